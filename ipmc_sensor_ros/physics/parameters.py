@@ -1,0 +1,248 @@
+"""Material parameters and sample geometry of an IPMC sensor, in SI units.
+
+Reference: Z. Chen, X. Tan, A. Will, C. Ziel, "A dynamic model for ionic
+polymer-metal composite sensors", Smart Mater. Struct. 16 (2007) 1477-1488
+(below: "the paper").  Defaults are the paper's Table 1 (constants and directly
+measured values) and Table 2 (values identified by curve fitting); the three
+sample geometries are its Table 3.
+
+Material parameters and geometry are kept apart on purpose: one parameter set
+describes a sheet of material and serves every sample cut from it, which is the
+paper's "geometric scalability" claim (section 5.3.2).
+
+Both classes are frozen dataclasses, validated at construction: a non-physical
+value (zero or negative length, negative resistance, NaN, ...) raises
+:class:`ParameterError` naming the parameter and the value.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any, Mapping
+
+__all__ = [
+    "ParameterError",
+    "MaterialParameters",
+    "Geometry",
+    "PAPER_PARAMETERS",
+    "PAPER_SAMPLES",
+    "load_yaml",
+    "save_yaml",
+]
+
+
+class ParameterError(ValueError):
+    """A physical parameter or geometry value is not physically meaningful."""
+
+
+def _check(name: str, value: Any, *, positive: bool = True, allow_zero: bool = False,
+           upper: float | None = None, where: str = "") -> float:
+    """Return ``value`` as float or raise :class:`ParameterError` naming it."""
+    prefix = f"{where}: " if where else ""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        try:
+            value = float(value)
+        except (TypeError, ValueError):
+            raise ParameterError(
+                f"{prefix}parameter '{name}' must be a number, got {value!r}") from None
+    value = float(value)
+    if not math.isfinite(value):
+        raise ParameterError(f"{prefix}parameter '{name}' must be finite, got {value!r}")
+    if positive:
+        if allow_zero and value < 0.0:
+            raise ParameterError(f"{prefix}parameter '{name}' must be >= 0, got {value!r}")
+        if not allow_zero and value <= 0.0:
+            raise ParameterError(f"{prefix}parameter '{name}' must be > 0, got {value!r}")
+    if upper is not None and value > upper:
+        raise ParameterError(f"{prefix}parameter '{name}' must be <= {upper}, got {value!r}")
+    return value
+
+
+@dataclass(frozen=True)
+class MaterialParameters:
+    """Physical parameters of an IPMC material (paper Tables 1-2), SI units.
+
+    Attributes
+    ----------
+    faraday_constant_c_per_mol : F, C mol^-1 (Table 1: 96487).
+    gas_constant_j_per_mol_k : R, J mol^-1 K^-1 (Table 1: 8.3143).
+    temperature_k : T, absolute temperature, K (Table 1: 300).
+    youngs_modulus_pa : Y, Pa (Table 1: 5.71e8).
+    surface_resistance_ohm : r0, surface-electrode resistance per unit length
+        and unit width, ohm (Table 1: 6.05).  Only the ``surface_resistance``
+        effect (the paper's H2, eq. 45) uses it.
+    diffusivity_m2_per_s : d, ionic diffusivity, m^2 s^-1 (Table 2: 3.32e-11).
+    anion_concentration_mol_per_m3 : C-, mol m^-3 (Table 2: 1091).
+    permittivity_f_per_m : kappa_e, effective dielectric permittivity, F m^-1
+        (Table 2: 1.88e-3).
+    charge_stress_coupling_j_per_c : alpha0, eq. 16, J C^-1 (Table 2: 104).
+    one_minus_anion_volume_fraction : 1 - C- dV, dimensionless (paper section
+        5.2 takes it as 1 since |C- dV| << 1).
+    """
+
+    faraday_constant_c_per_mol: float = 96487.0
+    gas_constant_j_per_mol_k: float = 8.3143
+    temperature_k: float = 300.0
+    youngs_modulus_pa: float = 5.71e8
+    surface_resistance_ohm: float = 6.05
+    diffusivity_m2_per_s: float = 3.32e-11
+    anion_concentration_mol_per_m3: float = 1091.0
+    permittivity_f_per_m: float = 1.88e-3
+    charge_stress_coupling_j_per_c: float = 104.0
+    one_minus_anion_volume_fraction: float = 1.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            allow_zero = f.name == "surface_resistance_ohm"
+            upper = 1.0 if f.name == "one_minus_anion_volume_fraction" else None
+            object.__setattr__(self, f.name, _check(f.name, getattr(self, f.name),
+                                                    allow_zero=allow_zero, upper=upper))
+
+    # -- derived quantities -------------------------------------------------
+    @property
+    def k_rate_per_s(self) -> float:
+        """K = F^2 d C- (1 - C- dV) / (kappa_e R T), s^-1 (paper, definition after eq. 12)."""
+        return (self.faraday_constant_c_per_mol ** 2 * self.diffusivity_m2_per_s
+                * self.anion_concentration_mol_per_m3 * self.one_minus_anion_volume_fraction
+                / (self.permittivity_f_per_m * self.gas_constant_j_per_mol_k * self.temperature_k))
+
+    @property
+    def debye_length_m(self) -> float:
+        """1/beta(0) = sqrt(d/K), the boundary-layer thickness of eq. 15, m."""
+        return math.sqrt(self.diffusivity_m2_per_s / self.k_rate_per_s)
+
+    def replace(self, **changes: float) -> "MaterialParameters":
+        """Return a copy with ``changes`` applied (validated)."""
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, float]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], where: str = "") -> "MaterialParameters":
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - names)
+        if unknown:
+            prefix = f"{where}: " if where else ""
+            raise ParameterError(f"{prefix}unknown material parameter(s) {unknown}; "
+                                 f"known: {sorted(names)}")
+        try:
+            return cls(**dict(data))
+        except ParameterError as exc:
+            if where:
+                raise ParameterError(f"{where}: {exc}") from None
+            raise
+
+
+#: Plausible physical ranges of each geometric quantity, used to catch unit
+#: mistakes (millimetres given as metres).  A 2 m long IPMC does not exist.
+GEOMETRY_LIMITS_M = {
+    "length_m": (1e-4, 1.0),
+    "width_m": (1e-4, 1.0),
+    "thickness_m": (1e-6, 1e-2),
+}
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Cantilever geometry of one sample (paper Fig. 1, Table 3), metres.
+
+    length_m : L, free (bending) length from the clamp to the tip.
+    width_m : W.
+    thickness_m : 2h, total thickness; ``half_thickness_m`` is h.
+    name : optional label (e.g. ``slim``).
+    """
+
+    length_m: float
+    width_m: float
+    thickness_m: float
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        for key, (lo, hi) in GEOMETRY_LIMITS_M.items():
+            value = _check(key, getattr(self, key), where=self.name)
+            if not lo <= value <= hi:
+                raise ParameterError(
+                    f"{self.name + ': ' if self.name else ''}parameter '{key}' = {value!r} m is "
+                    f"outside the physical range [{lo}, {hi}] m (is it in millimetres?)")
+            object.__setattr__(self, key, value)
+
+    @property
+    def half_thickness_m(self) -> float:
+        """h, distance from the neutral axis to the surface (paper Fig. 1)."""
+        return 0.5 * self.thickness_m
+
+    def replace(self, **changes: Any) -> "Geometry":
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"length_m": self.length_m, "width_m": self.width_m,
+                "thickness_m": self.thickness_m, "name": self.name}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], where: str = "") -> "Geometry":
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - names)
+        prefix = f"{where}: " if where else ""
+        if unknown:
+            raise ParameterError(f"{prefix}unknown geometry key(s) {unknown}; known: {sorted(names)}")
+        missing = sorted({"length_m", "width_m", "thickness_m"} - set(data))
+        if missing:
+            raise ParameterError(f"{prefix}missing geometry key(s) {missing}")
+        try:
+            return cls(**dict(data))
+        except ParameterError as exc:
+            if where:
+                raise ParameterError(f"{prefix}{exc}") from None
+            raise
+
+
+#: Paper Tables 1-2.
+PAPER_PARAMETERS = MaterialParameters()
+
+#: Paper Table 3: the three samples cut from one sheet.
+PAPER_SAMPLES: dict[str, Geometry] = {
+    "big": Geometry(22e-3, 14e-3, 360e-6, "big"),
+    "slim": Geometry(22e-3, 7e-3, 360e-6, "slim"),
+    "short": Geometry(11e-3, 7e-3, 360e-6, "short"),
+}
+
+
+def load_yaml(path: str | Path) -> tuple[MaterialParameters, Geometry | None]:
+    """Load ``material:`` (and optional ``geometry:``) from a YAML file.
+
+    Missing material keys take the paper's defaults.  Errors name the file.
+    """
+    import yaml
+
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as exc:
+        raise ParameterError(f"{path}: not valid YAML: {exc}") from None
+    if not isinstance(data, dict):
+        raise ParameterError(f"{path}: expected a mapping with 'material' and 'geometry' keys")
+    unknown = sorted(set(data) - {"material", "geometry", "model"})
+    if unknown:
+        raise ParameterError(f"{path}: unknown top-level key(s) {unknown}; "
+                             "known: ['geometry', 'material', 'model']")
+    material = MaterialParameters.from_dict(data.get("material") or {}, where=str(path))
+    geometry = None
+    if data.get("geometry") is not None:
+        geometry = Geometry.from_dict(data["geometry"], where=str(path))
+    return material, geometry
+
+
+def save_yaml(path: str | Path, material: MaterialParameters,
+              geometry: Geometry | None = None, extra: Mapping[str, Any] | None = None) -> None:
+    """Write ``material`` (and ``geometry``) as YAML readable by :func:`load_yaml`."""
+    import yaml
+
+    doc: dict[str, Any] = {"material": material.to_dict()}
+    if geometry is not None:
+        doc["geometry"] = geometry.to_dict()
+    if extra:
+        doc.update(extra)
+    Path(path).write_text(yaml.safe_dump(doc, sort_keys=False))

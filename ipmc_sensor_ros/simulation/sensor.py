@@ -1,0 +1,138 @@
+"""Time-domain simulation of the sensing current, and exact periodic responses.
+
+Two simulators:
+
+* :func:`periodic_response` -- exact steady-state response of the full model
+  to a periodic deflection sampled over an integer number of periods, computed
+  in the frequency domain (FFT, multiply by H(j w_k), inverse FFT).  No
+  reduction, no discretisation: the reference for tests.
+* :class:`SensorSimulator` -- streaming, causal simulation for any stimulus.
+  H(s) = s R(s); the simulator feeds the stimulus' analytic velocity to a
+  high-order (default 8) stable reduction of R over a wide band (default
+  0.01 Hz to 0.45 fs), discretised by Tustin with prewarping.  Its accuracy
+  against the full model (:meth:`SensorSimulator.accuracy`) is below 0.05 dB /
+  0.3 deg over 0.5-50 Hz at 1 kHz for the paper's samples (tested at
+  <= 0.2 dB / 1 deg).
+
+A measurement chain follows the sensor: ``i_meas = current_gain * i +
+current_offset_a + noise``, the noise white Gaussian of RMS ``noise_rms_a``
+from a seeded generator (reproducible).
+"""
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+import scipy.signal as sig
+
+from ..physics.model import SensorModel
+from ..physics.parameters import ParameterError
+from ..reduction import ReducedModel, reduce_response
+from .stimuli import Stimulus
+
+__all__ = ["periodic_response", "SensorSimulator", "forward_reduction"]
+
+
+def periodic_response(model: SensorModel, deflection_m, sample_rate_hz: float) -> np.ndarray:
+    """Exact steady-state current (A) for a periodic deflection record (m).
+
+    ``deflection_m`` must hold an integer number of periods (its DFT is the
+    Fourier series).  The DC term gives zero current (H(0) = 0, eq. 31).
+    """
+    w = np.asarray(deflection_m, float)
+    n = w.size
+    f = np.fft.rfftfreq(n, 1.0 / sample_rate_hz)
+    hw = model.frequency_response(f)
+    hw[0] = 0.0
+    if n % 2 == 0:
+        hw[-1] = hw[-1].real  # Nyquist bin of a real signal must stay real
+    return np.fft.irfft(np.fft.rfft(w) * hw, n)
+
+
+@functools.lru_cache(maxsize=32)
+def forward_reduction(model: SensorModel, sample_rate_hz: float, order: int = 8,
+                      low_hz: float = 0.01) -> ReducedModel:
+    """Wide-band reduction used by the simulator (cached per model and rate)."""
+    high = 0.45 * sample_rate_hz
+    if high <= low_hz * 10:
+        raise ParameterError(f"sample_rate_hz={sample_rate_hz} is too low to simulate")
+    return reduce_response(model.transfer, order, (low_hz, high), extension=3.0)
+
+
+class SensorSimulator:
+    """Streaming simulation of the measured sensing current.
+
+    Parameters
+    ----------
+    model : the sensing model (H1/H2 + effects).
+    sample_rate_hz : output sample rate, Hz.
+    current_gain : dimensionless gain error of the current amplifier (1 = ideal).
+    current_offset_a : constant offset added to the current, A.
+    noise_rms_a : white Gaussian noise RMS, A.
+    seed : seed of the noise generator.
+    order : order of the internal reduction of R(s).
+    """
+
+    def __init__(self, model: SensorModel, sample_rate_hz: float, *, current_gain: float = 1.0,
+                 current_offset_a: float = 0.0, noise_rms_a: float = 0.0, seed: int = 0,
+                 order: int = 8):
+        fs = float(sample_rate_hz)
+        if not (math.isfinite(fs) and fs > 0):
+            raise ParameterError(f"parameter 'sample_rate_hz' must be > 0, got {sample_rate_hz!r}")
+        for name, value in (("current_gain", current_gain), ("current_offset_a", current_offset_a),
+                            ("noise_rms_a", noise_rms_a)):
+            if not math.isfinite(float(value)):
+                raise ParameterError(f"parameter '{name}' must be finite, got {value!r}")
+        if noise_rms_a < 0:
+            raise ParameterError(f"parameter 'noise_rms_a' must be >= 0, got {noise_rms_a!r}")
+        self.model = model
+        self.sample_rate_hz = fs
+        self.current_gain = float(current_gain)
+        self.current_offset_a = float(current_offset_a)
+        self.noise_rms_a = float(noise_rms_a)
+        self.reduced = forward_reduction(model, fs, order)
+        w0 = 2 * np.pi * min(50.0, 0.25 * fs)
+        fs_warped = w0 / (2 * math.tan(w0 / (2 * fs)))
+        zd, pd, kd = sig.bilinear_zpk(self.reduced.zeros_rad_s, self.reduced.poles_rad_s,
+                                      self.reduced.gain, fs_warped)
+        self.sos = sig.zpk2sos(zd, pd, kd)
+        self._rng = np.random.default_rng(seed)
+        self._zi = np.zeros((self.sos.shape[0], 2))
+
+    def reset(self) -> None:
+        self._zi = np.zeros_like(self._zi)
+
+    def clean_current(self, velocity_m_per_s) -> np.ndarray:
+        """Sensing current (A) for a block of tip velocities (m/s), no measurement chain."""
+        v = np.asarray(velocity_m_per_s, float)
+        if v.size == 0:
+            return np.empty(0)
+        y, self._zi = sig.sosfilt(self.sos, v, zi=self._zi)
+        return y
+
+    def measure(self, clean_current_a) -> np.ndarray:
+        """Apply gain, offset and noise of the measurement chain."""
+        i = self.current_gain * np.asarray(clean_current_a, float) + self.current_offset_a
+        if self.noise_rms_a > 0:
+            i = i + self._rng.normal(0.0, self.noise_rms_a, i.shape)
+        return i
+
+    def run(self, stimulus: Stimulus, time_s) -> tuple[np.ndarray, np.ndarray]:
+        """Simulate at the given sample times (uniformly spaced, increasing).
+
+        Returns (deflection_m, measured_current_a).  State carries over between
+        calls, so consecutive blocks form one continuous record.
+        """
+        t = np.asarray(time_s, float)
+        return stimulus.deflection(t), self.measure(self.clean_current(stimulus.velocity(t)))
+
+    def accuracy(self, band_hz=(0.5, 50.0), n_points: int = 200) -> tuple[float, float]:
+        """Worst magnitude (dB) and phase (deg) error of the discrete simulator
+        against the full model over ``band_hz`` (velocity input is exact, so
+        the simulator's response is ``j w * R_discrete(e^{j w T})``)."""
+        f = np.logspace(np.log10(band_hz[0]), np.log10(band_hz[1]), n_points)
+        _, hd = sig.sosfreqz(self.sos, worN=f, fs=self.sample_rate_hz)
+        ratio = (2j * np.pi * f * hd) / self.model.frequency_response(f)
+        return float(np.max(np.abs(20 * np.log10(np.abs(ratio))))), \
+            float(np.max(np.abs(np.degrees(np.angle(ratio)))))
