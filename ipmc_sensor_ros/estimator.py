@@ -27,9 +27,9 @@ of about ``atan(f_c/f)`` (0.57 deg at 1 Hz for the default f_c = 0.01 Hz).
 Discretisation
 --------------
 Tustin (bilinear) transform with frequency prewarping at ``prewarp_hz``
-(default: the upper edge of the reduction band, capped at fs/4), applied pole
-by pole in zpk form (:func:`scipy.signal.bilinear_zpk`) and realised as
-second-order sections (:func:`scipy.signal.zpk2sos`).  Tustin maps the open
+(default fs/20, capped at the upper edge of the reduction band; see
+:mod:`ipmc_sensor_ros.discretize`), applied pole by pole in zpk form and
+realised as second-order sections.  Tustin maps the open
 left half plane into the unit disc, so stability is preserved for every sample
 rate; it is nevertheless checked at construction (every pole strictly inside
 the unit circle) and :class:`EstimatorError` is raised otherwise.  The
@@ -51,6 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.signal as sig
 
+from .discretize import default_prewarp_hz, tustin_sos
 from .reduction import ReducedModel
 
 __all__ = ["EstimatorError", "InverseEstimator", "inverse_zpk", "leak_tradeoff",
@@ -164,7 +165,7 @@ def _design(reduced: ReducedModel, sample_rate_hz: float, leak_corner_hz: float,
             offset_corner_hz: float | None, prewarp_hz: float | None) -> _Design:
     fs = _positive("sample_rate_hz", sample_rate_hz)
     if prewarp_hz is None:
-        prewarp_hz = min(reduced.band_hz[1], fs / 4.0)
+        prewarp_hz = default_prewarp_hz(fs, reduced.band_hz[1])
     prewarp_hz = _positive("prewarp_hz", prewarp_hz)
     if prewarp_hz >= fs / 2.0:
         raise EstimatorError(f"parameter 'prewarp_hz' = {prewarp_hz} must be below the Nyquist "
@@ -172,15 +173,11 @@ def _design(reduced: ReducedModel, sample_rate_hz: float, leak_corner_hz: float,
     if leak_corner_hz >= fs / 2.0:
         raise EstimatorError(f"parameter 'leak_corner_hz' = {leak_corner_hz} must be below the "
                              f"Nyquist frequency {fs / 2.0} Hz")
-    z, p, k = inverse_zpk(reduced, leak_corner_hz, offset_corner_hz)
-    w0 = 2.0 * np.pi * prewarp_hz
-    fs_warped = w0 / (2.0 * math.tan(w0 / (2.0 * fs)))   # s = w0/tan(w0 T/2) (z-1)/(z+1)
-    zd, pd, kd = sig.bilinear_zpk(z, p, k, fs_warped)
-    radius = np.abs(pd)
+    sos = tustin_sos(*inverse_zpk(reduced, leak_corner_hz, offset_corner_hz), fs, prewarp_hz)
+    radius = np.abs(sig.sos2zpk(sos)[1])
     if not np.all(radius < 1.0):
         raise EstimatorError(f"discrete inverse is unstable: pole radius {radius.max():.12f} >= 1 "
                              f"(sample_rate_hz={fs}, leak_corner_hz={leak_corner_hz})")
-    sos = sig.zpk2sos(zd, pd, kd)
     if not np.all(np.isfinite(sos)):
         raise EstimatorError("discrete inverse has non-finite coefficients")
     return _Design(sos=sos, sample_rate_hz=fs, prewarp_hz=prewarp_hz)
@@ -195,7 +192,7 @@ class InverseEstimator:
     sample_rate_hz : sample rate of the current, Hz.
     leak_corner_hz : leaky-integration corner f_c, Hz (> 0).
     offset_corner_hz : corner of the optional current-offset tracker, Hz, or None.
-    prewarp_hz : Tustin prewarping frequency, Hz (default min(band high, fs/4)).
+    prewarp_hz : Tustin prewarping frequency, Hz (default min(band high, fs/20)).
     channels : number of independent channels filtered together.
     """
 

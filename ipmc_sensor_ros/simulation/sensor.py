@@ -26,6 +26,7 @@ import math
 import numpy as np
 import scipy.signal as sig
 
+from ..discretize import default_prewarp_hz, tustin_sos
 from ..physics.model import SensorModel
 from ..physics.parameters import ParameterError
 from ..reduction import ReducedModel, reduce_response
@@ -92,11 +93,8 @@ class SensorSimulator:
         self.current_offset_a = float(current_offset_a)
         self.noise_rms_a = float(noise_rms_a)
         self.reduced = forward_reduction(model, fs, order)
-        w0 = 2 * np.pi * min(50.0, 0.25 * fs)
-        fs_warped = w0 / (2 * math.tan(w0 / (2 * fs)))
-        zd, pd, kd = sig.bilinear_zpk(self.reduced.zeros_rad_s, self.reduced.poles_rad_s,
-                                      self.reduced.gain, fs_warped)
-        self.sos = sig.zpk2sos(zd, pd, kd)
+        self.sos = tustin_sos(self.reduced.zeros_rad_s, self.reduced.poles_rad_s,
+                              self.reduced.gain, fs, default_prewarp_hz(fs, 50.0))
         self._rng = np.random.default_rng(seed)
         self._zi = np.zeros((self.sos.shape[0], 2))
 

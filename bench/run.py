@@ -1,0 +1,35 @@
+"""Run every benchmark and print one table: ``python -m bench.run [--smoke]``.
+
+``--smoke`` runs each benchmark on tiny inputs (what CI does): it checks that
+they run, not how fast.
+"""
+from __future__ import annotations
+
+import argparse
+import platform
+import sys
+
+from bench import bench_core
+
+SUITES = [bench_core.bench_estimator, bench_core.bench_model]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--smoke", action="store_true")
+    args = ap.parse_args(argv)
+    rows = []
+    for suite in SUITES:
+        rows.extend(suite(smoke=args.smoke))
+    print(f"machine: {platform.machine()} {platform.processor() or ''} python {platform.python_version()}"
+          f" cores={__import__('os').cpu_count()}")
+    print(f"| benchmark | value | unit | ratio | baseline | target |")
+    print(f"|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['benchmark']} | {r['value']:.3g} | {r['unit']} | {r['ratio']:.2f} | "
+              f"{r['baseline']} | {r['target']} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

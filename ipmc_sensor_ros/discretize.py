@@ -1,0 +1,35 @@
+"""Tustin (bilinear) discretisation with prewarping, in zpk form.
+
+Used by the estimator (inverse model) and the simulator (forward model), so the
+two share one documented mapping
+
+    s = w_p / tan(w_p T / 2) * (z - 1) / (z + 1),       w_p = 2 pi prewarp_hz,
+
+which is exact at DC and at ``prewarp_hz`` and maps the open left half plane
+into the unit disc (stability preserved at every sample rate).  The default
+prewarp frequency fs/20 keeps the frequency distortion below 0.9 % at all
+f <= fs/20 and below 2.5 % up to fs/10; a prewarp near Nyquist would instead
+distort the whole low-frequency band (e.g. 27 % at fs/4).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.signal as sig
+
+__all__ = ["default_prewarp_hz", "tustin_sos"]
+
+
+def default_prewarp_hz(sample_rate_hz: float, band_high_hz: float | None = None) -> float:
+    """fs/20, or the band's upper edge if that is lower, Hz."""
+    f = sample_rate_hz / 20.0
+    return min(f, band_high_hz) if band_high_hz else f
+
+
+def tustin_sos(zeros, poles, gain, sample_rate_hz: float, prewarp_hz: float) -> np.ndarray:
+    """Second-order sections of the prewarped Tustin image of a continuous zpk (rad/s)."""
+    w0 = 2.0 * math.pi * prewarp_hz
+    fs_warped = w0 / (2.0 * math.tan(w0 / (2.0 * sample_rate_hz)))
+    zd, pd, kd = sig.bilinear_zpk(np.asarray(zeros, float), np.asarray(poles, float), gain, fs_warped)
+    return sig.zpk2sos(zd, pd, kd)
