@@ -263,8 +263,9 @@ def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
     at_bound = [n for n, v, lo, hi in zip(free, theta, lower, upper)
                 if v - lo < 1e-3 or hi - v < 1e-3]
     est = {n: float(np.exp(v)) for n, v in zip(free, theta)}
-    ci = {n: (float(np.exp(v - 1.96 * s)), float(np.exp(v + 1.96 * s)))
-          for n, v, s in zip(free, theta, sd)}
+    with np.errstate(over="ignore"):
+        ci = {n: (float(np.exp(v - 1.96 * s)), float(np.exp(v + 1.96 * s)))
+              for n, v, s in zip(free, theta, sd)}
     return FitResult(material=material_at(theta), effects=tuple(effects), free=free, estimates=est,
                      ci95=ci, sd_log={n: float(s) for n, s in zip(free, sd)}, correlation=corr,
                      chi2=chi2, dof=dof, identifiability=combos, named_combinations=named,
