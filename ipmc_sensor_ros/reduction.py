@@ -211,8 +211,12 @@ def reduce_response_all(response: Callable[[np.ndarray], np.ndarray], max_order:
 
 def reduce_model(model: SensorModel, order: int = 4, band_hz: Sequence[float] = (0.1, 50.0),
                  **kwargs) -> ReducedModel:
-    """Stable minimum-phase reduction of ``model`` (see module docstring)."""
-    return reduce_response(model.transfer, order, band_hz, **kwargs)
+    """Stable minimum-phase reduction of ``model`` (see module docstring).
+
+    A pure delay in the model (``time_delay`` effect) is not part of the
+    reduction: no causal inverse can undo it; see ``SensorModel.delay_s``.
+    """
+    return reduce_response(model.min_phase_transfer, order, band_hz, **kwargs)
 
 
 def reduction_error(reduced, model: SensorModel, band_hz: Sequence[float] = (0.1, 50.0),
@@ -221,7 +225,7 @@ def reduction_error(reduced, model: SensorModel, band_hz: Sequence[float] = (0.1
     ``model`` over ``band_hz``.  ``reduced`` is anything with ``frequency_response``."""
     lo, hi = _check_band(band_hz)
     f = np.logspace(np.log10(lo), np.log10(hi), n_points)
-    ratio = reduced.frequency_response(f) / model.frequency_response(f)
+    ratio = reduced.frequency_response(f) / model.min_phase_transfer(2j * np.pi * f)
     mag_db = 20.0 * np.log10(np.abs(ratio))
     phase_deg = np.degrees(np.angle(ratio))
     return float(np.max(np.abs(mag_db))), float(np.max(np.abs(phase_deg)))
@@ -232,7 +236,7 @@ def reduction_error_table(models: dict[str, SensorModel], orders: Sequence[int] 
     """Rows ``{sample, order, max_mag_error_db, max_phase_error_deg}``."""
     rows = []
     for name, model in models.items():
-        fits = reduce_response_all(model.transfer, max(orders), band_hz)
+        fits = reduce_response_all(model.min_phase_transfer, max(orders), band_hz)
         for order in orders:
             mag, phase = reduction_error(fits[order - 1], model, band_hz)
             rows.append({"sample": name, "order": int(order), "max_mag_error_db": mag,

@@ -1,29 +1,101 @@
-"""A sensing model: material + geometry + base transfer function (+ effects).
+"""A sensing model: material + geometry + base transfer function + effects.
 
-``SensorModel`` is the one description that fitting, comparison, reduction, the
-estimator and the simulator all take.  The base is the paper's H1 (eq. 31);
-``h2`` (eq. 45) is H1 with the ``surface_resistance`` effect.
+``SensorModel`` is the one description that fitting, comparison, reduction,
+the estimator and the simulator all take.  The base is the paper's H1
+(eq. 31); ``h2`` (eq. 45) is exactly H1 with the ``surface_resistance``
+effect.  Effects come from :mod:`ipmc_sensor_ros.physics.effects` (the
+built-in catalog is :mod:`ipmc_sensor_ros.physics.catalog`; plugins register
+more).
+
+Text form (CLI ``--effects``, node parameter ``effects``, YAML ``model:``)::
+
+    h2                                   # base name
+    time_delay                           # effect with default parameters
+    time_delay(delay_s=0.002)            # effect with parameter values
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Any, Iterable, Mapping
 
 import numpy as np
 
+from . import catalog as _catalog  # noqa: F401  (registers the built-in effects)
+from .effects import get_effect
 from .parameters import PAPER_PARAMETERS, Geometry, MaterialParameters, ParameterError
-from .sensing import h1, surface_resistance_factor
+from .sensing import h1
 
-__all__ = ["SensorModel", "BASES", "parse_model_name"]
+__all__ = ["SensorModel", "EffectSpec", "BASES", "parse_model_name", "parse_effects",
+           "format_effect"]
 
 #: base name -> effects implied by it
 BASES = {"h1": (), "h2": ("surface_resistance",)}
 
-#: Linear time-invariant multiplicative factors, keyed by effect name.
-#: Each maps (s, material, geometry) -> dimensionless complex factor.
-_LTI_FACTORS: dict[str, Callable] = {
-    "surface_resistance": surface_resistance_factor,
-}
+
+@dataclass(frozen=True)
+class EffectSpec:
+    """One effect in a model: its name and parameter values (hashable)."""
+
+    name: str
+    values: tuple[tuple[str, float], ...] = ()
+
+    def as_dict(self) -> dict[str, float]:
+        return dict(self.values)
+
+
+def _spec(name: str, values: Mapping[str, Any] | None = None) -> EffectSpec:
+    effect = get_effect(name)
+    checked = effect.validate(dict(values or {}))
+    return EffectSpec(name, tuple(sorted(checked.items())))
+
+
+_EFFECT_RE = re.compile(r"^\s*([A-Za-z_]\w*)\s*(?:\((.*)\))?\s*$")
+
+
+def parse_effects(text: str | Iterable) -> tuple[EffectSpec, ...]:
+    """Parse ``"a,b(p=1e-3),c"`` (or a list of such items) into effect specs."""
+    if isinstance(text, str):
+        items, depth, cur = [], 0, ""
+        for ch in text:
+            if ch == "," and depth == 0:
+                items.append(cur)
+                cur = ""
+                continue
+            depth += ch == "("
+            depth -= ch == ")"
+            cur += ch
+        items.append(cur)
+    else:
+        items = list(text)
+    out = []
+    for item in items:
+        if isinstance(item, EffectSpec):
+            out.append(item)
+            continue
+        if isinstance(item, tuple) and len(item) == 2:
+            out.append(_spec(item[0], item[1]))
+            continue
+        if not str(item).strip():
+            continue
+        m = _EFFECT_RE.match(str(item))
+        if not m:
+            raise ParameterError(f"cannot parse effect {item!r}; expected name or name(param=value,...)")
+        values = {}
+        if m.group(2):
+            for kv in m.group(2).split(","):
+                if "=" not in kv:
+                    raise ParameterError(f"effect {item!r}: expected param=value, got {kv!r}")
+                k, v = kv.split("=", 1)
+                values[k.strip()] = v.strip()
+        out.append(_spec(m.group(1), values))
+    return tuple(out)
+
+
+def format_effect(spec: EffectSpec) -> str:
+    if not spec.values:
+        return spec.name
+    return f"{spec.name}({', '.join(f'{k}={v:.6g}' for k, v in spec.values)})"
 
 
 def parse_model_name(name: str) -> tuple[str, tuple[str, ...]]:
@@ -42,43 +114,100 @@ class SensorModel:
     ----------
     geometry : sample geometry.
     material : material parameters (default: the paper's Tables 1-2).
-    effects : ordered names of effects added to the base H1 (eq. 31).  With
-        ``("surface_resistance",)`` the model is the paper's H2 (eq. 45).
+    effects : ordered effects added to the base H1 (eq. 31): names, specs, or
+        ``(name, {param: value})`` pairs.  ``("surface_resistance",)`` (the
+        default) is the paper's H2 (eq. 45).
     """
 
     geometry: Geometry
     material: MaterialParameters = PAPER_PARAMETERS
-    effects: tuple[str, ...] = field(default=("surface_resistance",))
+    effects: tuple = field(default=("surface_resistance",))
 
     def __post_init__(self) -> None:
-        effects = tuple(self.effects)
-        for name in effects:
-            if name not in _LTI_FACTORS:
-                raise ParameterError(f"unknown effect '{name}'; known: {sorted(_LTI_FACTORS)}")
-        if len(set(effects)) != len(effects):
-            raise ParameterError(f"effect listed twice in {list(effects)}")
-        object.__setattr__(self, "effects", effects)
+        specs = parse_effects(self.effects)
+        names = [e.name for e in specs]
+        if len(set(names)) != len(names):
+            raise ParameterError(f"effect listed twice in {names}")
+        object.__setattr__(self, "effects", specs)
 
+    # -- construction helpers ------------------------------------------------
     @classmethod
-    def named(cls, name: str, geometry: Geometry,
-              material: MaterialParameters = PAPER_PARAMETERS) -> "SensorModel":
-        """Build ``h1`` or ``h2`` (the paper's two models) for ``geometry``."""
-        _, effects = parse_model_name(name)
-        return cls(geometry=geometry, material=material, effects=effects)
+    def named(cls, name: str, geometry: Geometry, material: MaterialParameters = PAPER_PARAMETERS,
+              extra_effects: str | Iterable = ()) -> "SensorModel":
+        """``h1`` or ``h2`` (the paper's models) for ``geometry``, plus ``extra_effects``."""
+        _, base = parse_model_name(name)
+        extra = parse_effects(extra_effects)
+        return cls(geometry=geometry, material=material,
+                   effects=tuple(parse_effects(base)) + tuple(e for e in extra if e.name not in base))
+
+    @property
+    def effect_names(self) -> tuple[str, ...]:
+        return tuple(e.name for e in self.effects)
 
     @property
     def name(self) -> str:
-        if self.effects == ("surface_resistance",):
-            return "h2"
-        return "+".join(("h1",) + self.effects)
+        names = self.effect_names
+        if names[:1] == ("surface_resistance",):
+            return "+".join(("h2",) + names[1:])
+        return "+".join(("h1",) + names)
+
+    def describe(self) -> str:
+        """Text form: base plus formatted effects."""
+        names = self.effect_names
+        if names[:1] == ("surface_resistance",):
+            return ",".join(["h2"] + [format_effect(e) for e in self.effects[1:]])
+        return ",".join(["h1"] + [format_effect(e) for e in self.effects])
+
+    def has_effect(self, name: str) -> bool:
+        return name in self.effect_names
+
+    def effect_values(self, name: str) -> dict[str, float]:
+        for e in self.effects:
+            if e.name == name:
+                return e.as_dict()
+        raise ParameterError(f"model {self.name} has no effect '{name}'")
+
+    def with_effect(self, name: str, **values) -> "SensorModel":
+        """Add (or replace the values of) an effect."""
+        new = _spec(name, values)
+        effects = [new if e.name == name else e for e in self.effects]
+        if name not in self.effect_names:
+            effects.append(new)
+        return SensorModel(self.geometry, self.material, tuple(effects))
+
+    def without_effect(self, name: str) -> "SensorModel":
+        return SensorModel(self.geometry, self.material, tuple(e for e in self.effects if e.name != name))
+
+    def with_geometry(self, geometry: Geometry) -> "SensorModel":
+        return SensorModel(geometry=geometry, material=self.material, effects=self.effects)
+
+    def with_material(self, material: MaterialParameters) -> "SensorModel":
+        return SensorModel(geometry=self.geometry, material=material, effects=self.effects)
+
+    # -- evaluation ------------------------------------------------------------
+    @property
+    def is_lti(self) -> bool:
+        return all(get_effect(e.name).lti for e in self.effects)
 
     def transfer(self, s) -> np.ndarray:
-        """i(s)/w(s) in A m^-1 at complex frequencies ``s`` (rad s^-1)."""
+        """i(s)/w(s) in A m^-1 at complex frequencies ``s`` (rad s^-1): H1 times every
+        effect's factor (non-LTI effects contribute their linear part only)."""
         s = np.asarray(s, dtype=complex)
         out = h1(s, self.material, self.geometry)
-        for name in self.effects:
-            out = out * _LTI_FACTORS[name](s, self.material, self.geometry)
+        for spec in self.effects:
+            fac = get_effect(spec.name).factor(s, self, spec.as_dict())
+            if fac is not None:
+                out = out * fac
         return out
+
+    def delay_s(self) -> float:
+        """Total pure delay of the LTI part, s."""
+        return float(sum(get_effect(e.name).delay_s(e.as_dict()) for e in self.effects))
+
+    def min_phase_transfer(self, s) -> np.ndarray:
+        """``transfer`` with its pure delay removed (what a causal inverse can invert)."""
+        s = np.asarray(s, dtype=complex)
+        return self.transfer(s) * np.exp(s * self.delay_s())
 
     def frequency_response(self, frequency_hz) -> np.ndarray:
         """H(j 2 pi f), A m^-1."""
@@ -88,9 +217,3 @@ class SensorModel:
         """lim_{s->0} H(s)/s, A s m^-1 (= C m^-1): static charge per unit tip deflection."""
         s = np.array([1e-9j])
         return float(np.real(self.transfer(s)[0] / s[0]))
-
-    def with_geometry(self, geometry: Geometry) -> "SensorModel":
-        return SensorModel(geometry=geometry, material=self.material, effects=self.effects)
-
-    def with_material(self, material: MaterialParameters) -> "SensorModel":
-        return SensorModel(geometry=self.geometry, material=material, effects=self.effects)

@@ -32,7 +32,8 @@ from ..physics.parameters import ParameterError
 from ..reduction import ReducedModel, reduce_response
 from .stimuli import Stimulus
 
-__all__ = ["periodic_response", "lti_response_fft", "SensorSimulator", "forward_reduction"]
+__all__ = ["periodic_response", "lti_response_fft", "predict_current", "SensorSimulator",
+           "forward_reduction"]
 
 
 def periodic_response(model: SensorModel, deflection_m, sample_rate_hz: float) -> np.ndarray:
@@ -164,3 +165,40 @@ def lti_response_fft(transfer, time_s, deflection_m, pad_s: float = 2.0) -> np.n
     if n % 2 == 0:
         h[-1] = h[-1].real
     return np.fft.irfft(np.fft.rfft(x, n) * h, n)[: t.size]
+
+
+def predict_current(model: SensorModel, time_s, deflection_m, pad_s: float = 2.0) -> np.ndarray:
+    """Current (A) of a model with any effects for a deflection record (m).
+
+    Order of operations: every effect's ``input_transform`` (e.g. the
+    nonlinearity), then the linear dynamics by exact FFT convolution
+    (:func:`lti_response_fft`), then every ``output_transform`` (e.g. offset).
+    A time-varying effect (``material_at``, e.g. ``hydration_drift``) is
+    simulated as piecewise-constant material over ``chunks`` equal spans: the
+    LTI response is computed for each chunk's material at its centre and used
+    within that span (the drift is slow against the sensor's ~0.1 s memory).
+    """
+    from ..physics.effects import get_effect
+
+    t = np.asarray(time_s, float)
+    w = np.asarray(deflection_m, float)
+    specs = [(get_effect(e.name), e.as_dict()) for e in model.effects]
+    for eff, vals in specs:
+        w = eff.input_transform(t, w, model, vals)
+    varying = [(eff, vals) for eff, vals in specs if eff.material_at(t, model, vals) is not None]
+    if not varying:
+        i = lti_response_fft(model.transfer, t, w, pad_s)
+    else:
+        eff, vals = varying[0]
+        mat_at = eff.material_at(t, model, vals)
+        chunks = int(getattr(eff, "chunks", 16))
+        edges = np.linspace(t[0], t[-1], chunks + 1)
+        i = np.empty_like(w)
+        for k in range(chunks):
+            sel = (t >= edges[k]) & ((t < edges[k + 1]) if k < chunks - 1 else (t <= edges[k + 1]))
+            centre = 0.5 * (edges[k] + edges[k + 1]) - t[0]
+            chunk_model = model.with_material(mat_at(centre))
+            i[sel] = lti_response_fft(chunk_model.transfer, t, w, pad_s)[sel]
+    for eff, vals in specs:
+        i = eff.output_transform(t, i, model, vals)
+    return i

@@ -1,0 +1,220 @@
+"""The built-in effect catalog (see :mod:`ipmc_sensor_ros.physics.effects`)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .effects import Effect, EffectParameter, register_effect
+from .sensing import h1, surface_resistance_factor
+
+__all__ = ["SurfaceResistance", "AmplifierBandwidth", "TimeDelay", "CurrentOffset", "HydrationDrift",
+           "EffectiveLength", "BeamInertia", "Nonlinearity", "clamped_pinned_slope_ratio"]
+
+
+@register_effect
+class SurfaceResistance(Effect):
+    name = "surface_resistance"
+    summary = "Distributed resistance of the surface electrodes (the paper's H2)."
+    physics = ("The platinum electrodes have a resistance r0 per unit length and width; the current "
+               "generated along the beam flows through an RC line to the clamp (paper Fig. 2, "
+               "eqs. 32-43).")
+    equation = ("H2 = H1 * 2 G(a), G(a) = (1 - cosh a + a sinh a)/(a^2 cosh a), a = L sqrt(s kappa_e "
+                "r0 / h) (eqs. 42, 45, 46).  Uses the material's r0; no parameter of its own.")
+    signature = ("Extra phase lag and flatter magnitude slope at high frequency that grow with L^2 "
+                 "(slim 14.9 vs short 17.3 dB/decade over 1-20 Hz); H1 predicts equal slopes for "
+                 "samples that differ only in length.")
+    reference = "Chen et al. 2007, section 3.2; Punning et al. 2007 (ref. [30] there)."
+
+    def factor(self, s, model, values):
+        return surface_resistance_factor(s, model.material, model.geometry)
+
+
+@register_effect
+class AmplifierBandwidth(Effect):
+    name = "amplifier_bandwidth"
+    summary = "Finite bandwidth of the current amplifier / anti-alias filter of the DAQ."
+    physics = ("A transimpedance amplifier with feedback R_f C_f, or the DAQ's anti-alias filter, "
+               "low-pass filters the measured current.")
+    equation = "H -> H / (1 + s / (2 pi f_a))"
+    parameters = (EffectParameter("corner_hz", "Hz", 200.0, 0.5, 1e5, (20.0, 20000.0),
+                                  "-3 dB corner frequency f_a of the first-order low-pass"),)
+    signature = ("Phase lag growing linearly with frequency (about f/f_a rad) and, near f_a, a "
+                 "magnitude droop; errors concentrated at the top of the band, equal for all samples.")
+    reference = "Any transimpedance-amplifier text, e.g. Horowitz & Hill, The Art of Electronics, 3rd ed., 4.3."
+
+    def factor(self, s, model, values):
+        return 1.0 / (1.0 + s / (2 * math.pi * values["corner_hz"]))
+
+
+@register_effect
+class TimeDelay(Effect):
+    name = "time_delay"
+    summary = "Skew between the deflection and current channels (sampling, filters, cabling)."
+    physics = ("Non-simultaneous sampling of two channels or a digital filter in one of them "
+               "delays the current relative to the deflection.")
+    equation = "H -> H exp(-s tau)"
+    parameters = (EffectParameter("delay_s", "s", 1e-3, 1e-6, 0.1, (1e-5, 5e-3),
+                                  "delay tau of the current relative to the deflection"),)
+    signature = ("Phase error exactly proportional to frequency (-360 f tau degrees), no magnitude "
+                 "error; the residual cross-correlates with the input velocity at a lag of tau.")
+    reference = "Pintelon & Schoukens, System Identification: A Frequency Domain Approach, 2nd ed., ch. 2."
+
+    def factor(self, s, model, values):
+        return np.exp(-s * values["delay_s"])
+
+    def delay_s(self, values):
+        return float(values["delay_s"])
+
+
+@register_effect
+class CurrentOffset(Effect):
+    name = "current_offset"
+    summary = "Offset and slow linear drift of the measured current."
+    physics = ("Amplifier input offset/bias currents, electrode potentials and thermal drift add a "
+               "slowly varying current unrelated to deformation.")
+    equation = "i_meas(t) = i(t) + i_0 + i_1 (t - t_start)"
+    lti = False
+    parameters = (
+        EffectParameter("offset_a", "A", 0.0, -1e-3, 1e-3, (-1e-6, 1e-6), "constant offset i_0", False),
+        EffectParameter("drift_a_per_s", "A/s", 0.0, -1e-5, 1e-5, (-1e-8, 1e-8), "linear drift i_1", False),
+    )
+    signature = ("Residual with a non-zero mean or a ramp: low-frequency content the deflection does "
+                 "not explain; invisible at the excitation fundamental; the estimated deflection "
+                 "drifts (leaky integrator).")
+    reference = "Chen et al. 2007 section 4 (the integrator of the inverse); Bonomo et al. 2006."
+
+    def output_transform(self, t, i, model, values):
+        return i + values["offset_a"] + values["drift_a_per_s"] * (t - t[0])
+
+    def inverse_output_transform(self, t, i, model, values):
+        return i - values["offset_a"] - values["drift_a_per_s"] * (t - t[0])
+
+
+@register_effect
+class HydrationDrift(Effect):
+    name = "hydration_drift"
+    summary = "Diffusivity changing over a long record as the polymer dries (paper section 5.4)."
+    physics = ("Water evaporates from the ionomer; ion mobility, hence d, falls (paper Figs. 9-10), "
+               "changing both gain and phase over minutes.")
+    equation = "d(t) = d_0 exp(r_d (t - t_start)), all other parameters fixed"
+    lti = False
+    needs_long_record = True
+    parameters = (EffectParameter("diffusivity_rate_per_s", "1/s", 0.0, -0.02, 0.02, (-2e-3, 2e-4),
+                                  "relative rate r_d of change of d", False),)
+    signature = ("Error that grows with time within a record (time-window breakdown), with gain and "
+                 "phase of the fundamental trending; a windowed refit of d shows a trend.")
+    reference = "Chen et al. 2007, section 5.4; Bonomo et al. 2006 (ref. [27] there)."
+
+    #: number of piecewise-constant chunks used to simulate the drift
+    chunks = 16
+
+    def material_at(self, t, model, values):
+        rate = values["diffusivity_rate_per_s"]
+        d0 = model.material.diffusivity_m2_per_s
+        return lambda tau: model.material.replace(diffusivity_m2_per_s=d0 * math.exp(rate * tau))
+
+
+def clamped_pinned_slope_ratio(x4: np.ndarray) -> np.ndarray:
+    """Tip-slope ratio R = w'(L) 2L / (3 w(L)) of a clamped beam whose tip displacement is
+    prescribed (pinned, zero moment), as a function of x^4 = (kL)^4, k^4 = rho A w^2 / (E I).
+
+    R = (2x/3) sinh x sin x / (sin x cosh x - sinh x cos x) (Euler-Bernoulli), even in x,
+    = 1 - 2 x^4 / 315 + O(x^8) for small x (series used below |x^4| = 1e-3, where the
+    closed form cancels and the series' truncation error is below 1e-10).
+    """
+    x4 = np.asarray(x4, dtype=complex)
+    out = np.empty_like(x4)
+    small = np.abs(x4) < 1e-3
+    out[small] = 1.0 - 2.0 * x4[small] / 315.0
+    x = x4[~small] ** 0.25
+    th = np.tanh(x)
+    out[~small] = (2 * x / 3) * th * np.sin(x) / (np.sin(x) - th * np.cos(x))
+    return out
+
+
+@register_effect
+class BeamInertia(Effect):
+    name = "beam_inertia"
+    summary = "Dynamic stress profile of the beam near its resonance (inertia of the IPMC)."
+    physics = ("The paper's stress (eq. 21) is the static profile of a tip-loaded cantilever.  With "
+               "the tip held by the slider and the beam's own inertia, the curvature distribution "
+               "changes with frequency; the sensing charge, proportional to the integral of the "
+               "surface stress, i.e. to the tip slope w'(L), changes accordingly.")
+    equation = ("H -> H R(x^4), R = (2x/3) sinh x sin x / (sin x cosh x - sinh x cos x), "
+                "x^4 = 1.8751^4 (-s^2/w_1^2)/(1 + j eta), w_1 = 2 pi f_1 the free cantilever's first "
+                "natural frequency, eta the loss factor; R = 1 - 2x^4/315 at low frequency.  "
+                "The surface-resistance weighting of the changed profile is neglected (second order).")
+    parameters = (
+        EffectParameter("natural_frequency_hz", "Hz", 30.0, 1.0, 1e4, (10.0, 300.0),
+                        "first natural frequency f_1 of the free cantilever (paper Fig. 7: ~30 Hz)"),
+        EffectParameter("loss_factor", "1", 0.05, 1e-4, 1.0, (0.005, 0.3), "structural loss factor eta"),
+    )
+    signature = ("Magnitude error growing as f^2 (R ~ 1 - 0.039 (f/f_1)^2), almost no phase error, "
+                 "strongest near the top of the band; independent of amplitude.")
+    reference = "Euler-Bernoulli beam; e.g. Meirovitch, Fundamentals of Vibrations (2001), ch. 8."
+
+    def factor(self, s, model, values):
+        w1 = 2 * math.pi * values["natural_frequency_hz"]
+        x4 = 1.8751040687 ** 4 * (-(s ** 2) / w1 ** 2) / (1 + 1j * values["loss_factor"])
+        return clamped_pinned_slope_ratio(x4)
+
+
+@register_effect
+class EffectiveLength(Effect):
+    name = "effective_length"
+    summary = "Contact point of the stimulus not at the nominal tip."
+    physics = ("The slider grips the beam at L_c = lambda L rather than at its tip (paper section "
+               "5.1: 'the contact point ... is close to the beam tip').  The stressed length is L_c; "
+               "the unstressed electrode beyond L_c is neglected.")
+    equation = "H(s; L) -> H(s; lambda L) (eqs. 31, 45 with L replaced by lambda L)"
+    parameters = (EffectParameter("length_ratio", "1", 0.9, 0.3, 1.0, (0.7, 1.0),
+                                  "lambda = contact distance from the clamp / free length"),)
+    signature = ("A nearly frequency-independent gain error (H1 ~ 1/L, so +1/lambda) plus a small "
+                 "change of the surface-resistance dynamics (~lambda^2); on a single geometry it ties "
+                 "with Young's modulus / alpha0 scaling.")
+    reference = "Chen et al. 2007, section 5.1."
+
+    def factor(self, s, model, values):
+        short = model.geometry.replace(length_m=model.geometry.length_m * values["length_ratio"])
+        ratio = h1(s, model.material, short) / h1(s, model.material, model.geometry)
+        if model.has_effect("surface_resistance"):
+            ratio = ratio * (surface_resistance_factor(s, model.material, short)
+                             / surface_resistance_factor(s, model.material, model.geometry))
+        return ratio
+
+
+@register_effect
+class Nonlinearity(Effect):
+    name = "nonlinearity"
+    summary = "Amplitude-dependent response and harmonics beyond the linear model."
+    physics = ("The paper drops the term in grad(E).E of eq. 9 and uses small-deflection beam "
+               "theory; at larger amplitude the charge is no longer linear in the deflection.  "
+               "Modelled phenomenologically as a static polynomial of w/L before the linear dynamics "
+               "(a Hammerstein structure).")
+    equation = "w' = w + a_2 w^2 / L + a_3 w^3 / L^2,  i = H(s) w'"
+    lti = False
+    parameters = (
+        EffectParameter("quadratic", "1", 0.0, -20.0, 20.0, (-2.0, 2.0), "a_2", False),
+        EffectParameter("cubic", "1", 0.0, -200.0, 200.0, (-20.0, 20.0), "a_3", False),
+    )
+    signature = ("Harmonics in the current that the deflection's harmonics do not explain (even "
+                 "harmonics for a_2) and a fundamental gain that depends on amplitude (a_3); the "
+                 "error grows with amplitude.")
+    reference = "Chen et al. 2007, eqs. 9-10 and section 6; Bonomo et al. 2007 (nonlinear IPMC model)."
+
+    def input_transform(self, t, w, model, values):
+        L = model.geometry.length_m
+        return w + values["quadratic"] * w ** 2 / L + values["cubic"] * w ** 3 / L ** 2
+
+    def inverse_input_transform(self, w_prime, model, values):
+        L = model.geometry.length_m
+        a2, a3 = values["quadratic"], values["cubic"]
+        if a2 == 0 and a3 == 0:
+            return w_prime
+        w = np.array(w_prime, dtype=float)
+        for _ in range(8):  # Newton on w + a2 w^2/L + a3 w^3/L^2 = w'
+            f = w + a2 * w ** 2 / L + a3 * w ** 3 / L ** 2 - w_prime
+            df = 1 + 2 * a2 * w / L + 3 * a3 * w ** 2 / L ** 2
+            w = w - f / np.where(np.abs(df) > 1e-6, df, 1e-6)
+        return w
