@@ -6,6 +6,7 @@ import math
 import numpy as np
 
 from .effects import Effect, EffectParameter, register_effect
+from .parameters import ParameterError
 from .sensing import h1, surface_resistance_factor
 
 __all__ = ["SurfaceResistance", "AmplifierBandwidth", "TimeDelay", "CurrentOffset", "HydrationDrift",
@@ -164,20 +165,28 @@ class BeamInertia(Effect):
 class EffectiveLength(Effect):
     name = "effective_length"
     summary = "Contact point of the stimulus not at the nominal tip."
-    physics = ("The slider grips the beam at L_c = lambda L rather than at its tip (paper section "
-               "5.1: 'the contact point ... is close to the beam tip').  The stressed length is L_c; "
-               "the unstressed electrode beyond L_c is neglected.")
-    equation = "H(s; L) -> H(s; lambda L) (eqs. 31, 45 with L replaced by lambda L)"
-    parameters = (EffectParameter("length_ratio", "1", 0.9, 0.3, 1.0, (0.7, 1.0),
-                                  "lambda = contact distance from the clamp / free length"),)
-    signature = ("A nearly frequency-independent gain error (H1 ~ 1/L, so +1/lambda) plus a small "
-                 "change of the surface-resistance dynamics (~lambda^2); on a single geometry it ties "
-                 "with Young's modulus / alpha0 scaling.")
+    physics = ("The slider's slit grips the beam a distance delta before its tip (paper section 5.1: "
+               "'the contact point ... is close to the beam tip'), the same delta whatever the "
+               "sample, so the stressed length is L_c = L - delta; the unstressed electrode beyond "
+               "L_c is neglected.")
+    equation = "H(s; L) -> H(s; L - delta) (eqs. 31, 45 with L replaced by L - delta)"
+    parameters = (EffectParameter("tip_offset_m", "m", 1e-3, 1e-6, 0.05, (1e-4, 4e-3),
+                                  "delta: distance of the contact point from the nominal tip"),)
+    signature = ("A gain error ~ L/(L - delta) that is larger for short samples, plus a small change "
+                 "of the surface-resistance dynamics ((L - delta)^2); on a single geometry it ties "
+                 "with Young's modulus / alpha0 scaling, across lengths it does not.")
     reference = "Chen et al. 2007, section 5.1."
 
     def factor(self, s, model, values):
-        short = model.geometry.replace(length_m=model.geometry.length_m * values["length_ratio"])
-        ratio = h1(s, model.material, short) / h1(s, model.material, model.geometry)
+        L = model.geometry.length_m
+        delta = values["tip_offset_m"]
+        if delta >= 0.9 * L:
+            raise ParameterError(f"effect 'effective_length': tip_offset_m = {delta} m leaves less than "
+                                 f"10 % of the free length {L} m")
+        short = model.geometry.replace(length_m=L - delta)
+        num, den = h1(s, model.material, short), h1(s, model.material, model.geometry)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratio = np.where(den == 0, L / (L - delta), num / np.where(den == 0, 1.0, den))
         if model.has_effect("surface_resistance"):
             ratio = ratio * (surface_resistance_factor(s, model.material, short)
                              / surface_resistance_factor(s, model.material, model.geometry))

@@ -1,0 +1,322 @@
+"""Time-domain output-error fit of a model (material parameters + effect parameters).
+
+Used by the diagnosis: every effect, built-in or plugin, acts on the predicted
+current through :func:`~ipmc_sensor_ros.simulation.sensor.predict_current`,
+so fitting in the time domain treats them all alike (LTI factors, input and
+output transforms, time-varying material).
+
+Residuals are ``(y - y_hat) / sigma_r`` on a decimated subset of each record's
+samples (at most ``max_rows_per_record``, after ``settle_s``), sigma_r the
+record's noise RMS; free material parameters are fitted in log space, effect
+parameters in log or linear space as their :class:`EffectParameter` says,
+within their bounds (:func:`scipy.optimize.least_squares`, ``trf``).
+
+Speed: the deflection spectrum of each record is computed once, and the
+model's transfer function is evaluated on a log-spaced grid of ``n_grid``
+(512) frequencies spanning the record's FFT bins and interpolated (log-magnitude
+and unwrapped phase, linear in log f) to all bins; a pure delay is applied
+exactly afterwards.  For the smooth diffusion-type responses here the
+interpolation error is below 1e-5 relative (tested against the exact
+prediction), two orders below realistic noise, at a fraction of the cost.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..physics.effects import Effect, get_effect
+from ..physics.model import EffectSpec, SensorModel
+from ..physics.parameters import MaterialParameters, ParameterError
+
+__all__ = ["Record", "PreparedRecord", "prepare", "FitSpec", "ModelFit", "fit_model", "predict",
+           "noise_rms"]
+
+
+@dataclass
+class Record:
+    """A time record with its sample model (geometry, header-known material)."""
+
+    path: str
+    sample: str
+    model: SensorModel          # base model for this record (geometry, known material, effects)
+    time_s: np.ndarray
+    deflection_m: np.ndarray
+    current_a: np.ndarray
+
+
+def noise_rms(t: np.ndarray, w: np.ndarray, y: np.ndarray, window_s: float = 4.0) -> float:
+    """Measurement-noise RMS of the current (A).
+
+    Periodic records: residual of harmonic fits (mean + harmonics of the
+    excitation fundamental) in consecutive windows of about ``window_s``
+    (whole periods), pooled -- short windows keep slow drifts of the response
+    out of the noise estimate.  Other records: scaled MAD of second differences.
+    """
+    from .freqresp import fundamental_response, harmonic_fit
+
+    try:
+        p = fundamental_response(t, w, y)
+    except ValueError:
+        d2 = np.diff(y, 2)
+        return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+    f0, k = p.frequency_hz, p.extra.get("harmonics", 10)
+    periods = max(2, int(round(window_s * f0)))
+    span = periods / f0
+    ss, dof = 0.0, 0
+    start = t[0]
+    while start + span <= t[-1] + 1e-9:
+        sel = (t >= start) & (t < start + span)
+        _, resid, _ = harmonic_fit(t[sel] - start, y[sel], f0, k)
+        ss += float(resid @ resid)
+        dof += max(int(sel.sum()) - (2 * k + 1), 1)
+        start += span
+    if dof == 0:
+        sel = (t >= p.window[0]) & (t <= p.window[1])
+        _, resid, _ = harmonic_fit(t[sel] - t[sel][0], y[sel], f0, k)
+        return float(np.sqrt(np.mean(resid ** 2)))
+    return float(np.sqrt(ss / dof))
+
+
+@dataclass
+class PreparedRecord:
+    rec: Record
+    t: np.ndarray
+    w: np.ndarray
+    y: np.ndarray
+    keep: np.ndarray            # samples used for error metrics (after settle)
+    rows: np.ndarray            # decimated sample indices used as fit residuals
+    sigma: float
+    n_fft: int
+    bins: np.ndarray            # rfft bins where H is evaluated
+    freqs: np.ndarray
+    x_pad: np.ndarray           # padded (w - w0) for the linear path
+    pad: int
+    x_bins: np.ndarray = None   # FFT of x_pad at ``bins``
+    grid_hz: np.ndarray = None  # interpolation grid of the transfer function
+
+
+def _padded(t, w, pad_s):
+    fs = (t.size - 1) / (t[-1] - t[0])
+    w0 = w - w[0]
+    n_pad = int(np.ceil(pad_s * fs))
+    ramp = w0[-1] * 0.5 * (1 + np.cos(np.pi * np.arange(1, n_pad + 1) / n_pad))
+    x = np.concatenate([w0, ramp])
+    n = 1 << int(np.ceil(np.log2(x.size)))
+    return x, n, fs, n_pad
+
+
+def prepare(records: Sequence[Record], *, settle_s: float = 0.5, max_rows_per_record: int = 1500,
+            pad_s: float = 1.0, n_grid: int = 512) -> list[PreparedRecord]:
+    out = []
+    for rec in records:
+        t = np.asarray(rec.time_s, float)
+        w = np.asarray(rec.deflection_m, float)
+        y = np.asarray(rec.current_a, float)
+        keep = t >= t[0] + settle_s
+        if keep.sum() < 32:
+            raise ValueError(f"{rec.path}: fewer than 32 samples after the {settle_s} s settle time")
+        idx = np.flatnonzero(keep)
+        step = max(1, int(np.ceil(idx.size / max_rows_per_record)))
+        rows = idx[::step]
+        x, n, fs, n_pad = _padded(t, w, pad_s)
+        f_all = np.fft.rfftfreq(n, 1.0 / fs)
+        bins = np.arange(1, f_all.size)
+        freqs = f_all[bins]
+        sigma = noise_rms(t[keep], w[keep], y[keep])
+        grid = np.geomspace(freqs[0], freqs[-1], n_grid)
+        out.append(PreparedRecord(rec, t, w, y, keep, rows, max(sigma, 1e-30), n, bins, freqs, x, n_pad,
+                                  np.fft.rfft(x, n)[bins], grid))
+    return out
+
+
+_BUILTIN = {"surface_resistance", "amplifier_bandwidth", "time_delay", "current_offset",
+            "hydration_drift", "effective_length", "beam_inertia", "nonlinearity"}
+
+
+def _overrides(effect: Effect) -> set[str]:
+    return {name for name in ("input_transform", "output_transform", "material_at")
+            if getattr(type(effect), name) is not getattr(Effect, name)}
+
+
+def predict(p: PreparedRecord, model: SensorModel) -> np.ndarray:
+    """Predicted current of a prepared record under ``model``: the same operations as
+    :func:`~ipmc_sensor_ros.simulation.sensor.predict_current`, on the kept bins."""
+    specs = [(get_effect(e.name), e.as_dict()) for e in model.effects]
+    if any(_overrides(eff) - {"output_transform", "input_transform", "material_at"}
+           or (eff.name not in _BUILTIN and _overrides(eff) & {"input_transform"})
+           for eff, _ in specs):
+        from ..simulation.sensor import predict_current
+
+        fs = (p.t.size - 1) / (p.t[-1] - p.t[0])
+        return predict_current(model, p.t, p.w, pad_s=p.pad / fs)
+    x_bins = p.x_bins
+    w = p.w
+    for eff, vals in specs:
+        w = eff.input_transform(p.t, w, model, vals)
+    if w is not p.w:
+        x_bins = np.fft.rfft(_repad(p, w), p.n_fft)[p.bins]
+    varying = [(eff, vals) for eff, vals in specs if eff.material_at(p.t, model, vals) is not None]
+    spec = np.zeros(p.n_fft // 2 + 1, dtype=complex)
+    if not varying:
+        spec[p.bins] = x_bins * _transfer_on_bins(p, model)
+        i = np.fft.irfft(spec, p.n_fft)[: p.t.size]
+    else:
+        eff, vals = varying[0]
+        mat_at = eff.material_at(p.t, model, vals)
+        chunks = int(getattr(eff, "chunks", 16))
+        edges = np.linspace(p.t[0], p.t[-1], chunks + 1)
+        i = np.empty(p.t.size)
+        for k in range(chunks):
+            sel = (p.t >= edges[k]) & ((p.t < edges[k + 1]) if k < chunks - 1 else (p.t <= edges[k + 1]))
+            centre = 0.5 * (edges[k] + edges[k + 1]) - p.t[0]
+            spec[p.bins] = x_bins * _transfer_on_bins(p, model.with_material(mat_at(centre)))
+            i[sel] = np.fft.irfft(spec, p.n_fft)[: p.t.size][sel]
+    for eff, vals in specs:
+        i = eff.output_transform(p.t, i, model, vals)
+    return i
+
+
+def _transfer_on_bins(p: PreparedRecord, model: SensorModel) -> np.ndarray:
+    """H at the record's FFT bins: min-phase part interpolated from the log grid, delay exact."""
+    hg = model.min_phase_transfer(2j * np.pi * p.grid_hz)
+    lf, lg = np.log(p.freqs), np.log(p.grid_hz)
+    mag = np.interp(lf, lg, np.log(np.abs(hg)))
+    phase = np.interp(lf, lg, np.unwrap(np.angle(hg)))
+    return np.exp(mag + 1j * (phase - 2 * np.pi * p.freqs * model.delay_s()))
+
+
+def _repad(p: PreparedRecord, w: np.ndarray) -> np.ndarray:
+    """Pad a transformed deflection exactly as the record's own deflection was padded."""
+    w0 = w - w[0]
+    ramp = w0[-1] * 0.5 * (1 + np.cos(np.pi * np.arange(1, p.pad + 1) / p.pad))
+    return np.concatenate([w0, ramp])
+
+
+@dataclass(frozen=True)
+class FitSpec:
+    """What is free: material parameter names and (effect, parameter) pairs."""
+
+    material: tuple[str, ...] = ()
+    effect_params: tuple[tuple[str, str], ...] = ()
+
+
+@dataclass
+class ModelFit:
+    models: list[SensorModel]            # fitted model per record
+    material: MaterialParameters
+    effect_values: dict[str, dict[str, float]]
+    chi2: float
+    n_rows: int
+    n_params: int
+    success: bool
+    flags: list[str] = field(default_factory=list)
+
+    @property
+    def bic(self) -> float:
+        return float(self.chi2 + self.n_params * np.log(max(self.n_rows, 1)))
+
+    @property
+    def aic(self) -> float:
+        return float(self.chi2 + 2 * self.n_params)
+
+
+def _apply(models: Sequence[SensorModel], material_names, effect_keys, x, base_material):
+    mat_changes = {n: float(np.exp(v)) for n, v in zip(material_names, x[:len(material_names)])}
+    ev: dict[str, dict[str, float]] = {}
+    for (eff_name, par_name), v, log in zip(effect_keys, x[len(material_names):],
+                                            [_param(e, p).log_scale for e, p in effect_keys]):
+        ev.setdefault(eff_name, {})[par_name] = float(np.exp(v)) if log else float(v)
+    out = []
+    for m in models:
+        mat = m.material.replace(**mat_changes) if mat_changes else m.material
+        effects = []
+        for spec in m.effects:
+            if spec.name in ev:
+                vals = spec.as_dict()
+                vals.update(ev[spec.name])
+                effects.append(EffectSpec(spec.name, tuple(sorted(vals.items()))))
+            else:
+                effects.append(spec)
+        out.append(SensorModel(m.geometry, mat, tuple(effects)))
+    return out, ev
+
+
+def _param(effect_name: str, param_name: str):
+    eff = get_effect(effect_name)
+    for p in eff.parameters:
+        if p.name == param_name:
+            return p
+    raise ParameterError(f"effect '{effect_name}' has no parameter '{param_name}'")
+
+
+def fit_model(prepared: Sequence[PreparedRecord], free: FitSpec, *,
+              train: Sequence[np.ndarray] | None = None, starts: Sequence[np.ndarray] | None = None,
+              bounds_factor: float = 100.0, max_nfev: int = 60) -> ModelFit:
+    """Fit ``free`` to the prepared records (all rows, or ``train[r]`` row masks per record).
+
+    Each record's model must already contain every effect named in ``free``.
+    ``starts``: optional list of starting vectors (fit space); the best result is kept.
+    """
+    models = [p.rec.model for p in prepared]
+    base = models[0].material
+    mat_names = tuple(free.material)
+    eff_keys = tuple(free.effect_params)
+    x0, lo, hi = [], [], []
+    for n in mat_names:
+        v = np.log(getattr(base, n))
+        x0.append(v)
+        lo.append(v - np.log(bounds_factor))
+        hi.append(v + np.log(bounds_factor))
+    for eff_name, par_name in eff_keys:
+        par = _param(eff_name, par_name)
+        current = models[0].effect_values(eff_name)[par_name]
+        if par.log_scale:
+            x0.append(np.log(current))
+            lo.append(np.log(par.lower))
+            hi.append(np.log(par.upper))
+        else:
+            x0.append(current)
+            lo.append(par.lower)
+            hi.append(par.upper)
+    x0, lo, hi = np.array(x0, float), np.array(lo, float), np.array(hi, float)
+    rows = [p.rows if train is None else p.rows[train[k][p.rows]] for k, p in enumerate(prepared)]
+    n_rows = int(sum(r.size for r in rows))
+
+    def residual(x):
+        try:
+            ms, _ = _apply(models, mat_names, eff_keys, x, base)
+            parts = [(p.y[r] - predict(p, m)[r]) / p.sigma for p, m, r in zip(prepared, ms, rows)]
+        except (ParameterError, ValueError, FloatingPointError):
+            return np.full(n_rows, 1e3)
+        res = np.concatenate(parts)
+        return np.where(np.isfinite(res), res, 1e3)
+
+    if x0.size == 0:
+        r = residual(x0)
+        ms, ev = _apply(models, mat_names, eff_keys, x0, base)
+        return ModelFit(ms, ms[0].material, ev, float(r @ r), n_rows, 0, True)
+    candidates = [np.clip(np.asarray(st, float), lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
+                  for st in (starts or [x0])]
+    if len(candidates) > 1:
+        # screen the starts by their cost and refine only the best one
+        costs = [float(np.sum(residual(c) ** 2)) for c in candidates]
+        candidates = [candidates[int(np.argmin(costs))]]
+    best = least_squares(residual, candidates[0], bounds=(lo, hi), method="trf", x_scale="jac",
+                         diff_step=1e-4, max_nfev=max_nfev)
+    ms, ev = _apply(models, mat_names, eff_keys, best.x, base)
+    flags = []
+    for k, (v, l, h) in enumerate(zip(best.x, lo, hi)):
+        name = mat_names[k] if k < len(mat_names) else "/".join(eff_keys[k - len(mat_names)])
+        if (v - l) < 1e-3 * (h - l) or (h - v) < 1e-3 * (h - l):
+            flags.append(f"{name} at bound")
+        if k >= len(mat_names):
+            par = _param(*eff_keys[k - len(mat_names)])
+            val = float(np.exp(v)) if par.log_scale else float(v)
+            if not par.typical[0] <= val <= par.typical[1]:
+                flags.append(f"{name} = {val:.4g} {par.unit} outside plausible range "
+                             f"[{par.typical[0]:g}, {par.typical[1]:g}]")
+    return ModelFit(ms, ms[0].material, ev, float(2 * best.cost), n_rows, int(best.x.size),
+                    bool(best.success), flags)
