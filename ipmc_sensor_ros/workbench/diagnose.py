@@ -14,11 +14,14 @@ Procedure (:func:`diagnose`)
    ``error`` is the held-out normalised RMS error of the predicted current,
    ||y - y_hat|| / ||y - mean(y)|| over the test parts, pooled.  Also the BIC
    of the full-data fit (chi^2 + k ln n, residuals in units of the noise).
-4. Verdict.  The noise floor is the error a perfect model would have (from the
-   measured noise).  If the baseline is within ``explained_factor`` x the noise
-   floor (+0.002), nothing is missing (no false alarm).  Otherwise the best
-   candidate is named if it lowers the held-out error by at least 10 % and its
-   BIC by at least 10; ``explained`` says whether it reaches the noise floor.
+4. Verdict.  The best candidate is named if it is significant: it lowers the
+   held-out error by at least ``min_gain`` (3 %) **and** the BIC by at least
+   ``min_delta_bic`` (20, "very strong" evidence on the Kass-Raftery scale).
+   On data the model already explains, extra parameters only fit noise: the
+   held-out error does not fall and the BIC rises, so no effect is named (no
+   false alarm).  ``explained`` says whether the chosen model's held-out error
+   reaches the noise floor (the error a perfect model would have, from the
+   measured noise): at most ``explained_factor`` (1.15) x floor + 0.001.
    Candidates within 5 % of the best held-out error are reported as ties
    (indistinguishable on these data); parameters at a bound or outside their
    plausible range are flagged.
@@ -164,7 +167,8 @@ def _score(prepared, fit_fn, folds) -> tuple[float, list[float], ModelFit]:
 
 def diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAULT_FREE_MATERIAL,
              candidates: Sequence[str] | None = None, n_folds: int = 4,
-             explained_factor: float = 1.3, progress: Callable[[str], None] | None = None,
+             explained_factor: float = 1.15, min_gain: float = 0.03, min_delta_bic: float = 20.0,
+             progress: Callable[[str], None] | None = None,
              settle_s: float = 0.5, fold_nfev: int = 15, n_jobs: int | None = None) -> Diagnosis:
     """Rank the effects missing from the records' models (see module docstring)."""
     say = progress or (lambda msg: None)
@@ -218,23 +222,26 @@ def diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAUL
             cands.append(job(name))
     cands.sort(key=lambda c: c.error)
 
-    threshold = explained_factor * noise_floor + 0.002
+    threshold = explained_factor * noise_floor + 0.001
     ties: list[str] = []
-    if baseline.error <= threshold:
-        missing, explained = None, True
-        reason = (f"baseline error {baseline.error:.4f} is at the noise floor "
-                  f"({noise_floor:.4f}): nothing is missing")
-    elif cands and cands[0].error <= 0.9 * baseline.error and cands[0].fit.bic <= baseline.fit.bic - 10:
+
+    def significant(c: Candidate) -> bool:
+        return c.error <= (1 - min_gain) * baseline.error and c.fit.bic <= baseline.fit.bic - min_delta_bic
+
+    if cands and significant(cands[0]):
         best = cands[0]
         missing = best.effect
         explained = bool(best.error <= threshold)
-        ties = [c.effect for c in cands[1:] if c.error <= 1.05 * best.error
-                and c.fit.bic <= baseline.fit.bic - 10]
+        ties = [c.effect for c in cands[1:] if c.error <= 1.05 * best.error and significant(c)]
         reason = (f"adding {best.effect} lowers the held-out error {baseline.error:.4f} -> "
-                  f"{best.error:.4f} ({baseline.error / best.error:.1f}x), BIC by "
+                  f"{best.error:.4f} ({baseline.error / best.error:.2f}x) and the BIC by "
                   f"{baseline.fit.bic - best.fit.bic:.0f}" +
                   ("" if explained else f"; the residual stays above the noise floor {noise_floor:.4f}: "
                    "something else is missing too"))
+    elif baseline.error <= threshold:
+        missing, explained = None, True
+        reason = (f"baseline error {baseline.error:.4f} is at the noise floor ({noise_floor:.4f}) and "
+                  "no effect improves it significantly: nothing is missing")
     else:
         missing, explained = None, False
         reason = (f"baseline error {baseline.error:.4f} is above the noise floor {noise_floor:.4f} "

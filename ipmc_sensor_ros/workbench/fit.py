@@ -81,7 +81,7 @@ class FitGroup:
 @dataclass
 class FitResult:
     material: MaterialParameters
-    effects: tuple[str, ...]
+    effects: tuple
     free: tuple[str, ...]
     estimates: dict[str, float]
     ci95: dict[str, tuple[float, float]]
@@ -103,7 +103,7 @@ class FitResult:
 
     def summary(self) -> str:
         lines = [f"fit of {', '.join(SYMBOLS.get(n, n) for n in self.free)} "
-                 f"({'+'.join(('h1',) + self.effects)}): chi2/dof = {self.chi2:.4g}/{self.dof} "
+                 f"({'+'.join(('h1',) + tuple(getattr(e, 'name', e) for e in self.effects))}): chi2/dof = {self.chi2:.4g}/{self.dof} "
                  f"= {self.reduced_chi2:.3g}"]
         lines.append(f"{'parameter':<32} {'estimate':>12} {'95% CI':>27}  note")
         for name in self.free:
@@ -136,7 +136,7 @@ class FitResult:
 
 
 def model_for_group(material: MaterialParameters, group: FitGroup, free: Sequence[str],
-                    effects: tuple[str, ...]) -> SensorModel:
+                    effects: tuple) -> SensorModel:
     """Model of one group: header-known values override fixed parameters."""
     overrides = {k: v for k, v in group.known.items() if k not in free and k in FITTABLE}
     mat = material.replace(**overrides) if overrides else material
@@ -160,7 +160,7 @@ def _combination_text(vector: np.ndarray, free: Sequence[str]) -> str:
 
 def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
                    material: MaterialParameters = PAPER_PARAMETERS,
-                   effects: tuple[str, ...] = ("surface_resistance",), *,
+                   effects: tuple = ("surface_resistance",), *,
                    bounds_factor: float = 1e3, sd_floor: float = 1e-6,
                    sd_threshold: float = 0.3, min_sensitivity: float = 0.01) -> FitResult:
     """Fit ``free`` parameters to the frequency points of ``groups`` (see module doc).

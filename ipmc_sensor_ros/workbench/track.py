@@ -33,7 +33,7 @@ class TrackPoint:
 
 def track_parameter(time_s, deflection_m, current_a, geometry: Geometry,
                     material: MaterialParameters, free: Sequence[str] = ("diffusivity_m2_per_s",),
-                    effects: tuple[str, ...] = ("surface_resistance",), *, window_s: float = 60.0,
+                    effects: tuple = ("surface_resistance",), *, window_s: float = 60.0,
                     step_s: float | None = None, known: dict | None = None,
                     source: str = "") -> list[TrackPoint]:
     """Refit ``free`` in consecutive windows; returns one :class:`TrackPoint` per window.
