@@ -133,19 +133,22 @@ def _check_band(band_hz: Sequence[float]) -> tuple[float, float]:
 
 def reduce_response(response: Callable[[np.ndarray], np.ndarray], order: int,
                     band_hz: Sequence[float] = (0.1, 50.0), *, extension: float = 10.0,
-                    n_points: int = 160) -> ReducedModel:
+                    n_points: int = 160, initial: ReducedModel | None = None) -> ReducedModel:
     """Stable, minimum-phase order-``order`` fit of ``response(s) = H(s)``.
 
     ``response`` must behave like ``s R(s)`` with ``R(0)`` finite and non-zero
-    (a charge sensor).  See the module docstring for the method.
+    (a charge sensor).  See the module docstring for the method.  ``initial``
+    (a reduction of the same order of a nearby response) skips the order
+    continuation and starts the fit from its poles and zeros (fast updates of
+    slowly varying models).
     """
     return reduce_response_all(response, order, band_hz, extension=extension,
-                               n_points=n_points)[-1]
+                               n_points=n_points, initial=initial)[-1]
 
 
 def reduce_response_all(response: Callable[[np.ndarray], np.ndarray], max_order: int,
                         band_hz: Sequence[float] = (0.1, 50.0), *, extension: float = 10.0,
-                        n_points: int = 160) -> list[ReducedModel]:
+                        n_points: int = 160, initial: ReducedModel | None = None) -> list[ReducedModel]:
     """Fits of orders 1..``max_order`` (each one continues from the previous)."""
     if isinstance(max_order, bool) or not isinstance(max_order, (int, np.integer)) \
             or not 1 <= max_order <= MAX_ORDER:
@@ -180,11 +183,15 @@ def reduce_response_all(response: Callable[[np.ndarray], np.ndarray], max_order:
 
     fits: list[ReducedModel] = []
     previous = None
-    for n in range(1, int(max_order) + 1):
+    use_initial = initial is not None and initial.order == int(max_order)
+    for n in range(int(max_order) if use_initial else 1, int(max_order) + 1):
         corners = np.logspace(np.log10(w[0]), np.log10(w[-1]), 2 * n + 2)[1:-1]
         x0 = np.concatenate([np.log(corners[0::2]), np.log(corners[1::2]), [0.0]])
         x0[-1] = np.mean(target.real - model(x0, n).real)
         starts = [x0]
+        if use_initial:
+            starts = [np.concatenate([np.log(-initial.poles_rad_s), np.log(-initial.zeros_rad_s),
+                                      [np.log(initial.gain)]])]
         if previous is not None:
             err = np.abs(model(previous, n - 1) - target) * weight
             at = np.log(w[int(np.argmax(err))])

@@ -86,10 +86,10 @@ class CurrentOffset(Effect):
     reference = "Chen et al. 2007 section 4 (the integrator of the inverse); Bonomo et al. 2006."
 
     def output_transform(self, t, i, model, values):
-        return i + values["offset_a"] + values["drift_a_per_s"] * (t - t[0])
+        return i + values["offset_a"] + values["drift_a_per_s"] * t
 
     def inverse_output_transform(self, t, i, model, values):
-        return i - values["offset_a"] - values["drift_a_per_s"] * (t - t[0])
+        return i - values["offset_a"] - values["drift_a_per_s"] * t
 
 
 @register_effect
@@ -110,7 +110,7 @@ class HydrationDrift(Effect):
     #: number of piecewise-constant chunks used to simulate the drift
     chunks = 16
 
-    def material_at(self, t, model, values):
+    def material_at(self, model, values):
         rate = values["diffusivity_rate_per_s"]
         d0 = model.material.diffusivity_m2_per_s
         return lambda tau: model.material.replace(diffusivity_m2_per_s=d0 * math.exp(rate * tau))

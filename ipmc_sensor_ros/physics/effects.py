@@ -106,14 +106,16 @@ class Effect:
         """Pure time delay contained in ``factor``, s."""
         return 0.0
 
+    # Times ``t`` given to the hooks are seconds since the start of the record
+    # (or of the stream, for the nodes).
     def input_transform(self, t: np.ndarray, w: np.ndarray, model, values: dict) -> np.ndarray:
         return w
 
     def output_transform(self, t: np.ndarray, i: np.ndarray, model, values: dict) -> np.ndarray:
         return i
 
-    def material_at(self, t: np.ndarray, model, values: dict):
-        """Time-varying material (array of MaterialParameters per chunk) or None."""
+    def material_at(self, model, values: dict):
+        """For time-varying effects: a function ``elapsed_s -> MaterialParameters``; else None."""
         return None
 
     def inverse_input_transform(self, w_prime: np.ndarray, model, values: dict) -> np.ndarray:

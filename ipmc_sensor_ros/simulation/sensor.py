@@ -52,18 +52,33 @@ def periodic_response(model: SensorModel, deflection_m, sample_rate_hz: float) -
     return np.fft.irfft(np.fft.rfft(w) * hw, n)
 
 
-@functools.lru_cache(maxsize=32)
+@functools.lru_cache(maxsize=64)
 def forward_reduction(model: SensorModel, sample_rate_hz: float, order: int = 8,
                       low_hz: float = 0.01) -> ReducedModel:
-    """Wide-band reduction used by the simulator (cached per model and rate)."""
+    """Wide-band reduction of the model's minimum-phase LTI part used by the
+    simulator (cached per model and rate); any pure delay is applied separately."""
     high = 0.45 * sample_rate_hz
     if high <= low_hz * 10:
         raise ParameterError(f"sample_rate_hz={sample_rate_hz} is too low to simulate")
-    return reduce_response(model.transfer, order, (low_hz, high), extension=3.0)
+    return reduce_response(model.min_phase_transfer, order, (low_hz, high), extension=3.0)
 
 
 class SensorSimulator:
-    """Streaming simulation of the measured sensing current.
+    """Streaming simulation of the measured sensing current, effects included.
+
+    Per block of sample times: the stimulus gives w and its velocity v;
+    effects' ``input_transform`` T maps w -> T(w) and v -> dT/dt, computed as
+    the central directional derivative (T(w + h v) - T(w - h v)) / 2h with
+    h = 1 us (exact to O(h^2) for the polynomial nonlinearity); v drives the
+    Tustin-discretised reduction of the minimum-phase part of H(s)/s; a pure
+    delay is a delay line with linear interpolation between samples; the
+    effects' ``output_transform`` and the measurement chain follow.  A
+    time-varying material (``hydration_drift``) is followed by recomputing the
+    filter every ``update_s`` seconds of simulated time; the new filter's state
+    is obtained by replaying the last ``replay_s`` (1 s, many times the
+    sensor's memory) of its input through it, so the switch is seamless even
+    though successive reductions place their poles differently.  Time in the effect hooks runs from the first
+    simulated sample.
 
     Parameters
     ----------
@@ -74,11 +89,14 @@ class SensorSimulator:
     noise_rms_a : white Gaussian noise RMS, A.
     seed : seed of the noise generator.
     order : order of the internal reduction of R(s).
+    update_s : coefficient update interval for time-varying effects, s.
     """
 
     def __init__(self, model: SensorModel, sample_rate_hz: float, *, current_gain: float = 1.0,
                  current_offset_a: float = 0.0, noise_rms_a: float = 0.0, seed: int = 0,
-                 order: int = 8):
+                 order: int = 8, update_s: float = 5.0, replay_s: float = 1.0):
+        from ..physics.effects import get_effect
+
         fs = float(sample_rate_hz)
         if not (math.isfinite(fs) and fs > 0):
             raise ParameterError(f"parameter 'sample_rate_hz' must be > 0, got {sample_rate_hz!r}")
@@ -93,26 +111,65 @@ class SensorSimulator:
         self.current_gain = float(current_gain)
         self.current_offset_a = float(current_offset_a)
         self.noise_rms_a = float(noise_rms_a)
-        self.reduced = forward_reduction(model, fs, order)
-        self.sos = tustin_sos(self.reduced.zeros_rad_s, self.reduced.poles_rad_s,
-                              self.reduced.gain, fs, default_prewarp_hz(fs, 50.0))
+        self.order = int(order)
+        self.update_s = float(update_s)
+        self._effects = [(get_effect(e.name), e.as_dict()) for e in model.effects]
+        self._material_at = next((f for f in (eff.material_at(model, v) for eff, v in self._effects)
+                                  if f is not None), None)
+        self._input = [(eff, v) for eff, v in self._effects
+                       if type(eff).input_transform is not _base_effect().input_transform]
+        self.reduced = forward_reduction(model, fs, self.order)
+        self.sos = self._sos_for(self.reduced)
+        delay = model.delay_s() * fs
+        self._delay_int, self._delay_frac = int(math.floor(delay)), float(delay - math.floor(delay))
         self._rng = np.random.default_rng(seed)
         self._zi = np.zeros((self.sos.shape[0], 2))
+        self._history = np.zeros(self._delay_int + 1)
+        self._t_start: float | None = None
+        self._next_update = self.update_s
+        self._replay = np.zeros(int(round(replay_s * fs))) if self._material_at is not None else None
+
+    def _sos_for(self, reduced: ReducedModel) -> np.ndarray:
+        return tustin_sos(reduced.zeros_rad_s, reduced.poles_rad_s, reduced.gain,
+                          self.sample_rate_hz, default_prewarp_hz(self.sample_rate_hz, 50.0))
 
     def reset(self) -> None:
         self._zi = np.zeros_like(self._zi)
+        self._history = np.zeros_like(self._history)
+        self._t_start = None
+        self._next_update = self.update_s
+        if self._replay is not None:
+            self._replay = np.zeros_like(self._replay)
+        if self._material_at is not None:
+            self.reduced = forward_reduction(self.model, self.sample_rate_hz, self.order)
+            self.sos = self._sos_for(self.reduced)
 
     def clean_current(self, velocity_m_per_s) -> np.ndarray:
-        """Sensing current (A) for a block of tip velocities (m/s), no measurement chain."""
+        """Sensing current (A) of the LTI part for a block of (transformed) tip
+        velocities (m/s), delay included; no output transforms or measurement chain."""
         v = np.asarray(velocity_m_per_s, float)
         if v.size == 0:
             return np.empty(0)
         y, self._zi = sig.sosfilt(self.sos, v, zi=self._zi)
-        return y
+        if self._replay is not None:
+            self._replay = np.concatenate([self._replay, v])[-self._replay.size:]
+        if self._delay_int == 0 and self._delay_frac == 0.0:
+            return y
+        buf = np.concatenate([self._history, y])
+        n, frac = self._delay_int, self._delay_frac
+        start = self._history.size
+        idx = np.arange(start, start + y.size)
+        out = (1 - frac) * buf[idx - n] + frac * buf[idx - n - 1]
+        self._history = buf[-(n + 1):]
+        return out
 
-    def measure(self, clean_current_a) -> np.ndarray:
-        """Apply gain, offset and noise of the measurement chain."""
-        i = self.current_gain * np.asarray(clean_current_a, float) + self.current_offset_a
+    def measure(self, clean_current_a, elapsed_s=None) -> np.ndarray:
+        """Apply the effects' output transforms (at ``elapsed_s``) and the measurement chain."""
+        i = np.asarray(clean_current_a, float)
+        if elapsed_s is not None:
+            for eff, vals in self._effects:
+                i = eff.output_transform(np.asarray(elapsed_s, float), i, self.model, vals)
+        i = self.current_gain * i + self.current_offset_a
         if self.noise_rms_a > 0:
             i = i + self._rng.normal(0.0, self.noise_rms_a, i.shape)
         return i
@@ -124,17 +181,66 @@ class SensorSimulator:
         calls, so consecutive blocks form one continuous record.
         """
         t = np.asarray(time_s, float)
-        return stimulus.deflection(t), self.measure(self.clean_current(stimulus.velocity(t)))
+        if t.size == 0:
+            return np.empty(0), np.empty(0)
+        if self._t_start is None:
+            self._t_start = float(t[0])
+        elapsed = t - self._t_start
+        w = stimulus.deflection(t)
+        v = stimulus.velocity(t)
+        if self._input:
+            h = 1e-6
+            wp, wm, w_eff = w + h * v, w - h * v, w
+            for eff, vals in self._input:
+                wp = eff.input_transform(elapsed, wp, self.model, vals)
+                wm = eff.input_transform(elapsed, wm, self.model, vals)
+                w_eff = eff.input_transform(elapsed, w_eff, self.model, vals)
+            v = (wp - wm) / (2 * h)
+        if self._material_at is None:
+            clean = self.clean_current(v)
+        else:
+            parts = []
+            for sl in self._update_slices(elapsed):
+                parts.append(self.clean_current(v[sl]))
+            clean = np.concatenate(parts)
+        return w, self.measure(clean, elapsed)
+
+    def _update_slices(self, elapsed: np.ndarray):
+        """Split a block at coefficient-update times; update the filter at each."""
+        start = 0
+        while start < elapsed.size:
+            cut = int(np.searchsorted(elapsed, self._next_update, side="left"))
+            if cut <= start:
+                material = self._material_at(self._next_update)
+                self.reduced = reduce_response(self.model.with_material(material).min_phase_transfer,
+                                               self.order, (0.01, 0.45 * self.sample_rate_hz),
+                                               extension=3.0, initial=self.reduced)
+                self.sos = self._sos_for(self.reduced)
+                _, self._zi = sig.sosfilt(self.sos, self._replay,
+                                          zi=np.zeros((self.sos.shape[0], 2)))
+                self._next_update += self.update_s
+                continue
+            yield slice(start, min(cut, elapsed.size))
+            start = min(cut, elapsed.size)
 
     def accuracy(self, band_hz=(0.5, 50.0), n_points: int = 200) -> tuple[float, float]:
         """Worst magnitude (dB) and phase (deg) error of the discrete simulator
         against the full model over ``band_hz`` (velocity input is exact, so
-        the simulator's response is ``j w * R_discrete(e^{j w T})``)."""
+        the simulator's response is ``j w * R_discrete(e^{j w T})``, times the
+        delay line's response)."""
         f = np.logspace(np.log10(band_hz[0]), np.log10(band_hz[1]), n_points)
         _, hd = sig.sosfreqz(self.sos, worN=f, fs=self.sample_rate_hz)
-        ratio = (2j * np.pi * f * hd) / self.model.frequency_response(f)
+        z = np.exp(-2j * np.pi * f / self.sample_rate_hz)
+        line = z ** self._delay_int * ((1 - self._delay_frac) + self._delay_frac * z)
+        ratio = (2j * np.pi * f * hd * line) / self.model.frequency_response(f)
         return float(np.max(np.abs(20 * np.log10(np.abs(ratio))))), \
             float(np.max(np.abs(np.degrees(np.angle(ratio)))))
+
+
+def _base_effect():
+    from ..physics.effects import Effect
+
+    return Effect
 
 
 def lti_response_fft(transfer, time_s, deflection_m, pad_s: float = 2.0) -> np.ndarray:
@@ -182,15 +288,16 @@ def predict_current(model: SensorModel, time_s, deflection_m, pad_s: float = 2.0
 
     t = np.asarray(time_s, float)
     w = np.asarray(deflection_m, float)
+    t_rel = t - t[0]
     specs = [(get_effect(e.name), e.as_dict()) for e in model.effects]
     for eff, vals in specs:
-        w = eff.input_transform(t, w, model, vals)
-    varying = [(eff, vals) for eff, vals in specs if eff.material_at(t, model, vals) is not None]
+        w = eff.input_transform(t_rel, w, model, vals)
+    varying = [(eff, vals) for eff, vals in specs if eff.material_at(model, vals) is not None]
     if not varying:
         i = lti_response_fft(model.transfer, t, w, pad_s)
     else:
         eff, vals = varying[0]
-        mat_at = eff.material_at(t, model, vals)
+        mat_at = eff.material_at(model, vals)
         chunks = int(getattr(eff, "chunks", 16))
         edges = np.linspace(t[0], t[-1], chunks + 1)
         i = np.empty_like(w)
@@ -200,5 +307,5 @@ def predict_current(model: SensorModel, time_s, deflection_m, pad_s: float = 2.0
             chunk_model = model.with_material(mat_at(centre))
             i[sel] = lti_response_fft(chunk_model.transfer, t, w, pad_s)[sel]
     for eff, vals in specs:
-        i = eff.output_transform(t, i, model, vals)
+        i = eff.output_transform(t_rel, i, model, vals)
     return i

@@ -154,18 +154,19 @@ def predict(p: PreparedRecord, model: SensorModel) -> np.ndarray:
         return predict_current(model, p.t, p.w, pad_s=p.pad / fs)
     x_bins = p.x_bins
     w = p.w
+    t_rel = p.t - p.t[0]
     for eff, vals in specs:
-        w = eff.input_transform(p.t, w, model, vals)
+        w = eff.input_transform(t_rel, w, model, vals)
     if w is not p.w:
         x_bins = np.fft.rfft(_repad(p, w), p.n_fft)[p.bins]
-    varying = [(eff, vals) for eff, vals in specs if eff.material_at(p.t, model, vals) is not None]
+    varying = [(eff, vals) for eff, vals in specs if eff.material_at(model, vals) is not None]
     spec = np.zeros(p.n_fft // 2 + 1, dtype=complex)
     if not varying:
         spec[p.bins] = x_bins * _transfer_on_bins(p, model)
         i = np.fft.irfft(spec, p.n_fft)[: p.t.size]
     else:
         eff, vals = varying[0]
-        mat_at = eff.material_at(p.t, model, vals)
+        mat_at = eff.material_at(model, vals)
         chunks = int(getattr(eff, "chunks", 16))
         edges = np.linspace(p.t[0], p.t[-1], chunks + 1)
         i = np.empty(p.t.size)
@@ -175,7 +176,7 @@ def predict(p: PreparedRecord, model: SensorModel) -> np.ndarray:
             spec[p.bins] = x_bins * _transfer_on_bins(p, model.with_material(mat_at(centre)))
             i[sel] = np.fft.irfft(spec, p.n_fft)[: p.t.size][sel]
     for eff, vals in specs:
-        i = eff.output_transform(p.t, i, model, vals)
+        i = eff.output_transform(t_rel, i, model, vals)
     return i
 
 
