@@ -31,5 +31,11 @@ def tustin_sos(zeros, poles, gain, sample_rate_hz: float, prewarp_hz: float) -> 
     """Second-order sections of the prewarped Tustin image of a continuous zpk (rad/s)."""
     w0 = 2.0 * math.pi * prewarp_hz
     fs_warped = w0 / (2.0 * math.tan(w0 / (2.0 * sample_rate_hz)))
-    zd, pd, kd = sig.bilinear_zpk(np.asarray(zeros, float), np.asarray(poles, float), gain, fs_warped)
+    zd, pd, kd = sig.bilinear_zpk(_maybe_real(zeros), _maybe_real(poles), gain, fs_warped)
     return sig.zpk2sos(zd, pd, kd)
+
+
+def _maybe_real(values) -> np.ndarray:
+    """Real array if every value is real, else complex (conjugate pairs expected)."""
+    v = np.asarray(values, dtype=complex)
+    return v.real.copy() if np.all(v.imag == 0) else v

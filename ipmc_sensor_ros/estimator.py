@@ -89,8 +89,8 @@ def inverse_zpk(reduced: ReducedModel, leak_corner_hz: float = DEFAULT_LEAK_CORN
                 offset_corner_hz: float | None = None):
     """Continuous inverse (zeros, poles, gain) in rad/s: 1/((s+w_c) R_n(s)) [* s/(s+w_o)]."""
     wc = 2.0 * np.pi * _positive("leak_corner_hz", leak_corner_hz)
-    zeros = np.asarray(reduced.poles_rad_s, dtype=float)
-    poles = np.concatenate([np.asarray(reduced.zeros_rad_s, dtype=float), [-wc]])
+    zeros = np.asarray(reduced.poles_rad_s)
+    poles = np.concatenate([np.asarray(reduced.zeros_rad_s), [-wc]])
     if offset_corner_hz is not None:
         wo = 2.0 * np.pi * _positive("offset_corner_hz", offset_corner_hz)
         zeros = np.concatenate([zeros, [0.0]])

@@ -58,6 +58,7 @@ __all__ = [
     "eq55_poles_zeros",
     "reduce_model",
     "reduce_response",
+    "append_rational",
     "reduction_error",
     "reduction_error_table",
     "MAX_ORDER",
@@ -89,6 +90,10 @@ class ReducedModel:
     @property
     def order(self) -> int:
         return len(self.poles_rad_s)
+
+    @property
+    def is_real(self) -> bool:
+        return not (np.iscomplexobj(self.zeros_rad_s) or np.iscomplexobj(self.poles_rad_s))
 
     def charge_response(self, s) -> np.ndarray:
         """R_n(s) = H_n(s)/s, A s m^-1."""
@@ -222,8 +227,23 @@ def reduce_model(model: SensorModel, order: int = 4, band_hz: Sequence[float] = 
 
     A pure delay in the model (``time_delay`` effect) is not part of the
     reduction: no causal inverse can undo it; see ``SensorModel.delay_s``.
+    Effects with an exact rational form (``Effect.rational``: amplifier
+    bandwidth, beam resonances) are appended exactly to the real-pole fit of
+    the remaining diffusion-type part, so ``order`` counts the fitted poles
+    only.
     """
-    return reduce_response(model.min_phase_transfer, order, band_hz, **kwargs)
+    return append_rational(reduce_response(model.diffusive_transfer, order, band_hz, **kwargs),
+                           model.rational_factors())
+
+
+def append_rational(reduced: ReducedModel, factors) -> ReducedModel:
+    """``reduced`` times exact rational factors [(zeros, poles, gain), ...] (rad/s)."""
+    if not factors:
+        return reduced
+    zeros = np.concatenate([reduced.zeros_rad_s] + [np.asarray(z, complex) for z, _, _ in factors])
+    poles = np.concatenate([reduced.poles_rad_s] + [np.asarray(p, complex) for _, p, _ in factors])
+    gain = reduced.gain * float(np.prod([k for _, _, k in factors]))
+    return ReducedModel(zeros_rad_s=zeros, poles_rad_s=poles, gain=gain, band_hz=reduced.band_hz)
 
 
 def reduction_error(reduced, model: SensorModel, band_hz: Sequence[float] = (0.1, 50.0),
@@ -243,9 +263,10 @@ def reduction_error_table(models: dict[str, SensorModel], orders: Sequence[int] 
     """Rows ``{sample, order, max_mag_error_db, max_phase_error_deg}``."""
     rows = []
     for name, model in models.items():
-        fits = reduce_response_all(model.min_phase_transfer, max(orders), band_hz)
+        fits = reduce_response_all(model.diffusive_transfer, max(orders), band_hz)
         for order in orders:
-            mag, phase = reduction_error(fits[order - 1], model, band_hz)
+            mag, phase = reduction_error(append_rational(fits[order - 1], model.rational_factors()),
+                                         model, band_hz)
             rows.append({"sample": name, "order": int(order), "max_mag_error_db": mag,
                          "max_phase_error_deg": phase})
     return rows

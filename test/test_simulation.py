@@ -79,7 +79,7 @@ def test_sampled_stimulus_and_errors():
 @pytest.mark.parametrize("effects", [
     "time_delay(delay_s=0.0023)", "nonlinearity(quadratic=1,cubic=10)",
     "current_offset(offset_a=1e-7,drift_a_per_s=1e-9)", "amplifier_bandwidth(corner_hz=50)",
-    "beam_inertia(natural_frequency_hz=30,loss_factor=0.05)", "effective_length(tip_offset_m=0.002)",
+    "beam_inertia(natural_frequency_hz=30,damping_ratio=0.03)", "effective_length(tip_offset_m=0.002)",
     "hydration_drift(diffusivity_rate_per_s=-0.005)",
 ])
 def test_streaming_simulator_with_effects_matches_exact_prediction(effects):

@@ -47,6 +47,10 @@ class AmplifierBandwidth(Effect):
     def factor(self, s, model, values):
         return 1.0 / (1.0 + s / (2 * math.pi * values["corner_hz"]))
 
+    def rational(self, model, values):
+        wa = 2 * math.pi * values["corner_hz"]
+        return np.array([]), np.array([-wa]), wa
+
 
 @register_effect
 class TimeDelay(Effect):
@@ -116,6 +120,13 @@ class HydrationDrift(Effect):
         return lambda tau: model.material.replace(diffusivity_m2_per_s=d0 * math.exp(rate * tau))
 
 
+#: x = kL of the zeros (sinh x sin x = 0) and poles (tan x = tanh x) of the tip-slope
+#: ratio of a clamped beam with prescribed tip displacement (first two of each)
+_BEAM_ZEROS_X = (math.pi, 2 * math.pi)
+_BEAM_POLES_X = (3.926602312, 7.068582745)
+_FREE_CANTILEVER_X1 = 1.8751040687
+
+
 def clamped_pinned_slope_ratio(x4: np.ndarray) -> np.ndarray:
     """Tip-slope ratio R = w'(L) 2L / (3 w(L)) of a clamped beam whose tip displacement is
     prescribed (pinned, zero moment), as a function of x^4 = (kL)^4, k^4 = rho A w^2 / (E I).
@@ -141,24 +152,47 @@ class BeamInertia(Effect):
     physics = ("The paper's stress (eq. 21) is the static profile of a tip-loaded cantilever.  With "
                "the tip held by the slider and the beam's own inertia, the curvature distribution "
                "changes with frequency; the sensing charge, proportional to the integral of the "
-               "surface stress, i.e. to the tip slope w'(L), changes accordingly.")
-    equation = ("H -> H R(x^4), R = (2x/3) sinh x sin x / (sin x cosh x - sinh x cos x), "
-                "x^4 = 1.8751^4 (-s^2/w_1^2)/(1 + j eta), w_1 = 2 pi f_1 the free cantilever's first "
-                "natural frequency, eta the loss factor; R = 1 - 2x^4/315 at low frequency.  "
-                "The surface-resistance weighting of the changed profile is neglected (second order).")
+               "surface stress, i.e. to the tip slope w'(L), changes accordingly.  Exact undamped "
+               "(Euler-Bernoulli): R = (2x/3) sinh x sin x / (sin x cosh x - sinh x cos x), "
+               "x = kL (:func:`clamped_pinned_slope_ratio`), zeros at x = n pi (anti-resonances), "
+               "poles at tan x = tanh x (clamped-pinned resonances, x = 3.927, 7.069).")
+    equation = ("H -> H prod_{n=1,2} [(s^2 + 2 zeta w_zn s + w_zn^2)/w_zn^2] / "
+                "[(s^2 + 2 zeta w_pn s + w_pn^2)/w_pn^2], w_zn = w_1 (n pi / 1.8751)^2, "
+                "w_pn = w_1 (x_pn / 1.8751)^2, w_1 = 2 pi f_1 the free cantilever's first natural "
+                "frequency: the first two modes of R with viscous modal damping zeta "
+                "(= 1 - 0.039 (f/f_1)^2 at low frequency, as the exact R).")
     parameters = (
         EffectParameter("natural_frequency_hz", "Hz", 30.0, 1.0, 1e4, (10.0, 300.0),
                         "first natural frequency f_1 of the free cantilever (paper Fig. 7: ~30 Hz)"),
-        EffectParameter("loss_factor", "1", 0.05, 1e-4, 1.0, (0.005, 0.3), "structural loss factor eta"),
+        EffectParameter("damping_ratio", "1", 0.03, 1e-4, 0.7, (0.003, 0.2), "modal damping ratio zeta"),
     )
-    signature = ("Magnitude error growing as f^2 (R ~ 1 - 0.039 (f/f_1)^2), almost no phase error, "
-                 "strongest near the top of the band; independent of amplitude.")
+    signature = ("Magnitude error growing as f^2 (R ~ 1 - 0.039 (f/f_1)^2), almost no phase error "
+                 "below the anti-resonance at 2.8 f_1; independent of amplitude.")
     reference = "Euler-Bernoulli beam; e.g. Meirovitch, Fundamentals of Vibrations (2001), ch. 8."
 
-    def factor(self, s, model, values):
+    def rational(self, model, values):
         w1 = 2 * math.pi * values["natural_frequency_hz"]
-        x4 = 1.8751040687 ** 4 * (-(s ** 2) / w1 ** 2) / (1 + 1j * values["loss_factor"])
-        return clamped_pinned_slope_ratio(x4)
+        zeta = values["damping_ratio"]
+
+        def pair(x):
+            wn = w1 * (x / _FREE_CANTILEVER_X1) ** 2
+            re = -zeta * wn
+            im = wn * math.sqrt(max(1 - zeta * zeta, 0.0))
+            return [complex(re, im), complex(re, -im)], wn
+
+        zeros, poles, gain = [], [], 1.0
+        for xz, xp in zip(_BEAM_ZEROS_X, _BEAM_POLES_X):
+            z, wz = pair(xz)
+            p, wp = pair(xp)
+            zeros += z
+            poles += p
+            gain *= (wp / wz) ** 2
+        return np.array(zeros), np.array(poles), gain
+
+    def factor(self, s, model, values):
+        z, p, k = self.rational(model, values)
+        s = np.asarray(s, dtype=complex)[..., None]
+        return k * np.prod((s - z) / (s - p), axis=-1)
 
 
 @register_effect

@@ -106,6 +106,13 @@ class Effect:
         """Pure time delay contained in ``factor``, s."""
         return 0.0
 
+    def rational(self, model, values: dict):
+        """Exact rational form of ``factor`` as continuous (zeros, poles, gain) in
+        rad/s, if it has one (e.g. resonances, filters); None otherwise.  The
+        reduction keeps such factors exactly instead of approximating them by
+        real poles and zeros."""
+        return None
+
     # Times ``t`` given to the hooks are seconds since the start of the record
     # (or of the stream, for the nodes).
     def input_transform(self, t: np.ndarray, w: np.ndarray, model, values: dict) -> np.ndarray:

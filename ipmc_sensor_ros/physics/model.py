@@ -204,6 +204,25 @@ class SensorModel:
         """Total pure delay of the LTI part, s."""
         return float(sum(get_effect(e.name).delay_s(e.as_dict()) for e in self.effects))
 
+    def rational_factors(self) -> list[tuple[np.ndarray, np.ndarray, float]]:
+        """Continuous zpk (rad/s) of the effects whose factor is exactly rational."""
+        out = []
+        for spec in self.effects:
+            zpk = get_effect(spec.name).rational(self, spec.as_dict())
+            if zpk is not None:
+                out.append(zpk)
+        return out
+
+    def diffusive_transfer(self, s) -> np.ndarray:
+        """``min_phase_transfer`` without the exactly rational factors: the
+        diffusion-type part that the reduction approximates by real poles/zeros."""
+        s = np.asarray(s, dtype=complex)
+        out = self.min_phase_transfer(s)
+        for z, p, k in self.rational_factors():
+            sc = s[..., None]
+            out = out / (k * np.prod(sc - z, axis=-1) / np.prod(sc - p, axis=-1))
+        return out
+
     def min_phase_transfer(self, s) -> np.ndarray:
         """``transfer`` with its pure delay removed (what a causal inverse can invert)."""
         s = np.asarray(s, dtype=complex)

@@ -29,7 +29,7 @@ import scipy.signal as sig
 from ..discretize import default_prewarp_hz, tustin_sos
 from ..physics.model import SensorModel
 from ..physics.parameters import ParameterError
-from ..reduction import ReducedModel, reduce_response
+from ..reduction import ReducedModel, append_rational, reduce_response
 from .stimuli import Stimulus
 
 __all__ = ["periodic_response", "lti_response_fft", "predict_current", "SensorSimulator",
@@ -60,7 +60,8 @@ def forward_reduction(model: SensorModel, sample_rate_hz: float, order: int = 8,
     high = 0.45 * sample_rate_hz
     if high <= low_hz * 10:
         raise ParameterError(f"sample_rate_hz={sample_rate_hz} is too low to simulate")
-    return reduce_response(model.min_phase_transfer, order, (low_hz, high), extension=3.0)
+    return append_rational(reduce_response(model.diffusive_transfer, order, (low_hz, high),
+                                           extension=3.0), model.rational_factors())
 
 
 class SensorSimulator:
@@ -119,6 +120,9 @@ class SensorSimulator:
         self._input = [(eff, v) for eff, v in self._effects
                        if type(eff).input_transform is not _base_effect().input_transform]
         self.reduced = forward_reduction(model, fs, self.order)
+        self._diffusive = reduce_response(model.diffusive_transfer, self.order,
+                                          (0.01, 0.45 * fs), extension=3.0) \
+            if self._material_at is not None else None
         self.sos = self._sos_for(self.reduced)
         delay = model.delay_s() * fs
         self._delay_int, self._delay_frac = int(math.floor(delay)), float(delay - math.floor(delay))
@@ -212,9 +216,11 @@ class SensorSimulator:
             cut = int(np.searchsorted(elapsed, self._next_update, side="left"))
             if cut <= start:
                 material = self._material_at(self._next_update)
-                self.reduced = reduce_response(self.model.with_material(material).min_phase_transfer,
-                                               self.order, (0.01, 0.45 * self.sample_rate_hz),
-                                               extension=3.0, initial=self.reduced)
+                drifted = self.model.with_material(material)
+                self._diffusive = reduce_response(drifted.diffusive_transfer, self.order,
+                                                  (0.01, 0.45 * self.sample_rate_hz), extension=3.0,
+                                                  initial=self._diffusive)
+                self.reduced = append_rational(self._diffusive, drifted.rational_factors())
                 self.sos = self._sos_for(self.reduced)
                 _, self._zi = sig.sosfilt(self.sos, self._replay,
                                           zi=np.zeros((self.sos.shape[0], 2)))

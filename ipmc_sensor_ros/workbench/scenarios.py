@@ -31,7 +31,7 @@ DETECTABLE_RANGES = {
     "current_offset": {"offset_a": (1e-7, 5e-7), "drift_a_per_s": (-2e-8, 2e-8)},
     "hydration_drift": {"diffusivity_rate_per_s": (-2e-3, -5e-4)},
     "effective_length": {"tip_offset_m": (1.5e-3, 4e-3)},
-    "beam_inertia": {"natural_frequency_hz": (22.0, 50.0), "loss_factor": (0.01, 0.1)},
+    "beam_inertia": {"natural_frequency_hz": (22.0, 50.0), "damping_ratio": (0.01, 0.1)},
     "nonlinearity": {"quadratic": (0.5, 2.0), "cubic": (5.0, 20.0)},
 }
 
