@@ -33,3 +33,11 @@ def test_benchmarks_smoke():
                          capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr
     assert "estimator block" in res.stdout and "| benchmark |" in res.stdout
+
+
+def test_effect_catalog_doc_is_in_sync():
+    """docs/effects.md is the catalog's one place of documentation: it must match the code."""
+    from ipmc_sensor_ros.physics.effects import catalog_markdown
+
+    doc = (ROOT / "docs" / "effects.md").read_text()
+    assert catalog_markdown().strip() in doc
