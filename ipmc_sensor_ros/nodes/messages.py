@@ -1,0 +1,152 @@
+"""Pack and unpack sample blocks in ``std_msgs/Float64MultiArray`` (pure numpy + std_msgs).
+
+Block layout (see docs/ros_interface.md)
+----------------------------------------
+A block of ``n`` timed samples is a 2-D array, row-major::
+
+    layout.dim[0] = MultiArrayDimension(label="sample", size=n, stride=2 n)
+    layout.dim[1] = MultiArrayDimension(label=<columns>, size=2, stride=2)
+    layout.data_offset = 0 (a non-zero offset is honoured when reading)
+    data = [t_0, v_0, t_1, v_1, ..., t_{n-1}, v_{n-1}]   (float64)
+
+``t_k`` is the sample time in seconds (ROS time as float seconds, resolution
+about 0.24 us at today's epoch), ``v_k`` the value in the unit named by the
+column label: ``"time_s,current_A"`` for the sensing current (amperes),
+``"time_s,deflection_m"`` for tip deflections (metres).
+
+A plain 1-D array (no dimension, or one dimension whose size matches the data)
+is also accepted on input: values only, no times.
+
+Malformed layouts raise :class:`LayoutError` with a message saying what is
+wrong; nothing here touches ROS middleware, so it is usable (and tested)
+without a running context.
+"""
+from __future__ import annotations
+
+import array
+from dataclasses import dataclass
+
+import numpy as np
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+__all__ = [
+    "LayoutError",
+    "Block",
+    "SAMPLE_LABEL",
+    "CURRENT_COLUMNS",
+    "DEFLECTION_COLUMNS",
+    "pack_block",
+    "unpack_block",
+    "claimed_samples",
+    "stamp_from_seconds",
+]
+
+#: Label of the row dimension.
+SAMPLE_LABEL = "sample"
+#: Column label of current blocks: seconds, amperes.
+CURRENT_COLUMNS = "time_s,current_A"
+#: Column label of deflection blocks: seconds, metres.
+DEFLECTION_COLUMNS = "time_s,deflection_m"
+
+
+class LayoutError(ValueError):
+    """A ``Float64MultiArray`` whose layout does not follow the block convention."""
+
+
+@dataclass(frozen=True)
+class Block:
+    """An unpacked block: ``times_s`` (None for a 1-D, values-only message) and ``values``."""
+
+    times_s: np.ndarray | None
+    values: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.values.size)
+
+
+def _to_array_d(values: np.ndarray) -> array.array:
+    out = array.array("d")
+    out.frombytes(np.ascontiguousarray(values, dtype="=f8").tobytes())
+    return out
+
+
+def pack_block(times_s, values, columns: str = CURRENT_COLUMNS) -> Float64MultiArray:
+    """Build the 2-D block message from ``times_s`` (s) and ``values`` (unit per ``columns``)."""
+    t = np.asarray(times_s, dtype=float).ravel()
+    v = np.asarray(values, dtype=float).ravel()
+    if t.shape != v.shape:
+        raise LayoutError(f"times ({t.size}) and values ({v.size}) differ in length")
+    n = int(t.size)
+    msg = Float64MultiArray()
+    msg.layout.dim = [MultiArrayDimension(label=SAMPLE_LABEL, size=n, stride=2 * n),
+                      MultiArrayDimension(label=columns, size=2, stride=2)]
+    msg.layout.data_offset = 0
+    inter = np.empty(2 * n)
+    inter[0::2] = t
+    inter[1::2] = v
+    msg.data = _to_array_d(inter)
+    return msg
+
+
+def _data(msg: Float64MultiArray) -> np.ndarray:
+    data = msg.data
+    if isinstance(data, array.array) and data.typecode == "d":
+        return np.frombuffer(data, dtype=float)
+    return np.asarray(data, dtype=float)
+
+
+def claimed_samples(msg: Float64MultiArray) -> int:
+    """How many samples the message carries, for accounting even when it is malformed.
+
+    Two or more dimensions: ceil(payload / 2) (a time and a value per sample);
+    otherwise the payload length (values only).
+    """
+    payload = max(len(msg.data) - int(msg.layout.data_offset), 0)
+    if len(msg.layout.dim) >= 2:
+        return (payload + 1) // 2
+    return payload
+
+
+def unpack_block(msg: Float64MultiArray, columns: str = CURRENT_COLUMNS) -> Block:
+    """Decode a block message; raise :class:`LayoutError` if the layout is malformed.
+
+    Returns a :class:`Block`; ``times_s`` is None for a values-only 1-D message.
+    Values are *not* checked for finiteness here (that is the estimator's job).
+    """
+    dims = list(msg.layout.dim)
+    offset = int(msg.layout.data_offset)
+    data = _data(msg)
+    if offset < 0 or offset > data.size:
+        raise LayoutError(f"layout.data_offset {offset} is outside the data (length {data.size})")
+    data = data[offset:]
+    if len(dims) <= 1:
+        if dims and dims[0].size != data.size:
+            raise LayoutError(f"1-D layout: dim[0].size = {dims[0].size} but the data holds "
+                              f"{data.size} value(s)")
+        return Block(times_s=None, values=data)
+    if len(dims) != 2:
+        raise LayoutError(f"expected 2 dimensions (sample, '{columns}'), got {len(dims)}")
+    d0, d1 = dims
+    if d0.label != SAMPLE_LABEL:
+        raise LayoutError(f"dim[0].label must be '{SAMPLE_LABEL}', got '{d0.label}'")
+    if d1.label != columns:
+        raise LayoutError(f"dim[1].label must be '{columns}', got '{d1.label}'")
+    if d1.size != 2 or d1.stride != 2:
+        raise LayoutError(f"dim[1] must have size 2 and stride 2, got size {d1.size}, "
+                          f"stride {d1.stride}")
+    if data.size % 2:
+        raise LayoutError(f"data length {data.size} is odd: samples are (time, value) pairs")
+    n = data.size // 2
+    if d0.size != n:
+        raise LayoutError(f"dim[0].size = {d0.size} but the data holds {n} (time, value) pair(s)")
+    if d0.stride != 2 * n:
+        raise LayoutError(f"dim[0].stride must be 2 * size = {2 * n}, got {d0.stride}")
+    pairs = data.reshape(n, 2)
+    return Block(times_s=pairs[:, 0].copy(), values=pairs[:, 1].copy())
+
+
+def stamp_from_seconds(t_s: float) -> tuple[int, int]:
+    """(sec, nanosec) of a ``builtin_interfaces/Time`` for ``t_s`` seconds (t_s >= 0)."""
+    ns = int(round(float(t_s) * 1e9))
+    sec, nanosec = divmod(ns, 1_000_000_000)
+    return int(sec), int(nanosec)

@@ -1,0 +1,53 @@
+"""Process entry helper shared by the node executables."""
+from __future__ import annotations
+
+import signal
+import sys
+
+import rclpy
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+
+from .params import ConfigurationError
+
+__all__ = ["run"]
+
+
+def run(node_factory, name: str, args=None) -> int:
+    """Init rclpy, build the node, spin until SIGINT/shutdown; return the exit code.
+
+    SIGINT (Ctrl-C, ``ros2 run``/launch shutdown) gives 0.  A configuration error
+    is printed on one line naming the parameter (no traceback) and gives 2.
+    """
+    # A shell starts background jobs with SIGINT ignored, and Python keeps an
+    # inherited SIG_IGN: restore the default so SIGINT always stops the node.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    rclpy.init(args=args)
+    # The executor exists before the node logs "ready", so a SIGINT sent on that
+    # line cannot interrupt the executor's construction (rclpy then prints an
+    # "Exception ignored in Executor.__del__" traceback).
+    executor = SingleThreadedExecutor()
+    try:
+        node = node_factory()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        executor.shutdown()
+        rclpy.try_shutdown()
+        return 0
+    except (ConfigurationError, ParameterException) as exc:
+        hint = ""
+        if "type" in str(exc).lower() and "double" in str(exc).lower():
+            hint = " (write floating-point parameters with a decimal point, e.g. 1000.0)"
+        print(f"{name}: invalid parameter: {exc}{hint}", file=sys.stderr)
+        executor.shutdown()
+        rclpy.try_shutdown()
+        return 2
+    try:
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0

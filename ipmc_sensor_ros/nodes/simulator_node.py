@@ -1,0 +1,309 @@
+"""ROS 2 node ``ipmc_simulator``: a simulated IPMC sensor and its DAQ.
+
+Publishes the measured sensing current on ``current`` (``time_s,current_A``
+blocks, the estimator's input layout) and the ground-truth tip deflection on
+``deflection_truth`` (``time_s,deflection_m`` blocks) with identical sample
+times ``t_k = t_start + k / sample_rate_hz``, ``t_start`` = node clock at the
+first block (simulation time works).  The stimulus is evaluated at ``k / fs``
+(it starts at zero whatever the clock says).  Counters go to
+``simulator/counters`` (``std_msgs/String`` JSON, 1 Hz and when done).
+
+Pacing (``realtime_factor``):
+
+* ``> 0``: a node-clock timer publishes the blocks that are due, i.e. simulated
+  time follows ``realtime_factor`` x the node clock (sim-time aware).  At most
+  ``MAX_BLOCKS_PER_TICK`` blocks per tick and a tick period >= 1 ms cap the
+  achievable factor at ``10 * block_size`` (1 kHz data).
+* ``0`` (fast mode, for tests and the demo): one block per tick of a 1 ms
+  steady-clock timer, i.e. ``block_size * 1 ms^-1`` samples per second at most
+  (real-time factor about ``block_size`` at 1 kHz: measured 194 with ``block_size: 200``).
+  One block per tick, never a burst, means a subscriber that keeps up with
+  one message per millisecond never sees its KEEP_LAST queue overflow, so the
+  sample accounting stays exact.
+
+All simulator parameters are read-only (restart to change them).
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray, String
+
+from ..physics.effects import get_effect
+from ..physics.parameters import ParameterError
+from ..reduction import ReductionError
+from ..simulation.sensor import SensorSimulator
+from ..simulation.stimuli import STIMULUS_KINDS, Sampled, Stimulus, make_stimulus
+from . import params as P
+from .messages import CURRENT_COLUMNS, DEFLECTION_COLUMNS, pack_block
+from .runner import run
+
+__all__ = ["SimulatorNode", "SIMULATOR_SPECS", "STIMULI", "load_stimulus_csv",
+           "read_stimulus_csv", "build_stimulus", "main"]
+
+STIMULI = tuple(sorted(STIMULUS_KINDS)) + ("file",)
+MAX_BLOCKS_PER_TICK = 10
+MIN_TICK_S = 1e-3
+
+_OWN_SPECS = (
+    P.Spec("stimulus", "crank_slider", str, "tip-deflection stimulus: crank_slider, sweep, "
+           "free_vibration, step or file", choices=STIMULI),
+    P.Spec("motor_frequency_hz", 1.0, float, "crank_slider: motor (drive) frequency, Hz",
+           low=1e-3, high=1e3),
+    P.Spec("crank_radius_m", 0.002, float, "crank_slider: crank radius r (half the "
+           "peak-to-peak deflection), m", low=1e-6, high=1.0),
+    P.Spec("rod_length_m", 0.02, float, "crank_slider: connecting-rod length l (> r), m",
+           low=1e-6, high=10.0),
+    P.Spec("sweep_start_hz", 0.5, float, "sweep: start frequency, Hz", low=1e-3, high=1e4),
+    P.Spec("sweep_stop_hz", 50.0, float, "sweep: stop frequency, Hz", low=1e-3, high=1e4),
+    P.Spec("sweep_duration_s", 20.0, float, "sweep: duration of one sweep (then repeated), s",
+           low=1e-3, high=1e6),
+    P.Spec("amplitude_m", 0.001, float, "sweep, step and free_vibration: tip amplitude, m",
+           low=-1.0, high=1.0),
+    P.Spec("natural_frequency_hz", 30.0, float, "free_vibration: natural frequency, Hz",
+           low=1e-3, high=1e4),
+    P.Spec("damping_ratio", 0.05, float, "free_vibration: damping ratio (dimensionless, < 1)",
+           low=0.0, high=0.999999),
+    P.Spec("step_start_s", 0.5, float, "step: time of the step after the start, s",
+           low=0.0, high=1e6),
+    P.Spec("stimulus_file", "", str, "file: CSV with columns time_s,deflection_m ('#' comment "
+           "lines and one header line allowed), interpolated by a cubic spline"),
+    P.Spec("sample_rate_hz", 1000.0, float, "DAQ sample rate, Hz", low=1.0, high=1e6),
+    P.Spec("block_size", 10, int, "samples per published message", low=1, high=100000),
+    P.Spec("realtime_factor", 1.0, float, "simulated seconds per node-clock second; 0 = fast "
+           "mode (one block per 1 ms tick)", low=0.0, high=1e6),
+    P.Spec("duration_s", 0.0, float, "simulated duration, s (0 = forever); then it logs "
+           "'done' and stops publishing", low=0.0, high=1e9),
+    P.Spec("current_gain", 1.0, float, "measurement chain: amplifier gain error "
+           "(dimensionless, 1 = ideal)", low=-1e6, high=1e6),
+    P.Spec("current_offset_a", 0.0, float, "measurement chain: constant current offset, A",
+           low=-1.0, high=1.0),
+    P.Spec("noise_rms_a", 0.0, float, "measurement chain: white Gaussian noise RMS, A",
+           low=0.0, high=1.0),
+    P.Spec("seed", 0, int, "seed of the noise generator", low=0, high=2 ** 31 - 1),
+    P.Spec("wait_for_subscribers", 0, int, "start only when 'current' and 'deflection_truth' "
+           "each have at least this many matched subscriptions (0 = start at once)",
+           low=0, high=1000),
+)
+
+SIMULATOR_SPECS = tuple(dataclasses.replace(s, read_only=True) for s in
+                        P.GEOMETRY_SPECS + P.MATERIAL_SPECS + P.MODEL_SPECS + _OWN_SPECS
+                        + P.QOS_SPECS)
+
+
+def read_stimulus_csv(path: str | Path) -> np.ndarray:
+    """(n, 2) array of (time_s, deflection_m) rows from a CSV file (s, m)."""
+    path = Path(path)
+    try:
+        lines = path.read_text().splitlines()
+    except OSError as exc:
+        raise ParameterError(f"parameter 'stimulus_file': cannot read {str(path)!r}: "
+                             f"{exc.strerror}") from None
+    rows = []
+    for number, line in enumerate(lines, 1):
+        text = line.split("#", 1)[0].strip()
+        if not text:
+            continue
+        cells = [c.strip() for c in text.split(",")]
+        try:
+            values = [float(c) for c in cells]
+        except ValueError:
+            if not rows and cells[:2] == ["time_s", "deflection_m"]:
+                continue  # header line
+            raise ParameterError(f"parameter 'stimulus_file': {path}:{number}: not two numbers: "
+                                 f"{line!r}") from None
+        if len(values) != 2:
+            raise ParameterError(f"parameter 'stimulus_file': {path}:{number}: expected 2 "
+                                 f"columns (time_s, deflection_m), got {len(values)}")
+        rows.append(values)
+    return np.array(rows, dtype=float).reshape(-1, 2)
+
+
+def load_stimulus_csv(path: str | Path) -> Sampled:
+    """A :class:`Sampled` stimulus from a ``time_s,deflection_m`` CSV file (s, m)."""
+    data = read_stimulus_csv(path)
+    try:
+        return Sampled(data[:, 0], data[:, 1])
+    except ParameterError as exc:
+        raise ParameterError(f"parameter 'stimulus_file': {path}: {exc}") from None
+
+
+def build_stimulus(values: dict) -> tuple[Stimulus, float]:
+    """(stimulus, time offset in stimulus time of sample 0, s) from parameter values."""
+    kind = P.check_choice("stimulus", values["stimulus"], STIMULI)
+    if kind == "file":
+        if not values["stimulus_file"]:
+            raise ParameterError("parameter 'stimulus_file' must name a CSV file when "
+                                 "stimulus is 'file'")
+        stim = load_stimulus_csv(values["stimulus_file"])
+        return stim, float(read_stimulus_csv(values["stimulus_file"])[0, 0])
+    if kind == "crank_slider":
+        kw = {k: values[k] for k in ("motor_frequency_hz", "crank_radius_m", "rod_length_m")}
+    elif kind == "sweep":
+        kw = {"amplitude_m": values["amplitude_m"], "start_frequency_hz": values["sweep_start_hz"],
+              "stop_frequency_hz": values["sweep_stop_hz"],
+              "duration_s": values["sweep_duration_s"]}
+    elif kind == "free_vibration":
+        kw = {k: values[k] for k in ("amplitude_m", "natural_frequency_hz", "damping_ratio")}
+    else:  # step
+        kw = {"amplitude_m": values["amplitude_m"], "start_s": values["step_start_s"]}
+    return make_stimulus(kind, **kw), 0.0
+
+
+def check_lti(model) -> None:
+    """The streaming simulator runs the LTI part only: refuse non-LTI effects by name."""
+    if not model.is_lti:
+        bad = [name for name in model.effect_names if not get_effect(name).lti]
+        raise ParameterError(f"parameter 'effects': {bad} not LTI; the streaming simulator "
+                             "supports LTI effects only (use current_gain, current_offset_a, "
+                             "noise_rms_a for the measurement chain, or "
+                             "simulation.sensor.predict_current offline)")
+
+
+def describe_stimulus(stimulus: Stimulus, values: dict) -> str:
+    """Short text of the stimulus and its parameters for the log."""
+    if dataclasses.is_dataclass(stimulus):
+        args = ", ".join(f"{f.name}={getattr(stimulus, f.name):g}"
+                         for f in dataclasses.fields(stimulus))
+        return f"{values['stimulus']}({args})"
+    return f"{values['stimulus']}({values['stimulus_file']})"
+
+
+class SimulatorNode(Node):
+    """Simulated sensor + DAQ node; see the module docstring and docs/ros_interface.md.
+
+    ``kwargs`` go to :class:`rclpy.node.Node`.  Raises
+    :class:`~ipmc_sensor_ros.nodes.params.ConfigurationError` on invalid parameters.
+    """
+
+    def __init__(self, node_name: str = "ipmc_simulator", **kwargs: Any):
+        super().__init__(node_name, **kwargs)
+        P.declare(self, SIMULATOR_SPECS)
+        v = self._values = P.read(self, SIMULATOR_SPECS)
+        try:
+            model = P.build_sensor_model(v)
+            check_lti(model)
+            self._stimulus, self._stim_t0 = build_stimulus(v)
+            self._sim = SensorSimulator(model, v["sample_rate_hz"],
+                                        current_gain=v["current_gain"],
+                                        current_offset_a=v["current_offset_a"],
+                                        noise_rms_a=v["noise_rms_a"], seed=v["seed"])
+        except (ParameterError, ReductionError) as exc:
+            raise P.ConfigurationError(str(exc)) from None
+        self._fs = float(v["sample_rate_hz"])
+        self._block = int(v["block_size"])
+        self._rtf = float(v["realtime_factor"])
+        self._total = int(round(float(v["duration_s"]) * self._fs)) or None
+        self._k = 0                       # next sample index
+        self._blocks = 0
+        self._t_start_ns: int | None = None
+        self._done = False
+
+        qos = P.make_qos(v)
+        self._pub_current = self.create_publisher(Float64MultiArray, "current", qos)
+        self._pub_truth = self.create_publisher(Float64MultiArray, "deflection_truth", qos)
+        self._pub_counters = self.create_publisher(String, "simulator/counters", P.COUNTERS_QOS)
+        if self._rtf > 0.0:
+            period = max(self._block / self._fs / self._rtf, MIN_TICK_S)
+            self._timer = self.create_timer(period, self._on_tick)   # node clock: sim-time aware
+        else:
+            self._timer = self.create_timer(MIN_TICK_S, self._on_tick,
+                                            clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self._counter_timer = self.create_timer(1.0, self._publish_counters,
+                                                clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.get_logger().info(
+            f"ready: {model.describe()} model, stimulus "
+            f"{describe_stimulus(self._stimulus, v)}, {self._fs} Hz in blocks of "
+            f"{self._block}, realtime_factor {self._rtf}"
+            + (f", duration {v['duration_s']} s" if self._total else ", no end")
+            + f"; publishing {self._pub_current.topic_name}")
+
+    # -- public helpers -----------------------------------------------------------
+    def counters(self) -> dict[str, Any]:
+        """``samples_published``, ``blocks_published`` (ints) and ``done`` (bool)."""
+        return {"samples_published": self._k, "blocks_published": self._blocks,
+                "done": self._done}
+
+    @property
+    def done(self) -> bool:
+        return self._done
+
+    # -- publishing -------------------------------------------------------------
+    def _publish_counters(self) -> None:
+        c = self.counters()
+        c["node"] = self.get_fully_qualified_name()
+        self._pub_counters.publish(String(data=json.dumps(c)))
+
+    def _ready_to_start(self, now_ns: int) -> bool:
+        need = int(self._values["wait_for_subscribers"])
+        if need and (self._pub_current.get_subscription_count() < need
+                     or self._pub_truth.get_subscription_count() < need):
+            self.get_logger().info(f"waiting for {need} subscriber(s) on "
+                                   f"{self._pub_current.topic_name} and "
+                                   f"{self._pub_truth.topic_name}", throttle_duration_sec=5.0)
+            return False
+        if now_ns <= 0:
+            self.get_logger().info("waiting for the clock (use_sim_time without /clock?)",
+                                   throttle_duration_sec=5.0)
+            return False
+        return True
+
+    def _on_tick(self) -> None:
+        if self._done:
+            return
+        now_ns = self.get_clock().now().nanoseconds
+        if self._t_start_ns is None:
+            if not self._ready_to_start(now_ns):
+                return
+            self._t_start_ns = now_ns
+        if self._rtf > 0.0:
+            due = int((now_ns - self._t_start_ns) * 1e-9 * self._rtf * self._fs)
+            n_blocks = min(MAX_BLOCKS_PER_TICK, max(due - self._k, 0) // self._block)
+        else:
+            n_blocks = 1
+        for _ in range(n_blocks):
+            if not self._publish_block():
+                break
+
+    def _publish_block(self) -> bool:
+        """Publish the next block; False once the duration is reached."""
+        k0 = self._k
+        k1 = k0 + self._block if self._total is None else min(k0 + self._block, self._total)
+        if k1 <= k0:
+            self._finish()
+            return False
+        k = np.arange(k0, k1)
+        times = self._t_start_ns * 1e-9 + k / self._fs
+        deflection, current = self._sim.run(self._stimulus, self._stim_t0 + k / self._fs)
+        self._pub_current.publish(pack_block(times, current, CURRENT_COLUMNS))
+        self._pub_truth.publish(pack_block(times, deflection, DEFLECTION_COLUMNS))
+        self._k = k1
+        self._blocks += 1
+        if self._total is not None and self._k >= self._total:
+            self._finish()
+            return False
+        return True
+
+    def _finish(self) -> None:
+        if not self._done:
+            self._done = True
+            self._timer.cancel()
+            self._publish_counters()
+            self.get_logger().info(f"done: published {self._k} samples in {self._blocks} blocks "
+                                   f"({self._k / self._fs:g} s of data)")
+
+
+def main(args=None) -> int:
+    """Entry point of ``ros2 run ipmc_sensor_ros ipmc_simulator``."""
+    return run(SimulatorNode, "ipmc_simulator", args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
