@@ -7,7 +7,7 @@ package_name = "ipmc_sensor_ros"
 setup(
     name=package_name,
     version="0.1.0",
-    packages=find_packages(exclude=["test", "test.*"]),
+    packages=find_packages(include=["ipmc_sensor_ros", "ipmc_sensor_ros.*"]),
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),

@@ -9,9 +9,9 @@ import argparse
 import platform
 import sys
 
-from bench import bench_core
+from bench import bench_core, bench_workbench
 
-SUITES = [bench_core.bench_estimator, bench_core.bench_model]
+SUITES = [bench_core.bench_estimator, bench_core.bench_model, bench_workbench.bench_workbench]
 
 
 def main(argv=None) -> int:
@@ -23,8 +23,8 @@ def main(argv=None) -> int:
         rows.extend(suite(smoke=args.smoke))
     print(f"machine: {platform.machine()} {platform.processor() or ''} python {platform.python_version()}"
           f" cores={__import__('os').cpu_count()}")
-    print(f"| benchmark | value | unit | ratio | baseline | target |")
-    print(f"|---|---|---|---|---|---|")
+    print("| benchmark | value | unit | ratio | baseline | target |")
+    print("|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['benchmark']} | {r['value']:.3g} | {r['unit']} | {r['ratio']:.2f} | "
               f"{r['baseline']} | {r['target']} |")

@@ -102,6 +102,50 @@ def test_in_process_pairs_track_truth_and_account_exactly(monkeypatch):
         rclpy.shutdown(context=ctx)
 
 
+def test_estimator_improves_when_its_model_gains_the_hidden_effect(monkeypatch):
+    """Issue 'discovery': the simulator hides a 40 Hz current-amplifier pole; an estimator
+    with the plain H2 model misses its 14 deg phase lag at 10 Hz, one whose ``effects``
+    parameter names it tracks the truth.  Two identical (seeded, deterministic) simulators
+    feed the two estimators in namespaces /plain and /aware of one executor."""
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=random.randint(100, 200))
+    ex = SingleThreadedExecutor(context=ctx)
+    monitor_node = rclpy.create_node("monitor", context=ctx)
+    ex.add_node(monitor_node)
+    hidden = ["amplifier_bandwidth(corner_hz=40)"]
+    nodes, monitors = [], {}
+    try:
+        for ns, est_effects in (("/plain", None), ("/aware", hidden)):
+            monitors[ns] = TrackingMonitor(monitor_node, ns)
+            est_params = [Parameter("publish_points", value="off")]
+            if est_effects:
+                est_params.append(Parameter("effects", value=est_effects))
+            est = EstimatorNode(context=ctx, namespace=ns, parameter_overrides=est_params)
+            sim = SimulatorNode(context=ctx, namespace=ns, parameter_overrides=[
+                Parameter(k, value=v) for k, v in _sim_params(10.0).items()]
+                + [Parameter("effects", value=hidden)])
+            nodes += [est, sim]
+            ex.add_node(est)
+            ex.add_node(sim)
+        end = time.monotonic() + TIMEOUT_S
+        while (any(m.estimate_samples < N_SAMPLES for m in monitors.values())
+               and time.monotonic() < end):
+            ex.spin_once(timeout_sec=0.05)
+        errors = {ns: m.score(last_s=20.0)[0] for ns, m in monitors.items()}
+        print(f"hidden amplifier pole: NRMSE plain {errors['/plain']:.4f}, aware {errors['/aware']:.4f}")
+        # A 14 deg phase error alone is a 25 % NRMSE; knowing the pole leaves the ~1 %
+        # of the leak and the reduction.  "Measurably better": at least 5x, and < 5 %.
+        assert errors["/aware"] < NRMSE_LIMIT
+        assert errors["/plain"] > 5 * errors["/aware"]
+    finally:
+        ex.shutdown()
+        for n in nodes:
+            n.destroy_node()
+        monitor_node.destroy_node()
+        rclpy.shutdown(context=ctx)
+
+
 def _ros_args(params: dict, namespace: str) -> list[str]:
     args = ["--ros-args", "-r", f"__ns:={namespace}"]
     for k, v in params.items():

@@ -1,6 +1,7 @@
 """ROS 2 node ``ipmc_estimator``: sensing current (A) in, tip deflection (m) out.
 
-A thin shell over :class:`ipmc_sensor_ros.estimator.InverseEstimator`:
+A thin shell over :class:`ipmc_sensor_ros.estimation.DeflectionEstimator` (model-aware
+inverse filter; the same code path as ``ipmc-model estimate``):
 
 * subscribes ``current`` (``std_msgs/Float64MultiArray``, block layout of
   :mod:`.messages`: 2-D ``time_s,current_A`` pairs, or a 1-D values-only array);
@@ -33,9 +34,9 @@ from std_msgs.msg import Float64MultiArray, String
 from ..estimator import (DEFAULT_LEAK_CORNER_HZ, MAX_BLOCK_SAMPLES, EstimatorError,
                          InverseEstimator, validate_block)
 from ..physics.parameters import ParameterError
-from ..reduction import MAX_ORDER, ReductionError, reduce_model
+from ..reduction import MAX_ORDER, ReductionError
 from . import params as P
-from .inverse_effects import InverseEffects
+from ..estimation import DeflectionEstimator
 from .messages import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, LayoutError, claimed_samples,
                        pack_block, unpack_block)
 from .runner import run
@@ -115,7 +116,7 @@ def check_values(values: dict) -> None:
 
 
 def design(values: dict, reduced=None):
-    """Build (reduced model, fresh InverseEstimator, InverseEffects) from parameter values.
+    """Build (reduced model, fresh core DeflectionEstimator) from parameter values.
 
     ``reduced`` is reused when given (the model part did not change).  Raises
     one of ParameterError / ReductionError / EstimatorError / ConfigurationError
@@ -123,14 +124,15 @@ def design(values: dict, reduced=None):
     """
     check_values(values)
     model = P.build_sensor_model(values)
-    hooks = InverseEffects.for_model(model)
-    if reduced is None:
-        band = (float(values["band_low_hz"]), float(values["band_high_hz"]))
-        if not band[0] < band[1]:
-            raise ReductionError(f"parameters 'band_low_hz' ({band[0]}) and 'band_high_hz' "
-                                 f"({band[1]}) must satisfy low < high")
-        reduced = reduce_model(model, int(values["reduction_order"]), band)
-    return reduced, InverseEstimator(reduced, **_filter_kwargs(values)), hooks
+    band = (float(values["band_low_hz"]), float(values["band_high_hz"]))
+    if not band[0] < band[1]:
+        raise ReductionError(f"parameters 'band_low_hz' ({band[0]}) and 'band_high_hz' "
+                             f"({band[1]}) must satisfy low < high")
+    kwargs = _filter_kwargs(values)
+    est = DeflectionEstimator(model, kwargs.pop("sample_rate_hz"),
+                              reduction_order=int(values["reduction_order"]), band_hz=band,
+                              reduced=reduced, **kwargs)
+    return est.reduced, est
 
 
 class EstimatorNode(Node):
@@ -148,7 +150,7 @@ class EstimatorNode(Node):
         P.declare(self, ESTIMATOR_SPECS)
         self._values = P.read(self, ESTIMATOR_SPECS)
         try:
-            self._reduced, self._estimator, self._effects = design(self._values)
+            self._reduced, self._estimator = design(self._values)
         except _ERRORS as exc:
             raise P.ConfigurationError(str(exc)) from None
         self._model_key = _model_key(self._values)
@@ -172,9 +174,9 @@ class EstimatorNode(Node):
         self.add_post_set_parameters_callback(self._on_parameters_set)
         r = self._reduced
         self.get_logger().info(
-            f"ready: {self._effects.model.describe()} model, order {r.order} reduction "
+            f"ready: {self._estimator.model.describe()} model, order {r.order} reduction "
             f"over {r.band_hz[0]}-{r.band_hz[1]} Hz, fs = {self._estimator.sample_rate_hz} Hz, "
-            f"leak corner {self._estimator.leak_corner_hz} Hz; listening on {self._sub.topic_name}")
+            f"leak corner {self._estimator.inverse.leak_corner_hz} Hz; listening on {self._sub.topic_name}")
 
     # -- public helpers -------------------------------------------------------
     def counters(self) -> dict[str, int]:
@@ -187,7 +189,12 @@ class EstimatorNode(Node):
 
     @property
     def estimator(self) -> InverseEstimator:
-        """The filter currently in use (replaced on parameter changes)."""
+        """The discrete inverse filter currently in use (replaced on parameter changes)."""
+        return self._estimator.inverse
+
+    @property
+    def deflection_estimator(self) -> DeflectionEstimator:
+        """The core model-aware estimator (filter + effects) currently in use."""
         return self._estimator
 
     @property
@@ -208,7 +215,6 @@ class EstimatorNode(Node):
 
     def _reset(self, text: str) -> None:
         self._estimator.reset()
-        self._effects.reset()
         self._counters["resets"] += 1
         self._warn(text)
 
@@ -255,7 +261,6 @@ class EstimatorNode(Node):
                 self._process(times, current)
             except Exception as exc:  # last resort: never let a callback kill the node
                 self._estimator.reset()
-                self._effects.reset()
                 self._counters["samples_dropped"] += current.size
                 self.get_logger().error(f"dropped a block of {current.size} sample(s): {exc!r}")
 
@@ -271,11 +276,9 @@ class EstimatorNode(Node):
                             f"on {topic}: filter reset")
             elif step * self._estimator.sample_rate_hz > 1.5:
                 self._counters["gaps_bridged"] += 1
-        y = self._estimator.process(self._effects.current_in(times, current))
-        t_out, y = self._effects.deflection_out(times, y)
+        t_out, y = self._estimator.process(times, current)
         if not np.all(np.isfinite(y)):
             self._estimator.reset()
-            self._effects.reset()
             self._counters["samples_dropped"] += current.size
             self._warn(f"non-finite estimate on {topic}: block dropped, filter reset")
             return
@@ -326,12 +329,11 @@ class EstimatorNode(Node):
                 values[p.name] = list(p.value) if isinstance(values[p.name], list) else p.value
             key = _model_key(values)
             try:
-                reduced, _, hooks = design(values,
-                                           self._reduced if key == self._model_key else None)
+                reduced, new = design(values, self._reduced if key == self._model_key else None)
             except _ERRORS as exc:
                 self._pending = None
                 return SetParametersResult(successful=False, reason=str(exc))
-            self._pending = (values, key, reduced, hooks)
+            self._pending = (values, key, reduced, new)
             return SetParametersResult(successful=True)
 
     def _on_parameters_set(self, parameters) -> None:
@@ -339,13 +341,14 @@ class EstimatorNode(Node):
         with self._lock:
             if self._pending is None:
                 return
-            values, key, reduced, hooks = self._pending
+            values, key, reduced, new = self._pending
             self._pending = None
             old = self._values
             self._values = values
             if key != self._model_key or _filter_kwargs(values) != _filter_kwargs(old):
-                self._estimator = self._estimator.rebuilt(reduced=reduced, **_filter_kwargs(values))
-                self._reduced, self._model_key, self._effects = reduced, key, hooks
+                new.inverse.last_output_steady_state(self._estimator.inverse.current_output())
+                self._estimator = new
+                self._reduced, self._model_key = reduced, key
                 self.get_logger().info("parameters changed: filter rebuilt ("
                                        + ", ".join(p.name for p in parameters) + ")")
 

@@ -19,6 +19,7 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
 
+from ..physics.effects import load_plugin
 from ..physics.model import BASES, SensorModel, parse_model_name
 from ..physics.parameters import (GEOMETRY_LIMITS_M, Geometry, MaterialParameters,
                                   ParameterError)
@@ -98,6 +99,8 @@ MODEL_SPECS = (
     Spec("effects", [], list, "extra effects beyond the base model, each 'name' or "
          "'name(param=value, ...)' from the effects catalog, e.g. ['time_delay(delay_s=0.002)'];"
          " unknown names and effects already in the base model are refused"),
+    Spec("plugins", [], list, "Python files defining more effects (Effect subclasses, see the "
+         "README's plugin API), loaded before 'effects' is read", read_only=True),
 )
 
 QOS_SPECS = (
@@ -147,6 +150,11 @@ def build_sensor_model(values: Mapping[str, Any]) -> SensorModel:
 
     Raises :class:`ParameterError` naming the offending parameter.
     """
+    for path in values.get("plugins") or ():
+        try:
+            load_plugin(path)
+        except ParameterError as exc:
+            raise ParameterError(f"parameter 'plugins': {exc}") from None
     geometry = Geometry(**{k: values[k] for k in GEOMETRY_NAMES})
     material = MaterialParameters(**{k: values[k] for k in MATERIAL_NAMES})
     _, base_effects = parse_model_name(values["model"])

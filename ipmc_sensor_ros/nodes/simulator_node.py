@@ -36,7 +36,6 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray, String
 
-from ..physics.effects import get_effect
 from ..physics.parameters import ParameterError
 from ..reduction import ReductionError
 from ..simulation.sensor import SensorSimulator
@@ -157,16 +156,6 @@ def build_stimulus(values: dict) -> tuple[Stimulus, float]:
     return make_stimulus(kind, **kw), 0.0
 
 
-def check_lti(model) -> None:
-    """The streaming simulator runs the LTI part only: refuse non-LTI effects by name."""
-    if not model.is_lti:
-        bad = [name for name in model.effect_names if not get_effect(name).lti]
-        raise ParameterError(f"parameter 'effects': {bad} not LTI; the streaming simulator "
-                             "supports LTI effects only (use current_gain, current_offset_a, "
-                             "noise_rms_a for the measurement chain, or "
-                             "simulation.sensor.predict_current offline)")
-
-
 def describe_stimulus(stimulus: Stimulus, values: dict) -> str:
     """Short text of the stimulus and its parameters for the log."""
     if dataclasses.is_dataclass(stimulus):
@@ -189,7 +178,6 @@ class SimulatorNode(Node):
         v = self._values = P.read(self, SIMULATOR_SPECS)
         try:
             model = P.build_sensor_model(v)
-            check_lti(model)
             self._stimulus, self._stim_t0 = build_stimulus(v)
             self._sim = SensorSimulator(model, v["sample_rate_hz"],
                                         current_gain=v["current_gain"],

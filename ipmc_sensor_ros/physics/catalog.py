@@ -111,9 +111,6 @@ class HydrationDrift(Effect):
                  "phase of the fundamental trending; a windowed refit of d shows a trend.")
     reference = "Chen et al. 2007, section 5.4; Bonomo et al. 2006 (ref. [27] there)."
 
-    #: number of piecewise-constant chunks used to simulate the drift
-    chunks = 16
-
     def material_at(self, model, values):
         rate = values["diffusivity_rate_per_s"]
         d0 = model.material.diffusivity_m2_per_s

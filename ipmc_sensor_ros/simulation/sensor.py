@@ -32,7 +32,8 @@ from ..physics.parameters import ParameterError
 from ..reduction import ReducedModel, append_rational, reduce_response
 from .stimuli import Stimulus
 
-__all__ = ["periodic_response", "lti_response_fft", "predict_current", "SensorSimulator",
+__all__ = ["periodic_response", "lti_response_fft", "predict_current", "time_varying_response",
+           "material_nodes", "SensorSimulator",
            "forward_reduction"]
 
 
@@ -279,6 +280,35 @@ def lti_response_fft(transfer, time_s, deflection_m, pad_s: float = 2.0) -> np.n
     return np.fft.irfft(np.fft.rfft(x, n) * h, n)[: t.size]
 
 
+def material_nodes(elapsed_s: np.ndarray, material_at, max_step: float = 0.05) -> np.ndarray:
+    """Node times (s) at which a time-varying material is sampled: start, end, and
+    enough in between that no material parameter changes by more than
+    ``max_step`` (relative, log) between neighbours (at most 64 nodes)."""
+    t0, t1 = float(elapsed_s[0]), float(elapsed_s[-1])
+    a, b = material_at(t0).to_dict(), material_at(t1).to_dict()
+    span = max(abs(np.log(b[k] / a[k])) for k in a if a[k] > 0 and b[k] > 0)
+    n = int(min(64, max(1, np.ceil(span / max_step))))
+    return np.linspace(t0, t1, n + 1)
+
+
+def time_varying_response(elapsed_s: np.ndarray, material_at, response_for) -> np.ndarray:
+    """Quasi-static response of a system whose material drifts slowly: the LTI
+    responses ``response_for(material)`` at :func:`material_nodes`, linearly
+    interpolated in time between neighbouring nodes (error ~ step^2/8 of the
+    response's curvature in the material: < 1e-3 relative for 5 % steps)."""
+    nodes = material_nodes(elapsed_s, material_at)
+    out = np.zeros(elapsed_s.size)
+    previous = response_for(material_at(nodes[0]))
+    for k in range(1, nodes.size):
+        current = response_for(material_at(nodes[k]))
+        sel = (elapsed_s >= nodes[k - 1]) & ((elapsed_s < nodes[k]) if k < nodes.size - 1
+                                            else (elapsed_s <= nodes[k]))
+        frac = (elapsed_s[sel] - nodes[k - 1]) / (nodes[k] - nodes[k - 1])
+        out[sel] = (1 - frac) * previous[sel] + frac * current[sel]
+        previous = current
+    return out
+
+
 def predict_current(model: SensorModel, time_s, deflection_m, pad_s: float = 2.0) -> np.ndarray:
     """Current (A) of a model with any effects for a deflection record (m).
 
@@ -286,9 +316,9 @@ def predict_current(model: SensorModel, time_s, deflection_m, pad_s: float = 2.0
     nonlinearity), then the linear dynamics by exact FFT convolution
     (:func:`lti_response_fft`), then every ``output_transform`` (e.g. offset).
     A time-varying effect (``material_at``, e.g. ``hydration_drift``) is
-    simulated as piecewise-constant material over ``chunks`` equal spans: the
-    LTI response is computed for each chunk's material at its centre and used
-    within that span (the drift is slow against the sensor's ~0.1 s memory).
+    simulated by :func:`time_varying_response`: LTI responses at material
+    nodes, linearly interpolated in time (the drift is slow against the
+    sensor's ~0.1 s memory, so the response is quasi-static in the material).
     """
     from ..physics.effects import get_effect
 
@@ -303,15 +333,8 @@ def predict_current(model: SensorModel, time_s, deflection_m, pad_s: float = 2.0
         i = lti_response_fft(model.transfer, t, w, pad_s)
     else:
         eff, vals = varying[0]
-        mat_at = eff.material_at(model, vals)
-        chunks = int(getattr(eff, "chunks", 16))
-        edges = np.linspace(t[0], t[-1], chunks + 1)
-        i = np.empty_like(w)
-        for k in range(chunks):
-            sel = (t >= edges[k]) & ((t < edges[k + 1]) if k < chunks - 1 else (t <= edges[k + 1]))
-            centre = 0.5 * (edges[k] + edges[k + 1]) - t[0]
-            chunk_model = model.with_material(mat_at(centre))
-            i[sel] = lti_response_fft(chunk_model.transfer, t, w, pad_s)[sel]
+        i = time_varying_response(t_rel, eff.material_at(model, vals),
+                                  lambda mat: lti_response_fft(model.with_material(mat).transfer, t, w, pad_s))
     for eff, vals in specs:
         i = eff.output_transform(t_rel, i, model, vals)
     return i

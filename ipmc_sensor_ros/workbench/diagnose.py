@@ -36,7 +36,6 @@ import os
 import numpy as np
 
 from ..physics.effects import EFFECTS, get_effect
-from ..physics.model import SensorModel
 from .modelfit import FitSpec, ModelFit, PreparedRecord, Record, fit_model, predict, prepare
 
 __all__ = ["diagnose", "Diagnosis", "DEFAULT_FREE_MATERIAL"]

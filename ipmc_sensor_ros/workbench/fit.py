@@ -222,7 +222,6 @@ def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
     dof = max(n_res - len(free), 1)
     chi2 = float(r @ r)
     s2 = max(chi2 / dof, 1.0) if dof > 0 else 1.0
-    sv_w = np.linalg.svd(jac, compute_uv=False)
     cov = s2 * np.linalg.pinv(jac.T @ jac, rcond=1e-15)
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -77,15 +77,19 @@ def harmonic_fit(t: np.ndarray, x: np.ndarray, f0: float, n_harmonics: int):
     x = Re(X_k exp(j k w0 t)), i.e. X_k = a_k - j b_k for a_k cos + b_k sin.
     """
     w0 = 2 * np.pi * f0
-    cols = [np.ones_like(t)]
-    for k in range(1, n_harmonics + 1):
-        cols += [np.cos(k * w0 * t), np.sin(k * w0 * t)]
-    a = np.stack(cols, axis=1)
-    coef, *_ = np.linalg.lstsq(a, x, rcond=None)
+    # columns cos(k w0 t), sin(k w0 t) from powers of exp(j w0 t) (one exp instead of 2K trig)
+    powers = np.cumprod(np.broadcast_to(np.exp(1j * w0 * t), (n_harmonics, t.size)), axis=0)
+    a = np.empty((t.size, 2 * n_harmonics + 1))
+    a[:, 0] = 1.0
+    a[:, 1::2] = powers.real.T
+    a[:, 2::2] = powers.imag.T
+    gram = a.T @ a
+    gram_inv = np.linalg.pinv(gram)
+    coef = gram_inv @ (a.T @ x)
     resid = x - a @ coef
     dof = max(t.size - a.shape[1], 1)
     sigma2 = float(resid @ resid) / dof
-    cov = sigma2 * np.linalg.pinv(a.T @ a)
+    cov = sigma2 * gram_inv
     phasors = coef[1::2] - 1j * coef[2::2]
     return phasors, resid, cov
 

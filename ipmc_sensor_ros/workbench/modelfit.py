@@ -30,6 +30,7 @@ from scipy.optimize import least_squares
 from ..physics.effects import Effect, get_effect
 from ..physics.model import EffectSpec, SensorModel
 from ..physics.parameters import MaterialParameters, ParameterError
+from ..simulation.sensor import time_varying_response
 
 __all__ = ["Record", "PreparedRecord", "prepare", "FitSpec", "ModelFit", "fit_model", "predict",
            "noise_rms"]
@@ -141,9 +142,12 @@ def _overrides(effect: Effect) -> set[str]:
             if getattr(type(effect), name) is not getattr(Effect, name)}
 
 
-def predict(p: PreparedRecord, model: SensorModel) -> np.ndarray:
+def predict(p: PreparedRecord, model: SensorModel, cache: dict | None = None) -> np.ndarray:
     """Predicted current of a prepared record under ``model``: the same operations as
-    :func:`~ipmc_sensor_ros.simulation.sensor.predict_current`, on the kept bins."""
+    :func:`~ipmc_sensor_ros.simulation.sensor.predict_current`, on the kept bins.
+
+    ``cache`` (a dict shared across the records of one evaluation) reuses the
+    transfer function between records of the same sample and FFT grid."""
     specs = [(get_effect(e.name), e.as_dict()) for e in model.effects]
     if any(_overrides(eff) - {"output_transform", "input_transform", "material_at"}
            or (eff.name not in _BUILTIN and _overrides(eff) & {"input_transform"})
@@ -161,27 +165,34 @@ def predict(p: PreparedRecord, model: SensorModel) -> np.ndarray:
         x_bins = np.fft.rfft(_repad(p, w), p.n_fft)[p.bins]
     varying = [(eff, vals) for eff, vals in specs if eff.material_at(model, vals) is not None]
     spec = np.zeros(p.n_fft // 2 + 1, dtype=complex)
+
+    def linear_response(m: SensorModel) -> np.ndarray:
+        spec[p.bins] = x_bins * _transfer_on_bins(p, m, cache)
+        return np.fft.irfft(spec, p.n_fft)[: p.t.size]
+
     if not varying:
-        spec[p.bins] = x_bins * _transfer_on_bins(p, model)
-        i = np.fft.irfft(spec, p.n_fft)[: p.t.size]
+        i = linear_response(model)
     else:
         eff, vals = varying[0]
-        mat_at = eff.material_at(model, vals)
-        chunks = int(getattr(eff, "chunks", 16))
-        edges = np.linspace(p.t[0], p.t[-1], chunks + 1)
-        i = np.empty(p.t.size)
-        for k in range(chunks):
-            sel = (p.t >= edges[k]) & ((p.t < edges[k + 1]) if k < chunks - 1 else (p.t <= edges[k + 1]))
-            centre = 0.5 * (edges[k] + edges[k + 1]) - p.t[0]
-            spec[p.bins] = x_bins * _transfer_on_bins(p, model.with_material(mat_at(centre)))
-            i[sel] = np.fft.irfft(spec, p.n_fft)[: p.t.size][sel]
+        i = time_varying_response(t_rel, eff.material_at(model, vals),
+                                  lambda mat: linear_response(model.with_material(mat)))
     for eff, vals in specs:
         i = eff.output_transform(t_rel, i, model, vals)
     return i
 
 
-def _transfer_on_bins(p: PreparedRecord, model: SensorModel) -> np.ndarray:
+def _transfer_on_bins(p: PreparedRecord, model: SensorModel, cache: dict | None = None) -> np.ndarray:
     """H at the record's FFT bins: min-phase part interpolated from the log grid, delay exact."""
+    key = (model, p.n_fft, float(p.freqs[0]), p.freqs.size)
+    if cache is not None and key in cache:
+        return cache[key]
+    out = _interpolated_transfer(p, model)
+    if cache is not None:
+        cache[key] = out
+    return out
+
+
+def _interpolated_transfer(p: PreparedRecord, model: SensorModel) -> np.ndarray:
     hg = model.min_phase_transfer(2j * np.pi * p.grid_hz)
     lf, lg = np.log(p.freqs), np.log(p.grid_hz)
     mag = np.interp(lf, lg, np.log(np.abs(hg)))
@@ -289,7 +300,8 @@ def fit_model(prepared: Sequence[PreparedRecord], free: FitSpec, *,
     def residual(x):
         try:
             ms, _ = _apply(models, mat_names, eff_keys, x, base)
-            parts = [(p.y[r] - predict(p, m)[r]) / p.sigma for p, m, r in zip(prepared, ms, rows)]
+            cache: dict = {}
+            parts = [(p.y[r] - predict(p, m, cache)[r]) / p.sigma for p, m, r in zip(prepared, ms, rows)]
         except (ParameterError, ValueError, FloatingPointError):
             return np.full(n_rows, 1e3)
         res = np.concatenate(parts)

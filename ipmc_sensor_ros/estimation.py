@@ -1,0 +1,159 @@
+"""Model-aware streaming deflection estimator: a :class:`SensorModel` in, deflection out.
+
+:class:`DeflectionEstimator` is what the estimator node and ``ipmc-model
+estimate`` run (one code path).  It reduces the model
+(:func:`~ipmc_sensor_ros.reduction.reduce_model`: the minimum-phase LTI part,
+exact rational factors appended), inverts it causally
+(:class:`~ipmc_sensor_ros.estimator.InverseEstimator`) and handles the rest of
+the model's effects around the filter, per block:
+
+* a pure delay (``time_delay``; ``SensorModel.delay_s``) cannot be inverted
+  causally: the deflection at time t is known once the current of t + delay
+  has arrived, so output samples are re-stamped ``t_out = t_in - delay``;
+* effects with an ``output_transform`` (e.g. ``current_offset``) are undone
+  on the current before the filter (``inverse_output_transform``);
+* effects with an ``input_transform`` (e.g. ``nonlinearity``) are undone on
+  the filter output (``inverse_input_transform``);
+* a time-varying material (``hydration_drift``) is followed by rebuilding the
+  filter every ``update_s`` seconds of data time for the material at that time,
+  bumplessly (:meth:`InverseEstimator.rebuilt`), each reduction warm-started
+  from the previous one.
+
+Time in the effect hooks runs from the first sample after construction or the
+last :meth:`reset`.  An effect that transforms without defining the inverse is
+refused with :class:`~ipmc_sensor_ros.physics.parameters.ParameterError`.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from .estimator import DEFAULT_LEAK_CORNER_HZ, InverseEstimator
+from .physics.effects import Effect, get_effect
+from .physics.model import SensorModel
+from .physics.parameters import ParameterError
+from .reduction import ReducedModel, append_rational, reduce_response
+
+__all__ = ["DeflectionEstimator"]
+
+
+def _overrides(effect: Effect, name: str) -> bool:
+    return getattr(type(effect), name) is not getattr(Effect, name)
+
+
+class DeflectionEstimator:
+    """Streaming estimate of tip deflection (m) from sensing current (A) for ``model``.
+
+    Parameters: ``model``; ``sample_rate_hz``; ``reduction_order`` (fitted
+    poles, 1..8); ``band_hz`` of the reduction; ``leak_corner_hz``,
+    ``offset_corner_hz``, ``prewarp_hz`` as in :class:`InverseEstimator`;
+    ``update_s``: rebuild interval for time-varying effects, s.
+    """
+
+    def __init__(self, model: SensorModel, sample_rate_hz: float, *, reduction_order: int = 4,
+                 band_hz: Sequence[float] = (0.1, 50.0),
+                 leak_corner_hz: float = DEFAULT_LEAK_CORNER_HZ,
+                 offset_corner_hz: float | None = None, prewarp_hz: float | None = None,
+                 update_s: float = 5.0, reduced: ReducedModel | None = None):
+        self.model = model
+        self.reduction_order = int(reduction_order)
+        self.band_hz = (float(band_hz[0]), float(band_hz[1]))
+        self.update_s = float(update_s)
+        self.delay_s = float(model.delay_s())
+        self._current_inv: list = []
+        self._deflection_inv: list = []
+        self._material_at = None
+        for spec in model.effects:
+            eff, values = get_effect(spec.name), spec.as_dict()
+            if eff.material_at(model, values) is not None:
+                self._material_at = eff.material_at(model, values)
+            if _overrides(eff, "output_transform"):
+                if not _overrides(eff, "inverse_output_transform"):
+                    raise ParameterError(f"parameter 'effects': '{spec.name}' transforms the current "
+                                         "but defines no inverse_output_transform")
+                self._current_inv.append((eff, values))
+            if _overrides(eff, "input_transform"):
+                if not _overrides(eff, "inverse_input_transform"):
+                    raise ParameterError(f"parameter 'effects': '{spec.name}' transforms the "
+                                         "deflection but defines no inverse_input_transform")
+                self._deflection_inv.append((eff, values))
+        self._diffusive = None
+        if reduced is None:
+            reduced = self._reduce(model)
+        self.reduced = reduced
+        self.inverse = InverseEstimator(reduced, sample_rate_hz, leak_corner_hz=leak_corner_hz,
+                                        offset_corner_hz=offset_corner_hz, prewarp_hz=prewarp_hz)
+        self._t0: float | None = None
+        self._next_update = self.update_s
+
+    def _reduce(self, model: SensorModel) -> ReducedModel:
+        self._diffusive = reduce_response(model.diffusive_transfer, self.reduction_order, self.band_hz,
+                                          initial=self._diffusive)
+        return append_rational(self._diffusive, model.rational_factors())
+
+    # -- properties -------------------------------------------------------------
+    @property
+    def sample_rate_hz(self) -> float:
+        return self.inverse.sample_rate_hz
+
+    @property
+    def filter_kwargs(self) -> dict:
+        return {"sample_rate_hz": self.inverse.sample_rate_hz,
+                "leak_corner_hz": self.inverse.leak_corner_hz,
+                "offset_corner_hz": self.inverse.offset_corner_hz}
+
+    # -- streaming --------------------------------------------------------------
+    def reset(self) -> None:
+        """Zero the filter and restart the effects' time origin."""
+        self.inverse.reset()
+        self._t0 = None
+        self._next_update = self.update_s
+        if self._material_at is not None:
+            self._diffusive = None
+            self.inverse = self.inverse.rebuilt(self._reduce(self.model))
+            self.inverse.reset()
+
+    def process(self, time_s, current_a) -> tuple[np.ndarray, np.ndarray]:
+        """Filter one block; returns (output times, deflection).  Pass validated values
+        (:func:`~ipmc_sensor_ros.estimator.validate_block`)."""
+        t = np.asarray(time_s, float)
+        i = np.asarray(current_a, float)
+        if t.size == 0:
+            return t, i
+        if self._t0 is None:
+            self._t0 = float(t[0])
+        elapsed = t - self._t0
+        for eff, values in reversed(self._current_inv):
+            i = eff.inverse_output_transform(elapsed, i, self.model, values)
+        if self._material_at is None:
+            w = self.inverse.process(i)
+        else:
+            parts, start = [], 0
+            while start < t.size:
+                cut = int(np.searchsorted(elapsed, self._next_update, side="left"))
+                if cut <= start:
+                    drifted = self.model.with_material(self._material_at(self._next_update))
+                    self.inverse = self.inverse.rebuilt(self._reduce(drifted))
+                    self._next_update += self.update_s
+                    continue
+                parts.append(self.inverse.process(i[start:cut]))
+                start = cut
+            w = np.concatenate(parts)
+        for eff, values in reversed(self._deflection_inv):
+            w = np.asarray(eff.inverse_input_transform(w, self.model, values), dtype=float)
+        return (t - self.delay_s if self.delay_s else t), w
+
+    def rebuilt(self, model: SensorModel | None = None, reduced: ReducedModel | None = None,
+                **filter_changes) -> "DeflectionEstimator":
+        """A new estimator (new model and/or filter settings) whose output continues from
+        this one's without a jump; ``self`` is untouched if the new design is invalid."""
+        kwargs = dict(self.filter_kwargs)
+        kwargs.update(filter_changes)
+        fs = kwargs.pop("sample_rate_hz")
+        new = DeflectionEstimator(model or self.model, fs, reduction_order=self.reduction_order,
+                                  band_hz=self.band_hz, update_s=self.update_s,
+                                  reduced=reduced if (reduced is not None or model is not None) else self.reduced,
+                                  **kwargs)
+        new.inverse.last_output_steady_state(self.inverse.current_output())
+        return new
