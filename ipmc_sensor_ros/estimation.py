@@ -12,12 +12,20 @@ the model's effects around the filter, per block:
   has arrived, so output samples are re-stamped ``t_out = t_in - delay``;
 * effects with an ``output_transform`` (e.g. ``current_offset``) are undone
   on the current before the filter (``inverse_output_transform``);
-* effects with an ``input_transform`` (e.g. ``nonlinearity``) are undone on
-  the filter output (``inverse_input_transform``);
+* effects with an ``input_transform`` T (e.g. ``nonlinearity``) are undone on
+  the filter output (``inverse_input_transform``).  The sensor cannot see the
+  mean of T(w) (H(0) = 0) and the leak removes it from the filter output, so
+  the estimator adds back m = <T(w) - w>, the mean an even nonlinearity gives a
+  zero-mean deflection, tracked by a first-order average of the estimates with
+  the leak's time constant and applied per block (with one block of lag);
 * a time-varying material (``hydration_drift``) is followed by rebuilding the
   filter every ``update_s`` seconds of data time for the material at that time,
-  bumplessly (:meth:`InverseEstimator.rebuilt`), each reduction warm-started
-  from the previous one.
+  each reduction warm-started from the previous one.
+
+Rebuilds (drift updates, parameter changes through :meth:`rebuilt`) are
+bumpless: the new filter replays the last ``history_s`` (0.5 s) of input to
+restore its fast modes and takes over the old output
+(:meth:`InverseEstimator.continue_from`).
 
 Time in the effect hooks runs from the first sample after construction or the
 last :meth:`reset`.  An effect that transforms without defining the inverse is
@@ -28,6 +36,7 @@ from __future__ import annotations
 from typing import Sequence
 
 import numpy as np
+from scipy.signal import lfilter
 
 from .estimator import DEFAULT_LEAK_CORNER_HZ, InverseEstimator
 from .physics.effects import Effect, get_effect
@@ -55,7 +64,8 @@ class DeflectionEstimator:
                  band_hz: Sequence[float] = (0.1, 50.0),
                  leak_corner_hz: float = DEFAULT_LEAK_CORNER_HZ,
                  offset_corner_hz: float | None = None, prewarp_hz: float | None = None,
-                 update_s: float = 5.0, reduced: ReducedModel | None = None):
+                 update_s: float = 5.0, reduced: ReducedModel | None = None,
+                 history_s: float = 0.5):
         self.model = model
         self.reduction_order = int(reduction_order)
         self.band_hz = (float(band_hz[0]), float(band_hz[1]))
@@ -86,6 +96,24 @@ class DeflectionEstimator:
                                         offset_corner_hz=offset_corner_hz, prewarp_hz=prewarp_hz)
         self._t0: float | None = None
         self._next_update = self.update_s
+        self._history = np.zeros(max(1, int(round(history_s * self.inverse.sample_rate_hz))))
+        self._history_n = 0
+        self._bias_m = 0.0          # m = <T(w) - w>, see the module docstring
+        self._bias_zi = np.zeros(1)
+
+    def _remember(self, x: np.ndarray) -> None:
+        n = self._history.size
+        if x.size >= n:
+            self._history[:] = x[-n:]
+        else:
+            self._history = np.roll(self._history, -x.size)
+            self._history[-x.size:] = x
+        self._history_n = min(n, self._history_n + x.size)
+
+    @property
+    def recent_input(self) -> np.ndarray:
+        """The last inputs fed to the filter (effect-corrected current), oldest first."""
+        return self._history[self._history.size - self._history_n:]
 
     def _reduce(self, model: SensorModel) -> ReducedModel:
         self._diffusive = reduce_response(model.diffusive_transfer, self.reduction_order, self.band_hz,
@@ -109,10 +137,12 @@ class DeflectionEstimator:
         self.inverse.reset()
         self._t0 = None
         self._next_update = self.update_s
+        self._history_n = 0
+        self._bias_m = 0.0
+        self._bias_zi = np.zeros(1)
         if self._material_at is not None:
             self._diffusive = None
-            self.inverse = self.inverse.rebuilt(self._reduce(self.model))
-            self.inverse.reset()
+            self.inverse = InverseEstimator(self._reduce(self.model), **self._filter_args())
 
     def process(self, time_s, current_a) -> tuple[np.ndarray, np.ndarray]:
         """Filter one block; returns (output times, deflection).  Pass validated values
@@ -128,20 +158,28 @@ class DeflectionEstimator:
             i = eff.inverse_output_transform(elapsed, i, self.model, values)
         if self._material_at is None:
             w = self.inverse.process(i)
+            self._remember(i)
         else:
             parts, start = [], 0
             while start < t.size:
                 cut = int(np.searchsorted(elapsed, self._next_update, side="left"))
                 if cut <= start:
                     drifted = self.model.with_material(self._material_at(self._next_update))
-                    self.inverse = self.inverse.rebuilt(self._reduce(drifted))
+                    self.inverse = self.inverse.rebuilt(self._reduce(drifted), self.recent_input)
                     self._next_update += self.update_s
                     continue
                 parts.append(self.inverse.process(i[start:cut]))
+                self._remember(i[start:cut])
                 start = cut
             w = np.concatenate(parts)
-        for eff, values in reversed(self._deflection_inv):
-            w = np.asarray(eff.inverse_input_transform(w, self.model, values), dtype=float)
+        if self._deflection_inv:
+            w_prime = w + self._bias_m
+            w = w_prime
+            for eff, values in reversed(self._deflection_inv):
+                w = np.asarray(eff.inverse_input_transform(w, self.model, values), dtype=float)
+            a = float(np.exp(-2 * np.pi * self.inverse.leak_corner_hz / self.inverse.sample_rate_hz))
+            avg, self._bias_zi = lfilter([1 - a], [1, -a], w_prime - w, zi=self._bias_zi)
+            self._bias_m = float(avg[-1])
         return (t - self.delay_s if self.delay_s else t), w
 
     def rebuilt(self, model: SensorModel | None = None, reduced: ReducedModel | None = None,
@@ -155,5 +193,17 @@ class DeflectionEstimator:
                                   band_hz=self.band_hz, update_s=self.update_s,
                                   reduced=reduced if (reduced is not None or model is not None) else self.reduced,
                                   **kwargs)
-        new.inverse.last_output_steady_state(self.inverse.current_output())
+        new.continue_from(self)
         return new
+
+    def continue_from(self, old: "DeflectionEstimator") -> None:
+        """Take over ``old``'s stream: its recent input, output level and time origin."""
+        self._history = old._history.copy() if old._history.size == self._history.size else self._history
+        self._history_n = old._history_n if old._history.size == self._history.size else 0
+        self.inverse.continue_from(old.inverse, self.recent_input)
+        self._t0 = old._t0
+
+    def _filter_args(self) -> dict:
+        return {"sample_rate_hz": self.inverse.sample_rate_hz,
+                "leak_corner_hz": self.inverse.leak_corner_hz,
+                "offset_corner_hz": self.inverse.offset_corner_hz}

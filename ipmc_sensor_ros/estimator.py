@@ -298,8 +298,29 @@ class InverseEstimator:
         zi_unit = sig.sosfilt_zi(self.sos)  # (n_sections, 2), unit step input
         self._zi = zi_unit[:, :, None] * x_ss[None, None, :]
 
-    def rebuilt(self, reduced: ReducedModel | None = None, **changes) -> "InverseEstimator":
-        """A new estimator with changed design whose output continues from this one's.
+    def continue_from(self, old: "InverseEstimator", recent_input=None) -> None:
+        """Set this filter's state so its output continues ``old``'s without a jump.
+
+        With ``recent_input`` (the last samples fed to ``old``, shape (n,) or
+        (n, channels); a few tenths of a second is many times the fast modes'
+        memory) the state is the new filter's response to that history, which
+        restores its fast modes, plus the steady state that makes the next
+        output equal ``old``'s (the slow, integrating mode carries the
+        deflection, which the history alone does not determine).  Without it,
+        only the steady state is used (a short transient of the fast modes).
+        """
+        self.reset()
+        if recent_input is not None and np.size(recent_input):
+            x = np.asarray(recent_input, dtype=float).reshape(-1, self.channels)
+            _, self._zi = sig.sosfilt(self.sos, x, axis=0, zi=self._zi)
+        delta = old.current_output() - self.current_output()
+        zi_unit = sig.sosfilt_zi(self.sos)
+        self._zi = self._zi + zi_unit[:, :, None] * (delta / self.dc_gain_m_per_a())[None, None, :]
+
+    def rebuilt(self, reduced: ReducedModel | None = None, recent_input=None,
+                **changes) -> "InverseEstimator":
+        """A new estimator with changed design whose output continues from this one's
+        (:meth:`continue_from`, with ``recent_input`` if given).
 
         ``changes`` may set sample_rate_hz, leak_corner_hz, offset_corner_hz,
         prewarp_hz.  Raises :class:`EstimatorError` (and leaves ``self`` intact)
@@ -311,7 +332,7 @@ class InverseEstimator:
             kwargs["prewarp_hz"] = self.prewarp_hz
         kwargs.update(changes)
         new = InverseEstimator(reduced or self.reduced, **kwargs)
-        new.last_output_steady_state(self.current_output())
+        new.continue_from(self, recent_input)
         return new
 
     def current_output(self) -> np.ndarray:

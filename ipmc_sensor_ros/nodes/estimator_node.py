@@ -346,7 +346,7 @@ class EstimatorNode(Node):
             old = self._values
             self._values = values
             if key != self._model_key or _filter_kwargs(values) != _filter_kwargs(old):
-                new.inverse.last_output_steady_state(self._estimator.inverse.current_output())
+                new.continue_from(self._estimator)
                 self._estimator = new
                 self._reduced, self._model_key = reduced, key
                 self.get_logger().info("parameters changed: filter rebuilt ("

@@ -1,0 +1,62 @@
+"""Tests of the model-aware DeflectionEstimator (effects around the inverse filter)."""
+import numpy as np
+import pytest
+
+from ipmc_sensor_ros.estimation import DeflectionEstimator
+from ipmc_sensor_ros.physics.model import SensorModel
+from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
+from ipmc_sensor_ros.simulation.sensor import predict_current
+from ipmc_sensor_ros.simulation.stimuli import CrankSlider
+
+FS = 1000.0
+SLIM = PAPER_SAMPLES["slim"]
+
+
+def track(model_true, model_est, f=5.0, duration=120.0, block=250):
+    """NRMSE over the last 20 s of an estimate from blocks of exact current."""
+    t = np.arange(int(duration * FS)) / FS
+    w = CrankSlider(f, 2e-3, 15e-3).deflection(t)
+    i = predict_current(model_true, t, w)
+    est = DeflectionEstimator(model_est, FS)
+    outs = [est.process(t[k:k + block], i[k:k + block]) for k in range(0, t.size, block)]
+    t_out = np.concatenate([o[0] for o in outs])
+    y = np.concatenate([o[1] for o in outs])
+    truth = CrankSlider(f, 2e-3, 15e-3).deflection(t_out)
+    sel = t_out >= t_out[-1] - 20
+    return float(np.sqrt(np.mean((y[sel] - truth[sel]) ** 2)) / np.sqrt(np.mean(truth[sel] ** 2)))
+
+
+@pytest.mark.parametrize("effect", [
+    "time_delay(delay_s=0.003)", "current_offset(offset_a=3e-7,drift_a_per_s=1e-9)",
+    "nonlinearity(quadratic=2,cubic=30)", "amplifier_bandwidth(corner_hz=20)",
+    "hydration_drift(diffusivity_rate_per_s=-0.003)",
+])
+def test_estimate_improves_when_the_model_gains_the_hidden_effect(effect):
+    true = SensorModel.named("h2", SLIM, extra_effects=effect)
+    plain = track(true, SensorModel.named("h2", SLIM))
+    aware = track(true, true)
+    # The aware estimator is back to the plain-data accuracy (~1 %, leak phase lead);
+    # every hidden effect here costs the plain one at least twice that.
+    assert aware < 0.03, (plain, aware)
+    assert plain > 2 * aware, (plain, aware)
+
+
+def test_delay_restamps_output_times():
+    model = SensorModel.named("h2", SLIM, extra_effects="time_delay(delay_s=0.002)")
+    est = DeflectionEstimator(model, FS)
+    t = np.arange(100) / FS
+    t_out, _ = est.process(t, np.zeros(100))
+    assert np.allclose(t_out, t - 0.002)
+
+
+def test_rebuilt_continues_without_jump():
+    model = SensorModel.named("h2", SLIM)
+    t = np.arange(int(31 * FS)) / FS
+    i = predict_current(model, t, CrankSlider(2.0, 2e-3, 15e-3).deflection(t))
+    n = int(30 * FS)
+    est = DeflectionEstimator(model, FS)
+    _, before = est.process(t[:n], i[:n])
+    _, after = est.rebuilt(leak_corner_hz=0.02).process(t[n:], i[n:])
+    # one sample of a 2 Hz, 2 mm motion moves the tip by at most 25 um; the replayed
+    # history keeps the switch far below that (measured: 2 um)
+    assert abs(after[0] - before[-1]) < 10e-6
