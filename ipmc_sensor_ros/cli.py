@@ -390,6 +390,67 @@ def _diagnose_report(rd: Path, diag) -> None:
     write_report(rd, "ipmc-model diagnose", sections)
 
 
+def _cmd_estimate(args) -> int:
+    """Offline estimation with the node's code path and parameters file."""
+    from . import config
+    from .estimation import estimate_record
+    from .estimator import validate_block
+    from .workbench.io import TimeSeries, read_any, read_bag, write_bag, write_timeseries
+
+    values = config.load_params_file(args.params) if args.params else \
+        config.defaults(config.ESTIMATOR_SPECS)
+    src = Path(args.input)
+    if src.is_dir() or src.suffix in (".mcap", ".db3"):
+        geometry = None
+        if args.geometry:
+            length, width, thickness = (float(v) for v in args.geometry.split(","))
+            geometry = Geometry(length, width, thickness)
+        data = read_bag(src, args.current_topic, args.deflection_topic, geometry)
+    else:
+        data = read_any(src)
+    if not isinstance(data, TimeSeries):
+        raise ParameterError(f"{src}: a time series is needed (this is a frequency-response file)")
+    if not args.params:  # geometry and rate from the data when no params file says otherwise
+        values.update({"length_m": data.geometry.length_m, "width_m": data.geometry.width_m,
+                       "thickness_m": data.geometry.thickness_m,
+                       "sample_rate_hz": float(data.sample_rate_hz)})
+    fs = float(values["sample_rate_hz"])
+    if abs(data.sample_rate_hz / fs - 1) > 0.01:
+        raise ParameterError(f"{src}: sample rate {data.sample_rate_hz:g} Hz does not match the "
+                             f"parameter sample_rate_hz = {fs:g} Hz")
+    current = validate_block(data.current_a, max_samples=max(data.current_a.size, 1))
+    estimator = config.build_estimator(values)
+    _say(f"estimating {data.current_a.size} samples of {src} with {estimator.model.describe()} "
+         f"(order {estimator.reduction_order}, fs {fs:g} Hz, leak {values['leak_corner_hz']:g} Hz)")
+    t_out, w, resets = estimate_record(estimator, data.time_s, current,
+                                       max_gap_s=float(values["max_gap_s"]))
+    out = Path(args.out)
+    as_bag = args.format == "bag" or (args.format is None and (out.suffix in (".mcap", ".db3")
+                                                               or out.suffix == ""))
+    result = TimeSeries(path="", sample=data.sample, geometry=data.geometry, known=data.known,
+                        sample_rate_hz=data.sample_rate_hz, time_s=t_out, current_a=current,
+                        deflection_m=w)
+    if as_bag:
+        storage = "mcap" if (args.storage == "mcap" or out.suffix == ".mcap") else "sqlite3"
+        out = out.with_suffix("") if out.suffix in (".mcap", ".db3") else out
+        write_bag(out, result, storage=storage, current_topic=args.current_topic,
+                  deflection_topic=args.estimate_topic)
+    else:
+        write_timeseries(out, result)
+    msg = f"wrote {t_out.size} estimates to {out} ({'bag' if as_bag else 'ipmc-timeseries/1'})"
+    if resets:
+        msg += f"; {resets} filter reset(s) at time gaps > {values['max_gap_s']} s or backward jumps"
+    if data.deflection_m is not None and data.deflection_alignment is not None and not resets:
+        truth = data.deflection_m
+        sel = data.time_s >= data.time_s[0] + 5.0 / (2 * np.pi * float(values["leak_corner_hz"]))
+        if sel.sum() > 10 and not estimator.delay_s:
+            err = np.sqrt(np.mean((w[sel] - truth[sel]) ** 2)) / np.sqrt(np.mean(truth[sel] ** 2))
+            msg += f"; NRMSE against the recorded deflection after the leak transient: {err:.4f}"
+    print(msg)
+    _write_json(args.json, {"samples": int(t_out.size), "resets": resets, "out": str(out)})
+    return 0
+
+
 def _cmd_reduce(args) -> int:
     from .reduction import reduction_error_table
 
@@ -565,6 +626,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--candidates", help="restrict to these effects (comma list)")
     _add_output_args(p)
     p.set_defaults(func=_cmd_diagnose)
+
+    p = sub.add_parser("estimate", help="estimate deflection offline from a bag or time series "
+                                        "(same code path and params file as the estimator node)")
+    p.add_argument("input", help="rosbag2 bag (dir, .mcap, .db3) or ipmc-timeseries/1 file")
+    p.add_argument("--out", required=True, help="output: .csv (ipmc-timeseries/1) or a bag path")
+    p.add_argument("--params", help="ROS 2 params file of the estimator node (config/estimator.yaml)")
+    p.add_argument("--format", choices=("timeseries", "bag"), help="output format (default: by suffix)")
+    p.add_argument("--storage", choices=("sqlite3", "mcap"), default="sqlite3", help="output bag storage")
+    p.add_argument("--current-topic", default="current")
+    p.add_argument("--deflection-topic", default="deflection_truth",
+                   help="input bags: recorded deflection (optional, used to report the error)")
+    p.add_argument("--estimate-topic", default="deflection/block", help="output bags: estimate topic")
+    p.add_argument("--geometry", help="bags without ipmc.yaml sidecar: 'L,W,T' in metres")
+    p.add_argument("--json")
+    p.set_defaults(func=_cmd_estimate)
 
     p = sub.add_parser("reduce", help="error table of reduced models against the full model")
     _add_model_args(p)

@@ -31,20 +31,19 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray, String
 
-from ..estimator import (DEFAULT_LEAK_CORNER_HZ, MAX_BLOCK_SAMPLES, EstimatorError,
-                         InverseEstimator, validate_block)
-from ..physics.parameters import ParameterError
-from ..reduction import MAX_ORDER, ReductionError
-from . import params as P
+from .. import config as C
 from ..estimation import DeflectionEstimator
+from ..estimator import EstimatorError, InverseEstimator, validate_block
+from ..physics.parameters import ParameterError
+from ..reduction import ReductionError
+from . import params as P
 from .messages import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, LayoutError, claimed_samples,
                        pack_block, unpack_block)
 from .runner import run
 
 __all__ = ["EstimatorNode", "ESTIMATOR_SPECS", "COUNTER_NAMES", "PUBLISH_POINTS", "main"]
 
-#: Allowed values of ``publish_points``.
-PUBLISH_POINTS = ("per_sample", "last_of_block", "off")
+PUBLISH_POINTS = C.PUBLISH_POINTS
 
 #: Relative tolerance on the median sample period of a block against 1/sample_rate_hz.
 PERIOD_TOLERANCE = 0.01
@@ -55,30 +54,7 @@ MAX_STAMP_S = 2.0 ** 31 - 1.0
 COUNTER_NAMES = ("messages_in", "samples_in", "samples_out", "samples_rejected",
                  "messages_rejected", "samples_dropped", "resets", "gaps", "gaps_bridged")
 
-ESTIMATOR_SPECS = P.GEOMETRY_SPECS + P.MATERIAL_SPECS + P.MODEL_SPECS + (
-    P.Spec("reduction_order", 4, int, "order n of the stable reduction of R(s) = H(s)/s",
-           low=1, high=MAX_ORDER),
-    P.Spec("band_low_hz", 0.1, float, "lower edge of the reduction fit band, Hz",
-           low=1e-4, high=1e5),
-    P.Spec("band_high_hz", 50.0, float, "upper edge of the reduction fit band, Hz",
-           low=1e-4, high=1e5),
-    P.Spec("sample_rate_hz", 1000.0, float, "sample rate of the current the filter is designed "
-           "for, Hz; blocks whose median sample period differs by more than 1 % are rejected",
-           low=1.0, high=1e6, read_only=True),
-    P.Spec("leak_corner_hz", DEFAULT_LEAK_CORNER_HZ, float, "leaky-integration corner f_c, Hz "
-           "(time constant 1/(2 pi f_c) of the initial-condition and held-step decay)",
-           low=1e-6, high=1e4),
-    P.Spec("offset_corner_hz", 0.0, float, "corner of the current-offset tracker, Hz "
-           "(0 = off)", low=0.0, high=1e4),
-    P.Spec("frame_id", "ipmc_clamp", str, "frame of the deflection points: origin at the "
-           "clamp, x along the beam to the tip, z in the bending direction"),
-    P.Spec("max_gap_s", 0.1, float, "largest time gap between consecutive samples bridged "
-           "without a filter reset, s", low=1e-6, high=1e6),
-    P.Spec("publish_points", "per_sample", str, "deflection PointStamped output: 'per_sample', "
-           "'last_of_block' or 'off'", choices=PUBLISH_POINTS),
-    P.Spec("max_block_samples", 100_000, int, "largest accepted input block, samples",
-           low=1, high=MAX_BLOCK_SAMPLES, read_only=True),
-) + P.QOS_SPECS
+ESTIMATOR_SPECS = C.ESTIMATOR_SPECS
 
 #: Parameters whose change needs a new reduction (the sensor model changes).
 _MODEL_KEYS = P.GEOMETRY_NAMES + P.MATERIAL_NAMES + ("model", "effects", "reduction_order",
@@ -116,22 +92,15 @@ def check_values(values: dict) -> None:
 
 
 def design(values: dict, reduced=None):
-    """Build (reduced model, fresh core DeflectionEstimator) from parameter values.
+    """Build (reduced model, fresh core DeflectionEstimator) from parameter values
+    (:func:`ipmc_sensor_ros.config.build_estimator`, as ``ipmc-model estimate`` does).
 
     ``reduced`` is reused when given (the model part did not change).  Raises
     one of ParameterError / ReductionError / EstimatorError / ConfigurationError
     with a message naming the parameter.
     """
     check_values(values)
-    model = P.build_sensor_model(values)
-    band = (float(values["band_low_hz"]), float(values["band_high_hz"]))
-    if not band[0] < band[1]:
-        raise ReductionError(f"parameters 'band_low_hz' ({band[0]}) and 'band_high_hz' "
-                             f"({band[1]}) must satisfy low < high")
-    kwargs = _filter_kwargs(values)
-    est = DeflectionEstimator(model, kwargs.pop("sample_rate_hz"),
-                              reduction_order=int(values["reduction_order"]), band_hz=band,
-                              reduced=reduced, **kwargs)
+    est = C.build_estimator(values, reduced)
     return est.reduced, est
 
 
