@@ -167,6 +167,8 @@ def _cmd_simulate(args) -> int:
         if s not in PAPER_SAMPLES:
             raise ParameterError(f"--samples: unknown sample '{s}'; paper samples: {sorted(PAPER_SAMPLES)}")
     freqs = _parse_frequencies(args.frequencies)
+    if args.bag:
+        args.out, args.format = args.bag, "bag"
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     recs = crank_slider_campaign(effects, samples=samples, frequencies_hz=freqs,
@@ -579,7 +581,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("simulate", help="write synthetic measurement files from the package's simulator")
     _add_model_args(p)
-    p.add_argument("--out", required=True, help="output directory")
+    out = p.add_mutually_exclusive_group(required=True)
+    out.add_argument("--out", help="output directory")
+    out.add_argument("--bag", metavar="DIR",
+                     help="write rosbag2 bags into DIR (same as --out DIR --format bag)")
     p.add_argument("--samples", default="slim,short", help="paper samples, comma list")
     p.add_argument("--frequencies", default="1:20:8",
                    help="crank frequencies: 'lo:hi:n' (log-spaced) or a comma list, Hz")

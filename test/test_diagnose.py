@@ -42,6 +42,14 @@ def test_hidden_effect_ranks_first_and_error_falls(name):
     assert diag.explained
 
 
+def test_surface_resistance_is_found_missing_from_h1():
+    """The paper's own step (section 5.3.1): data from H2, model H1."""
+    records = crank_slider_campaign(("surface_resistance",), seed=11, model_effects=())
+    diag = diagnose(records)
+    assert diag.missing_effect == "surface_resistance" and diag.explained, diag.summary()
+    assert diag.baseline.error / diag.candidates[0].error >= 3.0
+
+
 def test_no_false_alarm_on_data_the_model_explains():
     diag = diagnose(campaign(None, seed=42))
     assert diag.missing_effect is None and diag.explained, diag.summary()
