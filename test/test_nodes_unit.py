@@ -107,7 +107,7 @@ MALFORMED = {
     "row label": (lambda m: _dims(m, 0, label="row"), "dim[0].label"),
     "column label": (lambda m: _dims(m, 1, label="time_s,current_mA"), "dim[1].label"),
     "column size": (lambda m: _dims(m, 1, size=3), "size 2 and stride 2"),
-    "row size": (lambda m: _dims(m, 0, size=5), "dim[0].size = 5"),
+    "row size": (lambda m: _dims(m, 0, size=5), "dim[0] is (size 5"),
     "row stride": (lambda m: _dims(m, 0, stride=3), "dim[0].stride"),
     "odd length": (lambda m: setattr(m, "data", list(m.data) + [1.0]), "odd"),
     "offset": (lambda m: setattr(m.layout, "data_offset", 100), "data_offset"),

@@ -1,7 +1,7 @@
 """Pack and unpack sample blocks in ``std_msgs/Float64MultiArray`` (pure numpy + std_msgs).
 
-Block layout (see docs/ros_interface.md)
-----------------------------------------
+Block layout (defined in :mod:`ipmc_sensor_ros.blocks`; README "ROS 2 interface")
+---------------------------------------------------------------------------------
 A block of ``n`` timed samples is a 2-D array, row-major::
 
     layout.dim[0] = MultiArrayDimension(label="sample", size=n, stride=2 n)
@@ -29,6 +29,9 @@ from dataclasses import dataclass
 import numpy as np
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
+from ..blocks import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, SAMPLE_LABEL, LayoutError,
+                      unpack_pairs)
+
 __all__ = [
     "LayoutError",
     "Block",
@@ -40,18 +43,6 @@ __all__ = [
     "claimed_samples",
     "stamp_from_seconds",
 ]
-
-#: Label of the row dimension.
-SAMPLE_LABEL = "sample"
-#: Column label of current blocks: seconds, amperes.
-CURRENT_COLUMNS = "time_s,current_A"
-#: Column label of deflection blocks: seconds, metres.
-DEFLECTION_COLUMNS = "time_s,deflection_m"
-
-
-class LayoutError(ValueError):
-    """A ``Float64MultiArray`` whose layout does not follow the block convention."""
-
 
 @dataclass(frozen=True)
 class Block:
@@ -88,13 +79,6 @@ def pack_block(times_s, values, columns: str = CURRENT_COLUMNS) -> Float64MultiA
     return msg
 
 
-def _data(msg: Float64MultiArray) -> np.ndarray:
-    data = msg.data
-    if isinstance(data, array.array) and data.typecode == "d":
-        return np.frombuffer(data, dtype=float)
-    return np.asarray(data, dtype=float)
-
-
 def claimed_samples(msg: Float64MultiArray) -> int:
     """How many samples the message carries, for accounting even when it is malformed.
 
@@ -108,41 +92,14 @@ def claimed_samples(msg: Float64MultiArray) -> int:
 
 
 def unpack_block(msg: Float64MultiArray, columns: str = CURRENT_COLUMNS) -> Block:
-    """Decode a block message; raise :class:`LayoutError` if the layout is malformed.
+    """Decode a block message; raise :class:`LayoutError` if the layout is malformed
+    (:func:`ipmc_sensor_ros.blocks.unpack_pairs`).
 
     Returns a :class:`Block`; ``times_s`` is None for a values-only 1-D message.
     Values are *not* checked for finiteness here (that is the estimator's job).
     """
-    dims = list(msg.layout.dim)
-    offset = int(msg.layout.data_offset)
-    data = _data(msg)
-    if offset < 0 or offset > data.size:
-        raise LayoutError(f"layout.data_offset {offset} is outside the data (length {data.size})")
-    data = data[offset:]
-    if len(dims) <= 1:
-        if dims and dims[0].size != data.size:
-            raise LayoutError(f"1-D layout: dim[0].size = {dims[0].size} but the data holds "
-                              f"{data.size} value(s)")
-        return Block(times_s=None, values=data)
-    if len(dims) != 2:
-        raise LayoutError(f"expected 2 dimensions (sample, '{columns}'), got {len(dims)}")
-    d0, d1 = dims
-    if d0.label != SAMPLE_LABEL:
-        raise LayoutError(f"dim[0].label must be '{SAMPLE_LABEL}', got '{d0.label}'")
-    if d1.label != columns:
-        raise LayoutError(f"dim[1].label must be '{columns}', got '{d1.label}'")
-    if d1.size != 2 or d1.stride != 2:
-        raise LayoutError(f"dim[1] must have size 2 and stride 2, got size {d1.size}, "
-                          f"stride {d1.stride}")
-    if data.size % 2:
-        raise LayoutError(f"data length {data.size} is odd: samples are (time, value) pairs")
-    n = data.size // 2
-    if d0.size != n:
-        raise LayoutError(f"dim[0].size = {d0.size} but the data holds {n} (time, value) pair(s)")
-    if d0.stride != 2 * n:
-        raise LayoutError(f"dim[0].stride must be 2 * size = {2 * n}, got {d0.stride}")
-    pairs = data.reshape(n, 2)
-    return Block(times_s=pairs[:, 0].copy(), values=pairs[:, 1].copy())
+    times, values = unpack_pairs(msg, columns)
+    return Block(times_s=times, values=values)
 
 
 def stamp_from_seconds(t_s: float) -> tuple[int, int]:

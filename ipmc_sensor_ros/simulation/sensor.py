@@ -32,7 +32,7 @@ from ..physics.parameters import ParameterError
 from ..reduction import ReducedModel, append_rational, reduce_response
 from .stimuli import Stimulus
 
-__all__ = ["periodic_response", "lti_response_fft", "predict_current", "time_varying_response",
+__all__ = ["periodic_response", "padded_record", "lti_response_fft", "predict_current", "time_varying_response",
            "material_nodes", "SensorSimulator",
            "forward_reduction"]
 
@@ -250,6 +250,19 @@ def _base_effect():
     return Effect
 
 
+def padded_record(time_s: np.ndarray, deflection_m: np.ndarray, pad_s: float):
+    """(x, n_fft, fs, n_pad): the deflection minus its first value, followed by ``pad_s``
+    seconds of a raised-cosine return to zero (no discontinuity at the circular
+    wrap-around), and the power-of-two FFT length that holds it."""
+    t = np.asarray(time_s, float)
+    fs = (t.size - 1) / (t[-1] - t[0])
+    w0 = np.asarray(deflection_m, float) - deflection_m[0]
+    n_pad = int(np.ceil(pad_s * fs))
+    ramp = w0[-1] * 0.5 * (1 + np.cos(np.pi * np.arange(1, n_pad + 1) / n_pad))
+    x = np.concatenate([w0, ramp])
+    return x, 1 << int(np.ceil(np.log2(x.size))), fs, n_pad
+
+
 def lti_response_fft(transfer, time_s, deflection_m, pad_s: float = 2.0) -> np.ndarray:
     """Current (A) of any LTI model ``transfer(s)`` (A/m) for an arbitrary deflection record.
 
@@ -266,12 +279,7 @@ def lti_response_fft(transfer, time_s, deflection_m, pad_s: float = 2.0) -> np.n
     w = np.asarray(deflection_m, float)
     if t.size < 2:
         raise ValueError("need at least two samples")
-    fs = (t.size - 1) / (t[-1] - t[0])
-    w0 = w - w[0]
-    n_pad = int(np.ceil(pad_s * fs))
-    ramp = w0[-1] * 0.5 * (1 + np.cos(np.pi * np.arange(1, n_pad + 1) / n_pad))
-    x = np.concatenate([w0, ramp])
-    n = 1 << int(np.ceil(np.log2(x.size)))
+    x, n, fs, _ = padded_record(t, w, pad_s)
     f = np.fft.rfftfreq(n, 1.0 / fs)
     h = np.asarray(transfer(2j * np.pi * f), dtype=complex)
     h[0] = 0.0

@@ -142,6 +142,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence, Union
 
 import numpy as np
 
+from ..blocks import SAMPLE_LABEL, unpack_pairs
 from ..physics.parameters import Geometry, MaterialParameters, ParameterError
 
 __all__ = [
@@ -203,7 +204,6 @@ SAMPLE_RATE_TOLERANCE = 0.01
 #: Column label (dim[1].label) of current and deflection blocks in bags.
 CURRENT_LABEL = "time_s,current_A"
 DEFLECTION_LABEL = "time_s,deflection_m"
-SAMPLE_LABEL = "sample"
 MULTIARRAY_TYPE = "std_msgs/msg/Float64MultiArray"
 POINT_STAMPED_TYPE = "geometry_msgs/msg/PointStamped"
 SIDECAR_NAME = "ipmc.yaml"
@@ -856,34 +856,8 @@ def _describe_topics(topics: Mapping[str, Any]) -> str:
 
 
 def _unpack_block(msg, label: str) -> tuple[np.ndarray, np.ndarray]:
-    """Times and values of a block message; ValueError describing a bad layout."""
-    dims = list(msg.layout.dim)
-    data = np.asarray(msg.data, dtype=float)
-    offset = int(msg.layout.data_offset)
-    if offset < 0 or offset > data.size:
-        raise ValueError(f"layout.data_offset {offset} is outside the data (length {data.size})")
-    data = data[offset:]
-    if len(dims) != 2:
-        note = " (values only, no sample times)" if len(dims) < 2 else ""
-        raise ValueError(f"expected a 2-D layout (dim[0] '{SAMPLE_LABEL}', dim[1] '{label}'), got "
-                         f"{len(dims)} dimension(s){note}")
-    d0, d1 = dims
-    if d0.label != SAMPLE_LABEL:
-        raise ValueError(f"dim[0].label is {d0.label!r}, expected '{SAMPLE_LABEL}'")
-    if d1.label != label:
-        raise ValueError(f"dim[1].label is {d1.label!r}, expected '{label}' (wrong units or "
-                         "wrong topic?)")
-    if d1.size != 2 or d1.stride != 2:
-        raise ValueError(f"dim[1] must have size 2 and stride 2, got size {d1.size}, "
-                         f"stride {d1.stride}")
-    if data.size % 2:
-        raise ValueError(f"data length {data.size} is odd: samples are (time, value) pairs")
-    n = data.size // 2
-    if d0.size != n or d0.stride != 2 * n:
-        raise ValueError(f"dim[0] is (size {d0.size}, stride {d0.stride}) but the data holds {n} "
-                         f"(time, value) pair(s): expected (size {n}, stride {2 * n})")
-    pairs = data.reshape(n, 2)
-    return pairs[:, 0].copy(), pairs[:, 1].copy()
+    """Times and values of a block message; ValueError (LayoutError) describing a bad layout."""
+    return unpack_pairs(msg, label, values_only_ok=False)
 
 
 def _read_topic(where: str, reader, name: str, info, label: str,

@@ -30,7 +30,7 @@ from scipy.optimize import least_squares
 from ..physics.effects import Effect, get_effect
 from ..physics.model import EffectSpec, SensorModel
 from ..physics.parameters import MaterialParameters, ParameterError
-from ..simulation.sensor import time_varying_response
+from ..simulation.sensor import padded_record, time_varying_response
 
 __all__ = ["Record", "PreparedRecord", "prepare", "FitSpec", "ModelFit", "fit_model", "predict",
            "noise_rms"]
@@ -99,16 +99,6 @@ class PreparedRecord:
     grid_hz: np.ndarray = None  # interpolation grid of the transfer function
 
 
-def _padded(t, w, pad_s):
-    fs = (t.size - 1) / (t[-1] - t[0])
-    w0 = w - w[0]
-    n_pad = int(np.ceil(pad_s * fs))
-    ramp = w0[-1] * 0.5 * (1 + np.cos(np.pi * np.arange(1, n_pad + 1) / n_pad))
-    x = np.concatenate([w0, ramp])
-    n = 1 << int(np.ceil(np.log2(x.size)))
-    return x, n, fs, n_pad
-
-
 def prepare(records: Sequence[Record], *, settle_s: float = 0.5, max_rows_per_record: int = 1500,
             pad_s: float = 1.0, n_grid: int = 512) -> list[PreparedRecord]:
     out = []
@@ -122,7 +112,7 @@ def prepare(records: Sequence[Record], *, settle_s: float = 0.5, max_rows_per_re
         idx = np.flatnonzero(keep)
         step = max(1, int(np.ceil(idx.size / max_rows_per_record)))
         rows = idx[::step]
-        x, n, fs, n_pad = _padded(t, w, pad_s)
+        x, n, fs, n_pad = padded_record(t, w, pad_s)
         f_all = np.fft.rfftfreq(n, 1.0 / fs)
         bins = np.arange(1, f_all.size)
         freqs = f_all[bins]
@@ -202,9 +192,8 @@ def _interpolated_transfer(p: PreparedRecord, model: SensorModel) -> np.ndarray:
 
 def _repad(p: PreparedRecord, w: np.ndarray) -> np.ndarray:
     """Pad a transformed deflection exactly as the record's own deflection was padded."""
-    w0 = w - w[0]
-    ramp = w0[-1] * 0.5 * (1 + np.cos(np.pi * np.arange(1, p.pad + 1) / p.pad))
-    return np.concatenate([w0, ramp])
+    fs = (p.t.size - 1) / (p.t[-1] - p.t[0])
+    return padded_record(p.t, w, p.pad / fs)[0]
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,83 @@
+"""The sample-block layout of ``std_msgs/Float64MultiArray`` messages, without ROS.
+
+A block of ``n`` timed samples is a 2-D array, row-major::
+
+    layout.dim[0] = (label "sample", size n, stride 2 n)
+    layout.dim[1] = (label <columns>, size 2, stride 2)
+    layout.data_offset = 0 (a non-zero offset is honoured when reading)
+    data = [t_0, v_0, t_1, v_1, ..., t_{n-1}, v_{n-1}]   (float64)
+
+``t_k`` is the sample time in seconds (ROS time as float seconds), ``v_k`` the
+value in the unit named by the column label: ``"time_s,current_A"`` for the
+sensing current (A), ``"time_s,deflection_m"`` for tip deflections (m).  A plain
+1-D array (no dimension, or one whose size matches the data) holds values only.
+
+Used by the nodes (:mod:`ipmc_sensor_ros.nodes.messages`, which also packs) and
+by the bag reader of the workbench; works on any object with ``layout.dim``,
+``layout.data_offset`` and ``data`` (rclpy or rosbags messages).
+"""
+from __future__ import annotations
+
+import array
+
+import numpy as np
+
+__all__ = ["LayoutError", "SAMPLE_LABEL", "CURRENT_COLUMNS", "DEFLECTION_COLUMNS", "unpack_pairs"]
+
+#: Label of the row dimension.
+SAMPLE_LABEL = "sample"
+#: Column label of current blocks: seconds, amperes.
+CURRENT_COLUMNS = "time_s,current_A"
+#: Column label of deflection blocks: seconds, metres.
+DEFLECTION_COLUMNS = "time_s,deflection_m"
+
+
+class LayoutError(ValueError):
+    """A ``Float64MultiArray`` whose layout does not follow the block convention."""
+
+
+def _data(msg) -> np.ndarray:
+    data = msg.data
+    if isinstance(data, array.array) and data.typecode == "d":
+        return np.frombuffer(data, dtype=float)
+    return np.asarray(data, dtype=float)
+
+
+def unpack_pairs(msg, columns: str, *, values_only_ok: bool = True):
+    """(times_s or None, values) of a block message; :class:`LayoutError` if malformed.
+
+    ``values_only_ok``: accept a 1-D values-only message (times None).  Values
+    are not checked for finiteness here.
+    """
+    dims = list(msg.layout.dim)
+    offset = int(msg.layout.data_offset)
+    data = _data(msg)
+    if offset < 0 or offset > data.size:
+        raise LayoutError(f"layout.data_offset {offset} is outside the data (length {data.size})")
+    data = data[offset:]
+    if len(dims) <= 1 and values_only_ok:
+        if dims and dims[0].size != data.size:
+            raise LayoutError(f"1-D layout: dim[0].size = {dims[0].size} but the data holds "
+                              f"{data.size} value(s)")
+        return None, data
+    if len(dims) != 2:
+        note = " (values only, no sample times)" if len(dims) < 2 else ""
+        raise LayoutError(f"expected 2 dimensions (dim[0] '{SAMPLE_LABEL}', dim[1] '{columns}'), "
+                          f"got {len(dims)}{note}")
+    d0, d1 = dims
+    if d0.label != SAMPLE_LABEL:
+        raise LayoutError(f"dim[0].label is {d0.label!r}, expected '{SAMPLE_LABEL}'")
+    if d1.label != columns:
+        raise LayoutError(f"dim[1].label is {d1.label!r}, expected '{columns}' (wrong units or "
+                          "wrong topic?)")
+    if d1.size != 2 or d1.stride != 2:
+        raise LayoutError(f"dim[1] must have size 2 and stride 2, got size {d1.size}, "
+                          f"stride {d1.stride}")
+    if data.size % 2:
+        raise LayoutError(f"data length {data.size} is odd: samples are (time, value) pairs")
+    n = data.size // 2
+    if d0.size != n or d0.stride != 2 * n:
+        raise LayoutError(f"dim[0] is (size {d0.size}, stride {d0.stride}) but the data holds {n} "
+                          f"(time, value) pair(s): expected dim[0].size = {n}, dim[0].stride = {2 * n}")
+    pairs = data.reshape(n, 2)
+    return pairs[:, 0].copy(), pairs[:, 1].copy()
