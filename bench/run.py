@@ -9,9 +9,10 @@ import argparse
 import platform
 import sys
 
-from bench import bench_core, bench_workbench
+from bench import bench_core, bench_nodes, bench_workbench
 
-SUITES = [bench_core.bench_estimator, bench_core.bench_model, bench_workbench.bench_workbench]
+SUITES = [bench_core.bench_estimator, bench_core.bench_model, bench_workbench.bench_workbench,
+          bench_nodes.bench_nodes]
 
 
 def main(argv=None) -> int:

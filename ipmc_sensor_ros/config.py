@@ -96,7 +96,7 @@ GEOMETRY_NAMES = tuple(s.name for s in GEOMETRY_SPECS)
 
 
 #: Allowed values of ``publish_points``.
-PUBLISH_POINTS = ("per_sample", "last_of_block", "off")
+PUBLISH_POINTS = ("per_sample", "last_of_block", "none")  # not "off": YAML reads off as false
 
 ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
     Spec("reduction_order", 4, int, "order n of the stable reduction of R(s) = H(s)/s",
@@ -118,7 +118,7 @@ ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
     Spec("max_gap_s", 0.1, float, "largest time gap between consecutive samples bridged "
          "without a filter reset, s", low=1e-6, high=1e6),
     Spec("publish_points", "per_sample", str, "deflection PointStamped output: 'per_sample', "
-         "'last_of_block' or 'off'", choices=PUBLISH_POINTS),
+         "'last_of_block' or 'none'", choices=PUBLISH_POINTS),
     Spec("max_block_samples", 100_000, int, "largest accepted input block, samples",
          low=1, high=MAX_BLOCK_SAMPLES, read_only=True),
 ) + QOS_SPECS

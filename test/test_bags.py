@@ -80,7 +80,7 @@ def test_replay_into_live_node_equals_offline_and_loop_resets(tmp_path):
     ex = SingleThreadedExecutor(context=ctx)
     try:
         est = EstimatorNode(context=ctx, parameter_overrides=[
-            Parameter("use_sim_time", value=True), Parameter("publish_points", value="off")],
+            Parameter("use_sim_time", value=True), Parameter("publish_points", value="none")],
             cli_args=["--ros-args", "--params-file", str(params)])
         player = rclpy.create_node("player", context=ctx)
         qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)

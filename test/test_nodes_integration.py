@@ -47,12 +47,12 @@ NRMSE_LIMIT = 0.05
 TIMEOUT_S = 120.0
 
 
-def _sim_params(f_hz: float) -> dict:
+def _sim_params(f_hz: float, duration_s: float = DURATION_S, realtime_factor: float = 0.0) -> dict:
     # 120 s in blocks of 200 = 600 messages per topic, fewer than the QoS depth of
     # 1000: even a stalled subscriber cannot lose one, so exact accounting does not
     # depend on scheduling (fast mode: one block per ms, real-time factor ~200).
-    return {"motor_frequency_hz": f_hz, "realtime_factor": 0.0, "block_size": 200,
-            "duration_s": DURATION_S, "wait_for_subscribers": 1}
+    return {"motor_frequency_hz": f_hz, "realtime_factor": realtime_factor, "block_size": 200,
+            "duration_s": duration_s, "wait_for_subscribers": 1}
 
 
 def test_in_process_pairs_track_truth_and_account_exactly(monkeypatch):
@@ -118,7 +118,7 @@ def test_estimator_improves_when_its_model_gains_the_hidden_effect(monkeypatch):
     try:
         for ns, est_effects in (("/plain", None), ("/aware", hidden)):
             monitors[ns] = TrackingMonitor(monitor_node, ns)
-            est_params = [Parameter("publish_points", value="off")]
+            est_params = [Parameter("publish_points", value="none")]
             if est_effects:
                 est_params.append(Parameter("effects", value=est_effects))
             est = EstimatorNode(context=ctx, namespace=ns, parameter_overrides=est_params)
@@ -159,6 +159,30 @@ def _start(module: str, params: dict, namespace: str, env: dict, log: Path):
 
 
 def test_two_processes_over_dds_track_truth_and_account_exactly(tmp_path, monkeypatch):
+    _two_process_run(tmp_path, monkeypatch, DURATION_S, 0.0)
+
+
+@pytest.mark.slow
+def test_ten_minute_live_run_accounts_exactly(tmp_path, monkeypatch):
+    """The reliability soak: 10 minutes paced in real time, two processes over DDS, exact
+    accounting; resident memory of each node flat (growth from 10 % of the run to its end
+    within 5 %)."""
+    rss = _two_process_run(tmp_path, monkeypatch, 600.0, 1.0)
+    for name, (early, end) in rss.items():
+        assert end <= 1.05 * early, (name, early, end)
+
+
+def _rss_bytes(pid: int) -> int:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) * 1024
+    return 0
+
+
+def _two_process_run(tmp_path, monkeypatch, duration_s: float, realtime_factor: float):
+    """Simulator and estimator as two processes; returns {name: (rss early, rss at end)}."""
+    n_samples = int(duration_s * FS)
+    timeout_s = TIMEOUT_S + 1.2 * duration_s * (realtime_factor > 0)
     domain = random.randint(100, 200)
     env = dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(domain),
                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOG_DIR=str(tmp_path))
@@ -173,7 +197,7 @@ def test_two_processes_over_dds_track_truth_and_account_exactly(tmp_path, monkey
     logs = {"estimator": tmp_path / "estimator.log", "simulator": tmp_path / "simulator.log"}
 
     def spin_until(predicate, what):
-        end = time.monotonic() + TIMEOUT_S
+        end = time.monotonic() + timeout_s
         while not predicate():
             for name, p in procs.items():
                 assert p.poll() is None, f"{name} exited early:\n{logs[name].read_text()}"
@@ -187,13 +211,16 @@ def test_two_processes_over_dds_track_truth_and_account_exactly(tmp_path, monkey
         # output; the simulator itself waits for its subscribers (wait_for_subscribers).
         spin_until(lambda: monitor.subscriptions[0].get_publisher_count() > 0,
                    "the estimator's deflection/block publisher")
-        procs["simulator"] = _start("simulator_node", _sim_params(5.0), "/rig", env,
-                                    logs["simulator"])
+        procs["simulator"] = _start("simulator_node", _sim_params(5.0, duration_s, realtime_factor),
+                                    "/rig", env, logs["simulator"])
+        spin_until(lambda: monitor.estimate_samples >= n_samples // 10, "10 % of the run")
+        rss_early = {name: _rss_bytes(p.pid) for name, p in procs.items()}
         spin_until(lambda: monitor.simulator_counters.get("done")
-                   and monitor.estimator_counters.get("samples_out") == N_SAMPLES
-                   and monitor.estimate_samples == N_SAMPLES
-                   and monitor.truth_samples == N_SAMPLES, "the run to complete")
+                   and monitor.estimator_counters.get("samples_out") == n_samples
+                   and monitor.estimate_samples == n_samples
+                   and monitor.truth_samples == n_samples, "the run to complete")
         error, compared = monitor.score(last_s=20.0)
+        rss = {name: (rss_early[name], _rss_bytes(p.pid)) for name, p in procs.items()}
     finally:
         codes = {}
         for name, p in procs.items():
@@ -210,13 +237,17 @@ def test_two_processes_over_dds_track_truth_and_account_exactly(tmp_path, monkey
         rclpy.shutdown(context=ctx)
 
     sim_c, est_c = monitor.simulator_counters, monitor.estimator_counters
-    print(f"two processes 5 Hz: NRMSE {error:.4f}; simulator {sim_c}; estimator {est_c}; "
-          f"monitor received {monitor.estimate_samples} estimated / {monitor.truth_samples} truth")
-    assert sim_c["samples_published"] == N_SAMPLES
-    assert est_c["samples_in"] == est_c["samples_out"] == N_SAMPLES
+    print(f"two processes 5 Hz, {duration_s:g} s: NRMSE {error:.4f}; simulator {sim_c}; "
+          f"estimator {est_c}; monitor received {monitor.estimate_samples} estimated / "
+          f"{monitor.truth_samples} truth")
+    assert sim_c["samples_published"] == n_samples
+    assert est_c["samples_in"] == est_c["samples_out"] == n_samples
     assert est_c["messages_in"] == sim_c["blocks_published"]
     assert est_c["samples_rejected"] == est_c["samples_dropped"] == est_c["resets"] == 0
-    assert monitor.estimate_samples == monitor.truth_samples == N_SAMPLES
+    assert monitor.estimate_samples == monitor.truth_samples == n_samples
     assert compared >= 20000
     assert error < NRMSE_LIMIT
     assert codes == {"estimator": 0, "simulator": 0}, {k: logs[k].read_text() for k in logs}
+    print("resident memory (early, end) in MB: "
+          + ", ".join(f"{k} {a / 2**20:.1f} -> {b / 2**20:.1f}" for k, (a, b) in rss.items()))
+    return rss

@@ -216,7 +216,7 @@ def check_accounting(c: dict) -> None:
 # Estimator node
 # ---------------------------------------------------------------------------
 def test_bad_messages_are_rejected_and_leave_the_filter_untouched(harness, reduced):
-    h = harness(overrides={"publish_points": "off", "max_block_samples": 500})
+    h = harness(overrides={"publish_points": "none", "max_block_samples": 500})
     t, _, i = crank_record(2.0)
     valid = [(t[k:k + 100], i[k:k + 100]) for k in range(0, 2000, 100)]
 
@@ -270,7 +270,7 @@ def test_bad_messages_are_rejected_and_leave_the_filter_untouched(harness, reduc
 
 
 def test_backward_time_jump_resets_the_filter_and_warns(harness, reduced, capfd):
-    h = harness(overrides={"publish_points": "off"})
+    h = harness(overrides={"publish_points": "none"})
     t, _, i = crank_record(1.0)
     for k in range(0, 1000, 250):
         h.send(pack_block(t[k:k + 250], i[k:k + 250]))
@@ -287,7 +287,7 @@ def test_backward_time_jump_resets_the_filter_and_warns(harness, reduced, capfd)
 
 
 def test_long_gap_resets_short_gap_is_bridged(harness, reduced):
-    h = harness(overrides={"publish_points": "off", "max_gap_s": 0.1})
+    h = harness(overrides={"publish_points": "none", "max_gap_s": 0.1})
     t, _, i = crank_record(1.0)
     h.send(pack_block(t[:100], i[:100]))
     h.send(pack_block(t[150:250], i[150:250]))    # 50 ms missing: bridged, no reset
@@ -334,7 +334,7 @@ def test_last_of_block_points_and_counters_topic_under_sim_time(harness):
 
 
 def test_invalid_parameter_changes_are_refused_with_reason(harness, reduced):
-    h = harness(overrides={"publish_points": "off"})
+    h = harness(overrides={"publish_points": "none"})
     before = h.node.estimator
     cases = {
         "length_m": (-1.0, "length_m"),
@@ -362,7 +362,7 @@ def test_invalid_parameter_changes_are_refused_with_reason(harness, reduced):
 
 
 def test_valid_leak_change_is_applied_without_an_output_jump(harness, reduced):
-    h = harness(overrides={"publish_points": "off"})
+    h = harness(overrides={"publish_points": "none"})
     t, w, i = crank_record(31.0, f_hz=1.0)
     cut = 30000                      # at 30 s the 1 Hz crank is at its peak (2 mm)
     for k in range(0, cut, 1000):
@@ -385,7 +385,7 @@ def test_valid_leak_change_is_applied_without_an_output_jump(harness, reduced):
 
 
 def test_effects_current_offset_is_removed_and_delay_restamps(harness, reduced):
-    h = harness(overrides={"publish_points": "off",
+    h = harness(overrides={"publish_points": "none",
                            "effects": ["current_offset(offset_a=1e-6)", "time_delay(delay_s=0.002)"]})
     t, _, i = crank_record(0.5)
     for k in range(0, 500, 100):

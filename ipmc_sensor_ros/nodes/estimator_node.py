@@ -116,6 +116,7 @@ class EstimatorNode(Node):
     def __init__(self, node_name: str = "ipmc_estimator", **kwargs: Any):
         super().__init__(node_name, **kwargs)
         self._lock = threading.RLock()
+        P.check_unknown_overrides(self, ESTIMATOR_SPECS, kwargs.get("cli_args"))
         P.declare(self, ESTIMATOR_SPECS)
         self._values = P.read(self, ESTIMATOR_SPECS)
         try:
@@ -258,7 +259,7 @@ class EstimatorNode(Node):
 
     def _publish_points(self, times: np.ndarray, y: np.ndarray) -> None:
         mode = self._values["publish_points"]
-        if mode == "off":
+        if mode == "none":
             return
         if mode == "last_of_block":
             times, y = times[-1:], y[-1:]

@@ -26,7 +26,8 @@ from ..physics.parameters import ParameterError
 
 __all__ = ["ConfigurationError", "Spec", "GEOMETRY_SPECS", "MATERIAL_SPECS", "MODEL_SPECS",
            "QOS_SPECS", "declare", "read", "build_sensor_model", "make_qos", "COUNTERS_QOS",
-           "check_choice", "ParameterError", "MATERIAL_NAMES", "GEOMETRY_NAMES", "markdown_table"]
+           "check_choice", "ParameterError", "MATERIAL_NAMES", "GEOMETRY_NAMES", "markdown_table",
+           "params_files", "check_unknown_overrides"]
 
 _TYPES = {float: ParameterType.PARAMETER_DOUBLE, int: ParameterType.PARAMETER_INTEGER,
           str: ParameterType.PARAMETER_STRING, bool: ParameterType.PARAMETER_BOOL,
@@ -46,6 +47,30 @@ def descriptor(spec: Spec) -> ParameterDescriptor:
         d.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high),
                                         step=1)]
     return d
+
+
+def params_files(cli_args: Iterable[str] | None = None) -> list[str]:
+    """The ``--params-file`` paths given to this process or node (for error messages)."""
+    import sys
+
+    out = []
+    for args in (list(cli_args or ()), sys.argv):
+        for k, a in enumerate(args[:-1]):
+            if a == "--params-file":
+                out.append(args[k + 1])
+    return out
+
+
+def check_unknown_overrides(node, specs: Iterable[Spec], cli_args=None) -> None:
+    """Refuse parameter overrides (from params files or -p) that the node does not declare:
+    rclpy would ignore them silently, so a typo ('lenght_m') would go unnoticed."""
+    known = {s.name for s in specs} | {"use_sim_time", "start_type_description_service"}
+    unknown = sorted(set(node._parameter_overrides) - known)
+    if unknown:
+        files = params_files(cli_args)
+        where = f" in {', '.join(files)}" if files else ""
+        raise ConfigurationError(f"unknown parameter(s) {unknown}{where} for node "
+                                 f"'{node.get_name()}'; known: {sorted(known - {'use_sim_time'})}")
 
 
 def declare(node, specs: Iterable[Spec]) -> None:

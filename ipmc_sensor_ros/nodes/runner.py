@@ -9,7 +9,7 @@ import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
-from .params import ConfigurationError
+from .params import ConfigurationError, params_files
 
 __all__ = ["run"]
 
@@ -50,10 +50,17 @@ def _run(node_factory, name: str, args=None) -> int:
         rclpy.try_shutdown()
         return 0
     except (ConfigurationError, ParameterException) as exc:
+        text = str(exc)
         hint = ""
-        if "type" in str(exc).lower() and "double" in str(exc).lower():
+        if "type 'INTEGER'" in text and "expecting type 'DOUBLE'" in text:
             hint = " (write floating-point parameters with a decimal point, e.g. 1000.0)"
-        print(f"{name}: invalid parameter: {exc}{hint}", file=sys.stderr)
+        elif "out of range" in text and any(f"Parameter {n} out of range" in text
+                                            for n in ("length_m", "width_m", "thickness_m")):
+            hint = " (lengths are in metres: is it in millimetres?)"
+        files = params_files()
+        source = f" (parameters files: {', '.join(files)})" if files and not any(
+            f in str(exc) for f in files) else ""
+        print(f"{name}: invalid parameter: {exc}{hint}{source}", file=sys.stderr)
         executor.shutdown()
         rclpy.try_shutdown()
         return 2

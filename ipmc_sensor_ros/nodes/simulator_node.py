@@ -174,6 +174,7 @@ class SimulatorNode(Node):
 
     def __init__(self, node_name: str = "ipmc_simulator", **kwargs: Any):
         super().__init__(node_name, **kwargs)
+        P.check_unknown_overrides(self, SIMULATOR_SPECS, kwargs.get("cli_args"))
         P.declare(self, SIMULATOR_SPECS)
         v = self._values = P.read(self, SIMULATOR_SPECS)
         try:

@@ -1,0 +1,216 @@
+"""Node benchmarks: sustained input rate without loss and added latency of the estimator
+node against a pass-through node (subscribe, copy, publish) in the same harness, and the
+simulator's real-time factor.
+
+Harness: three processes on one machine, an isolated ROS_DOMAIN_ID, DDS on
+loopback.  A driver process publishes ``current`` blocks (n samples per message,
+sample times = the driver's wall clock) at a fixed message rate for a fixed time;
+the node under test (estimator, or the pass-through) republishes on
+``deflection/block``; this process counts what arrives and the latency
+``receive time - time of the block's last sample``.  A rate is *sustained* when
+every sample sent arrives.  Run: ``python -m bench.run`` (full: ladder of rates, 10 s
+each, the best loss-free one confirmed for 60 s) or ``--smoke``.
+"""
+from __future__ import annotations
+
+import os
+import random
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+PASSTHROUGH = r'''
+import sys, rclpy
+from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray
+from ipmc_sensor_ros.nodes import params as P
+class PassThrough(Node):
+    def __init__(self):
+        super().__init__("passthrough")
+        qos = P.make_qos({"qos_depth": 1000, "qos_reliability": "reliable"})
+        self.pub = self.create_publisher(Float64MultiArray, "deflection/block", qos)
+        self.create_subscription(Float64MultiArray, "current", self.on_msg, qos)
+    def on_msg(self, msg):
+        out = Float64MultiArray()
+        out.layout = msg.layout
+        out.layout.dim[1].label = "time_s,deflection_m"
+        out.data = msg.data
+        self.pub.publish(out)
+rclpy.init()
+node = PassThrough()
+try:
+    rclpy.spin(node)
+except KeyboardInterrupt:
+    pass
+'''
+
+DRIVER = r'''
+import sys, time, rclpy, numpy as np
+from std_msgs.msg import Float64MultiArray
+from ipmc_sensor_ros.nodes import params as P
+from ipmc_sensor_ros.nodes.messages import pack_block
+rate, n, duration, fs = float(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3]), float(sys.argv[4])
+rclpy.init()
+node = rclpy.create_node("driver")
+qos = P.make_qos({"qos_depth": 1000, "qos_reliability": "reliable"})
+pub = node.create_publisher(Float64MultiArray, "current", qos)
+end = time.monotonic() + 20
+while pub.get_subscription_count() == 0 and time.monotonic() < end:
+    rclpy.spin_once(node, timeout_sec=0.05)
+time.sleep(1.0)
+k = 0
+t0 = time.monotonic()
+total = int(rate * duration)
+offsets = np.arange(n) / fs
+signal = 1e-6 * np.sin(2 * np.pi * 5.0 * offsets)
+while k < total:
+    target = t0 + k / rate
+    now = time.monotonic()
+    if target > now:
+        time.sleep(target - now)
+    t_last = time.time()
+    pub.publish(pack_block(t_last - offsets[::-1], signal))
+    k += 1
+print(f"SENT {k} {k * n}", flush=True)
+time.sleep(2.0)
+node.destroy_node()
+rclpy.shutdown()
+'''
+
+
+def _env(domain: int) -> dict:
+    return dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(domain),
+                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+
+
+def _run_once(kind: str, rate: float, n: int, duration: float) -> dict:
+    import numpy as np
+    import rclpy
+    from std_msgs.msg import Float64MultiArray
+
+    from ipmc_sensor_ros.nodes import params as P
+    from ipmc_sensor_ros.nodes.messages import DEFLECTION_COLUMNS, unpack_block
+
+    fs = rate * n
+    domain = random.randint(100, 200)
+    env = _env(domain)
+    if kind == "estimator":
+        node_cmd = [sys.executable, "-m", "ipmc_sensor_ros.nodes.estimator_node", "--ros-args",
+                    "-p", f"sample_rate_hz:={fs:.1f}", "-p", "publish_points:=none",
+                    "-p", "max_gap_s:=1.0", "-p", f"band_high_hz:={min(50.0, fs / 4):.1f}"]
+    else:
+        node_cmd = [sys.executable, "-c", PASSTHROUGH]
+    proc = subprocess.Popen(node_cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    sink = rclpy.create_node("sink", context=ctx)
+    qos = P.make_qos({"qos_depth": 1000, "qos_reliability": "reliable"})
+    received = [0]
+    latencies: list[float] = []
+
+    def on_block(msg):
+        now = time.time()
+        b = unpack_block(msg, DEFLECTION_COLUMNS)
+        received[0] += len(b.values)
+        latencies.append(now - float(b.times_s[-1]))
+
+    sink.create_subscription(Float64MultiArray, "deflection/block", on_block, qos)
+    from rclpy.executors import SingleThreadedExecutor
+
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(sink)
+    driver = subprocess.Popen([sys.executable, "-c", DRIVER, str(rate), str(n), str(duration), str(fs)],
+                              env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    end = time.monotonic() + duration + 40
+    while driver.poll() is None and time.monotonic() < end:
+        ex.spin_once(timeout_sec=0.01)
+    deadline = time.monotonic() + 3
+    while time.monotonic() < deadline:
+        ex.spin_once(timeout_sec=0.01)
+    out = driver.communicate(timeout=5)[0] if driver.poll() is not None else ""
+    sent = int(out.split()[2]) if out.startswith("SENT") else -1
+    proc.terminate()
+    proc.wait(timeout=10)
+    ex.shutdown()
+    sink.destroy_node()
+    rclpy.shutdown(context=ctx)
+    lat = np.array(latencies) if latencies else np.array([np.nan])
+    return {"kind": kind, "rate_msg_s": rate, "n": n, "sent": sent, "received": received[0],
+            "lossless": sent > 0 and received[0] == sent,
+            "latency_median_ms": float(np.median(lat) * 1e3),
+            "latency_p99_ms": float(np.percentile(lat, 99) * 1e3)}
+
+
+def _ladder(n: int) -> list[float]:
+    return [250.0, 500.0, 1000.0, 2000.0, 4000.0] if n == 1 else [5.0, 20.0, 50.0, 100.0, 200.0]
+
+
+def bench_nodes(smoke: bool = False) -> list[dict]:
+    rows = []
+    for n in (1, 1000):
+        results = {}
+        for kind in ("passthrough", "estimator"):
+            if smoke:
+                best = _run_once(kind, _ladder(n)[0], n, 1.0)
+            else:
+                best = None
+                for rate in _ladder(n):
+                    r = _run_once(kind, rate, n, 10.0)
+                    if not r["lossless"]:
+                        break
+                    best = r
+                if best is not None:
+                    best = _run_once(kind, best["rate_msg_s"], n, 60.0)
+            results[kind] = best
+        p, e = results["passthrough"], results["estimator"]
+        if p is None or e is None:
+            rows.append({"benchmark": f"node rate, {n}-sample messages", "value": float("nan"),
+                         "unit": "samples/s", "baseline": "pass-through node", "ratio": float("nan"),
+                         "target": ">= 0.9"})
+            continue
+        rate_e = e["rate_msg_s"] * n if e["lossless"] else 0.0
+        rate_p = p["rate_msg_s"] * n if p["lossless"] else 0.0
+        rows.append({"benchmark": f"estimator node sustained rate, {n}-sample messages"
+                                  + (" (smoke)" if smoke else ", 60 s without loss"),
+                     "value": rate_e, "unit": "samples/s", "baseline": "pass-through node same harness",
+                     "ratio": rate_e / rate_p if rate_p else float("nan"), "target": ">= 0.9"})
+        rows.append({"benchmark": f"estimator node added latency, {n}-sample messages (median / p99)",
+                     "value": e["latency_median_ms"] - p["latency_median_ms"], "unit": "ms",
+                     "baseline": f"pass-through {p['latency_median_ms']:.2f} / {p['latency_p99_ms']:.2f} ms",
+                     "ratio": (e["latency_p99_ms"] - p["latency_p99_ms"]),
+                     "target": "ratio column = added p99 (ms)"})
+    rows.append(bench_simulator_rtf(smoke))
+    return rows
+
+
+def bench_simulator_rtf(smoke: bool = False) -> dict:
+    """Simulated seconds per wall second of the simulator node in fast mode at 1 kHz,
+    in process (the node's publish path, no subscriber)."""
+    import rclpy
+    from rclpy.parameter import Parameter
+
+    from ipmc_sensor_ros.nodes.simulator_node import SimulatorNode
+
+    duration = 5.0 if smoke else 60.0
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=random.randint(100, 200))
+    node = SimulatorNode(context=ctx, parameter_overrides=[
+        Parameter("realtime_factor", value=0.0), Parameter("duration_s", value=duration),
+        Parameter("block_size", value=200)])
+    from rclpy.executors import SingleThreadedExecutor
+
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    t0 = time.perf_counter()
+    while not node.done:
+        ex.spin_once(timeout_sec=0.01)
+    wall = time.perf_counter() - t0
+    ex.shutdown()
+    node.destroy_node()
+    rclpy.shutdown(context=ctx)
+    return {"benchmark": "simulator node real-time factor at 1 kHz (fast mode)",
+            "value": duration / wall, "unit": "x real time", "baseline": "wall clock",
+            "ratio": duration / wall, "target": ">= 100"}
