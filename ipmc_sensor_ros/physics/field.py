@@ -169,24 +169,45 @@ class FieldSolver:
             out[k] = s * (self.C @ x + self.Cw)
         return out
 
-    def simulate(self, time_s, deflection_m) -> np.ndarray:
+    def simulate(self, time_s, deflection_m, diffusivity_at=None, update_s: float = 0.5) -> np.ndarray:
         """Sensing current (A) for a deflection record (uniform time steps, starting from
-        rest), by Crank-Nicolson; i = C (A x + B w)."""
+        rest), by Crank-Nicolson; i = C (A x + B w) + C_w dw/dt.
+
+        ``diffusivity_at(elapsed_s) -> d`` (m^2/s) makes the diffusivity change during the
+        run (hydration, paper section 5.4): the system is re-assembled every ``update_s``
+        with d at that time, keeping the state.  The thickness mesh does not depend on d
+        (its scale sqrt(d/K) = sqrt(kappa_e R T / (F^2 C-)) is independent of d), so the
+        state carries over exactly.
+        """
         t = np.asarray(time_s, float)
         w = np.asarray(deflection_m, float)
         dt = float(t[1] - t[0])
         eye = sp.identity(self.n_states, format="csc")
-        lhs = spla.splu((eye - 0.5 * dt * self.A).tocsc())
-        rhs_m = (eye + 0.5 * dt * self.A).tocsr()
+        w_rate = np.gradient(w, dt)        # for the (tiny) direct term Cw of the surface node
         x = np.zeros(self.n_states)
         out = np.empty(t.size)
-        a_csr = self.A.tocsr()
-        w_rate = np.gradient(w, dt)        # for the (tiny) direct term Cw of the surface node
-        out[0] = self.C @ (a_csr @ x + self.B * w[0]) + self.Cw * w_rate[0]
+        system = self
+        step_update = max(1, int(round(update_s / dt))) if diffusivity_at else t.size + 1
+
+        def factor(sol):
+            return (spla.splu((eye - 0.5 * dt * sol.A).tocsc()), (eye + 0.5 * dt * sol.A).tocsr(),
+                    sol.A.tocsr())
+
+        if diffusivity_at is not None:
+            system = self._with_diffusivity(diffusivity_at(0.0))
+        lhs, rhs_m, a_csr = factor(system)
+        out[0] = system.C @ (a_csr @ x + system.B * w[0]) + system.Cw * w_rate[0]
         for k in range(1, t.size):
-            x = lhs.solve(rhs_m @ x + 0.5 * dt * self.B * (w[k - 1] + w[k]))
-            out[k] = self.C @ (a_csr @ x + self.B * w[k]) + self.Cw * w_rate[k]
+            if k % step_update == 0:
+                system = self._with_diffusivity(diffusivity_at(t[k] - t[0]))
+                lhs, rhs_m, a_csr = factor(system)
+            x = lhs.solve(rhs_m @ x + 0.5 * dt * system.B * (w[k - 1] + w[k]))
+            out[k] = system.C @ (a_csr @ x + system.B * w[k]) + system.Cw * w_rate[k]
         return out
+
+    def _with_diffusivity(self, d: float) -> "FieldSolver":
+        model = self.model.with_material(self.model.material.replace(diffusivity_m2_per_s=float(d)))
+        return FieldSolver(model, self.surface_cell, self.growth, self.n_length)
 
 
 def convergence_table(model: SensorModel, band_hz=(0.1, 100.0), n_points: int = 25,
