@@ -11,7 +11,8 @@ import sys
 
 from bench import bench_core, bench_nodes, bench_workbench
 
-SUITES = [bench_core.bench_estimator, bench_core.bench_model, bench_workbench.bench_workbench,
+SUITES = [bench_core.bench_estimator, bench_core.bench_model, bench_core.bench_field,
+          bench_workbench.bench_workbench,
           bench_nodes.bench_nodes]
 
 

@@ -174,7 +174,7 @@ def _cmd_simulate(args) -> int:
     recs = crank_slider_campaign(effects, samples=samples, frequencies_hz=freqs,
                                  duration_s=args.duration, sample_rate_hz=args.sample_rate,
                                  crank_radius_m=args.crank_radius, material=material,
-                                 noise_rel=args.noise_rel, seed=args.seed)
+                                 noise_rel=args.noise_rel, seed=args.seed, fidelity=args.fidelity)
     written = []
     points: dict = {}
     for r in recs:
@@ -595,6 +595,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--format", choices=("timeseries", "frf", "bag"), default="timeseries")
     p.add_argument("--storage", choices=("sqlite3", "mcap"), default="sqlite3", help="bag storage")
+    p.add_argument("--fidelity", choices=("exact", "field"), default="exact",
+                   help="exact: FFT prediction of the closed form with its effects; field: the "
+                        "independent field-equation solution (base model and hydration_drift)")
     p.add_argument("--json")
     p.set_defaults(func=_cmd_simulate)
 

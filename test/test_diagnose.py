@@ -22,8 +22,10 @@ CATALOG = [n for n in ("amplifier_bandwidth", "time_delay", "current_offset", "h
 def campaign(hidden, seed):
     kwargs = {}
     if hidden and hidden[0] == "hydration_drift":
-        # the drift needs long records: 4 records of 120 s (2 samples x 2 frequencies)
-        kwargs = dict(frequencies_hz=(3.0, 7.0), duration_s=120.0)
+        # the drift needs long records: 4 records of 120 s (2 samples x 2 frequencies), and
+        # the data come from the independent field solution with d(t) drifting (physics
+        # ground truth, not the effect's own quasi-static formula)
+        kwargs = dict(frequencies_hz=(3.0, 7.0), duration_s=120.0, fidelity="field")
     effects = ("surface_resistance",) + ((hidden,) if hidden else ())
     return crank_slider_campaign(effects, seed=seed, **kwargs)
 

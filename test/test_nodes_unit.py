@@ -567,3 +567,26 @@ def test_plugin_effect_is_used_by_the_estimator_node():
     finally:
         EFFECTS.pop("polymer_leakage", None)
         rclpy.shutdown(context=ctx)
+
+
+def test_simulator_node_field_fidelity_publishes():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=random.randint(100, 200))
+    try:
+        node = SimulatorNode(context=ctx, parameter_overrides=[
+            Parameter("fidelity", value="field"), Parameter("realtime_factor", value=0.0),
+            Parameter("duration_s", value=0.5), Parameter("block_size", value=100)])
+        from rclpy.executors import SingleThreadedExecutor
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        end = time.monotonic() + 30
+        while not node.done and time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.01)
+        assert node.done and node.counters()["samples_published"] == 500
+        ex.shutdown()
+        node.destroy_node()
+        with pytest.raises(P.ConfigurationError, match="fidelity"):
+            SimulatorNode(context=ctx, parameter_overrides=[
+                Parameter("fidelity", value="field"), Parameter("effects", value=["time_delay"])])
+    finally:
+        rclpy.shutdown(context=ctx)

@@ -38,7 +38,7 @@ from std_msgs.msg import Float64MultiArray, String
 
 from ..physics.parameters import ParameterError
 from ..reduction import ReductionError
-from ..simulation.sensor import SensorSimulator
+from ..simulation.sensor import FieldSensorSimulator, SensorSimulator
 from ..simulation.stimuli import STIMULUS_KINDS, Sampled, Stimulus, make_stimulus
 from . import params as P
 from .messages import CURRENT_COLUMNS, DEFLECTION_COLUMNS, pack_block
@@ -52,6 +52,10 @@ MAX_BLOCKS_PER_TICK = 10
 MIN_TICK_S = 1e-3
 
 _OWN_SPECS = (
+    P.Spec("fidelity", "reduced", str, "sensor physics: 'reduced' (order-8 reduction of the "
+           "closed form, every effect) or 'field' (independent solution of the field equations; "
+           "base model and hydration_drift only; ~50x real time)", read_only=True,
+           choices=("reduced", "field")),
     P.Spec("stimulus", "crank_slider", str, "tip-deflection stimulus: crank_slider, sweep, "
            "free_vibration, step or file", choices=STIMULI),
     P.Spec("motor_frequency_hz", 1.0, float, "crank_slider: motor (drive) frequency, Hz",
@@ -180,7 +184,8 @@ class SimulatorNode(Node):
         try:
             model = P.build_sensor_model(v)
             self._stimulus, self._stim_t0 = build_stimulus(v)
-            self._sim = SensorSimulator(model, v["sample_rate_hz"],
+            sim_cls = FieldSensorSimulator if v["fidelity"] == "field" else SensorSimulator
+            self._sim = sim_cls(model, v["sample_rate_hz"],
                                         current_gain=v["current_gain"],
                                         current_offset_a=v["current_offset_a"],
                                         noise_rms_a=v["noise_rms_a"], seed=v["seed"])

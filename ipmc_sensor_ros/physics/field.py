@@ -49,7 +49,8 @@ import scipy.sparse.linalg as spla
 
 from .model import SensorModel
 
-__all__ = ["FieldSolver", "NonlinearFieldSolver", "convergence_table", "nonlinearity_study"]
+__all__ = ["FieldSolver", "FieldStream", "NonlinearFieldSolver", "convergence_table",
+           "nonlinearity_study"]
 
 
 def _graded_nodes(h: float, first: float, growth: float) -> np.ndarray:
@@ -205,6 +206,10 @@ class FieldSolver:
             out[k] = system.C @ (a_csr @ x + system.B * w[k]) + system.Cw * w_rate[k]
         return out
 
+    def stream(self, sample_rate_hz: float, diffusivity_at=None, update_s: float = 0.5) -> "FieldStream":
+        """A streaming (block by block) Crank-Nicolson integrator of this system."""
+        return FieldStream(self, sample_rate_hz, diffusivity_at, update_s)
+
     def _with_diffusivity(self, d: float) -> "FieldSolver":
         model = self.model.with_material(self.model.material.replace(diffusivity_m2_per_s=float(d)))
         return FieldSolver(model, self.surface_cell, self.growth, self.n_length)
@@ -338,3 +343,40 @@ def nonlinearity_study(model: SensorModel, amplitudes_m, frequency_hz: float = 5
                      "h2_over_h1": float(abs(ph[1]) / abs(ph[0])),
                      "h3_over_h1": float(abs(ph[2]) / abs(ph[0]))})
     return rows
+
+
+class FieldStream:
+    """Streaming Crank-Nicolson integration of a :class:`FieldSolver` (state kept between
+    blocks): ``step(w_block, w_rate_block) -> current_block``.  Used by the simulator's
+    ``fidelity = field``."""
+
+    def __init__(self, solver: FieldSolver, sample_rate_hz: float, diffusivity_at=None,
+                 update_s: float = 0.5):
+        self.base = solver
+        self.dt = 1.0 / float(sample_rate_hz)
+        self.diffusivity_at = diffusivity_at
+        self.update_s = float(update_s)
+        self.x = np.zeros(solver.n_states)
+        self.w_prev = 0.0
+        self.elapsed = 0.0
+        self._next_update = 0.0 if diffusivity_at else float("inf")
+        self._factor(solver)
+
+    def _factor(self, sol: FieldSolver) -> None:
+        eye = sp.identity(sol.n_states, format="csc")
+        self.sol = sol
+        self.lhs = spla.splu((eye - 0.5 * self.dt * sol.A).tocsc())
+        self.rhs = (eye + 0.5 * self.dt * sol.A).tocsr()
+        self.a = sol.A.tocsr()
+
+    def step(self, w, w_rate) -> np.ndarray:
+        out = np.empty(len(w))
+        for k, (wk, vk) in enumerate(zip(w, w_rate)):
+            if self.elapsed >= self._next_update:
+                self._factor(self.base._with_diffusivity(self.diffusivity_at(self.elapsed)))
+                self._next_update += self.update_s
+            self.x = self.lhs.solve(self.rhs @ self.x + 0.5 * self.dt * self.sol.B * (self.w_prev + wk))
+            out[k] = self.sol.C @ (self.a @ self.x + self.sol.B * wk) + self.sol.Cw * vk
+            self.w_prev = wk
+            self.elapsed += self.dt
+        return out

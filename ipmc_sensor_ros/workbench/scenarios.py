@@ -56,9 +56,13 @@ def crank_slider_campaign(true_effects: Sequence = ("surface_resistance",), *,
                           crank_radius_m: float = 2e-3, rod_length_m: float = 15e-3,
                           material: MaterialParameters = PAPER_PARAMETERS, noise_rel: float = 0.01,
                           seed: int = 0, model_effects: Sequence = ("surface_resistance",),
-                          preroll_s: float = 1.0) -> list[Record]:
+                          preroll_s: float = 1.0, fidelity: str = "exact") -> list[Record]:
     """One record per (sample, frequency); ``true_effects`` make the data,
-    ``model_effects`` go into each record's (to be tested) model."""
+    ``model_effects`` go into each record's (to be tested) model.  ``fidelity``:
+    ``exact`` (FFT prediction of the closed form with its effects) or ``field`` (the
+    independent field solution, :class:`~ipmc_sensor_ros.simulation.sensor.FieldSensorSimulator`)."""
+    if fidelity not in ("exact", "field"):
+        raise ValueError(f"fidelity must be 'exact' or 'field', got {fidelity!r}")
     rng = np.random.default_rng(seed)
     out = []
     for sample in samples:
@@ -66,8 +70,14 @@ def crank_slider_campaign(true_effects: Sequence = ("surface_resistance",), *,
         truth = SensorModel(geometry, material, tuple(true_effects))
         for f in frequencies_hz:
             t = np.arange(int(round((duration_s + preroll_s) * sample_rate_hz))) / sample_rate_hz
-            w = CrankSlider(float(f), crank_radius_m, rod_length_m).deflection(t)
-            i = predict_current(truth, t, w)
+            stim = CrankSlider(float(f), crank_radius_m, rod_length_m)
+            w = stim.deflection(t)
+            if fidelity == "field":
+                from ..simulation.sensor import FieldSensorSimulator
+
+                i = FieldSensorSimulator(truth, sample_rate_hz).run(stim, t)[1]
+            else:
+                i = predict_current(truth, t, w)
             keep = t >= preroll_s
             t, w, i = t[keep] - preroll_s, w[keep], i[keep]
             i = i + rng.normal(0.0, noise_rel * np.std(i), i.size)
