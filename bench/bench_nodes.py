@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 import random
+import signal
 import subprocess
 import sys
 import time
@@ -81,6 +82,14 @@ rclpy.shutdown()
 '''
 
 
+_DOMAINS = iter(random.sample(range(100, 230), 130))
+
+
+def _next_domain() -> int:
+    """A ROS_DOMAIN_ID not used before in this run, so runs never hear each other."""
+    return next(_DOMAINS)
+
+
 def _env(domain: int) -> dict:
     return dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(domain),
                 ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
@@ -95,7 +104,7 @@ def _run_once(kind: str, rate: float, n: int, duration: float) -> dict:
     from ipmc_sensor_ros.nodes.messages import DEFLECTION_COLUMNS, unpack_block
 
     fs = rate * n
-    domain = random.randint(100, 200)
+    domain = _next_domain()
     env = _env(domain)
     if kind == "estimator":
         node_cmd = [sys.executable, "-m", "ipmc_sensor_ros.nodes.estimator_node", "--ros-args",
@@ -132,8 +141,12 @@ def _run_once(kind: str, rate: float, n: int, duration: float) -> dict:
         ex.spin_once(timeout_sec=0.01)
     out = driver.communicate(timeout=5)[0] if driver.poll() is not None else ""
     sent = int(out.split()[2]) if out.startswith("SENT") else -1
-    proc.terminate()
-    proc.wait(timeout=10)
+    proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
     ex.shutdown()
     sink.destroy_node()
     rclpy.shutdown(context=ctx)
@@ -145,7 +158,7 @@ def _run_once(kind: str, rate: float, n: int, duration: float) -> dict:
 
 
 def _ladder(n: int) -> list[float]:
-    return [250.0, 500.0, 1000.0, 2000.0, 4000.0] if n == 1 else [5.0, 20.0, 50.0, 100.0, 200.0]
+    return [500.0, 1000.0, 2000.0, 4000.0, 8000.0] if n == 1 else [20.0, 50.0, 100.0, 200.0, 500.0, 1000.0]
 
 
 def bench_nodes(smoke: bool = False) -> list[dict]:

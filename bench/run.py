@@ -20,16 +20,14 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--smoke", action="store_true")
     args = ap.parse_args(argv)
-    rows = []
-    for suite in SUITES:
-        rows.extend(suite(smoke=args.smoke))
     print(f"machine: {platform.machine()} {platform.processor() or ''} python {platform.python_version()}"
           f" cores={__import__('os').cpu_count()}")
     print("| benchmark | value | unit | ratio | baseline | target |")
-    print("|---|---|---|---|---|---|")
-    for r in rows:
-        print(f"| {r['benchmark']} | {r['value']:.3g} | {r['unit']} | {r['ratio']:.2f} | "
-              f"{r['baseline']} | {r['target']} |")
+    print("|---|---|---|---|---|---|", flush=True)
+    for suite in SUITES:          # rows are printed as each suite finishes
+        for r in suite(smoke=args.smoke):
+            print(f"| {r['benchmark']} | {r['value']:.3g} | {r['unit']} | {r['ratio']:.3g} | "
+                  f"{r['baseline']} | {r['target']} |", flush=True)
     return 0
 
 
