@@ -287,17 +287,6 @@ class InverseEstimator:
             raise EstimatorError("state contains non-finite values")
         self._zi = zi.copy()
 
-    def last_output_steady_state(self, deflection_m) -> None:
-        """Set the state to the steady state whose output is ``deflection_m``.
-
-        Used after a rebuild so the output continues without a jump: the state
-        is the equilibrium for a constant input ``deflection / dc_gain``.
-        """
-        y = np.broadcast_to(np.asarray(deflection_m, dtype=float), (self.channels,))
-        x_ss = y / self.dc_gain_m_per_a()
-        zi_unit = sig.sosfilt_zi(self.sos)  # (n_sections, 2), unit step input
-        self._zi = zi_unit[:, :, None] * x_ss[None, None, :]
-
     def continue_from(self, old: "InverseEstimator", recent_input=None) -> None:
         """Set this filter's state so its output continues ``old``'s without a jump.
 

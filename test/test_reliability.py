@@ -23,7 +23,7 @@ from ipmc_sensor_ros.estimator import InverseEstimator, leak_tradeoff
 from ipmc_sensor_ros.nodes.estimator_node import EstimatorNode
 from ipmc_sensor_ros.nodes.messages import DEFLECTION_COLUMNS, pack_block, unpack_block
 from ipmc_sensor_ros.physics.model import SensorModel
-from ipmc_sensor_ros.physics.parameters import PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, ParameterError
+from ipmc_sensor_ros.physics.parameters import PAPER_PARAMETERS, PAPER_SAMPLES, Geometry
 from ipmc_sensor_ros.reduction import ReductionError, reduce_model
 
 ROOT = Path(__file__).resolve().parents[1]
