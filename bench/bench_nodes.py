@@ -69,11 +69,13 @@ t0 = time.monotonic()
 total = int(rate * duration)
 offsets = np.arange(n) / fs
 signal = 1e-6 * np.sin(2 * np.pi * 5.0 * offsets)
+next_t = t0
 while k < total:
-    target = t0 + k / rate
     now = time.monotonic()
-    if target > now:
-        time.sleep(target - now)
+    if next_t > now:
+        time.sleep(next_t - now)
+    # steady pacing, no catch-up bursts after a stall (a DAQ does not burst either)
+    next_t = max(next_t + 1.0 / rate, time.monotonic())
     t_last = time.time() - epoch
     pub.publish(pack_block(t_last - offsets[::-1], signal))
     k += 1
