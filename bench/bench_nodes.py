@@ -86,20 +86,28 @@ rclpy.shutdown()
 '''
 
 
-_DOMAINS = iter(random.sample(range(100, 230), 130))
-
-
-def _next_domain() -> int:
-    """A ROS_DOMAIN_ID not used before in this run, so runs never hear each other."""
-    return next(_DOMAINS)
-
-
 def _env(domain: int) -> dict:
     return dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(domain),
                 ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
 
 
 def _run_once(kind: str, rate: float, n: int, duration: float) -> dict:
+    """One trial in a fresh process: a long-lived process that creates and destroys many
+    DDS participants was seen to lose messages in later trials."""
+    import json
+
+    code = ("import json, sys; from bench.bench_nodes import _trial; "
+            f"print('RESULT ' + json.dumps(_trial({kind!r}, {rate!r}, {n!r}, {duration!r})))")
+    res = subprocess.run([sys.executable, "-c", code], cwd=str(ROOT), env=dict(os.environ, PYTHONPATH=str(ROOT)),
+                         capture_output=True, text=True, timeout=duration + 120)
+    for line in res.stdout.splitlines():
+        if line.startswith("RESULT "):
+            return json.loads(line[7:])
+    return {"kind": kind, "rate_msg_s": rate, "n": n, "sent": -1, "received": 0, "lossless": False,
+            "latency_median_ms": float("nan"), "latency_p99_ms": float("nan")}
+
+
+def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
     import numpy as np
     import rclpy
     from std_msgs.msg import Float64MultiArray
@@ -108,7 +116,7 @@ def _run_once(kind: str, rate: float, n: int, duration: float) -> dict:
     from ipmc_sensor_ros.nodes.messages import DEFLECTION_COLUMNS, unpack_block
 
     fs = rate * n
-    domain = _next_domain()
+    domain = random.randint(100, 229)
     env = _env(domain)
     if kind == "estimator":
         node_cmd = [sys.executable, "-m", "ipmc_sensor_ros.nodes.estimator_node", "--ros-args",
@@ -132,11 +140,16 @@ def _run_once(kind: str, rate: float, n: int, duration: float) -> dict:
         received[0] += len(b.values)
         latencies.append(now - float(b.times_s[-1]))
 
-    sink.create_subscription(Float64MultiArray, "deflection/block", on_block, qos)
+    sub = sink.create_subscription(Float64MultiArray, "deflection/block", on_block, qos)
     from rclpy.executors import SingleThreadedExecutor
 
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(sink)
+    # start the driver only once the node's output is matched: data published before the
+    # match would be lost (volatile QoS) and counted against the node
+    ready_by = time.monotonic() + 30
+    while sub.get_publisher_count() == 0 and time.monotonic() < ready_by:
+        ex.spin_once(timeout_sec=0.05)
     driver = subprocess.Popen([sys.executable, "-c", DRIVER, str(rate), str(n), str(duration), str(fs),
                                repr(epoch)],
                               env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
@@ -159,7 +172,7 @@ def _run_once(kind: str, rate: float, n: int, duration: float) -> dict:
     rclpy.shutdown(context=ctx)
     lat = np.array(latencies) if latencies else np.array([np.nan])
     return {"kind": kind, "rate_msg_s": rate, "n": n, "sent": sent, "received": received[0],
-            "lossless": sent > 0 and received[0] == sent,
+            "lossless": bool(sent > 0 and received[0] == sent),
             "latency_median_ms": float(np.median(lat) * 1e3),
             "latency_p99_ms": float(np.percentile(lat, 99) * 1e3)}
 
