@@ -55,13 +55,19 @@ def _sim_params(f_hz: float, duration_s: float = DURATION_S, realtime_factor: fl
             "duration_s": duration_s, "wait_for_subscribers": 1}
 
 
-def test_in_process_pairs_track_truth_and_account_exactly(monkeypatch):
+def _context_with_monitor(monkeypatch):
+    """A fresh context on a random loopback domain, its executor and a monitor node."""
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=random.randint(100, 200))
     ex = SingleThreadedExecutor(context=ctx)
     monitor_node = rclpy.create_node("monitor", context=ctx)
     ex.add_node(monitor_node)
+    return ctx, ex, monitor_node
+
+
+def test_in_process_pairs_track_truth_and_account_exactly(monkeypatch):
+    ctx, ex, monitor_node = _context_with_monitor(monkeypatch)
     pairs = []
     try:
         for f in (1.0, 5.0, 20.0):
@@ -107,12 +113,7 @@ def test_estimator_improves_when_its_model_gains_the_hidden_effect(monkeypatch):
     with the plain H2 model misses its 14 deg phase lag at 10 Hz, one whose ``effects``
     parameter names it tracks the truth.  Two identical (seeded, deterministic) simulators
     feed the two estimators in namespaces /plain and /aware of one executor."""
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=random.randint(100, 200))
-    ex = SingleThreadedExecutor(context=ctx)
-    monitor_node = rclpy.create_node("monitor", context=ctx)
-    ex.add_node(monitor_node)
+    ctx, ex, monitor_node = _context_with_monitor(monkeypatch)
     hidden = ["amplifier_bandwidth(corner_hz=40)"]
     nodes, monitors = [], {}
     try:

@@ -86,33 +86,34 @@ def test_streaming_simulator_with_effects_matches_exact_prediction(effects):
     """The streaming simulator (blocks of 100 samples) against the exact FFT prediction of the
     same model; 1 % bounds the simulator's 0.05 dB / 0.2 deg discretisation error plus the
     delay line's interpolation and the piecewise-constant drift."""
-    from ipmc_sensor_ros.simulation.sensor import predict_current
-
     fs = 1000.0
     model = SensorModel.named("h2", PAPER_SAMPLES["slim"], extra_effects=effects)
     t = np.arange(int(20 * fs)) / fs
     stim = CrankSlider(3.0, 2e-3, 15e-3)
-    sim = SensorSimulator(model, fs, update_s=1.0)
-    i = np.concatenate([sim.run(stim, t[k:k + 100])[1] for k in range(0, t.size, 100)])
+    assert _streaming_error(SensorSimulator(model, fs, update_s=1.0), model, stim, t, 100) < 0.01
+
+
+def _streaming_error(sim, model, stim, t, block: int) -> float:
+    """Relative RMS error of a streaming simulator (blocks of ``block`` samples) against the
+    exact FFT prediction of ``model``, after a 1 s settle."""
+    from ipmc_sensor_ros.simulation.sensor import predict_current
+
+    i = np.concatenate([sim.run(stim, t[k:k + block])[1] for k in range(0, t.size, block)])
     exact = predict_current(model, t, stim.deflection(t))
     k = t > 1.0
-    assert np.sqrt(np.mean((i[k] - exact[k]) ** 2)) / np.std(exact[k]) < 0.01
+    return float(np.sqrt(np.mean((i[k] - exact[k]) ** 2)) / np.std(exact[k]))
 
 
 def test_field_fidelity_simulator_matches_exact_prediction_and_refuses_other_effects():
-    from ipmc_sensor_ros.simulation.sensor import FieldSensorSimulator, predict_current
+    from ipmc_sensor_ros.simulation.sensor import FieldSensorSimulator
 
     fs = 1000.0
     model = SensorModel.named("h2", PAPER_SAMPLES["short"],
                               extra_effects="hydration_drift(diffusivity_rate_per_s=-0.003)")
     t = np.arange(int(10 * fs)) / fs
     stim = CrankSlider(4.0, 2e-3, 15e-3)
-    sim = FieldSensorSimulator(model, fs, noise_rms_a=0.0)
-    i = np.concatenate([sim.run(stim, t[k:k + 250])[1] for k in range(0, t.size, 250)])
-    exact = predict_current(model, t, stim.deflection(t))
-    k = t > 1.0
     # field mesh (0.2 deg) + Crank-Nicolson + the effect's quasi-static approximation: < 1 %
-    assert np.sqrt(np.mean((i[k] - exact[k]) ** 2)) / np.std(exact[k]) < 0.01
+    assert _streaming_error(FieldSensorSimulator(model, fs, noise_rms_a=0.0), model, stim, t, 250) < 0.01
     with pytest.raises(ParameterError, match="time_delay"):
         FieldSensorSimulator(SensorModel.named("h2", PAPER_SAMPLES["short"],
                                                extra_effects="time_delay"), fs)
