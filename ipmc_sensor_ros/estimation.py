@@ -98,22 +98,31 @@ class DeflectionEstimator:
         self._next_update = self.update_s
         self._history = np.zeros(max(1, int(round(history_s * self.inverse.sample_rate_hz))))
         self._history_n = 0
+        self._history_end = 0
         self._bias_m = 0.0          # m = <T(w) - w>, see the module docstring
         self._bias_zi = np.zeros(1)
 
     def _remember(self, x: np.ndarray) -> None:
+        """Append ``x`` to the ring buffer of recent input (``_history_end`` is the
+        index after the newest sample)."""
         n = self._history.size
-        if x.size >= n:
+        m = x.size
+        if m >= n:
             self._history[:] = x[-n:]
+            self._history_end = 0
         else:
-            self._history = np.roll(self._history, -x.size)
-            self._history[-x.size:] = x
-        self._history_n = min(n, self._history_n + x.size)
+            end = self._history_end
+            first = min(m, n - end)
+            self._history[end:end + first] = x[:first]
+            self._history[:m - first] = x[first:]
+            self._history_end = (end + m) % n
+        self._history_n = min(n, self._history_n + m)
 
     @property
     def recent_input(self) -> np.ndarray:
         """The last inputs fed to the filter (effect-corrected current), oldest first."""
-        return self._history[self._history.size - self._history_n:]
+        ordered = np.roll(self._history, -self._history_end)
+        return ordered[ordered.size - self._history_n:]
 
     def _reduce(self, model: SensorModel) -> ReducedModel:
         self._diffusive = reduce_response(model.diffusive_transfer, self.reduction_order, self.band_hz,
@@ -198,8 +207,11 @@ class DeflectionEstimator:
 
     def continue_from(self, old: "DeflectionEstimator") -> None:
         """Take over ``old``'s stream: its recent input, output level and time origin."""
-        self._history = old._history.copy() if old._history.size == self._history.size else self._history
-        self._history_n = old._history_n if old._history.size == self._history.size else 0
+        if old._history.size == self._history.size:
+            self._history = old._history.copy()
+            self._history_n, self._history_end = old._history_n, old._history_end
+        else:
+            self._history_n = self._history_end = 0
         self.inverse.continue_from(old.inverse, self.recent_input)
         self._t0 = old._t0
 

@@ -60,3 +60,21 @@ def test_rebuilt_continues_without_jump():
     # one sample of a 2 Hz, 2 mm motion moves the tip by at most 25 um; the replayed
     # history keeps the switch far below that (measured: 2 um)
     assert abs(after[0] - before[-1]) < 10e-6
+
+
+def test_recent_input_is_the_last_inputs_in_order_for_any_block_sizes():
+    """The replay history (a ring buffer) holds exactly the last history_s of input,
+    oldest first, whatever the block sizes (1 sample up to more than the buffer)."""
+    est = DeflectionEstimator(SensorModel(PAPER_SAMPLES["slim"]), 1000.0, history_s=0.05)
+    size = est._history.size
+    rng = np.random.default_rng(3)
+    x = rng.normal(0, 1e-6, 2000)
+    k = 0
+    for n in rng.choice([1, 3, size - 1, size, size + 7], size=60):
+        n = int(min(n, x.size - k))
+        if n == 0:
+            break
+        est.process(np.arange(k, k + n) / 1000.0, x[k:k + n])
+        k += n
+        expected = x[max(0, k - size):k]
+        assert np.array_equal(est.recent_input, expected)

@@ -120,6 +120,25 @@ def test_blocks_and_single_samples_identical_and_state_restore(reduced_slim):
     assert np.array_equal(c.process(x), ya)
 
 
+@pytest.mark.parametrize("offset_corner_hz", [None, 0.05])
+def test_small_block_path_equals_sosfilt_bit_for_bit(reduced_slim, offset_corner_hz):
+    """Blocks up to SMALL_BLOCK_SAMPLES run a plain-Python recursion (the one-sample
+    fast path of the node); it must give exactly sosfilt's numbers, whatever the mix
+    of block sizes around the threshold."""
+    from ipmc_sensor_ros.estimator import SMALL_BLOCK_SAMPLES
+    rng = np.random.default_rng(7)
+    x = rng.normal(0, 1e-6, 3000)
+    whole = InverseEstimator(reduced_slim, FS, offset_corner_hz=offset_corner_hz)
+    y_whole = whole.process(x)
+    mixed = InverseEstimator(reduced_slim, FS, offset_corner_hz=offset_corner_hz)
+    sizes = rng.choice([1, 2, SMALL_BLOCK_SAMPLES, SMALL_BLOCK_SAMPLES + 1, 100], size=200)
+    bounds = np.minimum(np.concatenate([[0], np.cumsum(sizes)]), x.size)
+    y_mixed = np.concatenate([mixed.process(x[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
+                             + [mixed.process(x[bounds[-1]:])])
+    assert np.array_equal(y_whole, y_mixed)
+    assert np.array_equal(whole.get_state()["zi"], mixed.get_state()["zi"])
+
+
 def test_multichannel_equals_independent_channels(reduced_slim):
     rng = np.random.default_rng(2)
     x = rng.normal(0, 1e-6, (300, 3))

@@ -27,7 +27,7 @@ from ipmc_sensor_ros.estimator import InverseEstimator
 from ipmc_sensor_ros.nodes import params as P
 from ipmc_sensor_ros.nodes.estimator_node import ESTIMATOR_SPECS, EstimatorNode
 from ipmc_sensor_ros.nodes.messages import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, LayoutError,
-                                            claimed_samples, pack_block, unpack_block)
+                                            claimed_samples, pack_block, unpack_block, BlockPacker)
 from ipmc_sensor_ros.nodes.simulator_node import SIMULATOR_SPECS, SimulatorNode
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import Geometry
@@ -78,6 +78,22 @@ def test_pack_unpack_round_trip_is_exact(n):
     block = unpack_block(msg, CURRENT_COLUMNS)
     assert np.array_equal(block.times_s, t) and np.array_equal(block.values, v)
     assert claimed_samples(msg) == n
+
+
+def test_block_packer_reuses_one_message_and_follows_length_changes():
+    """The node's reused output message: each pack is exact, including after the
+    block length changes (1 -> 5 -> 1), and it is the same object every time."""
+    packer = BlockPacker(DEFLECTION_COLUMNS)
+    first = None
+    for n in (1, 1, 5, 1):
+        t = 2.0 + np.arange(n) * 1e-3
+        w = np.linspace(-1e-3, 2e-3, n)
+        msg = packer.pack(t, w)
+        first = first or msg
+        assert msg is first
+        block = unpack_block(msg, DEFLECTION_COLUMNS)
+        assert np.array_equal(block.times_s, t) and np.array_equal(block.values, w)
+        assert claimed_samples(msg) == n
 
 
 def test_unpack_honours_data_offset_and_accepts_one_dimensional():

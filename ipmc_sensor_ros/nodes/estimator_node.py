@@ -37,8 +37,8 @@ from ..estimator import EstimatorError, InverseEstimator, validate_block
 from ..physics.parameters import ParameterError
 from ..reduction import ReductionError
 from . import params as P
-from .messages import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, LayoutError, claimed_samples,
-                       pack_block, unpack_block)
+from .messages import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, BlockPacker, LayoutError,
+                       claimed_samples, unpack_block)
 from .runner import run
 
 __all__ = ["EstimatorNode", "ESTIMATOR_SPECS", "COUNTER_NAMES", "PUBLISH_POINTS", "main"]
@@ -134,6 +134,8 @@ class EstimatorNode(Node):
         qos = P.make_qos(self._values)
         self._sub = self.create_subscription(Float64MultiArray, "current", self._on_current, qos)
         self._pub_block = self.create_publisher(Float64MultiArray, "deflection/block", qos)
+        self._packer = BlockPacker(DEFLECTION_COLUMNS)
+        self._topic = self._sub.topic_name
         self._pub_point = self.create_publisher(PointStamped, "deflection", qos)
         self._pub_counters = self.create_publisher(String, "estimator/counters", P.COUNTERS_QOS)
         # Steady clock: counters and the waiting message must not stall under
@@ -197,6 +199,13 @@ class EstimatorNode(Node):
                 t0 = self.get_clock().now().nanoseconds * 1e-9
                 return t0 + np.arange(n) / fs
             return self._last_time_s + np.arange(1, n + 1) / fs
+        if n == 1:  # one-sample messages: the same checks without numpy's per-call cost
+            t = float(times[0])
+            if not math.isfinite(t):
+                raise EstimatorError("sample times contain non-finite values")
+            if not 0.0 <= t <= MAX_STAMP_S:
+                raise EstimatorError(f"sample times must lie in [0, {MAX_STAMP_S:.0f}] s")
+            return times
         if not np.all(np.isfinite(times)):
             raise EstimatorError("sample times contain non-finite values")
         if times.min() < 0.0 or times.max() > MAX_STAMP_S:
@@ -235,7 +244,7 @@ class EstimatorNode(Node):
                 self.get_logger().error(f"dropped a block of {current.size} sample(s): {exc!r}")
 
     def _process(self, times: np.ndarray, current: np.ndarray) -> None:
-        topic = self._sub.topic_name
+        topic = self._topic
         if self._last_time_s is not None:
             step = float(times[0] - self._last_time_s)
             if step <= 0.0:
@@ -247,13 +256,13 @@ class EstimatorNode(Node):
             elif step * self._estimator.sample_rate_hz > 1.5:
                 self._counters["gaps_bridged"] += 1
         t_out, y = self._estimator.process(times, current)
-        if not np.all(np.isfinite(y)):
+        if not (math.isfinite(y[0]) if y.size == 1 else np.all(np.isfinite(y))):
             self._estimator.reset()
             self._counters["samples_dropped"] += current.size
             self._warn(f"non-finite estimate on {topic}: block dropped, filter reset")
             return
         self._last_time_s = float(times[-1])
-        self._pub_block.publish(pack_block(t_out, y, DEFLECTION_COLUMNS))
+        self._pub_block.publish(self._packer.pack(t_out, y))
         self._publish_points(t_out, y)
         self._counters["samples_out"] += current.size
 

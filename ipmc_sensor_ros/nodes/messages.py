@@ -39,6 +39,7 @@ __all__ = [
     "CURRENT_COLUMNS",
     "DEFLECTION_COLUMNS",
     "pack_block",
+    "BlockPacker",
     "unpack_block",
     "claimed_samples",
     "stamp_from_seconds",
@@ -63,20 +64,43 @@ def _to_array_d(values: np.ndarray) -> array.array:
 
 def pack_block(times_s, values, columns: str = CURRENT_COLUMNS) -> Float64MultiArray:
     """Build the 2-D block message from ``times_s`` (s) and ``values`` (unit per ``columns``)."""
-    t = np.asarray(times_s, dtype=float).ravel()
-    v = np.asarray(values, dtype=float).ravel()
-    if t.shape != v.shape:
-        raise LayoutError(f"times ({t.size}) and values ({v.size}) differ in length")
-    n = int(t.size)
-    msg = Float64MultiArray()
-    msg.layout.dim = [MultiArrayDimension(label=SAMPLE_LABEL, size=n, stride=2 * n),
-                      MultiArrayDimension(label=columns, size=2, stride=2)]
-    msg.layout.data_offset = 0
-    inter = np.empty(2 * n)
-    inter[0::2] = t
-    inter[1::2] = v
-    msg.data = _to_array_d(inter)
-    return msg
+    return BlockPacker(columns).pack(times_s, values)
+
+
+class BlockPacker:
+    """Packs blocks of one column layout into a single, reused message.
+
+    A publisher's hot path: rclpy serialises a message inside ``publish()``, so
+    the same message object can be refilled for the next block; its layout is
+    rebuilt only when the block length changes.  Do not keep a packed message
+    beyond the next :meth:`pack` call (use :func:`pack_block` for that).
+    """
+
+    def __init__(self, columns: str = CURRENT_COLUMNS):
+        self.columns = columns
+        self._msg = Float64MultiArray()
+        self._n = -1
+
+    def pack(self, times_s, values) -> Float64MultiArray:
+        t = np.asarray(times_s, dtype=float).ravel()
+        v = np.asarray(values, dtype=float).ravel()
+        if t.shape != v.shape:
+            raise LayoutError(f"times ({t.size}) and values ({v.size}) differ in length")
+        n = int(t.size)
+        msg = self._msg
+        if n != self._n:
+            msg.layout.dim = [MultiArrayDimension(label=SAMPLE_LABEL, size=n, stride=2 * n),
+                              MultiArrayDimension(label=self.columns, size=2, stride=2)]
+            msg.layout.data_offset = 0
+            self._n = n
+        if n == 1:
+            msg.data = array.array("d", (float(t[0]), float(v[0])))
+        else:
+            inter = np.empty(2 * n)
+            inter[0::2] = t
+            inter[1::2] = v
+            msg.data = _to_array_d(inter)
+        return msg
 
 
 def claimed_samples(msg: Float64MultiArray) -> int:

@@ -41,7 +41,7 @@ from ..reduction import ReductionError
 from ..simulation.sensor import FieldSensorSimulator, SensorSimulator
 from ..simulation.stimuli import STIMULUS_KINDS, Sampled, Stimulus, make_stimulus
 from . import params as P
-from .messages import CURRENT_COLUMNS, DEFLECTION_COLUMNS, pack_block
+from .messages import CURRENT_COLUMNS, DEFLECTION_COLUMNS, BlockPacker
 from .runner import run
 
 __all__ = ["SimulatorNode", "SIMULATOR_SPECS", "STIMULI", "load_stimulus_csv",
@@ -203,6 +203,8 @@ class SimulatorNode(Node):
         qos = P.make_qos(v)
         self._pub_current = self.create_publisher(Float64MultiArray, "current", qos)
         self._pub_truth = self.create_publisher(Float64MultiArray, "deflection_truth", qos)
+        self._pack_current = BlockPacker(CURRENT_COLUMNS)
+        self._pack_truth = BlockPacker(DEFLECTION_COLUMNS)
         self._pub_counters = self.create_publisher(String, "simulator/counters", P.COUNTERS_QOS)
         if self._rtf > 0.0:
             period = max(self._block / self._fs / self._rtf, MIN_TICK_S)
@@ -276,8 +278,8 @@ class SimulatorNode(Node):
         k = np.arange(k0, k1)
         times = self._t_start_ns * 1e-9 + k / self._fs
         deflection, current = self._sim.run(self._stimulus, self._stim_t0 + k / self._fs)
-        self._pub_current.publish(pack_block(times, current, CURRENT_COLUMNS))
-        self._pub_truth.publish(pack_block(times, deflection, DEFLECTION_COLUMNS))
+        self._pub_current.publish(self._pack_current.pack(times, current))
+        self._pub_truth.publish(self._pack_truth.pack(times, deflection))
         self._k = k1
         self._blocks += 1
         if self._total is not None and self._k >= self._total:
