@@ -185,7 +185,16 @@ def _ladder(n: int) -> list[float]:
     if n == 1:
         return [500.0, 1000.0, 2000.0, 3000.0, 4000.0, 5000.0, 6000.0, 7000.0, 8000.0, 10000.0,
                 12000.0, 16000.0]
-    return [20.0, 50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0]
+    return [20.0, 50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0, 3000.0, 4000.0]
+
+
+def _ok(r: dict) -> bool:
+    """A trial passes when nothing was lost and the driver achieved the requested rate."""
+    print(f"  node trial {r['kind']:11s} {r['n']:5d}-sample msgs at {r['rate_msg_s']:8.0f} msg/s: "
+          f"sent {r['sent']}, received {r['received']}, achieved {r.get('achieved_msg_s', 0):.0f} "
+          f"msg/s -> {'pass' if r['lossless'] and r.get('driver_kept_up') else 'FAIL'}",
+          file=sys.stderr, flush=True)
+    return bool(r["lossless"] and r.get("driver_kept_up"))
 
 
 def bench_nodes(smoke: bool = False) -> list[dict]:
@@ -196,16 +205,20 @@ def bench_nodes(smoke: bool = False) -> list[dict]:
             if smoke:
                 best = _run_once(kind, _ladder(n)[0], n, 1.0)
             else:
-                passed = []
+                passed, failed = [], None
                 for rate in _ladder(n):
-                    r = _run_once(kind, rate, n, 10.0)
-                    if not (r["lossless"] and r.get("driver_kept_up")):
+                    if not _ok(_run_once(kind, rate, n, 10.0)):
+                        failed = rate
                         break
                     passed.append(rate)
+                if passed and failed is not None:   # one bisection step between the rungs
+                    mid = round((passed[-1] + failed) / 2.0)
+                    if _ok(_run_once(kind, mid, n, 10.0)):
+                        passed.append(mid)
                 best = None
                 for rate in reversed(passed[-3:]):   # confirm for 60 s, stepping down if needed
                     r = _run_once(kind, rate, n, 60.0)
-                    if r["lossless"] and r["driver_kept_up"]:
+                    if _ok(r):
                         best = r
                         break
             results[kind] = best

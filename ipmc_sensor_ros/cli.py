@@ -174,7 +174,8 @@ def _cmd_simulate(args) -> int:
     recs = crank_slider_campaign(effects, samples=samples, frequencies_hz=freqs,
                                  duration_s=args.duration, sample_rate_hz=args.sample_rate,
                                  crank_radius_m=args.crank_radius, material=material,
-                                 noise_rel=args.noise_rel, seed=args.seed, fidelity=args.fidelity)
+                                 noise_rel=args.noise_rel, seed=args.seed, fidelity=args.fidelity,
+                                 beam_model=args.beam_model)
     written = []
     points: dict = {}
     for r in recs:
@@ -598,6 +599,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fidelity", choices=("exact", "field"), default="exact",
                    help="exact: FFT prediction of the closed form with its effects; field: the "
                         "independent field-equation solution (base model and hydration_drift)")
+    p.add_argument("--beam-model", choices=("linear", "elastica"), default="linear",
+                   help="with --fidelity field: stress profile from the small-deflection beam "
+                        "(the paper, eq. 21) or the large-deflection elastica")
     p.add_argument("--json")
     p.set_defaults(func=_cmd_simulate)
 

@@ -162,7 +162,7 @@ class DeflectionEstimator:
             return t, i
         if self._t0 is None:
             self._t0 = float(t[0])
-        elapsed = t - self._t0
+        elapsed = t - self._t0 if (self._current_inv or self._material_at is not None) else None
         for eff, values in reversed(self._current_inv):
             i = eff.inverse_output_transform(elapsed, i, self.model, values)
         if self._material_at is None:

@@ -148,6 +148,8 @@ def validate_block(values, max_samples: int = MAX_BLOCK_SAMPLES,
         raise EstimatorError("current block is empty")
     if x.size > max_samples:
         raise EstimatorError(f"current block has {x.size} samples, more than the limit {max_samples}")
+    if float(np.max(np.abs(x))) <= max_abs_current_a:   # one pass; NaN makes it False
+        return x
     finite = np.isfinite(x)
     if not finite.all():
         raise EstimatorError(f"current block has {int((~finite).sum())} non-finite sample(s) "

@@ -94,3 +94,35 @@ def test_term_dropped_from_eq9_is_negligible_at_physical_amplitudes():
     assert errors[1] / errors[0] == pytest.approx(10, rel=0.05)     # linear in the amplitude
     assert errors[2] / errors[1] == pytest.approx(10, rel=0.05)
     assert rows[-1]["h2_over_h1"] > 100 * rows[-1]["h3_over_h1"]       # a second harmonic
+
+
+@pytest.mark.parametrize("effects", [(), ("surface_resistance",)])
+def test_elastica_beam_small_signal_response_is_the_papers(effects):
+    """With the large-deflection beam, the linearisation at w = 0 is still H1/H2 (the
+    elastica is the paper's beam at first order): same 0.1 dB / 0.5 deg as the linear beam."""
+    from ipmc_sensor_ros.physics.beam import ElasticaBeam
+
+    model = SensorModel(PAPER_SAMPLES["short"], effects=effects)
+    f = np.logspace(-1, 2, 7)
+    ratio = FieldSolver(model, beam=ElasticaBeam()).frequency_response(f) / model.frequency_response(f)
+    assert np.max(np.abs(20 * np.log10(np.abs(ratio)))) < 0.1
+    assert np.max(np.abs(np.degrees(np.angle(ratio)))) < 0.5
+
+
+def test_large_deflection_error_of_the_linear_model_and_its_harmonics():
+    """Past the paper (its section 2 ignores 'the nonlinearity of stress profile'): the
+    elastica's current differs from eq. 21's by an odd, cubic distortion.  The error
+    grows as the amplitude squared, the third harmonic dominates the second, and the
+    linear model's error reaches 1 % at a deflection of about a fifth of the length."""
+    from ipmc_sensor_ros.physics.field import amplitude_at_error, large_deflection_study
+
+    model = SensorModel(PAPER_SAMPLES["short"])
+    L = model.geometry.length_m
+    rows = large_deflection_study(model, [0.05 * L, 0.1 * L, 0.2 * L, 0.4 * L])
+    errors = np.array([r["linear_model_error"] for r in rows])
+    # cubic distortion: error ~ a^2 (x4 per doubling; 20 % allowance for higher orders)
+    assert errors[1] / errors[0] == pytest.approx(4.0, rel=0.2)
+    assert errors[2] / errors[1] == pytest.approx(4.0, rel=0.2)
+    assert all(r["h3_over_h1"] > 10 * r["h2_over_h1"] for r in rows)
+    limit = amplitude_at_error(rows, 0.01) / L
+    assert 0.1 < limit < 0.4

@@ -206,16 +206,21 @@ class EstimatorNode(Node):
             if not 0.0 <= t <= MAX_STAMP_S:
                 raise EstimatorError(f"sample times must lie in [0, {MAX_STAMP_S:.0f}] s")
             return times
-        if not np.all(np.isfinite(times)):
+        # strictly increasing with finite ends implies all finite and within the ends
+        # (NaN fails 'dt > 0'), so the range is checked on the first and last time only
+        dt = np.diff(times)
+        if not (dt > 0.0).all():
+            if not np.all(np.isfinite(times)):
+                raise EstimatorError("sample times contain non-finite values")
+            k = int(np.argmax(~(dt > 0.0)))
+            raise EstimatorError(f"sample times are not strictly increasing (index {k + 1}: "
+                                 f"{times[k + 1]!r} s after {times[k]!r} s)")
+        first, last = float(times[0]), float(times[-1])
+        if not (math.isfinite(first) and math.isfinite(last)):
             raise EstimatorError("sample times contain non-finite values")
-        if times.min() < 0.0 or times.max() > MAX_STAMP_S:
+        if first < 0.0 or last > MAX_STAMP_S:
             raise EstimatorError(f"sample times must lie in [0, {MAX_STAMP_S:.0f}] s")
         if n >= 2:
-            dt = np.diff(times)
-            if np.any(dt <= 0.0):
-                k = int(np.argmax(dt <= 0.0))
-                raise EstimatorError(f"sample times are not strictly increasing (index {k + 1}: "
-                                     f"{times[k + 1]!r} s after {times[k]!r} s)")
             period = float(np.median(dt))
             if abs(period * fs - 1.0) > PERIOD_TOLERANCE:
                 raise EstimatorError(f"median sample period {period:.6g} s does not match "

@@ -56,6 +56,10 @@ _OWN_SPECS = (
            "closed form, every effect) or 'field' (independent solution of the field equations; "
            "base model and hydration_drift only; ~50x real time)", read_only=True,
            choices=("reduced", "field")),
+    P.Spec("beam_model", "linear", str, "fidelity 'field' only: stress profile from the tip "
+           "deflection, 'linear' (the paper's small-deflection beam, eq. 21) or 'elastica' "
+           "(large deflection: the physical source of the 'nonlinearity' effect)", read_only=True,
+           choices=("linear", "elastica")),
     P.Spec("stimulus", "crank_slider", str, "tip-deflection stimulus: crank_slider, sweep, "
            "free_vibration, step or file", choices=STIMULI),
     P.Spec("motor_frequency_hz", 1.0, float, "crank_slider: motor (drive) frequency, Hz",
@@ -184,11 +188,17 @@ class SimulatorNode(Node):
         try:
             model = P.build_sensor_model(v)
             self._stimulus, self._stim_t0 = build_stimulus(v)
-            sim_cls = FieldSensorSimulator if v["fidelity"] == "field" else SensorSimulator
-            self._sim = sim_cls(model, v["sample_rate_hz"],
-                                        current_gain=v["current_gain"],
-                                        current_offset_a=v["current_offset_a"],
-                                        noise_rms_a=v["noise_rms_a"], seed=v["seed"])
+            chain = dict(current_gain=v["current_gain"], current_offset_a=v["current_offset_a"],
+                         noise_rms_a=v["noise_rms_a"], seed=v["seed"])
+            if v["fidelity"] == "field":
+                self._sim = FieldSensorSimulator(model, v["sample_rate_hz"],
+                                                 beam_model=v["beam_model"], **chain)
+            elif v["beam_model"] != "linear":
+                raise ParameterError(f"parameter 'beam_model' = {v['beam_model']!r} needs "
+                                     "fidelity 'field' (the reduced model assumes the "
+                                     "small-deflection beam)")
+            else:
+                self._sim = SensorSimulator(model, v["sample_rate_hz"], **chain)
         except (ParameterError, ReductionError) as exc:
             raise P.ConfigurationError(str(exc)) from None
         self._fs = float(v["sample_rate_hz"])

@@ -50,7 +50,7 @@ import scipy.sparse.linalg as spla
 from .model import SensorModel
 
 __all__ = ["FieldSolver", "FieldStream", "NonlinearFieldSolver", "convergence_table",
-           "nonlinearity_study"]
+           "nonlinearity_study", "large_deflection_study", "amplitude_at_error"]
 
 
 def _graded_nodes(h: float, first: float, growth: float) -> np.ndarray:
@@ -91,15 +91,28 @@ class FieldSolver:
 
     ``surface_cell``: first thickness cell at x = h in units of the boundary-layer
     thickness sqrt(d/K); ``growth``: cell growth ratio inland; ``n_length``:
-    cells along the length (RC line).
+    cells along the length (RC line); ``beam``: the mechanics that turn the tip
+    deflection into the surface stress (:mod:`ipmc_sensor_ros.physics.beam`; default
+    the paper's small-deflection beam, eq. 21).
+
+    With a beam of P stress shapes, rho(h, z, t) = c0 L sum_k q_k(t) phi_k(z/L)
+    (c0 = 3 Y h / (alpha0 L^3); the paper: P = 1, phi_1 = 1 - z/L, q_1 = w).  Eq. 12
+    is linear, so each shape has its own copy of the thickness problem (the same
+    operator) driven by q_k, and the RC line sums their charges; the system is
+    x' = A x + B q with P inputs.
     """
 
     model: SensorModel
     surface_cell: float = 0.05
     growth: float = 1.08
     n_length: int = 40
+    beam: object = None
 
     def __post_init__(self):
+        from .beam import LinearBeam
+
+        if self.beam is None:
+            self.beam = LinearBeam()
         m, g = self.model.material, self.model.geometry
         self.h = g.half_thickness_m
         self.L = g.length_m
@@ -109,24 +122,28 @@ class FieldSolver:
         self.x = _graded_nodes(self.h, self.surface_cell * debye, self.growth)
         nx = self.x.size
         d2x = _second_derivative(self.x)
-        # thickness states: interior u_1..u_{N-1}; u_0 = 0, u_N = w (input)
+        # thickness states (one copy per shape): interior u_1..u_{N-1}; u_0 = 0, u_N = q_k
         a_u = d * d2x[:, 1:-1] - K * sp.identity(nx - 2, format="csr")
         b_u = d * d2x[:, -1].toarray().ravel()
         wx = _trapezoid_weights(self.x) * self.x / self.h     # m = sum wx u
         p_u, p_w = wx[1:-1], wx[-1]
         a0 = m.charge_stress_coupling_j_per_c
         self.c0 = 3 * m.youngs_modulus_pa * self.h / (a0 * self.L ** 3)   # c(z) = c0 (L - z)
+        n_shapes = self.beam.n_shapes
+        eye_p = sp.identity(n_shapes, format="csr")
+        a_uu = sp.kron(eye_p, a_u, format="csr")
+        b_uu = sp.kron(eye_p, sp.csr_matrix(b_u[:, None]), format="csr").toarray()   # (P n_u, P)
         self.resistive = self.model.has_effect("surface_resistance") and \
             m.surface_resistance_ohm > 0
         kap = m.permittivity_f_per_m
         if not self.resistive:
-            z = np.linspace(0, self.L, 2)
-            self.A = a_u.tocsc()
-            self.B = b_u
-            # Q = W int c(z) m dz = W c0 L^2/2 m
-            gain = self.W * self.c0 * self.L ** 2 / 2
-            self.C = gain * p_u
-            self.Cw = gain * p_w            # Q also has a direct term in w
+            # Q = W int rho-shape m dz = W c0 L sum_k (int phi_k dz) m_k
+            zq = np.linspace(0.0, self.L, 401)
+            gains = self.W * self.c0 * self.L * (_trapezoid_weights(zq) @ self.beam.shapes(zq / self.L))
+            self.A = a_uu.tocsc()
+            self.B = b_uu
+            self.C = np.concatenate([gk * p_u for gk in gains])
+            self.Cw = gains * p_w           # Q also has a direct term in q
             return
         r0 = m.surface_resistance_ohm
         nz = self.n_length
@@ -138,21 +155,21 @@ class FieldSolver:
         lap[nz - 1, nz - 2] = 2.0
         lap = (lap / dz ** 2).tocsr()
         tau = r0 * kap / self.h                 # r0 c per unit length^2 (time constant factor)
-        g = self.c0 * (self.L - z[1:]) * self.h / kap     # phi = psi + g m
-        # psi' = (1/tau) lap (psi + g m),  m = p_u u + p_w w
-        lap_g = lap @ g
+        # phi = psi + sum_k g_k m_k, g_k(z) = c0 L phi_k(z/L) h / kappa
+        g_all = self.c0 * self.L * self.beam.shapes(z / self.L) * self.h / kap   # (nz+1, P)
+        # psi' = (1/tau) lap (psi + sum_k g_k m_k),  m_k = p_u u_k + p_w q_k
+        lap_g = lap @ g_all[1:]                                                  # (nz, P)
         a_pp = lap / tau
-        a_pu = sp.csr_matrix(np.outer(lap_g / tau, p_u))
+        a_pu = sp.hstack([sp.csr_matrix(np.outer(lap_g[:, k] / tau, p_u)) for k in range(n_shapes)])
         b_p = lap_g / tau * p_w
-        self.A = sp.bmat([[a_u, None], [a_pu, a_pp]], format="csc")
-        self.B = np.concatenate([b_u, b_p])
-        # Q = W int q dz, q = c m - (kappa/h) phi = -(kappa/h) psi: trapezoid over z (psi_0 at
-        # z = 0 equals -g(0) m because phi_0 = 0)
+        self.A = sp.bmat([[a_uu, None], [a_pu, a_pp]], format="csc")
+        self.B = np.vstack([b_uu, b_p])
+        # Q = W int q dz, q = rho-shape m - (kappa/h) phi = -(kappa/h) psi: trapezoid over z
+        # (psi_0 at z = 0 equals -sum_k g_k(0) m_k because phi_0 = 0)
         wz = _trapezoid_weights(z)
-        g0 = self.c0 * self.L * self.h / kap
         c_psi = -self.W * kap / self.h * wz[1:]
-        c_m = -self.W * kap / self.h * wz[0] * (-g0)
-        self.C = np.concatenate([c_m * p_u, c_psi])
+        c_m = self.W * kap / self.h * wz[0] * g_all[0]                           # (P,)
+        self.C = np.concatenate([np.concatenate([ck * p_u for ck in c_m]), c_psi])
         self.Cw = c_m * p_w
 
     @property
@@ -160,19 +177,23 @@ class FieldSolver:
         return self.A.shape[0]
 
     def frequency_response(self, frequency_hz) -> np.ndarray:
-        """i/w (A/m) at ``frequency_hz`` from the discretised equations."""
+        """i/w (A/m) at ``frequency_hz`` from the discretised equations (for a nonlinear
+        beam: its small-signal linearisation at w = 0)."""
         f = np.atleast_1d(np.asarray(frequency_hz, float))
         out = np.empty(f.size, dtype=complex)
         eye = sp.identity(self.n_states, format="csc")
+        direction = self.beam.small_signal_direction()
+        b = (self.B @ direction).astype(complex)
+        cw = float(self.Cw @ direction)
         for k, fk in enumerate(f):
             s = 2j * np.pi * fk
-            x = spla.spsolve((s * eye - self.A).tocsc(), self.B.astype(complex))
-            out[k] = s * (self.C @ x + self.Cw)
+            x = spla.spsolve((s * eye - self.A).tocsc(), b)
+            out[k] = s * (self.C @ x + cw)
         return out
 
     def simulate(self, time_s, deflection_m, diffusivity_at=None, update_s: float = 0.5) -> np.ndarray:
         """Sensing current (A) for a deflection record (uniform time steps, starting from
-        rest), by Crank-Nicolson; i = C (A x + B w) + C_w dw/dt.
+        rest), by Crank-Nicolson; i = C (A x + B q) + C_w dq/dt with q = beam(w).
 
         ``diffusivity_at(elapsed_s) -> d`` (m^2/s) makes the diffusivity change during the
         run (hydration, paper section 5.4): the system is re-assembled every ``update_s``
@@ -183,36 +204,15 @@ class FieldSolver:
         t = np.asarray(time_s, float)
         w = np.asarray(deflection_m, float)
         dt = float(t[1] - t[0])
-        eye = sp.identity(self.n_states, format="csc")
-        w_rate = np.gradient(w, dt)        # for the (tiny) direct term Cw of the surface node
-        x = np.zeros(self.n_states)
-        out = np.empty(t.size)
-        system = self
-        step_update = max(1, int(round(update_s / dt))) if diffusivity_at else t.size + 1
-
-        def factor(sol):
-            return (spla.splu((eye - 0.5 * dt * sol.A).tocsc()), (eye + 0.5 * dt * sol.A).tocsr(),
-                    sol.A.tocsr())
-
-        if diffusivity_at is not None:
-            system = self._with_diffusivity(diffusivity_at(0.0))
-        lhs, rhs_m, a_csr = factor(system)
-        out[0] = system.C @ (a_csr @ x + system.B * w[0]) + system.Cw * w_rate[0]
-        for k in range(1, t.size):
-            if k % step_update == 0:
-                system = self._with_diffusivity(diffusivity_at(t[k] - t[0]))
-                lhs, rhs_m, a_csr = factor(system)
-            x = lhs.solve(rhs_m @ x + 0.5 * dt * system.B * (w[k - 1] + w[k]))
-            out[k] = system.C @ (a_csr @ x + system.B * w[k]) + system.Cw * w_rate[k]
-        return out
-
+        stream = self.stream(1.0 / dt, diffusivity_at, update_s)
+        return stream.step(w, np.gradient(w, dt))
     def stream(self, sample_rate_hz: float, diffusivity_at=None, update_s: float = 0.5) -> "FieldStream":
         """A streaming (block by block) Crank-Nicolson integrator of this system."""
         return FieldStream(self, sample_rate_hz, diffusivity_at, update_s)
 
     def _with_diffusivity(self, d: float) -> "FieldSolver":
         model = self.model.with_material(self.model.material.replace(diffusivity_m2_per_s=float(d)))
-        return FieldSolver(model, self.surface_cell, self.growth, self.n_length)
+        return FieldSolver(model, self.surface_cell, self.growth, self.n_length, self.beam)
 
 
 def convergence_table(model: SensorModel, band_hz=(0.1, 100.0), n_points: int = 25,
@@ -321,34 +321,76 @@ class NonlinearFieldSolver:
         return np.gradient(charge, dt)
 
 
-def nonlinearity_study(model: SensorModel, amplitudes_m, frequency_hz: float = 5.0,
-                       sample_rate_hz: float = 2000.0, periods: int = 6) -> list[dict]:
-    """Relative error of the linear model and harmonic content of the current versus the
-    tip-deflection amplitude (sinusoidal drive), from the nonlinear field solution."""
+def _distortion_rows(simulate_exact, i_unit, t, shape, amplitudes_m, frequency_hz) -> list[dict]:
+    """Relative RMS error of the linear prediction (amplitude x ``i_unit``) against
+    ``simulate_exact(w)`` and the harmonics of the latter, over the last two periods."""
     from ..workbench.freqresp import harmonic_fit
 
-    t = np.arange(int(round(periods / frequency_hz * sample_rate_hz))) / sample_rate_hz
-    lin = NonlinearFieldSolver(model, linear=True)
-    nonlin = NonlinearFieldSolver(model)
-    shape = np.sin(2 * np.pi * frequency_hz * t)
-    i_unit = lin.simulate(t, shape)             # linear: scales with amplitude
     keep = t >= t[-1] - 2 / frequency_hz
     rows = []
     for a in amplitudes_m:
-        i_nl = nonlin.simulate(t, a * shape)
+        i_true = simulate_exact(a * shape)
         i_lin = a * i_unit
-        err = float(np.sqrt(np.mean((i_nl[keep] - i_lin[keep]) ** 2)) / np.sqrt(np.mean(i_lin[keep] ** 2)))
-        ph, _, _ = harmonic_fit(t[keep] - t[keep][0], i_nl[keep], frequency_hz, 3)
+        err = float(np.sqrt(np.mean((i_true[keep] - i_lin[keep]) ** 2)) / np.sqrt(np.mean(i_lin[keep] ** 2)))
+        ph, _, _ = harmonic_fit(t[keep] - t[keep][0], i_true[keep], frequency_hz, 3)
         rows.append({"amplitude_m": float(a), "linear_model_error": err,
                      "h2_over_h1": float(abs(ph[1]) / abs(ph[0])),
                      "h3_over_h1": float(abs(ph[2]) / abs(ph[0]))})
     return rows
 
 
+def nonlinearity_study(model: SensorModel, amplitudes_m, frequency_hz: float = 5.0,
+                       sample_rate_hz: float = 2000.0, periods: int = 6) -> list[dict]:
+    """Relative error of the linear model and harmonic content of the current versus the
+    tip-deflection amplitude (sinusoidal drive), from the nonlinear field solution
+    (the eq. 9 term; r0 = 0)."""
+    t = np.arange(int(round(periods / frequency_hz * sample_rate_hz))) / sample_rate_hz
+    lin = NonlinearFieldSolver(model, linear=True)
+    nonlin = NonlinearFieldSolver(model)
+    shape = np.sin(2 * np.pi * frequency_hz * t)
+    i_unit = lin.simulate(t, shape)             # linear: scales with amplitude
+    return _distortion_rows(lambda w: nonlin.simulate(t, w), i_unit, t, shape, amplitudes_m,
+                            frequency_hz)
+
+
+def large_deflection_study(model: SensorModel, amplitudes_m, frequency_hz: float = 5.0,
+                           sample_rate_hz: float = 1000.0, periods: int = 4) -> list[dict]:
+    """The same for the beam: field solution with the elastica stress profile
+    (:class:`~ipmc_sensor_ros.physics.beam.ElasticaBeam`) against the paper's
+    small-deflection profile (eq. 21), sinusoidal tip deflection.  Rows also give the
+    amplitude as a fraction of the length, ``amplitude_over_length``."""
+    from .beam import ElasticaBeam
+
+    t = np.arange(int(round(periods / frequency_hz * sample_rate_hz))) / sample_rate_hz
+    shape = np.sin(2 * np.pi * frequency_hz * t)
+    i_unit = FieldSolver(model).simulate(t, shape)
+    elastica = FieldSolver(model, beam=ElasticaBeam())
+    rows = _distortion_rows(lambda w: elastica.simulate(t, w), i_unit, t, shape, amplitudes_m,
+                            frequency_hz)
+    for r in rows:
+        r["amplitude_over_length"] = r["amplitude_m"] / model.geometry.length_m
+    return rows
+
+
+def amplitude_at_error(rows: list[dict], level: float = 0.01) -> float:
+    """Smallest amplitude (m) at which ``linear_model_error`` reaches ``level``, by
+    log-log interpolation between the study's rows (nan if never reached)."""
+    a = np.array([r["amplitude_m"] for r in rows])
+    e = np.array([r["linear_model_error"] for r in rows])
+    above = np.flatnonzero(e >= level)
+    if above.size == 0:
+        return float("nan")
+    k = int(above[0])
+    if k == 0:
+        return float(a[0])
+    frac = (np.log(level) - np.log(e[k - 1])) / (np.log(e[k]) - np.log(e[k - 1]))
+    return float(np.exp(np.log(a[k - 1]) + frac * (np.log(a[k]) - np.log(a[k - 1]))))
+
+
 class FieldStream:
     """Streaming Crank-Nicolson integration of a :class:`FieldSolver` (state kept between
-    blocks): ``step(w_block, w_rate_block) -> current_block``.  Used by the simulator's
-    ``fidelity = field``."""
+    blocks): ``step(w_block, w_rate_block) -> current_block``.  Used by
+    :meth:`FieldSolver.simulate` and the simulator's ``fidelity = field``."""
 
     def __init__(self, solver: FieldSolver, sample_rate_hz: float, diffusivity_at=None,
                  update_s: float = 0.5):
@@ -357,7 +399,7 @@ class FieldStream:
         self.diffusivity_at = diffusivity_at
         self.update_s = float(update_s)
         self.x = np.zeros(solver.n_states)
-        self.w_prev = 0.0
+        self.q_prev = np.zeros(solver.beam.n_shapes)
         self.elapsed = 0.0
         self._next_update = 0.0 if diffusivity_at else float("inf")
         self._factor(solver)
@@ -370,13 +412,19 @@ class FieldStream:
         self.a = sol.A.tocsr()
 
     def step(self, w, w_rate) -> np.ndarray:
-        out = np.empty(len(w))
-        for k, (wk, vk) in enumerate(zip(w, w_rate)):
+        w = np.asarray(w, float)
+        beam, length = self.base.beam, self.base.L
+        q_all = beam.coordinates(w, length)
+        q_rate = beam.coordinate_rates(w, w_rate, length)
+        out = np.empty(w.size)
+        for k in range(w.size):
             if self.elapsed >= self._next_update:
                 self._factor(self.base._with_diffusivity(self.diffusivity_at(self.elapsed)))
                 self._next_update += self.update_s
-            self.x = self.lhs.solve(self.rhs @ self.x + 0.5 * self.dt * self.sol.B * (self.w_prev + wk))
-            out[k] = self.sol.C @ (self.a @ self.x + self.sol.B * wk) + self.sol.Cw * vk
-            self.w_prev = wk
+            qk = q_all[k]
+            bq = self.sol.B @ qk
+            self.x = self.lhs.solve(self.rhs @ self.x + 0.5 * self.dt * (self.sol.B @ self.q_prev + bq))
+            out[k] = self.sol.C @ (self.a @ self.x + bq) + self.sol.Cw @ q_rate[k]
+            self.q_prev = qk
             self.elapsed += self.dt
         return out

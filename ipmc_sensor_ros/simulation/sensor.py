@@ -70,14 +70,19 @@ class FieldSensorSimulator:
     (:class:`~ipmc_sensor_ros.physics.field.FieldSolver`, Crank-Nicolson) instead of a
     reduction of the closed form.  Supports the base model (h1/h2) and
     ``hydration_drift`` (a diffusivity changing during the run); other effects are
-    refused by name.  Same ``run``/``reset`` interface and measurement chain as
-    :class:`SensorSimulator`; about 50x real time at 1 kHz.
+    refused by name.  ``beam_model``: ``linear`` (the paper's small-deflection stress
+    profile, eq. 21) or ``elastica`` (large-deflection beam,
+    :class:`~ipmc_sensor_ros.physics.beam.ElasticaBeam`: the physical source of the
+    ``nonlinearity`` effect).  Same ``run``/``reset`` interface and measurement chain
+    as :class:`SensorSimulator`; about 50x real time at 1 kHz (linear beam).
     """
 
     SUPPORTED = ("surface_resistance", "hydration_drift")
 
     def __init__(self, model: SensorModel, sample_rate_hz: float, *, current_gain: float = 1.0,
-                 current_offset_a: float = 0.0, noise_rms_a: float = 0.0, seed: int = 0):
+                 current_offset_a: float = 0.0, noise_rms_a: float = 0.0, seed: int = 0,
+                 beam_model: str = "linear"):
+        from ..physics.beam import make_beam
         from ..physics.effects import get_effect
         from ..physics.field import FieldSolver
 
@@ -91,7 +96,7 @@ class FieldSensorSimulator:
         self.noise_rms_a = float(noise_rms_a)
         self._rng = np.random.default_rng(seed)
         base = model.without_effect("hydration_drift")
-        self._solver = FieldSolver(base)
+        self._solver = FieldSolver(base, beam=make_beam(beam_model))
         self._diffusivity_at = None
         if model.has_effect("hydration_drift"):
             mat_at = get_effect("hydration_drift").material_at(model, model.effect_values("hydration_drift"))

@@ -56,13 +56,18 @@ def crank_slider_campaign(true_effects: Sequence = ("surface_resistance",), *,
                           crank_radius_m: float = 2e-3, rod_length_m: float = 15e-3,
                           material: MaterialParameters = PAPER_PARAMETERS, noise_rel: float = 0.01,
                           seed: int = 0, model_effects: Sequence = ("surface_resistance",),
-                          preroll_s: float = 1.0, fidelity: str = "exact") -> list[Record]:
+                          preroll_s: float = 1.0, fidelity: str = "exact",
+                          beam_model: str = "linear") -> list[Record]:
     """One record per (sample, frequency); ``true_effects`` make the data,
     ``model_effects`` go into each record's (to be tested) model.  ``fidelity``:
     ``exact`` (FFT prediction of the closed form with its effects) or ``field`` (the
-    independent field solution, :class:`~ipmc_sensor_ros.simulation.sensor.FieldSensorSimulator`)."""
+    independent field solution, :class:`~ipmc_sensor_ros.simulation.sensor.FieldSensorSimulator`),
+    whose ``beam_model`` may be ``elastica`` (large-deflection stress profile)."""
     if fidelity not in ("exact", "field"):
         raise ValueError(f"fidelity must be 'exact' or 'field', got {fidelity!r}")
+    if beam_model != "linear" and fidelity != "field":
+        raise ValueError(f"beam_model {beam_model!r} needs fidelity 'field' (the closed form "
+                         "assumes the small-deflection beam)")
     rng = np.random.default_rng(seed)
     out = []
     for sample in samples:
@@ -75,7 +80,7 @@ def crank_slider_campaign(true_effects: Sequence = ("surface_resistance",), *,
             if fidelity == "field":
                 from ..simulation.sensor import FieldSensorSimulator
 
-                i = FieldSensorSimulator(truth, sample_rate_hz).run(stim, t)[1]
+                i = FieldSensorSimulator(truth, sample_rate_hz, beam_model=beam_model).run(stim, t)[1]
             else:
                 i = predict_current(truth, t, w)
             keep = t >= preroll_s
