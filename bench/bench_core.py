@@ -64,15 +64,21 @@ def bench_model(smoke: bool = False) -> list[dict]:
 
 def bench_field(smoke: bool = False) -> list[dict]:
     """Simulated seconds per wall-clock second of the field solvers at 1 kHz (slim, 5 Hz)."""
+    from ipmc_sensor_ros.physics.beam import ElasticaBeam
     from ipmc_sensor_ros.physics.field import FieldSolver, NonlinearFieldSolver
 
     duration = 1.0 if smoke else 10.0
     t = np.arange(int(duration * 1000)) / 1000.0
     w = 2e-3 * np.sin(2 * np.pi * 5 * t)
+    slim = SensorModel(PAPER_SAMPLES["slim"])
+    linear = FieldSolver(slim)
+    elastica = FieldSolver(slim, beam=ElasticaBeam())
+    nonlinear = NonlinearFieldSolver(SensorModel(PAPER_SAMPLES["slim"], effects=()))
     rows = []
-    for label, solver in (("linear (H2, 158 states)", FieldSolver(SensorModel(PAPER_SAMPLES["slim"]))),
-                          ("nonlinear eq. 9 (H1, 6 z-points x 155 nodes)",
-                           NonlinearFieldSolver(SensorModel(PAPER_SAMPLES["slim"], effects=())))):
+    for label, solver in ((f"linear (H2, {linear.n_states} states)", linear),
+                          (f"elastica beam (H2, 5 shapes, {elastica.n_states} states)", elastica),
+                          (f"nonlinear eq. 9 (H1, {nonlinear.z.size} z-points x {nonlinear.x.size} "
+                           "nodes)", nonlinear)):
         t0 = time.perf_counter()
         solver.simulate(t, w)
         wall = time.perf_counter() - t0

@@ -272,12 +272,19 @@ class InverseEstimator:
         if x.shape[0] == 0:
             return np.empty(0) if squeeze else np.empty((0, self.channels))
         if squeeze and x.shape[0] <= SMALL_BLOCK_SAMPLES:
-            return self._process_small(x[:, 0])
+            return np.array(self._process_small(x[:, 0].tolist()))
         y, zi = sig.sosfilt(self.sos, x, axis=0, zi=self._zi)
         self._zi = zi
         return y[:, 0] if squeeze else y
 
-    def _process_small(self, x: np.ndarray) -> np.ndarray:
+    def process_one(self, current_a: float) -> float:
+        """One sample of a single-channel estimator, as a float; identical to
+        :meth:`process` on a one-sample block, without numpy's per-call costs."""
+        if self.channels != 1:
+            raise EstimatorError(f"process_one needs a single-channel estimator (channels = {self.channels})")
+        return self._process_small([float(current_a)])[0]
+
+    def _process_small(self, values: list) -> list:
         """Single-channel DF-II-transposed recursion in plain Python floats for
         blocks of at most :data:`SMALL_BLOCK_SAMPLES` samples.  Same operations in
         the same order as :func:`scipy.signal.sosfilt`, so the output is identical
@@ -285,7 +292,7 @@ class InverseEstimator:
         handling), which dominates one-sample messages."""
         state = self._zi[:, :, 0].tolist()
         out = []
-        for x_cur in x.tolist():
+        for x_cur in values:
             for (b0, b1, b2, a1, a2), zs in zip(self._coefficients, state):
                 x_new = b0 * x_cur + zs[0]
                 zs[0] = b1 * x_cur - a1 * x_new + zs[1]
@@ -293,11 +300,11 @@ class InverseEstimator:
                 x_cur = x_new
             out.append(x_cur)
         self._zi[:, :, 0] = state
-        return np.array(out)
+        return out
 
     def process_sample(self, current_a: float) -> float:
-        """One sample of a single-channel estimator (same code path as blocks)."""
-        return float(self.process(np.array([current_a], dtype=float))[0])
+        """One sample of a single-channel estimator (alias of :meth:`process_one`)."""
+        return self.process_one(current_a)
 
     def reset(self) -> None:
         """Zero the state: the estimate restarts from zero deflection."""

@@ -41,11 +41,14 @@ class DirectNode:
     def __init__(self, **overrides):
         self.ctx = rclpy.Context()
         rclpy.init(context=self.ctx, domain_id=random.randint(100, 200))
-        params = [Parameter("publish_points", value="none")] + [
-            Parameter(k, value=v) for k, v in overrides.items()]
+        values = {"publish_points": "none", **overrides}
+        params = [Parameter(k, value=v) for k, v in values.items()]
         self.node = EstimatorNode(context=self.ctx, parameter_overrides=params)
         self.published: list = []
+        self.points: list = []
         self.node._pub_block.publish = lambda m: self.published.append(unpack_block(m, DEFLECTION_COLUMNS))
+        self.node._pub_point.publish = lambda p: self.points.append(
+            (p.header.stamp.sec, p.header.stamp.nanosec, p.header.frame_id, p.point.x, p.point.z))
 
     def send(self, msg) -> None:
         self.node._on_current(msg)
@@ -108,6 +111,41 @@ def _corrupt(kind: str, t, i, rng):
 
 CORRUPTIONS = ("nan", "inf", "huge", "time_nan", "not_increasing", "wrong_rate", "empty", "odd",
                "wrong_label", "bad_stride", "three_dims", "bad_offset")
+
+
+def test_one_sample_lean_path_gives_the_general_paths_results():
+    """One-sample messages take a lean scalar path (performance issue); it must publish
+    exactly what the general block path publishes and count alike, through bad messages,
+    a bridged gap, a reset gap and a backward time jump."""
+    rng = np.random.default_rng(5)
+    t, i = _signal(600, 10.0, rng)
+    t[300:] += 0.002          # bridged gap (3 periods)
+    t[450:] += 0.5            # gap > max_gap_s: reset
+    t[520:] -= 2.0            # time jumps back: reset
+    msgs = []
+    for k in range(t.size):
+        msgs.append(pack_block(t[k:k + 1], i[k:k + 1]))
+        if k % 37 == 5:
+            msgs.append(_corrupt(("nan", "huge", "time_nan", "wrong_label", "odd")[k % 5],
+                                 t[k:k + 1], i[k:k + 1], rng))
+    lean, general = DirectNode(publish_points="per_sample"), DirectNode(publish_points="per_sample")
+    general.node._one_sample = lambda msg: False
+    taken = []
+    original = lean.node._one_sample
+    lean.node._one_sample = lambda msg: taken.append(original(msg)) or taken[-1]
+    try:
+        for m in msgs:
+            lean.send(m)
+            general.send(m)
+        assert sum(taken) >= 590 - 3          # all but the reset/gap samples went the lean way
+        assert lean.node.counters() == general.node.counters()
+        assert lean.node.counters()["resets"] == 2 and lean.node.counters()["gaps_bridged"] == 1
+        for a, b in zip(lean.published, general.published, strict=True):
+            assert np.array_equal(a.times_s, b.times_s) and np.array_equal(a.values, b.values)
+        assert lean.points == general.points and len(lean.points) == t.size
+    finally:
+        lean.close()
+        general.close()
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow,

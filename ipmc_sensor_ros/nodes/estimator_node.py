@@ -33,12 +33,12 @@ from std_msgs.msg import Float64MultiArray, String
 
 from .. import config as C
 from ..estimation import DeflectionEstimator
-from ..estimator import EstimatorError, InverseEstimator, validate_block
+from ..estimator import MAX_ABS_CURRENT_A, EstimatorError, InverseEstimator, validate_block
 from ..physics.parameters import ParameterError
 from ..reduction import ReductionError
 from . import params as P
-from .messages import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, BlockPacker, LayoutError,
-                       claimed_samples, unpack_block)
+from .messages import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, SAMPLE_LABEL, BlockPacker,
+                       LayoutError, claimed_samples, unpack_block)
 from .runner import run
 
 __all__ = ["EstimatorNode", "ESTIMATOR_SPECS", "COUNTER_NAMES", "PUBLISH_POINTS", "main"]
@@ -124,6 +124,7 @@ class EstimatorNode(Node):
         except _ERRORS as exc:
             raise P.ConfigurationError(str(exc)) from None
         self._model_key = _model_key(self._values)
+        self._refresh_fast_path()
         self._pending: tuple | None = None
         self._counters = dict.fromkeys(COUNTER_NAMES, 0)
         self._last_time_s: float | None = None
@@ -191,6 +192,11 @@ class EstimatorNode(Node):
         self._warn(text)
 
     # -- data path ------------------------------------------------------------
+    def _refresh_fast_path(self) -> None:
+        """Cache the values the one-sample path reads (after every parameter change)."""
+        self._max_gap_s = float(self._values["max_gap_s"])
+        self._fs = float(self._estimator.sample_rate_hz)
+
     def _times(self, times: np.ndarray | None, n: int) -> np.ndarray:
         """Check the sample times of a block (or infer them); raise EstimatorError."""
         fs = self._estimator.sample_rate_hz
@@ -230,6 +236,8 @@ class EstimatorNode(Node):
 
     def _on_current(self, msg: Float64MultiArray) -> None:
         with self._lock:
+            if self._one_sample(msg):
+                return
             n_claimed = claimed_samples(msg)
             self._counters["messages_in"] += 1
             self._counters["samples_in"] += n_claimed
@@ -247,6 +255,50 @@ class EstimatorNode(Node):
                 self._estimator.reset()
                 self._counters["samples_dropped"] += current.size
                 self.get_logger().error(f"dropped a block of {current.size} sample(s): {exc!r}")
+
+    def _one_sample(self, msg: Float64MultiArray) -> bool:
+        """Lean path of a well-formed one-sample timed message that needs no reset, gap
+        handling or effects: the general path's checks and results in scalar Python
+        (identical output and counters, tested).  Returns False, having touched
+        nothing, for any other message, which then takes the general path (and gets
+        its precise rejection message)."""
+        layout = msg.layout
+        dims = layout.dim
+        if len(dims) != 2 or layout.data_offset != 0:
+            return False
+        d0, d1 = dims
+        if (d0.size != 1 or d0.stride != 2 or d1.size != 2 or d1.stride != 2
+                or d0.label != SAMPLE_LABEL or d1.label != CURRENT_COLUMNS):
+            return False
+        data = msg.data
+        if len(data) != 2:
+            return False
+        t, i = data[0], data[1]
+        # NaN fails every comparison, so non-finite values leave through the general path
+        if not (0.0 <= t <= MAX_STAMP_S and -MAX_ABS_CURRENT_A <= i <= MAX_ABS_CURRENT_A):
+            return False
+        last = self._last_time_s
+        if last is not None:
+            step = t - last
+            if not (0.0 < step <= self._max_gap_s and step * self._fs <= 1.5):
+                return False
+        est = self._estimator
+        if not est.plain:
+            return False
+        self._counters["messages_in"] += 1
+        self._counters["samples_in"] += 1
+        t_out, w = est.process_one(t, i)
+        if not math.isfinite(w):
+            est.reset()
+            self._counters["samples_dropped"] += 1
+            self._warn(f"non-finite estimate on {self._topic}: block dropped, filter reset")
+            return True
+        self._last_time_s = t
+        self._pub_block.publish(self._packer.pack_one(t_out, w))
+        if self._values["publish_points"] != "none":
+            self._publish_point(t_out, w)
+        self._counters["samples_out"] += 1
+        return True
 
     def _process(self, times: np.ndarray, current: np.ndarray) -> None:
         topic = self._topic
@@ -277,18 +329,18 @@ class EstimatorNode(Node):
             return
         if mode == "last_of_block":
             times, y = times[-1:], y[-1:]
-        ns = np.round(times * 1e9).astype(np.int64)
-        sec, nsec = np.divmod(ns, 1_000_000_000)
-        frame = self._values["frame_id"]
-        length = float(self._values["length_m"])
-        for s, n, w in zip(sec.tolist(), nsec.tolist(), y.tolist()):
-            p = PointStamped()
-            p.header.stamp.sec = s
-            p.header.stamp.nanosec = n
-            p.header.frame_id = frame
-            p.point.x = length
-            p.point.z = w
-            self._pub_point.publish(p)
+        for t, w in zip(times.tolist(), y.tolist()):
+            self._publish_point(t, w)
+
+    def _publish_point(self, time_s: float, deflection_m: float) -> None:
+        sec, nsec = divmod(round(time_s * 1e9), 1_000_000_000)
+        p = PointStamped()
+        p.header.stamp.sec = sec
+        p.header.stamp.nanosec = nsec
+        p.header.frame_id = self._values["frame_id"]
+        p.point.x = float(self._values["length_m"])
+        p.point.z = deflection_m
+        self._pub_point.publish(p)
 
     # -- periodic -------------------------------------------------------------
     def _on_timer(self) -> None:
@@ -329,9 +381,11 @@ class EstimatorNode(Node):
             self._pending = None
             old = self._values
             self._values = values
+            self._refresh_fast_path()
             if key != self._model_key or _filter_kwargs(values) != _filter_kwargs(old):
                 new.continue_from(self._estimator)
                 self._estimator = new
+                self._refresh_fast_path()
                 self._reduced, self._model_key = reduced, key
                 self.get_logger().info("parameters changed: filter rebuilt ("
                                        + ", ".join(p.name for p in parameters) + ")")

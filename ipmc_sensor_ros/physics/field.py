@@ -17,6 +17,10 @@ What is solved
   RC-line diffusion r0 (kappa_e/h) d phi_s/dt = d^2 phi_s/dz^2 + r0 c(z) dm/dt.
   The sensing current is i = i_s(0) = W int_0^L dq/dt dz.  With r0 = 0,
   phi_s = 0 and i = W dm/dt int c dz (the paper's H1 case).
+* The stress profile sigma(h, z) comes from a beam model
+  (:mod:`ipmc_sensor_ros.physics.beam`): the paper's small-deflection beam (eq. 21,
+  the default) or the large-deflection elastica, a sum of P shapes with one copy of
+  the thickness problem each (the problem is linear in its boundary value).
 
 Discretisation (method of lines)
 --------------------------------
@@ -138,8 +142,8 @@ class FieldSolver:
         kap = m.permittivity_f_per_m
         if not self.resistive:
             # Q = W int rho-shape m dz = W c0 L sum_k (int phi_k dz) m_k
-            zq = np.linspace(0.0, self.L, 401)
-            gains = self.W * self.c0 * self.L * (_trapezoid_weights(zq) @ self.beam.shapes(zq / self.L))
+            zg, wg = np.polynomial.legendre.leggauss(8)     # exact for shapes up to degree 15
+            gains = self.W * self.c0 * self.L * (0.5 * self.L * wg) @ self.beam.shapes(0.5 * (zg + 1))
             self.A = a_uu.tocsc()
             self.B = b_uu
             self.C = np.concatenate([gk * p_u for gk in gains])
