@@ -69,21 +69,84 @@ t0 = time.monotonic()
 total = int(rate * duration)
 offsets = np.arange(n) / fs
 signal = 1e-6 * np.sin(2 * np.pi * 5.0 * offsets)
-next_t = t0
+start = time.time() - epoch
 while k < total:
+    # a DAQ's steady sample clock: message k ends at start + k / rate (contiguous samples, no
+    # jitter in the stamps); it is published when due, and after a stall the backlog goes out
+    # at once, as a buffered DAQ delivers it
+    due = t0 + k / rate
     now = time.monotonic()
-    if next_t > now:
-        time.sleep(next_t - now)
-    # steady pacing, no catch-up bursts after a stall (a DAQ does not burst either)
-    next_t = max(next_t + 1.0 / rate, time.monotonic())
-    t_last = time.time() - epoch
-    pub.publish(pack_block(t_last - offsets[::-1], signal))
+    if due > now:
+        time.sleep(due - now)
+    pub.publish(pack_block(start + k / rate - offsets[::-1], signal))
     k += 1
 print(f"SENT {k} {k * n} {time.monotonic() - t0:.6f}", flush=True)
 time.sleep(2.0)
 node.destroy_node()
 rclpy.shutdown()
 '''
+
+
+NODE_CPU = r'''
+import os, sys, time, random, subprocess
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from bench.bench_nodes import DRIVER, PASSTHROUGH, _env
+kind, rate, n, duration = sys.argv[1], float(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4])
+domain = random.randint(100, 229)
+rclpy.init(domain_id=domain)
+if kind == "estimator":
+    from ipmc_sensor_ros.nodes.estimator_node import EstimatorNode
+    node = EstimatorNode(parameter_overrides=[
+        Parameter("sample_rate_hz", value=rate * n), Parameter("publish_points", value="none"),
+        Parameter("max_gap_s", value=1.0), Parameter("band_high_hz", value=min(50.0, rate * n / 4))])
+    handled = lambda: node.counters()["messages_in"]
+else:
+    ns = {}
+    exec(PASSTHROUGH.split("rclpy.init()")[0], ns)      # the PassThrough class only
+    node = ns["PassThrough"]()
+    count = [0]
+    original = node.on_msg
+    def counted(msg):
+        count[0] += 1
+        original(msg)
+    node._subscriptions[0].callback = counted
+    handled = lambda: count[0]
+ex = SingleThreadedExecutor()
+ex.add_node(node)
+drv = subprocess.Popen([sys.executable, "-c", DRIVER, str(rate), str(n), str(duration), str(rate * n),
+                        repr(time.time() - 100.0)], env=_env(domain), stdout=subprocess.DEVNULL)
+while handled() == 0:
+    ex.spin_once(timeout_sec=0.05)
+cpu0, m0 = time.process_time(), handled()
+while drv.poll() is None:
+    ex.spin_once(timeout_sec=0.05)
+print("CPU", time.process_time() - cpu0, handled() - m0)
+'''
+
+
+def bench_node_cpu(smoke: bool = False) -> list[dict]:
+    """CPU per message of each node (whole process: executor, DDS threads, callback) under
+    the same driver at a fixed rate, each in a fresh process: a steadier comparison than
+    the sustained rate, which three processes sharing two cores make noisy."""
+    rows = []
+    for n, rate in ((1, 4000.0), (1000, 500.0)):
+        cost = {}
+        for kind in ("passthrough", "estimator"):
+            res = subprocess.run([sys.executable, "-c", NODE_CPU, kind, str(rate), str(n),
+                                  "1.0" if smoke else "8.0"], cwd=str(ROOT),
+                                 env=dict(os.environ, PYTHONPATH=str(ROOT)), capture_output=True,
+                                 text=True, timeout=120)
+            line = [x for x in res.stdout.splitlines() if x.startswith("CPU ")]
+            cpu, msgs = (float(line[0].split()[1]), int(line[0].split()[2])) if line else (float("nan"), 0)
+            cost[kind] = cpu / msgs * 1e6 if msgs else float("nan")
+        rows.append({"benchmark": f"node CPU per message, {n}-sample messages at {rate:.0f} msg/s "
+                                  "(process CPU / messages handled)",
+                     "value": cost["estimator"], "unit": "us/msg",
+                     "baseline": f"pass-through {cost['passthrough']:.0f} us/msg",
+                     "ratio": cost["estimator"] / cost["passthrough"], "target": "-"})
+    return rows
 
 
 def _env(domain: int) -> dict:
@@ -267,6 +330,7 @@ def bench_nodes(smoke: bool = False) -> list[dict]:
                      "baseline": f"pass-through same rate {100.0 * same.get('node_cpu_fraction', float('nan')):.0f} %",
                      "ratio": e.get("node_cpu_fraction", float("nan")) / same.get("node_cpu_fraction", float("nan")),
                      "target": "-"})
+    rows.extend(bench_node_cpu(smoke))
     rows.append(bench_simulator_rtf(smoke))
     return rows
 
