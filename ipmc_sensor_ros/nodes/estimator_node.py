@@ -205,13 +205,6 @@ class EstimatorNode(Node):
                 t0 = self.get_clock().now().nanoseconds * 1e-9
                 return t0 + np.arange(n) / fs
             return self._last_time_s + np.arange(1, n + 1) / fs
-        if n == 1:  # one-sample messages: the same checks without numpy's per-call cost
-            t = float(times[0])
-            if not math.isfinite(t):
-                raise EstimatorError("sample times contain non-finite values")
-            if not 0.0 <= t <= MAX_STAMP_S:
-                raise EstimatorError(f"sample times must lie in [0, {MAX_STAMP_S:.0f}] s")
-            return times
         # strictly increasing with finite ends implies all finite and within the ends
         # (NaN fails 'dt > 0'), so the range is checked on the first and last time only
         dt = np.diff(times)
@@ -313,7 +306,7 @@ class EstimatorNode(Node):
             elif step * self._estimator.sample_rate_hz > 1.5:
                 self._counters["gaps_bridged"] += 1
         t_out, y = self._estimator.process(times, current)
-        if not (math.isfinite(y[0]) if y.size == 1 else np.all(np.isfinite(y))):
+        if not np.all(np.isfinite(y)):
             self._estimator.reset()
             self._counters["samples_dropped"] += current.size
             self._warn(f"non-finite estimate on {topic}: block dropped, filter reset")
