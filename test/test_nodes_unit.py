@@ -604,5 +604,12 @@ def test_simulator_node_field_fidelity_publishes():
         with pytest.raises(P.ConfigurationError, match="fidelity"):
             SimulatorNode(context=ctx, parameter_overrides=[
                 Parameter("fidelity", value="field"), Parameter("effects", value=["time_delay"])])
+        # the large-deflection beam needs the field solution, and says so by parameter name
+        with pytest.raises(P.ConfigurationError, match="beam_model"):
+            SimulatorNode(context=ctx, parameter_overrides=[Parameter("beam_model", value="elastica")])
+        elastica = SimulatorNode(context=ctx, parameter_overrides=[
+            Parameter("fidelity", value="field"), Parameter("beam_model", value="elastica")])
+        assert elastica._sim._solver.beam.name == "elastica"
+        elastica.destroy_node()
     finally:
         rclpy.shutdown(context=ctx)
