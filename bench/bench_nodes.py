@@ -23,7 +23,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-PASSTHROUGH = r'''
+PASSTHROUGH_CLASS = r'''
 import sys, rclpy
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
@@ -34,12 +34,17 @@ class PassThrough(Node):
         qos = P.make_qos({"qos_depth": 1000, "qos_reliability": "reliable"})
         self.pub = self.create_publisher(Float64MultiArray, "deflection/block", qos)
         self.create_subscription(Float64MultiArray, "current", self.on_msg, qos)
+        self.handled = 0
     def on_msg(self, msg):
+        self.handled += 1
         out = Float64MultiArray()
         out.layout = msg.layout
         out.layout.dim[1].label = "time_s,deflection_m"
         out.data = msg.data
         self.pub.publish(out)
+'''
+
+PASSTHROUGH = PASSTHROUGH_CLASS + r'''
 rclpy.init()
 node = PassThrough()
 try:
@@ -92,7 +97,7 @@ import os, sys, time, random, subprocess
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
-from bench.bench_nodes import DRIVER, PASSTHROUGH, _env
+from bench.bench_nodes import DRIVER, PASSTHROUGH_CLASS, _env
 kind, rate, n, duration = sys.argv[1], float(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4])
 domain = random.randint(100, 229)
 rclpy.init(domain_id=domain)
@@ -104,15 +109,9 @@ if kind == "estimator":
     handled = lambda: node.counters()["messages_in"]
 else:
     ns = {}
-    exec(PASSTHROUGH.split("rclpy.init()")[0], ns)      # the PassThrough class only
+    exec(PASSTHROUGH_CLASS, ns)
     node = ns["PassThrough"]()
-    count = [0]
-    original = node.on_msg
-    def counted(msg):
-        count[0] += 1
-        original(msg)
-    node._subscriptions[0].callback = counted
-    handled = lambda: count[0]
+    handled = lambda: node.handled
 ex = SingleThreadedExecutor()
 ex.add_node(node)
 drv = subprocess.Popen([sys.executable, "-c", DRIVER, str(rate), str(n), str(duration), str(rate * n),

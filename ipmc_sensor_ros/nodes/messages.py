@@ -87,30 +87,29 @@ class BlockPacker:
         if t.shape != v.shape:
             raise LayoutError(f"times ({t.size}) and values ({v.size}) differ in length")
         n = int(t.size)
+        if n == 1:
+            return self.pack_one(float(t[0]), float(v[0]))
+        msg = self._with_layout(n)
+        inter = np.empty(2 * n)
+        inter[0::2] = t
+        inter[1::2] = v
+        msg.data = _to_array_d(inter)
+        return msg
+
+    def pack_one(self, time_s: float, value: float) -> Float64MultiArray:
+        """A one-sample block from two floats (no numpy on the way)."""
+        msg = self._with_layout(1)
+        msg.data = array.array("d", (time_s, value))
+        return msg
+
+    def _with_layout(self, n: int) -> Float64MultiArray:
+        """The reused message, its layout set for ``n`` samples (rebuilt only on change)."""
         msg = self._msg
         if n != self._n:
             msg.layout.dim = [MultiArrayDimension(label=SAMPLE_LABEL, size=n, stride=2 * n),
                               MultiArrayDimension(label=self.columns, size=2, stride=2)]
             msg.layout.data_offset = 0
             self._n = n
-        if n == 1:
-            return self.pack_one(float(t[0]), float(v[0]))
-        else:
-            inter = np.empty(2 * n)
-            inter[0::2] = t
-            inter[1::2] = v
-            msg.data = _to_array_d(inter)
-        return msg
-
-    def pack_one(self, time_s: float, value: float) -> Float64MultiArray:
-        """A one-sample block from two floats (no numpy on the way)."""
-        msg = self._msg
-        if self._n != 1:
-            msg.layout.dim = [MultiArrayDimension(label=SAMPLE_LABEL, size=1, stride=2),
-                              MultiArrayDimension(label=self.columns, size=2, stride=2)]
-            msg.layout.data_offset = 0
-            self._n = 1
-        msg.data = array.array("d", (time_s, value))
         return msg
 
 

@@ -36,6 +36,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray, String
 
+from ..physics.beam import require_field_fidelity
 from ..physics.parameters import ParameterError
 from ..reduction import ReductionError
 from ..simulation.sensor import FieldSensorSimulator, SensorSimulator
@@ -190,13 +191,10 @@ class SimulatorNode(Node):
             self._stimulus, self._stim_t0 = build_stimulus(v)
             chain = dict(current_gain=v["current_gain"], current_offset_a=v["current_offset_a"],
                          noise_rms_a=v["noise_rms_a"], seed=v["seed"])
+            require_field_fidelity(v["beam_model"], v["fidelity"] == "field")
             if v["fidelity"] == "field":
                 self._sim = FieldSensorSimulator(model, v["sample_rate_hz"],
                                                  beam_model=v["beam_model"], **chain)
-            elif v["beam_model"] != "linear":
-                raise ParameterError(f"parameter 'beam_model' = {v['beam_model']!r} needs "
-                                     "fidelity 'field' (the reduced model assumes the "
-                                     "small-deflection beam)")
             else:
                 self._sim = SensorSimulator(model, v["sample_rate_hz"], **chain)
         except (ParameterError, ReductionError) as exc:

@@ -43,7 +43,8 @@ from scipy.interpolate import CubicSpline
 
 from .parameters import ParameterError
 
-__all__ = ["LinearBeam", "ElasticaBeam", "BEAM_MODELS", "make_beam", "elastica_solution"]
+__all__ = ["LinearBeam", "ElasticaBeam", "BEAM_MODELS", "make_beam", "elastica_solution",
+           "require_field_fidelity"]
 
 #: Largest |w| / L the elastica tables cover (lambda ~ 3.1; the tip is then at 1.1 rad,
 #: well past IPMC sensing use).
@@ -165,6 +166,14 @@ class ElasticaBeam:
 
 
 BEAM_MODELS = ("linear", "elastica")
+
+
+def require_field_fidelity(beam_model: str, field: bool) -> None:
+    """Refuse a large-deflection beam where the closed form (small-deflection beam,
+    eq. 21) is used instead of the field solution; ParameterError naming the parameter."""
+    if beam_model != "linear" and not field:
+        raise ParameterError(f"parameter 'beam_model' = {beam_model!r} needs fidelity 'field' "
+                             "(the closed form assumes the small-deflection beam, eq. 21)")
 
 
 def make_beam(name: str):

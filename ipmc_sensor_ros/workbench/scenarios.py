@@ -13,6 +13,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ..physics.beam import require_field_fidelity
 from ..physics.effects import get_effect
 from ..physics.model import SensorModel
 from ..physics.parameters import PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, MaterialParameters
@@ -65,9 +66,7 @@ def crank_slider_campaign(true_effects: Sequence = ("surface_resistance",), *,
     whose ``beam_model`` may be ``elastica`` (large-deflection stress profile)."""
     if fidelity not in ("exact", "field"):
         raise ValueError(f"fidelity must be 'exact' or 'field', got {fidelity!r}")
-    if beam_model != "linear" and fidelity != "field":
-        raise ValueError(f"beam_model {beam_model!r} needs fidelity 'field' (the closed form "
-                         "assumes the small-deflection beam)")
+    require_field_fidelity(beam_model, fidelity == "field")
     rng = np.random.default_rng(seed)
     out = []
     for sample in samples:
