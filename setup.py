@@ -27,7 +27,7 @@ setup(
         "console_scripts": [
             "ipmc_estimator = ipmc_sensor_ros.nodes.estimator_node:main",
             "ipmc_simulator = ipmc_sensor_ros.nodes.simulator_node:main",
-            "ipmc-model = ipmc_sensor_ros.cli:main",
+            "ipmc-model = ipmc_sensor_ros.cli.main:main",
         ],
     },
 )

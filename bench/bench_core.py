@@ -10,10 +10,10 @@ import time
 import numpy as np
 import scipy.signal as sig
 
-from ipmc_sensor_ros.estimator import InverseEstimator
+from ipmc_sensor_ros.estimation.inverse import InverseEstimator
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
-from ipmc_sensor_ros.reduction import reduce_model
+from ipmc_sensor_ros.lti.reduction import reduce_model
 
 
 def _best_of(fn, repeats: int) -> float:

@@ -4,4 +4,4 @@
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$root/scripts/setup_env.sh"
-exec "$root/.venv/bin/python" -m ipmc_sensor_ros.demo "$@"
+exec "$root/.venv/bin/python" -m ipmc_sensor_ros.nodes.demo "$@"

@@ -17,7 +17,7 @@ from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray
 
-from ipmc_sensor_ros.cli import main
+from ipmc_sensor_ros.cli.main import main
 from ipmc_sensor_ros.nodes.estimator_node import EstimatorNode
 from ipmc_sensor_ros.nodes.messages import DEFLECTION_COLUMNS, unpack_block
 from ipmc_sensor_ros.workbench.io import read_timeseries

@@ -4,7 +4,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from ipmc_sensor_ros.cli import main
+from ipmc_sensor_ros.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[1]
 

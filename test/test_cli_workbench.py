@@ -4,7 +4,7 @@ import json
 import pytest
 import yaml
 
-from ipmc_sensor_ros.cli import main
+from ipmc_sensor_ros.cli.main import main
 from ipmc_sensor_ros.workbench.io import read_frf, read_timeseries
 
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from ipmc_sensor_ros.estimation import DeflectionEstimator
+from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
 from ipmc_sensor_ros.simulation.sensor import predict_current

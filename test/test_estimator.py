@@ -2,11 +2,11 @@
 import numpy as np
 import pytest
 
-from ipmc_sensor_ros.estimator import (DEFAULT_LEAK_CORNER_HZ, EstimatorError, InverseEstimator,
+from ipmc_sensor_ros.estimation.inverse import (DEFAULT_LEAK_CORNER_HZ, EstimatorError, InverseEstimator,
                                        leak_tradeoff, validate_block)
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
-from ipmc_sensor_ros.reduction import reduce_model
+from ipmc_sensor_ros.lti.reduction import reduce_model
 from ipmc_sensor_ros.simulation.sensor import SensorSimulator, periodic_response
 from ipmc_sensor_ros.simulation.stimuli import CrankSlider, FreeVibration, Step
 
@@ -125,7 +125,7 @@ def test_small_block_path_equals_sosfilt_bit_for_bit(reduced_slim, offset_corner
     """Blocks up to SMALL_BLOCK_SAMPLES run a plain-Python recursion (the one-sample
     fast path of the node); it must give exactly sosfilt's numbers, whatever the mix
     of block sizes around the threshold."""
-    from ipmc_sensor_ros.estimator import SMALL_BLOCK_SAMPLES
+    from ipmc_sensor_ros.estimation.inverse import SMALL_BLOCK_SAMPLES
     rng = np.random.default_rng(7)
     x = rng.normal(0, 1e-6, 3000)
     whole = InverseEstimator(reduced_slim, FS, offset_corner_hz=offset_corner_hz)

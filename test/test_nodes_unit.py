@@ -23,7 +23,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 
-from ipmc_sensor_ros.estimator import InverseEstimator
+from ipmc_sensor_ros.estimation.inverse import InverseEstimator
 from ipmc_sensor_ros.nodes import params as P
 from ipmc_sensor_ros.nodes.estimator_node import ESTIMATOR_SPECS, EstimatorNode
 from ipmc_sensor_ros.nodes.messages import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, LayoutError,
@@ -31,7 +31,7 @@ from ipmc_sensor_ros.nodes.messages import (CURRENT_COLUMNS, DEFLECTION_COLUMNS,
 from ipmc_sensor_ros.nodes.simulator_node import SIMULATOR_SPECS, SimulatorNode
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import Geometry
-from ipmc_sensor_ros.reduction import reduce_model
+from ipmc_sensor_ros.lti.reduction import reduce_model
 from ipmc_sensor_ros.simulation.sensor import SensorSimulator
 from ipmc_sensor_ros.simulation.stimuli import CrankSlider
 

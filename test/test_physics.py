@@ -18,8 +18,8 @@ def test_core_imports_without_rclpy():
     import subprocess
     import sys
     code = ("import sys; sys.modules['rclpy'] = None\n"
-            "import ipmc_sensor_ros.physics.model, ipmc_sensor_ros.reduction, "
-            "ipmc_sensor_ros.estimator, ipmc_sensor_ros.simulation.sensor\n"
+            "import ipmc_sensor_ros.physics.model, ipmc_sensor_ros.lti.reduction, "
+            "ipmc_sensor_ros.estimation.inverse, ipmc_sensor_ros.simulation.sensor\n"
             "assert 'rclpy' not in [m for m in sys.modules if sys.modules[m] is not None]")
     subprocess.run([sys.executable, "-c", code], check=True)
 

@@ -17,14 +17,14 @@ from hypothesis import strategies as st
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from ipmc_sensor_ros import config
-from ipmc_sensor_ros.estimation import DeflectionEstimator
-from ipmc_sensor_ros.estimator import InverseEstimator, leak_tradeoff
+from ipmc_sensor_ros.interface import specs as config
+from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
+from ipmc_sensor_ros.estimation.inverse import InverseEstimator, leak_tradeoff
 from ipmc_sensor_ros.nodes.estimator_node import EstimatorNode
 from ipmc_sensor_ros.nodes.messages import DEFLECTION_COLUMNS, pack_block, unpack_block
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_PARAMETERS, PAPER_SAMPLES, Geometry
-from ipmc_sensor_ros.reduction import ReductionError, reduce_model
+from ipmc_sensor_ros.lti.reduction import ReductionError, reduce_model
 
 ROOT = Path(__file__).resolve().parents[1]
 FS = 1000.0

@@ -1,6 +1,6 @@
 """ROS 2 node ``ipmc_estimator``: sensing current (A) in, tip deflection (m) out.
 
-A thin shell over :class:`ipmc_sensor_ros.estimation.DeflectionEstimator` (model-aware
+A thin shell over :class:`ipmc_sensor_ros.estimation.deflection.DeflectionEstimator` (model-aware
 inverse filter; the same code path as ``ipmc-model estimate``):
 
 * subscribes ``current`` (``std_msgs/Float64MultiArray``, block layout of
@@ -31,11 +31,11 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray, String
 
-from .. import config as C
-from ..estimation import DeflectionEstimator
-from ..estimator import MAX_ABS_CURRENT_A, EstimatorError, InverseEstimator, validate_block
+from ..interface import specs as C
+from ..estimation.deflection import DeflectionEstimator
+from ..estimation.inverse import MAX_ABS_CURRENT_A, EstimatorError, InverseEstimator, validate_block
 from ..physics.parameters import ParameterError
-from ..reduction import ReductionError
+from ..lti.reduction import ReductionError
 from . import params as P
 from .messages import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, SAMPLE_LABEL, BlockPacker,
                        LayoutError, claimed_samples, unpack_block)
@@ -93,7 +93,7 @@ def check_values(values: dict) -> None:
 
 def design(values: dict, reduced=None):
     """Build (reduced model, fresh core DeflectionEstimator) from parameter values
-    (:func:`ipmc_sensor_ros.config.build_estimator`, as ``ipmc-model estimate`` does).
+    (:func:`ipmc_sensor_ros.interface.specs.build_estimator`, as ``ipmc-model estimate`` does).
 
     ``reduced`` is reused when given (the model part did not change).  Raises
     one of ParameterError / ReductionError / EstimatorError / ConfigurationError

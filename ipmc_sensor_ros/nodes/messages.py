@@ -1,6 +1,6 @@
 """Pack and unpack sample blocks in ``std_msgs/Float64MultiArray`` (pure numpy + std_msgs).
 
-Block layout (defined in :mod:`ipmc_sensor_ros.blocks`; README "ROS 2 interface")
+Block layout (defined in :mod:`ipmc_sensor_ros.interface.blocks`; README "ROS 2 interface")
 ---------------------------------------------------------------------------------
 A block of ``n`` timed samples is a 2-D array, row-major::
 
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from ..blocks import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, SAMPLE_LABEL, LayoutError,
+from ..interface.blocks import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, SAMPLE_LABEL, LayoutError,
                       unpack_pairs)
 
 __all__ = [
@@ -127,7 +127,7 @@ def claimed_samples(msg: Float64MultiArray) -> int:
 
 def unpack_block(msg: Float64MultiArray, columns: str = CURRENT_COLUMNS) -> Block:
     """Decode a block message; raise :class:`LayoutError` if the layout is malformed
-    (:func:`ipmc_sensor_ros.blocks.unpack_pairs`).
+    (:func:`ipmc_sensor_ros.interface.blocks.unpack_pairs`).
 
     Returns a :class:`Block`; ``times_s`` is None for a values-only 1-D message.
     Values are *not* checked for finiteness here (that is the estimator's job).

@@ -1,6 +1,6 @@
 """Tracking monitor: collect estimate and ground truth, align them by time, score.
 
-Used by the demo (``python -m ipmc_sensor_ros.demo``) and the integration
+Used by the demo (``python -m ipmc_sensor_ros.nodes.demo``) and the integration
 tests.  It subscribes, inside ``namespace``, to ``deflection/block``
 (estimator output), ``deflection_truth`` (simulator ground truth) and the two
 JSON counters topics, with the same QoS as the data topics.

@@ -18,10 +18,10 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
 
-from ..config import (GEOMETRY_NAMES, GEOMETRY_SPECS, MATERIAL_NAMES, MATERIAL_SPECS,
+from ..interface.specs import (GEOMETRY_NAMES, GEOMETRY_SPECS, MATERIAL_NAMES, MATERIAL_SPECS,
                       MODEL_SPECS, QOS_SPECS, ConfigurationError, Spec, check_choice,
                       markdown_table)
-from ..config import build_model as build_sensor_model
+from ..interface.specs import build_model as build_sensor_model
 from ..physics.parameters import ParameterError
 
 __all__ = ["ConfigurationError", "Spec", "GEOMETRY_SPECS", "MATERIAL_SPECS", "MODEL_SPECS",

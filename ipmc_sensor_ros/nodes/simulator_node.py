@@ -38,7 +38,7 @@ from std_msgs.msg import Float64MultiArray, String
 
 from ..physics.beam import require_field_fidelity
 from ..physics.parameters import ParameterError
-from ..reduction import ReductionError
+from ..lti.reduction import ReductionError
 from ..simulation.sensor import FieldSensorSimulator, SensorSimulator
 from ..simulation.stimuli import STIMULUS_KINDS, Sampled, Stimulus, make_stimulus
 from . import params as P

@@ -17,7 +17,7 @@ evaluate algebraically identical forms:
   < 2e-9 relative).  The identity ``z coth z - 1 = 2 sum_n z^2/(z^2 + n^2 pi^2)``
   shows that ``H1(s)/s`` is a sum of first-order lags with real poles at
   ``-(K + n^2 pi^2 d / h^2)``, n = 1, 2, ... (the diffusion modes across the
-  thickness); :mod:`ipmc_sensor_ros.reduction` uses this to justify a
+  thickness); :mod:`ipmc_sensor_ros.lti.reduction` uses this to justify a
   real-pole, real-zero reduction.
 * eq. 45 / 46: ``H2 = H1 * 2 G(a)``, ``a = L sqrt(B(s))``, ``B = s kappa_e r0 / h``
   (eq. 42) and ``G(a) = (1 - cosh a + a sinh a) / (a^2 cosh a)``, evaluated as

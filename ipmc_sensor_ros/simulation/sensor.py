@@ -26,10 +26,10 @@ import math
 import numpy as np
 import scipy.signal as sig
 
-from ..discretize import default_prewarp_hz, tustin_sos
+from ..lti.discretize import default_prewarp_hz, tustin_sos
 from ..physics.model import SensorModel
 from ..physics.parameters import ParameterError
-from ..reduction import ReducedModel, append_rational, reduce_response
+from ..lti.reduction import ReducedModel, append_rational, reduce_response
 from .stimuli import Stimulus
 
 __all__ = ["periodic_response", "padded_record", "lti_response_fft", "predict_current", "time_varying_response",

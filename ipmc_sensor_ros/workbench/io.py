@@ -142,7 +142,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence, Union
 
 import numpy as np
 
-from ..blocks import SAMPLE_LABEL, unpack_pairs
+from ..interface.blocks import SAMPLE_LABEL, unpack_pairs
 from ..physics.parameters import Geometry, MaterialParameters, ParameterError
 
 __all__ = [

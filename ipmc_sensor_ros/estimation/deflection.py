@@ -2,9 +2,9 @@
 
 :class:`DeflectionEstimator` is what the estimator node and ``ipmc-model
 estimate`` run (one code path).  It reduces the model
-(:func:`~ipmc_sensor_ros.reduction.reduce_model`: the minimum-phase LTI part,
+(:func:`~ipmc_sensor_ros.lti.reduction.reduce_model`: the minimum-phase LTI part,
 exact rational factors appended), inverts it causally
-(:class:`~ipmc_sensor_ros.estimator.InverseEstimator`) and handles the rest of
+(:class:`~ipmc_sensor_ros.estimation.inverse.InverseEstimator`) and handles the rest of
 the model's effects around the filter, per block:
 
 * a pure delay (``time_delay``; ``SensorModel.delay_s``) cannot be inverted
@@ -38,11 +38,11 @@ from typing import Sequence
 import numpy as np
 from scipy.signal import lfilter
 
-from .estimator import DEFAULT_LEAK_CORNER_HZ, InverseEstimator
-from .physics.effects import Effect, get_effect
-from .physics.model import SensorModel
-from .physics.parameters import ParameterError
-from .reduction import ReducedModel, append_rational, reduce_response
+from .inverse import DEFAULT_LEAK_CORNER_HZ, InverseEstimator
+from ..physics.effects import Effect, get_effect
+from ..physics.model import SensorModel
+from ..physics.parameters import ParameterError
+from ..lti.reduction import ReducedModel, append_rational, reduce_response
 
 __all__ = ["DeflectionEstimator", "estimate_record"]
 
@@ -155,7 +155,7 @@ class DeflectionEstimator:
 
     def process(self, time_s, current_a) -> tuple[np.ndarray, np.ndarray]:
         """Filter one block; returns (output times, deflection).  Pass validated values
-        (:func:`~ipmc_sensor_ros.estimator.validate_block`)."""
+        (:func:`~ipmc_sensor_ros.estimation.inverse.validate_block`)."""
         t = np.asarray(time_s, float)
         i = np.asarray(current_a, float)
         if t.size == 0:

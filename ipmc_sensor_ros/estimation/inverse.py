@@ -3,7 +3,7 @@
 Continuous inverse
 ------------------
 The paper inverts its reduced model directly (eqs. 47-48).  With
-``H_n(s) = s R_n(s)`` from :func:`ipmc_sensor_ros.reduction.reduce_model` the
+``H_n(s) = s R_n(s)`` from :func:`ipmc_sensor_ros.lti.reduction.reduce_model` the
 exact inverse ``1/(s R_n(s))`` contains a pure integrator: the sensor measures
 the *rate* of charge, so any current offset i0 would ramp the estimate without
 bound.  We therefore use
@@ -28,7 +28,7 @@ Discretisation
 --------------
 Tustin (bilinear) transform with frequency prewarping at ``prewarp_hz``
 (default fs/20, capped at the upper edge of the reduction band; see
-:mod:`ipmc_sensor_ros.discretize`), applied pole by pole in zpk form and
+:mod:`ipmc_sensor_ros.lti.discretize`), applied pole by pole in zpk form and
 realised as second-order sections.  Tustin maps the open
 left half plane into the unit disc, so stability is preserved for every sample
 rate; it is nevertheless checked at construction (every pole strictly inside
@@ -51,8 +51,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.signal as sig
 
-from .discretize import default_prewarp_hz, tustin_sos
-from .reduction import ReducedModel
+from ..lti.discretize import default_prewarp_hz, tustin_sos
+from ..lti.reduction import ReducedModel
 
 __all__ = ["EstimatorError", "InverseEstimator", "inverse_zpk", "leak_tradeoff",
            "validate_block", "DEFAULT_LEAK_CORNER_HZ", "MAX_BLOCK_SAMPLES"]
@@ -195,7 +195,7 @@ class InverseEstimator:
 
     Parameters
     ----------
-    reduced : reduced model of the sensor (:func:`~ipmc_sensor_ros.reduction.reduce_model`).
+    reduced : reduced model of the sensor (:func:`~ipmc_sensor_ros.lti.reduction.reduce_model`).
     sample_rate_hz : sample rate of the current, Hz.
     leak_corner_hz : leaky-integration corner f_c, Hz (> 0).
     offset_corner_hz : corner of the optional current-offset tracker, Hz, or None.

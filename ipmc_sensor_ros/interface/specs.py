@@ -14,12 +14,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
-from .estimation import DeflectionEstimator
-from .estimator import DEFAULT_LEAK_CORNER_HZ, MAX_BLOCK_SAMPLES
-from .physics.effects import load_plugin
-from .physics.model import BASES, SensorModel, parse_model_name
-from .physics.parameters import GEOMETRY_LIMITS_M, Geometry, MaterialParameters, ParameterError
-from .reduction import MAX_ORDER, ReducedModel, ReductionError
+from ..estimation.deflection import DeflectionEstimator
+from ..estimation.inverse import DEFAULT_LEAK_CORNER_HZ, MAX_BLOCK_SAMPLES
+from ..physics.effects import load_plugin
+from ..physics.model import BASES, SensorModel, parse_model_name
+from ..physics.parameters import GEOMETRY_LIMITS_M, Geometry, MaterialParameters, ParameterError
+from ..lti.reduction import MAX_ORDER, ReducedModel, ReductionError
 
 __all__ = ["Spec", "ConfigurationError", "GEOMETRY_SPECS", "MATERIAL_SPECS", "MODEL_SPECS",
            "QOS_SPECS", "ESTIMATOR_SPECS", "PUBLISH_POINTS", "MATERIAL_NAMES", "GEOMETRY_NAMES",

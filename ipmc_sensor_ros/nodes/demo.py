@@ -1,6 +1,6 @@
 """Live demo: simulator -> estimator as two ROS 2 processes over DDS, tracking error table.
 
-``python -m ipmc_sensor_ros.demo`` (or ``bash scripts/demo.sh``).  For each
+``python -m ipmc_sensor_ros.nodes.demo`` (or ``bash scripts/demo.sh``).  For each
 crank-slider drive frequency (default 1, 5 and 20 Hz) it starts
 ``ipmc_simulator`` and ``ipmc_estimator`` as separate OS processes in their own
 namespace, on an isolated ROS_DOMAIN_ID (random in 50..200 unless
@@ -63,7 +63,7 @@ def _stop(procs: dict) -> dict:
 
 def run_case(node, executor, f_hz: float, args, env: dict, logdir: Path) -> dict:
     """One drive frequency: start both processes, wait for the run, score it."""
-    from .nodes.monitor import TrackingMonitor
+    from .monitor import TrackingMonitor
 
     ns = "/demo_f" + f"{f_hz:g}".replace(".", "_")
     monitor = TrackingMonitor(node, ns)
@@ -117,7 +117,7 @@ def run_case(node, executor, f_hz: float, args, env: dict, logdir: Path) -> dict
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m ipmc_sensor_ros.demo",
+    parser = argparse.ArgumentParser(prog="python -m ipmc_sensor_ros.nodes.demo",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--frequencies", type=float, nargs="+", default=[1.0, 5.0, 20.0],
                         help="crank-slider drive frequencies, Hz (default 1 5 20)")

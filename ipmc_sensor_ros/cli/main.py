@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .physics.effects import load_plugin
-from .physics.model import SensorModel, parse_effects, parse_model_name
-from .physics.parameters import (PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, MaterialParameters,
+from ..physics.effects import load_plugin
+from ..physics.model import SensorModel, parse_effects, parse_model_name
+from ..physics.parameters import (PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, MaterialParameters,
                                  ParameterError, load_yaml)
 
 __all__ = ["main", "build_parser"]
@@ -84,7 +84,7 @@ def _effects_from_args(args, base_key: str = "model") -> tuple:
 
 
 def _load_data(args):
-    from .workbench.io import read_any, read_bag
+    from ..workbench.io import read_any, read_bag
 
     geometry = None
     if getattr(args, "geometry", None):
@@ -156,9 +156,9 @@ def _report_dir(path) -> Path | None:
 
 # ---------------------------------------------------------------------------
 def _cmd_simulate(args) -> int:
-    from .workbench.freqresp import fundamental_response
-    from .workbench.io import FrequencyResponseData, TimeSeries, write_bag, write_frf, write_timeseries
-    from .workbench.scenarios import crank_slider_campaign
+    from ..workbench.freqresp import fundamental_response
+    from ..workbench.io import FrequencyResponseData, TimeSeries, write_bag, write_frf, write_timeseries
+    from ..workbench.scenarios import crank_slider_campaign
 
     effects = _effects_from_args(args)
     material = _material_from_args(args)
@@ -216,9 +216,9 @@ def _parse_frequencies(text: str) -> list[float]:
 
 
 def _cmd_fit(args) -> int:
-    from .physics.parameters import save_yaml
-    from .workbench.data import groups_from
-    from .workbench.fit import fit_parameters
+    from ..physics.parameters import save_yaml
+    from ..workbench.data import groups_from
+    from ..workbench.fit import fit_parameters
 
     effects = _effects_from_args(args)
     material = _material_from_args(args)
@@ -242,7 +242,7 @@ def _cmd_fit(args) -> int:
         save_yaml(args.save_material, res.material)
     rd = _report_dir(args.report)
     if rd:
-        from .workbench.report import plot_bode, write_report
+        from ..workbench.report import plot_bode, write_report
 
         pts = {g.name: g.points for g in groups}
         models = {}
@@ -260,7 +260,7 @@ def _cmd_fit(args) -> int:
 def _save_node_params(path, material: MaterialParameters, base: str, extra_effects) -> None:
     import yaml
 
-    from .physics.model import format_effect
+    from ..physics.model import format_effect
 
     params = {k: v for k, v in material.to_dict().items()
               if k not in ("faraday_constant_c_per_mol", "gas_constant_j_per_mol_k",
@@ -273,8 +273,8 @@ def _save_node_params(path, material: MaterialParameters, base: str, extra_effec
 
 
 def _cmd_compare(args) -> int:
-    from .workbench.compare import compare_records
-    from .workbench.data import records_from
+    from ..workbench.compare import compare_records
+    from ..workbench.data import records_from
 
     effects = _effects_from_args(args)
     material = _material_from_args(args)
@@ -287,7 +287,7 @@ def _cmd_compare(args) -> int:
     _write_json(args.json, {**cmp.to_json(), "model": recs[0].model.describe()})
     rd = _report_dir(args.report)
     if rd:
-        from .workbench.report import (plot_bode, plot_failure_map, plot_residuals, plot_time_overlay,
+        from ..workbench.report import (plot_bode, plot_failure_map, plot_residuals, plot_time_overlay,
                                        write_report)
 
         pts, curves = {}, {}
@@ -306,7 +306,7 @@ def _cmd_compare(args) -> int:
 
 
 def _cmd_track(args) -> int:
-    from .workbench.track import track_parameter
+    from ..workbench.track import track_parameter
 
     effects = _effects_from_args(args)
     material = _material_from_args(args)
@@ -314,7 +314,7 @@ def _cmd_track(args) -> int:
     free = _param_names(args.param)
     rows = []
     for ts in data:
-        from .workbench.data import material_for
+        from ..workbench.data import material_for
 
         _say(f"tracking {', '.join(free)} in {args.window:g} s windows of {ts.path}")
         tr = track_parameter(ts.time_s, ts.deflection_m, ts.current_a, ts.geometry,
@@ -329,7 +329,7 @@ def _cmd_track(args) -> int:
         rows.append({"source": ts.path, "track": [p.__dict__ for p in tr]})
         rd = _report_dir(args.report)
         if rd:
-            from .workbench.report import plot_track, write_report
+            from ..workbench.report import plot_track, write_report
 
             img = plot_track(rd, f"track_{Path(ts.path).stem}", tr, free[0])
             write_report(rd, "ipmc-model track", [(ts.path, "", [img])])
@@ -338,9 +338,9 @@ def _cmd_track(args) -> int:
 
 
 def _cmd_diagnose(args) -> int:
-    from .physics.effects import EFFECTS
-    from .workbench.data import records_from
-    from .workbench.diagnose import diagnose
+    from ..physics.effects import EFFECTS
+    from ..workbench.data import records_from
+    from ..workbench.diagnose import diagnose
 
     effects = _effects_from_args(args)
     material = _material_from_args(args)
@@ -366,8 +366,8 @@ def _cmd_diagnose(args) -> int:
 def _diagnose_report(rd: Path, diag) -> None:
     from types import SimpleNamespace
 
-    from .workbench.modelfit import predict
-    from .workbench.report import plot_error_bars, plot_time_overlay, write_report
+    from ..workbench.modelfit import predict
+    from ..workbench.report import plot_error_bars, plot_time_overlay, write_report
 
     labels = ["baseline"] + [c.effect for c in diag.candidates]
     errors = [diag.baseline.error] + [c.error for c in diag.candidates]
@@ -395,10 +395,10 @@ def _diagnose_report(rd: Path, diag) -> None:
 
 def _cmd_estimate(args) -> int:
     """Offline estimation with the node's code path and parameters file."""
-    from . import config
-    from .estimation import estimate_record
-    from .estimator import validate_block
-    from .workbench.io import TimeSeries, read_any, read_bag, write_bag, write_timeseries
+    from ..interface import specs as config
+    from ..estimation.deflection import estimate_record
+    from ..estimation.inverse import validate_block
+    from ..workbench.io import TimeSeries, read_any, read_bag, write_bag, write_timeseries
 
     values = config.load_params_file(args.params) if args.params else \
         config.defaults(config.ESTIMATOR_SPECS)
@@ -455,7 +455,7 @@ def _cmd_estimate(args) -> int:
 
 
 def _cmd_reduce(args) -> int:
-    from .reduction import reduction_error_table
+    from ..lti.reduction import reduction_error_table
 
     effects = _effects_from_args(args)
     material = _material_from_args(args)
@@ -495,7 +495,7 @@ def _parse_orders(text: str) -> list[int]:
 
 
 def _cmd_eq55(args) -> int:
-    from .reduction import eq55_poles_zeros
+    from ..lti.reduction import eq55_poles_zeros
 
     material = _material_from_args(args)
     names = (args.samples or "big,slim,short").split(",")
@@ -512,7 +512,7 @@ def _cmd_eq55(args) -> int:
 
 
 def _cmd_effects(args) -> int:
-    from .physics.effects import EFFECTS, catalog_markdown
+    from ..physics.effects import EFFECTS, catalog_markdown
 
     for plugin in args.plugin or []:
         load_plugin(plugin)
@@ -565,7 +565,7 @@ def _cmd_example(args) -> int:
 
 
 def _cmd_figures(args) -> int:
-    from .workbench.figures import reproduce_figures
+    from ..workbench.figures import reproduce_figures
 
     out = _report_dir(args.out)
     numbers = reproduce_figures(out, seed=args.seed)

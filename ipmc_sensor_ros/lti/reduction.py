@@ -49,7 +49,7 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy.optimize import least_squares
 
-from .physics.model import SensorModel
+from ..physics.model import SensorModel
 
 __all__ = [
     "ReducedModel",
