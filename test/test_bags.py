@@ -2,7 +2,6 @@
 replay into the node (as `ros2 bag play --clock` does), and a looping replay resets cleanly."""
 from __future__ import annotations
 
-import random
 import time
 from pathlib import Path
 
@@ -21,6 +20,7 @@ from ipmc_sensor_ros.cli.main import main
 from ipmc_sensor_ros.nodes.estimator_node import EstimatorNode
 from ipmc_sensor_ros.nodes.messages import DEFLECTION_COLUMNS, unpack_block
 from ipmc_sensor_ros.workbench.io import read_timeseries
+from conftest import TEST_DOMAIN
 
 pytestmark = pytest.mark.ros
 ROOT = Path(__file__).resolve().parents[1]
@@ -48,7 +48,7 @@ def test_written_bags_match_rclpy_types_and_deserialise(tmp_path, storage):
     meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert meta["storage_identifier"] == storage
     ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=random.randint(100, 200))
+    rclpy.init(context=ctx, domain_id=TEST_DOMAIN)
     try:
         node = rclpy.create_node("hash_probe", context=ctx)
         for entry in meta["topics_with_message_count"]:
@@ -76,7 +76,7 @@ def test_replay_into_live_node_equals_offline_and_loop_resets(tmp_path):
     current = [(stamp, raw) for topic, _, stamp, raw in _raw_messages(bag) if topic == "/current"]
     current.sort(key=lambda x: x[0])
     ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=random.randint(100, 200))
+    rclpy.init(context=ctx, domain_id=TEST_DOMAIN)
     ex = SingleThreadedExecutor(context=ctx)
     try:
         est = EstimatorNode(context=ctx, parameter_overrides=[

@@ -3,7 +3,9 @@ import numpy as np
 import pytest
 
 from ipmc_sensor_ros.estimation.inverse import (DEFAULT_LEAK_CORNER_HZ, EstimatorError, InverseEstimator,
-                                       leak_tradeoff, validate_block)
+                                       leak_tradeoff)
+from ipmc_sensor_ros.errors import DataError
+from ipmc_sensor_ros.estimation.stream import validate_block
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
 from ipmc_sensor_ros.lti.reduction import reduce_model
@@ -165,10 +167,10 @@ def test_rebuild_continues_without_jump(reduced_slim):
     ([[1.0]], "1-D"), ([5.0], r"\|i\|"), (["x"], "numeric"),
 ])
 def test_validate_block_rejects_bad_input(bad, msg):
-    with pytest.raises(EstimatorError, match=msg):
+    with pytest.raises(DataError, match=msg):
         validate_block(bad)
 
 
 def test_validate_block_rejects_oversized():
-    with pytest.raises(EstimatorError, match="limit"):
+    with pytest.raises(DataError, match="limit"):
         validate_block(np.zeros(11), max_samples=10)

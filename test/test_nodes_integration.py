@@ -36,6 +36,7 @@ from rclpy.parameter import Parameter
 from ipmc_sensor_ros.nodes.estimator_node import EstimatorNode
 from ipmc_sensor_ros.nodes.monitor import TrackingMonitor
 from ipmc_sensor_ros.nodes.simulator_node import SimulatorNode
+from conftest import TEST_DOMAIN
 
 pytestmark = pytest.mark.ros
 
@@ -59,7 +60,7 @@ def _context_with_monitor(monkeypatch):
     """A fresh context on a random loopback domain, its executor and a monitor node."""
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=random.randint(100, 200))
+    rclpy.init(context=ctx, domain_id=TEST_DOMAIN)
     ex = SingleThreadedExecutor(context=ctx)
     monitor_node = rclpy.create_node("monitor", context=ctx)
     ex.add_node(monitor_node)

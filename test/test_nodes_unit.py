@@ -34,6 +34,7 @@ from ipmc_sensor_ros.physics.parameters import Geometry
 from ipmc_sensor_ros.lti.reduction import reduce_model
 from ipmc_sensor_ros.simulation.sensor import SensorSimulator
 from ipmc_sensor_ros.simulation.stimuli import CrankSlider
+from conftest import TEST_DOMAIN
 
 pytestmark = pytest.mark.ros
 
@@ -149,7 +150,7 @@ class Harness:
 
     def __init__(self, node_cls=EstimatorNode, overrides=(), use_sim_time=False):
         self.ctx = rclpy.Context()
-        rclpy.init(context=self.ctx, domain_id=random.randint(100, 200))
+        rclpy.init(context=self.ctx, domain_id=TEST_DOMAIN)
         params = [Parameter(k, value=v) for k, v in dict(overrides).items()]
         if use_sim_time:
             params.append(Parameter("use_sim_time", value=True))
@@ -416,7 +417,7 @@ def test_effects_current_offset_is_removed_and_delay_restamps(harness, reduced):
 
 def test_invalid_startup_parameters_raise_naming_the_parameter():
     ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=random.randint(100, 200))
+    rclpy.init(context=ctx, domain_id=TEST_DOMAIN)
     try:
         for name, value, needle in [("length_m", -1.0, "length_m"),
                                     ("youngs_modulus_pa", -5.0, "youngs_modulus_pa"),
@@ -469,7 +470,7 @@ def test_params_file_is_applied_in_any_namespace(tmp_path):
     path = tmp_path / "est.yaml"
     path.write_text(text)
     ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=random.randint(100, 200),
+    rclpy.init(context=ctx, domain_id=TEST_DOMAIN,
                args=["--ros-args", "--params-file", str(path)])
     try:
         node = EstimatorNode(context=ctx, namespace="/rig3")
@@ -568,7 +569,7 @@ def test_plugin_effect_is_used_by_the_estimator_node():
 
     plugin = ROOT / "examples" / "polymer_leakage.py"
     ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=random.randint(100, 200))
+    rclpy.init(context=ctx, domain_id=TEST_DOMAIN)
     try:
         node = EstimatorNode(context=ctx, parameter_overrides=[
             Parameter("plugins", value=[str(plugin)]),
@@ -587,7 +588,7 @@ def test_plugin_effect_is_used_by_the_estimator_node():
 
 def test_simulator_node_field_fidelity_publishes():
     ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=random.randint(100, 200))
+    rclpy.init(context=ctx, domain_id=TEST_DOMAIN)
     try:
         node = SimulatorNode(context=ctx, parameter_overrides=[
             Parameter("fidelity", value="field"), Parameter("realtime_factor", value=0.0),

@@ -396,8 +396,7 @@ def _diagnose_report(rd: Path, diag) -> None:
 def _cmd_estimate(args) -> int:
     """Offline estimation with the node's code path and parameters file."""
     from ..interface import specs as config
-    from ..estimation.deflection import estimate_record
-    from ..estimation.inverse import validate_block
+    from ..estimation.stream import estimate_record, validate_block
     from ..workbench.io import TimeSeries, read_any, read_bag, write_bag, write_timeseries
 
     values = config.load_params_file(args.params) if args.params else \
@@ -425,8 +424,13 @@ def _cmd_estimate(args) -> int:
     estimator = config.build_estimator(values)
     _say(f"estimating {data.current_a.size} samples of {src} with {estimator.model.describe()} "
          f"(order {estimator.reduction_order}, fs {fs:g} Hz, leak {values['leak_corner_hz']:g} Hz)")
-    t_out, w, resets = estimate_record(estimator, data.time_s, current,
-                                       max_gap_s=float(values["max_gap_s"]))
+    t_out, w, stream = estimate_record(estimator, data.time_s, current,
+                                       max_gap_s=float(values["max_gap_s"]), source=str(src))
+    resets = stream.counters["resets"]
+    if stream.counters["samples_rejected"]:
+        _say(f"{src}: {stream.counters['samples_rejected']} sample(s) rejected by the stream "
+             f"rules: {stream.last_rejection}")
+    current = current[stream.kept]
     out = Path(args.out)
     as_bag = args.format == "bag" or (args.format is None and (out.suffix in (".mcap", ".db3")
                                                                or out.suffix == ""))
@@ -443,7 +447,8 @@ def _cmd_estimate(args) -> int:
     msg = f"wrote {t_out.size} estimates to {out} ({'bag' if as_bag else 'ipmc-timeseries/1'})"
     if resets:
         msg += f"; {resets} filter reset(s) at time gaps > {values['max_gap_s']} s or backward jumps"
-    if data.deflection_m is not None and data.deflection_alignment is not None and not resets:
+    if (data.deflection_m is not None and data.deflection_alignment is not None and not resets
+            and stream.kept.all()):
         truth = data.deflection_m
         sel = data.time_s >= data.time_s[0] + 5.0 / (2 * np.pi * float(values["leak_corner_hz"]))
         if sel.sum() > 10 and not estimator.delay_s:

@@ -44,7 +44,7 @@ from ..physics.model import SensorModel
 from ..physics.parameters import ParameterError
 from ..lti.reduction import ReducedModel, append_rational, reduce_response
 
-__all__ = ["DeflectionEstimator", "estimate_record"]
+__all__ = ["DeflectionEstimator"]
 
 
 def _overrides(effect: Effect, name: str) -> bool:
@@ -155,7 +155,7 @@ class DeflectionEstimator:
 
     def process(self, time_s, current_a) -> tuple[np.ndarray, np.ndarray]:
         """Filter one block; returns (output times, deflection).  Pass validated values
-        (:func:`~ipmc_sensor_ros.estimation.inverse.validate_block`)."""
+        (:func:`~ipmc_sensor_ros.estimation.stream.validate_block`)."""
         t = np.asarray(time_s, float)
         i = np.asarray(current_a, float)
         if t.size == 0:
@@ -242,29 +242,3 @@ class DeflectionEstimator:
         return {"sample_rate_hz": self.inverse.sample_rate_hz,
                 "leak_corner_hz": self.inverse.leak_corner_hz,
                 "offset_corner_hz": self.inverse.offset_corner_hz}
-
-
-def estimate_record(estimator: DeflectionEstimator, time_s, current_a, *, max_gap_s: float = 0.1,
-                    block_samples: int = 1000) -> tuple[np.ndarray, np.ndarray, int]:
-    """Run ``estimator`` over a whole record in blocks, with the node's time rules:
-    a gap longer than ``max_gap_s`` resets the filter (the missing current is
-    unknown), as does time going backwards (a record may hold several concatenated
-    runs).  Returns (output times, deflection, number of resets).  Block size does
-    not change the result (blocks and single samples give identical output).
-    """
-    t = np.asarray(time_s, float)
-    i = np.asarray(current_a, float)
-    out_t, out_w, resets = [], [], 0
-    start = 0
-    steps = np.diff(t)
-    breaks = np.flatnonzero((steps <= 0) | (steps > max_gap_s)) + 1
-    for stop in list(breaks) + [t.size]:
-        if start > 0:
-            estimator.reset()
-            resets += 1
-        for k in range(start, stop, block_samples):
-            tb, wb = estimator.process(t[k:min(k + block_samples, stop)], i[k:min(k + block_samples, stop)])
-            out_t.append(tb)
-            out_w.append(wb)
-        start = stop
-    return np.concatenate(out_t), np.concatenate(out_w), resets

@@ -51,30 +51,24 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.signal as sig
 
+from ..errors import ParameterError
 from ..lti.discretize import default_prewarp_hz, tustin_sos
 from ..lti.reduction import ReducedModel
 
 __all__ = ["EstimatorError", "InverseEstimator", "inverse_zpk", "leak_tradeoff",
-           "validate_block", "DEFAULT_LEAK_CORNER_HZ", "MAX_BLOCK_SAMPLES"]
-
-#: Largest block accepted in one call of :func:`validate_block` (samples).
-MAX_BLOCK_SAMPLES = 1_000_000
+           "DEFAULT_LEAK_CORNER_HZ"]
 
 #: Blocks up to this many samples (single channel) are filtered by a plain-Python
 #: recursion instead of :func:`scipy.signal.sosfilt` (identical output, lower fixed
 #: cost); above it sosfilt's vectorised loop wins (measured crossover ~40 samples).
 SMALL_BLOCK_SAMPLES = 16
 
-#: Largest plausible |current|, A: IPMC sensing currents are micro- to milliamperes;
-#: anything above this is a unit or driver error, not a measurement.
-MAX_ABS_CURRENT_A = 1.0
-
 #: Default leaky-integration corner, Hz: time constant 16 s; a 2 mm step held
 #: 3 s loses 17 %, a 1 Hz sinusoid sees a 0.57 deg phase lead.
 DEFAULT_LEAK_CORNER_HZ = 0.01
 
 
-class EstimatorError(ValueError):
+class EstimatorError(ParameterError):
     """Invalid estimator configuration (names the parameter and the value)."""
 
 
@@ -127,38 +121,6 @@ def leak_tradeoff(reduced: ReducedModel, leak_corner_hz: float, hold_time_s: flo
         steady = 0.0
     return {"held_step_relative_error": step_err, "offset_steady_error_m": steady,
             "offset_peak_error_m": peak}
-
-
-def validate_block(values, max_samples: int = MAX_BLOCK_SAMPLES,
-                   max_abs_current_a: float = MAX_ABS_CURRENT_A) -> np.ndarray:
-    """Check a block of current samples before it touches filter state.
-
-    Returns a float64 1-D array, or raises :class:`EstimatorError` saying why
-    (empty, too long, non-finite or implausibly large values).  Rejecting the
-    whole block, rather than patching samples, keeps the filter state clean and
-    the sample accounting exact.
-    """
-    try:
-        x = np.asarray(values, dtype=float)
-    except (TypeError, ValueError):
-        raise EstimatorError("current block is not numeric") from None
-    if x.ndim != 1:
-        raise EstimatorError(f"current block must be 1-D, got shape {x.shape}")
-    if x.size == 0:
-        raise EstimatorError("current block is empty")
-    if x.size > max_samples:
-        raise EstimatorError(f"current block has {x.size} samples, more than the limit {max_samples}")
-    if float(np.max(np.abs(x))) <= max_abs_current_a:   # one pass; NaN makes it False
-        return x
-    finite = np.isfinite(x)
-    if not finite.all():
-        raise EstimatorError(f"current block has {int((~finite).sum())} non-finite sample(s) "
-                             f"(first at index {int(np.argmin(finite))})")
-    big = np.abs(x) > max_abs_current_a
-    if big.any():
-        raise EstimatorError(f"current block has |i| > {max_abs_current_a} A at index "
-                             f"{int(np.argmax(big))} ({x[int(np.argmax(big))]!r} A): not a sensing current")
-    return x
 
 
 @dataclass(frozen=True)
@@ -259,7 +221,7 @@ class InverseEstimator:
         """Filter a block of current samples, A -> deflection, m.
 
         ``current_a``: shape ``(n,)`` (one channel only) or ``(n, channels)``.
-        Pass values through :func:`validate_block` first: the filter trusts its input.
+        Pass values through :func:`~ipmc_sensor_ros.estimation.stream.validate_block` first: the filter trusts its input.
         """
         x = np.asarray(current_a, dtype=float)
         squeeze = x.ndim == 1

@@ -22,6 +22,8 @@ import array
 
 import numpy as np
 
+from ..errors import DataError
+
 __all__ = ["LayoutError", "SAMPLE_LABEL", "CURRENT_COLUMNS", "DEFLECTION_COLUMNS", "unpack_pairs"]
 
 #: Label of the row dimension.
@@ -32,7 +34,7 @@ CURRENT_COLUMNS = "time_s,current_A"
 DEFLECTION_COLUMNS = "time_s,deflection_m"
 
 
-class LayoutError(ValueError):
+class LayoutError(DataError):
     """A ``Float64MultiArray`` whose layout does not follow the block convention."""
 
 

@@ -15,7 +15,8 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
 from ..estimation.deflection import DeflectionEstimator
-from ..estimation.inverse import DEFAULT_LEAK_CORNER_HZ, MAX_BLOCK_SAMPLES
+from ..estimation.inverse import DEFAULT_LEAK_CORNER_HZ
+from ..estimation.stream import MAX_BLOCK_SAMPLES
 from ..physics.effects import load_plugin
 from ..physics.model import BASES, SensorModel, parse_model_name
 from ..physics.parameters import GEOMETRY_LIMITS_M, Geometry, MaterialParameters, ParameterError
@@ -27,7 +28,7 @@ __all__ = ["Spec", "ConfigurationError", "GEOMETRY_SPECS", "MATERIAL_SPECS", "MO
            "markdown_table"]
 
 
-class ConfigurationError(ValueError):
+class ConfigurationError(ParameterError):
     """A parameter value the node cannot start (or continue) with; the message names it."""
 
 

@@ -49,6 +49,7 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..errors import ParameterError
 from ..physics.model import SensorModel
 
 __all__ = [
@@ -69,7 +70,7 @@ _DB_SCALE = 0.1 * np.log(10.0) / 20.0   # 0.1 dB expressed as a natural-log magn
 _DEG_SCALE = np.pi / 180.0               # 1 degree in radians
 
 
-class ReductionError(ValueError):
+class ReductionError(ParameterError):
     """A reduction request that cannot be honoured (order, band, response)."""
 
 

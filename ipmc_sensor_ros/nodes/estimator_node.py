@@ -9,12 +9,12 @@ inverse filter; the same code path as ``ipmc-model estimate``):
   the clamp frame, one per sample / last of block / off), ``deflection/block``
   (``Float64MultiArray``, ``time_s,deflection_m``, one per accepted input
   message) and ``estimator/counters`` (``std_msgs/String`` JSON, 1 Hz);
-* validates every message before it touches the filter (rejected messages
-  never change filter state), resets the filter on backward time jumps and on
-  gaps longer than ``max_gap_s``, and rebuilds the filter without an output
-  jump on runtime parameter changes.
+* hands every block to the stream core
+  (:class:`ipmc_sensor_ros.estimation.stream.StreamEstimator`), which owns every rule of the
+  stream (values, times, gaps, resets, counters); this node only unpacks, feeds and publishes,
+  and rebuilds the filter without an output jump on runtime parameter changes.
 
-See docs/ros_interface.md for the full interface.
+README "ROS 2 interface" documents topics, parameters and counters.
 """
 from __future__ import annotations
 
@@ -33,7 +33,8 @@ from std_msgs.msg import Float64MultiArray, String
 
 from ..interface import specs as C
 from ..estimation.deflection import DeflectionEstimator
-from ..estimation.inverse import MAX_ABS_CURRENT_A, EstimatorError, InverseEstimator, validate_block
+from ..estimation.inverse import EstimatorError, InverseEstimator
+from ..estimation.stream import COUNTER_NAMES, StreamEstimator, echo
 from ..physics.parameters import ParameterError
 from ..lti.reduction import ReductionError
 from . import params as P
@@ -44,15 +45,6 @@ from .runner import run
 __all__ = ["EstimatorNode", "ESTIMATOR_SPECS", "COUNTER_NAMES", "PUBLISH_POINTS", "main"]
 
 PUBLISH_POINTS = C.PUBLISH_POINTS
-
-#: Relative tolerance on the median sample period of a block against 1/sample_rate_hz.
-PERIOD_TOLERANCE = 0.01
-
-#: Largest representable stamp (builtin_interfaces/Time.sec is int32), s.
-MAX_STAMP_S = 2.0 ** 31 - 1.0
-
-COUNTER_NAMES = ("messages_in", "samples_in", "samples_out", "samples_rejected",
-                 "messages_rejected", "samples_dropped", "resets", "gaps", "gaps_bridged")
 
 ESTIMATOR_SPECS = C.ESTIMATOR_SPECS
 
@@ -104,8 +96,26 @@ def design(values: dict, reduced=None):
     return est.reduced, est
 
 
+def _one_sample(msg: Float64MultiArray):
+    """``(time, current)`` of a well-formed one-sample timed message (the layout the
+    simulator and DAQ drivers publish), as floats without numpy; ``None`` for any other
+    message, which then takes the general path and gets its precise layout check."""
+    layout = msg.layout
+    dims = layout.dim
+    if len(dims) != 2 or layout.data_offset != 0:
+        return None
+    d0, d1 = dims
+    if (d0.size != 1 or d0.stride != 2 or d1.size != 2 or d1.stride != 2
+            or d0.label != SAMPLE_LABEL or d1.label != CURRENT_COLUMNS):
+        return None
+    data = msg.data
+    if len(data) != 2:
+        return None
+    return data[0], data[1]
+
+
 class EstimatorNode(Node):
-    """Deflection estimator node; see the module docstring and docs/ros_interface.md.
+    """Deflection estimator node; see the module docstring and README "ROS 2 interface".
 
     ``kwargs`` go to :class:`rclpy.node.Node` (context, namespace,
     parameter_overrides, ...), so several nodes can share one process.
@@ -120,25 +130,25 @@ class EstimatorNode(Node):
         P.declare(self, ESTIMATOR_SPECS)
         self._values = P.read(self, ESTIMATOR_SPECS)
         try:
-            self._reduced, self._estimator = design(self._values)
+            self._reduced, estimator = design(self._values)
         except _ERRORS as exc:
             raise P.ConfigurationError(str(exc)) from None
         self._model_key = _model_key(self._values)
-        self._refresh_fast_path()
         self._pending: tuple | None = None
-        self._counters = dict.fromkeys(COUNTER_NAMES, 0)
-        self._last_time_s: float | None = None
-        self.last_rejection: str = ""
-        self.last_warning: str = ""
         self._ticks = 0
 
         qos = P.make_qos(self._values)
         self._sub = self.create_subscription(Float64MultiArray, "current", self._on_current, qos)
         self._pub_block = self.create_publisher(Float64MultiArray, "deflection/block", qos)
         self._packer = BlockPacker(DEFLECTION_COLUMNS)
-        self._topic = self._sub.topic_name
         self._pub_point = self.create_publisher(PointStamped, "deflection", qos)
         self._pub_counters = self.create_publisher(String, "estimator/counters", P.COUNTERS_QOS)
+        logger = self.get_logger()
+        self._stream = StreamEstimator(
+            estimator, max_gap_s=float(self._values["max_gap_s"]),
+            max_block_samples=int(self._values["max_block_samples"]),
+            source=self._sub.topic_name, now_s=lambda: self.get_clock().now().nanoseconds * 1e-9,
+            warn=lambda text: logger.warning(text, throttle_duration_sec=1.0))
         # Steady clock: counters and the waiting message must not stall under
         # use_sim_time before /clock arrives.
         self._timer = self.create_timer(1.0, self._on_timer,
@@ -146,184 +156,88 @@ class EstimatorNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._on_parameters_set)
         r = self._reduced
-        self.get_logger().info(
-            f"ready: {self._estimator.model.describe()} model, order {r.order} reduction "
-            f"over {r.band_hz[0]}-{r.band_hz[1]} Hz, fs = {self._estimator.sample_rate_hz} Hz, "
-            f"leak corner {self._estimator.inverse.leak_corner_hz} Hz; listening on {self._sub.topic_name}")
+        logger.info(
+            f"ready: {estimator.model.describe()} model, order {r.order} reduction "
+            f"over {r.band_hz[0]}-{r.band_hz[1]} Hz, fs = {estimator.sample_rate_hz} Hz, "
+            f"leak corner {estimator.inverse.leak_corner_hz} Hz; listening on {self._sub.topic_name}")
 
     # -- public helpers -------------------------------------------------------
     def counters(self) -> dict[str, int]:
-        """Copy of the counters (ints).
-
-        Invariant: samples_in == samples_out + samples_rejected + samples_dropped.
-        """
+        """Copy of the stream counters (ints); invariant in
+        :mod:`ipmc_sensor_ros.estimation.stream`."""
         with self._lock:
-            return dict(self._counters)
+            return dict(self._stream.counters)
+
+    @property
+    def stream(self) -> StreamEstimator:
+        """The stream core (rules, counters) this node feeds."""
+        return self._stream
 
     @property
     def estimator(self) -> InverseEstimator:
         """The discrete inverse filter currently in use (replaced on parameter changes)."""
-        return self._estimator.inverse
+        return self._stream.estimator.inverse
 
     @property
     def deflection_estimator(self) -> DeflectionEstimator:
         """The core model-aware estimator (filter + effects) currently in use."""
-        return self._estimator
+        return self._stream.estimator
 
     @property
     def input_topic(self) -> str:
         return self._sub.topic_name
 
-    # -- logging helpers ------------------------------------------------------
-    def _warn(self, text: str) -> None:
-        self.last_warning = text
-        self.get_logger().warning(text, throttle_duration_sec=1.0)
+    @property
+    def last_rejection(self) -> str:
+        return self._stream.last_rejection
 
-    def _reject(self, n: int, reason: str) -> None:
-        self._counters["messages_rejected"] += 1
-        self._counters["samples_rejected"] += n
-        self.last_rejection = reason
-        self.get_logger().warning(f"rejected message on {self._sub.topic_name} ({n} sample(s)): "
-                                  f"{reason}", throttle_duration_sec=5.0)
+    @property
+    def last_warning(self) -> str:
+        return self._stream.last_warning
 
-    def _reset(self, text: str) -> None:
-        self._estimator.reset()
-        self._counters["resets"] += 1
-        self._warn(text)
-
-    # -- data path ------------------------------------------------------------
-    def _refresh_fast_path(self) -> None:
-        """Cache the values the one-sample path reads (after every parameter change)."""
-        self._max_gap_s = float(self._values["max_gap_s"])
-        self._fs = float(self._estimator.sample_rate_hz)
-
-    def _times(self, times: np.ndarray | None, n: int) -> np.ndarray:
-        """Check the sample times of a block (or infer them); raise EstimatorError."""
-        fs = self._estimator.sample_rate_hz
-        if times is None:
-            if self._last_time_s is None:
-                t0 = self.get_clock().now().nanoseconds * 1e-9
-                return t0 + np.arange(n) / fs
-            return self._last_time_s + np.arange(1, n + 1) / fs
-        # strictly increasing with finite ends implies all finite and within the ends
-        # (NaN fails 'dt > 0'), so the range is checked on the first and last time only
-        dt = np.diff(times)
-        if not (dt > 0.0).all():
-            if not np.all(np.isfinite(times)):
-                raise EstimatorError("sample times contain non-finite values")
-            k = int(np.argmax(~(dt > 0.0)))
-            raise EstimatorError(f"sample times are not strictly increasing (index {k + 1}: "
-                                 f"{times[k + 1]!r} s after {times[k]!r} s)")
-        first, last = float(times[0]), float(times[-1])
-        if not (math.isfinite(first) and math.isfinite(last)):
-            raise EstimatorError("sample times contain non-finite values")
-        if first < 0.0 or last > MAX_STAMP_S:
-            raise EstimatorError(f"sample times must lie in [0, {MAX_STAMP_S:.0f}] s")
-        if n >= 2:
-            period = float(np.median(dt))
-            if abs(period * fs - 1.0) > PERIOD_TOLERANCE:
-                raise EstimatorError(f"median sample period {period:.6g} s does not match "
-                                     f"sample_rate_hz = {fs} Hz (1/fs = {1.0 / fs:.6g} s, "
-                                     f"tolerance {PERIOD_TOLERANCE:.0%})")
-        return times
-
+    # -- data path: unpack -> stream core -> publish ----------------------------
     def _on_current(self, msg: Float64MultiArray) -> None:
         with self._lock:
-            if self._one_sample(msg):
-                return
-            n_claimed = claimed_samples(msg)
-            self._counters["messages_in"] += 1
-            self._counters["samples_in"] += n_claimed
+            one = _one_sample(msg)
+            if one:
+                out = self._stream.feed_one(*one)
+                if out is not False:
+                    if out is not None:
+                        self._publish(self._packer.pack_one(*out), out[0], out[1], 1)
+                    return
             try:
                 block = unpack_block(msg, CURRENT_COLUMNS)
-                current = validate_block(block.values,
-                                         max_samples=int(self._values["max_block_samples"]))
-                times = self._times(block.times_s, current.size)
-            except (LayoutError, EstimatorError) as exc:
-                self._reject(n_claimed, str(exc))
+            except LayoutError as exc:
+                self._stream.reject(claimed_samples(msg), str(exc))
                 return
-            try:
-                self._process(times, current)
-            except Exception as exc:  # last resort: never let a callback kill the node
-                self._estimator.reset()
-                self._counters["samples_dropped"] += current.size
-                self.get_logger().error(f"dropped a block of {current.size} sample(s): {exc!r}")
+            out = self._stream.feed(block.times_s, block.values, claimed=claimed_samples(msg))
+            if out is not None:
+                t, w = out
+                self._publish(self._packer.pack(t, w), t, w, t.size)
 
-    def _one_sample(self, msg: Float64MultiArray) -> bool:
-        """Lean path of a well-formed one-sample timed message that needs no reset, gap
-        handling or effects: the general path's checks and results in scalar Python
-        (identical output and counters, tested).  Returns False, having touched
-        nothing, for any other message, which then takes the general path (and gets
-        its precise rejection message)."""
-        layout = msg.layout
-        dims = layout.dim
-        if len(dims) != 2 or layout.data_offset != 0:
-            return False
-        d0, d1 = dims
-        if (d0.size != 1 or d0.stride != 2 or d1.size != 2 or d1.stride != 2
-                or d0.label != SAMPLE_LABEL or d1.label != CURRENT_COLUMNS):
-            return False
-        data = msg.data
-        if len(data) != 2:
-            return False
-        t, i = data[0], data[1]
-        # NaN fails every comparison, so non-finite values leave through the general path
-        if not (0.0 <= t <= MAX_STAMP_S and -MAX_ABS_CURRENT_A <= i <= MAX_ABS_CURRENT_A):
-            return False
-        last = self._last_time_s
-        if last is not None:
-            step = t - last
-            if not (0.0 < step <= self._max_gap_s and step * self._fs <= 1.5):
-                return False
-        est = self._estimator
-        if not est.plain:
-            return False
-        self._counters["messages_in"] += 1
-        self._counters["samples_in"] += 1
-        t_out, w = est.process_one(t, i)
-        if not math.isfinite(w):
-            est.reset()
-            self._counters["samples_dropped"] += 1
-            self._warn(f"non-finite estimate on {self._topic}: block dropped, filter reset")
-            return True
-        self._last_time_s = t
-        self._pub_block.publish(self._packer.pack_one(t_out, w))
-        if self._values["publish_points"] != "none":
-            self._publish_point(t_out, w)
-        self._counters["samples_out"] += 1
-        return True
-
-    def _process(self, times: np.ndarray, current: np.ndarray) -> None:
-        topic = self._topic
-        if self._last_time_s is not None:
-            step = float(times[0] - self._last_time_s)
-            if step <= 0.0:
-                self._reset(f"time jumped back by {-step:.6g} s on {topic}: filter reset")
-            elif step > float(self._values["max_gap_s"]):
-                self._counters["gaps"] += 1
-                self._reset(f"gap of {step:.6g} s (> max_gap_s = {self._values['max_gap_s']} s) "
-                            f"on {topic}: filter reset")
-            elif step * self._estimator.sample_rate_hz > 1.5:
-                self._counters["gaps_bridged"] += 1
-        t_out, y = self._estimator.process(times, current)
-        if not np.all(np.isfinite(y)):
-            self._estimator.reset()
-            self._counters["samples_dropped"] += current.size
-            self._warn(f"non-finite estimate on {topic}: block dropped, filter reset")
+    def _publish(self, block_msg: Float64MultiArray, times, deflections, n: int) -> None:
+        """Publish a block and its points; a publish that cannot complete (e.g. a stalled
+        reliable subscriber) is counted by the stream core, never fatal, never a reset."""
+        try:
+            self._pub_block.publish(block_msg)
+        except Exception as exc:  # rclpy raises RCLError and others: back-pressure, not a bug
+            self._stream.unpublished(n, echo(str(exc)))
             return
-        self._last_time_s = float(times[-1])
-        self._pub_block.publish(self._packer.pack(t_out, y))
-        self._publish_points(t_out, y)
-        self._counters["samples_out"] += current.size
-
-    def _publish_points(self, times: np.ndarray, y: np.ndarray) -> None:
         mode = self._values["publish_points"]
         if mode == "none":
             return
-        if mode == "last_of_block":
-            times, y = times[-1:], y[-1:]
-        for t, w in zip(times.tolist(), y.tolist()):
-            self._publish_point(t, w)
+        try:
+            if n == 1 and not isinstance(times, np.ndarray):
+                self._publish_point(times, deflections)
+            elif mode == "last_of_block":
+                self._publish_point(float(times[-1]), float(deflections[-1]))
+            else:
+                for t, w in zip(times.tolist(), deflections.tolist()):
+                    self._publish_point(t, w)
+        except Exception as exc:  # the block went out; points are a convenience view
+            self._stream.counters["messages_unpublished"] += 1
+            self.get_logger().warning(f"could not publish deflection points: {echo(str(exc))}",
+                                      throttle_duration_sec=1.0)
 
     def _publish_point(self, time_s: float, deflection_m: float) -> None:
         sec, nsec = divmod(round(time_s * 1e9), 1_000_000_000)
@@ -374,11 +288,9 @@ class EstimatorNode(Node):
             self._pending = None
             old = self._values
             self._values = values
-            self._refresh_fast_path()
+            self._stream.max_gap_s = float(values["max_gap_s"])
             if key != self._model_key or _filter_kwargs(values) != _filter_kwargs(old):
-                new.continue_from(self._estimator)
-                self._estimator = new
-                self._refresh_fast_path()
+                self._stream.replace_estimator(new)
                 self._reduced, self._model_key = reduced, key
                 self.get_logger().info("parameters changed: filter rebuilt ("
                                        + ", ".join(p.name for p in parameters) + ")")

@@ -22,6 +22,8 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, Mapping
 
+from ..errors import ParameterError
+
 __all__ = [
     "ParameterError",
     "MaterialParameters",
@@ -33,8 +35,6 @@ __all__ = [
 ]
 
 
-class ParameterError(ValueError):
-    """A physical parameter or geometry value is not physically meaningful."""
 
 
 def _check(name: str, value: Any, *, positive: bool = True, allow_zero: bool = False,
