@@ -1,7 +1,7 @@
 """Benchmarks of the core: estimator throughput and per-sample overhead, model evaluation.
 
 Every figure is a ratio against a baseline measured in the same process, so the
-numbers are comparable across machines.  No assertions: see bench/README.md.
+numbers are comparable across machines.  No assertions: README "Benchmarks" lists the measured figures.
 """
 from __future__ import annotations
 

@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from ipmc_sensor_ros.physics.field import FieldSolver, convergence_table
+from ipmc_sensor_ros.physics.field import FieldSolver
+from ipmc_sensor_ros.workbench.studies import convergence_table
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_PARAMETERS, PAPER_SAMPLES
 from ipmc_sensor_ros.simulation.sensor import lti_response_fft
@@ -78,7 +79,8 @@ def test_term_dropped_from_eq9_is_negligible_at_physical_amplitudes():
     amplitude (a second harmonic); at the paper's 2 mm it changes the current by ~2e-5,
     so the linear model only errs by 1 % near 1 m of tip deflection -- impossible for a
     22 mm beam.  The linear variant reproduces H1 (0.14 % waveform error at 2 kHz)."""
-    from ipmc_sensor_ros.physics.field import NonlinearFieldSolver, nonlinearity_study
+    from ipmc_sensor_ros.physics.field import NonlinearFieldSolver
+    from ipmc_sensor_ros.workbench.studies import nonlinearity_study
 
     model = SensorModel(PAPER_SAMPLES["slim"], effects=())
     fs = 2000.0
@@ -114,7 +116,7 @@ def test_large_deflection_error_of_the_linear_model_and_its_harmonics():
     elastica's current differs from eq. 21's by an odd, cubic distortion.  The error
     grows as the amplitude squared, the third harmonic dominates the second, and the
     linear model's error reaches 1 % at a deflection of about a fifth of the length."""
-    from ipmc_sensor_ros.physics.field import amplitude_at_error, large_deflection_study
+    from ipmc_sensor_ros.workbench.studies import amplitude_at_error, large_deflection_study
 
     model = SensorModel(PAPER_SAMPLES["short"])
     L = model.geometry.length_m

@@ -81,3 +81,31 @@ def test_control_object_matches_zpk():
     f = np.array([0.5, 5.0, 40.0])
     resp = np.array([complex(sys(2j * np.pi * x)) for x in f])
     assert np.allclose(resp, red.charge_response(2j * np.pi * f), rtol=1e-8)
+
+
+# Independent 50-digit roots of eq. 55 with Tables 1-2 (issue #13): the h2 model keeps the
+# g(s) factor of eq. 54 (degree 5 over 3).  An earlier version tested the effect name against
+# effect objects and silently dropped g(s) (degree 3 over 1).
+EQ55_ROOTS = {
+    "big": ([392.6157, -104.97, -196.18, -392.37, 0.0], [-71.911, -82.917, -309.45]),
+    "slim": ([392.6157, -104.97, -196.18, -392.37, 0.0], [-71.911, -82.917, -309.45]),
+    "short": ([392.6157, -104.97, -784.74, -1569.5, 0.0], [-71.911, -331.67, -1237.8]),
+}
+
+
+@pytest.mark.parametrize("sample", sorted(EQ55_ROOTS))
+def test_eq55_of_h2_has_the_independently_computed_roots(sample):
+    zeros_ref, poles_ref = EQ55_ROOTS[sample]
+    report = eq55_poles_zeros(SensorModel(PAPER_SAMPLES[sample]))
+    zeros, poles = np.sort(report["zeros"].real), np.sort(report["poles"].real)
+    assert np.allclose(np.abs(report["zeros"].imag), 0) and np.allclose(report["poles"].imag, 0)
+    # the references carry 4-5 significant digits: compare to 5e-4 relative (1e-3 rad/s at 0)
+    assert np.allclose(zeros, np.sort(zeros_ref), rtol=5e-4, atol=1e-3)
+    assert np.allclose(poles, np.sort(poles_ref), rtol=5e-4)
+    num_degree = len(paper_eq55(SensorModel(PAPER_SAMPLES[sample])).num[0][0]) - 1
+    assert num_degree == 5
+
+
+def test_h1_eq55_has_no_surface_resistance_factor():
+    report = eq55_poles_zeros(SensorModel(PAPER_SAMPLES["slim"], effects=()))
+    assert report["zeros"].size == 3 and report["poles"].size == 1

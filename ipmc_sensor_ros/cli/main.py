@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from ..physics.effects import load_plugin
-from ..physics.model import SensorModel, parse_effects, parse_model_name
+from ..physics.beam import FIDELITIES
+from ..physics.model import SensorModel, model_effects
 from ..physics.parameters import (PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, MaterialParameters,
                                  ParameterError, load_yaml)
 
@@ -78,9 +79,7 @@ def _effects_from_args(args, base_key: str = "model") -> tuple:
     for plugin in getattr(args, "plugin", None) or []:
         names = load_plugin(plugin)
         _say(f"plugin {plugin}: effects {', '.join(names)}")
-    _, base = parse_model_name(getattr(args, base_key))
-    extra = parse_effects(getattr(args, "effects", "") or "")
-    return tuple(parse_effects(base)) + tuple(e for e in extra if e.name not in base)
+    return model_effects(getattr(args, base_key), getattr(args, "effects", "") or "")
 
 
 def _load_data(args):
@@ -601,8 +600,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--format", choices=("timeseries", "frf", "bag"), default="timeseries")
     p.add_argument("--storage", choices=("sqlite3", "mcap"), default="sqlite3", help="bag storage")
-    p.add_argument("--fidelity", choices=("exact", "field"), default="exact",
-                   help="exact: FFT prediction of the closed form with its effects; field: the "
+    p.add_argument("--fidelity", choices=FIDELITIES, default="model",
+                   help="model: FFT prediction of the closed form with its effects; field: the "
                         "independent field-equation solution (base model and hydration_drift)")
     p.add_argument("--beam-model", choices=("linear", "elastica"), default="linear",
                    help="with --fidelity field: stress profile from the small-deflection beam "

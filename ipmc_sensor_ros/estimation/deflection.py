@@ -39,16 +39,11 @@ import numpy as np
 from scipy.signal import lfilter
 
 from .inverse import DEFAULT_LEAK_CORNER_HZ, InverseEstimator
-from ..physics.effects import Effect, get_effect
 from ..physics.model import SensorModel
-from ..physics.parameters import ParameterError
-from ..lti.reduction import ReducedModel, append_rational, reduce_response
+from ..physics.pipeline import DriftSchedule
+from ..lti.reduction import ReducedModel, reduce_model_parts
 
 __all__ = ["DeflectionEstimator"]
-
-
-def _overrides(effect: Effect, name: str) -> bool:
-    return getattr(type(effect), name) is not getattr(Effect, name)
 
 
 class DeflectionEstimator:
@@ -71,23 +66,13 @@ class DeflectionEstimator:
         self.band_hz = (float(band_hz[0]), float(band_hz[1]))
         self.update_s = float(update_s)
         self.delay_s = float(model.delay_s())
-        self._current_inv: list = []
-        self._deflection_inv: list = []
-        self._material_at = None
-        for spec in model.effects:
-            eff, values = get_effect(spec.name), spec.as_dict()
-            if eff.material_at(model, values) is not None:
-                self._material_at = eff.material_at(model, values)
-            if _overrides(eff, "output_transform"):
-                if not _overrides(eff, "inverse_output_transform"):
-                    raise ParameterError(f"parameter 'effects': '{spec.name}' transforms the current "
-                                         "but defines no inverse_output_transform")
-                self._current_inv.append((eff, values))
-            if _overrides(eff, "input_transform"):
-                if not _overrides(eff, "inverse_input_transform"):
-                    raise ParameterError(f"parameter 'effects': '{spec.name}' transforms the "
-                                         "deflection but defines no inverse_input_transform")
-                self._deflection_inv.append((eff, values))
+        compiled = model.compiled
+        compiled.require_inverse()
+        self._current_inv = compiled.output_transforms
+        self._deflection_inv = compiled.input_transforms
+        self._material_at = compiled.material_at
+        self._drift = (DriftSchedule(compiled.material_at, self.update_s)
+                       if compiled.material_at is not None else None)
         self._diffusive = None
         if reduced is None:
             reduced = self._reduce(model)
@@ -95,7 +80,6 @@ class DeflectionEstimator:
         self.inverse = InverseEstimator(reduced, sample_rate_hz, leak_corner_hz=leak_corner_hz,
                                         offset_corner_hz=offset_corner_hz, prewarp_hz=prewarp_hz)
         self._t0: float | None = None
-        self._next_update = self.update_s
         self._history = np.zeros(max(1, int(round(history_s * self.inverse.sample_rate_hz))))
         self._history_n = 0
         self._history_end = 0
@@ -125,9 +109,9 @@ class DeflectionEstimator:
         return ordered[ordered.size - self._history_n:]
 
     def _reduce(self, model: SensorModel) -> ReducedModel:
-        self._diffusive = reduce_response(model.diffusive_transfer, self.reduction_order, self.band_hz,
-                                          initial=self._diffusive)
-        return append_rational(self._diffusive, model.rational_factors())
+        reduced, self._diffusive = reduce_model_parts(model, self.reduction_order, self.band_hz,
+                                                      initial=self._diffusive)
+        return reduced
 
     # -- properties -------------------------------------------------------------
     @property
@@ -145,7 +129,8 @@ class DeflectionEstimator:
         """Zero the filter and restart the effects' time origin."""
         self.inverse.reset()
         self._t0 = None
-        self._next_update = self.update_s
+        if self._drift is not None:
+            self._drift.reset()
         self._history_n = 0
         self._bias_m = 0.0
         self._bias_zi = np.zeros(1)
@@ -169,17 +154,10 @@ class DeflectionEstimator:
             w = self.inverse.process(i)
             self._remember(i)
         else:
-            parts, start = [], 0
-            while start < t.size:
-                cut = int(np.searchsorted(elapsed, self._next_update, side="left"))
-                if cut <= start:
-                    drifted = self.model.with_material(self._material_at(self._next_update))
-                    self.inverse = self.inverse.rebuilt(self._reduce(drifted), self.recent_input)
-                    self._next_update += self.update_s
-                    continue
-                parts.append(self.inverse.process(i[start:cut]))
-                self._remember(i[start:cut])
-                start = cut
+            parts = []
+            for sl in self._drift.slices(elapsed, self._follow_drift):
+                parts.append(self.inverse.process(i[sl]))
+                self._remember(i[sl])
             w = np.concatenate(parts)
         if self._deflection_inv:
             w_prime = w + self._bias_m
@@ -190,6 +168,11 @@ class DeflectionEstimator:
             avg, self._bias_zi = lfilter([1 - a], [1, -a], w_prime - w, zi=self._bias_zi)
             self._bias_m = float(avg[-1])
         return (t - self.delay_s if self.delay_s else t), w
+
+    def _follow_drift(self, material) -> None:
+        """Rebuild the filter for the drifted ``material`` (bumpless: recent input replayed)."""
+        drifted = self.model.with_material(material)
+        self.inverse = self.inverse.rebuilt(self._reduce(drifted), self.recent_input)
 
     @property
     def plain(self) -> bool:

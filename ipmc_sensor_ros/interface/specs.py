@@ -18,7 +18,7 @@ from ..estimation.deflection import DeflectionEstimator
 from ..estimation.inverse import DEFAULT_LEAK_CORNER_HZ
 from ..estimation.stream import MAX_BLOCK_SAMPLES
 from ..physics.effects import load_plugin
-from ..physics.model import BASES, SensorModel, parse_model_name
+from ..physics.model import BASES, SensorModel
 from ..physics.parameters import GEOMETRY_LIMITS_M, Geometry, MaterialParameters, ParameterError
 from ..lti.reduction import MAX_ORDER, ReducedModel, ReductionError
 
@@ -145,10 +145,9 @@ def build_model(values: Mapping[str, Any]) -> SensorModel:
             raise ParameterError(f"parameter 'plugins': {exc}") from None
     geometry = Geometry(**{k: values[k] for k in GEOMETRY_NAMES})
     material = MaterialParameters(**{k: values[k] for k in MATERIAL_NAMES})
-    _, base_effects = parse_model_name(values["model"])
     extra = tuple(str(e) for e in values.get("effects") or ())
     try:
-        return SensorModel(geometry=geometry, material=material, effects=base_effects + extra)
+        return SensorModel.named(values["model"], geometry, material, extra)
     except ParameterError as exc:
         raise ParameterError(f"parameter 'effects' = {list(extra)} with model "
                              f"'{values['model']}': {exc}") from None

@@ -60,6 +60,7 @@ __all__ = [
     "reduce_model",
     "reduce_response",
     "append_rational",
+    "reduce_model_parts",
     "reduction_error",
     "reduction_error_table",
     "MAX_ORDER",
@@ -91,10 +92,6 @@ class ReducedModel:
     @property
     def order(self) -> int:
         return len(self.poles_rad_s)
-
-    @property
-    def is_real(self) -> bool:
-        return not (np.iscomplexobj(self.zeros_rad_s) or np.iscomplexobj(self.poles_rad_s))
 
     def charge_response(self, s) -> np.ndarray:
         """R_n(s) = H_n(s)/s, A s m^-1."""
@@ -233,8 +230,17 @@ def reduce_model(model: SensorModel, order: int = 4, band_hz: Sequence[float] = 
     the remaining diffusion-type part, so ``order`` counts the fitted poles
     only.
     """
-    return append_rational(reduce_response(model.diffusive_transfer, order, band_hz, **kwargs),
-                           model.rational_factors())
+    return reduce_model_parts(model, order, band_hz, **kwargs)[0]
+
+
+def reduce_model_parts(model: SensorModel, order: int = 4, band_hz: Sequence[float] = (0.1, 50.0),
+                       **kwargs) -> tuple[ReducedModel, ReducedModel]:
+    """(full reduction, fit of the diffusive part alone): the one place where the diffusive part
+    (:meth:`~ipmc_sensor_ros.physics.pipeline.CompiledModel.diffusive_transfer`) is reduced and
+    the exact rational factors are appended.  The diffusive fit warm-starts the next reduction
+    of a drifting material (``initial=``)."""
+    diffusive = reduce_response(model.diffusive_transfer, order, band_hz, **kwargs)
+    return append_rational(diffusive, model.rational_factors()), diffusive
 
 
 def append_rational(reduced: ReducedModel, factors) -> ReducedModel:
@@ -287,7 +293,7 @@ def _eq55_polynomials(model: SensorModel) -> tuple[np.ndarray, np.ndarray]:
     y, w, l, h = m.youngs_modulus_pa, g.width_m, g.length_m, g.half_thickness_m
     d, k, a0 = m.diffusivity_m2_per_s, m.k_rate_per_s, m.charge_stress_coupling_j_per_c
     b = (m.permittivity_f_per_m * m.surface_resistance_ohm / h
-         if "surface_resistance" in model.effects else 0.0)  # B(s) = b s, eq. 42
+         if model.has_effect("surface_resistance") else 0.0)  # B(s) = b s, eq. 42
     # f-part, eq. 52: 3 s Y W sqrt(d) (h sqrt(K)(1 + s/2K - s^2/8K^2) - sqrt(d)) / (a0 L^3 (s+K))
     quad = np.array([-h * np.sqrt(k) / (8 * k ** 2), h * np.sqrt(k) / (2 * k),
                      h * np.sqrt(k) - np.sqrt(d)])

@@ -42,7 +42,6 @@ __all__ = [
     "BlockPacker",
     "unpack_block",
     "claimed_samples",
-    "stamp_from_seconds",
 ]
 
 @dataclass(frozen=True)
@@ -134,10 +133,3 @@ def unpack_block(msg: Float64MultiArray, columns: str = CURRENT_COLUMNS) -> Bloc
     """
     times, values = unpack_pairs(msg, columns)
     return Block(times_s=times, values=values)
-
-
-def stamp_from_seconds(t_s: float) -> tuple[int, int]:
-    """(sec, nanosec) of a ``builtin_interfaces/Time`` for ``t_s`` seconds (t_s >= 0)."""
-    ns = int(round(float(t_s) * 1e9))
-    sec, nanosec = divmod(ns, 1_000_000_000)
-    return int(sec), int(nanosec)

@@ -36,7 +36,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray, String
 
-from ..physics.beam import require_field_fidelity
+from ..physics.beam import FIDELITIES, check_fidelity
 from ..physics.parameters import ParameterError
 from ..lti.reduction import ReductionError
 from ..simulation.sensor import FieldSensorSimulator, SensorSimulator
@@ -53,10 +53,10 @@ MAX_BLOCKS_PER_TICK = 10
 MIN_TICK_S = 1e-3
 
 _OWN_SPECS = (
-    P.Spec("fidelity", "reduced", str, "sensor physics: 'reduced' (order-8 reduction of the "
-           "closed form, every effect) or 'field' (independent solution of the field equations; "
-           "base model and hydration_drift only; ~50x real time)", read_only=True,
-           choices=("reduced", "field")),
+    P.Spec("fidelity", "model", str, "sensor physics: 'model' (the closed-form model with every "
+           "effect, as an order-8 reduction) or 'field' (independent solution of the field "
+           "equations; base model and hydration_drift only; ~50x real time)", read_only=True,
+           choices=FIDELITIES),
     P.Spec("beam_model", "linear", str, "fidelity 'field' only: stress profile from the tip "
            "deflection, 'linear' (the paper's small-deflection beam, eq. 21) or 'elastica' "
            "(large deflection: the physical source of the 'nonlinearity' effect)", read_only=True,
@@ -175,7 +175,7 @@ def describe_stimulus(stimulus: Stimulus, values: dict) -> str:
 
 
 class SimulatorNode(Node):
-    """Simulated sensor + DAQ node; see the module docstring and docs/ros_interface.md.
+    """Simulated sensor + DAQ node; see the module docstring and README "ROS 2 interface".
 
     ``kwargs`` go to :class:`rclpy.node.Node`.  Raises
     :class:`~ipmc_sensor_ros.nodes.params.ConfigurationError` on invalid parameters.
@@ -191,8 +191,7 @@ class SimulatorNode(Node):
             self._stimulus, self._stim_t0 = build_stimulus(v)
             chain = dict(current_gain=v["current_gain"], current_offset_a=v["current_offset_a"],
                          noise_rms_a=v["noise_rms_a"], seed=v["seed"])
-            require_field_fidelity(v["beam_model"], v["fidelity"] == "field")
-            if v["fidelity"] == "field":
+            if check_fidelity(v["fidelity"], v["beam_model"]):
                 self._sim = FieldSensorSimulator(model, v["sample_rate_hz"],
                                                  beam_model=v["beam_model"], **chain)
             else:

@@ -167,6 +167,24 @@ class ElasticaBeam:
 
 BEAM_MODELS = ("linear", "elastica")
 
+#: How a simulator computes the current: ``model`` -- the closed-form model with its effects
+#: (offline by exact FFT prediction, in the node by an order-8 reduction); ``field`` -- the
+#: independent solution of the field equations (:mod:`ipmc_sensor_ros.physics.field`).
+FIDELITIES = ("model", "field")
+
+
+def check_fidelity(fidelity: str, beam_model: str = "linear") -> bool:
+    """Validate ``fidelity`` and ``beam_model`` together; True for the field solution.
+
+    A large-deflection beam needs the field solution (the closed form assumes the
+    small-deflection beam, eq. 21).  Raises ParameterError naming the parameter."""
+    if fidelity not in FIDELITIES:
+        hint = " ('reduced' and 'exact' are now 'model')" if fidelity in ("reduced", "exact") else ""
+        raise ParameterError(f"parameter 'fidelity' must be one of {list(FIDELITIES)}, "
+                             f"got {fidelity!r}{hint}")
+    require_field_fidelity(beam_model, fidelity == "field")
+    return fidelity == "field"
+
 
 def require_field_fidelity(beam_model: str, field: bool) -> None:
     """Refuse a large-deflection beam where the closed form (small-deflection beam,

@@ -15,6 +15,7 @@ Text form (CLI ``--effects``, node parameter ``effects``, YAML ``model:``)::
 """
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping
@@ -24,9 +25,8 @@ import numpy as np
 from . import catalog as _catalog  # noqa: F401  (registers the built-in effects)
 from .effects import get_effect
 from .parameters import PAPER_PARAMETERS, Geometry, MaterialParameters, ParameterError
-from .sensing import h1
 
-__all__ = ["SensorModel", "EffectSpec", "BASES", "parse_model_name", "parse_effects",
+__all__ = ["SensorModel", "EffectSpec", "BASES", "model_effects", "parse_model_name", "parse_effects",
            "format_effect"]
 
 #: base name -> effects implied by it
@@ -98,6 +98,22 @@ def format_effect(spec: EffectSpec) -> str:
     return f"{spec.name}({', '.join(f'{k}={v:.6g}' for k, v in spec.values)})"
 
 
+def model_effects(name: str, extra_effects: str | Iterable = ()) -> tuple[EffectSpec, ...]:
+    """The effects of model ``name`` (``h1``/``h2``) plus ``extra_effects``: the one way a model
+    description (CLI flags, node parameters, model files) becomes a list of effects.  An extra
+    effect that the base already contains, or one listed twice, is refused."""
+    _, base = parse_model_name(name)
+    extra = parse_effects(extra_effects)
+    names = [e.name for e in extra]
+    for e in names:
+        if e in base:
+            raise ParameterError(f"effect '{e}' is already part of model '{name}' "
+                                 f"(h2 = h1 + surface_resistance)")
+        if names.count(e) > 1:
+            raise ParameterError(f"effect '{e}' listed twice")
+    return tuple(parse_effects(base)) + tuple(extra)
+
+
 def parse_model_name(name: str) -> tuple[str, tuple[str, ...]]:
     """'h2' -> ('h1', ('surface_resistance',)); refuse unknown names."""
     key = str(name).strip().lower()
@@ -134,11 +150,10 @@ class SensorModel:
     @classmethod
     def named(cls, name: str, geometry: Geometry, material: MaterialParameters = PAPER_PARAMETERS,
               extra_effects: str | Iterable = ()) -> "SensorModel":
-        """``h1`` or ``h2`` (the paper's models) for ``geometry``, plus ``extra_effects``."""
-        _, base = parse_model_name(name)
-        extra = parse_effects(extra_effects)
+        """``h1`` or ``h2`` (the paper's models) for ``geometry``, plus ``extra_effects``
+        (:func:`model_effects`: an effect already in the base is refused, not ignored)."""
         return cls(geometry=geometry, material=material,
-                   effects=tuple(parse_effects(base)) + tuple(e for e in extra if e.name not in base))
+                   effects=model_effects(name, extra_effects))
 
     @property
     def effect_names(self) -> tuple[str, ...]:
@@ -178,61 +193,38 @@ class SensorModel:
     def without_effect(self, name: str) -> "SensorModel":
         return SensorModel(self.geometry, self.material, tuple(e for e in self.effects if e.name != name))
 
-    def with_geometry(self, geometry: Geometry) -> "SensorModel":
-        return SensorModel(geometry=geometry, material=self.material, effects=self.effects)
-
     def with_material(self, material: MaterialParameters) -> "SensorModel":
         return SensorModel(geometry=self.geometry, material=material, effects=self.effects)
 
-    # -- evaluation ------------------------------------------------------------
-    @property
-    def is_lti(self) -> bool:
-        return all(get_effect(e.name).lti for e in self.effects)
+    # -- evaluation (physics/pipeline.py holds the rules) -------------------------
+    @functools.cached_property
+    def compiled(self):
+        """The model taken apart once (:class:`~ipmc_sensor_ros.physics.pipeline.CompiledModel`)."""
+        from .pipeline import compile_model
+
+        return compile_model(self)
 
     def transfer(self, s) -> np.ndarray:
-        """i(s)/w(s) in A m^-1 at complex frequencies ``s`` (rad s^-1): H1 times every
+        """i(s)/w(s) in A m^-1 at complex frequencies ``s`` (rad s^-1): H1 (eq. 31) times every
         effect's factor (non-LTI effects contribute their linear part only)."""
-        s = np.asarray(s, dtype=complex)
-        out = h1(s, self.material, self.geometry)
-        for spec in self.effects:
-            fac = get_effect(spec.name).factor(s, self, spec.as_dict())
-            if fac is not None:
-                out = out * fac
-        return out
+        return self.compiled.transfer(s)
 
     def delay_s(self) -> float:
         """Total pure delay of the LTI part, s."""
-        return float(sum(get_effect(e.name).delay_s(e.as_dict()) for e in self.effects))
+        return self.compiled.delay_s
 
     def rational_factors(self) -> list[tuple[np.ndarray, np.ndarray, float]]:
         """Continuous zpk (rad/s) of the effects whose factor is exactly rational."""
-        out = []
-        for spec in self.effects:
-            zpk = get_effect(spec.name).rational(self, spec.as_dict())
-            if zpk is not None:
-                out.append(zpk)
-        return out
+        return list(self.compiled.rational_factors)
 
     def diffusive_transfer(self, s) -> np.ndarray:
-        """``min_phase_transfer`` without the exactly rational factors: the
-        diffusion-type part that the reduction approximates by real poles/zeros."""
-        s = np.asarray(s, dtype=complex)
-        out = self.min_phase_transfer(s)
-        for z, p, k in self.rational_factors():
-            sc = s[..., None]
-            out = out / (k * np.prod(sc - z, axis=-1) / np.prod(sc - p, axis=-1))
-        return out
+        """The diffusion-type part the reduction approximates (no rational factors, no delay)."""
+        return self.compiled.diffusive_transfer(s)
 
     def min_phase_transfer(self, s) -> np.ndarray:
         """``transfer`` with its pure delay removed (what a causal inverse can invert)."""
-        s = np.asarray(s, dtype=complex)
-        return self.transfer(s) * np.exp(s * self.delay_s())
+        return self.compiled.min_phase_transfer(s)
 
     def frequency_response(self, frequency_hz) -> np.ndarray:
         """H(j 2 pi f), A m^-1."""
         return self.transfer(2j * np.pi * np.asarray(frequency_hz, dtype=float))
-
-    def charge_gain_dc(self) -> float:
-        """lim_{s->0} H(s)/s, A s m^-1 (= C m^-1): static charge per unit tip deflection."""
-        s = np.array([1e-9j])
-        return float(np.real(self.transfer(s)[0] / s[0]))

@@ -108,11 +108,6 @@ class MaterialParameters:
                 * self.anion_concentration_mol_per_m3 * self.one_minus_anion_volume_fraction
                 / (self.permittivity_f_per_m * self.gas_constant_j_per_mol_k * self.temperature_k))
 
-    @property
-    def debye_length_m(self) -> float:
-        """1/beta(0) = sqrt(d/K), the boundary-layer thickness of eq. 15, m."""
-        return math.sqrt(self.diffusivity_m2_per_s / self.k_rate_per_s)
-
     def replace(self, **changes: float) -> "MaterialParameters":
         """Return a copy with ``changes`` applied (validated)."""
         return dataclasses.replace(self, **changes)

@@ -29,11 +29,11 @@ import scipy.signal as sig
 from ..lti.discretize import default_prewarp_hz, tustin_sos
 from ..physics.model import SensorModel
 from ..physics.parameters import ParameterError
-from ..lti.reduction import ReducedModel, append_rational, reduce_response
+from ..physics.pipeline import DriftSchedule
+from ..lti.reduction import ReducedModel, reduce_model, reduce_model_parts
 from .stimuli import Stimulus
 
-__all__ = ["periodic_response", "padded_record", "lti_response_fft", "predict_current", "time_varying_response",
-           "material_nodes", "SensorSimulator", "FieldSensorSimulator",
+__all__ = ["periodic_response", "padded_record", "lti_response_fft", "predict_current", "SensorSimulator", "FieldSensorSimulator",
            "forward_reduction"]
 
 
@@ -61,8 +61,7 @@ def forward_reduction(model: SensorModel, sample_rate_hz: float, order: int = 8,
     high = 0.45 * sample_rate_hz
     if high <= low_hz * 10:
         raise ParameterError(f"sample_rate_hz={sample_rate_hz} is too low to simulate")
-    return append_rational(reduce_response(model.diffusive_transfer, order, (low_hz, high),
-                                           extension=3.0), model.rational_factors())
+    return reduce_model(model, order, (low_hz, high), extension=3.0)
 
 
 class FieldSensorSimulator:
@@ -148,8 +147,6 @@ class SensorSimulator:
     def __init__(self, model: SensorModel, sample_rate_hz: float, *, current_gain: float = 1.0,
                  current_offset_a: float = 0.0, noise_rms_a: float = 0.0, seed: int = 0,
                  order: int = 8, update_s: float = 5.0, replay_s: float = 1.0):
-        from ..physics.effects import get_effect
-
         fs = float(sample_rate_hz)
         if not (math.isfinite(fs) and fs > 0):
             raise ParameterError(f"parameter 'sample_rate_hz' must be > 0, got {sample_rate_hz!r}")
@@ -166,14 +163,15 @@ class SensorSimulator:
         self.noise_rms_a = float(noise_rms_a)
         self.order = int(order)
         self.update_s = float(update_s)
-        self._effects = [(get_effect(e.name), e.as_dict()) for e in model.effects]
-        self._material_at = next((f for f in (eff.material_at(model, v) for eff, v in self._effects)
-                                  if f is not None), None)
-        self._input = [(eff, v) for eff, v in self._effects
-                       if type(eff).input_transform is not _base_effect().input_transform]
+        compiled = model.compiled
+        self._compiled = compiled
+        self._material_at = compiled.material_at
+        self._drift = (DriftSchedule(compiled.material_at, self.update_s)
+                       if compiled.material_at is not None else None)
+        self._input = compiled.input_transforms
         self.reduced = forward_reduction(model, fs, self.order)
-        self._diffusive = reduce_response(model.diffusive_transfer, self.order,
-                                          (0.01, 0.45 * fs), extension=3.0) \
+        self._diffusive = reduce_model_parts(model, self.order, (0.01, 0.45 * fs),
+                                             extension=3.0)[1] \
             if self._material_at is not None else None
         self.sos = self._sos_for(self.reduced)
         delay = model.delay_s() * fs
@@ -182,7 +180,6 @@ class SensorSimulator:
         self._zi = np.zeros((self.sos.shape[0], 2))
         self._history = np.zeros(self._delay_int + 1)
         self._t_start: float | None = None
-        self._next_update = self.update_s
         self._replay = np.zeros(int(round(replay_s * fs))) if self._material_at is not None else None
 
     def _sos_for(self, reduced: ReducedModel) -> np.ndarray:
@@ -193,7 +190,8 @@ class SensorSimulator:
         self._zi = np.zeros_like(self._zi)
         self._history = np.zeros_like(self._history)
         self._t_start = None
-        self._next_update = self.update_s
+        if self._drift is not None:
+            self._drift.reset()
         if self._replay is not None:
             self._replay = np.zeros_like(self._replay)
         if self._material_at is not None:
@@ -223,8 +221,7 @@ class SensorSimulator:
         """Apply the effects' output transforms (at ``elapsed_s``) and the measurement chain."""
         i = np.asarray(clean_current_a, float)
         if elapsed_s is not None:
-            for eff, vals in self._effects:
-                i = eff.output_transform(np.asarray(elapsed_s, float), i, self.model, vals)
+            i = self._compiled.apply_output_transforms(np.asarray(elapsed_s, float), i)
         i = self.current_gain * i + self.current_offset_a
         if self.noise_rms_a > 0:
             i = i + self._rng.normal(0.0, self.noise_rms_a, i.shape)
@@ -256,30 +253,19 @@ class SensorSimulator:
             clean = self.clean_current(v)
         else:
             parts = []
-            for sl in self._update_slices(elapsed):
+            for sl in self._drift.slices(elapsed, self._follow_drift):
                 parts.append(self.clean_current(v[sl]))
             clean = np.concatenate(parts)
         return w, self.measure(clean, elapsed)
 
-    def _update_slices(self, elapsed: np.ndarray):
-        """Split a block at coefficient-update times; update the filter at each."""
-        start = 0
-        while start < elapsed.size:
-            cut = int(np.searchsorted(elapsed, self._next_update, side="left"))
-            if cut <= start:
-                material = self._material_at(self._next_update)
-                drifted = self.model.with_material(material)
-                self._diffusive = reduce_response(drifted.diffusive_transfer, self.order,
-                                                  (0.01, 0.45 * self.sample_rate_hz), extension=3.0,
-                                                  initial=self._diffusive)
-                self.reduced = append_rational(self._diffusive, drifted.rational_factors())
-                self.sos = self._sos_for(self.reduced)
-                _, self._zi = sig.sosfilt(self.sos, self._replay,
-                                          zi=np.zeros((self.sos.shape[0], 2)))
-                self._next_update += self.update_s
-                continue
-            yield slice(start, min(cut, elapsed.size))
-            start = min(cut, elapsed.size)
+    def _follow_drift(self, material) -> None:
+        """New filter for the drifted ``material``; its state from replaying the recent input."""
+        drifted = self.model.with_material(material)
+        self.reduced, self._diffusive = reduce_model_parts(
+            drifted, self.order, (0.01, 0.45 * self.sample_rate_hz), extension=3.0,
+            initial=self._diffusive)
+        self.sos = self._sos_for(self.reduced)
+        _, self._zi = sig.sosfilt(self.sos, self._replay, zi=np.zeros((self.sos.shape[0], 2)))
 
     def accuracy(self, band_hz=(0.5, 50.0), n_points: int = 200) -> tuple[float, float]:
         """Worst magnitude (dB) and phase (deg) error of the discrete simulator
@@ -293,12 +279,6 @@ class SensorSimulator:
         ratio = (2j * np.pi * f * hd * line) / self.model.frequency_response(f)
         return float(np.max(np.abs(20 * np.log10(np.abs(ratio))))), \
             float(np.max(np.abs(np.degrees(np.angle(ratio)))))
-
-
-def _base_effect():
-    from ..physics.effects import Effect
-
-    return Effect
 
 
 def padded_record(time_s: np.ndarray, deflection_m: np.ndarray, pad_s: float):
@@ -339,35 +319,6 @@ def lti_response_fft(transfer, time_s, deflection_m, pad_s: float = 2.0) -> np.n
     return np.fft.irfft(np.fft.rfft(x, n) * h, n)[: t.size]
 
 
-def material_nodes(elapsed_s: np.ndarray, material_at, max_step: float = 0.05) -> np.ndarray:
-    """Node times (s) at which a time-varying material is sampled: start, end, and
-    enough in between that no material parameter changes by more than
-    ``max_step`` (relative, log) between neighbours (at most 64 nodes)."""
-    t0, t1 = float(elapsed_s[0]), float(elapsed_s[-1])
-    a, b = material_at(t0).to_dict(), material_at(t1).to_dict()
-    span = max(abs(np.log(b[k] / a[k])) for k in a if a[k] > 0 and b[k] > 0)
-    n = int(min(64, max(1, np.ceil(span / max_step))))
-    return np.linspace(t0, t1, n + 1)
-
-
-def time_varying_response(elapsed_s: np.ndarray, material_at, response_for) -> np.ndarray:
-    """Quasi-static response of a system whose material drifts slowly: the LTI
-    responses ``response_for(material)`` at :func:`material_nodes`, linearly
-    interpolated in time between neighbouring nodes (error ~ step^2/8 of the
-    response's curvature in the material: < 1e-3 relative for 5 % steps)."""
-    nodes = material_nodes(elapsed_s, material_at)
-    out = np.zeros(elapsed_s.size)
-    previous = response_for(material_at(nodes[0]))
-    for k in range(1, nodes.size):
-        current = response_for(material_at(nodes[k]))
-        sel = (elapsed_s >= nodes[k - 1]) & ((elapsed_s < nodes[k]) if k < nodes.size - 1
-                                            else (elapsed_s <= nodes[k]))
-        frac = (elapsed_s[sel] - nodes[k - 1]) / (nodes[k] - nodes[k - 1])
-        out[sel] = (1 - frac) * previous[sel] + frac * current[sel]
-        previous = current
-    return out
-
-
 def predict_current(model: SensorModel, time_s, deflection_m, pad_s: float = 2.0) -> np.ndarray:
     """Current (A) of a model with any effects for a deflection record (m).
 
@@ -375,25 +326,10 @@ def predict_current(model: SensorModel, time_s, deflection_m, pad_s: float = 2.0
     nonlinearity), then the linear dynamics by exact FFT convolution
     (:func:`lti_response_fft`), then every ``output_transform`` (e.g. offset).
     A time-varying effect (``material_at``, e.g. ``hydration_drift``) is
-    simulated by :func:`time_varying_response`: LTI responses at material
+    simulated by :func:`~ipmc_sensor_ros.physics.pipeline.time_varying_response`: LTI responses at material
     nodes, linearly interpolated in time (the drift is slow against the
     sensor's ~0.1 s memory, so the response is quasi-static in the material).
     """
-    from ..physics.effects import get_effect
-
     t = np.asarray(time_s, float)
-    w = np.asarray(deflection_m, float)
-    t_rel = t - t[0]
-    specs = [(get_effect(e.name), e.as_dict()) for e in model.effects]
-    for eff, vals in specs:
-        w = eff.input_transform(t_rel, w, model, vals)
-    varying = [(eff, vals) for eff, vals in specs if eff.material_at(model, vals) is not None]
-    if not varying:
-        i = lti_response_fft(model.transfer, t, w, pad_s)
-    else:
-        eff, vals = varying[0]
-        i = time_varying_response(t_rel, eff.material_at(model, vals),
-                                  lambda mat: lti_response_fft(model.with_material(mat).transfer, t, w, pad_s))
-    for eff, vals in specs:
-        i = eff.output_transform(t_rel, i, model, vals)
-    return i
+    return model.compiled.predict(t - t[0], np.asarray(deflection_m, float),
+                                  lambda m, w: lti_response_fft(m.transfer, t, w, pad_s))

@@ -99,10 +99,6 @@ class RecordComparison:
     input_correlation: dict
     windows: list[dict] = field(default_factory=list)
 
-    @property
-    def residual_a(self) -> np.ndarray:
-        return self.measured_a - self.predicted_a
-
 
 @dataclass
 class Comparison:

@@ -32,7 +32,7 @@ from scipy.optimize import least_squares
 from ..physics.effects import get_effect
 from ..physics.model import EffectSpec, SensorModel
 from ..physics.parameters import MaterialParameters, ParameterError
-from ..simulation.sensor import padded_record, time_varying_response
+from ..simulation.sensor import padded_record
 
 __all__ = ["Record", "PreparedRecord", "prepare", "FitSpec", "ModelFit", "fit_model", "predict",
            "noise_rms"]
@@ -131,30 +131,14 @@ def predict(p: PreparedRecord, model: SensorModel, cache: dict | None = None) ->
 
     ``cache`` (a dict shared across the records of one evaluation) reuses the
     transfer function between records of the same sample and FFT grid."""
-    specs = [(get_effect(e.name), e.as_dict()) for e in model.effects]
-    x_bins = p.x_bins
-    w = p.w
-    t_rel = p.t - p.t[0]
-    for eff, vals in specs:
-        w = eff.input_transform(t_rel, w, model, vals)
-    if w is not p.w:
-        x_bins = np.fft.rfft(_repad(p, w), p.n_fft)[p.bins]
-    varying = [(eff, vals) for eff, vals in specs if eff.material_at(model, vals) is not None]
     spec = np.zeros(p.n_fft // 2 + 1, dtype=complex)
 
-    def linear_response(m: SensorModel) -> np.ndarray:
+    def linear_response(m: SensorModel, w: np.ndarray) -> np.ndarray:
+        x_bins = p.x_bins if w is p.w else np.fft.rfft(_repad(p, w), p.n_fft)[p.bins]
         spec[p.bins] = x_bins * _transfer_on_bins(p, m, cache)
         return np.fft.irfft(spec, p.n_fft)[: p.t.size]
 
-    if not varying:
-        i = linear_response(model)
-    else:
-        eff, vals = varying[0]
-        i = time_varying_response(t_rel, eff.material_at(model, vals),
-                                  lambda mat: linear_response(model.with_material(mat)))
-    for eff, vals in specs:
-        i = eff.output_transform(t_rel, i, model, vals)
-    return i
+    return model.compiled.predict(p.t - p.t[0], p.w, linear_response)
 
 
 def _transfer_on_bins(p: PreparedRecord, model: SensorModel, cache: dict | None = None) -> np.ndarray:

@@ -13,7 +13,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..physics.beam import require_field_fidelity
+from ..physics.beam import check_fidelity
 from ..physics.effects import get_effect
 from ..physics.model import SensorModel
 from ..physics.parameters import PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, MaterialParameters
@@ -57,16 +57,14 @@ def crank_slider_campaign(true_effects: Sequence = ("surface_resistance",), *,
                           crank_radius_m: float = 2e-3, rod_length_m: float = 15e-3,
                           material: MaterialParameters = PAPER_PARAMETERS, noise_rel: float = 0.01,
                           seed: int = 0, model_effects: Sequence = ("surface_resistance",),
-                          preroll_s: float = 1.0, fidelity: str = "exact",
+                          preroll_s: float = 1.0, fidelity: str = "model",
                           beam_model: str = "linear") -> list[Record]:
     """One record per (sample, frequency); ``true_effects`` make the data,
     ``model_effects`` go into each record's (to be tested) model.  ``fidelity``:
-    ``exact`` (FFT prediction of the closed form with its effects) or ``field`` (the
+    ``model`` (FFT prediction of the closed form with its effects) or ``field`` (the
     independent field solution, :class:`~ipmc_sensor_ros.simulation.sensor.FieldSensorSimulator`),
     whose ``beam_model`` may be ``elastica`` (large-deflection stress profile)."""
-    if fidelity not in ("exact", "field"):
-        raise ValueError(f"fidelity must be 'exact' or 'field', got {fidelity!r}")
-    require_field_fidelity(beam_model, fidelity == "field")
+    check_fidelity(fidelity, beam_model)
     rng = np.random.default_rng(seed)
     out = []
     for sample in samples:
