@@ -10,6 +10,7 @@ from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
 from ipmc_sensor_ros.lti.reduction import reduce_model
 from ipmc_sensor_ros.simulation.sensor import SensorSimulator, periodic_response
+from ipmc_sensor_ros.workbench.metrics import nrmse
 from ipmc_sensor_ros.simulation.stimuli import CrankSlider, FreeVibration, Step
 
 SLIM = SensorModel(PAPER_SAMPLES["slim"])
@@ -20,10 +21,6 @@ FS = 1000.0
 @pytest.fixture(scope="module")
 def reduced_slim():
     return reduce_model(SLIM, 4)
-
-
-def nrmse(est, truth):
-    return float(np.sqrt(np.mean((est - truth) ** 2)) / np.sqrt(np.mean(truth ** 2)))
 
 
 @pytest.mark.parametrize("fs", [200.0, 1000.0, 10000.0])

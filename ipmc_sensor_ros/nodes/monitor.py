@@ -14,16 +14,10 @@ from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray, String
 
 from . import params as P
+from ..workbench.metrics import nrmse
 from .messages import DEFLECTION_COLUMNS, unpack_block
 
 __all__ = ["TrackingMonitor", "nrmse"]
-
-
-def nrmse(estimate_m, truth_m) -> float:
-    """RMS(estimate - truth) / RMS(truth), dimensionless."""
-    e = np.asarray(estimate_m, float)
-    t = np.asarray(truth_m, float)
-    return float(np.sqrt(np.mean((e - t) ** 2)) / np.sqrt(np.mean(t ** 2)))
 
 
 class TrackingMonitor:

@@ -36,33 +36,12 @@ import numpy as np
 from ..physics.model import SensorModel
 from ..simulation.sensor import lti_response_fft
 from .freqresp import FrequencyPoint, fundamental_response
+from .metrics import fit_percent, noise_rms
 
-__all__ = ["RecordComparison", "Comparison", "compare_records", "noise_floor_of",
-           "fit_percent", "FREQUENCY_BANDS_HZ"]
+__all__ = ["RecordComparison", "Comparison", "compare_records", "FREQUENCY_BANDS_HZ"]
 
 FREQUENCY_BANDS_HZ = ((0.0, 2.0), (2.0, 5.0), (5.0, 10.0), (10.0, 20.0), (20.0, np.inf))
 _BOUND99 = 2.576
-
-
-def fit_percent(measured: np.ndarray, predicted: np.ndarray) -> float:
-    """MATLAB ``compare`` fit: 100 (1 - ||y - y_hat|| / ||y - mean y||)."""
-    y = np.asarray(measured, float)
-    den = np.linalg.norm(y - y.mean())
-    return float(100.0 * (1.0 - np.linalg.norm(y - predicted) / den)) if den > 0 else float("nan")
-
-
-def noise_floor_of(current_a: np.ndarray, point: FrequencyPoint | None, time_s: np.ndarray) -> float:
-    """RMS of the measurement noise in the current, A (see module doc)."""
-    y = np.asarray(current_a, float)
-    if point is not None and point.window is not None:
-        from .freqresp import harmonic_fit
-
-        sel = (time_s >= point.window[0]) & (time_s <= point.window[1])
-        _, resid, _ = harmonic_fit(time_s[sel] - time_s[sel][0], y[sel], point.frequency_hz,
-                                   point.extra.get("harmonics", 10))
-        return float(np.sqrt(np.mean(resid ** 2)))
-    d2 = np.diff(y, 2)
-    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
 
 
 def _xcorr_normalised(a: np.ndarray, b: np.ndarray, lags: np.ndarray) -> np.ndarray:
@@ -171,7 +150,7 @@ def compare_records(records: Sequence, model_for: Callable[[object], SensorModel
             point = None
         fp = fit_percent(yy, yh)
         den = np.linalg.norm(yy - yy.mean())
-        noise = noise_floor_of(yy, point, tt) * np.sqrt(yy.size) / den if den > 0 else float("nan")
+        noise = noise_rms(tt, ww, yy) * np.sqrt(yy.size) / den if den > 0 else float("nan")
         resid = yy - yh
         lags = np.arange(1, max_lag + 1)
         acf = _xcorr_normalised(resid, resid, lags)

@@ -33,9 +33,10 @@ from ..physics.effects import get_effect
 from ..physics.model import EffectSpec, SensorModel
 from ..physics.parameters import MaterialParameters, ParameterError
 from ..simulation.sensor import padded_record
+from .metrics import noise_rms
 
 __all__ = ["Record", "PreparedRecord", "prepare", "FitSpec", "ModelFit", "fit_model", "predict",
-           "noise_rms"]
+]
 
 
 @dataclass
@@ -48,39 +49,6 @@ class Record:
     time_s: np.ndarray
     deflection_m: np.ndarray
     current_a: np.ndarray
-
-
-def noise_rms(t: np.ndarray, w: np.ndarray, y: np.ndarray, window_s: float = 4.0) -> float:
-    """Measurement-noise RMS of the current (A).
-
-    Periodic records: residual of harmonic fits (mean + harmonics of the
-    excitation fundamental) in consecutive windows of about ``window_s``
-    (whole periods), pooled -- short windows keep slow drifts of the response
-    out of the noise estimate.  Other records: scaled MAD of second differences.
-    """
-    from .freqresp import fundamental_response, harmonic_fit
-
-    try:
-        p = fundamental_response(t, w, y)
-    except ValueError:
-        d2 = np.diff(y, 2)
-        return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
-    f0, k = p.frequency_hz, p.extra.get("harmonics", 10)
-    periods = max(2, int(round(window_s * f0)))
-    span = periods / f0
-    ss, dof = 0.0, 0
-    start = t[0]
-    while start + span <= t[-1] + 1e-9:
-        sel = (t >= start) & (t < start + span)
-        _, resid, _ = harmonic_fit(t[sel] - start, y[sel], f0, k)
-        ss += float(resid @ resid)
-        dof += max(int(sel.sum()) - (2 * k + 1), 1)
-        start += span
-    if dof == 0:
-        sel = (t >= p.window[0]) & (t <= p.window[1])
-        _, resid, _ = harmonic_fit(t[sel] - t[sel][0], y[sel], f0, k)
-        return float(np.sqrt(np.mean(resid ** 2)))
-    return float(np.sqrt(ss / dof))
 
 
 @dataclass
