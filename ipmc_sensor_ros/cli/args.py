@@ -259,7 +259,7 @@ def renamed_flag(parser: argparse.ArgumentParser, old: str, new: str) -> None:
 
     class _Renamed(argparse.Action):
         def __call__(self, parser, namespace, values, option_string=None):
-            parser.error(f"{old} was renamed {new} (same meaning); use {new} {values}")
+            parser.error(f"{old} was renamed {new} (same meaning)")
 
     parser.add_argument(old, action=_Renamed, help=argparse.SUPPRESS)
 

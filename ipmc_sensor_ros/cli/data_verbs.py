@@ -132,10 +132,21 @@ def _resolve_values(data, base: dict, explicit: set[str], params: str | None, pr
 
 def estimate_accuracy(time_s, estimate_m, measured_m, leak_corner_hz: float,
                       delay_s: float = 0.0) -> tuple[float, float, str]:
-    """NRMSE = RMS(estimate - measured) / RMS(measured), after the leak transient
-    5 / (2 pi f_leak) when the record is long enough, else over the whole record;
-    the measurement is delayed by ``delay_s`` (the estimate of a delayed model lags).
-    Returns (nrmse, seconds used, what was used)."""
+    """NRMSE of the estimated deflection: RMS(e - m) / RMS(m) of the estimate e and
+    the measurement m, each with its mean and linear trend removed.
+
+    A current sensor cannot see a constant deflection: the estimator's leak
+    (corner ``leak_corner_hz``) removes it, and the deflection before the
+    record started leaves a transient decaying as exp(-2 pi f_leak t), a slow
+    drift over a short record; both are outside what the sensor can measure,
+    so they are removed before comparing.  The comparison starts after the
+    leak transient 5 / (2 pi f_leak) when the record is long enough, else
+    covers the whole record; the measurement is delayed by ``delay_s`` (the
+    estimate of a model with a time delay lags by it).
+    Returns (nrmse, seconds used, which part was used).
+    """
+    from scipy.signal import detrend
+
     t = np.asarray(time_s, float)
     truth = np.interp(t - delay_s, t, np.asarray(measured_m, float)) if delay_s else measured_m
     transient = 5.0 / (2 * np.pi * leak_corner_hz)
@@ -144,9 +155,9 @@ def estimate_accuracy(time_s, estimate_m, measured_m, leak_corner_hz: float,
         what = f"after the {fmt_time_s(transient)} s leak transient"
     else:
         sel = t >= t[0] + delay_s
-        what = (f"whole record (shorter than the {fmt_time_s(transient)} s leak transient, "
-                "so the transient is included)")
-    err = float(np.sqrt(np.mean((estimate_m[sel] - truth[sel]) ** 2) / np.mean(truth[sel] ** 2)))
+        what = "whole record"
+    e, m = detrend(np.asarray(estimate_m, float)[sel]), detrend(np.asarray(truth, float)[sel])
+    err = float(np.sqrt(np.mean((e - m) ** 2) / np.mean(m ** 2)))
     return err, float(t[sel][-1] - t[sel][0]), what
 
 
@@ -162,10 +173,9 @@ def _write_estimate(path: Path, data, values: dict, model_text: str, params, res
             f"# model: {model_text}", f"# params: {params or 'defaults of the estimator node'}",
             f"# resets: {resets}",
             "# deflection_estimate_m: the estimate; deflection_m: the measured deflection of the input"]
-    rows = np.column_stack(arrays)
-    with open(path, "w", encoding="utf-8") as fh:
-        fh.write("\n".join(head) + "\n" + ",".join(cols) + "\n")
-        np.savetxt(fh, rows, delimiter=",", fmt="%.17g")
+    rows = np.column_stack(arrays).tolist()     # repr: shortest text that reads back exactly
+    path.write_text("\n".join(head + [",".join(cols)] + [",".join(map(repr, r)) for r in rows]) + "\n",
+                    encoding="utf-8")
 
 
 def read_estimate(path) -> dict[str, np.ndarray]:
@@ -223,8 +233,8 @@ def _cmd_estimate(args) -> int:
             err, used, what = estimate_accuracy(t_out, w, data.deflection_m,
                                                 float(values["leak_corner_hz"]), estimator.delay_s)
             row["nrmse"] = err
-            msg += (f"; NRMSE {err:.4f} = RMS(estimate - measured) / RMS(measured) over "
-                    f"{fmt_time_s(used)} s, {what}")
+            msg += (f"; NRMSE {err:.4f} = RMS(estimate - measured) / RMS(measured), means and "
+                    f"linear trends removed, over {fmt_time_s(used)} s ({what})")
         else:
             msg += "; no measured deflection in the input: accuracy not reported"
         print(msg)
