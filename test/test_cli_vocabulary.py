@@ -106,7 +106,45 @@ def test_progress_lines_are_rate_limited(capsys):
         prog.step(f"step {k}")
     lines = capsys.readouterr().out.splitlines()
     assert lines == ["... work: step 0 [0 s]"]              # one line, not 200
-    with Progress("quiet", interval_s=0.2, quiet_s=0.3, out=sys.stdout):
+    with Progress("quiet", interval_s=0.2, quiet_s=0.3, heartbeat_s=0.2, out=sys.stdout):
         time.sleep(0.8)                                     # an opaque call: heartbeat lines
     out = capsys.readouterr().out
     assert "still working" in out and "done" in out
+
+
+def test_nothing_written_unless_asked():
+    parser, verbs = _verbs()
+    for verb, p in verbs.items():
+        for a in _visible(p):
+            if a.dest in ("report", "json", "save", "save_material"):
+                assert a.default is None, (verb, a.dest)     # no default output location
+    assert parser.parse_args(["figures"]).report is None
+
+
+def test_import_verb_passes_everything_to_the_library(monkeypatch, tmp_path, capsys):
+    """The verb is a thin shell over workbench.labimport.import_lab_files (stubbed here, so
+    this tests the CLI side only: parsing of --geometry units, --columns, --current-gain)."""
+    import sys
+    import types
+
+    calls = []
+
+    def fake_import(paths, out_dir, *, geometry=None, meta=None, columns=None,
+                    current_gain_a_per_v=None, sample=None):
+        calls.append(dict(paths=paths, out_dir=out_dir, geometry=geometry, meta=meta,
+                          columns=columns, gain=current_gain_a_per_v, sample=sample))
+        return [out_dir / "run1.csv"]
+
+    monkeypatch.setitem(sys.modules, "ipmc_sensor_ros.workbench.labimport",
+                        types.SimpleNamespace(import_lab_files=fake_import))
+    assert main(["import", "a.csv", "b.txt", "--out", str(tmp_path), "--geometry", "22mm,7mm,360um",
+                 "--columns", "time=Time [s],current=Current [uA]", "--current-gain", "1e-6",
+                 "--sample", "s1", "--meta", "run.json"]) == 0
+    (c,) = calls
+    assert [p.name for p in c["paths"]] == ["a.csv", "b.txt"] and c["out_dir"] == tmp_path
+    assert c["geometry"].length_m == pytest.approx(0.022) and c["geometry"].name == "s1"
+    assert c["columns"] == {"time": "Time [s]", "current": "Current [uA]"}
+    assert c["gain"] == 1e-6 and c["meta"].name == "run.json" and c["sample"] == "s1"
+    assert "run1.csv" in capsys.readouterr().out
+    assert main(["import", "a.csv", "--out", str(tmp_path), "--columns", "volts=V"]) == 2
+    assert "--columns: unknown role 'volts'" in capsys.readouterr().err

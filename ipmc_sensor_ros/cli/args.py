@@ -66,13 +66,15 @@ class Progress:
 
     ``step(msg)`` prints at most one line every ``interval_s`` seconds (the
     first and, via ``done``, the last always); inside ``with Progress(...)``
-    a heartbeat line with the elapsed time is printed every ``interval_s``
+    a heartbeat line with the elapsed time is printed every ``heartbeat_s``
     once the work has run ``quiet_s`` seconds, so opaque library calls are
     not silent either.
     """
 
-    def __init__(self, what: str, *, interval_s: float = 2.0, quiet_s: float = 5.0, out=None):
+    def __init__(self, what: str, *, interval_s: float = 2.0, quiet_s: float = 5.0,
+                 heartbeat_s: float = 5.0, out=None):
         self.what, self.interval_s, self.quiet_s = what, interval_s, quiet_s
+        self.heartbeat_s = max(heartbeat_s, interval_s)
         self.out = out or sys.stderr
         self.t0 = time.monotonic()
         self._last = -np.inf
@@ -96,7 +98,7 @@ class Progress:
     def _beat(self) -> None:
         while not self._stop.wait(self.interval_s / 4):
             now = time.monotonic()
-            if now - self.t0 >= self.quiet_s and now - self._last >= self.interval_s:
+            if now - self.t0 >= self.quiet_s and now - self._last >= self.heartbeat_s:
                 self._print(f"still working ({self._last_msg or 'running'})")
 
     def __enter__(self) -> "Progress":

@@ -121,7 +121,9 @@ def plot_time_overlay(out_dir: Path, name: str, records: Sequence, max_records: 
     recs = (worst_first(records) if select_worst else list(records))[:max_records]
     fig, axes = plt.subplots(len(recs), 1, figsize=(8, 2.3 * len(recs)), squeeze=False)
     for ax, r in zip(axes[:, 0], recs):
-        sel = r.time_s >= r.time_s[-1] - span_s
+        point = getattr(r, "point", None)             # about 5 periods of the excitation
+        span = min(span_s, 5.0 / point.frequency_hz) if point is not None else span_s
+        sel = r.time_s >= r.time_s[-1] - span
         t = r.time_s[sel]
         ax.plot(t, r.predicted_a[sel] * 1e6, lw=2.4, color="tab:orange", alpha=0.8, label=labels[1],
                 zorder=1)
@@ -297,9 +299,9 @@ def plot_error_bars(out_dir: Path, name: str, labels: Sequence[str], errors: Seq
     if noise_floor:
         ax.axvline(noise_floor, color="k", ls="--", lw=1,
                    label=f"noise floor {noise_floor:.4f} (a perfect model)")
-        ax.legend(fontsize=7, loc="lower right")
+        ax.legend(fontsize=7, loc="lower right", bbox_to_anchor=(1.0, 1.0), frameon=False)
     ax.set_xlabel("held-out error = ||y - ŷ|| / ||y - mean y|| (lower is better)")
-    ax.set_title(title, fontsize=9)
+    ax.set_title(title, fontsize=9, loc="left")
     ax.grid(alpha=0.3, axis="x")
     return _save(fig, out_dir, name)
 
