@@ -22,6 +22,13 @@ _NOT_NODE_PARAMS = ("faraday_constant_c_per_mol", "gas_constant_j_per_mol_k",
                     "one_minus_anion_volume_fraction")
 
 
+def _records(args) -> list:
+    """The time records named by the arguments, each with its model (base + --effects, material)."""
+    from ..workbench.data import records_from
+
+    return records_from(load_data(args), material_from_args(args), effects_from_args(args))
+
+
 def _model_text(data, material, effects) -> str:
     return SensorModel(data[0].geometry, material, effects).describe()
 
@@ -83,6 +90,8 @@ def _cmd_fit(args) -> int:
     with Progress("fit"):
         res = fit_parameters(groups, free, material, effects)
     print(res.summary())
+    print("  chi2/dof about 1: the model explains the points within their error bars (>> 1: it does "
+          "not); 95% CI from the curvature of chi2; sd(ln) = relative sd of a parameter combination")
     write_json(args.json, {"free": list(res.free), "estimates": res.estimates, "ci95": res.ci95,
                            "correlation": res.correlation, "chi2": res.chi2, "dof": res.dof,
                            "identifiability": res.identifiability,
@@ -112,11 +121,8 @@ def _cmd_fit(args) -> int:
 
 def _cmd_compare(args) -> int:
     from ..workbench.compare import compare_records
-    from ..workbench.data import records_from
 
-    effects = effects_from_args(args)
-    material = material_from_args(args)
-    recs = records_from(load_data(args), material, effects)
+    recs = _records(args)
     model_text = recs[0].model.describe()
     with Progress(f"comparing {model_text} with {len(recs)} record(s)") as prog:
         counter = iter(range(1, len(recs) + 1))
@@ -175,12 +181,9 @@ def _cmd_track(args) -> int:
 
 def _cmd_diagnose(args) -> int:
     from ..physics.effects import EFFECTS
-    from ..workbench.data import records_from
     from ..workbench.diagnose import diagnose
 
-    effects = effects_from_args(args)
-    material = material_from_args(args)
-    recs = records_from(load_data(args), material, effects)
+    recs = _records(args)
     free = param_names(args.free)
     cands = [c.strip() for c in args.candidates.split(",")] if args.candidates else None
     for c in cands or []:
@@ -201,6 +204,11 @@ def _cmd_diagnose(args) -> int:
 
         print(f"report: {diagnose_report(rd, diag)}")
     return 0
+
+
+def _add_settle(p) -> None:
+    p.add_argument("--settle", type=float, default=0.5, metavar="S",
+                   help="seconds left out at each record start (they depend on motion before it), s")
 
 
 def add_parsers(sub, formatter) -> None:
@@ -224,8 +232,7 @@ def add_parsers(sub, formatter) -> None:
                                    "(MATLAB compare/resid style).")
     add_model_args(p)
     add_data_args(p)
-    p.add_argument("--settle", type=float, default=0.5, metavar="S",
-                   help="seconds left out at each record start, s")
+    _add_settle(p)
     add_output_args(p)
     p.set_defaults(func=_cmd_compare)
 
@@ -249,7 +256,6 @@ def add_parsers(sub, formatter) -> None:
     p.add_argument("--free", default="alpha0,d,kappa_e", help=FREE_HELP + "; refitted with each model")
     p.add_argument("--candidates", metavar="LIST",
                    help="restrict to these effects, comma list (default: the whole catalog)")
-    p.add_argument("--settle", type=float, default=0.5, metavar="S",
-                   help="seconds left out at each record start, s")
+    _add_settle(p)
     add_output_args(p)
     p.set_defaults(func=_cmd_diagnose)
