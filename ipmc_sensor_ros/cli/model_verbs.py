@@ -26,7 +26,8 @@ def _records(args) -> list:
     """The time records named by the arguments, each with its model (base + --effects, material)."""
     from ..workbench.data import records_from
 
-    return records_from(load_data(args), material_from_args(args), effects_from_args(args))
+    effects, material = effects_from_args(args), material_from_args(args)   # flags before files
+    return records_from(load_data(args), material, effects)
 
 
 def _model_text(data, material, effects) -> str:
