@@ -15,7 +15,9 @@ CONCEPTS = {"model": "--model", "effects": "--effects", "plugin": "--plugin", "p
             "settle": "--settle", "current_topic": "--current-topic",
             "deflection_topic": "--deflection-topic", "format": "--format", "storage": "--storage"}
 METAVARS = {"--out": "DIR", "--report": "DIR", "--json": "FILE", "--params": "FILE",
-            "--save": "FILE", "--plugin": "FILE", "--geometry": "L,W,T"}
+            "--save": "FILE", "--plugin": "FILE", "--geometry": "L,W,T", "--model": "h1|h2",
+            "--free": "LIST", "--samples": "LIST", "--effects": "LIST", "--current-topic": "TOPIC",
+            "--deflection-topic": "TOPIC", "--estimate-topic": "TOPIC"}
 RENAMED = {"diagnose": {"--base": "--model"}, "track": {"--param": "--free"},
            "simulate": {"--bag": "--out DIR --format bag"}, "figures": {"--out": "--report"}}
 

@@ -268,10 +268,10 @@ def renamed_flag(parser: argparse.ArgumentParser, old: str, new: str) -> None:
 
 def add_model_args(p: argparse.ArgumentParser, *, effects: bool = True) -> None:
     g = p.add_argument_group("model")
-    g.add_argument("--model", default="h2",
+    g.add_argument("--model", default="h2", metavar="h1|h2",
                    help="base model: h1 (eq. 31) or h2 = h1 + surface_resistance (eq. 45)")
     if effects:
-        g.add_argument("--effects", default="",
+        g.add_argument("--effects", default="", metavar="LIST",
                        help="extra effects, e.g. 'time_delay' or "
                             "'time_delay(delay_s=0.002),nonlinearity' (see: ipmc-model effects)")
         g.add_argument("--plugin", action="append", metavar="FILE",
@@ -288,8 +288,8 @@ def add_data_args(p: argparse.ArgumentParser) -> None:
                    help="ipmc-timeseries/1 or ipmc-frf/1 files, directories of them, or rosbag2 "
                         "bags (see: ipmc-model import for lab files)")
     g = p.add_argument_group("data")
-    g.add_argument("--current-topic", default="current", help="bags: topic of the current blocks")
-    g.add_argument("--deflection-topic", default="deflection_truth",
+    g.add_argument("--current-topic", default="current", metavar="TOPIC", help="bags: topic of the current blocks")
+    g.add_argument("--deflection-topic", default="deflection_truth", metavar="TOPIC",
                    help="bags: topic of the measured deflection")
     g.add_argument("--geometry", metavar="L,W,T",
                    help="bags without ipmc.yaml sidecar: length, width, thickness in metres or "

@@ -209,11 +209,12 @@ def _cmd_estimate(args) -> int:
         current = validate_block(data.current_a, max_samples=max(data.current_a.size, 1))
         estimator = config.build_estimator(values)
         model_text = estimator.model.describe()
-        say(f"estimating {data.current_a.size} samples of {src} with {model_text} "
-            f"(order {estimator.reduction_order}, fs {float(values['sample_rate_hz']):g} Hz, "
-            f"leak {float(values['leak_corner_hz']):g} Hz)")
-        t_out, w, resets = estimate_record(estimator, data.time_s, current,
-                                           max_gap_s=float(values["max_gap_s"]))
+        with Progress(f"estimating {data.current_a.size} samples of {src} with {model_text} "
+                      f"(order {estimator.reduction_order}, fs {float(values['sample_rate_hz']):g} Hz, "
+                      f"leak {float(values['leak_corner_hz']):g} Hz)") as prog:
+            prog.step("running")
+            t_out, w, resets = estimate_record(estimator, data.time_s, current,
+                                               max_gap_s=float(values["max_gap_s"]))
         stem = Path(src).name.removesuffix(".csv").removesuffix(".txt")
         if args.format == "bag":
             out = out_dir / f"{stem}_estimate"
@@ -284,8 +285,8 @@ def add_parsers(sub, formatter) -> None:
     add_model_args(p)
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     renamed_flag(p, "--bag", "--out DIR --format bag")
-    p.add_argument("--samples", default="slim,short", help="paper samples, comma list (big, slim, short)")
-    p.add_argument("--frequencies", default="1:20:8",
+    p.add_argument("--samples", default="slim,short", metavar="LIST", help="paper samples, comma list (big, slim, short)")
+    p.add_argument("--frequencies", default="1:20:8", metavar="LO:HI:N|LIST",
                    help="crank frequencies, Hz: 'lo:hi:n' (log-spaced) or a comma list")
     p.add_argument("--duration", type=float, default=6.0, metavar="S", help="record length per frequency, s")
     p.add_argument("--sample-rate", type=float, default=1000.0, metavar="HZ", help="sample rate, Hz")
@@ -320,7 +321,7 @@ def add_parsers(sub, formatter) -> None:
     p.add_argument("--format", choices=("timeseries", "bag"), default="timeseries",
                    help="output format: ipmc-estimate/1 text (estimate and measured columns) or bags")
     p.add_argument("--storage", choices=("sqlite3", "mcap"), default="sqlite3", help="output bag storage")
-    p.add_argument("--estimate-topic", default="deflection/block", help="output bags: estimate topic")
+    p.add_argument("--estimate-topic", default="deflection/block", metavar="TOPIC", help="output bags: estimate topic")
     add_output_args(p, report=False)
     p.set_defaults(func=_cmd_estimate)
 

@@ -144,10 +144,10 @@ def add_parsers(sub, formatter) -> None:
     p = sub.add_parser("reduce", formatter_class=formatter,
                        help="error table of reduced (stable, minimum-phase) models against the full model")
     add_model_args(p)
-    p.add_argument("--samples", default="big,slim,short", help="paper samples, comma list")
+    p.add_argument("--samples", default="big,slim,short", metavar="LIST", help="paper samples, comma list")
     p.add_argument("--geometry", metavar="L,W,T",
                    help="custom geometry instead of --samples: metres or with units (22mm,7mm,360um)")
-    p.add_argument("--orders", default="1-8", help="orders, e.g. '1-8' or '2,4,6'")
+    p.add_argument("--orders", default="1-8", metavar="LIST", help="orders, e.g. '1-8' or '2,4,6'")
     p.add_argument("--band", nargs=2, type=float, default=(0.1, 50.0), metavar=("LOW_HZ", "HIGH_HZ"),
                    help="frequency band of the error, Hz")
     add_output_args(p, report=False)
@@ -156,7 +156,7 @@ def add_parsers(sub, formatter) -> None:
     p = sub.add_parser("eq55", formatter_class=formatter,
                        help="poles/zeros of the paper's eq. 55 and stability of its literal inverse")
     add_model_args(p, effects=False)
-    p.add_argument("--samples", default="big,slim,short", help="paper samples, comma list")
+    p.add_argument("--samples", default="big,slim,short", metavar="LIST", help="paper samples, comma list")
     add_output_args(p, report=False)
     p.set_defaults(func=_cmd_eq55)
 

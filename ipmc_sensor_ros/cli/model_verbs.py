@@ -219,7 +219,7 @@ def add_parsers(sub, formatter) -> None:
                                    "(time series through the response at the excitation fundamental).")
     add_model_args(p)
     add_data_args(p)
-    p.add_argument("--free", default="alpha0,d,kappa_e", help=FREE_HELP)
+    p.add_argument("--free", metavar="LIST", default="alpha0,d,kappa_e", help=FREE_HELP)
     p.add_argument("--save", metavar="FILE",
                    help="write a ROS 2 params file for the nodes (key /**/ipmc_estimator, with the "
                         "data's geometry; one file per sample: FILE_<sample>.yaml when several)")
@@ -241,7 +241,7 @@ def add_parsers(sub, formatter) -> None:
                        help="refit parameter(s) in consecutive windows (paper 5.4)")
     add_model_args(p)
     add_data_args(p)
-    p.add_argument("--free", default="d", help=FREE_HELP + "; refitted in every window")
+    p.add_argument("--free", metavar="LIST", default="d", help=FREE_HELP + "; refitted in every window")
     renamed_flag(p, "--param", "--free")
     p.add_argument("--window", type=float, default=60.0, metavar="S", help="window length, s")
     p.add_argument("--step", type=float, default=None, metavar="S",
@@ -254,7 +254,7 @@ def add_parsers(sub, formatter) -> None:
     add_model_args(p)
     renamed_flag(p, "--base", "--model")
     add_data_args(p)
-    p.add_argument("--free", default="alpha0,d,kappa_e", help=FREE_HELP + "; refitted with each model")
+    p.add_argument("--free", metavar="LIST", default="alpha0,d,kappa_e", help=FREE_HELP + "; refitted with each model")
     p.add_argument("--candidates", metavar="LIST",
                    help="restrict to these effects, comma list (default: the whole catalog)")
     _add_settle(p)
