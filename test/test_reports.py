@@ -53,6 +53,7 @@ def test_compare_report(h1_records, tmp_path):
     rows = re.findall(r"<tr><td>(slim_[^<]*)</td>", text)
     assert rows == [Path(r.source).name for r in cmp.records]
     assert "by frequency band" in text and "FAILS" in text             # failure tables, H1 fails
+    assert "<dd>fails beyond the measurement uncertainty in frequency bands" in text
     assert "overflow-x:auto" not in text and "white-space:pre-wrap" in text   # no sideways scrolling
 
 

@@ -367,11 +367,16 @@ def _where_tables(where: dict) -> list:
 
 
 def compare_verdict(cmp) -> str:
-    flagged = [f"{k.replace('_', ' ')} {c['label']}" for k, cells in cmp.where.items()
-               for c in cells if c["flagged"]]
-    if not flagged:
-        return "consistent with the data: no cell fails beyond the measurement uncertainty"
-    return "fails beyond the measurement uncertainty at " + ", ".join(flagged)
+    """One line: where the model fails beyond the measurement uncertainty, per breakdown."""
+    parts = []
+    for key, cells in cmp.where.items():
+        bad = [c["label"] for c in cells if c["flagged"]]
+        if bad:
+            what = ", ".join(bad) if len(bad) <= 3 else f"{len(bad)} of {len(cells)}"
+            parts.append(f"{key.replace('_', ' ')}s {what}")
+    if not parts:
+        return "consistent with the data: nowhere beyond the measurement uncertainty"
+    return "fails beyond the measurement uncertainty in " + "; ".join(parts) + " (see Where it fails)"
 
 
 def compare_report(out_dir: Path, cmp, model_text: str, bode_points: dict, bode_models: dict) -> Path:
