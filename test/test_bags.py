@@ -16,10 +16,10 @@ from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray
 
+from ipmc_sensor_ros.cli.data_verbs import read_estimate
 from ipmc_sensor_ros.cli.main import main
 from ipmc_sensor_ros.nodes.estimator_node import EstimatorNode
 from ipmc_sensor_ros.nodes.messages import DEFLECTION_COLUMNS, unpack_block
-from ipmc_sensor_ros.workbench.io import read_timeseries
 from conftest import TEST_DOMAIN
 
 pytestmark = pytest.mark.ros
@@ -69,9 +69,8 @@ def test_written_bags_match_rclpy_types_and_deserialise(tmp_path, storage):
 def test_replay_into_live_node_equals_offline_and_loop_resets(tmp_path):
     bag = _simulate_bag(tmp_path, "sqlite3")
     params = ROOT / "config" / "estimator.yaml"
-    offline_csv = tmp_path / "offline.csv"
-    assert main(["estimate", str(bag), "--out", str(offline_csv), "--params", str(params)]) == 0
-    offline = read_timeseries(offline_csv)
+    assert main(["estimate", str(bag), "--out", str(tmp_path / "est"), "--params", str(params)]) == 0
+    offline = read_estimate(tmp_path / "est" / f"{bag.name}.estimate.csv")
 
     current = [(stamp, raw) for topic, _, stamp, raw in _raw_messages(bag) if topic == "/current"]
     current.sort(key=lambda x: x[0])
@@ -103,7 +102,7 @@ def test_replay_into_live_node_equals_offline_and_loop_resets(tmp_path):
                 pub_current.publish(raw)          # serialized bytes, as rosbag2 plays them
                 ex.spin_once(timeout_sec=0)
 
-        n = offline.time_s.size
+        n = offline["time_s"].size
         for loop in (1, 2):                        # the second pass jumps back (bag --loop)
             play()
             end = time.monotonic() + 30
@@ -115,8 +114,8 @@ def test_replay_into_live_node_equals_offline_and_loop_resets(tmp_path):
         t = np.concatenate([b.times_s for b in blocks])
         w = np.concatenate([b.values for b in blocks])
         # Pass 1 equals the offline estimate from the same params file (same code path).
-        assert np.array_equal(t[:n], offline.time_s)
-        assert np.max(np.abs(w[:n] - offline.deflection_m)) <= 1e-12
+        assert np.array_equal(t[:n], offline["time_s"])
+        assert np.max(np.abs(w[:n] - offline["deflection_estimate_m"])) <= 1e-12
         # Pass 2 restarts from a clean filter: identical to pass 1, so no spike at the jump.
         assert np.max(np.abs(w[n:] - w[:n])) <= 1e-12
         est.destroy_node()
@@ -129,8 +128,8 @@ def test_replay_into_live_node_equals_offline_and_loop_resets(tmp_path):
 def test_workbench_reads_bags_directly(tmp_path, capsys):
     """compare/fit take bags: topics by name, geometry from the ipmc.yaml sidecar or --geometry."""
     out = tmp_path / "bags"
-    assert main(["simulate", "--bag", str(out), "--samples", "slim", "--frequencies", "2,8",
-                 "--duration", "4", "--storage", "mcap"]) == 0
+    assert main(["simulate", "--out", str(out), "--format", "bag", "--samples", "slim",
+                 "--frequencies", "2,8", "--duration", "4", "--storage", "mcap"]) == 0
     bags = sorted(p for p in out.iterdir() if p.is_dir())
     js = tmp_path / "c.json"
     assert main(["compare", *map(str, bags), "--json", str(js)]) == 0

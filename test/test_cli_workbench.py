@@ -29,7 +29,9 @@ def test_compare_json_and_report(sweep, tmp_path):
     right = json.loads(js.read_text())
     assert {"error", "fit_percent"} <= set(right)
     assert right["fit_percent"] > 97.0   # 1 % noise
-    assert (rep / "index.html").exists() and len(list(rep.glob("*.png"))) == 4
+    assert (rep / "index.html").exists()
+    assert {p.name for p in rep.glob("*.png")} == {"bode.png", "time_worst.png", "residuals.png",
+                                                 "residual_spectrum.png", "failure_map.png"}
     assert main(["compare", str(sweep), "--model", "h1", "--json", str(js)]) == 0
     wrong = json.loads(js.read_text())
     assert wrong["error"] > 3 * right["error"]
@@ -39,13 +41,22 @@ def test_fit_saves_params_usable_by_nodes(sweep, tmp_path):
     saved = tmp_path / "fitted.yaml"
     assert main(["fit", str(sweep), "--model", "h2", "--free", "alpha0,d", "--set", "d=5e-11",
                  "--save", str(saved), "--report", str(tmp_path / "r")]) == 0
-    doc = yaml.safe_load(saved.read_text())
-    p = doc["ipmc_estimator"]["ros__parameters"]
+    # two samples (slim, short) -> one file per sample geometry, under the namespace-proof key
+    saved_short = tmp_path / "fitted_short.yaml"
+    doc = yaml.safe_load(saved_short.read_text())
+    p = doc["/**/ipmc_estimator"]["ros__parameters"]
     assert p["model"] == "h2"
+    assert (p["length_m"], p["width_m"], p["thickness_m"]) == (0.011, 0.007, 0.00036)  # short sample
+    assert p["sample_rate_hz"] == 1000.0
     assert p["diffusivity_m2_per_s"] == pytest.approx(3.32e-11, rel=0.05)
+    assert doc["/**/ipmc_simulator"]["ros__parameters"] == p
+    assert "ipmc-model fit" in saved_short.read_text().splitlines()[0]    # provenance comment
     assert (tmp_path / "r" / "index.html").exists()
-    # the saved file is accepted back as --params
-    assert main(["compare", str(sweep), "--params", str(saved), "--json", str(tmp_path / "c.json")]) == 0
+    # the saved file is accepted back as --params, and by the node's own loader
+    from ipmc_sensor_ros.interface.specs import load_params_file
+    assert load_params_file(saved_short)["length_m"] == 0.011
+    assert main(["compare", str(sweep), "--params", str(saved_short),
+                 "--json", str(tmp_path / "c.json")]) == 0
     assert json.loads((tmp_path / "c.json").read_text())["fit_percent"] > 97.0
 
 
@@ -83,7 +94,7 @@ def test_track_long_record(tmp_path, capsys):
 
 def test_figures_numbers_match_paper_claims(tmp_path):
     js = tmp_path / "f.json"
-    assert main(["figures", "--out", str(tmp_path / "figs"), "--json", str(js)]) == 0
+    assert main(["figures", "--report", str(tmp_path / "figs"), "--json", str(js)]) == 0
     n = json.loads(js.read_text())
     assert n["fig5 big - slim magnitude, mean (dB)"] == pytest.approx(6.02, abs=0.02)   # 20 log10 2
     assert n["fig5 big - slim phase, max |diff| (deg)"] < 0.2                            # same phase

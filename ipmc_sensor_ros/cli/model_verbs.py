@@ -1,0 +1,262 @@
+"""Verbs that test a model against measurements: ``fit``, ``compare``, ``track``, ``diagnose``.
+
+Each verb: parse -> call the workbench -> print a summary -> optional JSON and report.
+"""
+from __future__ import annotations
+
+import datetime
+from pathlib import Path
+
+from ..physics.model import SensorModel, format_effect, parse_model_name
+from ..physics.parameters import MaterialParameters, ParameterError
+from .args import (Progress, add_data_args, add_model_args, add_output_args, effects_from_args,
+                   load_data, material_from_args, param_names, renamed_flag, report_dir, say,
+                   write_json)
+
+__all__ = ["add_parsers", "params_file_doc"]
+
+FREE_HELP = ("parameters estimated from the data, comma list of symbols d, alpha0, C-, kappa_e, "
+             "Y, r0, T or full names")
+#: physical constants of MaterialParameters that are not node parameters
+_NOT_NODE_PARAMS = ("faraday_constant_c_per_mol", "gas_constant_j_per_mol_k",
+                    "one_minus_anion_volume_fraction")
+
+
+def _records(args) -> list:
+    """The time records named by the arguments, each with its model (base + --effects, material)."""
+    from ..workbench.data import records_from
+
+    effects, material = effects_from_args(args), material_from_args(args)   # flags before files
+    return records_from(load_data(args), material, effects)
+
+
+def _model_text(data, material, effects) -> str:
+    return SensorModel(data[0].geometry, material, effects).describe()
+
+
+# ---------------------------------------------------------------------------
+def params_file_doc(material: MaterialParameters, geometry, base: str, extra_effects,
+                    sample_rate_hz: float | None = None) -> dict:
+    """ROS 2 params file contents for both nodes, under ``/**/<node>`` (any namespace)."""
+    params = {"length_m": geometry.length_m, "width_m": geometry.width_m,
+              "thickness_m": geometry.thickness_m}
+    params.update({k: v for k, v in material.to_dict().items() if k not in _NOT_NODE_PARAMS})
+    if sample_rate_hz:
+        params["sample_rate_hz"] = float(sample_rate_hz)
+    params["model"] = base
+    params["effects"] = [format_effect(e) for e in extra_effects] or [""]
+    return {"/**/ipmc_estimator": {"ros__parameters": params},
+            "/**/ipmc_simulator": {"ros__parameters": dict(params)}}
+
+
+def _save_params(path: Path, groups, data, res, args, effects) -> list[Path]:
+    """One params file per sample geometry (``NAME_<sample>.yaml`` when several)."""
+    import yaml
+
+    from ..workbench.io import TimeSeries
+
+    base = args.model.strip().lower()
+    extra = effects[len(parse_model_name(base)[1]):]
+    written = []
+    for g in groups:
+        out = path if len(groups) == 1 else path.with_name(f"{path.stem}_{g.name}{path.suffix}")
+        material = res.material.replace(**{k: v for k, v in g.known.items()
+                                           if k not in res.free and k in MaterialParameters.__dataclass_fields__})
+        rates = {d.sample_rate_hz for d in data if isinstance(d, TimeSeries) and d.geometry == g.geometry}
+        doc = params_file_doc(material, g.geometry, base, extra, rates.pop() if len(rates) == 1 else None)
+        sources = sorted({Path(p.source).name for p in g.points if getattr(p, "source", "")})
+        head = [f"# Written by ipmc-model fit on {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC",
+                f"# sample {g.name}: geometry from the data; model {base}"
+                f"{' + ' + ', '.join(doc['/**/ipmc_estimator']['ros__parameters']['effects']) if extra else ''}",
+                f"# fitted: {', '.join(res.free)}; chi2/dof {res.chi2:.4g}/{res.dof}",
+                f"# data: {', '.join(sources[:12])}{' ...' if len(sources) > 12 else ''}",
+                "# use: ros2 run ipmc_sensor_ros ipmc_estimator --ros-args --params-file THIS_FILE"]
+        out.write_text("\n".join(head) + "\n" + yaml.safe_dump(doc, sort_keys=False))
+        written.append(out)
+    return written
+
+
+def _cmd_fit(args) -> int:
+    from ..physics.parameters import save_yaml
+    from ..workbench.data import groups_from
+    from ..workbench.fit import fit_parameters
+
+    effects = effects_from_args(args)
+    material = material_from_args(args)
+    data = load_data(args)
+    groups = groups_from(data)
+    free = param_names(args.free)
+    say(f"fitting {', '.join(free)} to {sum(len(g.points) for g in groups)} frequency point(s) "
+        f"of {len(groups)} sample(s)")
+    with Progress("fit"):
+        res = fit_parameters(groups, free, material, effects)
+    print(res.summary())
+    print("  chi2/dof about 1: the model explains the points within their error bars (>> 1: it does "
+          "not); 95% CI from the curvature of chi2; sd(ln) = relative sd of a parameter combination")
+    write_json(args.json, {"free": list(res.free), "estimates": res.estimates, "ci95": res.ci95,
+                           "correlation": res.correlation, "chi2": res.chi2, "dof": res.dof,
+                           "identifiability": res.identifiability,
+                           "named_combinations": res.named_combinations,
+                           "not_identifiable": res.not_identifiable, "success": res.success,
+                           "material": res.material.to_dict()})
+    if args.save:
+        for path in _save_params(Path(args.save), groups, data, res, args, effects):
+            print(f"saved node parameters (key /**/ipmc_estimator, geometry included) to {path}")
+    if args.save_material:
+        save_yaml(args.save_material, res.material)
+        print(f"saved fitted material to {args.save_material}")
+    rd = report_dir(args.report)
+    if rd:
+        from ..workbench.report import fit_report
+
+        pts = {g.name: g.points for g in groups}
+        models = {}
+        for g in groups:
+            known = {k: v for k, v in g.known.items() if k not in free}
+            models[g.name] = {"fitted": SensorModel(g.geometry, res.material.replace(**known),
+                                                    effects).frequency_response,
+                              "start": SensorModel(g.geometry, material, effects).frequency_response}
+        print(f"report: {fit_report(rd, res, pts, models, _model_text(data, material, effects))}")
+    return 0
+
+
+def _cmd_compare(args) -> int:
+    from ..workbench.compare import compare_records
+
+    recs = _records(args)
+    model_text = recs[0].model.describe()
+    with Progress(f"comparing {model_text} with {len(recs)} record(s)") as prog:
+        counter = iter(range(1, len(recs) + 1))
+
+        def model_for(rec):
+            prog.step(f"record {next(counter)}/{len(recs)}")
+            return rec.model
+
+        cmp = compare_records(recs, model_for, settle_s=args.settle)
+    print(cmp.summary())
+    print("  fit % = 100 (1 - error); error = ||y - ŷ|| / ||y - mean y|| of the current; "
+          "noise = error of a perfect model; dMag/dPhase = measured/model at f0 +- 1 sd")
+    write_json(args.json, {**cmp.to_json(), "model": model_text})
+    rd = report_dir(args.report)
+    if rd:
+        from ..workbench.report import compare_report
+
+        pts, curves = {}, {}
+        for r, rec in zip(cmp.records, recs):
+            if r.point is not None:
+                pts.setdefault(r.sample, []).append(r.point)
+            curves.setdefault(r.sample, {"model": rec.model.frequency_response})
+        print(f"report: {compare_report(rd, cmp, model_text, pts, curves)}")
+    return 0
+
+
+def _cmd_track(args) -> int:
+    from ..workbench.data import material_for
+    from ..workbench.track import track_parameter
+
+    effects = effects_from_args(args)
+    material = material_from_args(args)
+    free = param_names(args.free)
+    tracks, rows = {}, []
+    for ts in load_data(args):
+        with Progress(f"tracking {', '.join(free)} in {args.window:g} s windows of {ts.path}"):
+            tr = track_parameter(ts.time_s, ts.deflection_m, ts.current_a, ts.geometry,
+                                 material_for(ts, material), free, effects,
+                                 window_s=args.window, step_s=args.step, source=ts.path)
+        print(f"{ts.path}: (value [95 % confidence interval])")
+        print(f"{'t (s)':>9} {'f0 (Hz)':>8} " + " ".join(f"{n:>36}" for n in free))
+        for p in tr:
+            cells = " ".join(f"{p.estimates[n]:>11.4g} [{p.ci95[n][0]:.4g}, {p.ci95[n][1]:.4g}]".rjust(36)
+                             for n in free)
+            print(f"{p.time_s:9.1f} {p.frequency_hz:8.3f} {cells}")
+        tracks[ts.path] = tr
+        rows.append({"source": ts.path, "track": [p.__dict__ for p in tr]})
+    write_json(args.json, rows)
+    rd = report_dir(args.report)
+    if rd:
+        from ..workbench.report import track_report
+
+        print(f"report: {track_report(rd, tracks, free[0])}")
+    return 0
+
+
+def _cmd_diagnose(args) -> int:
+    from ..physics.effects import EFFECTS
+    from ..workbench.diagnose import diagnose
+
+    recs = _records(args)
+    free = param_names(args.free)
+    cands = [c.strip() for c in args.candidates.split(",")] if args.candidates else None
+    for c in cands or []:
+        if c not in EFFECTS:
+            raise ParameterError(f"--candidates: unknown effect '{c}' (see: ipmc-model effects)")
+    names = [n for n in (cands or EFFECTS) if not recs[0].model.has_effect(n)]
+    with Progress(f"diagnosing {recs[0].model.describe()} on {len(recs)} record(s), "
+                  f"{len(names)} candidate(s)") as prog:
+        diag = diagnose(recs, free_material=free, candidates=cands, progress=prog.step,
+                        settle_s=args.settle)
+    print(diag.summary())
+    print("  error = held-out ||y - ŷ|| / ||y - mean y||; x better = baseline error / error; "
+          "dBIC = BIC change vs the baseline (< -20: very strong evidence for the effect)")
+    write_json(args.json, diag.to_json())
+    rd = report_dir(args.report)
+    if rd:
+        from ..workbench.report import diagnose_report
+
+        print(f"report: {diagnose_report(rd, diag)}")
+    return 0
+
+
+def _add_settle(p) -> None:
+    p.add_argument("--settle", type=float, default=0.5, metavar="S",
+                   help="seconds left out at each record start (they depend on motion before it), s")
+
+
+def add_parsers(sub, formatter) -> None:
+    p = sub.add_parser("fit", formatter_class=formatter,
+                       help="identify material parameters from the frequency response (paper 5.2)",
+                       description="Fit the --free parameters to the measured frequency response "
+                                   "(time series through the response at the excitation fundamental).")
+    add_model_args(p)
+    add_data_args(p)
+    p.add_argument("--free", metavar="LIST", default="alpha0,d,kappa_e", help=FREE_HELP)
+    p.add_argument("--save", metavar="FILE",
+                   help="write a ROS 2 params file for the nodes (key /**/ipmc_estimator, with the "
+                        "data's geometry; one file per sample: FILE_<sample>.yaml when several)")
+    p.add_argument("--save-material", metavar="FILE", help="write the fitted material as workbench YAML")
+    add_output_args(p)
+    p.set_defaults(func=_cmd_fit)
+
+    p = sub.add_parser("compare", formatter_class=formatter,
+                       help="fixed model vs measurements: fit %%, errors, where it fails",
+                       description="Predict the current of each record from its deflection and compare "
+                                   "(MATLAB compare/resid style).")
+    add_model_args(p)
+    add_data_args(p)
+    _add_settle(p)
+    add_output_args(p)
+    p.set_defaults(func=_cmd_compare)
+
+    p = sub.add_parser("track", formatter_class=formatter,
+                       help="refit parameter(s) in consecutive windows (paper 5.4)")
+    add_model_args(p)
+    add_data_args(p)
+    p.add_argument("--free", metavar="LIST", default="d", help=FREE_HELP + "; refitted in every window")
+    renamed_flag(p, "--param", "--free")
+    p.add_argument("--window", type=float, default=60.0, metavar="S", help="window length, s")
+    p.add_argument("--step", type=float, default=None, metavar="S",
+                   help="window step, s (default: the window length)")
+    add_output_args(p)
+    p.set_defaults(func=_cmd_track)
+
+    p = sub.add_parser("diagnose", formatter_class=formatter,
+                       help="rank the physical effects missing from the model (held-out error)")
+    add_model_args(p)
+    renamed_flag(p, "--base", "--model")
+    add_data_args(p)
+    p.add_argument("--free", metavar="LIST", default="alpha0,d,kappa_e", help=FREE_HELP + "; refitted with each model")
+    p.add_argument("--candidates", metavar="LIST",
+                   help="restrict to these effects, comma list (default: the whole catalog)")
+    _add_settle(p)
+    add_output_args(p)
+    p.set_defaults(func=_cmd_diagnose)
