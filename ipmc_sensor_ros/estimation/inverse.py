@@ -178,9 +178,10 @@ def _design(reduced: ReducedModel, sample_rate_hz: float, leak_corner_hz: float,
     if prewarp_hz >= fs / 2.0:
         raise EstimatorError(f"parameter 'prewarp_hz' = {prewarp_hz} must be below the Nyquist "
                              f"frequency {fs / 2.0} Hz")
-    if leak_corner_hz >= fs / 2.0:
-        raise EstimatorError(f"parameter 'leak_corner_hz' = {leak_corner_hz} must be below the "
-                             f"Nyquist frequency {fs / 2.0} Hz")
+    for name, corner in (("leak_corner_hz", leak_corner_hz), ("offset_corner_hz", offset_corner_hz)):
+        if corner is not None and corner >= fs / 2.0:
+            raise EstimatorError(f"parameter '{name}' = {corner} must be below the "
+                                 f"Nyquist frequency {fs / 2.0} Hz")
     sos = tustin_sos(*inverse_zpk(reduced, leak_corner_hz, offset_corner_hz), fs, prewarp_hz)
     radius = np.abs(sig.sos2zpk(sos)[1])
     if not np.all(radius < 1.0):
