@@ -50,6 +50,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.signal as sig
+from scipy.linalg import schur, solve_sylvester
 
 from ..errors import ParameterError
 from ..lti.discretize import default_prewarp_hz, tustin_sos
@@ -139,9 +140,10 @@ def _design(reduced: ReducedModel, sample_rate_hz: float, leak_corner_hz: float,
     if prewarp_hz >= fs / 2.0:
         raise EstimatorError(f"parameter 'prewarp_hz' = {prewarp_hz} must be below the Nyquist "
                              f"frequency {fs / 2.0} Hz")
-    if leak_corner_hz >= fs / 2.0:
-        raise EstimatorError(f"parameter 'leak_corner_hz' = {leak_corner_hz} must be below the "
-                             f"Nyquist frequency {fs / 2.0} Hz")
+    for name, corner in (("leak_corner_hz", leak_corner_hz), ("offset_corner_hz", offset_corner_hz)):
+        if corner is not None and corner >= fs / 2.0:
+            raise EstimatorError(f"parameter '{name}' = {corner} must be below the "
+                                 f"Nyquist frequency {fs / 2.0} Hz")
     sos = tustin_sos(*inverse_zpk(reduced, leak_corner_hz, offset_corner_hz), fs, prewarp_hz)
     radius = np.abs(sig.sos2zpk(sos)[1])
     if not np.all(radius < 1.0):
@@ -175,6 +177,7 @@ class InverseEstimator:
         self.leak_corner_hz = _positive("leak_corner_hz", leak_corner_hz)
         self.offset_corner_hz = _positive("offset_corner_hz", offset_corner_hz, allow_none=True)
         self.channels = int(channels)
+        self._slow_cache = None
         self._design = _design(reduced, sample_rate_hz, self.leak_corner_hz,
                                self.offset_corner_hz, prewarp_hz)
         self._zi = np.zeros((self.sos.shape[0], 2, self.channels))
@@ -292,18 +295,81 @@ class InverseEstimator:
         With ``recent_input`` (the last samples fed to ``old``, shape (n,) or
         (n, channels); a few tenths of a second is many times the fast modes'
         memory) the state is the new filter's response to that history, which
-        restores its fast modes, plus the steady state that makes the next
-        output equal ``old``'s (the slow, integrating mode carries the
-        deflection, which the history alone does not determine).  Without it,
-        only the steady state is used (a short transient of the fast modes).
+        restores its fast modes, plus a correction in the slow modes (leak and
+        offset tracker) that makes the next output equal ``old``'s and keeps
+        ``old``'s current-offset estimate (these modes carry the deflection and
+        the offset, which the history alone does not determine).  Without it,
+        only the slow modes are set (a short transient of the fast modes).
         """
         self.reset()
         if recent_input is not None and np.size(recent_input):
             x = np.asarray(recent_input, dtype=float).reshape(-1, self.channels)
             _, self._zi = sig.sosfilt(self.sos, x, axis=0, zi=self._zi)
-        delta = old.current_output() - self.current_output()
-        zi_unit = sig.sosfilt_zi(self.sos)
-        self._zi = self._zi + zi_unit[:, :, None] * (delta / self.dc_gain_m_per_a())[None, None, :]
+        # Hand-over in the slow modes (leak, and offset tracker when on), which the short
+        # history cannot restore: the next output equals the old one, and with the tracker
+        # the current-offset estimate carries over.  In continuous form the slow free
+        # response obeys dx/dt = -w_c x - q (q: offset estimate / R_n(0), 0 without
+        # tracker), so q = -(rate + w_c x) is kept; discretely w_c -> 1 - leak pole.
+        # (Not the DC steady state: with the tracker the DC gain is exactly 0.)
+        level, rate = old._slow_level_and_rate()
+        own_level, own_rate = self._slow_level_and_rate()
+        basis, t11, c1, _ = self._slow_part()
+        d_level = old.current_output() - self.current_output()
+        rows, rhs = [c1], [d_level]
+        if t11.shape[0] == 2:
+            offset_term = rate - (old._leak_pole() - 1.0) * level
+            rate_want = offset_term + (self._leak_pole() - 1.0) * (own_level + d_level)
+            rows.append(c1 @ (t11 - np.eye(2)))
+            rhs.append(rate_want - own_rate)
+        coef = np.linalg.solve(np.array(rows), np.array(rhs))      # (m, channels)
+        self._zi = self._zi + (basis @ coef).reshape(-1, 2, self.channels)
+
+    def _leak_pole(self) -> float:
+        """The discrete pole of the leak: prewarped Tustin image of -w_c (as
+        :func:`~ipmc_sensor_ros.lti.discretize.tustin_sos` maps it); computed, not picked
+        among the eigenvalues, which are ambiguous when the two corners nearly coincide."""
+        w0 = 2.0 * math.pi * self.prewarp_hz
+        k = w0 / math.tan(w0 / (2.0 * self.sample_rate_hz))      # 2 fs_warped
+        wc = 2.0 * math.pi * self.leak_corner_hz
+        return (k - wc) / (k + wc)
+
+    def _slow_level_and_rate(self) -> tuple[np.ndarray, np.ndarray]:
+        """Slow part of the free response now: level s(0) and rate s(1) - s(0), per channel."""
+        _, t11, c1, proj = self._slow_part()
+        a = proj @ self._zi.reshape(-1, self.channels)            # slow coordinates (m, ch)
+        level = c1 @ a
+        rate = c1 @ (t11 @ a) - level
+        return level, rate
+
+    def _slow_part(self) -> tuple:
+        """Slow invariant subspace of the zero-input dynamics: basis Q1 (n, m), dynamics
+        T11 (m, m), output row c1 (m,), and the spectral projector onto slow coordinates
+        (m, n) along the fast modes."""
+        if self._slow_cache is not None:
+            return self._slow_cache
+        sections = self.sos.shape[0]
+        n = 2 * sections
+        step = np.empty((n, n))
+        out = np.empty(n)
+        for k in range(n):
+            z = np.zeros((sections, 2))
+            z.flat[k] = 1.0
+            x = 0.0
+            for (b0, b1, b2, a1, a2), zs in zip(self._coefficients, z):
+                y = b0 * x + zs[0]
+                zs[0], zs[1] = b1 * x - a1 * y + zs[1], b2 * x - a2 * y
+                x = y
+            out[k] = x
+            step[:, k] = z.ravel()
+        m = 1 if self.offset_corner_hz is None else 2
+        radius = np.sort(np.abs(np.linalg.eigvals(step)))[::-1]
+        cut = 0.5 * (radius[m - 1] + radius[m]) if radius.size > m else 0.0
+        t, q, dim = schur(step, output="real", sort=lambda re, im: np.hypot(re, im) > cut)
+        t11, t12, t22 = t[:dim, :dim], t[:dim, dim:], t[dim:, dim:]
+        x_syl = solve_sylvester(t11, -t22, -t12)
+        proj = q[:, :dim].T - x_syl @ q[:, dim:].T
+        self._slow_cache = (q[:, :dim], t11, out @ q[:, :dim], proj)
+        return self._slow_cache
 
     def rebuilt(self, reduced: ReducedModel | None = None, recent_input=None,
                 **changes) -> "InverseEstimator":

@@ -10,22 +10,24 @@ code path, one parameters file.
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
 from ..estimation.deflection import DeflectionEstimator
-from ..estimation.inverse import DEFAULT_LEAK_CORNER_HZ
+from ..estimation.inverse import DEFAULT_LEAK_CORNER_HZ, EstimatorError
 from ..estimation.stream import MAX_BLOCK_SAMPLES
-from ..physics.effects import load_plugin
+from ..physics.effects import load_plugins  # noqa: F401 (re-exported for the node)
 from ..physics.model import BASES, SensorModel
-from ..physics.parameters import GEOMETRY_LIMITS_M, Geometry, MaterialParameters, ParameterError
+from ..physics.parameters import (GEOMETRY_LIMITS_M, MATERIAL_LIMITS, Geometry, MaterialParameters,
+                                  ParameterError, read_yaml, short_repr)
 from ..lti.reduction import MAX_ORDER, ReducedModel, ReductionError
 
 __all__ = ["Spec", "ConfigurationError", "GEOMETRY_SPECS", "MATERIAL_SPECS", "MODEL_SPECS",
            "QOS_SPECS", "ESTIMATOR_SPECS", "PUBLISH_POINTS", "MATERIAL_NAMES", "GEOMETRY_NAMES",
            "defaults", "load_params_file", "build_model", "build_estimator", "check_choice",
-           "markdown_table"]
+           "check_values", "markdown_table", "FRAME_ID_PATTERN"]
 
 
 class ConfigurationError(ParameterError):
@@ -37,7 +39,9 @@ class Spec:
     """One parameter: name, default, type, description (with unit), range, read-only flag.
 
     ``kind`` is float, int, str, bool or list (list = string array; its default
-    must be empty: it is declared by type, unset means empty).
+    must be empty: it is declared by type, unset means empty).  Every number has a
+    range (``low``..``high``, inclusive); a string may have a ``pattern`` (full match)
+    and a ``max_length`` in characters.
     """
 
     name: str
@@ -48,6 +52,8 @@ class Spec:
     high: float | None = None
     read_only: bool = False
     choices: tuple[str, ...] = ()
+    pattern: str = ""
+    max_length: int | None = None
 
 
 _M = MaterialParameters()
@@ -60,20 +66,18 @@ GEOMETRY_SPECS = tuple(
                        ("width_m", "width W of the sample"),
                        ("thickness_m", "total thickness 2h of the sample")))
 
-MATERIAL_SPECS = (
-    Spec("youngs_modulus_pa", _M.youngs_modulus_pa, float, "Young's modulus Y, Pa (> 0)"),
-    Spec("surface_resistance_ohm", _M.surface_resistance_ohm, float,
-         "surface-electrode resistance r0 per unit length and width, ohm (>= 0; H2 only)"),
-    Spec("diffusivity_m2_per_s", _M.diffusivity_m2_per_s, float,
-         "ionic diffusivity d, m^2/s (> 0)"),
-    Spec("anion_concentration_mol_per_m3", _M.anion_concentration_mol_per_m3, float,
-         "anion concentration C-, mol/m^3 (> 0)"),
-    Spec("permittivity_f_per_m", _M.permittivity_f_per_m, float,
-         "effective dielectric permittivity kappa_e, F/m (> 0)"),
-    Spec("charge_stress_coupling_j_per_c", _M.charge_stress_coupling_j_per_c, float,
-         "charge-stress coupling alpha0, J/C (> 0)"),
-    Spec("temperature_k", _M.temperature_k, float, "absolute temperature T, K (> 0)"),
-)
+MATERIAL_SPECS = tuple(
+    Spec(name, getattr(_M, name), float, text,
+         low=MATERIAL_LIMITS[name][0], high=MATERIAL_LIMITS[name][1])
+    for name, text in (
+        ("youngs_modulus_pa", "Young's modulus Y, Pa"),
+        ("surface_resistance_ohm", "surface-electrode resistance r0 per unit length and width, "
+                                   "ohm (H2 only)"),
+        ("diffusivity_m2_per_s", "ionic diffusivity d, m^2/s"),
+        ("anion_concentration_mol_per_m3", "anion concentration C-, mol/m^3"),
+        ("permittivity_f_per_m", "effective dielectric permittivity kappa_e, F/m"),
+        ("charge_stress_coupling_j_per_c", "charge-stress coupling alpha0, J/C"),
+        ("temperature_k", "absolute temperature T, K")))
 
 MODEL_SPECS = (
     Spec("model", "h2", str, "base model: 'h1' (eq. 31) or 'h2' (eq. 45, with surface "
@@ -82,7 +86,8 @@ MODEL_SPECS = (
          "'name(param=value, ...)' from the effects catalog, e.g. ['time_delay(delay_s=0.002)'];"
          " unknown names and effects already in the base model are refused"),
     Spec("plugins", [], list, "Python files defining more effects (Effect subclasses, see the "
-         "README's plugin API), loaded before 'effects' is read", read_only=True),
+         "README's plugin API): arbitrary code, loaded once at start-up (sha256 logged), "
+         "never re-read; they cannot replace a built-in effect", read_only=True),
 )
 
 QOS_SPECS = (
@@ -98,6 +103,9 @@ GEOMETRY_NAMES = tuple(s.name for s in GEOMETRY_SPECS)
 
 #: Allowed values of ``publish_points``.
 PUBLISH_POINTS = ("per_sample", "last_of_block", "none")  # not "off": YAML reads off as false
+
+#: Characters allowed in ``frame_id`` (tf2 frame names: letters, digits, _ / . -).
+FRAME_ID_PATTERN = r"[A-Za-z0-9_/.\-]+"
 
 ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
     Spec("reduction_order", 4, int, "order n of the stable reduction of R(s) = H(s)/s",
@@ -115,7 +123,8 @@ ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
     Spec("offset_corner_hz", 0.0, float, "corner of the current-offset tracker, Hz "
          "(0 = off)", low=0.0, high=1e4),
     Spec("frame_id", "ipmc_clamp", str, "frame of the deflection points: origin at the "
-         "clamp, x along the beam to the tip, z in the bending direction"),
+         "clamp, x along the beam to the tip, z in the bending direction",
+         pattern=FRAME_ID_PATTERN, max_length=128),
     Spec("max_gap_s", 0.1, float, "largest time gap between consecutive samples bridged "
          "without a filter reset, s", low=1e-6, high=1e6),
     Spec("publish_points", "per_sample", str, "deflection PointStamped output: 'per_sample', "
@@ -129,47 +138,75 @@ def check_choice(name: str, value: Any, choices: Iterable[str]) -> str:
     """Return ``value`` if it is one of ``choices``, else raise ParameterError naming ``name``."""
     choices = tuple(choices)
     if value not in choices:
-        raise ParameterError(f"parameter '{name}' must be one of {list(choices)}, got {value!r}")
+        raise ParameterError(f"parameter '{name}' must be one of {list(choices)}, "
+                             f"got {short_repr(value)}")
     return value
 
 
 def build_model(values: Mapping[str, Any]) -> SensorModel:
     """SensorModel from geometry, material, ``model`` and ``effects`` parameter values.
 
+    Plugins (``plugins``) are loaded on the first call only
+    (:func:`~ipmc_sensor_ros.physics.effects.load_plugins`: never re-executed).
     Raises :class:`ParameterError` naming the offending parameter.
     """
-    for path in values.get("plugins") or ():
-        try:
-            load_plugin(path)
-        except ParameterError as exc:
-            raise ParameterError(f"parameter 'plugins': {exc}") from None
+    try:
+        load_plugins(values.get("plugins") or ())
+    except ParameterError as exc:
+        raise ParameterError(f"parameter 'plugins': {exc}") from None
     geometry = Geometry(**{k: values[k] for k in GEOMETRY_NAMES})
     material = MaterialParameters(**{k: values[k] for k in MATERIAL_NAMES})
     extra = tuple(str(e) for e in values.get("effects") or ())
     try:
         return SensorModel.named(values["model"], geometry, material, extra)
     except ParameterError as exc:
-        raise ParameterError(f"parameter 'effects' = {list(extra)} with model "
-                             f"'{values['model']}': {exc}") from None
+        raise ParameterError(f"parameter 'effects' = {short_repr(list(extra))} with model "
+                             f"'{short_repr(values['model'])}': {exc}") from None
 
+
+#: Errors of the project that name the parameter; anything else raised while building
+#: is reported as a ConfigurationError (one line, never a traceback).
+_NAMED_ERRORS = (ParameterError, ReductionError, EstimatorError)
+
+
+def check_values(values: Mapping[str, Any], specs: Iterable[Spec] | None = None) -> None:
+    """Check every value in ``values`` that has a spec (type, range, choices, pattern,
+    length): the same rules as a params file and the ROS descriptors.  Raises
+    :class:`ConfigurationError` naming the parameter."""
+    for spec in (ESTIMATOR_SPECS if specs is None else specs):
+        if spec.name in values:
+            _check_value(spec, values[spec.name], "")
 
 
 def build_estimator(values: Mapping[str, Any], reduced: ReducedModel | None = None) -> DeflectionEstimator:
     """The core estimator from parameter values (``reduced`` reused when the model part
     did not change).  Raises ParameterError / ReductionError / EstimatorError /
-    ConfigurationError naming the parameter."""
-    model = build_model(values)
-    band = (float(values["band_low_hz"]), float(values["band_high_hz"]))
-    if not band[0] < band[1]:
-        raise ReductionError(f"parameters 'band_low_hz' ({band[0]}) and 'band_high_hz' "
-                             f"({band[1]}) must satisfy low < high")
-    offset = float(values["offset_corner_hz"])
-    if offset < 0.0:
-        raise ConfigurationError(f"parameter 'offset_corner_hz' must be >= 0 Hz (0 = off), got {offset!r}")
-    return DeflectionEstimator(model, float(values["sample_rate_hz"]),
-                               reduction_order=int(values["reduction_order"]), band_hz=band,
-                               leak_corner_hz=float(values["leak_corner_hz"]),
-                               offset_corner_hz=offset if offset > 0.0 else None, reduced=reduced)
+    ConfigurationError naming the parameter; any other failure of the numerics (e.g. a
+    LinAlgError) becomes a one-line ConfigurationError."""
+    check_values(values)
+    try:
+        model = build_model(values)
+        band = (float(values["band_low_hz"]), float(values["band_high_hz"]))
+        if not band[0] < band[1]:
+            raise ReductionError(f"parameters 'band_low_hz' ({band[0]}) and 'band_high_hz' "
+                                 f"({band[1]}) must satisfy low < high")
+        offset = float(values["offset_corner_hz"])
+        return DeflectionEstimator(model, float(values["sample_rate_hz"]),
+                                   reduction_order=int(values["reduction_order"]), band_hz=band,
+                                   leak_corner_hz=float(values["leak_corner_hz"]),
+                                   offset_corner_hz=offset if offset > 0.0 else None,
+                                   reduced=reduced)
+    except (*_NAMED_ERRORS, ConfigurationError):
+        raise
+    except Exception as exc:  # numerics of an extreme but in-range combination
+        raise ConfigurationError(f"these parameter values do not give a usable model: "
+                                 f"{_one_line(exc)}") from None
+
+
+def _one_line(exc: BaseException, limit: int = 200) -> str:
+    text = " ".join(str(exc).split())
+    text = text if len(text) <= limit else text[:limit] + "..."
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
 def defaults(specs: Iterable[Spec]) -> dict[str, Any]:
@@ -178,31 +215,42 @@ def defaults(specs: Iterable[Spec]) -> dict[str, Any]:
 
 
 def _check_value(spec: Spec, value: Any, where: str) -> Any:
+    where = f"{where}: " if where else ""
+    shown = short_repr(value)
     if spec.kind is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigurationError(f"{where}: parameter '{spec.name}' must be a number, got {value!r}")
-        value = float(value)
+            raise ConfigurationError(f"{where}parameter '{spec.name}' must be a number, got {shown}")
+        try:
+            value = float(value)
+        except OverflowError:
+            raise ConfigurationError(f"{where}parameter '{spec.name}' = {shown} is too large") from None
     elif spec.kind is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigurationError(f"{where}: parameter '{spec.name}' must be an integer, got {value!r}")
+            raise ConfigurationError(f"{where}parameter '{spec.name}' must be an integer, got {shown}")
     elif spec.kind is str:
         if not isinstance(value, str):
-            raise ConfigurationError(f"{where}: parameter '{spec.name}' must be a string, got {value!r}")
+            raise ConfigurationError(f"{where}parameter '{spec.name}' must be a string, got {shown}")
     elif spec.kind is bool:
         if not isinstance(value, bool):
-            raise ConfigurationError(f"{where}: parameter '{spec.name}' must be true or false, got {value!r}")
+            raise ConfigurationError(f"{where}parameter '{spec.name}' must be true or false, got {shown}")
     elif spec.kind is list:
         if isinstance(value, str) or not isinstance(value, (list, tuple)) \
                 or not all(isinstance(v, str) for v in value):
-            raise ConfigurationError(f"{where}: parameter '{spec.name}' must be a list of strings, "
-                                     f"got {value!r}")
+            raise ConfigurationError(f"{where}parameter '{spec.name}' must be a list of strings, "
+                                     f"got {shown}")
         value = [v for v in value if v]
-    if spec.low is not None and not (spec.low <= value <= spec.high):
-        raise ConfigurationError(f"{where}: parameter '{spec.name}' = {value!r} is outside "
+    if spec.low is not None and not (spec.low <= value <= spec.high):  # NaN fails too
+        raise ConfigurationError(f"{where}parameter '{spec.name}' = {shown} is outside "
                                  f"[{spec.low:g}, {spec.high:g}]")
     if spec.choices and value not in spec.choices:
-        raise ConfigurationError(f"{where}: parameter '{spec.name}' must be one of "
-                                 f"{list(spec.choices)}, got {value!r}")
+        raise ConfigurationError(f"{where}parameter '{spec.name}' must be one of "
+                                 f"{list(spec.choices)}, got {shown}")
+    if spec.max_length is not None and len(value) > spec.max_length:
+        raise ConfigurationError(f"{where}parameter '{spec.name}' is {len(value)} characters long, "
+                                 f"more than {spec.max_length}: {shown}")
+    if spec.pattern and not re.fullmatch(spec.pattern, value):
+        raise ConfigurationError(f"{where}parameter '{spec.name}' = {shown} does not match "
+                                 f"{spec.pattern} (allowed characters, not empty)")
     return value
 
 
@@ -213,19 +261,16 @@ def load_params_file(path: str | Path, node_name: str = "ipmc_estimator",
     Sections that apply: ``/**``, ``/**/<node_name>``, ``<node_name>`` and
     ``/<node_name>`` (later ones win), each with ``ros__parameters``.  Unknown
     keys, wrong types, out-of-range values and unit mistakes (e.g. a length in
-    millimetres) raise :class:`ConfigurationError` naming the key and the file.
-    ``use_sim_time`` is accepted and ignored here.
+    millimetres) raise :class:`ConfigurationError` naming the key and the file;
+    so do unreadable files (not UTF-8, not YAML, ``!!python`` tags: one line with
+    file:line).  ``use_sim_time`` is accepted and ignored here.
     """
-    import yaml
-
     specs = ESTIMATOR_SPECS if specs is None else specs
     path = Path(path)
     try:
-        doc = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise ConfigurationError(f"{path}: parameters file not found") from None
-    except yaml.YAMLError as exc:
-        raise ConfigurationError(f"{path}: not valid YAML: {exc}") from None
+        doc = read_yaml(path, "parameters file")
+    except ParameterError as exc:
+        raise ConfigurationError(str(exc)) from None
     if not isinstance(doc, dict):
         raise ConfigurationError(f"{path}: expected a mapping of node names to 'ros__parameters'")
     values = defaults(specs)
@@ -238,20 +283,27 @@ def load_params_file(path: str | Path, node_name: str = "ipmc_estimator",
         if not isinstance(section, dict) or "ros__parameters" not in section:
             raise ConfigurationError(f"{path}: section '{key}' has no 'ros__parameters'")
         found = True
-        for name, value in (section["ros__parameters"] or {}).items():
+        params = section["ros__parameters"] or {}
+        if not isinstance(params, dict):
+            raise ConfigurationError(f"{path}: 'ros__parameters' of section '{key}' must be a "
+                                     f"mapping, got {short_repr(params)}")
+        for name, value in params.items():
             if name == "use_sim_time":
                 continue
             if name not in by_name:
-                raise ConfigurationError(f"{path}: unknown parameter '{name}' in section '{key}' "
-                                         f"(known: {sorted(by_name)})")
+                raise ConfigurationError(f"{path}: unknown parameter {short_repr(name)} in section "
+                                         f"'{key}' (known: {sorted(by_name)})")
             values[name] = _check_value(by_name[name], value, str(path))
     if not found:
         raise ConfigurationError(f"{path}: no section for node '{node_name}' (expected one of "
                                  f"'/**', '/**/{node_name}', '{node_name}')")
     try:
         build_model(values)
-    except ParameterError as exc:
+    except (*_NAMED_ERRORS, ConfigurationError) as exc:
         raise ConfigurationError(f"{path}: {exc}") from None
+    except Exception as exc:  # numerics of an extreme but in-range combination
+        raise ConfigurationError(f"{path}: these parameter values do not give a usable model: "
+                                 f"{_one_line(exc)}") from None
     return values
 
 

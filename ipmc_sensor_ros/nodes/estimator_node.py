@@ -133,6 +133,9 @@ class EstimatorNode(Node):
             self._reduced, estimator = design(self._values)
         except _ERRORS as exc:
             raise P.ConfigurationError(str(exc)) from None
+        for path, (digest, names) in C.load_plugins(self._values["plugins"]).items():
+            self.get_logger().info(f"plugin {path} (sha256 {digest}): effects {', '.join(names)}; "
+                                   "loaded once, not re-read")
         self._model_key = _model_key(self._values)
         self._pending: tuple | None = None
         self._ticks = 0
@@ -260,8 +263,10 @@ class EstimatorNode(Node):
 
     # -- parameters -------------------------------------------------------------
     def _on_set_parameters(self, parameters) -> SetParametersResult:
-        """Validate a change by building the new design; nothing is applied here."""
+        """Validate a change by building the new design; nothing is applied here.  Any
+        failure to build, whatever the exception, refuses the change (one-line reason)."""
         with self._lock:
+            self._pending = None
             values = dict(self._values)
             for p in parameters:
                 if p.name not in values:
@@ -270,12 +275,15 @@ class EstimatorNode(Node):
                     return SetParametersResult(successful=False,
                                                reason=f"parameter '{p.name}' cannot be unset")
                 values[p.name] = list(p.value) if isinstance(values[p.name], list) else p.value
-            key = _model_key(values)
             try:
+                key = _model_key(values)
                 reduced, new = design(values, self._reduced if key == self._model_key else None)
-            except _ERRORS as exc:
-                self._pending = None
-                return SetParametersResult(successful=False, reason=str(exc))
+            except Exception as exc:  # a remote call must never kill the node
+                text = " ".join(str(exc).split())
+                text = text if len(text) <= 300 else text[:300] + "..."
+                if not isinstance(exc, _ERRORS):
+                    text = f"{type(exc).__name__}: {text}"
+                return SetParametersResult(successful=False, reason=text)
             self._pending = (values, key, reduced, new)
             return SetParametersResult(successful=True)
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import re
 import signal
 import sys
 
@@ -9,6 +10,9 @@ import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
+from rclpy._rclpy_pybind11 import RCLError
+
+from ..physics.parameters import ParameterError, read_yaml
 from .params import ConfigurationError, params_files
 
 __all__ = ["run"]
@@ -38,7 +42,18 @@ def _run(node_factory, name: str, args=None) -> int:
     # A shell starts background jobs with SIGINT ignored, and Python keeps an
     # inherited SIG_IGN: restore the default so SIGINT always stops the node.
     signal.signal(signal.SIGINT, signal.default_int_handler)
-    rclpy.init(args=args)
+    try:
+        # rcl reports a params file it cannot parse as an RCLError traceback (exit 1)
+        # without the line: read each file first for a one-line file:line error
+        for path in params_files(args):
+            read_yaml(path, "parameters file")
+        rclpy.init(args=args)
+    except (ParameterError, RCLError) as exc:
+        text = str(exc)
+        if isinstance(exc, RCLError):   # "...Error: <what> at line_num 3, at /src/parse.c:435, ..."
+            text = re.sub(r",? at /\S+:\d+", "", text).replace("failed to initialize rcl: ", "")
+        print(f"{name}: invalid parameters file: {' '.join(text.split())}", file=sys.stderr)
+        return 2
     # The executor exists before the node logs "ready", so a SIGINT sent on that
     # line cannot interrupt the executor's construction (rclpy then prints an
     # "Exception ignored in Executor.__del__" traceback).

@@ -21,10 +21,14 @@ the time domain by :func:`ipmc_sensor_ros.simulation.sensor.predict_current`.
 
 User-defined effects subclass :class:`Effect`, set ``name`` and ``parameters``
 and override what they need; :func:`load_plugin` registers every subclass found
-in a Python file.
+in a Python file.  A plugin is arbitrary Python code run with the rights of the
+process: each file is executed once (its sha256 recorded, see
+:func:`loaded_plugins`) and never re-read, and it cannot replace a built-in effect
+or another plugin's.
 """
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import math
 from dataclasses import dataclass
@@ -33,10 +37,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from .parameters import ParameterError
+from .parameters import ParameterError, parse_number, short_repr
 
-__all__ = ["EffectParameter", "Effect", "EFFECTS", "register_effect", "load_plugin", "get_effect",
-           "catalog_markdown"]
+__all__ = ["EffectParameter", "Effect", "EFFECTS", "register_effect", "load_plugin", "load_plugins",
+           "loaded_plugins", "get_effect", "catalog_markdown"]
 
 
 @dataclass(frozen=True)
@@ -59,12 +63,13 @@ class EffectParameter:
 
     def check(self, value, where: str = "") -> float:
         try:
-            v = float(value)
-        except (TypeError, ValueError):
-            raise ParameterError(f"{where}parameter '{self.name}' must be a number, got {value!r}") from None
+            v = parse_number(value)
+        except (TypeError, ValueError, OverflowError):
+            raise ParameterError(f"{where}parameter '{self.name}' must be a number, "
+                                 f"got {short_repr(value)}") from None
         if not math.isfinite(v) or not (self.lower <= v <= self.upper):
-            raise ParameterError(f"{where}parameter '{self.name}' = {value!r} {self.unit} is outside "
-                                 f"[{self.lower:g}, {self.upper:g}] {self.unit}")
+            raise ParameterError(f"{where}parameter '{self.name}' = {short_repr(value)} {self.unit} "
+                                 f"is outside [{self.lower:g}, {self.upper:g}] {self.unit}")
         return v
 
 
@@ -88,9 +93,9 @@ class Effect:
 
     def validate(self, values: dict) -> dict[str, float]:
         known = {p.name: p for p in self.parameters}
-        unknown = sorted(set(values) - set(known))
+        unknown = sorted(str(k) for k in set(values) - set(known))
         if unknown:
-            raise ParameterError(f"effect '{self.name}': unknown parameter(s) {unknown}; "
+            raise ParameterError(f"effect '{self.name}': unknown parameter(s) {short_repr(unknown)}; "
                                  f"known: {sorted(known)}")
         out = self.defaults()
         for k, v in values.items():
@@ -136,47 +141,103 @@ class Effect:
 
 EFFECTS: dict[str, Effect] = {}
 
+#: Where each registered effect came from: "built-in" or the plugin file.
+_SOURCES: dict[str, str] = {}
 
-def register_effect(cls):
-    """Class decorator / function: register an :class:`Effect` subclass by its ``name``."""
+#: Plugin files loaded so far: resolved path -> (sha256 of the executed bytes, effect names).
+_PLUGINS: dict[str, tuple[str, tuple[str, ...]]] = {}
+_PLUGIN_CLASSES: dict[str, list[type]] = {}
+
+
+def register_effect(cls, source: str = "built-in"):
+    """Class decorator / function: register an :class:`Effect` subclass by its ``name``.
+
+    A name already registered from another source (a built-in effect, another plugin)
+    is refused: a plugin cannot silently replace an effect."""
     if not (isinstance(cls, type) and issubclass(cls, Effect)) or not cls.name:
-        raise ParameterError(f"{cls!r} is not an Effect subclass with a name")
-    if not cls.name.isidentifier():
-        raise ParameterError(f"effect name {cls.name!r} must be an identifier")
+        raise ParameterError(f"{short_repr(cls)} is not an Effect subclass with a name")
+    if not isinstance(cls.name, str) or not cls.name.isidentifier():
+        raise ParameterError(f"effect name {short_repr(cls.name)} must be an identifier")
+    previous = _SOURCES.get(cls.name)
+    if previous is not None and previous != source:
+        what = "a built-in effect" if previous == "built-in" else f"defined by plugin {previous}"
+        raise ParameterError(f"effect '{cls.name}' is {what}; a plugin cannot replace it "
+                             "(give the plugin's effect another name)")
     EFFECTS[cls.name] = cls()
+    _SOURCES[cls.name] = source
     return cls
 
 
 def get_effect(name: str) -> Effect:
     try:
         return EFFECTS[name]
-    except KeyError:
-        raise ParameterError(f"unknown effect '{name}'; known: {sorted(EFFECTS)} "
+    except (KeyError, TypeError):
+        raise ParameterError(f"unknown effect {short_repr(name)}; known: {sorted(EFFECTS)} "
                              "(or load a plugin with --plugin FILE)") from None
 
 
 def load_plugin(path: str | Path) -> list[str]:
-    """Import a Python file and register every Effect subclass it defines.
+    """Execute a Python file once and register every Effect subclass it defines.
 
-    Returns the names registered.  Errors name the file.
+    Returns the names registered.  A file already loaded (same resolved path) is not
+    executed again: its names are returned, whatever the file holds now.  Errors
+    name the file, including a plugin that raises KeyboardInterrupt or SystemExit
+    while loading (which would otherwise end the process silently).
     """
     path = Path(path)
     if not path.is_file():
-        raise ParameterError(f"{path}: plugin file not found")
+        raise ParameterError(f"{path}: plugin file not found (or not a regular file)")
+    key = str(path.resolve())
+    if key in _PLUGINS:
+        for obj in _PLUGIN_CLASSES[key]:      # re-register (not re-run) if one was removed
+            if obj.name not in EFFECTS:
+                register_effect(obj, source=_SOURCES.get(obj.name, str(path)))
+        return list(_PLUGINS[key][1])
+    source = path.read_bytes()
+    digest = hashlib.sha256(source).hexdigest()
     spec = importlib.util.spec_from_file_location(f"ipmc_plugin_{path.stem}", path)
     module = importlib.util.module_from_spec(spec)
     try:
-        spec.loader.exec_module(module)
-    except Exception as exc:  # a user's file: report any failure with its name
-        raise ParameterError(f"{path}: plugin failed to import: {type(exc).__name__}: {exc}") from None
-    names = []
-    for obj in vars(module).values():
-        if isinstance(obj, type) and issubclass(obj, Effect) and obj is not Effect and obj.name:
-            register_effect(obj)
-            names.append(obj.name)
-    if not names:
+        # the bytes hashed are the bytes run (not a second read of the file)
+        exec(compile(source, str(path), "exec"), module.__dict__)
+    except (KeyboardInterrupt, SystemExit) as exc:
+        raise ParameterError(f"{path}: plugin raised {type(exc).__name__} while loading") from None
+    except BaseException as exc:  # a user's file: report any failure with its name
+        text = " ".join(str(exc).split())[:200]
+        raise ParameterError(f"{path}: plugin failed to import: {type(exc).__name__}: {text}") from None
+    classes = [obj for obj in vars(module).values()
+               if isinstance(obj, type) and issubclass(obj, Effect) and obj is not Effect
+               and obj.name and obj.__module__ == module.__name__]
+    if not classes:
         raise ParameterError(f"{path}: defines no Effect subclass with a 'name'")
-    return names
+    for obj in classes:   # check all names before registering any
+        previous = _SOURCES.get(obj.name)
+        if previous is not None:
+            what = "a built-in effect" if previous == "built-in" else f"defined by plugin {previous}"
+            raise ParameterError(f"{path}: effect '{obj.name}' is {what}; a plugin cannot "
+                                 "replace it (give the plugin's effect another name)")
+    for obj in classes:
+        register_effect(obj, source=str(path))
+    names = tuple(obj.name for obj in classes)
+    _PLUGINS[key] = (digest, names)
+    _PLUGIN_CLASSES[key] = classes
+    return list(names)
+
+
+def load_plugins(paths) -> dict[str, tuple[str, tuple[str, ...]]]:
+    """Load each plugin file once (:func:`load_plugin`); returns ``{path: (sha256, names)}``
+    of these files."""
+    out = {}
+    for path in paths:
+        if path:
+            load_plugin(path)
+            out[str(path)] = _PLUGINS[str(Path(path).resolve())]
+    return out
+
+
+def loaded_plugins() -> dict[str, tuple[str, tuple[str, ...]]]:
+    """Every plugin executed in this process: resolved path -> (sha256, effect names)."""
+    return dict(_PLUGINS)
 
 
 def catalog_markdown() -> str:

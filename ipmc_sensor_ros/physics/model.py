@@ -24,7 +24,7 @@ import numpy as np
 
 from . import catalog as _catalog  # noqa: F401  (registers the built-in effects)
 from .effects import get_effect
-from .parameters import PAPER_PARAMETERS, Geometry, MaterialParameters, ParameterError
+from .parameters import PAPER_PARAMETERS, Geometry, MaterialParameters, ParameterError, short_repr
 
 __all__ = ["SensorModel", "EffectSpec", "BASES", "model_effects", "parse_model_name", "parse_effects",
            "format_effect"]
@@ -80,13 +80,18 @@ def parse_effects(text: str | Iterable) -> tuple[EffectSpec, ...]:
             continue
         m = _EFFECT_RE.match(str(item))
         if not m:
-            raise ParameterError(f"cannot parse effect {item!r}; expected name or name(param=value,...)")
+            raise ParameterError(f"cannot parse effect {short_repr(str(item))}; expected name or "
+                                 "name(param=value,...)")
         values = {}
         if m.group(2):
             for kv in m.group(2).split(","):
                 if "=" not in kv:
-                    raise ParameterError(f"effect {item!r}: expected param=value, got {kv!r}")
+                    raise ParameterError(f"effect {short_repr(str(item))}: expected param=value, "
+                                         f"got {short_repr(kv)}")
                 k, v = kv.split("=", 1)
+                if k.strip() in values:
+                    raise ParameterError(f"effect {short_repr(str(item))}: parameter "
+                                         f"{short_repr(k.strip())} is given twice")
                 values[k.strip()] = v.strip()
         out.append(_spec(m.group(1), values))
     return tuple(out)
@@ -118,7 +123,7 @@ def parse_model_name(name: str) -> tuple[str, tuple[str, ...]]:
     """'h2' -> ('h1', ('surface_resistance',)); refuse unknown names."""
     key = str(name).strip().lower()
     if key not in BASES:
-        raise ParameterError(f"unknown model '{name}'; choose one of {sorted(BASES)}")
+        raise ParameterError(f"unknown model {short_repr(str(name))}; choose one of {sorted(BASES)}")
     return "h1", BASES[key]
 
 

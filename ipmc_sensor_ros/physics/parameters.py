@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import reprlib
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, Mapping
@@ -26,6 +27,10 @@ from ..errors import ParameterError
 
 __all__ = [
     "ParameterError",
+    "MATERIAL_LIMITS",
+    "short_repr",
+    "parse_number",
+    "read_yaml",
     "MaterialParameters",
     "Geometry",
     "PAPER_PARAMETERS",
@@ -37,16 +42,68 @@ __all__ = [
 
 
 
+def short_repr(value: Any, limit: int = 60) -> str:
+    """``repr(value)`` cut to ``limit`` characters (with '...' and the full length), so an
+    error message never echoes a huge value in full (a 10 MB label, an alias-bomb YAML).
+    Containers are summarised before ``repr`` expands them."""
+    if isinstance(value, (list, tuple, dict, set)) and len(value) > 8:
+        kind = type(value).__name__
+        return f"<{kind} of {len(value)} items>"
+    if isinstance(value, (list, tuple, dict, set)):
+        try:
+            text = reprlib.Repr(maxlevel=2, maxstring=limit, maxother=limit).repr(value)
+        except Exception:  # a repr that fails must not hide the error being reported
+            text = f"<{type(value).__name__}>"
+    else:
+        text = repr(value) if not isinstance(value, str) or len(value) <= 4 * limit \
+            else repr(value[:limit + 1])
+    if len(text) > limit:
+        full = len(value) if isinstance(value, str) else len(text)
+        text = f"{text[:limit]}... ({full} characters)"
+    return text
+
+
+def parse_number(value: Any) -> float:
+    """``float(value)``, but a string must be plain ASCII: Python's ``float`` also reads
+    Unicode digits ('\u0661\u0662' -> 12.0) and full-width forms, which no instrument or
+    file of this project writes (raises ValueError)."""
+    if isinstance(value, bool):
+        raise TypeError("a boolean is not a number")
+    if isinstance(value, str) and not value.isascii():
+        raise ValueError(f"not an ASCII number: {short_repr(value)}")
+    return float(value)
+
+
+#: Physical range of each material parameter (SI units), checked at construction.  The
+#: envelopes are wide (several decades around the paper's Tables 1-2 and the fits'
+#: bounds) but keep every derived quantity (K, beta, the reduction) finite: a value
+#: like Y = 1e-300 Pa or T = 5e-324 K made the model's linear algebra fail.
+#: ``None`` as upper bound = none.
+MATERIAL_LIMITS: dict[str, tuple[float, float]] = {
+    "faraday_constant_c_per_mol": (9.6e4, 9.7e4),       # a constant (96485.3)
+    "gas_constant_j_per_mol_k": (8.3, 8.35),             # a constant (8.3145)
+    "temperature_k": (200.0, 400.0),                     # hydrated Nafion: well above freezing
+    "youngs_modulus_pa": (1e5, 1e12),                     # soft gels .. stiffer than steel
+    "surface_resistance_ohm": (0.0, 1e6),
+    "diffusivity_m2_per_s": (1e-20, 1e-6),                # ions in polymers .. liquids 1e-9
+    "anion_concentration_mol_per_m3": (1e-2, 1e5),        # water is 5.5e4 mol/m^3
+    "permittivity_f_per_m": (8.8e-12, 10.0),              # vacuum .. effective (Table 2: 1.9e-3)
+    "charge_stress_coupling_j_per_c": (1e-3, 1e6),
+    "one_minus_anion_volume_fraction": (1e-6, 1.0),
+}
+
+
 def _check(name: str, value: Any, *, positive: bool = True, allow_zero: bool = False,
-           upper: float | None = None, where: str = "") -> float:
+           upper: float | None = None, where: str = "", limits: tuple[float, float] | None = None,
+           unit: str = "") -> float:
     """Return ``value`` as float or raise :class:`ParameterError` naming it."""
     prefix = f"{where}: " if where else ""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         try:
-            value = float(value)
-        except (TypeError, ValueError):
+            value = parse_number(value)
+        except (TypeError, ValueError, OverflowError):
             raise ParameterError(
-                f"{prefix}parameter '{name}' must be a number, got {value!r}") from None
+                f"{prefix}parameter '{name}' must be a number, got {short_repr(value)}") from None
     value = float(value)
     if not math.isfinite(value):
         raise ParameterError(f"{prefix}parameter '{name}' must be finite, got {value!r}")
@@ -57,6 +114,9 @@ def _check(name: str, value: Any, *, positive: bool = True, allow_zero: bool = F
             raise ParameterError(f"{prefix}parameter '{name}' must be > 0, got {value!r}")
     if upper is not None and value > upper:
         raise ParameterError(f"{prefix}parameter '{name}' must be <= {upper}, got {value!r}")
+    if limits is not None and not limits[0] <= value <= limits[1]:
+        raise ParameterError(f"{prefix}parameter '{name}' = {value!r}{unit} is outside the "
+                             f"physical range [{limits[0]:g}, {limits[1]:g}]{unit}")
     return value
 
 
@@ -96,9 +156,9 @@ class MaterialParameters:
     def __post_init__(self) -> None:
         for f in fields(self):
             allow_zero = f.name == "surface_resistance_ohm"
-            upper = 1.0 if f.name == "one_minus_anion_volume_fraction" else None
             object.__setattr__(self, f.name, _check(f.name, getattr(self, f.name),
-                                                    allow_zero=allow_zero, upper=upper))
+                                                    allow_zero=allow_zero,
+                                                    limits=MATERIAL_LIMITS[f.name]))
 
     # -- derived quantities -------------------------------------------------
     @property
@@ -118,10 +178,13 @@ class MaterialParameters:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], where: str = "") -> "MaterialParameters":
         names = {f.name for f in fields(cls)}
-        unknown = sorted(set(data) - names)
+        prefix = f"{where}: " if where else ""
+        if not isinstance(data, Mapping):
+            raise ParameterError(f"{prefix}material must be a mapping of names to values, "
+                                 f"got {short_repr(data)}")
+        unknown = sorted(str(k) for k in set(data) - names)
         if unknown:
-            prefix = f"{where}: " if where else ""
-            raise ParameterError(f"{prefix}unknown material parameter(s) {unknown}; "
+            raise ParameterError(f"{prefix}unknown material parameter(s) {short_repr(unknown)}; "
                                  f"known: {sorted(names)}")
         try:
             return cls(**dict(data))
@@ -179,10 +242,14 @@ class Geometry:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], where: str = "") -> "Geometry":
         names = {f.name for f in fields(cls)}
-        unknown = sorted(set(data) - names)
         prefix = f"{where}: " if where else ""
+        if not isinstance(data, Mapping):
+            raise ParameterError(f"{prefix}geometry must be a mapping of names to values, "
+                                 f"got {short_repr(data)}")
+        unknown = sorted(str(k) for k in set(data) - names)
         if unknown:
-            raise ParameterError(f"{prefix}unknown geometry key(s) {unknown}; known: {sorted(names)}")
+            raise ParameterError(f"{prefix}unknown geometry key(s) {short_repr(unknown)}; "
+                                 f"known: {sorted(names)}")
         missing = sorted({"length_m", "width_m", "thickness_m"} - set(data))
         if missing:
             raise ParameterError(f"{prefix}missing geometry key(s) {missing}")
@@ -205,23 +272,60 @@ PAPER_SAMPLES: dict[str, Geometry] = {
 }
 
 
+#: Largest parameters / YAML file read, bytes (real ones are a few kB).
+MAX_YAML_BYTES = 1_000_000
+
+
+def read_yaml(path: str | Path, what: str = "YAML file") -> Any:
+    """Parse a small YAML file with ``yaml.safe_load``; every failure is one
+    :class:`ParameterError` line naming the file (and the line for syntax errors):
+    missing, not a regular file (a FIFO would block), too large, not text (UTF-8,
+    or UTF-16 with a byte-order mark, as rcl reads), invalid YAML, a ``!!python`` tag."""
+    import yaml
+
+    path = Path(path)
+    try:
+        if not path.exists():
+            raise ParameterError(f"{path}: {what} not found")
+        if not path.is_file():
+            raise ParameterError(f"{path}: {what} is not a regular file")
+        size = path.stat().st_size
+        if size > MAX_YAML_BYTES:
+            raise ParameterError(f"{path}: {what} is {size} bytes, more than the limit "
+                                 f"{MAX_YAML_BYTES} (is it the right file?)")
+        raw = path.read_bytes()[:MAX_YAML_BYTES + 1]
+    except OSError as exc:
+        raise ParameterError(f"{path}: cannot read the {what}: {exc.strerror or exc}") from None
+    bom16 = raw[:2] in (b"\xff\xfe", b"\xfe\xff")      # UTF-16 with a byte-order mark
+    try:
+        text = raw.decode("utf-16" if bom16 else "utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ParameterError(f"{path}: {what} is not UTF-8 (or UTF-16 with a byte-order mark) "
+                             f"text: undecodable byte at offset {exc.start}") from None
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = f":{mark.line + 1}" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or str(exc)
+        problem = " ".join(str(problem).split())[:200]
+        raise ParameterError(f"{path}{line}: not valid YAML for a {what}: {problem}") from None
+    except RecursionError:
+        raise ParameterError(f"{path}: {what} is nested too deeply") from None
+
+
 def load_yaml(path: str | Path) -> tuple[MaterialParameters, Geometry | None]:
     """Load ``material:`` (and optional ``geometry:``) from a YAML file.
 
     Missing material keys take the paper's defaults.  Errors name the file.
     """
-    import yaml
-
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise ParameterError(f"{path}: not valid YAML: {exc}") from None
+    data = read_yaml(path, "parameters file") or {}
     if not isinstance(data, dict):
         raise ParameterError(f"{path}: expected a mapping with 'material' and 'geometry' keys")
     unknown = sorted(set(data) - {"material", "geometry", "model"})
     if unknown:
-        raise ParameterError(f"{path}: unknown top-level key(s) {unknown}; "
+        raise ParameterError(f"{path}: unknown top-level key(s) {short_repr(unknown)}; "
                              "known: ['geometry', 'material', 'model']")
     material = MaterialParameters.from_dict(data.get("material") or {}, where=str(path))
     geometry = None
