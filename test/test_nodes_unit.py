@@ -359,7 +359,7 @@ def test_invalid_parameter_changes_are_refused_with_reason(harness, reduced):
         "sample_rate_hz": (500.0, "read-only"),
         "qos_depth": (10, "read-only"),
         "youngs_modulus_pa": (-5.0, "youngs_modulus_pa"),
-        "model": ("h3", "unknown model"),
+        "model": ("h3", "must be one of"),
         "effects": (["bogus"], "unknown effect 'bogus'"),
         "publish_points": ("all", "publish_points"),
         "band_low_hz": (80.0, "band_low_hz"),
