@@ -59,16 +59,6 @@ COUNTER_NAMES = ("messages_in", "samples_in", "samples_out", "samples_rejected",
                  "messages_rejected", "samples_dropped", "samples_unpublished",
                  "messages_unpublished", "resets", "gaps", "gaps_bridged")
 
-#: Longest piece of a peer's text (label, frame) echoed in a message, characters.
-MAX_ECHO_CHARS = 80
-
-
-def echo(text) -> str:
-    """``repr`` of a peer-supplied value, cut to :data:`MAX_ECHO_CHARS` (log lines stay short)."""
-    r = repr(text) if not isinstance(text, str) else repr(text[:MAX_ECHO_CHARS + 1])
-    return r if len(r) <= MAX_ECHO_CHARS else r[:MAX_ECHO_CHARS] + "...'"
-
-
 def validate_block(values, max_samples: int = MAX_BLOCK_SAMPLES,
                    max_abs_current_a: float = MAX_ABS_CURRENT_A) -> np.ndarray:
     """Check a block of current samples before it touches filter state.

@@ -23,8 +23,10 @@ import array
 import numpy as np
 
 from ..errors import DataError
+from ..physics.parameters import short_repr
 
-__all__ = ["LayoutError", "SAMPLE_LABEL", "CURRENT_COLUMNS", "DEFLECTION_COLUMNS", "unpack_pairs"]
+__all__ = ["LayoutError", "SAMPLE_LABEL", "CURRENT_COLUMNS", "DEFLECTION_COLUMNS",
+           "ESTIMATE_COLUMNS", "unpack_columns", "unpack_pairs"]
 
 #: Label of the row dimension.
 SAMPLE_LABEL = "sample"
@@ -32,7 +34,9 @@ SAMPLE_LABEL = "sample"
 CURRENT_COLUMNS = "time_s,current_A"
 #: Column label of deflection blocks: seconds, metres.
 DEFLECTION_COLUMNS = "time_s,deflection_m"
-
+#: Column label of the estimator's output blocks: seconds, metres, and the standard deviation
+#: of each estimate, metres.
+ESTIMATE_COLUMNS = "time_s,deflection_m,deflection_std_m"
 
 class LayoutError(DataError):
     """A ``Float64MultiArray`` whose layout does not follow the block convention."""
@@ -45,12 +49,13 @@ def _data(msg) -> np.ndarray:
     return np.asarray(data, dtype=float)
 
 
-def unpack_pairs(msg, columns: str, *, values_only_ok: bool = True):
-    """(times_s or None, values) of a block message; :class:`LayoutError` if malformed.
-
-    ``values_only_ok``: accept a 1-D values-only message (times None).  Values
-    are not checked for finiteness here.
+def unpack_columns(msg, columns: str, *, values_only_ok: bool = True):
+    """(times_s or None, table) of a block message whose ``dim[1]`` label is ``columns``
+    (``"time_s,<value>[,<more>...]"``, k names): ``table`` has shape (n, k - 1).
+    :class:`LayoutError` if malformed.  ``values_only_ok``: accept a 1-D values-only message
+    (times None, table of shape (n, 1)).  Values are not checked for finiteness here.
     """
+    k = len(columns.split(","))
     dims = list(msg.layout.dim)
     offset = int(msg.layout.data_offset)
     data = _data(msg)
@@ -61,25 +66,33 @@ def unpack_pairs(msg, columns: str, *, values_only_ok: bool = True):
         if dims and dims[0].size != data.size:
             raise LayoutError(f"1-D layout: dim[0].size = {dims[0].size} but the data holds "
                               f"{data.size} value(s)")
-        return None, data
+        return None, data[:, None]
     if len(dims) != 2:
         note = " (values only, no sample times)" if len(dims) < 2 else ""
         raise LayoutError(f"expected 2 dimensions (dim[0] '{SAMPLE_LABEL}', dim[1] '{columns}'), "
                           f"got {len(dims)}{note}")
     d0, d1 = dims
     if d0.label != SAMPLE_LABEL:
-        raise LayoutError(f"dim[0].label is {d0.label!r}, expected '{SAMPLE_LABEL}'")
+        raise LayoutError(f"dim[0].label is {short_repr(d0.label)}, expected '{SAMPLE_LABEL}'")
     if d1.label != columns:
-        raise LayoutError(f"dim[1].label is {d1.label!r}, expected '{columns}' (wrong units or "
-                          "wrong topic?)")
-    if d1.size != 2 or d1.stride != 2:
-        raise LayoutError(f"dim[1] must have size 2 and stride 2, got size {d1.size}, "
+        raise LayoutError(f"dim[1].label is {short_repr(d1.label)}, expected '{columns}' (wrong units "
+                          "or wrong topic?)")
+    if d1.size != k or d1.stride != k:
+        raise LayoutError(f"dim[1] must have size {k} and stride {k}, got size {d1.size}, "
                           f"stride {d1.stride}")
-    if data.size % 2:
-        raise LayoutError(f"data length {data.size} is odd: samples are (time, value) pairs")
-    n = data.size // 2
-    if d0.size != n or d0.stride != 2 * n:
+    if data.size % k:
+        what = "is odd: samples are (time, value) pairs" if k == 2 else \
+            f"is not a multiple of {k}: samples are ({columns}) rows"
+        raise LayoutError(f"data length {data.size} {what}")
+    n = data.size // k
+    if d0.size != n or d0.stride != k * n:
         raise LayoutError(f"dim[0] is (size {d0.size}, stride {d0.stride}) but the data holds {n} "
-                          f"(time, value) pair(s): expected dim[0].size = {n}, dim[0].stride = {2 * n}")
-    pairs = data.reshape(n, 2)
-    return pairs[:, 0].copy(), pairs[:, 1].copy()
+                          f"row(s) of {k}: expected dim[0].size = {n}, dim[0].stride = {k * n}")
+    rows = data.reshape(n, k)
+    return rows[:, 0].copy(), rows[:, 1:].copy()
+
+
+def unpack_pairs(msg, columns: str, *, values_only_ok: bool = True):
+    """(times_s or None, values) of a two-column block (:func:`unpack_columns`)."""
+    times, table = unpack_columns(msg, columns, values_only_ok=values_only_ok)
+    return times, table[:, 0]

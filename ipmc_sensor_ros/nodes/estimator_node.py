@@ -34,8 +34,8 @@ from std_msgs.msg import Float64MultiArray, String
 from ..interface import specs as C
 from ..estimation.deflection import DeflectionEstimator
 from ..estimation.inverse import EstimatorError, InverseEstimator
-from ..estimation.stream import COUNTER_NAMES, StreamEstimator, echo
-from ..physics.parameters import ParameterError
+from ..estimation.stream import COUNTER_NAMES, StreamEstimator
+from ..physics.parameters import ParameterError, short_repr
 from ..lti.reduction import ReductionError
 from . import params as P
 from .messages import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, SAMPLE_LABEL, BlockPacker,
@@ -224,7 +224,7 @@ class EstimatorNode(Node):
         try:
             self._pub_block.publish(block_msg)
         except Exception as exc:  # rclpy raises RCLError and others: back-pressure, not a bug
-            self._stream.unpublished(n, echo(str(exc)))
+            self._stream.unpublished(n, short_repr(str(exc)))
             return
         mode = self._values["publish_points"]
         if mode == "none":
@@ -239,7 +239,7 @@ class EstimatorNode(Node):
                     self._publish_point(t, w)
         except Exception as exc:  # the block went out; points are a convenience view
             self._stream.counters["messages_unpublished"] += 1
-            self.get_logger().warning(f"could not publish deflection points: {echo(str(exc))}",
+            self.get_logger().warning(f"could not publish deflection points: {short_repr(str(exc))}",
                                       throttle_duration_sec=1.0)
 
     def _publish_point(self, time_s: float, deflection_m: float) -> None:

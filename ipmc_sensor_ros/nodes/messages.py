@@ -29,8 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from ..interface.blocks import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, SAMPLE_LABEL, LayoutError,
-                      unpack_pairs)
+from ..interface.blocks import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, ESTIMATE_COLUMNS, SAMPLE_LABEL,
+                                LayoutError, unpack_columns)
 
 __all__ = [
     "LayoutError",
@@ -38,6 +38,7 @@ __all__ = [
     "SAMPLE_LABEL",
     "CURRENT_COLUMNS",
     "DEFLECTION_COLUMNS",
+    "ESTIMATE_COLUMNS",
     "pack_block",
     "BlockPacker",
     "unpack_block",
@@ -46,10 +47,12 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Block:
-    """An unpacked block: ``times_s`` (None for a 1-D, values-only message) and ``values``."""
+    """An unpacked block: ``times_s`` (None for a 1-D, values-only message), ``values`` (the
+    first value column) and ``extra`` (the further columns, shape (n, k - 2), or None)."""
 
     times_s: np.ndarray | None
     values: np.ndarray
+    extra: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.values.size)
@@ -61,9 +64,10 @@ def _to_array_d(values: np.ndarray) -> array.array:
     return out
 
 
-def pack_block(times_s, values, columns: str = CURRENT_COLUMNS) -> Float64MultiArray:
-    """Build the 2-D block message from ``times_s`` (s) and ``values`` (unit per ``columns``)."""
-    return BlockPacker(columns).pack(times_s, values)
+def pack_block(times_s, values, columns: str = CURRENT_COLUMNS, *extra) -> Float64MultiArray:
+    """Build the 2-D block message from ``times_s`` (s), ``values`` and any ``extra`` columns
+    (units per ``columns``)."""
+    return BlockPacker(columns).pack(times_s, values, *extra)
 
 
 class BlockPacker:
@@ -77,36 +81,44 @@ class BlockPacker:
 
     def __init__(self, columns: str = CURRENT_COLUMNS):
         self.columns = columns
+        self.width = len(columns.split(","))
         self._msg = Float64MultiArray()
         self._n = -1
 
-    def pack(self, times_s, values) -> Float64MultiArray:
+    def pack(self, times_s, *columns) -> Float64MultiArray:
+        """A block of the times and one array per value column (as many as ``columns`` names)."""
         t = np.asarray(times_s, dtype=float).ravel()
-        v = np.asarray(values, dtype=float).ravel()
-        if t.shape != v.shape:
-            raise LayoutError(f"times ({t.size}) and values ({v.size}) differ in length")
+        cols = [np.asarray(c, dtype=float).ravel() for c in columns]
+        if len(cols) + 1 != self.width:
+            raise LayoutError(f"{len(cols) + 1} columns for the layout '{self.columns}'")
+        if any(c.shape != t.shape for c in cols):
+            raise LayoutError(f"times ({t.size}) and values ({[c.size for c in cols]}) differ "
+                              "in length")
         n = int(t.size)
         if n == 1:
-            return self.pack_one(float(t[0]), float(v[0]))
+            return self.pack_one(float(t[0]), *(float(c[0]) for c in cols))
         msg = self._with_layout(n)
-        inter = np.empty(2 * n)
-        inter[0::2] = t
-        inter[1::2] = v
+        k = self.width
+        inter = np.empty(k * n)
+        inter[0::k] = t
+        for j, c in enumerate(cols, start=1):
+            inter[j::k] = c
         msg.data = _to_array_d(inter)
         return msg
 
-    def pack_one(self, time_s: float, value: float) -> Float64MultiArray:
-        """A one-sample block from two floats (no numpy on the way)."""
+    def pack_one(self, time_s: float, *values: float) -> Float64MultiArray:
+        """A one-sample block from floats (no numpy on the way)."""
         msg = self._with_layout(1)
-        msg.data = array.array("d", (time_s, value))
+        msg.data = array.array("d", (time_s, *values))
         return msg
 
     def _with_layout(self, n: int) -> Float64MultiArray:
         """The reused message, its layout set for ``n`` samples (rebuilt only on change)."""
         msg = self._msg
         if n != self._n:
-            msg.layout.dim = [MultiArrayDimension(label=SAMPLE_LABEL, size=n, stride=2 * n),
-                              MultiArrayDimension(label=self.columns, size=2, stride=2)]
+            k = self.width
+            msg.layout.dim = [MultiArrayDimension(label=SAMPLE_LABEL, size=n, stride=k * n),
+                              MultiArrayDimension(label=self.columns, size=k, stride=k)]
             msg.layout.data_offset = 0
             self._n = n
         return msg
@@ -126,10 +138,11 @@ def claimed_samples(msg: Float64MultiArray) -> int:
 
 def unpack_block(msg: Float64MultiArray, columns: str = CURRENT_COLUMNS) -> Block:
     """Decode a block message; raise :class:`LayoutError` if the layout is malformed
-    (:func:`ipmc_sensor_ros.interface.blocks.unpack_pairs`).
+    (:func:`ipmc_sensor_ros.interface.blocks.unpack_columns`).
 
     Returns a :class:`Block`; ``times_s`` is None for a values-only 1-D message.
     Values are *not* checked for finiteness here (that is the estimator's job).
     """
-    times, values = unpack_pairs(msg, columns)
-    return Block(times_s=times, values=values)
+    times, table = unpack_columns(msg, columns)
+    return Block(times_s=times, values=table[:, 0],
+                 extra=table[:, 1:] if table.shape[1] > 1 else None)
