@@ -72,14 +72,20 @@ deflection known, e.g. a field recording to be estimated):
 * ``gain_std_A_per_m`` (A/m), ``phase_std_deg`` (degrees): standard
   uncertainties, >= 0.
 
-Column names are exact.  A known quantity with another unit (``time_ms``,
-``deflection_mm``, ``current_uA``, ``phase_rad``...) is reported as "wrong
-units" naming the expected column.
+Time-series columns may carry another unit of the same quantity, converted
+to SI on reading: ``time_ms``/``time_us``; ``deflection_mm``,
+``deflection_um`` (or ``µm``), ``deflection_nm``; ``current_mA``,
+``current_uA`` (or ``µA``), ``current_nA``, ``current_pA`` (case-insensitive
+unit).  A unit of another dimension (``deflection_A``, ``time_m``) is refused
+as "wrong units".  ``ipmc-frf/1`` column names are exact (``phase_rad`` is
+refused naming ``phase_deg``).  Files are always written with the SI columns.
 
 Rows
 ----
 Comma separated, as many cells as columns, each a finite decimal number
-(spaces around a cell are allowed).  At least two data rows.  Empty lines
+(ASCII digits only; spaces around a cell are allowed).  At least two data
+rows, at most ``max_rows`` (default 10 million), in a regular file of at most
+``max_bytes`` (default 2 GiB): a FIFO or a device is refused, not read.  Empty lines
 are allowed only at the end of the file; a blank or ``#`` line between data
 rows is an error.
 
@@ -97,16 +103,18 @@ rate is recomputed from the times).
 """
 from __future__ import annotations
 
-import math
+import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
 from ..physics.parameters import Geometry, MaterialParameters, ParameterError
 from .measurements import DataFormatError, FrequencyResponseData, PathLike, TimeSeries
+from .textread import MAX_BYTES, MAX_ROWS, TextSource, first_bad, parse_number, read_table
+from .units import QUANTITY_UNITS, SI_SYMBOL, unit_factor
 
 __all__ = [
     "TIMESERIES_FORMAT", "FRF_FORMAT", "TIMESERIES_COLUMNS", "TIMESERIES_COLUMNS_NO_DEFLECTION",
@@ -160,86 +168,60 @@ _COLUMN_UNITS = {
 _TIMESERIES_BASES = ("time", "deflection", "current")
 _FRF_BASES = ("frequency", "gain", "phase", "coherence", "gain_std", "phase_std")
 
-_NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
-_NONFINITE = {"nan", "inf", "infinity"}
 _KEY = re.compile(r"[A-Za-z][A-Za-z0-9_.\-]*")
 
 
-
 # ---------------------------------------------------------------------------
-# Text files: low level
+# Text files: header and columns
 # ---------------------------------------------------------------------------
-def _read_lines(path: PathLike) -> list[str]:
-    """Decode ``path`` as UTF-8 text lines (``\\r\\n`` accepted) or raise DataFormatError."""
-    p = Path(path)
-    try:
-        raw = p.read_bytes()
-    except FileNotFoundError:
-        raise DataFormatError(path, None, "file not found") from None
-    except IsADirectoryError:
-        raise DataFormatError(path, None, "is a directory, expected a text file "
-                              "(bags are read with read_bag or read_any)") from None
-    except OSError as exc:
-        raise DataFormatError(path, None, f"cannot read file: {exc.strerror or exc}") from None
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        line = raw.count(b"\n", 0, exc.start) + 1
-        raise DataFormatError(path, line, f"not UTF-8 text (binary file?): byte "
-                              f"0x{raw[exc.start]:02x} at offset {exc.start} cannot be "
-                              "decoded") from None
-    if text.startswith("\ufeff"):  # byte-order mark written by some editors
-        text = text[1:]
-    if "\x00" in text:
-        pos = text.index("\x00")
-        raise DataFormatError(path, text.count("\n", 0, pos) + 1,
-                              "binary file: NUL byte in text")
-    lines = text.split("\n")
-    if lines and lines[-1] == "":
-        lines.pop()
-    return [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
-
-
 @dataclass
 class _Header:
-    values: dict            # key -> raw string value
-    lines: dict             # key -> 1-based line
-    column_index: int       # 0-based index of the column-header line (len(lines) if none)
+    values: dict               # key -> raw string value
+    lines: dict                # key -> 1-based line
+    column_line: int | None    # 1-based line of the column-header line (None: end of file)
+    column_text: str           # the column-header line ('' if none)
+    n_lines: int               # lines read (all of them when column_line is None)
 
 
-def _parse_header(path: PathLike, lines: list[str]) -> _Header:
-    if not any(ln.strip() for ln in lines):
-        raise DataFormatError(path, 1, "empty file (expected a '# format: ...' header line)")
+def _parse_header(path: PathLike, source: TextSource) -> _Header:
+    """Read header lines up to and including the column-header line."""
     values: dict[str, str] = {}
     where: dict[str, int] = {}
-    i = 0
-    while i < len(lines):
-        s = lines[i].strip()
+    seen_text = False
+    while True:
+        line = source.next_line()
+        if line is None:
+            if not seen_text:
+                raise DataFormatError(path, 1, "empty file (expected a '# format: ...' header "
+                                      "line)")
+            return _Header(values, where, None, "", source.lineno)
+        s = line.strip()
+        seen_text = seen_text or bool(s)
         if s and not s.startswith("#"):
-            break
+            return _Header(values, where, source.lineno, line, source.lineno)
         body = s[1:].strip()
-        if body:
-            if ":" not in body:
-                raise DataFormatError(path, i + 1, f"header line without ':' separator: {s!r} "
-                                      "(expected '# key: value')")
-            key, _, value = body.partition(":")
-            key, value = key.strip(), value.strip()
-            if not _KEY.fullmatch(key):
-                raise DataFormatError(path, i + 1, f"invalid header key {key!r} in {s!r} "
-                                      "(expected '# key: value', key [A-Za-z][A-Za-z0-9_.-]*)")
-            if key in values:
-                raise DataFormatError(path, i + 1, f"duplicate header key '{key}' (first "
-                                      f"given on line {where[key]})")
-            values[key] = value
-            where[key] = i + 1
-        i += 1
-    return _Header(values, where, i)
+        if not body:
+            continue
+        lineno = source.lineno
+        if ":" not in body:
+            raise DataFormatError(path, lineno, f"header line without ':' separator: {s!r} "
+                                  "(expected '# key: value')")
+        key, _, value = body.partition(":")
+        key, value = key.strip(), value.strip()
+        if not _KEY.fullmatch(key):
+            raise DataFormatError(path, lineno, f"invalid header key {key!r} in {s!r} "
+                                  "(expected '# key: value', key [A-Za-z][A-Za-z0-9_.-]*)")
+        if key in values:
+            raise DataFormatError(path, lineno, f"duplicate header key '{key}' (first "
+                                  f"given on line {where[key]})")
+        values[key] = value
+        where[key] = lineno
 
 
-def _format_of(path: PathLike, lines: list[str], header: _Header) -> str:
+def _format_of(path: PathLike, header: _Header) -> str:
     """The header's format, checked to be a known one."""
     if "format" not in header.values:
-        line = min(header.column_index + 1, len(lines))
+        line = header.column_line or header.n_lines
         raise DataFormatError(path, line, "missing '# format: ...' header line (known formats: "
                               f"{', '.join(FORMATS)})")
     fmt = header.values["format"]
@@ -249,34 +231,12 @@ def _format_of(path: PathLike, lines: list[str], header: _Header) -> str:
     return fmt
 
 
-def _parse_number(text: str) -> float | None:
-    """Finite float of a decimal number string, or None."""
-    s = text.strip()
-    if not _NUMBER.fullmatch(s):
-        return None
-    v = float(s)
-    return v if math.isfinite(v) else None
-
-
-def _cell_error(path, lineno: int, cell: str, column: str) -> DataFormatError:
-    s = cell.strip()
-    if not s:
-        return DataFormatError(path, lineno, f"empty cell in column {column}")
-    if s.lower().lstrip("+-") in _NONFINITE:
-        return DataFormatError(path, lineno, f"NaN/Inf cell {s!r} in column {column} "
-                               "(every value must be a finite number)")
-    if _NUMBER.fullmatch(s):
-        return DataFormatError(path, lineno, f"NaN/Inf: cell {s!r} in column {column} "
-                               "overflows to infinity")
-    return DataFormatError(path, lineno, f"non-numeric cell {s!r} in column {column}")
-
-
 def _header_numbers(path, header: _Header, numeric_keys: Sequence[str]) -> dict[str, float]:
     out: dict[str, float] = {}
     for key in sorted((k for k in numeric_keys if k in header.values),
                       key=lambda k: header.lines[k]):
         raw = header.values[key]
-        value = _parse_number(raw)
+        value = parse_number(raw)
         if value is None:
             what = "empty" if not raw else repr(raw)
             raise DataFormatError(path, header.lines[key], f"header key '{key}' must be a finite "
@@ -292,20 +252,20 @@ def _parameter_line(header: _Header, exc: ParameterError, keys: Sequence[str]) -
     return min(header.lines[k] for k in keys if k in header.lines)
 
 
-def _common_header(path, lines: list[str], header: _Header, expected_format: str,
+def _common_header(path, header: _Header, expected_format: str,
                    numeric_keys: Sequence[str], layouts: Sequence[tuple[str, ...]]):
     """Validate the header; return (sample, geometry, known, numbers, extra)."""
-    fmt = _format_of(path, lines, header)
+    fmt = _format_of(path, header)
     if fmt != expected_format:
         reader = "read_frf" if fmt == FRF_FORMAT else "read_timeseries"
         raise DataFormatError(path, header.lines["format"], f"format is {fmt!r}, expected "
                               f"{expected_format!r} (read it with {reader} or read_any)")
     numbers = _header_numbers(path, header, numeric_keys)
-    if header.column_index >= len(lines):
-        raise DataFormatError(path, len(lines), "the header is not followed by a column header "
+    if header.column_line is None:
+        raise DataFormatError(path, header.n_lines, "the header is not followed by a column header "
                               "line (expected " + " or ".join(repr(",".join(c)) for c in layouts)
                               + ") and data rows")
-    col_line = header.column_index + 1
+    col_line = header.column_line
     missing = [k for k in GEOMETRY_KEYS if k not in header.values]
     if missing:
         raise DataFormatError(path, col_line, "missing required header key(s) "
@@ -328,34 +288,54 @@ def _common_header(path, lines: list[str], header: _Header, expected_format: str
     return sample, geometry, known, numbers, extra
 
 
-def _parse_columns(path, lines: list[str], header: _Header,
-                   layouts: Sequence[tuple[str, ...]], bases: Sequence[str]) -> tuple[str, ...]:
-    col_line = header.column_index + 1
-    raw = lines[header.column_index]
+def _canonical(name: str, bases: Sequence[str]) -> tuple[str, float] | None:
+    """(SI column, factor) of a time-series column with a unit, e.g. 'deflection_mm'."""
+    base, _, unit = name.partition("_")
+    if base not in bases or base not in QUANTITY_UNITS or not unit:
+        return None
+    factor = unit_factor(unit, QUANTITY_UNITS[base])
+    return (f"{base}_{SI_SYMBOL[base]}", factor) if factor is not None else None
+
+
+def _parse_columns(path, header: _Header, layouts: Sequence[tuple[str, ...]],
+                   bases: Sequence[str]) -> tuple[tuple[str, ...], tuple[float, ...]]:
+    """(SI column names, factor of each column to SI) of the column-header line."""
+    col_line = header.column_line
+    raw = header.column_text
     names = tuple(c.strip() for c in raw.split(","))
-    if names in layouts:
-        return names
-    expected = " or ".join(repr(",".join(c)) for c in layouts)
+    factors = [1.0] * len(names)
+    canon = list(names)
     allowed = {n for c in layouts for n in c}
-    if all(_parse_number(n) is not None for n in names):
+    for k, name in enumerate(names):
+        if name not in allowed:
+            found = _canonical(name, bases)
+            if found is not None:
+                canon[k], factors[k] = found
+    if tuple(canon) in layouts:
+        return tuple(canon), tuple(factors)
+    expected = " or ".join(repr(",".join(c)) for c in layouts)
+    if all(parse_number(n) is not None for n in names):
         raise DataFormatError(path, col_line, f"missing column header line: found a data row "
                               f"{raw.strip()!r}; expected {expected}")
     other = _FRF_LAYOUTS if layouts is _TIMESERIES_LAYOUTS else _TIMESERIES_LAYOUTS
-    if names in other:
+    if tuple(canon) in other:
         this, that = ((TIMESERIES_FORMAT, FRF_FORMAT) if layouts is _TIMESERIES_LAYOUTS
                       else (FRF_FORMAT, TIMESERIES_FORMAT))
         raise DataFormatError(path, col_line, f"the file declares format {this!r} but has the "
                               f"columns of {that!r}; expected {expected}")
-    for name in names:
-        if name in allowed:
+    for name, good_name in zip(names, canon):
+        if good_name in allowed:
             continue
         low = name.lower()
         match = [b for b in bases if low == b or low.startswith(b + "_")]
         if match:
             base = max(match, key=len)
             good, unit = _COLUMN_UNITS[base]
+            accepted = ""
+            if base in QUANTITY_UNITS:
+                accepted = f" or another unit of it ({', '.join(QUANTITY_UNITS[base])})"
             raise DataFormatError(path, col_line, f"wrong units in column header: {name!r} "
-                                  f"should be '{good}' ({unit}); expected {expected}")
+                                  f"should be '{good}' ({unit}){accepted}; expected {expected}")
         raise DataFormatError(path, col_line, f"unknown column {name!r}; expected {expected}")
     if (FRF_STD_COLUMNS[0] in names) != (FRF_STD_COLUMNS[1] in names):
         raise DataFormatError(path, col_line, f"columns {FRF_STD_COLUMNS[0]} and "
@@ -367,49 +347,24 @@ def _parse_columns(path, lines: list[str], header: _Header,
 RowCheck = Callable[[np.ndarray, "np.ndarray | None", int, int], None]
 
 
-def _parse_rows(path, lines: list[str], header: _Header, columns: tuple[str, ...],
-                check: RowCheck) -> tuple[np.ndarray, list[int]]:
-    """Parse the data rows below the column header; ``check(row, prev, line, prev_line)``."""
-    start = header.column_index + 1
-    end = len(lines)
-    while end > start and not lines[end - 1].strip():
-        end -= 1  # empty lines at the very end carry nothing
-    ncol = len(columns)
-    rows: list[list[float]] = []
-    row_lines: list[int] = []
-    prev: np.ndarray | None = None
-    for i in range(start, end):
-        text = lines[i]
-        lineno = i + 1
-        s = text.strip()
-        if not s:
-            raise DataFormatError(path, lineno, "blank line between data rows "
-                                  "(data rows must be contiguous)")
-        if s.startswith("#"):
-            raise DataFormatError(path, lineno, "header/comment line after the column header "
-                                  "(header lines must come first)")
-        cells = text.split(",")
-        if len(cells) != ncol:
-            hint = " (cells are separated by ',', not ';')" if ";" in text else ""
-            raise DataFormatError(path, lineno, f"wrong number of cells: expected {ncol} "
-                                  f"({','.join(columns)}), got {len(cells)}{hint}")
-        row = []
-        for cell, column in zip(cells, columns):
-            v = _parse_number(cell)
-            if v is None:
-                raise _cell_error(path, lineno, cell, column)
-            row.append(v)
-        arr = np.array(row)
-        check(arr, prev, lineno, row_lines[-1] if row_lines else 0)
-        rows.append(row)
-        row_lines.append(lineno)
-        prev = arr
-    if not rows:
-        raise DataFormatError(path, header.column_index + 1, "no data rows after the column "
-                              "header (at least 2 are needed)")
-    if len(rows) < 2:
-        raise DataFormatError(path, row_lines[0], "only 1 data row; at least 2 are needed")
-    return np.array(rows, dtype=float), row_lines
+def _block_check(bad_rows: Callable[[np.ndarray, int], np.ndarray], row_check: RowCheck):
+    """A block check for :func:`read_table`: ``bad_rows(rows, n_prev)`` marks suspect rows
+    (``rows`` starts with the previous row when there is one), ``row_check`` raises the
+    message of the first of them."""
+    def check(block: np.ndarray, prev: np.ndarray | None, line0: int) -> None:
+        rows = block if prev is None else np.vstack([prev, block])
+        offset = 0 if prev is None else 1
+        k = first_bad(bad_rows(rows, offset))
+        if k is not None:
+            row_check(rows[k], rows[k - 1] if k else None, line0 + k - offset, line0 + k - offset - 1)
+    return check
+
+
+def _read_rows(source: TextSource, header: _Header, check, max_rows) -> list[np.ndarray]:
+    raw_names = [c.strip() for c in header.column_text.split(",")]
+    data, _ = read_table(source, raw_names, check, max_rows=max_rows,
+                         header_line=header.column_line)
+    return data
 
 
 def _fmt(x: float) -> str:
@@ -419,23 +374,37 @@ def _fmt(x: float) -> str:
 # ---------------------------------------------------------------------------
 # ipmc-timeseries/1
 # ---------------------------------------------------------------------------
-def _timeseries_from_lines(path, lines: list[str], header: _Header) -> TimeSeries:
+def _timeseries_from(path, source: TextSource, header: _Header, max_rows) -> TimeSeries:
     sample, geometry, known, numbers, extra = _common_header(
-        path, lines, header, TIMESERIES_FORMAT, _TIMESERIES_NUMERIC_KEYS, _TIMESERIES_LAYOUTS)
-    columns = _parse_columns(path, lines, header, _TIMESERIES_LAYOUTS, _TIMESERIES_BASES)
+        path, header, TIMESERIES_FORMAT, _TIMESERIES_NUMERIC_KEYS, _TIMESERIES_LAYOUTS)
+    columns, factors = _parse_columns(path, header, _TIMESERIES_LAYOUTS, _TIMESERIES_BASES)
+    tname = header.column_text.split(",")[0].strip()
+    tunit = tname.partition("_")[2]
 
-    def check(row, prev, lineno, prev_line):
+    def row_check(row, prev, lineno, prev_line):
         if prev is not None:
             if row[0] == prev[0]:
-                raise DataFormatError(path, lineno, f"duplicate time {_fmt(row[0])} s (same as "
-                                      f"line {prev_line}); time_s must be strictly increasing")
+                raise DataFormatError(path, lineno, f"duplicate time {_fmt(row[0])} {tunit} (same "
+                                      f"as line {prev_line}); {tname} must be strictly increasing")
             if row[0] < prev[0]:
-                raise DataFormatError(path, lineno, f"time decreases: {_fmt(row[0])} s after "
-                                      f"{_fmt(prev[0])} s on line {prev_line}; time_s must be "
-                                      "strictly increasing")
+                raise DataFormatError(path, lineno, f"time decreases: {_fmt(row[0])} {tunit} after "
+                                      f"{_fmt(prev[0])} {tunit} on line {prev_line}; {tname} must "
+                                      "be strictly increasing")
 
-    data, _ = _parse_rows(path, lines, header, columns, check)
-    t = data[:, 0]
+    def bad_rows(rows, offset):
+        bad = np.zeros(rows.shape[0], dtype=bool)
+        bad[1:] = np.diff(rows[:, 0]) <= 0
+        return bad
+
+    data = _read_rows(source, header, _block_check(bad_rows, row_check), max_rows)
+    for col, factor in zip(data, factors):
+        if factor != 1.0:
+            col *= factor
+    t = data[0]
+    if np.any(np.diff(t) <= 0):  # a sub-ns step in ms/us lost to rounding when converted
+        k = int(np.argmax(np.diff(t) <= 0)) + 1
+        raise DataFormatError(path, header.column_line + 1 + k, f"time step below float "
+                              f"resolution after conversion to seconds at {_fmt(t[k])} s")
     median_dt = float(np.median(np.diff(t)))
     measured_rate = 1.0 / median_dt
     rate = numbers.get("sample_rate_hz")
@@ -449,17 +418,20 @@ def _timeseries_from_lines(path, lines: list[str], header: _Header) -> TimeSerie
                               f"sample_rate_hz = {_fmt(rate)} disagrees with the time column: "
                               f"median step {median_dt:.6g} s -> {measured_rate:.6g} Hz "
                               f"(tolerance {SAMPLE_RATE_TOLERANCE:.0%})")
-    deflection = data[:, 1] if "deflection_m" in columns else None
+    deflection = data[1] if "deflection_m" in columns else None
+    current = data[columns.index("current_A")]
+    del data
     return TimeSeries(path=str(path), sample=sample, geometry=geometry, known=known,
-                      sample_rate_hz=rate, time_s=t, current_a=data[:, columns.index("current_A")],
+                      sample_rate_hz=rate, time_s=t, current_a=current,
                       deflection_m=deflection, extra=extra,
                       deflection_alignment="exact" if deflection is not None else None)
 
 
-def read_timeseries(path: PathLike) -> TimeSeries:
+def read_timeseries(path: PathLike, *, max_bytes: int | None = MAX_BYTES,
+                    max_rows: int | None = MAX_ROWS) -> TimeSeries:
     """Read an ``ipmc-timeseries/1`` file (see the module docstring)."""
-    lines = _read_lines(path)
-    return _timeseries_from_lines(path, lines, _parse_header(path, lines))
+    with TextSource(path, max_bytes=max_bytes) as source:
+        return _timeseries_from(path, source, _parse_header(path, source), max_rows)
 
 
 def _header_text(fmt: str, sample: str, geometry: Geometry, numbers: Sequence[tuple[str, float]],
@@ -493,50 +465,68 @@ def _header_text(fmt: str, sample: str, geometry: Geometry, numbers: Sequence[tu
     return out
 
 
-def _write_checked(path, text: str, parse: Callable[[list[str]], Any], what: str) -> None:
-    """Parse ``text`` back before writing it, so only readable files are ever written."""
-    lines = text.split("\n")[:-1]
+def _write_checked(path, lines: Sequence[str], rows: Iterator[str], read: Callable,
+                   what: str) -> None:
+    """Write header ``lines`` and row chunks to a temporary file beside ``path``, read it
+    back with ``read`` and move it into place: only readable files are ever written."""
+    target = Path(path)
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
     try:
-        parse(lines)
-    except DataFormatError as exc:
-        where = f" (line {exc.line} of the output)" if exc.line is not None else ""
-        raise DataFormatError(path, None, f"refusing to write an invalid {what}: "
-                              f"{exc.reason}{where}") from None
-    Path(path).write_text(text, encoding="utf-8", newline="\n")
+        with open(tmp, "w", encoding="utf-8", newline="\n") as f:
+            f.write("\n".join(lines) + "\n")
+            for chunk in rows:
+                f.write(chunk)
+        try:
+            read(tmp)
+        except DataFormatError as exc:
+            where = f" (line {exc.line} of the output)" if exc.line is not None else ""
+            raise DataFormatError(path, None, f"refusing to write an invalid {what}: "
+                                  f"{exc.reason}{where}") from None
+        os.replace(tmp, target)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def _row_chunks(columns: Sequence[np.ndarray], size: int = 100_000) -> Iterator[str]:
+    """repr-formatted CSV text of ``columns``, ``size`` rows at a time."""
+    n = columns[0].size
+    for start in range(0, n, size):
+        cells = [c[start:start + size].tolist() for c in columns]
+        yield "".join(",".join(map(repr, row)) + "\n" for row in zip(*cells))
 
 
 def write_timeseries(path: PathLike, ts: TimeSeries) -> None:
     """Write ``ts`` as ``ipmc-timeseries/1``; floats in repr precision (exact round trip).
 
-    The text is validated with the reader before it is written: an invalid
-    series (non-increasing time, NaN, ...) raises :class:`DataFormatError`.
+    The file is read back before it is put in place: an invalid series
+    (non-increasing time, NaN, ...) raises :class:`DataFormatError` and
+    nothing is written.
     """
     sample = ts.sample or ts.geometry.name
     lines = _header_text(TIMESERIES_FORMAT, sample, ts.geometry,
                          [("sample_rate_hz", ts.sample_rate_hz)], ts.known, ts.extra, path)
     if ts.deflection_m is None:
         lines.append(",".join(TIMESERIES_COLUMNS_NO_DEFLECTION))
-        lines += [f"{t!r},{i!r}" for t, i in zip(ts.time_s.tolist(), ts.current_a.tolist())]
+        columns = [ts.time_s, ts.current_a]
     else:
         lines.append(",".join(TIMESERIES_COLUMNS))
-        lines += [f"{t!r},{d!r},{i!r}" for t, d, i in
-                  zip(ts.time_s.tolist(), ts.deflection_m.tolist(), ts.current_a.tolist())]
-    text = "\n".join(lines) + "\n"
-    _write_checked(path, text, lambda ls: _timeseries_from_lines(path, ls, _parse_header(path, ls)),
-                   "time series")
+        columns = [ts.time_s, ts.deflection_m, ts.current_a]
+    _write_checked(path, lines, _row_chunks(columns),
+                   lambda p: read_timeseries(p, max_bytes=None, max_rows=None), "time series")
 
 
 # ---------------------------------------------------------------------------
 # ipmc-frf/1
 # ---------------------------------------------------------------------------
-def _frf_from_lines(path, lines: list[str], header: _Header) -> FrequencyResponseData:
+def _frf_from(path, source: TextSource, header: _Header, max_rows) -> FrequencyResponseData:
     sample, geometry, known, _numbers, extra = _common_header(
-        path, lines, header, FRF_FORMAT, _FRF_NUMERIC_KEYS, _FRF_LAYOUTS)
-    columns = _parse_columns(path, lines, header, _FRF_LAYOUTS, _FRF_BASES)
+        path, header, FRF_FORMAT, _FRF_NUMERIC_KEYS, _FRF_LAYOUTS)
+    columns, _factors = _parse_columns(path, header, _FRF_LAYOUTS, _FRF_BASES)
     coh = columns.index(FRF_COHERENCE_COLUMN) if FRF_COHERENCE_COLUMN in columns else None
     std = [columns.index(c) for c in FRF_STD_COLUMNS if c in columns]
 
-    def check(row, prev, lineno, prev_line):
+    def row_check(row, prev, lineno, prev_line):
         f = row[0]
         if f <= 0.0:
             raise DataFormatError(path, lineno, f"non-positive frequency {_fmt(f)} Hz "
@@ -555,19 +545,30 @@ def _frf_from_lines(path, lines: list[str], header: _Header) -> FrequencyRespons
                 raise DataFormatError(path, lineno, f"negative standard uncertainty "
                                       f"{_fmt(row[k])} in column {columns[k]}")
 
-    data, _ = _parse_rows(path, lines, header, columns, check)
+    def bad_rows(rows, offset):
+        bad = (rows[:, 0] <= 0) | (rows[:, 1] <= 0)
+        bad[1:] |= np.diff(rows[:, 0]) <= 0
+        if coh is not None:
+            bad |= ~((rows[:, coh] >= 0) & (rows[:, coh] <= 1))
+        for k in std:
+            bad |= rows[:, k] < 0
+        bad[:offset] = False  # the previous row was checked with its own block
+        return bad
+
+    data = _read_rows(source, header, _block_check(bad_rows, row_check), max_rows)
     return FrequencyResponseData(
         path=str(path), sample=sample, geometry=geometry, known=known,
-        frequency_hz=data[:, 0], gain_a_per_m=data[:, 1], phase_deg=data[:, 2],
-        coherence=data[:, coh] if coh is not None else None,
-        gain_std_a_per_m=data[:, std[0]] if std else None,
-        phase_std_deg=data[:, std[1]] if std else None, extra=extra)
+        frequency_hz=data[0], gain_a_per_m=data[1], phase_deg=data[2],
+        coherence=data[coh] if coh is not None else None,
+        gain_std_a_per_m=data[std[0]] if std else None,
+        phase_std_deg=data[std[1]] if std else None, extra=extra)
 
 
-def read_frf(path: PathLike) -> FrequencyResponseData:
+def read_frf(path: PathLike, *, max_bytes: int | None = MAX_BYTES,
+             max_rows: int | None = MAX_ROWS) -> FrequencyResponseData:
     """Read an ``ipmc-frf/1`` file (see the module docstring)."""
-    lines = _read_lines(path)
-    return _frf_from_lines(path, lines, _parse_header(path, lines))
+    with TextSource(path, max_bytes=max_bytes) as source:
+        return _frf_from(path, source, _parse_header(path, source), max_rows)
 
 
 def write_frf(path: PathLike, frf: FrequencyResponseData) -> None:
@@ -583,16 +584,15 @@ def write_frf(path: PathLike, frf: FrequencyResponseData) -> None:
         columns += FRF_STD_COLUMNS
         data += [frf.gain_std_a_per_m, frf.phase_std_deg]
     lines.append(",".join(columns))
-    lines += [",".join(repr(v) for v in row) for row in zip(*(d.tolist() for d in data))]
-    text = "\n".join(lines) + "\n"
-    _write_checked(path, text, lambda ls: _frf_from_lines(path, ls, _parse_header(path, ls)),
-                   "frequency response")
+    _write_checked(path, lines, _row_chunks(data),
+                   lambda p: read_frf(p, max_bytes=None, max_rows=None), "frequency response")
 
 
-def read_text(path: PathLike) -> TimeSeries | FrequencyResponseData:
+def read_text(path: PathLike, *, max_bytes: int | None = MAX_BYTES,
+              max_rows: int | None = MAX_ROWS) -> TimeSeries | FrequencyResponseData:
     """Read a text file of either format, dispatched on its ``# format:`` line."""
-    lines = _read_lines(path)
-    header = _parse_header(path, lines)
-    if _format_of(path, lines, header) == TIMESERIES_FORMAT:
-        return _timeseries_from_lines(path, lines, header)
-    return _frf_from_lines(path, lines, header)
+    with TextSource(path, max_bytes=max_bytes) as source:
+        header = _parse_header(path, source)
+        if _format_of(path, header) == TIMESERIES_FORMAT:
+            return _timeseries_from(path, source, header, max_rows)
+        return _frf_from(path, source, header, max_rows)
