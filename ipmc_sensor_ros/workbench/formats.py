@@ -113,8 +113,9 @@ import numpy as np
 
 from ..physics.parameters import Geometry, MaterialParameters, ParameterError
 from .measurements import DataFormatError, FrequencyResponseData, PathLike, TimeSeries
-from .textread import MAX_BYTES, MAX_ROWS, TextSource, first_bad, parse_number, read_table
-from .units import QUANTITY_UNITS, SI_SYMBOL, unit_factor
+from .textread import (MAX_BYTES, MAX_ROWS, TextSource, first_bad, increasing_check, parse_number,
+                       read_table)
+from .units import QUANTITY_UNITS, SI_SYMBOL, to_si, unit_factor
 
 __all__ = [
     "TIMESERIES_FORMAT", "FRF_FORMAT", "TIMESERIES_COLUMNS", "TIMESERIES_COLUMNS_NO_DEFLECTION",
@@ -381,25 +382,8 @@ def _timeseries_from(path, source: TextSource, header: _Header, max_rows) -> Tim
     tname = header.column_text.split(",")[0].strip()
     tunit = tname.partition("_")[2]
 
-    def row_check(row, prev, lineno, prev_line):
-        if prev is not None:
-            if row[0] == prev[0]:
-                raise DataFormatError(path, lineno, f"duplicate time {_fmt(row[0])} {tunit} (same "
-                                      f"as line {prev_line}); {tname} must be strictly increasing")
-            if row[0] < prev[0]:
-                raise DataFormatError(path, lineno, f"time decreases: {_fmt(row[0])} {tunit} after "
-                                      f"{_fmt(prev[0])} {tunit} on line {prev_line}; {tname} must "
-                                      "be strictly increasing")
-
-    def bad_rows(rows, offset):
-        bad = np.zeros(rows.shape[0], dtype=bool)
-        bad[1:] = np.diff(rows[:, 0]) <= 0
-        return bad
-
-    data = _read_rows(source, header, _block_check(bad_rows, row_check), max_rows)
-    for col, factor in zip(data, factors):
-        if factor != 1.0:
-            col *= factor
+    data = _read_rows(source, header, increasing_check(path, tname, tunit), max_rows)
+    data = [to_si(col, factor) if factor != 1.0 else col for col, factor in zip(data, factors)]
     t = data[0]
     if np.any(np.diff(t) <= 0):  # a sub-ns step in ms/us lost to rounding when converted
         k = int(np.argmax(np.diff(t) <= 0)) + 1

@@ -173,6 +173,13 @@ class TextSource:
         self.lineno += 1
         return text[:-1] if text.endswith("\r") else text
 
+    def unread(self, line: str) -> None:
+        """Put back the line just returned by :meth:`next_line` (read again next)."""
+        raw = (line + "\n").encode("utf-8")
+        self._buf = raw + self._buf
+        self._offset -= len(raw)
+        self.lineno -= 1
+
     def chunks(self) -> Iterator[tuple[int, bytes]]:
         """(1-based line of the first line, bytes of whole lines each ending in '\\n')."""
         while True:
@@ -308,6 +315,25 @@ def read_table(source: TextSource, columns: Sequence[str], check: BlockCheck | N
         out.append(np.concatenate(parts[j]))
         parts[j] = []
     return out, first_row_line
+
+
+def increasing_check(path, column: str, unit: str, index: int = 0) -> BlockCheck:
+    """A :func:`read_table` check that column ``index`` (``column``, in ``unit``) strictly
+    increases; the error names the line, both values and the previous line."""
+    def check(block: np.ndarray, prev: np.ndarray | None, line0: int) -> None:
+        t = block[:, index] if prev is None else np.concatenate(([prev[index]], block[:, index]))
+        offset = 0 if prev is None else 1
+        k = first_bad(np.diff(t) <= 0)
+        if k is None:
+            return
+        lineno = line0 + k + 1 - offset
+        now, before = repr(float(t[k + 1])), repr(float(t[k]))
+        if t[k + 1] == t[k]:
+            raise DataFormatError(path, lineno, f"duplicate time {now} {unit} (same as line "
+                                  f"{lineno - 1}); {column} must be strictly increasing")
+        raise DataFormatError(path, lineno, f"time decreases: {now} {unit} after {before} {unit} "
+                              f"on line {lineno - 1}; {column} must be strictly increasing")
+    return check
 
 
 def first_bad(mask: np.ndarray) -> int | None:

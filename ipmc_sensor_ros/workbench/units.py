@@ -10,7 +10,7 @@ from __future__ import annotations
 import re
 
 __all__ = ["TIME_UNITS", "LENGTH_UNITS", "CURRENT_UNITS", "VOLTAGE_UNITS", "QUANTITY_UNITS",
-           "SI_SYMBOL", "unit_factor", "split_unit", "parse_length"]
+           "SI_SYMBOL", "unit_factor", "to_si", "split_unit", "parse_length"]
 
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
 LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "nm": 1e-9}
@@ -21,6 +21,16 @@ VOLTAGE_UNITS = {"V": 1.0, "mV": 1e-3}
 QUANTITY_UNITS = {"time": TIME_UNITS, "deflection": LENGTH_UNITS, "current": CURRENT_UNITS}
 #: SI symbol of each quantity (the canonical column is ``<quantity>_<symbol>``).
 SI_SYMBOL = {"time": "s", "deflection": "m", "current": "A"}
+
+def to_si(value, factor: float):
+    """``value * factor``, computed as a division by the power of ten when ``factor`` is
+    one (``360 * 1e-6`` gives 0.00035999999999999997; ``360 / 1e6`` gives 0.00036)."""
+    if 0.0 < factor < 1.0:
+        inverse = round(1.0 / factor)
+        if inverse * factor == 1.0 or abs(inverse * factor - 1.0) < 1e-12:
+            return value / inverse
+    return value * factor
+
 
 _MICRO = str.maketrans({"\u00b5": "u", "\u03bc": "u"})
 
@@ -72,4 +82,4 @@ def parse_length(text: str) -> float:
     if factor is None:
         raise ValueError(f"{text.strip()!r}: unknown length unit {m.group(2)!r} "
                          f"(known: {', '.join(LENGTH_UNITS)})")
-    return float(m.group(1)) * factor
+    return float(to_si(float(m.group(1)), factor))
