@@ -64,9 +64,9 @@ def load_many(paths: Iterable[PathLike]) -> list[TimeSeries | FrequencyResponseD
 
 def natural_key(path: PathLike) -> list:
     """Sort key of a file name with its numbers compared as numbers: ``short_1Hz`` <
-    ``short_2Hz`` < ``short_13Hz`` (text sorting puts 13 before 2)."""
-    parts = re.split(r"([0-9]+)", Path(path).name.lower())
-    return [int(p) if k % 2 else p for k, p in enumerate(parts)] + [str(path)]
+    ``short_1.5Hz`` < ``short_2Hz`` < ``short_13Hz`` (text sorting puts 13 before 2)."""
+    parts = re.split(r"([0-9]+(?:\.[0-9]+)?)", Path(path).name.lower())
+    return [float(p) if k % 2 else p for k, p in enumerate(parts)] + [str(path)]
 
 
 class Records(NamedTuple):
