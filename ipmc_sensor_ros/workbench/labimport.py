@@ -49,8 +49,8 @@ from .formats import KNOWN_KEYS, write_timeseries
 from .measurements import DataFormatError, PathLike, TimeSeries
 from .textread import (MAX_BYTES, MAX_ROWS, TextSource, increasing_check, parse_number,
                        read_table)
-from .units import (CURRENT_UNITS, LENGTH_UNITS, TIME_UNITS, VOLTAGE_UNITS, parse_length,
-                    split_unit, to_si, unit_factor)
+from .units import (CURRENT_UNITS, LENGTH_UNITS, TIME_UNITS, VOLTAGE_UNITS, decimal_to_si,
+                    parse_length, split_unit, to_si, unit_factor)
 
 __all__ = ["import_lab_file", "import_lab_files", "ROLE_NAMES"]
 
@@ -214,7 +214,7 @@ def _meta_geometry(meta: PathLike, data: dict) -> dict[str, tuple[float, str]]:
                 factor = unit_factor(unit, LENGTH_UNITS)
                 if factor is None or isinstance(value, bool) or not isinstance(value, (int, float)):
                     raise ValueError(f"expected a number in {unit!r}, a length unit")
-                metres = float(to_si(float(value), factor))
+                metres = decimal_to_si(value, factor)
             elif isinstance(value, str):
                 metres = parse_length(value)
             else:

@@ -7,10 +7,12 @@ symbols differing only in case).
 """
 from __future__ import annotations
 
+import math
 import re
+from decimal import Decimal
 
 __all__ = ["TIME_UNITS", "LENGTH_UNITS", "CURRENT_UNITS", "VOLTAGE_UNITS", "QUANTITY_UNITS",
-           "SI_SYMBOL", "unit_factor", "to_si", "split_unit", "parse_length"]
+           "SI_SYMBOL", "unit_factor", "to_si", "decimal_to_si", "split_unit", "parse_length"]
 
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
 LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "nm": 1e-9}
@@ -30,6 +32,15 @@ def to_si(value, factor: float):
         if inverse * factor == 1.0 or abs(inverse * factor - 1.0) < 1e-12:
             return value / inverse
     return value * factor
+
+
+def decimal_to_si(value: str | float, factor: float) -> float:
+    """One value in SI, rounded once from its decimal form (``'0.36'`` mm -> 0.00036 m,
+    where ``0.36 / 1000`` gives 0.00035999999999999997)."""
+    exponent = round(math.log10(factor))
+    if math.isclose(10.0 ** exponent, factor, rel_tol=1e-12):
+        return float(Decimal(str(value)).scaleb(exponent))
+    return float(value) * factor
 
 
 _MICRO = str.maketrans({"\u00b5": "u", "\u03bc": "u"})
@@ -82,4 +93,4 @@ def parse_length(text: str) -> float:
     if factor is None:
         raise ValueError(f"{text.strip()!r}: unknown length unit {m.group(2)!r} "
                          f"(known: {', '.join(LENGTH_UNITS)})")
-    return float(to_si(float(m.group(1)), factor))
+    return decimal_to_si(m.group(1), factor)
