@@ -149,7 +149,8 @@ def test_columns_found_overridden_and_refused(tmp_path):
 
 def test_rows_checked_with_file_lines(tmp_path):
     back = _lab(tmp_path, "back.txt", "run 3\nTime [ms];Current [µA]\n0;1,5\n2;1,5\n1;1,5\n")
-    with pytest.raises(DataFormatError, match=r"back\.txt:5: time decreases: 1\.0 ms after 2\.0 ms"):
+    with pytest.raises(DataFormatError, match=r"back\.txt:5: time decreases: 1\.0 ms after "
+                                              r"2\.0 ms"):
         import_lab_file(back, geometry="22mm,7mm,360um")
     cell = _lab(tmp_path, "cell.csv", "Time [s],Current [A]\n0,1\n1,x\n")
     with pytest.raises(DataFormatError, match=r"cell\.csv:3: non-numeric cell 'x' in column "

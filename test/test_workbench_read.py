@@ -77,12 +77,14 @@ def test_time_in_ms_messages_say_ms(tmp_path):
 
 def test_unicode_digits_refused_in_header_and_cells(tmp_path):
     p = tmp_path / "h.csv"
-    p.write_text(HEAD.replace("0.022", "\u0660.\u0660\u0662\u0662") + "time_s,current_A\n0,0\n1,0\n",
+    arabic_indic = "\u0660.\u0660\u0662\u0662"  # 0.022 in Arabic-Indic digits
+    p.write_text(HEAD.replace("0.022", arabic_indic) + "time_s,current_A\n0,0\n1,0\n",
                  encoding="utf-8")
     with pytest.raises(DataFormatError, match=r"h\.csv:3: header key 'length_m' must be a finite"):
         io.read_timeseries(p)
     full = _write(tmp_path, "c.csv", "time_s,current_A", ["0,0", "\uff11,0"])  # fullwidth 1
-    with pytest.raises(DataFormatError, match=r"c\.csv:8: non-numeric cell '\uff11' in column time_s"):
+    with pytest.raises(DataFormatError, match=r"c\.csv:8: non-numeric cell '\uff11' in column "
+                                              r"time_s"):
         io.read_timeseries(full)
 
 

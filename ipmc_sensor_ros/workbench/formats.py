@@ -357,7 +357,8 @@ def _block_check(bad_rows: Callable[[np.ndarray, int], np.ndarray], row_check: R
         offset = 0 if prev is None else 1
         k = first_bad(bad_rows(rows, offset))
         if k is not None:
-            row_check(rows[k], rows[k - 1] if k else None, line0 + k - offset, line0 + k - offset - 1)
+            line = line0 + k - offset
+            row_check(rows[k], rows[k - 1] if k else None, line, line - 1)
     return check
 
 

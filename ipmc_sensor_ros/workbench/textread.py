@@ -127,7 +127,8 @@ class TextSource:
         if not data:
             self._eof = True
             return False
-        if self.max_bytes is not None and self._offset + len(self._buf) + len(data) > self.max_bytes:
+        read = self._offset + len(self._buf) + len(data)
+        if self.max_bytes is not None and read > self.max_bytes:
             raise DataFormatError(self.path, None, f"file grew above the limit of "
                                   f"{self.max_bytes} bytes (max_bytes) while being read")
         if self._offset == 0 and not self._buf and data.startswith(b"\xef\xbb\xbf"):
