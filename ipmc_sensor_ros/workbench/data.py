@@ -9,7 +9,7 @@ from ..physics.model import SensorModel
 from ..physics.parameters import MaterialParameters
 from .fit import FitGroup
 from .freqresp import FrequencyPoint, fundamental_response
-from .io import FrequencyResponseData, TimeSeries
+from .measurements import FrequencyResponseData, TimeSeries
 from .modelfit import Record
 
 __all__ = ["material_for", "records_from", "groups_from", "frf_points"]

@@ -1,0 +1,434 @@
+"""rosbag2 bags in and out of the workbench (read with ``rosbags``; no rclpy needed).
+
+Bags (rosbag2, read with ``rosbags``)
+=====================================
+``read_bag`` accepts a bag directory (with ``metadata.yaml``) or a single
+``.mcap``/``.db3`` storage file.  Topics are matched with or without the
+leading ``/``.
+
+* current (default topic ``current``): ``std_msgs/msg/Float64MultiArray``
+  blocks, ``layout.dim[0] = (label "sample", size n, stride 2n)``,
+  ``layout.dim[1] = (label "time_s,current_A", size 2, stride 2)``,
+  ``data = [t0, i0, t1, i1, ...]`` (seconds, amperes).  Samples must be
+  strictly increasing in time in message order.
+* deflection (default topic ``deflection_truth``; the estimator's output
+  ``deflection/block`` has the same layout): the same block type with label
+  ``"time_s,deflection_m"`` (metres), or ``geometry_msgs/msg/PointStamped``
+  with ``point.z`` the deflection (m) at ``header.stamp``.  The deflection is
+  aligned to the current sample times: ``deflection_alignment = "exact"`` when
+  every current time has a deflection sample at the same time (within 1 ns
+  plus float rounding, as when both come from the simulator), otherwise
+  ``"linear"`` (linear interpolation; the deflection must cover the whole
+  current time span, no extrapolation).  A missing deflection topic gives
+  ``deflection_m = None`` unless ``require_deflection=True``.
+* geometry: the ``geometry`` argument, else the YAML sidecar (argument
+  ``sidecar``, default ``<bag dir>/ipmc.yaml``, for a single storage file the
+  ``ipmc.yaml`` beside it)::
+
+      geometry: {length_m: 0.022, width_m: 0.007, thickness_m: 0.00036, name: slim}
+      material: {temperature_k: 300.0}     # optional, partial; -> known
+      extra: {operator: jd}                # optional -> extra
+
+"""
+from __future__ import annotations
+
+import functools
+import re
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from ..interface.blocks import SAMPLE_LABEL, unpack_pairs
+from ..physics.parameters import Geometry, MaterialParameters, ParameterError
+from .formats import _fmt
+from .measurements import DataFormatError, PathLike, TimeSeries
+
+__all__ = ["CURRENT_LABEL", "DEFLECTION_LABEL", "MULTIARRAY_TYPE", "POINT_STAMPED_TYPE",
+           "read_bag", "write_bag"]
+
+#: Column label (dim[1].label) of current and deflection blocks in bags.
+CURRENT_LABEL = "time_s,current_A"
+DEFLECTION_LABEL = "time_s,deflection_m"
+MULTIARRAY_TYPE = "std_msgs/msg/Float64MultiArray"
+POINT_STAMPED_TYPE = "geometry_msgs/msg/PointStamped"
+SIDECAR_NAME = "ipmc.yaml"
+_SIDECAR_KEYS = ("geometry", "material", "extra", "model")
+
+
+# ---------------------------------------------------------------------------
+# Bags
+# ---------------------------------------------------------------------------
+@functools.lru_cache(maxsize=None)
+def _typestore():
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def _topic_key(name: str) -> str:
+    return name.strip().lstrip("/")
+
+
+def _find_topic(where: str, topics: Mapping[str, Any], wanted: str):
+    """(name, info) of ``wanted`` in the bag (leading '/' optional), or None."""
+    matches = [name for name in topics if _topic_key(name) == _topic_key(wanted)]
+    if len(matches) > 1:
+        raise DataFormatError(where, None, f"ambiguous: the bag has both {matches}", topic=wanted)
+    return (matches[0], topics[matches[0]]) if matches else None
+
+
+def _describe_topics(topics: Mapping[str, Any]) -> str:
+    if not topics:
+        return "the bag has no topics"
+    return "the bag has: " + ", ".join(f"{name} ({info.msgtype}, {info.msgcount} msgs)"
+                                       for name, info in sorted(topics.items()))
+
+
+def _unpack_block(msg, label: str) -> tuple[np.ndarray, np.ndarray]:
+    """Times and values of a block message; ValueError (LayoutError) describing a bad layout."""
+    return unpack_pairs(msg, label, values_only_ok=False)
+
+
+def _read_topic(where: str, reader, name: str, info, label: str,
+                quantity: str) -> tuple[np.ndarray, np.ndarray]:
+    """All (time, value) samples of one topic, in time order, validated."""
+    store = _typestore()
+    msgtype = info.msgtype
+    allowed = (MULTIARRAY_TYPE,) if quantity == "current" else (MULTIARRAY_TYPE, POINT_STAMPED_TYPE)
+    if msgtype not in allowed:
+        raise DataFormatError(where, None, f"has message type {msgtype!r}; expected "
+                              + " or ".join(repr(a) for a in allowed), topic=name)
+    times: list[np.ndarray] = []
+    values: list[np.ndarray] = []
+    count = 0
+    prev_end: float | None = None
+    for conn, _stamp, raw in reader.messages(connections=info.connections):
+        count += 1
+        try:
+            msg = store.deserialize_cdr(raw, conn.msgtype)
+        except Exception as exc:  # corrupt payload: any decoder failure
+            raise DataFormatError(where, None, f"message {count}: cannot deserialize "
+                                  f"{conn.msgtype}: {type(exc).__name__}: {exc}",
+                                  topic=name) from exc
+        if msgtype == POINT_STAMPED_TYPE:
+            t = np.array([msg.header.stamp.sec + msg.header.stamp.nanosec / 1e9])
+            v = np.array([float(msg.point.z)])
+        else:
+            try:
+                t, v = _unpack_block(msg, label)
+            except ValueError as exc:
+                raise DataFormatError(where, None, f"message {count}: {exc}", topic=name) from None
+        bad = ~(np.isfinite(t) & np.isfinite(v))
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise DataFormatError(where, None, f"message {count}, sample {k}: NaN/Inf "
+                                  f"(time {_fmt(t[k])}, {quantity} {_fmt(v[k])})", topic=name)
+        if msgtype == MULTIARRAY_TYPE and t.size:
+            steps = np.diff(t)
+            if (steps <= 0).any():
+                k = int(np.argmax(steps <= 0)) + 1
+                raise DataFormatError(where, None, f"message {count}, sample {k}: time "
+                                      f"{_fmt(t[k])} s is not after {_fmt(t[k - 1])} s (sample "
+                                      "times must be strictly increasing)", topic=name)
+            if prev_end is not None and t[0] <= prev_end:
+                raise DataFormatError(where, None, f"message {count} starts at {_fmt(t[0])} s, not "
+                                      "after the previous message's last sample at "
+                                      f"{_fmt(prev_end)} s (blocks overlap or are out of order)",
+                                      topic=name)
+            prev_end = float(t[-1])
+        times.append(t)
+        values.append(v)
+    if count != info.msgcount and info.msgcount:
+        raise DataFormatError(where, None, f"the bag lists {info.msgcount} messages but only "
+                              f"{count} could be read (truncated bag?)", topic=name)
+    t = np.concatenate(times) if times else np.empty(0)
+    v = np.concatenate(values) if values else np.empty(0)
+    if msgtype == POINT_STAMPED_TYPE and t.size:
+        order = np.argsort(t, kind="stable")
+        t, v = t[order], v[order]
+        dup = np.diff(t) == 0
+        if dup.any():
+            k = int(np.argmax(dup))
+            raise DataFormatError(where, None, f"two samples with the same stamp {_fmt(t[k])} s",
+                                  topic=name)
+    return t, v
+
+
+def _align(where: str, name: str, tc: np.ndarray, td: np.ndarray,
+           vd: np.ndarray) -> tuple[np.ndarray, str]:
+    """Deflection at the current times ``tc``: exact match or linear interpolation."""
+    if td.size == 0:
+        raise DataFormatError(where, None, "has no deflection samples", topic=name)
+    tol = 1e-9 + 4.0 * float(np.spacing(max(abs(tc).max(), abs(td).max())))
+    idx = np.clip(np.searchsorted(td, tc), 1, max(td.size - 1, 1))
+    lo = np.clip(idx - 1, 0, td.size - 1)
+    hi = np.clip(idx, 0, td.size - 1)
+    nearest = np.where(np.abs(td[lo] - tc) <= np.abs(td[hi] - tc), lo, hi)
+    if np.all(np.abs(td[nearest] - tc) <= tol):
+        return vd[nearest].copy(), "exact"
+    if td.size < 2 or td[0] > tc[0] + tol or td[-1] < tc[-1] - tol:
+        raise DataFormatError(where, None, f"deflection covers {_fmt(td[0])}..{_fmt(td[-1])} s "
+                              f"but the current covers {_fmt(tc[0])}..{_fmt(tc[-1])} s: cannot "
+                              "align without extrapolating (trim the recording)", topic=name)
+    return np.interp(tc, td, vd), "linear"
+
+
+def _yaml_line(text: str, keys: Sequence[str]) -> int | None:
+    """1-based line of the nested mapping key ``keys`` in YAML ``text`` (best effort)."""
+    import yaml
+
+    try:
+        node = yaml.compose(text)
+    except yaml.YAMLError:
+        return None
+    line = None
+    for key in keys:
+        if not isinstance(node, yaml.MappingNode):
+            break
+        for k, v in node.value:
+            if getattr(k, "value", None) == key:
+                line, node = k.start_mark.line + 1, v
+                break
+        else:
+            break
+    return line
+
+
+def _read_sidecar(bag: str, path: Path, need_geometry: bool):
+    """(geometry or None, known, extra) from a YAML sidecar."""
+    import yaml
+
+    where = str(path)
+    about = f"sidecar of bag '{bag}'"
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise DataFormatError(where, None, f"{about} not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataFormatError(where, None, f"cannot read {about}: {exc}") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        problem = getattr(exc, "problem", None) or exc
+        raise DataFormatError(where, mark.line + 1 if mark else None,
+                              f"{about} is not valid YAML: {problem}") from None
+    data = {} if data is None else data
+    if not isinstance(data, dict):
+        raise DataFormatError(where, 1, f"{about} must be a mapping with a 'geometry' key")
+    unknown = sorted(str(k) for k in set(data) - set(_SIDECAR_KEYS))
+    if unknown:
+        raise DataFormatError(where, _yaml_line(text, [unknown[0]]), f"unknown key(s) {unknown} "
+                              f"in {about}; known: {list(_SIDECAR_KEYS)}")
+    geometry = None
+    if data.get("geometry") is not None:
+        g = data["geometry"]
+        if not isinstance(g, dict):
+            raise DataFormatError(where, _yaml_line(text, ["geometry"]),
+                                  f"'geometry' in {about} must be a mapping")
+        try:
+            geometry = Geometry.from_dict(g)
+        except (ParameterError, TypeError) as exc:
+            m = re.search(r"parameter '(\w+)'", str(exc))
+            line = _yaml_line(text, ["geometry", m.group(1)] if m else ["geometry"])
+            raise DataFormatError(where, line, f"geometry in {about}: {exc}") from None
+    elif need_geometry:
+        raise DataFormatError(where, None, f"{about} has no 'geometry' (length_m, width_m, "
+                              "thickness_m in metres) and no geometry was passed")
+    known: dict[str, float] = {}
+    if data.get("material") is not None:
+        mat = data["material"]
+        if not isinstance(mat, dict):
+            raise DataFormatError(where, _yaml_line(text, ["material"]),
+                                  f"'material' in {about} must be a mapping")
+        try:
+            MaterialParameters.from_dict(mat)
+        except (ParameterError, TypeError) as exc:
+            raise DataFormatError(where, _yaml_line(text, ["material"]),
+                                  f"material in {about}: {exc}") from None
+        known = {str(k): float(v) for k, v in mat.items()}
+    extra = data.get("extra") or {}
+    if not isinstance(extra, dict):
+        raise DataFormatError(where, _yaml_line(text, ["extra"]),
+                              f"'extra' in {about} must be a mapping")
+    extra = dict(extra)
+    if "model" in data:
+        extra["model"] = data["model"]
+    return geometry, known, extra
+
+
+def read_bag(path: PathLike, current_topic: str = "current",
+             deflection_topic: str | None = "deflection_truth",
+             geometry: Geometry | Mapping[str, Any] | None = None,
+             sidecar: PathLike | None = None, *, require_deflection: bool = False) -> TimeSeries:
+    """Read a rosbag2 bag (directory, ``.mcap`` or ``.db3``) into a :class:`TimeSeries`.
+
+    ``current_topic`` must hold ``Float64MultiArray`` current blocks.
+    ``deflection_topic`` (None: ignore) may hold deflection blocks or
+    ``PointStamped``; it is aligned to the current sample times and
+    ``deflection_alignment`` says how ("exact" or "linear").  If the topic is
+    absent the deflection is None, unless ``require_deflection``.
+    The geometry comes from ``geometry`` or else the sidecar (see the module
+    docstring); a sidecar, when present, also gives ``known`` and ``extra``.
+    Every problem raises :class:`DataFormatError` naming the bag and topic.
+    """
+    bag = Path(path)
+    where = str(path)
+    if not bag.exists():
+        raise DataFormatError(where, None, "bag not found (no such file or directory)")
+    if bag.is_dir():
+        if not (bag / "metadata.yaml").is_file():
+            content = sorted(p.name for p in bag.iterdir())[:8]
+            raise DataFormatError(where, None, "not a rosbag2 bag: the directory has no "
+                                  f"metadata.yaml (it contains {content})")
+    elif bag.suffix not in (".mcap", ".db3"):
+        raise DataFormatError(where, None, "not a rosbag2 bag: expected a bag directory, a .mcap "
+                              "or a .db3 file")
+    try:
+        from rosbags.rosbag2 import Reader
+    except ImportError as exc:  # pragma: no cover - rosbags is a workbench dependency
+        raise ImportError("reading bags needs the 'rosbags' package "
+                          "(pip install 'ipmc_sensor_ros[workbench]')") from exc
+
+    reading: str | None = None
+    try:
+        with Reader(bag) as reader:
+            topics = reader.topics
+            found = _find_topic(where, topics, current_topic)
+            if found is None:
+                raise DataFormatError(where, None, f"current topic not found; "
+                                      f"{_describe_topics(topics)}", topic=current_topic)
+            cur_name, cur_info = found
+            dfound = None
+            if deflection_topic is not None:
+                dfound = _find_topic(where, topics, deflection_topic)
+                if dfound is None and require_deflection:
+                    raise DataFormatError(where, None, f"deflection topic not found; "
+                                          f"{_describe_topics(topics)}", topic=deflection_topic)
+            reading = cur_name
+            tc, current = _read_topic(where, reader, cur_name, cur_info, CURRENT_LABEL, "current")
+            if tc.size < 2:
+                raise DataFormatError(where, None, f"only {tc.size} current sample(s); at least 2 "
+                                      "are needed", topic=cur_name)
+            deflection = alignment = None
+            if dfound is not None:
+                reading = dfound[0]
+                td, vd = _read_topic(where, reader, dfound[0], dfound[1], DEFLECTION_LABEL,
+                                     "deflection")
+                deflection, alignment = _align(where, dfound[0], tc, td, vd)
+            reading = None
+    except DataFormatError:
+        raise
+    except Exception as exc:  # rosbags/sqlite3/mcap raise many types on corrupt input
+        raise DataFormatError(where, None, f"cannot read bag (corrupt or truncated?): "
+                              f"{type(exc).__name__}: {exc}", topic=reading) from exc
+
+    known: dict[str, float] = {}
+    extra: dict[str, Any] = {}
+    sidecar_path = Path(sidecar) if sidecar is not None else \
+        (bag if bag.is_dir() else bag.parent) / SIDECAR_NAME
+    if sidecar is not None or sidecar_path.is_file():
+        side_geometry, known, extra = _read_sidecar(where, sidecar_path, geometry is None)
+        if geometry is None:
+            geometry = side_geometry
+    if geometry is None:
+        raise DataFormatError(where, None, "no geometry: pass geometry= or put an "
+                              f"{SIDECAR_NAME} sidecar with 'geometry: {{length_m, width_m, "
+                              "thickness_m}' (metres) next to the bag")
+    if not isinstance(geometry, Geometry):
+        try:
+            geometry = Geometry.from_dict(dict(geometry))
+        except (ParameterError, TypeError) as exc:
+            raise DataFormatError(where, None, f"geometry argument: {exc}") from None
+    rate = 1.0 / float(np.median(np.diff(tc)))
+    return TimeSeries(path=where, sample=geometry.name, geometry=geometry, known=known,
+                      sample_rate_hz=rate, time_s=tc, current_a=current, deflection_m=deflection,
+                      extra=extra, deflection_alignment=alignment)
+
+
+def _stamp_ns(t: float) -> int:
+    return int(round(float(t) * 1e9))
+
+
+def write_bag(path: PathLike, timeseries: TimeSeries, storage: str = "sqlite3",
+              current_topic: str = "current", deflection_topic: str = "deflection_truth",
+              block_size: int = 100, *, deflection_msgtype: str = MULTIARRAY_TYPE,
+              sidecar: bool = True) -> None:
+    """Write ``timeseries`` as a rosbag2 bag (format version 8) readable by :func:`read_bag`.
+
+    Current (and deflection, if any) go out as ``Float64MultiArray`` blocks of
+    up to ``block_size`` samples, each stamped with its last sample time;
+    ``deflection_msgtype=POINT_STAMPED_TYPE`` writes one ``PointStamped`` per
+    deflection sample instead.  Topic names get a leading '/'.  With
+    ``sidecar`` the geometry, known values and extra go to ``<bag>/ipmc.yaml``.
+    Sample times must be >= 0 (they become bag timestamps).
+    """
+    import yaml
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    plugins = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}
+    if storage not in plugins:
+        raise ValueError(f"storage must be 'sqlite3' or 'mcap', got {storage!r}")
+    if int(block_size) != block_size or block_size < 1:
+        raise ValueError(f"block_size must be a positive integer, got {block_size!r}")
+    if deflection_msgtype not in (MULTIARRAY_TYPE, POINT_STAMPED_TYPE):
+        raise ValueError(f"deflection_msgtype must be {MULTIARRAY_TYPE!r} or "
+                         f"{POINT_STAMPED_TYPE!r}, got {deflection_msgtype!r}")
+    ts = timeseries
+    if ts.n_samples and ts.time_s.min() < 0.0:
+        raise ValueError("sample times must be >= 0 to be written as bag timestamps")
+    bag = Path(path)
+    if bag.exists():
+        raise FileExistsError(f"{bag} exists; write_bag does not overwrite")
+    store = _typestore()
+    types = store.types
+    F64, Layout, Dim = (types["std_msgs/msg/Float64MultiArray"],
+                        types["std_msgs/msg/MultiArrayLayout"],
+                        types["std_msgs/msg/MultiArrayDimension"])
+
+    def block(t: np.ndarray, v: np.ndarray, label: str):
+        n = int(t.size)
+        data = np.empty(2 * n)
+        data[0::2], data[1::2] = t, v
+        layout = Layout(dim=[Dim(label=SAMPLE_LABEL, size=n, stride=2 * n),
+                             Dim(label=label, size=2, stride=2)], data_offset=0)
+        return store.serialize_cdr(F64(layout=layout, data=data), MULTIARRAY_TYPE)
+
+    def topic(name: str) -> str:
+        return "/" + _topic_key(name)
+
+    with Writer(bag, version=8, storage_plugin=plugins[storage]) as writer:
+        cur = writer.add_connection(topic(current_topic), MULTIARRAY_TYPE, typestore=store)
+        dconn = None
+        if ts.deflection_m is not None:
+            dconn = writer.add_connection(topic(deflection_topic), deflection_msgtype,
+                                          typestore=store)
+        for start in range(0, ts.n_samples, int(block_size)):
+            sl = slice(start, start + int(block_size))
+            t = ts.time_s[sl]
+            stamp = _stamp_ns(t[-1])
+            writer.write(cur, stamp, block(t, ts.current_a[sl], CURRENT_LABEL))
+            if dconn is not None and deflection_msgtype == MULTIARRAY_TYPE:
+                writer.write(dconn, stamp, block(t, ts.deflection_m[sl], DEFLECTION_LABEL))
+        if dconn is not None and deflection_msgtype == POINT_STAMPED_TYPE:
+            Point, PointStamped = types["geometry_msgs/msg/Point"], types[POINT_STAMPED_TYPE]
+            Header, Time = types["std_msgs/msg/Header"], types["builtin_interfaces/msg/Time"]
+            for t, d in zip(ts.time_s.tolist(), ts.deflection_m.tolist()):
+                ns = _stamp_ns(t)
+                sec, nsec = divmod(ns, 10**9)
+                msg = PointStamped(header=Header(stamp=Time(sec=sec, nanosec=nsec),
+                                                 frame_id="ipmc_tip"),
+                                   point=Point(x=0.0, y=0.0, z=d))
+                writer.write(dconn, ns, store.serialize_cdr(msg, POINT_STAMPED_TYPE))
+    if sidecar:
+        geometry = ts.geometry.to_dict()
+        geometry["name"] = ts.sample or ts.geometry.name
+        doc: dict[str, Any] = {"geometry": geometry}
+        if ts.known:
+            doc["material"] = dict(ts.known)
+        if ts.extra:
+            doc["extra"] = dict(ts.extra)
+        (bag / SIDECAR_NAME).write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
+
+

@@ -1,0 +1,194 @@
+"""Measurement data classes of the workbench and the one error they raise (no rclpy needed).
+
+:class:`TimeSeries` (current and optional tip deflection, SI units),
+:class:`FrequencyResponseData` (a measured I/w) and :class:`DataFormatError`,
+raised by every reader (text formats, lab import, bags) with the file, line
+and topic of the problem.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Union
+
+import numpy as np
+
+from ..physics.parameters import Geometry
+
+__all__ = ["DataFormatError", "TimeSeries", "FrequencyResponseData", "PathLike"]
+
+PathLike = Union[str, Path]
+
+
+# ---------------------------------------------------------------------------
+# Errors
+# ---------------------------------------------------------------------------
+class DataFormatError(ValueError):
+    """An input file or bag that cannot be read as valid measurement data.
+
+    Attributes
+    ----------
+    path : str, the file or bag (as given).
+    line : int or None, 1-based line of the problem in a text file.
+    topic : str or None, the bag topic concerned.
+    reason : str, the message without the location prefix.
+
+    ``str()`` is ``"<path>:<line>: <reason>"``, ``"<path>: topic '<topic>':
+    <reason>"`` or ``"<path>: <reason>"``.
+    """
+
+    def __init__(self, path: PathLike, line: int | None, reason: str, *,
+                 topic: str | None = None) -> None:
+        self.path = str(path)
+        self.line = line
+        self.topic = topic
+        self.reason = reason
+        super().__init__(self._format())
+
+    def _format(self) -> str:
+        where = self.path
+        if self.line is not None:
+            where += f":{self.line}"
+        if self.topic is not None:
+            where += f": topic '{self.topic}'"
+        return f"{where}: {self.reason}"
+
+    def __str__(self) -> str:
+        return self._format()
+
+    def __reduce__(self):  # picklable despite the keyword-only argument
+        return (_rebuild_error, (self.path, self.line, self.reason, self.topic))
+
+
+def _rebuild_error(path, line, reason, topic):
+    return DataFormatError(path, line, reason, topic=topic)
+
+
+# ---------------------------------------------------------------------------
+# Data classes
+# ---------------------------------------------------------------------------
+def _vector(name: str, values: Any, n: int | None = None) -> np.ndarray:
+    arr = np.array(values, dtype=float, copy=True)
+    if arr.ndim != 1:
+        raise ValueError(f"{name} must be 1-D, got shape {arr.shape}")
+    if n is not None and arr.size != n:
+        raise ValueError(f"{name} has {arr.size} values, expected {n}")
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class TimeSeries:
+    """Synchronous samples of sensing current and (optionally) tip deflection, SI units.
+
+    path : source file or bag ('' if built in memory).
+    sample : sample name ('' if unknown).
+    geometry : the cantilever geometry, metres.
+    known : known physical values (subset of ``KNOWN_KEYS``; for bags, any
+        :class:`MaterialParameters` field the sidecar gives), SI units.
+    sample_rate_hz : nominal sampling rate, Hz.
+    time_s : sample times, s, strictly increasing.
+    current_a : sensing current, A.
+    deflection_m : tip deflection, m, at ``time_s``; None if unknown.
+    extra : unrecognised header keys (text values) / sidecar ``extra``.
+    deflection_alignment : ``"exact"`` (measured at the sample times),
+        ``"linear"`` (interpolated from other times, bags only) or None.
+    """
+
+    path: str
+    sample: str
+    geometry: Geometry
+    known: dict
+    sample_rate_hz: float
+    time_s: np.ndarray
+    current_a: np.ndarray
+    deflection_m: np.ndarray | None = None
+    extra: dict = field(default_factory=dict)
+    deflection_alignment: str | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.geometry, Geometry):
+            raise TypeError(f"geometry must be a Geometry, got {type(self.geometry).__name__}")
+        t = _vector("time_s", self.time_s)
+        object.__setattr__(self, "time_s", t)
+        object.__setattr__(self, "current_a", _vector("current_a", self.current_a, t.size))
+        if self.deflection_m is not None:
+            object.__setattr__(self, "deflection_m",
+                               _vector("deflection_m", self.deflection_m, t.size))
+            if self.deflection_alignment is None:
+                object.__setattr__(self, "deflection_alignment", "exact")
+        elif self.deflection_alignment is not None:
+            raise ValueError("deflection_alignment given but deflection_m is None")
+        if self.deflection_alignment not in (None, "exact", "linear"):
+            raise ValueError(f"deflection_alignment must be 'exact', 'linear' or None, "
+                             f"got {self.deflection_alignment!r}")
+        object.__setattr__(self, "sample_rate_hz", float(self.sample_rate_hz))
+        object.__setattr__(self, "known", {str(k): float(v) for k, v in self.known.items()})
+        object.__setattr__(self, "extra", dict(self.extra))
+        object.__setattr__(self, "path", str(self.path))
+        object.__setattr__(self, "sample", str(self.sample))
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.time_s.size)
+
+    @property
+    def has_deflection(self) -> bool:
+        return self.deflection_m is not None
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.time_s[-1] - self.time_s[0]) if self.time_s.size else 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class FrequencyResponseData:
+    """A measured frequency response I/w of one sample, SI units.
+
+    frequency_hz : Hz, > 0, strictly increasing.
+    gain_a_per_m : |I/w|, A/m, > 0.
+    phase_deg : arg(I/w), degrees.
+    coherence : magnitude-squared coherence in [0, 1], or None.
+    gain_std_a_per_m, phase_std_deg : standard uncertainties (A/m, degrees),
+        both or neither.
+    Other fields as in :class:`TimeSeries`.
+    """
+
+    path: str
+    sample: str
+    geometry: Geometry
+    known: dict
+    frequency_hz: np.ndarray
+    gain_a_per_m: np.ndarray
+    phase_deg: np.ndarray
+    coherence: np.ndarray | None = None
+    gain_std_a_per_m: np.ndarray | None = None
+    phase_std_deg: np.ndarray | None = None
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.geometry, Geometry):
+            raise TypeError(f"geometry must be a Geometry, got {type(self.geometry).__name__}")
+        f = _vector("frequency_hz", self.frequency_hz)
+        object.__setattr__(self, "frequency_hz", f)
+        for name in ("gain_a_per_m", "phase_deg"):
+            object.__setattr__(self, name, _vector(name, getattr(self, name), f.size))
+        for name in ("coherence", "gain_std_a_per_m", "phase_std_deg"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, _vector(name, getattr(self, name), f.size))
+        if (self.gain_std_a_per_m is None) != (self.phase_std_deg is None):
+            raise ValueError("gain_std_a_per_m and phase_std_deg must be given together")
+        object.__setattr__(self, "known", {str(k): float(v) for k, v in self.known.items()})
+        object.__setattr__(self, "extra", dict(self.extra))
+        object.__setattr__(self, "path", str(self.path))
+        object.__setattr__(self, "sample", str(self.sample))
+
+    @property
+    def gain_std(self) -> np.ndarray | None:
+        """Alias of ``gain_std_a_per_m``."""
+        return self.gain_std_a_per_m
+
+    @property
+    def response(self) -> np.ndarray:
+        """Complex response I/w = gain * exp(j * deg2rad(phase)), A/m."""
+        return self.gain_a_per_m * np.exp(1j * np.deg2rad(self.phase_deg))
+
