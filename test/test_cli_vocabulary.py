@@ -140,13 +140,13 @@ def test_import_verb_passes_everything_to_the_library(monkeypatch, tmp_path, cap
     monkeypatch.setitem(sys.modules, "ipmc_sensor_ros.workbench.labimport",
                         types.SimpleNamespace(import_lab_files=fake_import))
     assert main(["import", "a.csv", "b.txt", "--out", str(tmp_path), "--geometry", "22mm,7mm,360um",
-                 "--columns", "time=Time [s],current=Current [uA]", "--current-gain", "1e-6",
+                 "--columns", "time=Time [s],current=Current [uA]", "--current-gain", "1e6",
                  "--sample", "s1", "--meta", "run.json"]) == 0
     (c,) = calls
     assert [p.name for p in c["paths"]] == ["a.csv", "b.txt"] and c["out_dir"] == tmp_path
     assert c["geometry"].length_m == pytest.approx(0.022) and c["geometry"].name == "s1"
     assert c["columns"] == {"time": "Time [s]", "current": "Current [uA]"}
-    assert c["gain"] == 1e-6 and c["meta"].name == "run.json" and c["sample"] == "s1"
+    assert c["gain"] == pytest.approx(1e-6) and c["meta"].name == "run.json" and c["sample"] == "s1"
     assert "run1.csv" in capsys.readouterr().out
     assert main(["import", "a.csv", "--out", str(tmp_path), "--columns", "volts=V"]) == 2
     assert "--columns: unknown role 'volts'" in capsys.readouterr().err

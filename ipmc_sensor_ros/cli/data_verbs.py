@@ -268,16 +268,17 @@ def _parse_columns(text: str | None) -> dict | None:
 
 
 def _cmd_import(args) -> int:
-    try:
-        from ..workbench.labimport import import_lab_files
-    except ImportError:
-        raise ParameterError("the lab-file importer (workbench.labimport) is not part of this "
-                             "installation") from None
+    from ..workbench.labimport import import_lab_files
+
+    gain = args.current_gain
+    if gain is not None and not (math.isfinite(gain) and gain > 0):
+        raise ParameterError(f"--current-gain must be a positive transimpedance in V/A, got {gain!r}")
     geometry = parse_geometry(args.geometry, args.sample or "") if args.geometry else None
     written = import_lab_files([Path(p) for p in args.files], Path(args.out), geometry=geometry,
                                meta=Path(args.meta) if args.meta else None,
                                columns=_parse_columns(args.columns),
-                               current_gain_a_per_v=args.current_gain, sample=args.sample)
+                               current_gain_a_per_v=None if gain is None else 1.0 / gain,
+                               sample=args.sample)
     for path in written:
         print(f"wrote {path}")
     print(f"imported {len(written)} file(s) into {args.out} (ipmc-timeseries/1); next: "
@@ -342,9 +343,9 @@ def add_parsers(sub, formatter) -> None:
     p.add_argument("--meta", metavar="FILE", help="run-metadata JSON/YAML with geometry (mm/µm accepted)")
     p.add_argument("--columns", metavar="ROLE=NAME,...",
                    help="column names when not found automatically: time=...,deflection=...,current=...")
-    p.add_argument("--current-gain", type=float, metavar="A_PER_V",
-                   help="current column recorded in volts: amplifier gain, A per V "
-                        "(1e-6 for a 1 MΩ transimpedance amplifier)")
+    p.add_argument("--current-gain", type=float, metavar="V_PER_A",
+                   help="current column recorded in volts: transimpedance gain of the current "
+                        "amplifier, V per A (1e6 for a 1 MΩ feedback resistor)")
     p.add_argument("--sample", help="sample name written into the files")
     add_output_args(p, report=False)
     p.set_defaults(func=_cmd_import)
