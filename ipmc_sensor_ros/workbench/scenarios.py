@@ -30,7 +30,8 @@ DETECTABLE_RANGES = {
     "amplifier_bandwidth": {"corner_hz": (30.0, 300.0)},
     "time_delay": {"delay_s": (5e-4, 5e-3)},
     "current_offset": {"offset_a": (1e-7, 5e-7), "drift_a_per_s": (-2e-8, 2e-8)},
-    "hydration_drift": {"diffusivity_rate_per_s": (-2e-3, -5e-4)},
+    # the plain exponential (no equilibrium) unless a test asks for a relaxation
+    "hydration_drift": {"diffusivity_rate_per_s": (-2e-3, -5e-4), "equilibrium_ratio": (0.0, 0.0)},
     "effective_length": {"tip_offset_m": (1.5e-3, 4e-3)},
     "beam_inertia": {"natural_frequency_hz": (22.0, 50.0), "damping_ratio": (0.01, 0.1)},
     "nonlinearity": {"quadratic": (0.5, 2.0), "cubic": (5.0, 20.0)},
