@@ -51,6 +51,10 @@ def _material_from_args(args) -> MaterialParameters:
     material = PAPER_PARAMETERS
     if getattr(args, "params", None):
         material = load_material(args.params)
+    if getattr(args, "model_file", None):
+        from ..physics.modelfile import load_model
+
+        material = load_model(args.model_file).material
     for item in getattr(args, "set", None) or []:
         if "=" not in item:
             raise ParameterError(f"--set expects name=value, got {item!r}")
@@ -79,8 +83,13 @@ def _effects_from_args(args, base_key: str = "model") -> tuple:
         names = load_plugin(plugin)
         _say(f"plugin {plugin}: effects {', '.join(names)}")
     _, base = parse_model_name(getattr(args, base_key))
+    if getattr(args, "model_file", None):
+        from ..physics.modelfile import load_model
+
+        base = load_model(args.model_file).effects
     extra = parse_effects(getattr(args, "effects", "") or "")
-    return tuple(parse_effects(base)) + tuple(e for e in extra if e.name not in base)
+    names = [getattr(b, "name", b) for b in base]
+    return tuple(parse_effects(base)) + tuple(e for e in extra if e.name not in names)
 
 
 def _load_data(args):
@@ -113,6 +122,8 @@ def _add_model_args(p: argparse.ArgumentParser, base_flag: str = "--model") -> N
     p.add_argument("--effects", default="",
                    help="extra effects, e.g. 'time_delay' or 'time_delay(delay_s=0.002),nonlinearity'")
     p.add_argument("--plugin", action="append", help="Python file defining more effects (repeatable)")
+    p.add_argument("--model-file", help="saved model (ipmc-model/1 YAML from --save-model): its effects "
+                                        "with their values and its material replace --model/--params")
     p.add_argument("--params", help="material YAML ('material:') or a ROS 2 params file of the nodes")
     p.add_argument("--set", action="append", metavar="NAME=VALUE",
                    help="override a material parameter, e.g. --set d=3e-11 (repeatable)")
@@ -224,7 +235,16 @@ def _cmd_fit(args) -> int:
     material = _material_from_args(args)
     data = _load_data(args)
     groups = groups_from(data)
-    free = _param_names(args.free)
+    from ..workbench.discovery import (acts_on_transfer, diagnosis_next_command, effect_free_names,
+                                       effects_to_fit, free_names, next_command)
+
+    fit_eff = effects_to_fit(args.effects)
+    free = free_names(args.free)
+    free += tuple(n for n in effect_free_names(fit_eff, frequency_domain=True) if n not in free)
+    for e in fit_eff:
+        if not acts_on_transfer(e):
+            _say(f"{e}: kept at its catalog values (a frequency-response fit cannot see it; "
+                 "diagnose fits it in the time domain)")
     _say(f"fitting {', '.join(free)} to {sum(len(g.points) for g in groups)} frequency points "
          f"of {len(groups)} sample(s)")
     res = fit_parameters(groups, free, material, effects)
@@ -233,10 +253,21 @@ def _cmd_fit(args) -> int:
            "correlation": res.correlation, "chi2": res.chi2, "dof": res.dof,
            "identifiability": res.identifiability, "named_combinations": res.named_combinations,
            "not_identifiable": res.not_identifiable, "success": res.success,
-           "material": res.material.to_dict()}
+           "p_value": res.p_value, "adequate": res.adequate,
+           "material": res.material.to_dict(), "model": SensorModel(groups[0].geometry, res.material,
+                                                                    res.effects).describe()}
     _write_json(args.json, out)
+    if args.save_model:
+        from ..physics.modelfile import save_model
+
+        save_model(args.save_model, effects=res.effects, material=res.material, tool="ipmc-model fit",
+                   data_files=args.data, ci95=res.ci95,
+                   error={"chi2": res.chi2, "dof": res.dof, "p_value": res.p_value})
+        print(f"saved the whole model to {args.save_model}")
+    print("next: " + (next_command("compare", args.data, args.save_model) if res.adequate or args.save_model
+                      else next_command("diagnose", args.data, None, f"--base {args.model}")))
     if args.save:
-        _save_node_params(args.save, res.material, args.model, effects[1:] if args.model == "h2" else effects)
+        _save_node_params(args.save, res.material, args.model, res.effects[1:] if args.model == "h2" else res.effects)
         print(f"saved fitted parameters for the nodes to {args.save}")
     if args.save_material:
         save_yaml(args.save_material, res.material)
@@ -353,8 +384,21 @@ def _cmd_diagnose(args) -> int:
             raise ParameterError(f"--candidates: unknown effect '{c}'")
     _say(f"diagnosing {recs[0].model.describe()} on {len(recs)} record(s); candidates: "
          f"{', '.join(n for n in (cands or EFFECTS) if not recs[0].model.has_effect(n))}")
-    diag = diagnose(recs, free_material=free, candidates=cands, progress=_say)
+    from ..workbench.diagnose import priors_from_headers
+    from ..workbench.discovery import diagnosis_next_command, effects_to_fit
+
+    diag = diagnose(recs, free_material=free, candidates=cands, fit_effects=effects_to_fit(args.effects),
+                    max_effects=args.max_effects, mains=args.mains, priors=priors_from_headers(data),
+                    progress=_say)
     print(diag.summary())
+    if args.save_model:
+        from ..physics.modelfile import save_model
+
+        save_model(args.save_model, diag.final_model, tool="ipmc-model diagnose", data_files=args.data,
+                   error={"held_out": diag.final.error, "noise_floor": diag.noise_floor},
+                   extra={"missing_effects": diag.missing_effects, "explained": diag.explained})
+        print(f"saved the whole model to {args.save_model}")
+    print(diagnosis_next_command(diag, args.data, args.save_model, args.model))
     _write_json(args.json, diag.to_json())
     rd = _report_dir(args.report)
     if rd:
@@ -609,7 +653,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_model_args(p)
     _add_data_args(p)
     p.add_argument("--free", default="alpha0,d,kappa_e",
-                   help="parameters to fit (symbols d, alpha0, C-, kappa_e, Y, r0, T or full names)")
+                   help="parameters to fit (symbols d, alpha0, C-, kappa_e, Y, r0, T or full names, and "
+                        "effect parameters, e.g. delay_s or time_delay.delay_s); effects given by "
+                        "name without values in --effects are fitted too")
+    p.add_argument("--save-model", help="write the whole fitted model as ipmc-model/1 YAML")
     p.add_argument("--save", help="write the fitted parameters as a ROS 2 params file for the nodes")
     p.add_argument("--save-material", help="write the fitted material as workbench YAML")
     _add_output_args(p)
@@ -636,6 +683,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_data_args(p)
     p.add_argument("--free", default="alpha0,d,kappa_e", help="material parameters refitted with each model")
     p.add_argument("--candidates", help="restrict to these effects (comma list)")
+    p.add_argument("--max-effects", type=int, default=3, help="at most this many effects added (stepwise)")
+    p.add_argument("--mains", default="auto", help="mains lines to find and remove: 50, 60, auto or off")
+    p.add_argument("--save-model", help="write the final model (effects with fitted values, material, "
+                                        "provenance) as ipmc-model/1 YAML")
     _add_output_args(p)
     p.set_defaults(func=_cmd_diagnose)
 
