@@ -4,9 +4,10 @@ Procedure (:func:`find_mains_lines`)
 ------------------------------------
 For every record the current is regressed, by linear least squares, on
 
-* a mean and the harmonics ``k f0`` of the stimulus fundamental that carry
-  deflection content (at least ``1e-4`` of the fundamental's amplitude; these
-  are the components the sensor's response to the deflection can produce),
+* a mean and the harmonics ``k f0`` (k <= 20) of the stimulus fundamental that
+  carry deflection content (at least ``1e-4`` of the fundamental's amplitude in a
+  least-squares harmonic fit of the deflection; these are the components the
+  sensor's response to the deflection can produce),
 * cosine/sine pairs at the mains lines ``m f_mains`` (``m = 1 .. n_harmonics``,
   below 0.45 of the sampling rate).
 
@@ -28,7 +29,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .freqresp import fundamental_response
+from .freqresp import fundamental_response, harmonic_fit
 
 __all__ = ["MainsLine", "find_mains_lines", "remove_mains", "parse_mains"]
 
@@ -63,33 +64,30 @@ def parse_mains(value) -> float | str | None:
     return f
 
 
-def _stimulus_harmonics(t, w, duration):
-    """Fundamental and the harmonics carrying deflection content (or (None, []))."""
+def _stimulus_harmonics(t, w, max_harmonics: int = 20):
+    """Fundamental and the harmonics (at most ``max_harmonics``) carrying deflection content
+    (least-squares harmonic fit of the deflection), or ``(None, [])`` for a non-periodic stimulus."""
     try:
         p = fundamental_response(t, w, w - np.mean(w))
     except ValueError:
         return None, []
     f0 = p.frequency_hz
     fs = (t.size - 1) / (t[-1] - t[0])
-    k_max = int(0.45 * fs / f0)
+    k_max = min(int(0.45 * fs / f0), max_harmonics)
     if k_max < 1:
         return f0, []
-    w0 = 2 * np.pi * f0
-    amps = []
-    for k in range(1, k_max + 1):
-        c = np.exp(-1j * k * w0 * t)
-        amps.append(abs(2 * np.mean((w - w.mean()) * c)))
-    amps = np.asarray(amps)
+    phasors, _, _ = harmonic_fit(t, w, f0, k_max)
+    amps = np.abs(phasors)
     return f0, [k + 1 for k in np.flatnonzero(amps >= 1e-4 * amps[0])]
 
 
-def _record_lines(name, t, w, y, f_mains, n_harmonics):
+def _record_lines(name, t, stimulus, y, f_mains, n_harmonics):
     t = np.asarray(t, float) - t[0]
     duration = t[-1] - t[0]
     fs = (t.size - 1) / duration
     res = 1.0 / duration
     lines = [m * f_mains for m in range(1, n_harmonics + 1) if m * f_mains < 0.45 * fs]
-    f0, ks = _stimulus_harmonics(t, np.asarray(w, float), duration) if w is not None else (None, [])
+    f0, ks = stimulus
     stim = [k * f0 for k in ks] if f0 else []
     sep = [f for f in lines if all(abs(f - s) > res for s in stim)]
     cols = [np.ones_like(t)]
@@ -128,10 +126,12 @@ def find_mains_lines(records: Sequence, mains="auto", n_harmonics: int = 10):
         return [], [np.zeros(np.asarray(r.current_a).size) for r in records]
     families = (50.0, 60.0) if mains == "auto" else (mains,)
     best = None
+    stimuli = [_stimulus_harmonics(np.asarray(r.time_s, float) - r.time_s[0], np.asarray(r.deflection_m, float))
+               if r.deflection_m is not None else (None, []) for r in records]
     for f_mains in families:
         lines, fitted = [], []
-        for r in records:
-            lr, fr = _record_lines(r.path, r.time_s, r.deflection_m, np.asarray(r.current_a, float),
+        for r, stim in zip(records, stimuli):
+            lr, fr = _record_lines(r.path, r.time_s, stim, np.asarray(r.current_a, float),
                                    f_mains, n_harmonics)
             lines += lr
             fitted.append(fr)
