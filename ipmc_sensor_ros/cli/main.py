@@ -350,13 +350,17 @@ def _cmd_track(args) -> int:
         _say(f"tracking {', '.join(free)} in {args.window:g} s windows of {ts.path}")
         tr = track_parameter(ts.time_s, ts.deflection_m, ts.current_a, ts.geometry,
                              material_for(ts, material), free, effects,
-                             window_s=args.window, step_s=args.step, source=ts.path)
+                             window_s=args.window, step_s=args.step, source=ts.path,
+                             model=SensorModel(ts.geometry, material_for(ts, material), effects)
+                             if getattr(args, "model_file", None) else None)
         print(f"{ts.path}:")
         print(f"{'t (s)':>9} {'f0 (Hz)':>8} " + " ".join(f"{n:>36}" for n in free))
         for p in tr:
             cells = " ".join(f"{p.estimates[n]:>11.4g} [{p.ci95[n][0]:.4g}, {p.ci95[n][1]:.4g}]".rjust(36)
                              for n in free)
-            print(f"{p.time_s:9.1f} {p.frequency_hz:8.3f} {cells}")
+            model_cells = ("  model: " + ", ".join(f"{v:.4g}" for v in p.model_estimates.values())
+                           if p.model_estimates else "")
+            print(f"{p.time_s:9.1f} {p.frequency_hz:8.3f} {cells}{model_cells}")
         rows.append({"source": ts.path, "track": [p.__dict__ for p in tr]})
         rd = _report_dir(args.report)
         if rd:

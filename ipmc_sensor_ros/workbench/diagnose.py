@@ -47,6 +47,7 @@ import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
 from ..physics.effects import EFFECTS, get_effect
+from .blas import single_threaded_blas
 from .interference import remove_mains, summarize_lines
 from .modelfit import FitSpec, ModelFit, PreparedRecord, Record, fit_model, predict, prepare
 
@@ -399,7 +400,15 @@ def _offset_test(prepared, models) -> dict:
             "p_value": float(chi2_dist.sf(c2, len(zs))), "max_abs_z": float(np.max(np.abs(zs)))}
 
 
-def diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAULT_FREE_MATERIAL,
+def diagnose(records: Sequence[Record], **kwargs) -> Diagnosis:
+    """Find the effects missing from the records' models (see module docstring and
+    :func:`_diagnose` for the keyword arguments); runs with single-threaded BLAS
+    (:mod:`.blas`: the fits' small products only lose time to BLAS threads)."""
+    with single_threaded_blas():
+        return _diagnose(records, **kwargs)
+
+
+def _diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAULT_FREE_MATERIAL,
              candidates: Sequence[str] | None = None, fit_effects: Sequence[str] = (),
              max_effects: int = 3, n_folds: int = 4, explained_factor: float = 1.15,
              min_gain: float = 0.03, min_delta_bic: float = 20.0, tie_tol: float = 0.05,
@@ -463,7 +472,9 @@ def diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAUL
             adopt(c)
 
     while len(chosen) < max_effects and current.error > threshold:
-        remaining = [n for n in pool_names if n not in {e for e, _ in chosen}]
+        # an effect dropped by the backward check is not offered again (no add/drop cycles)
+        dropped = {st.effect for st in steps if st.action == "dropped"}
+        remaining = [n for n in pool_names if n not in {e for e, _ in chosen} | dropped]
         if not remaining:
             break
         items = [(n, s) for n in remaining

@@ -29,7 +29,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .freqresp import fundamental_response, harmonic_fit
+from .freqresp import _coarse_frequency, harmonic_fit
 
 __all__ = ["MainsLine", "find_mains_lines", "remove_mains", "parse_mains"]
 
@@ -67,16 +67,16 @@ def parse_mains(value) -> float | str | None:
 def _stimulus_harmonics(t, w, max_harmonics: int = 20):
     """Fundamental and the harmonics (at most ``max_harmonics``) carrying deflection content
     (least-squares harmonic fit of the deflection), or ``(None, [])`` for a non-periodic stimulus."""
-    try:
-        p = fundamental_response(t, w, w - np.mean(w))
-    except ValueError:
-        return None, []
-    f0 = p.frequency_hz
     fs = (t.size - 1) / (t[-1] - t[0])
+    f0 = _coarse_frequency(t, w, fs)
+    if not f0 > 0 or f0 * (t[-1] - t[0]) < 2:
+        return None, []
     k_max = min(int(0.45 * fs / f0), max_harmonics)
     if k_max < 1:
         return f0, []
-    phasors, _, _ = harmonic_fit(t, w, f0, k_max)
+    phasors, resid, _ = harmonic_fit(t, w, f0, k_max)
+    if np.var(resid) > 0.1 * np.var(w):
+        return None, []              # not periodic: the harmonics do not explain the deflection
     amps = np.abs(phasors)
     return f0, [k + 1 for k in np.flatnonzero(amps >= 1e-4 * amps[0])]
 
@@ -94,7 +94,10 @@ def _record_lines(name, t, stimulus, y, f_mains, n_harmonics):
     for f in stim + sep:
         cols += [np.cos(2 * np.pi * f * t), np.sin(2 * np.pi * f * t)]
     a = np.column_stack(cols)
-    coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+    try:      # normal equations: the columns are nearly orthogonal sinusoids (fast, well conditioned)
+        coef = np.linalg.solve(a.T @ a, a.T @ y)
+    except np.linalg.LinAlgError:
+        coef, *_ = np.linalg.lstsq(a, y, rcond=None)
     resid = y - a @ coef
     sigma = float(np.sqrt(resid @ resid / max(t.size - a.shape[1], 1)))
     se = sigma * np.sqrt(2.0 / t.size)          # standard error of a sinusoid's amplitude
