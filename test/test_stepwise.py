@@ -133,3 +133,28 @@ def test_unit_errors_are_flagged_with_their_factor():
     assert "multiply by 0.001" in magnitude_flags(mm)[0]
     flag = magnitude_flags(ua)[0]
     assert "current" in flag and ("1e-06" in flag or "0.001" in flag)
+
+
+def test_hydration_relaxation_shape_limits():
+    from ipmc_sensor_ros.physics.catalog import diffusivity_ratio_function
+
+    t = np.array([0.0, 1.0, 600.0, 1e6])
+    plain = diffusivity_ratio_function({"diffusivity_rate_per_s": -1e-3, "equilibrium_ratio": 0.0})
+    assert plain(t) == pytest.approx(np.exp(-1e-3 * t))           # q = 0: the old exponential
+    relax = diffusivity_ratio_function({"diffusivity_rate_per_s": -1e-3, "equilibrium_ratio": 0.6})
+    assert relax(0.0) == 1.0 and relax(1e6) == pytest.approx(0.6)   # starts at d0, levels off at q d0
+    # initial relative rate r_d (forward difference over 10 ms: curvature error ~1e-5 relative)
+    assert (relax(0.01) - 1.0) / 0.01 == pytest.approx(-1e-3, rel=1e-4)
+
+
+def test_priors_from_headers_and_their_errors():
+    from types import SimpleNamespace
+
+    from ipmc_sensor_ros.workbench.diagnose import priors_from_headers
+
+    ts = [SimpleNamespace(path="a.csv", extra={"amplifier_bandwidth_hz": "200", "operator": "x"}),
+          SimpleNamespace(path="b.csv", extra={"time_delay.delay_s": "0.001"})]
+    assert priors_from_headers(ts) == {("amplifier_bandwidth", "corner_hz"): 200.0,
+                                       ("time_delay", "delay_s"): 0.001}
+    with pytest.raises(ValueError, match="c.csv: header key 'amplifier_bandwidth_hz'"):
+        priors_from_headers([SimpleNamespace(path="c.csv", extra={"amplifier_bandwidth_hz": "fast"})])
