@@ -11,9 +11,10 @@ For every record the current is regressed, by linear least squares, on
 * cosine/sine pairs at the mains lines ``m f_mains`` (``m = 1 .. n_harmonics``,
   below 0.45 of the sampling rate).
 
-A mains line that coincides (within one frequency resolution, 1/T) with a
-stimulus harmonic that carries deflection content is *not separable*: it is
-reported as such and left in the data.  Records without a periodic stimulus use
+A mains line that coincides (within one frequency resolution, 1/T) with any
+harmonic of the stimulus fundamental is *not separable* (a nonlinear sensor
+responds there even where the deflection has no content): it is reported as
+such and left in the data.  Records without a periodic stimulus use
 only the mean and the lines (the response to a broadband deflection is smooth
 in frequency, a line is not).  A line is detected when its amplitude exceeds
 ``z_threshold`` (6) standard errors of the regression (false-alarm probability
@@ -89,7 +90,8 @@ def _record_lines(name, t, stimulus, y, f_mains, n_harmonics):
     lines = [m * f_mains for m in range(1, n_harmonics + 1) if m * f_mains < 0.45 * fs]
     f0, ks = stimulus
     stim = [k * f0 for k in ks] if f0 else []
-    sep = [f for f in lines if all(abs(f - s) > res for s in stim)]
+    # a line on any stimulus harmonic may be the sensor's own (e.g. nonlinear) response
+    sep = [f for f in lines if not f0 or abs(f - round(f / f0) * f0) > res]
     cols = [np.ones_like(t)]
     for f in stim + sep:
         cols += [np.cos(2 * np.pi * f * t), np.sin(2 * np.pi * f * t)]
