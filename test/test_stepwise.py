@@ -158,3 +158,13 @@ def test_priors_from_headers_and_their_errors():
                                        ("time_delay", "delay_s"): 0.001}
     with pytest.raises(ValueError, match="c.csv: header key 'amplifier_bandwidth_hz'"):
         priors_from_headers([SimpleNamespace(path="c.csv", extra={"amplifier_bandwidth_hz": "fast"})])
+
+
+def test_effect_given_without_values_is_fitted_in_the_baseline():
+    """The issue's trap: '--effects amplifier_bandwidth' must fit corner_hz, not use 200 Hz."""
+    recs = crank_slider_campaign(("surface_resistance", ("amplifier_bandwidth", {"corner_hz": 25.0})),
+                                 model_effects=("surface_resistance", "amplifier_bandwidth"), seed=8, **SMALL)
+    diag = diagnose(recs, fit_effects=["amplifier_bandwidth"])
+    assert diag.missing_effects == [] and diag.explained, diag.summary()
+    # 1 % noise pins a 25 Hz corner to well under 5 % (its phase lag at 20 Hz is 0.7 rad)
+    assert diag.baseline.params["amplifier_bandwidth.corner_hz"] == pytest.approx(25.0, rel=0.05)
