@@ -31,10 +31,11 @@ Procedure (:func:`diagnose`)
 4. **Backward check** after each addition: an effect chosen earlier whose
    removal raises the held-out error by less than 1 % and the BIC by less than
    ``min_delta_bic`` is dropped.
-5. Stop when the held-out error reaches the noise floor (``explained``:
-   error <= ``explained_factor`` (1.15) x floor + 0.001; the floor is the error a
-   perfect model would have, from the measured noise), when nothing passes the
-   significance rule, or after ``max_effects`` additions.  On data the model
+5. Stop when the held-out error reaches the noise floor (within ``stop_factor``,
+   5 %; the floor is the error a perfect model would have, from the measured
+   noise), when nothing passes the significance rule, or after ``max_effects``
+   additions.  ``explained``: final error <= ``explained_factor`` (1.15) x floor
+   + 0.001.  On data the model
    explains, extra parameters only fit noise, so nothing is named.
 """
 from __future__ import annotations
@@ -48,6 +49,7 @@ from scipy.stats import chi2 as chi2_dist
 
 from ..physics.effects import EFFECTS, get_effect
 from .blas import single_threaded_blas
+from .discovery import priors_from_headers
 from .interference import remove_mains, summarize_lines
 from .modelfit import FitSpec, ModelFit, PreparedRecord, Record, fit_model, predict, prepare
 
@@ -57,28 +59,8 @@ __all__ = ["diagnose", "Diagnosis", "Candidate", "Step", "DEFAULT_FREE_MATERIAL"
 DEFAULT_FREE_MATERIAL = ("charge_stress_coupling_j_per_c", "diffusivity_m2_per_s", "permittivity_f_per_m")
 #: effects tried in several shapes: name -> tuples of free parameters (the rest stay at default)
 SHAPES = {"hydration_drift": (("diffusivity_rate_per_s",), ("diffusivity_rate_per_s", "equilibrium_ratio"))}
-#: data-header keys that give a prior value of an effect parameter
-PRIOR_KEYS = {"amplifier_bandwidth_hz": ("amplifier_bandwidth", "corner_hz"),
-              "time_delay_s": ("time_delay", "delay_s"),
-              "current_offset_a": ("current_offset", "offset_a")}
 #: a fitted value more than this factor from its header prior is implausible
 PRIOR_FACTOR = 3.0
-
-
-def priors_from_headers(series: Sequence) -> dict[tuple[str, str], float]:
-    """Effect-parameter priors from data headers (``extra`` keys of :data:`PRIOR_KEYS`
-    or ``effect.parameter``); the first file giving a key wins."""
-    out: dict[tuple[str, str], float] = {}
-    for ts in series:
-        for key, raw in getattr(ts, "extra", {}).items():
-            target = PRIOR_KEYS.get(key) or (tuple(key.split(".", 1)) if "." in key else None)
-            if target is None or target[0] not in EFFECTS:
-                continue
-            try:
-                out.setdefault(target, float(raw))
-            except (TypeError, ValueError):
-                raise ValueError(f"{ts.path}: header key '{key}' must be a number, got {raw!r}") from None
-    return out
 
 
 @dataclass
@@ -121,6 +103,7 @@ class Step:
     values: dict                          # effect -> fitted values, plus 'material'
     reason: str
     ties: list[dict] = field(default_factory=list)
+    alternatives: list[str] = field(default_factory=list)   # plausible scored runners-up
 
     def to_json(self) -> dict:
         return {"effect": self.effect, "action": self.action, "error": self.error, "bic": self.bic,
@@ -412,7 +395,7 @@ def _diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAU
              candidates: Sequence[str] | None = None, fit_effects: Sequence[str] = (),
              max_effects: int = 3, n_folds: int = 4, explained_factor: float = 1.15,
              min_gain: float = 0.03, min_delta_bic: float = 20.0, tie_tol: float = 0.05,
-             offset_p: float = 1e-6, mains="auto", priors: dict | None = None,
+             offset_p: float = 1e-6, mains="auto", stop_factor: float = 1.05, priors: dict | None = None,
              progress: Callable[[str], None] | None = None, settle_s: float = 0.5,
              fold_nfev: int = 15, max_cv: int = 4, n_jobs: int | None = None) -> Diagnosis:
     """Find the effects missing from the records' models (see module docstring).
@@ -451,6 +434,8 @@ def _diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAU
     steps: list[Step] = []
     first_ranking: list[Candidate] = []
     first_ties: list[str] = []
+    replaced: set[str] = set()
+    late_ties: list[str] = []
     offset_info = {}
 
     def adopt(c: Candidate):
@@ -471,9 +456,9 @@ def _diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAU
             current = c
             adopt(c)
 
-    while len(chosen) < max_effects and current.error > threshold:
+    while len(chosen) < max_effects and current.error > stop_factor * noise_floor:
         # an effect dropped by the backward check is not offered again (no add/drop cycles)
-        dropped = {st.effect for st in steps if st.action == "dropped"}
+        dropped = {st.effect for st in steps if st.action == "dropped"} | replaced
         remaining = [n for n in pool_names if n not in {e for e, _ in chosen} | dropped]
         if not remaining:
             break
@@ -510,7 +495,8 @@ def _diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAU
                                             else "BIC"))
         steps.append(Step(best.effect, "added", best.error, best.fit.bic, _values(best.fit, free_mat), reason,
                           [{"effect": t.effect, "error": t.error, "delta_bic": t.fit.bic - best.fit.bic,
-                            "params": t.params, "flags": t.flags} for t in ties]))
+                            "params": t.params, "flags": t.flags} for t in ties],
+                          [c.effect for c in ranked[1:] if c.held_out and c.plausible]))
         chosen.append((best.effect, best.shape))
         current = best
         adopt(best)
@@ -528,6 +514,35 @@ def _diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAU
                 chosen.remove((name, shape))
                 current = without
                 adopt(without)
+        # -- swap check: an earlier pick vs its plausible scored runners-up, now that the model
+        # holds more (e.g. an amplifier droop that stood in for delay + beam inertia): a swap
+        # needs lower BIC and held-out error; a runner-up within tie_tol is reported as a tie
+        for name, shape in list(chosen[:-1]):
+            if (name, shape) not in chosen:
+                continue
+            added = [st for st in steps if st.effect == name and st.action in ("added", "swapped")]
+            for alt in [a for st in added[-1:] for a in st.alternatives]:
+                if alt in {e for e, _ in chosen} or alt in replaced:
+                    continue
+                base = _without(prepared, current, name, folds, fold_nfev, priors)
+                alt_shape = SHAPES.get(alt, (tuple(p.name for p in get_effect(alt).parameters),))[0]
+                cand = _Job(_with_models(prepared, base.fit.models), base.spec, base.x, folds, fold_nfev,
+                            priors)((alt, alt_shape))
+                if cand.fit.bic >= current.fit.bic or not cand.plausible:
+                    continue
+                cand = _held_out(prepared, cand, folds, fold_nfev)
+                if cand.error <= (1 + tie_tol) * current.error and cand.error >= current.error:
+                    late_ties.append(f"{alt} instead of {name} (held-out error {cand.error:.4f} vs "
+                                     f"{current.error:.4f}, dBIC {cand.fit.bic - current.fit.bic:+.0f})")
+                if cand.error < current.error:
+                    steps.append(Step(alt, "swapped", cand.error, cand.fit.bic, _values(cand.fit, free_mat),
+                                      f"replaces {name} (its tie): held-out error {current.error:.4f} -> "
+                                      f"{cand.error:.4f}, BIC -{current.fit.bic - cand.fit.bic:.0f}"))
+                    chosen[chosen.index((name, shape))] = (alt, alt_shape)
+                    replaced.add(name)
+                    current = cand
+                    adopt(cand)
+                    break
     missing = [e for e, _ in chosen]
     explained = bool(current.error <= threshold)
     if missing:
@@ -543,7 +558,7 @@ def _diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAU
                   "and no catalog effect explains it")
     return Diagnosis(baseline=baseline, candidates=first_ranking, noise_floor=noise_floor,
                      missing_effect=missing[0] if missing else None, explained=explained, reason=reason,
-                     ties=first_ties, prepared=prepared, cv=cv, steps=steps, missing_effects=missing,
+                     ties=first_ties + late_ties, prepared=prepared, cv=cv, steps=steps, missing_effects=missing,
                      final=current, interference=summarize_lines(lines), offset_test=offset_info)
 
 

@@ -12,10 +12,10 @@ from __future__ import annotations
 import shlex
 from typing import Sequence
 
-from ..physics.effects import get_effect
+from ..physics.effects import EFFECTS, get_effect
 from ..physics.model import parse_effects
 
-__all__ = ["SYMBOL_TO_NAME", "free_names", "effects_to_fit", "effect_free_names", "acts_on_transfer",
+__all__ = ["PRIOR_KEYS", "priors_from_headers", "SYMBOL_TO_NAME", "free_names", "effects_to_fit", "effect_free_names", "acts_on_transfer",
            "next_command",
            "diagnosis_next_command"]
 
@@ -81,3 +81,23 @@ def diagnosis_next_command(diag, data: Sequence[str], model_file: str | None, ba
         return ("next (fits the named effects' parameters with the material; add --save-model FILE "
                 "to keep them): " + " ".join(shlex.quote(p) for p in cmd))
     return "next: " + next_command("compare", data, None, f"--model {base}")
+
+
+#: data-header keys that give a prior value of an effect parameter
+PRIOR_KEYS = {"amplifier_bandwidth_hz": ("amplifier_bandwidth", "corner_hz"),
+              "time_delay_s": ("time_delay", "delay_s"),
+              "current_offset_a": ("current_offset", "offset_a")}
+def priors_from_headers(series: Sequence) -> dict[tuple[str, str], float]:
+    """Effect-parameter priors from data headers (``extra`` keys of :data:`PRIOR_KEYS`
+    or ``effect.parameter``); the first file giving a key wins."""
+    out: dict[tuple[str, str], float] = {}
+    for ts in series:
+        for key, raw in getattr(ts, "extra", {}).items():
+            target = PRIOR_KEYS.get(key) or (tuple(key.split(".", 1)) if "." in key else None)
+            if target is None or target[0] not in EFFECTS:
+                continue
+            try:
+                out.setdefault(target, float(raw))
+            except (TypeError, ValueError):
+                raise ValueError(f"{ts.path}: header key '{key}' must be a number, got {raw!r}") from None
+    return out
