@@ -12,7 +12,6 @@ row per combination: successes / seeds, median final error / floor, median and m
 from __future__ import annotations
 
 import argparse
-import math
 import time
 
 import numpy as np
