@@ -6,6 +6,10 @@
   effect parameters (``delay_s``, or ``time_delay.delay_s`` when ambiguous):
   :func:`free_names`.
 * The printed verdict ends with the exact next command: :func:`next_command`.
+* Data headers may give priors of effect parameters (``amplifier_bandwidth_hz``,
+  ``time_delay_s``, ``current_offset_a`` or ``effect.parameter``):
+  :func:`priors_from_headers`; ``diagnose`` starts there and flags a fit more than
+  3x away as implausible.
 """
 from __future__ import annotations
 
@@ -87,6 +91,8 @@ def diagnosis_next_command(diag, data: Sequence[str], model_file: str | None, ba
 PRIOR_KEYS = {"amplifier_bandwidth_hz": ("amplifier_bandwidth", "corner_hz"),
               "time_delay_s": ("time_delay", "delay_s"),
               "current_offset_a": ("current_offset", "offset_a")}
+
+
 def priors_from_headers(series: Sequence) -> dict[tuple[str, str], float]:
     """Effect-parameter priors from data headers (``extra`` keys of :data:`PRIOR_KEYS`
     or ``effect.parameter``); the first file giving a key wins."""
