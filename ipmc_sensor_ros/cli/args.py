@@ -28,7 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from ..physics.effects import load_plugin
-from ..physics.model import model_effects
+from ..physics.model import model_effects, parse_effects
+from ..workbench.discovery import SYMBOL_TO_NAME
 from ..physics.parameters import (PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, MaterialParameters,
                                  ParameterError, load_yaml)
 
@@ -37,9 +38,6 @@ __all__ = ["HelpFormatter", "Progress", "say", "natural_key", "fmt_time_s", "par
            "load_data", "add_model_args", "add_data_args", "add_output_args", "write_json",
            "report_dir", "parse_samples", "renamed_flag", "SYMBOL_TO_NAME"]
 
-SYMBOL_TO_NAME = {"T": "temperature_k", "Y": "youngs_modulus_pa", "r0": "surface_resistance_ohm",
-                  "d": "diffusivity_m2_per_s", "C-": "anion_concentration_mol_per_m3",
-                  "kappa_e": "permittivity_f_per_m", "alpha0": "charge_stress_coupling_j_per_c"}
 MATERIAL_KEYS = tuple(MaterialParameters.__dataclass_fields__)
 LENGTH_UNITS_M = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "μm": 1e-6}
 
@@ -193,9 +191,26 @@ def load_material(path) -> MaterialParameters:
     return load_yaml(path)[0]
 
 
+def _model_file(args):
+    """The saved model of ``--model-file`` (None without it); with ``--params`` it is refused:
+    two sources of the material, nothing chosen silently."""
+    path = getattr(args, "model_file", None)
+    if not path:
+        return None
+    if getattr(args, "params", None):
+        raise ParameterError(f"--model-file {path} and --params {args.params} both give the "
+                             "material: use one")
+    from ..physics.modelfile import load_model
+
+    return load_model(path)
+
+
 def material_from_args(args) -> MaterialParameters:
     material = PAPER_PARAMETERS
-    if getattr(args, "params", None):
+    saved = _model_file(args)
+    if saved is not None:
+        material = saved.material
+    elif getattr(args, "params", None):
         material = load_material(args.params)
     for item in getattr(args, "set", None) or []:
         if "=" not in item:
@@ -209,7 +224,17 @@ def effects_from_args(args) -> tuple:
     for plugin in getattr(args, "plugin", None) or []:
         names = load_plugin(plugin)
         say(f"plugin {plugin}: effects {', '.join(names)}")
-    return model_effects(args.model, getattr(args, "effects", "") or "")
+    extra = getattr(args, "effects", "") or ""
+    saved = _model_file(args)
+    if saved is None:
+        return model_effects(args.model, extra)
+    base = parse_effects(saved.effects)
+    added = parse_effects(extra)
+    for e in added:
+        if e.name in {b.name for b in base}:
+            raise ParameterError(f"--effects: '{e.name}' is already in --model-file "
+                                 f"{args.model_file} (with its fitted values)")
+    return tuple(base) + tuple(added)
 
 
 def _expand(paths) -> list[Path]:
@@ -274,6 +299,9 @@ def add_model_args(p: argparse.ArgumentParser, *, effects: bool = True) -> None:
                             "'time_delay(delay_s=0.002),nonlinearity' (see: ipmc-model effects)")
         g.add_argument("--plugin", action="append", metavar="FILE",
                        help="Python file defining more effects (repeatable)")
+    g.add_argument("--model-file", metavar="FILE",
+                   help="a saved model (ipmc-model/1 YAML from --save-model): its effects with "
+                        "their values and its material replace --model and --params")
     g.add_argument("--params", metavar="FILE",
                    help="material YAML ('material:') or a ROS 2 params file of the nodes "
                         "(default: the paper's Tables 1-2)")

@@ -22,12 +22,15 @@ _NOT_NODE_PARAMS = ("faraday_constant_c_per_mol", "gas_constant_j_per_mol_k",
                     "one_minus_anion_volume_fraction")
 
 
-def _records(args) -> list:
-    """The time records named by the arguments, each with its model (base + --effects, material)."""
+def _records(args, with_data: bool = False):
+    """The time records named by the arguments, each with its model (base + --effects, material)
+    (and the loaded data files, ``with_data``)."""
     from ..workbench.data import records_from
 
     effects, material = effects_from_args(args), material_from_args(args)   # flags before files
-    return records_from(load_data(args), material, effects)
+    data = load_data(args)
+    recs = records_from(data, material, effects)
+    return (recs, data) if with_data else recs
 
 
 def _model_text(data, material, effects) -> str:
@@ -81,11 +84,20 @@ def _cmd_fit(args) -> int:
     from ..workbench.data import groups_from
     from ..workbench.fit import fit_parameters
 
+    from ..workbench.discovery import (acts_on_transfer, effect_free_names, effects_to_fit,
+                                       free_names, next_command)
+
     effects = effects_from_args(args)
     material = material_from_args(args)
     data = load_data(args)
     groups = groups_from(data)
-    free = param_names(args.free)
+    fit_eff = effects_to_fit(args.effects)
+    free = free_names(args.free)
+    free += tuple(n for n in effect_free_names(fit_eff, frequency_domain=True) if n not in free)
+    for e in fit_eff:
+        if not acts_on_transfer(e):
+            say(f"{e}: kept at its catalog values (a frequency-response fit cannot see it; "
+                "diagnose fits it in the time domain)")
     say(f"fitting {', '.join(free)} to {sum(len(g.points) for g in groups)} frequency point(s) "
         f"of {len(groups)} sample(s)")
     with Progress("fit"):
@@ -98,13 +110,26 @@ def _cmd_fit(args) -> int:
                            "identifiability": res.identifiability,
                            "named_combinations": res.named_combinations,
                            "not_identifiable": res.not_identifiable, "success": res.success,
-                           "material": res.material.to_dict()})
+                           "p_value": res.p_value, "adequate": res.adequate,
+                           "material": res.material.to_dict(),
+                           "model": SensorModel(groups[0].geometry, res.material,
+                                                res.effects).describe()})
+    if args.save_model:
+        from ..physics.modelfile import save_model
+
+        save_model(args.save_model, effects=res.effects, material=res.material,
+                   tool="ipmc-model fit", data_files=args.data, ci95=res.ci95,
+                   error={"chi2": res.chi2, "dof": res.dof, "p_value": res.p_value})
+        print(f"saved the whole model to {args.save_model}")
     if args.save:
         for path in _save_params(Path(args.save), groups, data, res, args, effects):
             print(f"saved node parameters (key /**/ipmc_estimator, geometry included) to {path}")
     if args.save_material:
         save_yaml(args.save_material, res.material)
         print(f"saved fitted material to {args.save_material}")
+    print("next: " + (next_command("compare", args.data, args.save_model)
+                      if res.adequate or args.save_model
+                      else next_command("diagnose", args.data, None, f"--model {args.model}")))
     rd = report_dir(args.report)
     if rd:
         from ..workbench.report import fit_report
@@ -162,13 +187,17 @@ def _cmd_track(args) -> int:
         with Progress(f"tracking {', '.join(free)} in {args.window:g} s windows of {ts.path}"):
             tr = track_parameter(ts.time_s, ts.deflection_m, ts.current_a, ts.geometry,
                                  material_for(ts, material), free, effects,
-                                 window_s=args.window, step_s=args.step, source=ts.path)
+                                 window_s=args.window, step_s=args.step, source=ts.path,
+                                 model=SensorModel(ts.geometry, material_for(ts, material), effects)
+                                 if getattr(args, "model_file", None) else None)
         print(f"{ts.path}: (value [95 % confidence interval])")
         print(f"{'t (s)':>9} {'f0 (Hz)':>8} " + " ".join(f"{n:>36}" for n in free))
         for p in tr:
             cells = " ".join(f"{p.estimates[n]:>11.4g} [{p.ci95[n][0]:.4g}, {p.ci95[n][1]:.4g}]".rjust(36)
                              for n in free)
-            print(f"{p.time_s:9.1f} {p.frequency_hz:8.3f} {cells}")
+            model_cells = ("  model: " + ", ".join(f"{v:.4g}" for v in p.model_estimates.values())
+                           if p.model_estimates else "")
+            print(f"{p.time_s:9.1f} {p.frequency_hz:8.3f} {cells}{model_cells}")
         tracks[ts.path] = tr
         rows.append({"source": ts.path, "track": [p.__dict__ for p in tr]})
     write_json(args.json, rows)
@@ -183,9 +212,13 @@ def _cmd_track(args) -> int:
 def _cmd_diagnose(args) -> int:
     from ..physics.effects import EFFECTS
     from ..workbench.diagnose import diagnose
+    from ..workbench.discovery import diagnosis_next_command, effects_to_fit, priors_from_headers
 
-    recs = _records(args)
+    recs, data = _records(args, with_data=True)
     free = param_names(args.free)
+    mains = {"off": None, "auto": "auto", "50": 50.0, "60": 60.0}.get(str(args.mains).lower(), "?")
+    if mains == "?":
+        raise ParameterError(f"--mains must be 50, 60, auto or off, got {args.mains!r}")
     cands = [c.strip() for c in args.candidates.split(",")] if args.candidates else None
     for c in cands or []:
         if c not in EFFECTS:
@@ -194,8 +227,19 @@ def _cmd_diagnose(args) -> int:
     with Progress(f"diagnosing {recs[0].model.describe()} on {len(recs)} record(s), "
                   f"{len(names)} candidate(s)") as prog:
         diag = diagnose(recs, free_material=free, candidates=cands, progress=prog.step,
-                        settle_s=args.settle)
+                        settle_s=args.settle, fit_effects=effects_to_fit(args.effects),
+                        max_effects=args.max_effects, mains=mains,
+                        priors=priors_from_headers(data))
     print(diag.summary())
+    if args.save_model:
+        from ..physics.modelfile import save_model
+
+        save_model(args.save_model, diag.final_model, tool="ipmc-model diagnose",
+                   data_files=args.data,
+                   error={"held_out": diag.final.error, "noise_floor": diag.noise_floor},
+                   extra={"missing_effects": diag.missing_effects, "explained": diag.explained})
+        print(f"saved the whole model to {args.save_model}")
+    print(diagnosis_next_command(diag, args.data, args.save_model, args.model))
     print("  error = held-out ||y - ŷ|| / ||y - mean y||; x better = baseline error / error; "
           "dBIC = BIC change vs the baseline (< -20: very strong evidence for the effect)")
     write_json(args.json, diag.to_json())
@@ -224,6 +268,9 @@ def add_parsers(sub, formatter) -> None:
                    help="write a ROS 2 params file for the nodes (key /**/ipmc_estimator, with the "
                         "data's geometry; one file per sample: FILE_<sample>.yaml when several)")
     p.add_argument("--save-material", metavar="FILE", help="write the fitted material as workbench YAML")
+    p.add_argument("--save-model", metavar="FILE",
+                   help="write the whole fitted model (effects with values, material, provenance) "
+                        "as ipmc-model/1 YAML, read back by --model-file and the nodes' model_file")
     add_output_args(p)
     p.set_defaults(func=_cmd_fit)
 
@@ -257,6 +304,13 @@ def add_parsers(sub, formatter) -> None:
     p.add_argument("--free", metavar="LIST", default="alpha0,d,kappa_e", help=FREE_HELP + "; refitted with each model")
     p.add_argument("--candidates", metavar="LIST",
                    help="restrict to these effects, comma list (default: the whole catalog)")
+    p.add_argument("--max-effects", type=int, default=3, metavar="N",
+                   help="at most this many effects added by the stepwise search")
+    p.add_argument("--mains", default="auto", metavar="50|60|auto|off",
+                   help="mains lines to find and remove from the current before fitting")
+    p.add_argument("--save-model", metavar="FILE",
+                   help="write the final model (effects with fitted values, material, provenance) "
+                        "as ipmc-model/1 YAML")
     _add_settle(p)
     add_output_args(p)
     p.set_defaults(func=_cmd_diagnose)

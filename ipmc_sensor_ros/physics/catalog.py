@@ -10,7 +10,8 @@ from .parameters import ParameterError
 from .sensing import h1, surface_resistance_factor
 
 __all__ = ["SurfaceResistance", "AmplifierBandwidth", "TimeDelay", "CurrentOffset", "HydrationDrift",
-           "EffectiveLength", "BeamInertia", "Nonlinearity", "clamped_pinned_slope_ratio"]
+           "EffectiveLength", "BeamInertia", "Nonlinearity", "clamped_pinned_slope_ratio",
+           "diffusivity_ratio_function"]
 
 
 @register_effect
@@ -102,19 +103,36 @@ class HydrationDrift(Effect):
     summary = "Diffusivity changing over a long record as the polymer dries (paper section 5.4)."
     physics = ("Water evaporates from the ionomer; ion mobility, hence d, falls (paper Figs. 9-10), "
                "changing both gain and phase over minutes.")
-    equation = "d(t) = d_0 exp(r_d (t - t_start)), all other parameters fixed"
+    equation = ("d(t) = d_0 [q + (1 - q) exp(r_d tau / (1 - q))], tau = t - t_start, all other "
+                "parameters fixed: an exponential relaxation from d_0 toward the equilibrium q d_0 with "
+                "initial relative rate r_d; q = 0 (default) is the plain exponential d_0 exp(r_d tau)")
     lti = False
     needs_long_record = True
     parameters = (EffectParameter("diffusivity_rate_per_s", "1/s", 0.0, -0.02, 0.02, (-2e-3, 2e-4),
-                                  "relative rate r_d of change of d", False),)
+                                  "initial relative rate r_d of change of d", False),
+                  EffectParameter("equilibrium_ratio", "1", 0.0, 0.0, 0.98, (0.0, 0.95),
+                                  "q = d_equilibrium / d_0 (0: no equilibrium, plain exponential)",
+                                  False))
     signature = ("Error that grows with time within a record (time-window breakdown), with gain and "
-                 "phase of the fundamental trending; a windowed refit of d shows a trend.")
+                 "phase of the fundamental trending; a windowed refit of d shows a trend (levelling "
+                 "off toward an equilibrium as the sample dries).")
     reference = "Chen et al. 2007, section 5.4; Bonomo et al. 2006 (ref. [27] there)."
 
     def material_at(self, model, values):
-        rate = values["diffusivity_rate_per_s"]
         d0 = model.material.diffusivity_m2_per_s
-        return lambda tau: model.material.replace(diffusivity_m2_per_s=d0 * math.exp(rate * tau))
+        ratio = diffusivity_ratio_function(values)
+        return lambda tau: model.material.replace(diffusivity_m2_per_s=d0 * ratio(tau))
+
+
+def diffusivity_ratio_function(values):
+    """d(t)/d_0 of :class:`HydrationDrift` as a function of elapsed seconds (also used by ``track``)."""
+    rate = float(values["diffusivity_rate_per_s"])
+    q = float(values.get("equilibrium_ratio", 0.0))
+
+    def ratio(tau):
+        r = q + (1.0 - q) * np.exp(rate * np.asarray(tau, float) / (1.0 - q))
+        return float(r) if np.ndim(r) == 0 else r
+    return ratio
 
 
 #: x = kL of the zeros (sinh x sin x = 0) and poles (tan x = tanh x) of the tip-slope

@@ -35,6 +35,7 @@ import numpy as np
 
 from ..physics.model import SensorModel
 from ..simulation.sensor import lti_response_fft
+from .adequacy import magnitude_flags
 from .freqresp import FrequencyPoint, fundamental_response
 from .metrics import fit_percent, noise_rms
 
@@ -86,9 +87,11 @@ class Comparison:
     error: float
     noise_floor: float
     where: dict
+    magnitude_flags: list = field(default_factory=list)   # implausible magnitudes (adequacy.py)
 
     def to_json(self) -> dict:
         return {
+            "magnitude_flags": self.magnitude_flags,
             "error": self.error, "fit_percent": self.fit_percent, "noise_floor": self.noise_floor,
             "records": [{
                 "source": r.source, "sample": r.sample, "error": r.error,
@@ -115,6 +118,7 @@ class Comparison:
         flagged = [f"{k}={c['label']}" for k, cells in self.where.items() for c in cells if c["flagged"]]
         lines.append("model fails beyond measurement uncertainty at: " +
                      (", ".join(flagged) if flagged else "nowhere"))
+        lines += [f"IMPLAUSIBLE MAGNITUDE: {f}" for f in self.magnitude_flags]
         return "\n".join(lines)
 
 
@@ -196,7 +200,8 @@ def compare_records(records: Sequence, model_for: Callable[[object], SensorModel
     noise_all = float(np.sqrt(sum((r.noise_floor * np.linalg.norm(r.measured_a - r.measured_a.mean())) ** 2
                                   for r in out)) / den_all) if den_all > 0 else float("nan")
     return Comparison(records=out, fit_percent=fp_all, error=float(1 - fp_all / 100),
-                      noise_floor=noise_all, where=_where_it_fails(out))
+                      noise_floor=noise_all, where=_where_it_fails(out),
+                      magnitude_flags=magnitude_flags(records, model_for))
 
 
 def _freq_cell(label: str, recs: list[RecordComparison]) -> dict:

@@ -1,46 +1,66 @@
-"""Missing-physics discovery: which effect does the model lack?
+"""Missing-physics discovery: which effects does the model lack?
 
 Procedure (:func:`diagnose`)
 ----------------------------
+0. Mains interference (``mains``: 50, 60, ``auto``, None) is detected and
+   removed from the currents (:mod:`.interference`).
 1. Fit the given model (base + effects) to all records: the free material
-   parameters (default alpha0, d, kappa_e) by the time-domain output-error fit
-   of :mod:`.modelfit`.
-2. For every catalog (and plugin) effect not yet in the model, add it and fit
-   its parameters together with the free material parameters (several starts
-   across the effect's plausible range).
-3. Score every model by its **held-out** error: k-fold cross-validation over
-   records (grouped, so a record is never both trained and tested on); with
-   fewer than ``folds`` records, over contiguous time blocks of each record.
-   ``error`` is the held-out normalised RMS error of the predicted current,
-   ||y - y_hat|| / ||y - mean(y)|| over the test parts, pooled.  Also the BIC
-   of the full-data fit (chi^2 + k ln n, residuals in units of the noise).
-4. Verdict.  The best candidate is named if it is significant: it lowers the
-   held-out error by at least ``min_gain`` (3 %) **and** the BIC by at least
-   ``min_delta_bic`` (20, "very strong" evidence on the Kass-Raftery scale).
-   On data the model already explains, extra parameters only fit noise: the
-   held-out error does not fall and the BIC rises, so no effect is named (no
-   false alarm).  ``explained`` says whether the chosen model's held-out error
-   reaches the noise floor (the error a perfect model would have, from the
-   measured noise): at most ``explained_factor`` (1.15) x floor + 0.001.
-   Candidates within 5 % of the best held-out error are reported as ties
-   (indistinguishable on these data); parameters at a bound or outside their
-   plausible range are flagged.
+   parameters (default alpha0, d, kappa_e) and the parameters of the effects in
+   ``fit_effects`` by the time-domain output-error fit of :mod:`.modelfit`.
+2. **Offset test**: the sensor cannot produce a mean current (H(0) = 0), so a
+   mean residual over whole stimulus periods is an offset.  Per record its
+   z-score (mean / (sigma/sqrt(n))) is computed; if the chi-square of the
+   z-scores has p < 1e-6, ``current_offset`` is named and added (fitted).
+3. **Stepwise forward selection** (at most ``max_effects`` effects): for every
+   catalog (and plugin) effect not yet in the model, add it and refit *all*
+   free parameters (material, every effect chosen so far, the candidate's, from
+   several starts across its plausible range).  Every candidate is scored by its
+   **held-out** error (k-fold cross-validation over records, or contiguous time
+   blocks with fewer records than folds): ``||y - y_hat|| / ||y - mean(y)||``
+   pooled over the test parts; and by the BIC of the full-data fit
+   (chi^2 + k ln n, residuals in units of the noise).  Candidates within
+   ``tie_tol`` (5 %) of the best held-out error are ties: among them a
+   plausible candidate (no parameter at a bound or outside its plausible range,
+   none far from a header prior) wins over an implausible one, then the lower
+   BIC.  The winner is added if it is significant: it lowers the held-out error
+   by at least ``min_gain`` (3 %) **and** the BIC by at least ``min_delta_bic``
+   (20, "very strong" on the Kass-Raftery scale).
+   ``hydration_drift`` is tried in two shapes, the plain exponential of d and a
+   relaxation toward an equilibrium (``equilibrium_ratio`` free); the shape
+   with the lower held-out error is kept (BIC within ``tie_tol``).
+4. **Backward check** after each addition: an effect chosen earlier whose
+   removal raises the held-out error by less than 1 % and the BIC by less than
+   ``min_delta_bic`` is dropped.
+5. Stop when the held-out error reaches the noise floor (within ``stop_factor``,
+   5 %; the floor is the error a perfect model would have, from the measured
+   noise), when nothing passes the significance rule, or after ``max_effects``
+   additions.  ``explained``: final error <= ``explained_factor`` (1.15) x floor
+   + 0.001.  On data the model
+   explains, extra parameters only fit noise, so nothing is named.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import os
+from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
-import os
-
 import numpy as np
+from scipy.stats import chi2 as chi2_dist
 
 from ..physics.effects import EFFECTS, get_effect
+from .blas import single_threaded_blas
+from .discovery import priors_from_headers
+from .interference import remove_mains, summarize_lines
 from .modelfit import FitSpec, ModelFit, PreparedRecord, Record, fit_model, predict, prepare
 
-__all__ = ["diagnose", "Diagnosis", "DEFAULT_FREE_MATERIAL"]
+__all__ = ["diagnose", "Diagnosis", "Candidate", "Step", "DEFAULT_FREE_MATERIAL", "priors_from_headers",
+           "SHAPES"]
 
 DEFAULT_FREE_MATERIAL = ("charge_stress_coupling_j_per_c", "diffusivity_m2_per_s", "permittivity_f_per_m")
+#: effects tried in several shapes: name -> tuples of free parameters (the rest stay at default)
+SHAPES = {"hydration_drift": (("diffusivity_rate_per_s",), ("diffusivity_rate_per_s", "equilibrium_ratio"))}
+#: a fitted value more than this factor from its header prior is implausible
+PRIOR_FACTOR = 3.0
 
 
 @dataclass
@@ -51,11 +71,21 @@ class Candidate:
     fit: ModelFit
     params: dict
     flags: list[str] = field(default_factory=list)
+    shape: tuple[str, ...] = ()          # the effect's free parameters
+    x: np.ndarray | None = None          # fit vector (for warm starts)
+    spec: FitSpec | None = None
+    held_out: bool = True                # False: ``error`` is the in-sample error (not scored)
+    in_sample_error: float | None = None
+
+    @property
+    def plausible(self) -> bool:
+        return not self.flags
 
     def to_json(self, baseline: "Candidate | None" = None) -> dict:
         d = {"effect": self.effect, "error": self.error, "fold_errors": self.fold_errors,
              "params": self.params, "bic": self.fit.bic, "aic": self.fit.aic,
-             "chi2": self.fit.chi2, "n_params": self.fit.n_params, "flags": self.flags}
+             "chi2": self.fit.chi2, "n_params": self.fit.n_params, "flags": self.flags,
+             "fitted_parameters": list(self.shape), "held_out": self.held_out}
         if baseline is not None:
             d["delta_bic"] = self.fit.bic - baseline.fit.bic
             d["improvement"] = baseline.error / self.error if self.error > 0 else float("inf")
@@ -63,9 +93,27 @@ class Candidate:
 
 
 @dataclass
+class Step:
+    """One accepted change of the model (``action``: added / dropped)."""
+
+    effect: str
+    action: str
+    error: float
+    bic: float
+    values: dict                          # effect -> fitted values, plus 'material'
+    reason: str
+    ties: list[dict] = field(default_factory=list)
+    alternatives: list[str] = field(default_factory=list)   # plausible scored runners-up
+
+    def to_json(self) -> dict:
+        return {"effect": self.effect, "action": self.action, "error": self.error, "bic": self.bic,
+                "values": self.values, "reason": self.reason, "ties": self.ties}
+
+
+@dataclass
 class Diagnosis:
     baseline: Candidate
-    candidates: list[Candidate]
+    candidates: list[Candidate]          # first step's ranking
     noise_floor: float
     missing_effect: str | None
     explained: bool
@@ -73,29 +121,66 @@ class Diagnosis:
     ties: list[str]
     prepared: list[PreparedRecord]
     cv: str
+    steps: list[Step] = field(default_factory=list)
+    missing_effects: list[str] = field(default_factory=list)
+    final: Candidate | None = None
+    interference: list[dict] = field(default_factory=list)
+    offset_test: dict = field(default_factory=dict)
+
+    @property
+    def final_model(self):
+        """Fitted model of the first record after the last step."""
+        return (self.final or self.baseline).fit.models[0]
 
     def to_json(self) -> dict:
+        final = self.final or self.baseline
         return {
             "baseline": {**self.baseline.to_json(), "model": self.baseline.fit.models[0].describe()},
             "candidates": [c.to_json(self.baseline) for c in self.candidates],
+            "steps": [s.to_json() for s in self.steps],
+            "final": {**final.to_json(), "model": final.fit.models[0].describe()},
             "noise_floor": self.noise_floor,
             "cross_validation": self.cv,
-            "verdict": {"missing_effect": self.missing_effect, "explained": self.explained,
-                        "reason": self.reason, "ties": self.ties},
+            "interference": [d for d in self.interference if d.get("removable")],
+            "interference_not_separable": [d for d in self.interference if not d.get("removable")],
+            "offset_test": self.offset_test,
+            "verdict": {"missing_effects": self.missing_effects, "missing_effect": self.missing_effect,
+                        "explained": self.explained, "reason": self.reason, "ties": self.ties,
+                        "error": final.error},
         }
 
     def summary(self) -> str:
         lines = [f"baseline {self.baseline.fit.models[0].describe()}: held-out error "
-                 f"{self.baseline.error:.4f} (noise floor {self.noise_floor:.4f}; {self.cv})",
-                 f"{'rank':>4} {'effect':<24} {'error':>8} {'x better':>8} {'dBIC':>10}  params / flags"]
+                 f"{self.baseline.error:.4f} (noise floor {self.noise_floor:.4f}; {self.cv})"]
+        for d in self.interference:
+            if d.get("removable"):
+                lines.append(f"interference: {d['frequency_hz']:g} Hz line, level {d['level']:.3g} of the "
+                             f"signal RMS in {d['records']} record(s): removed before fitting")
+        if self.offset_test:
+            ot = self.offset_test
+            lines.append(f"offset test: mean residual current {ot['mean_a'] * 1e9:.3g} nA, chi2 "
+                         f"{ot['chi2']:.1f}/{ot['dof']} (p = {ot['p_value']:.2g})")
+        lines.append(f"first step: {'rank':>4} {'effect':<24} {'error':>8} {'x better':>8} {'dBIC':>10}  "
+                     "params / flags")
         for k, c in enumerate(self.candidates, 1):
             ratio = self.baseline.error / c.error if c.error > 0 else float("inf")
             params = ", ".join(f"{n}={v:.4g}" for n, v in c.params.items())
             flags = ("  [" + "; ".join(c.flags) + "]") if c.flags else ""
-            lines.append(f"{k:>4} {c.effect:<24} {c.error:8.4f} {ratio:8.2f} "
+            mark = " " if c.held_out else "*"
+            lines.append(f"            {k:>4} {c.effect:<24} {c.error:8.4f}{mark}{ratio:7.2f} "
                          f"{c.fit.bic - self.baseline.fit.bic:10.1f}  {params}{flags}")
-        lines.append(f"verdict: missing effect = {self.missing_effect}; explained = {self.explained}"
-                     f" ({self.reason})")
+        if any(not c.held_out for c in self.candidates):
+            lines.append("            (* in-sample error: the BIC rule already rejects it, not cross-validated)")
+        for k, s in enumerate(self.steps, 1):
+            vals = "; ".join(f"{e}: " + ", ".join(f"{n}={v:.4g}" for n, v in vs.items())
+                             for e, vs in s.values.items() if e != "material")
+            lines.append(f"step {k}: {s.action} {s.effect}: held-out error {s.error:.4f}  ({vals})")
+            for t in s.ties:
+                lines.append(f"        tie: {t['effect']} (error {t['error']:.4f}, dBIC {t['delta_bic']:+.0f}"
+                             f"{', implausible' if t['flags'] else ''}): " +
+                             ", ".join(f"{n}={v:.4g}" for n, v in t["params"].items()))
+        lines.append(f"verdict: missing effects = {self.missing_effects or 'none'}; explained = "
+                     f"{self.explained} ({self.reason})")
         if self.ties:
             lines.append("ties (indistinguishable on these data): " + ", ".join(self.ties))
         return "\n".join(lines)
@@ -105,10 +190,9 @@ def _folds(prepared: Sequence[PreparedRecord], n_folds: int) -> tuple[list[list[
     """Boolean test masks per fold and record."""
     n = len(prepared)
     if n >= n_folds:
-        order = np.arange(n)
         folds = []
         for k in range(n_folds):
-            test_recs = set(order[k::n_folds])
+            test_recs = set(range(k, n, n_folds))
             folds.append([np.full(p.t.size, r in test_recs) for r, p in enumerate(prepared)])
         return folds, f"{n_folds}-fold over {n} records"
     folds = []
@@ -121,168 +205,33 @@ def _folds(prepared: Sequence[PreparedRecord], n_folds: int) -> tuple[list[list[
     return folds, f"{n_folds}-fold over contiguous time blocks of {n} record(s)"
 
 
-def _starts(effect_name: str, free: FitSpec, base_x: np.ndarray) -> list[np.ndarray]:
+def _grid(effect_name: str, shape: Sequence[str], priors: dict) -> list[list[float]]:
+    """Starting values (fit space) of an effect's free parameters."""
     eff = get_effect(effect_name)
-    if not eff.parameters:
-        return [base_x]
+    pars = {p.name: p for p in eff.parameters}
     grids = []
-    for par in eff.parameters:
+    for name in shape:
+        par = pars[name]
         lo, hi = par.typical
         if par.log_scale:
-            pts = np.exp(np.linspace(np.log(max(lo, par.lower)), np.log(min(hi, par.upper)), 3))
-            grids.append(np.log(pts))
+            pts = list(np.log(np.exp(np.linspace(np.log(max(lo, par.lower)), np.log(min(hi, par.upper)), 3))))
         else:
-            grids.append(np.array([lo, 0.0 if lo < 0 < hi else 0.5 * (lo + hi), hi]))
+            pts = [lo, 0.0 if lo < 0 < hi else 0.5 * (lo + hi), hi]
+        if (effect_name, name) in priors:
+            v = priors[(effect_name, name)]
+            pts = [np.log(v) if par.log_scale else v] + pts
+        grids.append(pts)
+    if not grids:
+        return [[]]
+    mid = [g[1] if len(g) == 3 else g[0] for g in grids]
     if len(grids) == 1:
-        combos = [[g] for g in grids[0]]
-    else:  # vary one parameter at a time around the middle
-        mid = [g[1] for g in grids]
-        combos = [mid] + [[g[j] if i == k else mid[i] for i, g in enumerate(grids)]
-                          for k in range(len(grids)) for j in (0, 2)]
-    return [np.concatenate([base_x, np.asarray(c, float)]) for c in combos]
+        return [[v] for v in grids[0]]
+    return [mid] + [[g[j] if i == k else mid[i] for i, g in enumerate(grids)]
+                    for k in range(len(grids)) for j in (0, len(grids[k]) - 1)]
 
 
-def _score(prepared, fit_fn, folds) -> tuple[float, list[float], ModelFit]:
-    """Held-out error over folds, and the full-data fit."""
-    num = den = 0.0
-    per_fold = []
-    for test in folds:
-        train = [~m for m in test]
-        fit = fit_fn(train)
-        fn = fd = 0.0
-        for p, m, tm in zip(prepared, fit.models, test):
-            sel = tm & p.keep
-            if not sel.any():
-                continue
-            y = p.y[sel]
-            y_hat = predict(p, m)[sel]
-            fn += float(np.sum((y - y_hat) ** 2))
-            fd += float(np.sum((y - y.mean()) ** 2))
-        per_fold.append(float(np.sqrt(fn / fd)) if fd > 0 else float("nan"))
-        num += fn
-        den += fd
-    return float(np.sqrt(num / den)), per_fold, fit_fn(None)
-
-
-def diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAULT_FREE_MATERIAL,
-             candidates: Sequence[str] | None = None, n_folds: int = 4,
-             explained_factor: float = 1.15, min_gain: float = 0.03, min_delta_bic: float = 20.0,
-             progress: Callable[[str], None] | None = None,
-             settle_s: float = 0.5, fold_nfev: int = 15, n_jobs: int | None = None) -> Diagnosis:
-    """Rank the effects missing from the records' models (see module docstring)."""
-    say = progress or (lambda msg: None)
-    n_jobs = min(2, os.cpu_count() or 1) if n_jobs is None else int(n_jobs)
-    prepared = prepare(records, settle_s=settle_s)
-    present = set(records[0].model.effect_names)
-    names = [n for n in (candidates if candidates is not None else list(EFFECTS)) if n not in present]
-    folds, cv = _folds(prepared, n_folds)
-    free_mat = tuple(free_material)
-    base_spec = FitSpec(material=free_mat)
-
-    say("fitting baseline")
-    # full-data baseline first: its parameters start every other fit
-    base_full = fit_model(prepared, base_spec)
-    base_x = np.log([getattr(base_full.material, n) for n in free_mat])
-
-    def base_fit(train):
-        if train is None:
-            return base_full
-        return fit_model(prepared, base_spec, train=train, starts=[base_x], max_nfev=fold_nfev)
-
-    b_err, b_folds, b_fit = _score(prepared, base_fit, folds)
-    baseline = Candidate(None, b_err, b_folds, b_fit,
-                         {n: getattr(b_fit.material, n) for n in free_mat}, b_fit.flags)
-    # noise floor: sqrt(sum sigma^2 N) / ||y - mean|| over kept samples
-    nf_num = sum(p.sigma ** 2 * p.keep.sum() for p in prepared)
-    nf_den = sum(float(np.sum((p.y[p.keep] - p.y[p.keep].mean()) ** 2)) for p in prepared)
-    noise_floor = float(np.sqrt(nf_num / nf_den))
-
-    job = _CandidateJob(prepared, free_mat, base_x, folds, fold_nfev)
-    if n_jobs > 1 and len(names) > 1:
-        import multiprocessing as mp
-
-        try:
-            ctx = mp.get_context("fork")
-        except ValueError:
-            ctx = None
-        if ctx is not None:
-            global _JOB
-            _JOB = job
-            say(f"fitting {len(names)} candidates on {n_jobs} processes")
-            with ctx.Pool(n_jobs) as pool:
-                cands = pool.map(_run_job, names)
-            _JOB = None
-        else:
-            cands = [job(n) for n in names]
-    else:
-        cands = []
-        for name in names:
-            say(f"fitting candidate {name}")
-            cands.append(job(name))
-    cands.sort(key=lambda c: c.error)
-
-    threshold = explained_factor * noise_floor + 0.001
-    ties: list[str] = []
-
-    def significant(c: Candidate) -> bool:
-        return c.error <= (1 - min_gain) * baseline.error and c.fit.bic <= baseline.fit.bic - min_delta_bic
-
-    if cands and significant(cands[0]):
-        best = cands[0]
-        missing = best.effect
-        explained = bool(best.error <= threshold)
-        ties = [c.effect for c in cands[1:] if c.error <= 1.05 * best.error and significant(c)]
-        reason = (f"adding {best.effect} lowers the held-out error {baseline.error:.4f} -> "
-                  f"{best.error:.4f} ({baseline.error / best.error:.2f}x) and the BIC by "
-                  f"{baseline.fit.bic - best.fit.bic:.0f}" +
-                  ("" if explained else f"; the residual stays above the noise floor {noise_floor:.4f}: "
-                   "something else is missing too"))
-    elif baseline.error <= threshold:
-        missing, explained = None, True
-        reason = (f"baseline error {baseline.error:.4f} is at the noise floor ({noise_floor:.4f}) and "
-                  "no effect improves it significantly: nothing is missing")
-    else:
-        missing, explained = None, False
-        reason = (f"baseline error {baseline.error:.4f} is above the noise floor {noise_floor:.4f} "
-                  "and no catalog effect explains it")
-    return Diagnosis(baseline=baseline, candidates=cands, noise_floor=noise_floor,
-                     missing_effect=missing, explained=explained, reason=reason, ties=ties,
-                     prepared=prepared, cv=cv)
-
-
-class _CandidateJob:
-    """Fit and score one candidate effect (picklable across a fork)."""
-
-    def __init__(self, prepared, free_mat, base_x, folds, fold_nfev):
-        self.prepared, self.free_mat, self.base_x = prepared, free_mat, base_x
-        self.folds, self.fold_nfev = folds, fold_nfev
-
-    def __call__(self, name: str) -> Candidate:
-        eff = get_effect(name)
-        cand_prepared = [PreparedRecord(**{**p.__dict__, "rec": Record(
-            p.rec.path, p.rec.sample, p.rec.model.with_effect(name), p.t, p.w, p.y)})
-            for p in self.prepared]
-        spec = FitSpec(material=self.free_mat,
-                       effect_params=tuple((name, par.name) for par in eff.parameters))
-        full = fit_model(cand_prepared, spec, starts=_starts(name, spec, self.base_x))
-        full_x = _fit_vector(full, spec)
-
-        def cand_fit(train):
-            if train is None:
-                return full
-            return fit_model(cand_prepared, spec, train=train, starts=[full_x], max_nfev=self.fold_nfev)
-
-        err, per_fold, fit = _score(cand_prepared, cand_fit, self.folds)
-        params = {**{n: getattr(fit.material, n) for n in self.free_mat},
-                  **fit.effect_values.get(name, {})}
-        return Candidate(name, err, per_fold, fit, params, fit.flags)
-
-
-_JOB: _CandidateJob | None = None
-
-
-def _run_job(name: str) -> Candidate:
-    return _JOB(name)
+def _with_models(prepared, models):
+    return [replace(p, rec=replace(p.rec, model=m)) for p, m in zip(prepared, models)]
 
 
 def _fit_vector(fit: ModelFit, spec: FitSpec) -> np.ndarray:
@@ -293,3 +242,358 @@ def _fit_vector(fit: ModelFit, spec: FitSpec) -> np.ndarray:
         v = fit.effect_values[eff_name][par_name]
         x.append(np.log(v) if _param(eff_name, par_name).log_scale else v)
     return np.asarray(x, float)
+
+
+def _evaluate(prepared, spec: FitSpec, starts, folds, fold_nfev, effect=None, shape=(), priors=None,
+              max_nfev=60, held_out=True) -> Candidate:
+    """Full-data fit from ``starts``; then (``held_out``) the held-out error over ``folds``."""
+    full = fit_model(prepared, spec, starts=starts, max_nfev=max_nfev)
+    x = _fit_vector(full, spec)
+    num = den = 0.0
+    for p, m in zip(prepared, full.models):
+        y = p.y[p.keep]
+        num += float(np.sum((y - predict(p, m)[p.keep]) ** 2))
+        den += float(np.sum((y - y.mean()) ** 2))
+    params = {n: getattr(full.material, n) for n in spec.material}
+    if effect is not None:
+        params.update(full.effect_values.get(effect, {}))
+    flags = list(full.flags)
+    for (e, n), v in (priors or {}).items():
+        got = full.effect_values.get(e, {}).get(n)
+        if got is not None and v != 0 and not (1 / PRIOR_FACTOR <= got / v <= PRIOR_FACTOR):
+            flags.append(f"{e}/{n} = {got:.4g} far from the header's {v:.4g}")
+    c = Candidate(effect, float(np.sqrt(num / den)), [], full, params, flags, tuple(shape), x, spec)
+    c.held_out = False
+    return _held_out(prepared, c, folds, fold_nfev) if held_out else c
+
+
+def _held_out(prepared, c: Candidate, folds, fold_nfev) -> Candidate:
+    """Replace ``c.error`` (in-sample) by the held-out error: refit on each fold's training part
+    (warm start at the full-data fit), predict its test part, pool."""
+    prepared = _with_models(prepared, c.fit.models)
+    num = den = 0.0
+    per_fold = []
+    for test in folds:
+        train = [~m for m in test]
+        fit = fit_model(prepared, c.spec, train=train, starts=[c.x], max_nfev=fold_nfev)
+        fn = fd = 0.0
+        for p, m, tm in zip(prepared, fit.models, test):
+            sel = tm & p.keep
+            if not sel.any():
+                continue
+            y = p.y[sel]
+            fn += float(np.sum((y - predict(p, m)[sel]) ** 2))
+            fd += float(np.sum((y - y.mean()) ** 2))
+        per_fold.append(float(np.sqrt(fn / fd)) if fd > 0 else float("nan"))
+        num += fn
+        den += fd
+    c.in_sample_error = c.error
+    c.error, c.fold_errors, c.held_out = float(np.sqrt(num / den)), per_fold, True
+    return c
+
+
+class _Job:
+    """Fit one (effect, shape) candidate on top of the current model (phase 1, full data), or
+    score a fitted candidate by its held-out error (phase 2); picklable across a fork."""
+
+    def __init__(self, prepared, spec, x, folds, fold_nfev, priors):
+        self.prepared, self.spec, self.x = prepared, spec, x
+        self.folds, self.fold_nfev, self.priors = folds, fold_nfev, priors
+
+    def __call__(self, item) -> Candidate:
+        if isinstance(item, Candidate):
+            return _held_out(self.prepared, item, self.folds, self.fold_nfev)
+        name, shape = item
+        models = [p.rec.model.with_effect(name) for p in self.prepared]
+        prepared = _with_models(self.prepared, models)
+        spec = FitSpec(self.spec.material, self.spec.effect_params + tuple((name, n) for n in shape))
+        starts = [np.concatenate([self.x, np.asarray(c, float)]) for c in _grid(name, shape, self.priors)]
+        return _evaluate(prepared, spec, starts, self.folds, self.fold_nfev, name, shape, self.priors,
+                         held_out=False)
+
+
+_JOB = None
+
+
+def _run_job(item):
+    return _JOB(item)
+
+
+def _map(job, items, n_jobs, say):
+    global _JOB
+    if n_jobs > 1 and len(items) > 1:
+        import multiprocessing as mp
+
+        try:
+            ctx = mp.get_context("fork")
+        except ValueError:
+            ctx = None
+        if ctx is not None:
+            _JOB = job
+            try:
+                with ctx.Pool(min(n_jobs, len(items))) as pool:
+                    return pool.map(_run_job, items)
+            finally:
+                _JOB = None
+    out = []
+    for item in items:
+        say(f"fitting {item.effect if isinstance(item, Candidate) else item[0]}")
+        out.append(job(item))
+    return out
+
+
+def _rank(cands: list[Candidate], tie_tol: float) -> list[Candidate]:
+    """Ties (within ``tie_tol`` of the best held-out error) first, plausible before implausible,
+    then by BIC; the rest by held-out error."""
+    if not cands:
+        return []
+    best = min(c.error for c in cands)
+    tied = [c for c in cands if c.error <= (1 + tie_tol) * best]
+    rest = sorted((c for c in cands if c not in tied), key=lambda c: c.error)
+    return sorted(tied, key=lambda c: (not c.plausible, c.fit.bic)) + rest
+
+
+def _values(fit: ModelFit, material_names) -> dict:
+    m = fit.models[0]
+    out = {e.name: e.as_dict() for e in m.effects if e.as_dict()}
+    out["material"] = {n: getattr(fit.material, n) for n in material_names}
+    return out
+
+
+def _offset_test(prepared, models) -> dict:
+    """Mean residual over whole stimulus periods per record; chi-square of the z-scores."""
+    from .freqresp import fundamental_response
+
+    zs, means, ns = [], [], []
+    for p, m in zip(prepared, models):
+        t, r = p.t[p.keep], (p.y - predict(p, m))[p.keep]
+        try:
+            f0 = fundamental_response(t, p.w[p.keep], p.y[p.keep]).frequency_hz
+            n_per = int((t[-1] - t[0]) * f0)
+            if n_per >= 1:
+                sel = t < t[0] + n_per / f0
+                t, r = t[sel], r[sel]
+        except ValueError:
+            pass
+        zs.append(float(np.mean(r) / (p.sigma / np.sqrt(r.size))))
+        means.append(float(np.mean(r)))
+        ns.append(r.size)
+    c2 = float(np.sum(np.square(zs)))
+    return {"mean_a": float(np.average(means, weights=ns)), "chi2": c2, "dof": len(zs),
+            "p_value": float(chi2_dist.sf(c2, len(zs))), "max_abs_z": float(np.max(np.abs(zs)))}
+
+
+def diagnose(records: Sequence[Record], **kwargs) -> Diagnosis:
+    """Find the effects missing from the records' models (see module docstring and
+    :func:`_diagnose` for the keyword arguments); runs with single-threaded BLAS
+    (:mod:`.blas`: the fits' small products only lose time to BLAS threads)."""
+    with single_threaded_blas():
+        return _diagnose(records, **kwargs)
+
+
+def _diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAULT_FREE_MATERIAL,
+             candidates: Sequence[str] | None = None, fit_effects: Sequence[str] = (),
+             max_effects: int = 3, n_folds: int = 4, explained_factor: float = 1.15,
+             min_gain: float = 0.03, min_delta_bic: float = 20.0, tie_tol: float = 0.05,
+             offset_p: float = 1e-6, mains="auto", stop_factor: float = 1.05, priors: dict | None = None,
+             progress: Callable[[str], None] | None = None, settle_s: float = 0.5,
+             fold_nfev: int = 15, max_cv: int = 4, n_jobs: int | None = None) -> Diagnosis:
+    """Find the effects missing from the records' models (see module docstring).
+
+    ``fit_effects``: effects of the given model whose parameters are fitted too
+    (e.g. given by name without values); ``priors``: {(effect, parameter): value}
+    from data headers (:func:`priors_from_headers`); ``mains``: 50, 60, 'auto' or None.
+    """
+    say = progress or (lambda msg: None)
+    if max_effects < 0:
+        raise ValueError(f"max_effects must be >= 0, got {max_effects}")
+    n_jobs = min(2, os.cpu_count() or 1) if n_jobs is None else int(n_jobs)
+    priors = dict(priors or {})
+    records, lines = remove_mains(records, mains)
+    prepared = prepare(records, settle_s=settle_s)
+    present = list(records[0].model.effect_names)
+    pool_names = [n for n in (candidates if candidates is not None else list(EFFECTS)) if n not in present]
+    folds, cv = _folds(prepared, n_folds)
+    free_mat = tuple(free_material)
+    spec = FitSpec(free_mat, tuple((e, p.name) for e in fit_effects for p in get_effect(e).parameters))
+
+    say("fitting baseline")
+    base_x0 = [np.concatenate([np.log([getattr(records[0].model.material, n) for n in free_mat]),
+                               np.asarray(c, float)])
+               for c in _grid_for_spec(spec, priors, records[0].model)]
+    baseline = _evaluate(prepared, spec, base_x0, folds, fold_nfev, priors=priors, max_nfev=60)
+    baseline.params = {**baseline.params, **{f"{e}.{n}": baseline.fit.effect_values[e][n]
+                                            for e, n in spec.effect_params}}
+    nf_num = sum(p.sigma ** 2 * p.keep.sum() for p in prepared)
+    nf_den = sum(float(np.sum((p.y[p.keep] - p.y[p.keep].mean()) ** 2)) for p in prepared)
+    noise_floor = float(np.sqrt(nf_num / nf_den))
+    threshold = explained_factor * noise_floor + 0.001
+
+    current = baseline
+    chosen: list[tuple[str, tuple]] = []
+    steps: list[Step] = []
+    first_ranking: list[Candidate] = []
+    first_ties: list[str] = []
+    replaced: set[str] = set()
+    late_ties: list[str] = []
+    offset_info = {}
+
+    def adopt(c: Candidate):
+        nonlocal prepared
+        prepared = _with_models(prepared, c.fit.models)
+
+    # -- offset test (H(0) = 0: a mean current is an offset) ----------------------
+    if "current_offset" in pool_names and max_effects > 0:
+        offset_info = _offset_test(prepared, current.fit.models)
+        if offset_info["p_value"] < offset_p:
+            say("mean current found: fitting current_offset")
+            shape = tuple(p.name for p in get_effect("current_offset").parameters)
+            c = _Job(prepared, current.spec, current.x, folds, fold_nfev, priors)(("current_offset", shape))
+            steps.append(Step("current_offset", "added", c.error, c.fit.bic, _values(c.fit, free_mat),
+                              f"mean residual current {offset_info['mean_a'] * 1e9:.3g} nA (offset test "
+                              f"p = {offset_info['p_value']:.2g}; the sensor has H(0) = 0)"))
+            chosen.append(("current_offset", shape))
+            current = c
+            adopt(c)
+
+    while len(chosen) < max_effects and current.error > stop_factor * noise_floor:
+        # an effect dropped by the backward check is not offered again (no add/drop cycles)
+        dropped = {st.effect for st in steps if st.action == "dropped"} | replaced
+        remaining = [n for n in pool_names if n not in {e for e, _ in chosen} | dropped]
+        if not remaining:
+            break
+        items = [(n, s) for n in remaining
+                 for s in SHAPES.get(n, (tuple(p.name for p in get_effect(n).parameters),))]
+        say(f"step {len(steps) + 1}: {len(items)} candidate fits on {min(n_jobs, len(items))} process(es)")
+        job = _Job(prepared, current.spec, current.x, folds, fold_nfev, priors)
+        fitted = _map(job, items, n_jobs, say)
+        # held-out error only for contenders: a candidate that does not pass the BIC rule on
+        # the full data cannot be significant (its error stays the in-sample one, marked)
+        contenders = sorted((c for c in fitted if c.fit.bic <= current.fit.bic - min_delta_bic),
+                            key=lambda c: c.fit.bic)[:max_cv]
+        say(f"step {len(steps) + 1}: held-out error of {len(contenders)} contender(s)")
+        scored = _map(job, contenders, n_jobs, say)
+        others = [c for c in fitted if not any(c is k for k in contenders)]
+        cands = _merge_shapes(scored, tie_tol)
+        ranked = _rank(cands, tie_tol) + sorted(others, key=lambda c: c.error)
+        first_iteration = not first_ranking
+        if first_iteration:
+            first_ranking = ranked
+        best = ranked[0]
+        significant = (best.held_out and best.error <= (1 - min_gain) * current.error
+                       and best.fit.bic <= current.fit.bic - min_delta_bic)
+        if not significant:
+            break
+        ties = [c for c in ranked[1:] if c.error <= (1 + tie_tol) * best.error
+                and c.error <= (1 - min_gain) * current.error and c.fit.bic <= current.fit.bic - min_delta_bic]
+        if first_iteration:
+            first_ties = [c.effect for c in ties]
+        reason = (f"held-out error {current.error:.4f} -> {best.error:.4f} "
+                  f"({current.error / best.error:.2f}x), BIC -{current.fit.bic - best.fit.bic:.0f}")
+        if ties:
+            reason += ("; tie broken by " + ("plausibility" if best.plausible and any(not t.plausible for t in ties)
+                                            else "BIC"))
+        steps.append(Step(best.effect, "added", best.error, best.fit.bic, _values(best.fit, free_mat), reason,
+                          [{"effect": t.effect, "error": t.error, "delta_bic": t.fit.bic - best.fit.bic,
+                            "params": t.params, "flags": t.flags} for t in ties],
+                          [c.effect for c in ranked[1:] if c.held_out and c.plausible]))
+        chosen.append((best.effect, best.shape))
+        current = best
+        adopt(best)
+        # -- backward check ---------------------------------------------------------
+        for name, shape in list(chosen[:-1]):
+            without = _without(prepared, current, name, folds, fold_nfev, priors)
+            if without.fit.bic >= current.fit.bic + min_delta_bic:
+                continue            # removal costs evidence: keep (no need to score it)
+            without = _held_out(prepared, without, folds, fold_nfev)
+            if without.error <= 1.01 * current.error and without.fit.bic < current.fit.bic + min_delta_bic:
+                steps.append(Step(name, "dropped", without.error, without.fit.bic,
+                                  _values(without.fit, free_mat),
+                                  f"removing it costs nothing (held-out error {current.error:.4f} -> "
+                                  f"{without.error:.4f})"))
+                chosen.remove((name, shape))
+                current = without
+                adopt(without)
+        # -- swap check: an earlier pick vs its plausible scored runners-up, now that the model
+        # holds more (e.g. an amplifier droop that stood in for delay + beam inertia): a swap
+        # needs lower BIC and held-out error; a runner-up within tie_tol is reported as a tie
+        for name, shape in list(chosen[:-1]):
+            if (name, shape) not in chosen:
+                continue
+            added = [st for st in steps if st.effect == name and st.action in ("added", "swapped")]
+            for alt in [a for st in added[-1:] for a in st.alternatives]:
+                if alt in {e for e, _ in chosen} or alt in replaced:
+                    continue
+                base = _without(prepared, current, name, folds, fold_nfev, priors)
+                alt_shape = SHAPES.get(alt, (tuple(p.name for p in get_effect(alt).parameters),))[0]
+                cand = _Job(_with_models(prepared, base.fit.models), base.spec, base.x, folds, fold_nfev,
+                            priors)((alt, alt_shape))
+                if cand.fit.bic >= current.fit.bic or not cand.plausible:
+                    continue
+                cand = _held_out(prepared, cand, folds, fold_nfev)
+                if cand.error <= (1 + tie_tol) * current.error and cand.error >= current.error:
+                    late_ties.append(f"{alt} instead of {name} (held-out error {cand.error:.4f} vs "
+                                     f"{current.error:.4f}, dBIC {cand.fit.bic - current.fit.bic:+.0f})")
+                if cand.error < current.error:
+                    steps.append(Step(alt, "swapped", cand.error, cand.fit.bic, _values(cand.fit, free_mat),
+                                      f"replaces {name} (its tie): held-out error {current.error:.4f} -> "
+                                      f"{cand.error:.4f}, BIC -{current.fit.bic - cand.fit.bic:.0f}"))
+                    chosen[chosen.index((name, shape))] = (alt, alt_shape)
+                    replaced.add(name)
+                    current = cand
+                    adopt(cand)
+                    break
+    missing = [e for e, _ in chosen]
+    explained = bool(current.error <= threshold)
+    if missing:
+        reason = (f"adding {', '.join(missing)} lowers the held-out error {baseline.error:.4f} -> "
+                  f"{current.error:.4f} ({baseline.error / current.error:.2f}x)" +
+                  ("" if explained else f"; the residual stays above the noise floor {noise_floor:.4f}: "
+                   "something else is missing too"))
+    elif explained:
+        reason = (f"baseline error {baseline.error:.4f} is at the noise floor ({noise_floor:.4f}) and "
+                  "no effect improves it significantly: nothing is missing")
+    else:
+        reason = (f"baseline error {baseline.error:.4f} is above the noise floor {noise_floor:.4f} "
+                  "and no catalog effect explains it")
+    return Diagnosis(baseline=baseline, candidates=first_ranking, noise_floor=noise_floor,
+                     missing_effect=missing[0] if missing else None, explained=explained, reason=reason,
+                     ties=first_ties + late_ties, prepared=prepared, cv=cv, steps=steps, missing_effects=missing,
+                     final=current, interference=summarize_lines(lines), offset_test=offset_info)
+
+
+def _grid_for_spec(spec: FitSpec, priors, model) -> list[list[float]]:
+    """Starts for the effect parameters of the baseline: current values, or the prior."""
+    from .modelfit import _param
+
+    x = []
+    for e, n in spec.effect_params:
+        v = priors.get((e, n), model.effect_values(e)[n])
+        x.append(np.log(v) if _param(e, n).log_scale else v)
+    return [x]
+
+
+def _merge_shapes(cands: list[Candidate], tie_tol: float) -> list[Candidate]:
+    """Keep one shape per effect: the lower held-out error (BIC decides within ``tie_tol``)."""
+    by: dict[str, Candidate] = {}
+    for c in cands:
+        o = by.get(c.effect)
+        if o is None:
+            by[c.effect] = c
+            continue
+        if abs(c.error - o.error) <= tie_tol * min(c.error, o.error):
+            by[c.effect] = c if c.fit.bic < o.fit.bic else o
+        else:
+            by[c.effect] = c if c.error < o.error else o
+    return list(by.values())
+
+
+def _without(prepared, current: Candidate, name, folds, fold_nfev, priors) -> Candidate:
+    """The current model without effect ``name``, refitted (warm start)."""
+    keep = [k for k, (e, _) in enumerate(current.spec.effect_params)]
+    n_mat = len(current.spec.material)
+    idx = list(range(n_mat)) + [n_mat + k for k in keep if current.spec.effect_params[k][0] != name]
+    spec = FitSpec(current.spec.material, tuple(ep for ep in current.spec.effect_params if ep[0] != name))
+    models = [p.rec.model.without_effect(name) for p in prepared]
+    return _evaluate(_with_models(prepared, models), spec, [current.x[idx]], folds, fold_nfev,
+                     None, (), priors, held_out=False)

@@ -40,11 +40,18 @@ from typing import Sequence
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..physics.model import SensorModel
+from scipy.stats import chi2 as chi2_dist
+
+from ..physics.effects import EFFECTS, get_effect
+from ..physics.model import EffectSpec, SensorModel, parse_effects
 from ..physics.parameters import PAPER_PARAMETERS, Geometry, MaterialParameters, ParameterError
 from .freqresp import FrequencyPoint
 
-__all__ = ["FitGroup", "FitResult", "fit_parameters", "FITTABLE", "SYMBOLS", "model_for_group"]
+__all__ = ["FitGroup", "FitResult", "fit_parameters", "FITTABLE", "SYMBOLS", "model_for_group",
+           "resolve_effect_parameter", "effect_parameter_names", "ADEQUACY_P"]
+
+#: chi^2 p-value below which the model is declared inadequate for the data
+ADEQUACY_P = 1e-3
 
 #: Parameters that may be fitted (F and R are constants).
 FITTABLE = ("temperature_k", "youngs_modulus_pa", "surface_resistance_ohm", "diffusivity_m2_per_s",
@@ -101,10 +108,28 @@ class FitResult:
     def reduced_chi2(self) -> float:
         return self.chi2 / max(self.dof, 1)
 
+    @property
+    def p_value(self) -> float:
+        """Probability of a chi^2 at least this large if the model were right (residuals in
+        units of their measured uncertainty)."""
+        return float(chi2_dist.sf(self.chi2, max(self.dof, 1)))
+
+    @property
+    def adequate(self) -> bool:
+        return self.p_value >= ADEQUACY_P
+
+    def adequacy_text(self) -> str:
+        if self.adequate:
+            return (f"model adequate: chi2/dof = {self.reduced_chi2:.3g}, p = {self.p_value:.3g} "
+                    f"(>= {ADEQUACY_P:g})")
+        return (f"model inadequate: chi2/dof = {self.reduced_chi2:.3g}, p = {self.p_value:.2g} "
+                f"(< {ADEQUACY_P:g}): the misfit is far above the measurement noise; run diagnose "
+                "to find the missing effect (the intervals above include the misfit, not just noise)")
+
     def summary(self) -> str:
         lines = [f"fit of {', '.join(SYMBOLS.get(n, n) for n in self.free)} "
                  f"({'+'.join(('h1',) + tuple(getattr(e, 'name', e) for e in self.effects))}): chi2/dof = {self.chi2:.4g}/{self.dof} "
-                 f"= {self.reduced_chi2:.3g}"]
+                 f"= {self.reduced_chi2:.3g}, p = {self.p_value:.3g}"]
         lines.append(f"{'parameter':<32} {'estimate':>12} {'95% CI':>27}  note")
         for name in self.free:
             lo, hi = self.ci95[name]
@@ -132,6 +157,7 @@ class FitResult:
             lines.append("WARNING: " + ", ".join(SYMBOLS.get(n, n) for n in self.not_identifiable)
                          + " cannot be estimated separately from these data; report the determined "
                          "combinations above, or fix some of them from independent measurements.")
+        lines.append(self.adequacy_text())
         return "\n".join(lines)
 
 
@@ -141,6 +167,39 @@ def model_for_group(material: MaterialParameters, group: FitGroup, free: Sequenc
     overrides = {k: v for k, v in group.known.items() if k not in free and k in FITTABLE}
     mat = material.replace(**overrides) if overrides else material
     return SensorModel(group.geometry, mat, effects)
+
+
+def effect_parameter_names(effects) -> list[str]:
+    """Qualified names ``effect.parameter`` of every parameter of ``effects``."""
+    return [f"{e.name}.{p.name}" for e in parse_effects(effects) for p in get_effect(e.name).parameters]
+
+
+def resolve_effect_parameter(name: str, effects) -> tuple[str, str]:
+    """``delay_s`` or ``time_delay.delay_s`` -> ``("time_delay", "delay_s")`` for a model with
+    ``effects``; a clear error when unknown, ambiguous or its effect is not in the model."""
+    specs = parse_effects(effects)
+    in_model = [e.name for e in specs]
+    if "." in name:
+        eff, par = name.split(".", 1)
+        if eff not in in_model:
+            raise ParameterError(f"cannot fit '{name}': effect '{eff}' is not in the model "
+                                 f"({', '.join(in_model) or 'h1 only'}); add it with --effects {eff}")
+        if par not in {p.name for p in get_effect(eff).parameters}:
+            raise ParameterError(f"cannot fit '{name}': effect '{eff}' has parameters "
+                                 f"{[p.name for p in get_effect(eff).parameters]}")
+        return eff, par
+    owners = [e for e in in_model if name in {p.name for p in get_effect(e).parameters}]
+    if len(owners) == 1:
+        return owners[0], name
+    if len(owners) > 1:
+        raise ParameterError(f"parameter '{name}' is ambiguous (effects {owners}); qualify it, "
+                             f"e.g. {owners[0]}.{name}")
+    catalog = [n for n, e in EFFECTS.items() if name in {p.name for p in e.parameters}]
+    if catalog:
+        raise ParameterError(f"cannot fit '{name}': it belongs to effect '{catalog[0]}', which is not in "
+                             f"the model; add it with --effects {catalog[0]}")
+    raise ParameterError(f"cannot fit '{name}'; fittable: {', '.join(FITTABLE)} or an effect parameter "
+                         f"of the model ({', '.join(effect_parameter_names(specs)) or 'none'})")
 
 
 def _wrap(angle):
@@ -177,17 +236,38 @@ def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
     free = tuple(free)
     if not free:
         raise ParameterError("no parameter to fit: give at least one of " + ", ".join(FITTABLE))
+    effects = parse_effects(effects)
+    keys: list = []                     # material name, or (effect, parameter)
     for name in free:
-        if name not in FITTABLE:
-            raise ParameterError(f"cannot fit '{name}'; fittable parameters: {', '.join(FITTABLE)}")
+        keys.append(name if name in FITTABLE else resolve_effect_parameter(name, effects))
+    free = tuple(k if isinstance(k, str) else f"{k[0]}.{k[1]}" for k in keys)
     if len(set(free)) != len(free):
         raise ParameterError(f"parameter listed twice in {list(free)}")
     if not groups or not any(g.points for g in groups):
         raise ParameterError("no frequency points to fit")
-    theta0 = np.log([getattr(material, n) if getattr(material, n) > 0 else 1e-6 for n in free])
-    lower, upper = theta0 - np.log(bounds_factor), theta0 + np.log(bounds_factor)
-    if "surface_resistance_ohm" in free and material.surface_resistance_ohm == 0:
-        lower[free.index("surface_resistance_ohm")] = np.log(1e-6)
+    mat_free = tuple(k for k in keys if isinstance(k, str))
+    is_log = []
+    theta0, lower, upper = [], [], []
+    for k in keys:
+        if isinstance(k, str):
+            v0 = np.log(getattr(material, k) if getattr(material, k) > 0 else 1e-6)
+            lo, hi = v0 - np.log(bounds_factor), v0 + np.log(bounds_factor)
+            if k == "surface_resistance_ohm" and material.surface_resistance_ohm == 0:
+                lo = np.log(1e-6)
+            is_log.append(True)
+        else:
+            par = next(p for p in get_effect(k[0]).parameters if p.name == k[1])
+            v = next(e for e in effects if e.name == k[0]).as_dict()[k[1]]
+            if par.log_scale:
+                v0, lo, hi = np.log(v), np.log(par.lower), np.log(par.upper)
+            else:
+                v0, lo, hi = v, par.lower, par.upper
+            is_log.append(par.log_scale)
+        theta0.append(v0)
+        lower.append(lo)
+        upper.append(hi)
+    theta0, lower, upper = np.array(theta0), np.array(lower), np.array(upper)
+    is_log = np.array(is_log)
     data = []
     for g in groups:
         f = np.array([p.frequency_hz for p in g.points])
@@ -197,23 +277,39 @@ def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
         data.append((g, f, np.log(np.abs(h)), np.angle(h), sdm, sdp))
     sd_rows = np.concatenate([np.concatenate([d[4], d[5]]) for d in data])
 
+    def values_at(theta):
+        return {n: float(np.exp(v)) if lg else float(v) for n, v, lg in zip(free, theta, is_log)}
+
     def material_at(theta):
-        return material.replace(**{n: float(np.exp(v)) for n, v in zip(free, theta)})
+        vals = values_at(theta)
+        return material.replace(**{n: vals[n] for n in mat_free})
+
+    def effects_at(theta):
+        vals = values_at(theta)
+        out = []
+        for e in effects:
+            d = e.as_dict()
+            d.update({k[1]: vals[f"{k[0]}.{k[1]}"] for k in keys if not isinstance(k, str) and k[0] == e.name})
+            out.append(EffectSpec(e.name, tuple(sorted(d.items()))))
+        return tuple(out)
 
     def residual(theta):
         try:
             mat = material_at(theta)
+            effs = effects_at(theta)
         except ParameterError:
             return np.full(2 * sum(d[1].size for d in data), 1e6)
         out = []
         for g, f, lm, ph, sdm, sdp in data:
-            hm = model_for_group(mat, g, free, effects).frequency_response(f)
+            hm = model_for_group(mat, g, free, effs).frequency_response(f)
             out.append((np.log(np.abs(hm)) - lm) / sdm)
             out.append(_wrap(np.angle(hm) - ph) / sdp)
         r = np.concatenate(out)
         return np.where(np.isfinite(r), r, 1e6)
 
-    sol = least_squares(residual, theta0, bounds=(lower, upper), method="trf", x_scale=1.0,
+    theta0 = np.clip(theta0, lower + 1e-9 * (upper - lower), upper - 1e-9 * (upper - lower))
+    sol = least_squares(residual, theta0, bounds=(lower, upper), method="trf",
+                        x_scale=np.where(is_log, 1.0, np.maximum(np.abs(upper - lower) * 1e-3, 1e-30)),
                         diff_step=1e-6, max_nfev=200 * (len(free) + 1))
     theta = sol.x
     jac = sol.jac
@@ -260,12 +356,13 @@ def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
                       "exponents": {n: expo[n] for n in expo if n in free}, "value": value,
                       "sd_log": sd_c, "determined": bool(sd_c <= sd_threshold)})
     at_bound = [n for n, v, lo, hi in zip(free, theta, lower, upper)
-                if v - lo < 1e-3 or hi - v < 1e-3]
-    est = {n: float(np.exp(v)) for n, v in zip(free, theta)}
+                if v - lo < 1e-3 * max(1.0, hi - lo) or hi - v < 1e-3 * max(1.0, hi - lo)]
+    est = values_at(theta)
     with np.errstate(over="ignore"):
-        ci = {n: (float(np.exp(v - 1.96 * s)), float(np.exp(v + 1.96 * s)))
-              for n, v, s in zip(free, theta, sd)}
-    return FitResult(material=material_at(theta), effects=tuple(effects), free=free, estimates=est,
+        ci = {n: ((float(np.exp(v - 1.96 * s)), float(np.exp(v + 1.96 * s))) if lg
+                  else (float(v - 1.96 * s), float(v + 1.96 * s)))
+              for n, v, s, lg in zip(free, theta, sd, is_log)}
+    return FitResult(material=material_at(theta), effects=effects_at(theta), free=free, estimates=est,
                      ci95=ci, sd_log={n: float(s) for n, s in zip(free, sd)}, correlation=corr,
                      chi2=chi2, dof=dof, identifiability=combos, named_combinations=named,
                      not_identifiable=not_ident,

@@ -21,7 +21,7 @@ from ..simulation.sensor import predict_current
 from ..simulation.stimuli import CrankSlider
 from .modelfit import Record
 
-__all__ = ["crank_slider_campaign", "DETECTABLE_RANGES", "random_effect_values"]
+__all__ = ["crank_slider_campaign", "DETECTABLE_RANGES", "random_effect_values", "hidden_effects_campaign"]
 
 #: Parameter ranges, inside each effect's plausible range, where the effect is
 #: large enough to be seen against 1 % noise in a 1-20 Hz sweep (used to draw
@@ -30,7 +30,8 @@ DETECTABLE_RANGES = {
     "amplifier_bandwidth": {"corner_hz": (30.0, 300.0)},
     "time_delay": {"delay_s": (5e-4, 5e-3)},
     "current_offset": {"offset_a": (1e-7, 5e-7), "drift_a_per_s": (-2e-8, 2e-8)},
-    "hydration_drift": {"diffusivity_rate_per_s": (-2e-3, -5e-4)},
+    # the plain exponential (no equilibrium) unless a test asks for a relaxation
+    "hydration_drift": {"diffusivity_rate_per_s": (-2e-3, -5e-4), "equilibrium_ratio": (0.0, 0.0)},
     "effective_length": {"tip_offset_m": (1.5e-3, 4e-3)},
     "beam_inertia": {"natural_frequency_hz": (22.0, 50.0), "damping_ratio": (0.01, 0.1)},
     "nonlinearity": {"quadratic": (0.5, 2.0), "cubic": (5.0, 20.0)},
@@ -58,12 +59,15 @@ def crank_slider_campaign(true_effects: Sequence = ("surface_resistance",), *,
                           material: MaterialParameters = PAPER_PARAMETERS, noise_rel: float = 0.01,
                           seed: int = 0, model_effects: Sequence = ("surface_resistance",),
                           preroll_s: float = 1.0, fidelity: str = "model",
-                          beam_model: str = "linear") -> list[Record]:
+                          beam_model: str = "linear", hum_rel: float = 0.0,
+                          hum_hz: float = 50.0) -> list[Record]:
     """One record per (sample, frequency); ``true_effects`` make the data,
     ``model_effects`` go into each record's (to be tested) model.  ``fidelity``:
     ``model`` (FFT prediction of the closed form with its effects) or ``field`` (the
     independent field solution, :class:`~ipmc_sensor_ros.simulation.sensor.FieldSensorSimulator`),
-    whose ``beam_model`` may be ``elastica`` (large-deflection stress profile)."""
+    whose ``beam_model`` may be ``elastica`` (large-deflection stress profile).
+    ``hum_rel``: mains interference of RMS ``hum_rel`` x the clean current's RMS at
+    ``hum_hz`` (80 % of its power) and its third harmonic (20 %), random phases per record."""
     check_fidelity(fidelity, beam_model)
     rng = np.random.default_rng(seed)
     out = []
@@ -82,7 +86,25 @@ def crank_slider_campaign(true_effects: Sequence = ("surface_resistance",), *,
                 i = predict_current(truth, t, w)
             keep = t >= preroll_s
             t, w, i = t[keep] - preroll_s, w[keep], i[keep]
-            i = i + rng.normal(0.0, noise_rel * np.std(i), i.size)
+            scale = np.std(i)
+            i = i + rng.normal(0.0, noise_rel * scale, i.size)
+            if hum_rel > 0:
+                for m, share in ((1, 0.8), (3, 0.2)):
+                    i = i + hum_rel * scale * np.sqrt(2 * share) * np.cos(
+                        2 * np.pi * m * hum_hz * t + rng.uniform(0, 2 * np.pi))
             out.append(Record(f"{geometry.name or 'sample'}_{f:.3g}Hz", geometry.name or "sample",
                               SensorModel(geometry, material, tuple(model_effects)), t, w, i))
     return out
+
+
+def hidden_effects_campaign(hidden: Sequence[str], seed: int, **kwargs) -> tuple[list[Record], dict]:
+    """Records with the ``hidden`` effects (values drawn by :func:`random_effect_values` from a
+    generator seeded with ``seed``) for a diagnosis that starts from H2, or from H1 when
+    ``surface_resistance`` is among the hidden effects.  Returns ``(records, truth)``,
+    ``truth`` = {effect: values}."""
+    rng = np.random.default_rng(10_000 + seed)
+    truth = {name: random_effect_values(name, rng) for name in hidden}
+    true_effects = ["surface_resistance"] + [(n, v) for n, v in truth.items() if n != "surface_resistance"]
+    model_effects = () if "surface_resistance" in truth else ("surface_resistance",)
+    recs = crank_slider_campaign(tuple(true_effects), seed=seed, model_effects=model_effects, **kwargs)
+    return recs, truth
