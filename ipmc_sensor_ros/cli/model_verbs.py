@@ -151,10 +151,10 @@ def _cmd_compare(args) -> int:
     recs = _records(args)
     model_text = recs[0].model.describe()
     with Progress(f"comparing {model_text} with {len(recs)} record(s)") as prog:
-        counter = iter(range(1, len(recs) + 1))
+        position = {id(rec): k for k, rec in enumerate(recs, start=1)}
 
         def model_for(rec):
-            prog.step(f"record {next(counter)}/{len(recs)}")
+            prog.step(f"record {position.get(id(rec), '?')}/{len(recs)}")
             return rec.model
 
         cmp = compare_records(recs, model_for, settle_s=args.settle)
@@ -231,6 +231,8 @@ def _cmd_diagnose(args) -> int:
                         max_effects=args.max_effects, mains=mains,
                         priors=priors_from_headers(data))
     print(diag.summary())
+    print("  error = held-out ||y - ŷ|| / ||y - mean y||; x better = baseline error / error; "
+          "dBIC = BIC change vs the baseline (< -20: very strong evidence for the effect)")
     if args.save_model:
         from ..physics.modelfile import save_model
 
@@ -240,8 +242,6 @@ def _cmd_diagnose(args) -> int:
                    extra={"missing_effects": diag.missing_effects, "explained": diag.explained})
         print(f"saved the whole model to {args.save_model}")
     print(diagnosis_next_command(diag, args.data, args.save_model, args.model))
-    print("  error = held-out ||y - ŷ|| / ||y - mean y||; x better = baseline error / error; "
-          "dBIC = BIC change vs the baseline (< -20: very strong evidence for the effect)")
     write_json(args.json, diag.to_json())
     rd = report_dir(args.report)
     if rd:

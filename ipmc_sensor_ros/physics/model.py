@@ -202,6 +202,13 @@ class SensorModel:
         return SensorModel(geometry=self.geometry, material=material, effects=self.effects)
 
     # -- evaluation (physics/pipeline.py holds the rules) -------------------------
+    def __getstate__(self):
+        """Pickle the description only; the compiled pipeline (which may hold closures, e.g. a
+        drift's ``material_at``) is rebuilt on first use after unpickling."""
+        state = dict(self.__dict__)
+        state.pop("compiled", None)
+        return state
+
     @functools.cached_property
     def compiled(self):
         """The model taken apart once (:class:`~ipmc_sensor_ros.physics.pipeline.CompiledModel`)."""
