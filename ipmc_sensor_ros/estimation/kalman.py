@@ -1,0 +1,428 @@
+"""Offset-aware steady-state Kalman estimator of tip deflection from sensing current.
+
+Model (continuous time, designed from the same :class:`ReducedModel` that
+:class:`~ipmc_sensor_ros.estimation.inverse.InverseEstimator` inverts)
+------------------------------------------------------------------------------
+The reduced sensor is ``H_n(s) = s R_n(s)`` (eqs. 45, 47): the current is the
+charge model ``R_n`` driven by the tip *velocity* v.  The state is
+
+    x = [x_R (n states of R_n), w, v, b]
+
+    x_R' = A_R x_R + B_R v                (R_n in state space, zpk2ss)
+    w'   = v - w_l w                      (deflection; w_l = 2 pi leak_corner_hz)
+    v'   = -a v + xi_v                    (velocity: Ornstein-Uhlenbeck, a = 2 pi motion_bandwidth_hz)
+    b'   = xi_b                           (current offset: constant + random-walk drift)
+    i    = C_R x_R + D_R v + b + n        (measured current, A)
+
+with white noises of intensities ``q_v = 2 a sigma_v^2`` (so the velocity RMS
+is ``motion_velocity_m_s`` = sigma_v, flat up to ``motion_bandwidth_hz``),
+``q_b = offset_drift_a_per_s^2 * 60 s`` (a random walk that moves by
+``offset_drift_a_per_s * 60 s`` RMS per minute) and a measurement noise of RMS
+``current_noise_a`` per sample.  The tiny leak ``w_l`` makes w detectable
+(a pure integrator that nothing measures has no steady-state Kalman gain); its
+default 0.01 Hz equals the leaky inverse's, so on continuous motion the
+filter is never worse than the leak it replaces.  The model is discretised
+exactly (Van Loan, :func:`scipy.linalg.expm`) and the steady-state gain comes
+from :func:`scipy.linalg.solve_discrete_are`.
+
+Defaults (from the DAQ and the motion)
+--------------------------------------
+``current_noise_a`` = 20 nA RMS per sample (a 16-bit DAQ on a +-1 uA-scale
+transimpedance range; 1 % of a slim sample's current at 1 Hz);
+``motion_velocity_m_s`` = 20 mm/s (a 2 mm crank at 1.6 Hz),
+``motion_bandwidth_hz`` = 50 Hz (above the paper's 1-20 Hz band and the 30 Hz
+free vibration); ``offset_drift_a_per_s`` = 1 nA/min.
+
+Observability, and how slow is too slow
+---------------------------------------
+``H(0) = 0``: a constant offset b is exactly a constant velocity b / R_n(0).
+Separating them rests on the spectra only.  The current due to motion has the
+low-frequency PSD ``R0^2 q_v / a^2`` (flat), the offset's PSD is ``q_b / w^2``;
+they cross at
+
+    w_c = sqrt(q_b a^2 / (R0^2 q_v)) = sqrt(q_b a / (2 R0^2 sigma_v^2)),
+
+(:func:`offset_corner_hz`).  Below ``f_c = w_c / 2 pi`` a deflection change is
+taken for offset drift and vice versa: a deflection that creeps by dw over a
+time longer than ``1/w_c`` is invisible.  With the defaults and the slim sample
+(R0 = 3.2e-4 A s/m) f_c is about 1e-6 Hz: while the sensor moves, the offset is
+essentially *not* learned (any faster offset learning during motion would
+also erase slow deflection ramps).  It is learned when the sensor rests:
+
+Rest detector and gain scheduling
+---------------------------------
+The current is band-passed (0.5 Hz to min(50 Hz, fs/4)) and its energy averaged
+over ``rest_window_s``.  The sensor is *at rest* when that energy falls below
+``rest_enter`` times the energy the white noise alone puts in the band, and
+*moving* again as soon as it exceeds ``rest_leave`` times it (hysteresis).
+At rest the leak and velocity noise are switched off (the deflection is held:
+w is frozen as a gyro's angle is when its bias is learned at standstill) and the
+offset is learned with the time constant ``rest_offset_time_s`` (the scalar
+steady-state Kalman gain of a random walk, ``g = 1/(fs tau)``).  Each mode is an
+LTI filter; within a run of samples of one mode the filter is run in modal
+coordinates (one first-order :func:`scipy.signal.lfilter` per eigenvalue of the
+closed-loop matrix, conjugate pairs once), so blocks are vectorised and the
+state passes exactly between modes.
+
+Uncertainty
+-----------
+``last_std`` is the standard deviation of w from the steady-state posterior
+covariance of the moving mode (held unchanged at rest, when w is frozen);
+it does not include the reduction error or an unmodelled offset step.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.linalg as la
+import scipy.signal as sig
+
+from .inverse import DEFAULT_LEAK_CORNER_HZ, EstimatorError, _positive
+from ..lti.reduction import ReducedModel
+
+__all__ = ["KalmanEstimator", "offset_corner_hz", "DEFAULT_CURRENT_NOISE_A"]
+
+#: Default DAQ current noise, A RMS per sample (see the module docstring).
+DEFAULT_CURRENT_NOISE_A = 20e-9
+DEFAULT_MOTION_VELOCITY_M_S = 0.02
+DEFAULT_MOTION_BANDWIDTH_HZ = 50.0
+DEFAULT_OFFSET_DRIFT_A_PER_S = 1e-9 / 60.0
+
+
+def offset_corner_hz(reduced: ReducedModel, motion_velocity_m_s: float = DEFAULT_MOTION_VELOCITY_M_S,
+                     motion_bandwidth_hz: float = DEFAULT_MOTION_BANDWIDTH_HZ,
+                     offset_drift_a_per_s: float = DEFAULT_OFFSET_DRIFT_A_PER_S) -> float:
+    """Frequency below which offset drift and deflection cannot be told apart while moving, Hz."""
+    r0 = abs(float(np.real(reduced.charge_response(np.array([0.0]))[0])))
+    a = 2 * math.pi * motion_bandwidth_hz
+    q_b = offset_drift_a_per_s ** 2 * 60.0
+    return math.sqrt(q_b * a / (2 * r0 ** 2 * motion_velocity_m_s ** 2)) / (2 * math.pi)
+
+
+def _van_loan(ac: np.ndarray, qc: np.ndarray, dt: float):
+    n = ac.shape[0]
+    m = np.zeros((2 * n, 2 * n))
+    m[:n, :n] = -ac
+    m[:n, n:] = qc
+    m[n:, n:] = ac.T
+    e = la.expm(m * dt)
+    ad = e[n:, n:].T
+    qd = ad @ e[:n, n:]
+    return ad, 0.5 * (qd + qd.T)
+
+
+def _modal_realisation(reduced: ReducedModel):
+    """R_n(s) = k + sum_i r_i / (s - p_i) (distinct real poles) as (A, B, C, D):
+    a diagonal, well-scaled realisation (each state is a first-order lag of v)."""
+    z = np.real(np.asarray(reduced.zeros_rad_s))
+    p = np.real(np.asarray(reduced.poles_rad_s))
+    k = float(reduced.gain)
+    if np.min(np.abs(np.subtract.outer(p, p)) + np.eye(p.size) * 1e300) < 1e-9 * np.max(np.abs(p)):
+        raise EstimatorError("reduced model has repeated poles; the Kalman estimator needs distinct poles")
+    r = np.array([k * np.prod(pi - z) / np.prod([pi - pj for pj in p if pj != pi]) for pi in p])
+    return np.diag(p), np.ones((p.size, 1)), r[None, :], np.array([[k]])
+
+
+class _Mode:
+    """One LTI predictor s_{k+1} = F s_k + G y_k with outputs in modal form."""
+
+    def __init__(self, ad: np.ndarray, k: np.ndarray, c: np.ndarray, iw: int, ib: int, scale: np.ndarray):
+        n = ad.shape[0]
+        ikc = np.eye(n) - np.outer(k, c)
+        f = ad @ ikc
+        g = ad @ k
+        lam, vs = np.linalg.eig(f / scale[:, None] * scale[None, :])   # in O(1) state units
+        if not np.all(np.abs(lam) <= 1.0 + 1e-12):
+            raise EstimatorError(f"Kalman predictor is unstable (pole radius {np.abs(lam).max():.12f})")
+        cond = np.linalg.cond(vs)
+        if not np.isfinite(cond) or cond > 1e12:
+            raise EstimatorError(f"Kalman predictor is not diagonalisable (condition {cond:.3g})")
+        v = scale[:, None] * vs
+        vinv = np.linalg.inv(vs) / scale[None, :]
+        # keep one of each conjugate pair (weight 2) and the real modes (weight 1)
+        keep = lam.imag >= -1e-14 * np.abs(lam)
+        pair = np.where(lam.imag > 1e-14 * np.abs(lam), 2.0, 1.0)
+        self.v = v
+        self.vinv = vinv
+        self.keep = np.flatnonzero(keep)
+        self.lam = lam[self.keep]
+        self.g = (vinv @ g)[self.keep]
+        self.hw = (ikc[iw] @ v)[self.keep] * pair[self.keep]
+        self.dw = float(k[iw])
+        self.hb = (ikc[ib] @ v)[self.keep] * pair[self.keep]
+        self.db = float(k[ib])
+        self.dropped = np.flatnonzero(~keep)
+        self.partner = np.array([int(np.argmin(np.abs(self.lam - np.conj(lam[j])))) for j in self.dropped],
+                                dtype=int)
+        self.a_list = [np.array([1.0, -l]) for l in self.lam]
+        self.b_list = [np.array([0.0, gg]) for gg in self.g]
+
+    def run(self, y: np.ndarray, s0: np.ndarray):
+        """Filter y from predicted state s0; returns (w_hat, b_hat_last, s_end)."""
+        z0 = (self.vinv @ s0)[self.keep]
+        w = self.dw * y
+        z_end = np.empty_like(z0)
+        zlast = np.empty_like(z0)
+        for j in range(self.lam.size):
+            zj, zf = sig.lfilter(self.b_list[j], self.a_list[j], y, zi=z0[j:j + 1])
+            w = w + (self.hw[j] * zj).real
+            zlast[j] = zj[-1]
+            z_end[j] = zf[0]
+        b_last = float((self.hb @ zlast).real + self.db * y[-1])
+        return w, b_last, self._to_state(z_end)
+
+    def _to_state(self, z_kept: np.ndarray) -> np.ndarray:
+        """Physical state from the kept modal values (dropped modes are conjugates)."""
+        full = np.empty(self.v.shape[0], complex)
+        full[self.keep] = z_kept
+        full[self.dropped] = np.conj(z_kept[self.partner])
+        return (self.v @ full).real
+
+
+class KalmanEstimator:
+    """Streaming offset-aware Kalman estimate of tip deflection (m) from current (A).
+
+    Parameters
+    ----------
+    reduced : reduced model of the sensor.
+    sample_rate_hz : sample rate of the current, Hz.
+    current_noise_a : white measurement noise, A RMS per sample.
+    motion_velocity_m_s : RMS tip velocity of typical motion, m/s.
+    motion_bandwidth_hz : corner of the velocity spectrum, Hz.
+    leak_corner_hz : deflection leak while moving (detectability), Hz.
+    offset_drift_a_per_s : RMS offset drift rate (random walk), A/s.
+    rest_offset_time_s : time constant of offset learning at rest, s.
+    rest_window_s : averaging time of the rest detector, s.
+    rest_enter, rest_leave : rest-detector thresholds (multiples of the noise energy in band).
+    rest_detection : switch the rest detector (and gain scheduling) on or off.
+    """
+
+    def __init__(self, reduced: ReducedModel, sample_rate_hz: float, *,
+                 current_noise_a: float = DEFAULT_CURRENT_NOISE_A,
+                 motion_velocity_m_s: float = DEFAULT_MOTION_VELOCITY_M_S,
+                 motion_bandwidth_hz: float = DEFAULT_MOTION_BANDWIDTH_HZ,
+                 leak_corner_hz: float = DEFAULT_LEAK_CORNER_HZ,
+                 offset_drift_a_per_s: float = DEFAULT_OFFSET_DRIFT_A_PER_S,
+                 rest_offset_time_s: float = 3.0, rest_window_s: float = 0.25,
+                 rest_enter: float = 2.0, rest_leave: float = 4.0, rest_detection: bool = True,
+                 channels: int = 1):
+        if channels != 1:
+            raise EstimatorError(f"parameter 'channels' must be 1 for the Kalman estimator, got {channels!r}")
+        self.channels = 1
+        self.reduced = reduced
+        fs = _positive("sample_rate_hz", sample_rate_hz)
+        self._fs = fs
+        self.current_noise_a = _positive("current_noise_a", current_noise_a)
+        self.motion_velocity_m_s = _positive("motion_velocity_m_s", motion_velocity_m_s)
+        self.motion_bandwidth_hz = _positive("motion_bandwidth_hz", motion_bandwidth_hz)
+        self.leak_corner_hz = _positive("leak_corner_hz", leak_corner_hz)
+        self.offset_corner_hz = None      # interface parity with InverseEstimator
+        self.offset_drift_a_per_s = _positive("offset_drift_a_per_s", offset_drift_a_per_s)
+        self.rest_offset_time_s = _positive("rest_offset_time_s", rest_offset_time_s)
+        self.rest_window_s = _positive("rest_window_s", rest_window_s)
+        self.rest_enter = _positive("rest_enter", rest_enter)
+        self.rest_leave = _positive("rest_leave", rest_leave)
+        if self.rest_leave <= self.rest_enter:
+            raise EstimatorError(f"parameter 'rest_leave' ({rest_leave}) must exceed 'rest_enter' ({rest_enter})")
+        for name, f in (("motion_bandwidth_hz", self.motion_bandwidth_hz), ("leak_corner_hz", self.leak_corner_hz)):
+            if f >= fs / 2:
+                raise EstimatorError(f"parameter '{name}' = {f} must be below the Nyquist frequency {fs / 2} Hz")
+        self.rest_detection = bool(rest_detection)
+        self._build()
+        self.reset()
+
+    # -- design -------------------------------------------------------------
+    def _build(self) -> None:
+        fs, dt = self._fs, 1.0 / self._fs
+        ar, br, cr, dr = _modal_realisation(self.reduced)
+        n = ar.shape[0]
+        iw, iv, ib = n, n + 1, n + 2
+        N = n + 3
+        a = 2 * math.pi * self.motion_bandwidth_hz
+        wl = 2 * math.pi * self.leak_corner_hz
+        # scale: current in units of the noise, states so that they are O(1)
+        sv = self.motion_velocity_m_s
+        ac = np.zeros((N, N))
+        ac[:n, :n] = ar
+        ac[:n, iv] = br[:, 0]
+        ac[iw, iv] = 1.0
+        ac[iv, iv] = -a
+        c = np.zeros(N)
+        c[:n] = cr[0]
+        c[iv] = dr[0, 0]
+        c[ib] = 1.0
+        qc = np.zeros((N, N))
+        qc[iv, iv] = 2 * a * sv ** 2
+        qc[ib, ib] = self.offset_drift_a_per_s ** 2 * 60.0
+        moving = ac.copy()
+        moving[iw, iw] = -wl
+        ad, qd = _van_loan(moving, qc, dt)
+        # scaling for a well-conditioned Riccati solve: x = S x~
+        scale = np.ones(N)
+        scale[:n] = sv / np.abs(np.diag(ar))
+        scale[iw] = 1e-3
+        scale[iv] = sv
+        scale[ib] = self.current_noise_a
+        s_inv = 1.0 / scale
+        ad_s = ad * s_inv[:, None] * scale[None, :]
+        qd_s = qd * s_inv[:, None] * s_inv[None, :]
+        c_s = c * scale / self.current_noise_a
+        p_s = la.solve_discrete_are(ad_s.T, c_s[:, None], qd_s + 1e-30 * np.eye(N), np.array([[1.0]]))
+        k_s = p_s @ c_s / (c_s @ p_s @ c_s + 1.0)
+        post = p_s - np.outer(k_s, c_s @ p_s)
+        k = k_s * scale / self.current_noise_a
+        self.std_moving_m = float(math.sqrt(max(post[iw, iw], 0.0)) * scale[iw])
+        self._c, self._iw, self._ib, self._n = c, iw, ib, N
+        self._k_moving = k
+        self._ad_moving = ad
+        self._moving = _Mode(ad, k, c, iw, ib, scale)
+        # rest: no leak, velocity decays, only the offset is updated (gain g)
+        rest = ac.copy()
+        ad_rest, _ = _van_loan(rest, qc, dt)
+        g = 1.0 - math.exp(-1.0 / (fs * self.rest_offset_time_s))
+        k_rest = np.zeros(N)
+        k_rest[ib] = g
+        self._rest = _Mode(ad_rest, k_rest, c, iw, ib, scale)
+        # detector: band-pass and one-pole energy average
+        hi = min(50.0, fs / 4)
+        self._bp = sig.butter(1, [0.5, hi], btype="bandpass", fs=fs, output="sos")
+        enbw = math.pi / 2 * (hi - 0.5)
+        self.noise_energy_a2 = self.current_noise_a ** 2 * 2 * enbw / fs
+        self._alpha = math.exp(-1.0 / (fs * self.rest_window_s))
+        # white-noise level seen above the motion band (fs/4 .. Nyquist): energy ratio to the band
+        self._hp = sig.butter(2, fs / 4, btype="highpass", fs=fs, output="sos") if fs / 4 > 2 * hi else None
+        if self._hp is not None:
+            imp = np.zeros(4096)
+            imp[0] = 1.0
+            self._hp_ratio = float(np.sum(sig.sosfilt(self._bp, imp) ** 2) / np.sum(sig.sosfilt(self._hp, imp) ** 2))
+            self.noise_energy_a2 = self.current_noise_a ** 2 * float(np.sum(sig.sosfilt(self._bp, imp) ** 2))
+
+    # -- properties -----------------------------------------------------------
+    @property
+    def sample_rate_hz(self) -> float:
+        return self._fs
+
+    @property
+    def offset_a(self) -> float:
+        """Current offset estimate, A."""
+        return self._b_last
+
+    @property
+    def offset_corner_while_moving_hz(self) -> float:
+        return offset_corner_hz(self.reduced, self.motion_velocity_m_s, self.motion_bandwidth_hz,
+                                self.offset_drift_a_per_s)
+
+    # -- streaming ------------------------------------------------------------
+    def reset(self) -> None:
+        """Zero deflection, zero offset, moving mode."""
+        self._s = np.zeros(self._n)
+        self._bp_zi = np.zeros((self._bp.shape[0], 2))
+        self._energy = 0.0
+        self._hp_zi = np.zeros((2 if self._hp is None else self._hp.shape[0], 2))
+        self._hf_energy = 0.0
+        self.at_rest = False
+        self._b_last = 0.0
+        self.last_std = self.std_moving_m
+        self.last_rest = np.zeros(0, bool)
+
+    def _rest_flags(self, y: np.ndarray) -> np.ndarray:
+        band, self._bp_zi = sig.sosfilt(self._bp, y, zi=self._bp_zi)
+        a = self._alpha
+        e, zf = sig.lfilter([1 - a], [1, -a], band * band, zi=[a * self._energy])
+        self._energy = float(zf[0] / a) if a > 0 else float(e[-1])
+        if not self.rest_detection:
+            return np.zeros(y.size, bool)
+        floor = self.noise_energy_a2
+        if self._hp is not None:
+            # measured white-noise floor (never below the configured DAQ noise)
+            high, self._hp_zi = sig.sosfilt(self._hp, y, zi=self._hp_zi)
+            hf, zf = sig.lfilter([1 - a], [1, -a], high * high, zi=[a * self._hf_energy])
+            self._hf_energy = float(zf[0] / a)
+            floor = np.maximum(floor, hf * self._hp_ratio)
+        # leave rest on the averaged energy, or at once on one sample beyond 6 sigma of the
+        # in-band noise (false alarm 2e-9 per sample), so a sudden move never feeds the offset
+        moving = (e > self.rest_leave * floor) | (band * band > 36.0 * floor)
+        code = np.where(moving, 0, np.where(e < self.rest_enter * floor, 1, -1))
+        idx = np.where(code >= 0, np.arange(y.size), -1)
+        np.maximum.accumulate(idx, out=idx)
+        flags = np.where(idx >= 0, code[np.maximum(idx, 0)] == 1, self.at_rest)
+        return flags
+
+    def process_with_std(self, current_a):
+        """(deflection m, its standard deviation m) for a block of current samples."""
+        y = np.asarray(current_a, dtype=float)
+        if y.ndim == 2 and y.shape[1] == 1:
+            y = y[:, 0]
+        if y.ndim != 1:
+            raise EstimatorError(f"expected shape (n,) or (n, 1), got {y.shape}")
+        if y.size == 0:
+            return np.empty(0), np.empty(0)
+        flags = self._rest_flags(y)
+        self.last_rest = flags
+        cuts = np.flatnonzero(np.diff(flags.astype(np.int8))) + 1
+        bounds = [0, *cuts.tolist(), y.size]
+        out = np.empty(y.size)
+        for lo, hi in zip(bounds[:-1], bounds[1:]):
+            mode = self._rest if flags[lo] else self._moving
+            out[lo:hi], self._b_last, self._s = mode.run(y[lo:hi], self._s)
+        self.at_rest = bool(flags[-1])
+        self.last_std = self.std_moving_m
+        return out, np.full(y.size, self.std_moving_m)
+
+    def process(self, current_a) -> np.ndarray:
+        """Deflection, m, for a block of current samples (A); see :meth:`process_with_std`."""
+        w, _ = self.process_with_std(current_a)
+        return w
+
+    def process_one(self, current_a: float) -> float:
+        return float(self.process(np.array([float(current_a)]))[0])
+
+    def process_sample(self, current_a: float) -> float:
+        return self.process_one(current_a)
+
+    def get_state(self) -> dict:
+        return {"s": self._s.copy(), "bp_zi": self._bp_zi.copy(), "energy": self._energy,
+                "at_rest": self.at_rest, "offset_a": self._b_last}
+
+    def set_state(self, state: dict) -> None:
+        s = np.asarray(state.get("s"), float)
+        if s.shape != self._s.shape or not np.all(np.isfinite(s)):
+            raise EstimatorError(f"state shape {s.shape} does not match {self._s.shape} or is not finite")
+        self._s = s.copy()
+        self._bp_zi = np.asarray(state["bp_zi"], float).copy()
+        self._energy = float(state["energy"])
+        self.at_rest = bool(state["at_rest"])
+        self._b_last = float(state["offset_a"])
+
+    def current_output(self) -> np.ndarray:
+        """Deflection held in the predicted state (per channel), m."""
+        return np.array([self._s[self._iw]])
+
+    def continue_from(self, old, recent_input=None) -> None:
+        """Take over ``old``'s deflection and offset (bumpless); the fast states are
+        rebuilt by replaying ``recent_input`` (then deflection and offset are reset
+        to ``old``'s)."""
+        self.reset()
+        if recent_input is not None and np.size(recent_input):
+            self.process(np.asarray(recent_input, float).reshape(-1))
+        if isinstance(old, KalmanEstimator):
+            self._s[self._iw] = old._s[old._iw]
+            self._s[self._ib] = old._s[old._ib]
+            self._b_last = old._b_last
+            self.at_rest = old.at_rest
+            self._energy = old._energy
+        else:
+            self._s[self._iw] = float(old.current_output()[0])
+
+    def rebuilt(self, reduced: ReducedModel | None = None, recent_input=None, **changes) -> "KalmanEstimator":
+        kwargs = {k: getattr(self, k) for k in (
+            "current_noise_a", "motion_velocity_m_s", "motion_bandwidth_hz", "leak_corner_hz",
+            "offset_drift_a_per_s", "rest_offset_time_s", "rest_window_s", "rest_enter", "rest_leave",
+            "rest_detection")}
+        kwargs["sample_rate_hz"] = self._fs
+        kwargs.update(changes)
+        fs = kwargs.pop("sample_rate_hz")
+        new = KalmanEstimator(reduced or self.reduced, fs, **kwargs)
+        new.continue_from(self, recent_input)
+        return new
