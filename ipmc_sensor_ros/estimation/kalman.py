@@ -73,6 +73,7 @@ it does not include the reduction error or an unmodelled offset step.
 from __future__ import annotations
 
 import math
+from operator import mul
 
 import numpy as np
 import scipy.linalg as la
@@ -88,6 +89,8 @@ DEFAULT_CURRENT_NOISE_A = 20e-9
 DEFAULT_MOTION_VELOCITY_M_S = 0.02
 DEFAULT_MOTION_BANDWIDTH_HZ = 50.0
 DEFAULT_OFFSET_DRIFT_A_PER_S = 1e-9 / 60.0
+#: Prior RMS of the current offset before any rest, A (DAQ offsets: tens of nA).
+OFFSET_PRIOR_A = 100e-9
 
 
 def offset_corner_hz(reduced: ReducedModel, motion_velocity_m_s: float = DEFAULT_MOTION_VELOCITY_M_S,
@@ -152,6 +155,12 @@ class _Mode:
         self.dw = float(k[iw])
         self.hb = (ikc[ib] @ v)[self.keep] * pair[self.keep]
         self.db = float(k[ib])
+        self.f, self.gvec, self.k = f, g, k
+        self.f_rows = [list(map(float, row)) for row in f]     # plain floats for process_one
+        self.g_list = list(map(float, g))
+        c_motion = c.copy()
+        c_motion[ib] = 0.0
+        self.hm = (c_motion @ v)[self.keep] * pair[self.keep]   # predicted current without offset
         self.dropped = np.flatnonzero(~keep)
         self.partner = np.array([int(np.argmin(np.abs(self.lam - np.conj(lam[j])))) for j in self.dropped],
                                 dtype=int)
@@ -171,6 +180,15 @@ class _Mode:
             z_end[j] = zf[0]
         b_last = float((self.hb @ zlast).real + self.db * y[-1])
         return w, b_last, self._to_state(z_end)
+
+    def run_free(self, length: int, s0: np.ndarray):
+        """Free response (no measurement update) over ``length`` samples from s0:
+        (w, predicted motion current, state after the run)."""
+        z0 = (self.vinv @ s0)[self.keep]
+        z = z0[:, None] * self.lam[:, None] ** np.arange(length)[None, :]
+        w = (self.hw @ z).real
+        m = (self.hm @ z).real
+        return w, m, self._to_state(z0 * self.lam ** length)
 
     def _to_state(self, z_kept: np.ndarray) -> np.ndarray:
         """Physical state from the kept modal values (dropped modes are conjugates)."""
@@ -204,7 +222,7 @@ class KalmanEstimator:
                  motion_bandwidth_hz: float = DEFAULT_MOTION_BANDWIDTH_HZ,
                  leak_corner_hz: float = DEFAULT_LEAK_CORNER_HZ,
                  offset_drift_a_per_s: float = DEFAULT_OFFSET_DRIFT_A_PER_S,
-                 rest_offset_time_s: float = 3.0, rest_window_s: float = 0.25,
+                 rest_offset_time_s: float = 10.0, rest_window_s: float = 0.25,
                  rest_enter: float = 2.0, rest_leave: float = 4.0, rest_detection: bool = True,
                  channels: int = 1):
         if channels != 1:
@@ -274,19 +292,23 @@ class KalmanEstimator:
         k = k_s * scale / self.current_noise_a
         self.std_moving_m = float(math.sqrt(max(post[iw, iw], 0.0)) * scale[iw])
         self._c, self._iw, self._ib, self._n = c, iw, ib, N
+        self._c_motion = c.copy()
+        self._c_motion[ib] = 0.0
+        self._c_list, self._c_motion_list = c.tolist(), self._c_motion.tolist()
+        self._k_w, self._k_b = float(k[iw]), float(k[ib])
         self._k_moving = k
         self._ad_moving = ad
         self._moving = _Mode(ad, k, c, iw, ib, scale)
         # rest: no leak, velocity decays, only the offset is updated (gain g)
         rest = ac.copy()
         ad_rest, _ = _van_loan(rest, qc, dt)
-        g = 1.0 - math.exp(-1.0 / (fs * self.rest_offset_time_s))
-        k_rest = np.zeros(N)
-        k_rest[ib] = g
-        self._rest = _Mode(ad_rest, k_rest, c, iw, ib, scale)
+        self._rest = _Mode(ad_rest, np.zeros(N), c, iw, ib, scale)
+        self._n_max = fs * self.rest_offset_time_s
+        self._q_b_step = self.offset_drift_a_per_s ** 2 * 60.0 * dt
         # detector: band-pass and one-pole energy average
         hi = min(50.0, fs / 4)
         self._bp = sig.butter(1, [0.5, hi], btype="bandpass", fs=fs, output="sos")
+        self._bp_list = self._bp[0].tolist()
         enbw = math.pi / 2 * (hi - 0.5)
         self.noise_energy_a2 = self.current_noise_a ** 2 * 2 * enbw / fs
         self._alpha = math.exp(-1.0 / (fs * self.rest_window_s))
@@ -295,6 +317,8 @@ class KalmanEstimator:
         if self._hp is not None:
             imp = np.zeros(4096)
             imp[0] = 1.0
+            self._hp_list = self._hp[0].tolist()
+            self._hp_unit = float(np.sum(sig.sosfilt(self._hp, imp) ** 2))
             self._hp_ratio = float(np.sum(sig.sosfilt(self._bp, imp) ** 2) / np.sum(sig.sosfilt(self._hp, imp) ** 2))
             self.noise_energy_a2 = self.current_noise_a ** 2 * float(np.sum(sig.sosfilt(self._bp, imp) ** 2))
 
@@ -319,6 +343,8 @@ class KalmanEstimator:
         self._s = np.zeros(self._n)
         self._bp_zi = np.zeros((self._bp.shape[0], 2))
         self._energy = 0.0
+        self._offset_var = OFFSET_PRIOR_A ** 2
+        self._sigma2 = self.current_noise_a ** 2
         self._hp_zi = np.zeros((2 if self._hp is None else self._hp.shape[0], 2))
         self._hf_energy = 0.0
         self.at_rest = False
@@ -340,6 +366,7 @@ class KalmanEstimator:
             hf, zf = sig.lfilter([1 - a], [1, -a], high * high, zi=[a * self._hf_energy])
             self._hf_energy = float(zf[0] / a)
             floor = np.maximum(floor, hf * self._hp_ratio)
+            self._sigma2 = max(self.current_noise_a ** 2, self._hf_energy / self._hp_unit)
         # leave rest on the averaged energy, or at once on one sample beyond 6 sigma of the
         # in-band noise (false alarm 2e-9 per sample), so a sudden move never feeds the offset
         moving = (e > self.rest_leave * floor) | (band * band > 36.0 * floor)
@@ -364,11 +391,40 @@ class KalmanEstimator:
         bounds = [0, *cuts.tolist(), y.size]
         out = np.empty(y.size)
         for lo, hi in zip(bounds[:-1], bounds[1:]):
-            mode = self._rest if flags[lo] else self._moving
-            out[lo:hi], self._b_last, self._s = mode.run(y[lo:hi], self._s)
+            if flags[lo]:
+                out[lo:hi] = self._run_rest(y[lo:hi])
+            else:
+                out[lo:hi], self._b_last, self._s = self._moving.run(y[lo:hi], self._s)
+                self._offset_var += self._q_b_step * (hi - lo)
         self.at_rest = bool(flags[-1])
         self.last_std = self.std_moving_m
         return out, np.full(y.size, self.std_moving_m)
+
+    def _run_rest(self, y: np.ndarray) -> np.ndarray:
+        """Rest: deflection held (free dynamics, no leak), offset = running mean of the
+        current minus the predicted motion current, weighted by its prior variance
+        (n0 = sigma^2 / P_b equivalent samples), then an exponential average over
+        at most ``rest_offset_time_s`` (drift)."""
+        w, m, s_end = self._rest.run_free(y.size, self._s)
+        u = y - m
+        b0 = self._s[self._ib]
+        n0 = self._sigma2 / self._offset_var
+        counts = n0 + np.arange(1, y.size + 1)
+        if counts[-1] <= self._n_max:
+            b = (n0 * b0 + float(np.sum(u))) / counts[-1]
+            n_end = counts[-1]
+        else:
+            k = max(0, int(math.floor(self._n_max - n0)))
+            b = (n0 * b0 + float(np.sum(u[:k]))) / (n0 + k) if k > 0 else b0
+            g = 1.0 / (self._n_max + 1.0)
+            b_seq, _ = sig.lfilter([g], [1.0, -(1.0 - g)], u[k:], zi=[(1.0 - g) * b])
+            b = float(b_seq[-1])
+            n_end = self._n_max
+        s_end[self._ib] = b
+        self._s = s_end
+        self._b_last = b
+        self._offset_var = self._sigma2 / n_end
+        return w
 
     def process(self, current_a) -> np.ndarray:
         """Deflection, m, for a block of current samples (A); see :meth:`process_with_std`."""
@@ -376,7 +432,56 @@ class KalmanEstimator:
         return w
 
     def process_one(self, current_a: float) -> float:
-        return float(self.process(np.array([float(current_a)]))[0])
+        """One sample, as a float: the same recursion as :meth:`process` written for a
+        single sample (no per-call lfilter costs); equal to it to rounding (tested)."""
+        y = float(current_a)
+        x = y
+        b0, b1, b2, _, a1, a2 = self._bp_list
+        zi = self._bp_zi
+        z0, z1 = zi.item(0), zi.item(1)
+        band = b0 * x + z0
+        zi[0] = (b1 * x - a1 * band + z1, b2 * x - a2 * band)
+        a = self._alpha
+        e = a * self._energy + (1 - a) * band * band
+        self._energy = e
+        floor = self.noise_energy_a2
+        if self._hp is not None and self.rest_detection:
+            h0, h1, h2, _, g1, g2 = self._hp_list
+            hz = self._hp_zi
+            y0, y1 = hz.item(0), hz.item(1)
+            high = h0 * x + y0
+            hz[0] = (h1 * x - g1 * high + y1, h2 * x - g2 * high)
+            self._hf_energy = hf = a * self._hf_energy + (1 - a) * high * high
+            floor = max(floor, hf * self._hp_ratio)
+            self._sigma2 = max(self.current_noise_a ** 2, hf / self._hp_unit)
+        if self.rest_detection:
+            if e > self.rest_leave * floor or band * band > 36.0 * floor:
+                self.at_rest = False
+            elif e < self.rest_enter * floor:
+                self.at_rest = True
+        st = self._s.tolist()
+        iw, ib = self._iw, self._ib
+        if self.at_rest:
+            mode = self._rest
+            m = sum(map(mul, self._c_motion_list, st))
+            n0 = self._sigma2 / self._offset_var
+            n1 = min(n0 + 1.0, self._n_max)
+            g = 1.0 / (n1 if n0 + 1.0 <= self._n_max else self._n_max + 1.0)
+            b = st[ib] + g * (y - m - st[ib])
+            w = st[iw]
+            new = [sum(map(mul, row, st)) for row in mode.f_rows]
+            new[ib] = b
+            self._b_last = b
+            self._offset_var = self._sigma2 / n1
+        else:
+            mode = self._moving
+            innov = y - sum(map(mul, self._c_list, st))
+            w = st[iw] + self._k_w * innov
+            self._b_last = st[ib] + self._k_b * innov
+            new = [sum(map(mul, row, st)) + g * y for row, g in zip(mode.f_rows, mode.g_list)]
+            self._offset_var += self._q_b_step
+        self._s[:] = new
+        return w
 
     def process_sample(self, current_a: float) -> float:
         return self.process_one(current_a)
