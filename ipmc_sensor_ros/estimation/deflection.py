@@ -39,7 +39,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 from .inverse import DEFAULT_LEAK_CORNER_HZ, EstimatorError, InverseEstimator
-from .kalman import DEFAULT_CURRENT_NOISE_A, KalmanEstimator
+from .kalman import DEFAULT_CURRENT_NOISE_A, KALMAN_LEAK_CORNER_HZ, KalmanEstimator
 from .mains import MainsFilter
 from ..physics.effects import Effect, get_effect
 from ..physics.model import SensorModel
@@ -57,7 +57,7 @@ class DeflectionEstimator:
     """Streaming estimate of tip deflection (m) from sensing current (A) for ``model``.
 
     Parameters: ``model``; ``sample_rate_hz``; ``reduction_order`` (fitted
-    poles, 1..8); ``band_hz`` of the reduction; ``leak_corner_hz``,
+    poles, 1..8); ``band_hz`` of the reduction; ``leak_corner_hz`` (default 0.01 Hz leaky, 0.002 Hz kalman),
     ``offset_corner_hz``, ``prewarp_hz`` as in :class:`InverseEstimator`;
     ``update_s``: rebuild interval for time-varying effects, s;
     ``estimator``: ``"leaky"`` (:class:`InverseEstimator`) or ``"kalman"``
@@ -70,7 +70,7 @@ class DeflectionEstimator:
 
     def __init__(self, model: SensorModel, sample_rate_hz: float, *, reduction_order: int = 4,
                  band_hz: Sequence[float] = (0.1, 50.0),
-                 leak_corner_hz: float = DEFAULT_LEAK_CORNER_HZ,
+                 leak_corner_hz: float | None = None,
                  offset_corner_hz: float | None = None, prewarp_hz: float | None = None,
                  update_s: float = 5.0, reduced: ReducedModel | None = None,
                  history_s: float = 0.5, estimator: str = "leaky", mains_hz: float = 0,
@@ -81,6 +81,8 @@ class DeflectionEstimator:
         self.mains_hz = mains_hz
         self.current_noise_a = float(current_noise_a)
         self.mains = MainsFilter(mains_hz, sample_rate_hz)
+        if leak_corner_hz is None:
+            leak_corner_hz = KALMAN_LEAK_CORNER_HZ if estimator == "kalman" else DEFAULT_LEAK_CORNER_HZ
         self.model = model
         self.reduction_order = int(reduction_order)
         self.band_hz = (float(band_hz[0]), float(band_hz[1]))

@@ -20,8 +20,7 @@ is ``motion_velocity_m_s`` = sigma_v, flat up to ``motion_bandwidth_hz``),
 ``offset_drift_a_per_s * 60 s`` RMS per minute) and a measurement noise of RMS
 ``current_noise_a`` per sample.  The tiny leak ``w_l`` makes w detectable
 (a pure integrator that nothing measures has no steady-state Kalman gain); its
-default 0.01 Hz equals the leaky inverse's, so on continuous motion the
-filter is never worse than the leak it replaces.  The model is discretised
+default 0.002 Hz (``KALMAN_LEAK_CORNER_HZ``) is five times below the leaky inverse's.  The model is discretised
 exactly (Van Loan, :func:`scipy.linalg.expm`) and the steady-state gain comes
 from :func:`scipy.linalg.solve_discrete_are`.
 
@@ -51,7 +50,8 @@ also erase slow deflection ramps).  It is learned when the sensor rests:
 
 Rest detector and gain scheduling
 ---------------------------------
-The current is band-passed (0.5 Hz to min(50 Hz, fs/4)) and its energy averaged
+The current is band-passed (1 Hz to min(50 Hz, fs/4); each sample's energy capped at
+``ENERGY_CLIP`` times the noise's so a pulse delays rest by < 1 s) and its energy averaged
 over ``rest_window_s``.  The sensor is *at rest* when that energy falls below
 ``rest_enter`` times the energy the white noise alone puts in the band, and
 *moving* again as soon as it exceeds ``rest_leave`` times it (hysteresis).
@@ -79,7 +79,7 @@ import numpy as np
 import scipy.linalg as la
 import scipy.signal as sig
 
-from .inverse import DEFAULT_LEAK_CORNER_HZ, EstimatorError, _positive
+from .inverse import EstimatorError, _positive
 from ..lti.reduction import ReducedModel
 
 __all__ = ["KalmanEstimator", "offset_corner_hz", "DEFAULT_CURRENT_NOISE_A"]
@@ -89,8 +89,16 @@ DEFAULT_CURRENT_NOISE_A = 20e-9
 DEFAULT_MOTION_VELOCITY_M_S = 0.02
 DEFAULT_MOTION_BANDWIDTH_HZ = 50.0
 DEFAULT_OFFSET_DRIFT_A_PER_S = 1e-9 / 60.0
+#: Default deflection leak while moving, Hz (time constant 80 s): a held deflection not yet
+#: detected as rest loses 1.3 % per second; a residual offset db gives at most db / (R0 w_l).
+KALMAN_LEAK_CORNER_HZ = 0.002
 #: Prior RMS of the current offset before any rest, A (DAQ offsets: tens of nA).
 OFFSET_PRIOR_A = 100e-9
+#: Cap on one sample's band-passed energy in the rest detector, in units of the noise's.
+ENERGY_CLIP = 20.0
+#: Low edge of the rest detector's band, Hz: a motion slower than this (and a
+#: current pulse's high-pass tail, time constant 1/(2 pi f)) is not seen.
+REST_BAND_LOW_HZ = 1.0
 
 
 def offset_corner_hz(reduced: ReducedModel, motion_velocity_m_s: float = DEFAULT_MOTION_VELOCITY_M_S,
@@ -230,9 +238,9 @@ class KalmanEstimator:
                  current_noise_a: float = DEFAULT_CURRENT_NOISE_A,
                  motion_velocity_m_s: float = DEFAULT_MOTION_VELOCITY_M_S,
                  motion_bandwidth_hz: float = DEFAULT_MOTION_BANDWIDTH_HZ,
-                 leak_corner_hz: float = DEFAULT_LEAK_CORNER_HZ,
+                 leak_corner_hz: float = KALMAN_LEAK_CORNER_HZ,
                  offset_drift_a_per_s: float = DEFAULT_OFFSET_DRIFT_A_PER_S,
-                 rest_offset_time_s: float = 10.0, rest_window_s: float = 0.25,
+                 rest_offset_time_s: float = 10.0, rest_window_s: float = 0.15,
                  rest_enter: float = 2.0, rest_leave: float = 4.0, rest_detection: bool = True,
                  channels: int = 1):
         if channels != 1:
@@ -317,9 +325,12 @@ class KalmanEstimator:
         self._q_b_step = self.offset_drift_a_per_s ** 2 * 60.0 * dt
         # detector: band-pass and one-pole energy average
         hi = min(50.0, fs / 4)
-        self._bp = sig.butter(1, [0.5, hi], btype="bandpass", fs=fs, output="sos")
+        self._bp = sig.butter(1, [REST_BAND_LOW_HZ, hi], btype="bandpass", fs=fs, output="sos")
         self._bp_list = self._bp[0].tolist()
-        enbw = math.pi / 2 * (hi - 0.5)
+        imp1 = np.zeros(4096)
+        imp1[0] = 1.0
+        self._bp_unit = float(np.sum(sig.sosfilt(self._bp, imp1) ** 2))
+        enbw = math.pi / 2 * (hi - REST_BAND_LOW_HZ)
         self.noise_energy_a2 = self.current_noise_a ** 2 * 2 * enbw / fs
         self._alpha = math.exp(-1.0 / (fs * self.rest_window_s))
         # white-noise level seen above the motion band (fs/4 .. Nyquist): energy ratio to the band
@@ -352,7 +363,9 @@ class KalmanEstimator:
         """Zero deflection, zero offset, moving mode."""
         self._s = np.zeros(self._n)
         self._bp_zi = np.zeros((self._bp.shape[0], 2))
-        self._energy = 0.0
+        # start as if just moving: rest is entered only after ~rest_window_s of quiet current
+        self._w_ref = 0.0
+        self._energy = 10.0 * self.rest_leave * self.noise_energy_a2
         self._offset_var = OFFSET_PRIOR_A ** 2
         self._sigma2 = self.current_noise_a ** 2
         self._hp_zi = np.zeros((2 if self._hp is None else self._hp.shape[0], 2))
@@ -361,6 +374,11 @@ class KalmanEstimator:
         self._b_last = 0.0
         self.last_std = self.std_moving_m
         self.last_rest = np.zeros(0, bool)
+
+    def _clip_a2(self) -> float:
+        """Cap on one sample's band energy (ENERGY_CLIP times the noise's): a large pulse
+        then delays rest by at most rest_window_s * ln(ENERGY_CLIP / rest_enter) (0.35 s)."""
+        return ENERGY_CLIP * self._sigma2 * self._bp_unit
 
     def _rest_flags(self, y: np.ndarray) -> np.ndarray:
         # single-section filters run by lfilter (same DF-II-T state as sosfilt, less overhead)
@@ -372,14 +390,18 @@ class KalmanEstimator:
             # measured white-noise floor (never below the configured DAQ noise)
             high, zf = sig.lfilter(self._hp[0, :3], self._hp[0, 3:], y, zi=self._hp_zi[0])
             self._hp_zi[0] = zf
-            both, zf = sig.lfilter([1 - a], [1, -a], np.stack([band * band, high * high]), axis=1,
-                                   zi=[[a * self._energy], [a * self._hf_energy]])
-            e, hf = both
-            self._energy, self._hf_energy = float(zf[0, 0] / a), float(zf[1, 0] / a)
+            hf, zf = sig.lfilter([1 - a], [1, -a], high * high, zi=[a * self._hf_energy])
+            # the noise level each sample sees is the one measured up to the sample before
+            sigma2 = np.maximum(self.current_noise_a ** 2, np.concatenate([[self._sigma2], hf[:-1] / self._hp_unit]))
+            self._hf_energy = float(zf[0] / a)
+            sq = np.minimum(band * band, ENERGY_CLIP * self._bp_unit * sigma2)
+            e, zf = sig.lfilter([1 - a], [1, -a], sq, zi=[a * self._energy])
+            self._energy = float(zf[0] / a)
             floor = np.maximum(floor, hf * self._hp_ratio)
             self._sigma2 = max(self.current_noise_a ** 2, self._hf_energy / self._hp_unit)
         else:
-            e, zf = sig.lfilter([1 - a], [1, -a], band * band, zi=[a * self._energy])
+            e, zf = sig.lfilter([1 - a], [1, -a], np.minimum(band * band, self._clip_a2()),
+                                zi=[a * self._energy])
             self._energy = float(zf[0] / a)
         if not self.rest_detection:
             return np.zeros(y.size, bool)
@@ -401,6 +423,7 @@ class KalmanEstimator:
             raise EstimatorError(f"expected shape (n,) or (n, 1), got {y.shape}")
         if y.size == 0:
             return np.empty(0), np.empty(0)
+        was_rest = self.at_rest
         flags = self._rest_flags(y)
         self.last_rest = flags
         cuts = np.flatnonzero(np.diff(flags.astype(np.int8))) + 1
@@ -408,10 +431,17 @@ class KalmanEstimator:
         out = np.empty(y.size)
         for lo, hi in zip(bounds[:-1], bounds[1:]):
             if flags[lo]:
+                self._s[self._iw] += self._w_ref          # rest holds the absolute deflection
+                self._w_ref = 0.0
                 out[lo:hi] = self._run_rest(y[lo:hi])
             else:
+                if was_rest:                              # leaving rest: leak towards this level
+                    self._w_ref = float(self._s[self._iw])
+                    self._s[self._iw] = 0.0
                 out[lo:hi], self._b_last, self._s = self._moving.run(y[lo:hi], self._s)
+                out[lo:hi] += self._w_ref
                 self._offset_var += self._q_b_step * (hi - lo)
+            was_rest = bool(flags[lo])
         self.at_rest = bool(flags[-1])
         self.last_std = self.std_moving_m
         return out, np.full(y.size, self.std_moving_m)
@@ -424,7 +454,7 @@ class KalmanEstimator:
         w, m, s_end = self._rest.run_free(y.size, self._s)
         u = y - m
         b0 = self._s[self._ib]
-        n0 = self._sigma2 / self._offset_var
+        n0 = self.current_noise_a ** 2 / self._offset_var
         counts = n0 + np.arange(1, y.size + 1)
         if counts[-1] <= self._n_max:
             b = (n0 * b0 + float(np.sum(u))) / counts[-1]
@@ -439,7 +469,7 @@ class KalmanEstimator:
         s_end[self._ib] = b
         self._s = s_end
         self._b_last = b
-        self._offset_var = self._sigma2 / n_end
+        self._offset_var = self.current_noise_a ** 2 / n_end
         return w
 
     def process(self, current_a) -> np.ndarray:
@@ -458,7 +488,7 @@ class KalmanEstimator:
         band = b0 * x + z0
         zi[0] = (b1 * x - a1 * band + z1, b2 * x - a2 * band)
         a = self._alpha
-        e = a * self._energy + (1 - a) * band * band
+        e = a * self._energy + (1 - a) * min(band * band, self._clip_a2())
         self._energy = e
         floor = self.noise_energy_a2
         if self._hp is not None and self.rest_detection:
@@ -470,6 +500,7 @@ class KalmanEstimator:
             self._hf_energy = hf = a * self._hf_energy + (1 - a) * high * high
             floor = max(floor, hf * self._hp_ratio)
             self._sigma2 = max(self.current_noise_a ** 2, hf / self._hp_unit)
+        was_rest = self.at_rest
         if self.rest_detection:
             if e > self.rest_leave * floor or band * band > 36.0 * floor:
                 self.at_rest = False
@@ -477,10 +508,16 @@ class KalmanEstimator:
                 self.at_rest = True
         st = self._s.tolist()
         iw, ib = self._iw, self._ib
+        if self.at_rest and self._w_ref:
+            st[iw] += self._w_ref
+            self._w_ref = 0.0
+        elif was_rest and not self.at_rest:
+            self._w_ref = st[iw]
+            st[iw] = 0.0
         if self.at_rest:
             mode = self._rest
             m = sum(map(mul, self._c_motion_list, st))
-            n0 = self._sigma2 / self._offset_var
+            n0 = self.current_noise_a ** 2 / self._offset_var
             n1 = min(n0 + 1.0, self._n_max)
             g = 1.0 / (n1 if n0 + 1.0 <= self._n_max else self._n_max + 1.0)
             b = st[ib] + g * (y - m - st[ib])
@@ -488,11 +525,11 @@ class KalmanEstimator:
             new = [sum(map(mul, row, st)) for row in mode.f_rows]
             new[ib] = b
             self._b_last = b
-            self._offset_var = self._sigma2 / n1
+            self._offset_var = self.current_noise_a ** 2 / n1
         else:
             mode = self._moving
             innov = y - sum(map(mul, self._c_list, st))
-            w = st[iw] + self._k_w * innov
+            w = st[iw] + self._k_w * innov + self._w_ref
             self._b_last = st[ib] + self._k_b * innov
             new = [sum(map(mul, row, st)) + g * y for row, g in zip(mode.f_rows, mode.g_list)]
             self._offset_var += self._q_b_step
@@ -504,7 +541,9 @@ class KalmanEstimator:
 
     def get_state(self) -> dict:
         return {"s": self._s.copy(), "bp_zi": self._bp_zi.copy(), "energy": self._energy,
-                "at_rest": self.at_rest, "offset_a": self._b_last}
+                "at_rest": self.at_rest, "offset_a": self._b_last, "w_ref": self._w_ref,
+                "hp_zi": self._hp_zi.copy(), "hf_energy": self._hf_energy, "offset_var": self._offset_var,
+                "sigma2": self._sigma2}
 
     def set_state(self, state: dict) -> None:
         s = np.asarray(state.get("s"), float)
@@ -515,10 +554,15 @@ class KalmanEstimator:
         self._energy = float(state["energy"])
         self.at_rest = bool(state["at_rest"])
         self._b_last = float(state["offset_a"])
+        self._w_ref = float(state["w_ref"])
+        self._hp_zi = np.asarray(state["hp_zi"], float).copy()
+        self._hf_energy = float(state["hf_energy"])
+        self._offset_var = float(state["offset_var"])
+        self._sigma2 = float(state["sigma2"])
 
     def current_output(self) -> np.ndarray:
         """Deflection held in the predicted state (per channel), m."""
-        return np.array([self._s[self._iw]])
+        return np.array([self._s[self._iw] + self._w_ref])
 
     def continue_from(self, old, recent_input=None) -> None:
         """Take over ``old``'s deflection and offset (bumpless); the fast states are
@@ -529,6 +573,8 @@ class KalmanEstimator:
             self.process(np.asarray(recent_input, float).reshape(-1))
         if isinstance(old, KalmanEstimator):
             self._s[self._iw] = old._s[old._iw]
+            self._w_ref = old._w_ref
+            self._offset_var = old._offset_var
             self._s[self._ib] = old._s[old._ib]
             self._b_last = old._b_last
             self.at_rest = old.at_rest
