@@ -99,6 +99,8 @@ ENERGY_CLIP = 20.0
 #: Low edge of the rest detector's band, Hz: a motion slower than this (and a
 #: current pulse's high-pass tail, time constant 1/(2 pi f)) is not seen.
 REST_BAND_LOW_HZ = 1.0
+#: Averaging time of the measured white-noise floor, s.
+NOISE_WINDOW_S = 2.0
 
 
 def offset_corner_hz(reduced: ReducedModel, motion_velocity_m_s: float = DEFAULT_MOTION_VELOCITY_M_S,
@@ -312,6 +314,7 @@ class KalmanEstimator:
         self._c, self._iw, self._ib, self._n = c, iw, ib, N
         self._c_motion = c.copy()
         self._c_motion[ib] = 0.0
+        self._motion_idx = np.r_[np.arange(n), iv]
         self._c_list, self._c_motion_list = c.tolist(), self._c_motion.tolist()
         self._k_w, self._k_b = float(k[iw]), float(k[ib])
         self._k_moving = k
@@ -333,6 +336,9 @@ class KalmanEstimator:
         enbw = math.pi / 2 * (hi - REST_BAND_LOW_HZ)
         self.noise_energy_a2 = self.current_noise_a ** 2 * 2 * enbw / fs
         self._alpha = math.exp(-1.0 / (fs * self.rest_window_s))
+        # the noise floor is averaged over NOISE_WINDOW_S and each sample's energy capped at
+        # ENERGY_CLIP^2 times the configured noise's, so a jump in the current cannot raise it
+        self._alpha_hf = math.exp(-1.0 / (fs * NOISE_WINDOW_S))
         # white-noise level seen above the motion band (fs/4 .. Nyquist): energy ratio to the band
         self._hp = sig.butter(2, fs / 4, btype="highpass", fs=fs, output="sos") if fs / 4 > 2 * hi else None
         if self._hp is not None:
@@ -340,6 +346,7 @@ class KalmanEstimator:
             imp[0] = 1.0
             self._hp_list = self._hp[0].tolist()
             self._hp_unit = float(np.sum(sig.sosfilt(self._hp, imp) ** 2))
+            self._hf_clip = ENERGY_CLIP ** 2 * self.current_noise_a ** 2 * self._hp_unit
             self._hp_ratio = float(np.sum(sig.sosfilt(self._bp, imp) ** 2) / np.sum(sig.sosfilt(self._hp, imp) ** 2))
             self.noise_energy_a2 = self.current_noise_a ** 2 * float(np.sum(sig.sosfilt(self._bp, imp) ** 2))
 
@@ -369,7 +376,7 @@ class KalmanEstimator:
         self._offset_var = OFFSET_PRIOR_A ** 2
         self._sigma2 = self.current_noise_a ** 2
         self._hp_zi = np.zeros((2 if self._hp is None else self._hp.shape[0], 2))
-        self._hf_energy = 0.0
+        self._hf_energy = 0.0 if self._hp is None else self.current_noise_a ** 2 * self._hp_unit
         self.at_rest = False
         self._b_last = 0.0
         self.last_std = self.std_moving_m
@@ -390,10 +397,11 @@ class KalmanEstimator:
             # measured white-noise floor (never below the configured DAQ noise)
             high, zf = sig.lfilter(self._hp[0, :3], self._hp[0, 3:], y, zi=self._hp_zi[0])
             self._hp_zi[0] = zf
-            hf, zf = sig.lfilter([1 - a], [1, -a], high * high, zi=[a * self._hf_energy])
+            ah = self._alpha_hf
+            hf, zf = sig.lfilter([1 - ah], [1, -ah], np.minimum(high * high, self._hf_clip), zi=[ah * self._hf_energy])
             # the noise level each sample sees is the one measured up to the sample before
             sigma2 = np.maximum(self.current_noise_a ** 2, np.concatenate([[self._sigma2], hf[:-1] / self._hp_unit]))
-            self._hf_energy = float(zf[0] / a)
+            self._hf_energy = float(zf[0] / ah)
             sq = np.minimum(band * band, ENERGY_CLIP * self._bp_unit * sigma2)
             e, zf = sig.lfilter([1 - a], [1, -a], sq, zi=[a * self._energy])
             self._energy = float(zf[0] / a)
@@ -447,12 +455,15 @@ class KalmanEstimator:
         return out, np.full(y.size, self.std_moving_m)
 
     def _run_rest(self, y: np.ndarray) -> np.ndarray:
-        """Rest: deflection held (free dynamics, no leak), offset = running mean of the
-        current minus the predicted motion current, weighted by its prior variance
+        """Rest: deflection held, velocity and charge states zero (the detector has seen
+        quiet current for ~rest_window_s, many times the sensor's memory), offset = running
+        mean of the current, weighted by its prior variance
         (n0 = sigma^2 / P_b equivalent samples), then an exponential average over
         at most ``rest_offset_time_s`` (drift)."""
-        w, m, s_end = self._rest.run_free(y.size, self._s)
-        u = y - m
+        s_end = self._s.copy()
+        s_end[self._motion_idx] = 0.0       # at rest nothing moves: no predicted motion current
+        w = np.full(y.size, s_end[self._iw])
+        u = y
         b0 = self._s[self._ib]
         n0 = self.current_noise_a ** 2 / self._offset_var
         counts = n0 + np.arange(1, y.size + 1)
@@ -497,7 +508,8 @@ class KalmanEstimator:
             y0, y1 = hz.item(0), hz.item(1)
             high = h0 * x + y0
             hz[0] = (h1 * x - g1 * high + y1, h2 * x - g2 * high)
-            self._hf_energy = hf = a * self._hf_energy + (1 - a) * high * high
+            ah = self._alpha_hf
+            self._hf_energy = hf = ah * self._hf_energy + (1 - ah) * min(high * high, self._hf_clip)
             floor = max(floor, hf * self._hp_ratio)
             self._sigma2 = max(self.current_noise_a ** 2, hf / self._hp_unit)
         was_rest = self.at_rest
@@ -515,14 +527,15 @@ class KalmanEstimator:
             self._w_ref = st[iw]
             st[iw] = 0.0
         if self.at_rest:
-            mode = self._rest
-            m = sum(map(mul, self._c_motion_list, st))
+            for j in self._motion_idx.tolist():
+                st[j] = 0.0
+            m = 0.0
             n0 = self.current_noise_a ** 2 / self._offset_var
             n1 = min(n0 + 1.0, self._n_max)
             g = 1.0 / (n1 if n0 + 1.0 <= self._n_max else self._n_max + 1.0)
             b = st[ib] + g * (y - m - st[ib])
             w = st[iw]
-            new = [sum(map(mul, row, st)) for row in mode.f_rows]
+            new = st
             new[ib] = b
             self._b_last = b
             self._offset_var = self.current_noise_a ** 2 / n1
