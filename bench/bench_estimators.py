@@ -36,6 +36,23 @@ def nrmse(w_hat, w, t, after_s=5.0):
     return float(np.sqrt(np.mean((w_hat[sel] - w[sel]) ** 2)) / np.sqrt(np.mean(w[sel] ** 2)))
 
 
+BOUNDS: dict = {}
+
+
+def rest_offset_bound(model, t, w, rest_s=2.0, after_s=5.0):
+    """NRMSE floor of any estimator that can follow a deflection ramp, when the offset can
+    only be learned during the first ``rest_s`` of rest: the sample mean of fs*rest_s samples
+    (optimal for a constant in white noise) leaves db ~ sigma/sqrt(fs rest_s); in motion db is
+    a constant velocity db/R0 (H(0) = 0), so the error grows as db (t - rest_s)/R0."""
+    from ipmc_sensor_ros.simulation.sensor import predict_current
+    clean = predict_current(model, t, w)
+    sigma = 0.01 * np.sqrt(np.mean(clean ** 2))
+    db = sigma / np.sqrt(FS * rest_s)
+    r0 = model.charge_gain_dc()
+    sel = t >= after_s
+    return float(db * np.sqrt(np.mean((t[sel] - rest_s) ** 2)) / abs(r0) / np.sqrt(np.mean(w[sel] ** 2)))
+
+
 def scenarios(seed: int):
     """(row name, sample, t, w, i, mains_hz) for one seed."""
     rng = np.random.default_rng(1000 + seed)
@@ -47,6 +64,9 @@ def scenarios(seed: int):
             w = started(t, CrankSlider(f, 2e-3, 20e-3, phase_rad=rng.uniform(0, 6.28)).deflection(t))
             i = daq_current(m, t, w, offset_a=10e-9, noise_fraction=0.01, seed=seed)
             rows.append((f"crank {f:g} Hz 1% + 10 nA (2 s rest first)", sample, t, w, i, 0))
+            key = (f"crank {f:g} Hz 1% + 10 nA (2 s rest first)", sample)
+            if key not in BOUNDS:
+                BOUNDS[key] = rest_offset_bound(m, t, w)
             w0 = CrankSlider(f, 2e-3, 20e-3, phase_rad=rng.uniform(0, 6.28)).deflection(t)
             w0 = w0 * np.clip(t / 0.5, 0, 1)
             i0 = daq_current(m, t, w0, offset_a=10e-9, noise_fraction=0.01, seed=seed)
@@ -134,7 +154,8 @@ def main():
     print(f"{'row':52s} {'sample':6s} {'leaky NRMSE %':>18s} {'kalman NRMSE %':>18s}")
     for (name, sample), d in table.items():
         fmt = lambda v: f"{100 * np.mean(v):6.1f} (max {100 * np.max(v):5.1f})"
-        print(f"{name:52s} {sample:6s} {fmt(d['leaky']):>18s} {fmt(d['kalman']):>18s}")
+        bound = f"  bound {100 * BOUNDS[(name, sample)]:5.1f}" if (name, sample) in BOUNDS else ""
+        print(f"{name:52s} {sample:6s} {fmt(d['leaky']):>18s} {fmt(d['kalman']):>18s}{bound}")
     if args.hour:
         m, t, w, i = hour_row()
         for est in ("leaky", "kalman"):

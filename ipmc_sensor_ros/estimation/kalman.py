@@ -174,10 +174,6 @@ class _Mode:
         self.dropped = np.flatnonzero(~keep)
         self.partner = np.array([int(np.argmin(np.abs(self.lam - np.conj(lam[j])))) for j in self.dropped],
                                 dtype=int)
-        if np.all(np.abs(self.lam.imag) <= 1e-14 * np.abs(self.lam)):
-            self.lam_real = self.lam.real.copy()     # real modes: real powers in run_free
-        else:
-            self.lam_real = None
         self.a_list = [np.array([1.0, -l]) for l in self.lam]
         self.b_list = [np.array([0.0, gg]) for gg in self.g]
 
@@ -194,21 +190,6 @@ class _Mode:
             z_end[j] = zf[0]
         b_last = float((self.hb @ zlast).real + self.db * y[-1])
         return w, b_last, self._to_state(z_end)
-
-    def run_free(self, length: int, s0: np.ndarray):
-        """Free response (no measurement update) over ``length`` samples from s0:
-        (w, predicted motion current, state after the run)."""
-        z0 = (self.vinv @ s0)[self.keep]
-        lam = self.lam if self.lam_real is None else self.lam_real
-        if self.lam_real is not None:
-            z0r = z0.real
-            z = z0r[:, None] * lam[:, None] ** np.arange(length)[None, :]
-            w, m = (self.hw.real @ z), (self.hm.real @ z)
-            return w, m, self._to_state(z0 * self.lam ** length)
-        z = z0[:, None] * lam[:, None] ** np.arange(length)[None, :]
-        w = (self.hw @ z).real
-        m = (self.hm @ z).real
-        return w, m, self._to_state(z0 * self.lam ** length)
 
     def _to_state(self, z_kept: np.ndarray) -> np.ndarray:
         """Physical state from the kept modal values (dropped modes are conjugates)."""
@@ -320,10 +301,7 @@ class KalmanEstimator:
         self._k_moving = k
         self._ad_moving = ad
         self._moving = _Mode(ad, k, c, iw, ib, scale)
-        # rest: no leak, velocity decays, only the offset is updated (gain g)
-        rest = ac.copy()
-        ad_rest, _ = _van_loan(rest, qc, dt)
-        self._rest = _Mode(ad_rest, np.zeros(N), c, iw, ib, scale)
+        # rest: see _run_rest (deflection held, offset averaged)
         self._n_max = fs * self.rest_offset_time_s
         self._q_b_step = self.offset_drift_a_per_s ** 2 * 60.0 * dt
         # detector: band-pass and one-pole energy average
