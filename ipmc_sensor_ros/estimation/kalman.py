@@ -350,6 +350,7 @@ class KalmanEstimator:
         self._bp_zi = np.zeros((self._bp.shape[0], 2))
         # start as if just moving: rest is entered only after ~rest_window_s of quiet current
         self._w_ref = 0.0
+        self._lp = 0.0
         self._energy = 10.0 * self.rest_leave * self.noise_energy_a2
         self._offset_var = OFFSET_PRIOR_A ** 2
         self._sigma2 = self.current_noise_a ** 2
@@ -364,6 +365,13 @@ class KalmanEstimator:
         """Cap on one sample's band energy (ENERGY_CLIP times the noise's): a large pulse
         then delays rest by at most rest_window_s * ln(ENERGY_CLIP / rest_enter) (0.35 s)."""
         return ENERGY_CLIP * self._sigma2 * self._bp_unit
+
+    def _dc_limit_a2(self) -> float:
+        """Largest squared departure of the low-passed current from the offset estimate
+        that still counts as rest: (4 sigma)^2 of that difference, sigma^2 = the mean's
+        noise sigma^2/(2 fs rest_window_s) + the offset's variance P_b (+ 2 nA for the
+        reduction/drift).  A deflection ramp of v m/s gives R0 v of steady current."""
+        return 16.0 * (self._sigma2 / (2 * self._fs * self.rest_window_s) + self._offset_var + 4e-18)
 
     def _rest_flags(self, y: np.ndarray) -> np.ndarray:
         # single-section filters run by lfilter (same DF-II-T state as sosfilt, less overhead)
@@ -389,11 +397,16 @@ class KalmanEstimator:
             e, zf = sig.lfilter([1 - a], [1, -a], np.minimum(band * band, self._clip_a2()),
                                 zi=[a * self._energy])
             self._energy = float(zf[0] / a)
+        # low-passed current against the offset estimate (a slow ramp is a steady current
+        # the band-pass does not see, H(0) = 0): see _dc_limit_a2
+        lp, zf = sig.lfilter([1 - a], [1, -a], y, zi=[a * self._lp])
+        self._lp = float(zf[0] / a)
         if not self.rest_detection:
             return np.zeros(y.size, bool)
         # leave rest on the averaged energy, or at once on one sample beyond 6 sigma of the
         # in-band noise (false alarm 2e-9 per sample), so a sudden move never feeds the offset
-        moving = (e > self.rest_leave * floor) | (band * band > 36.0 * floor)
+        dc = lp - self._b_last
+        moving = (e > self.rest_leave * floor) | (band * band > 36.0 * floor) | (dc * dc > self._dc_limit_a2())
         code = np.where(moving, 0, np.where(e < self.rest_enter * floor, 1, -1))
         idx = np.where(code >= 0, np.arange(y.size), -1)
         np.maximum.accumulate(idx, out=idx)
@@ -491,8 +504,10 @@ class KalmanEstimator:
             floor = max(floor, hf * self._hp_ratio)
             self._sigma2 = max(self.current_noise_a ** 2, hf / self._hp_unit)
         was_rest = self.at_rest
+        self._lp = lp = a * self._lp + (1 - a) * x
         if self.rest_detection:
-            if e > self.rest_leave * floor or band * band > 36.0 * floor:
+            dc = lp - self._b_last
+            if e > self.rest_leave * floor or band * band > 36.0 * floor or dc * dc > self._dc_limit_a2():
                 self.at_rest = False
             elif e < self.rest_enter * floor:
                 self.at_rest = True
@@ -534,7 +549,7 @@ class KalmanEstimator:
         return {"s": self._s.copy(), "bp_zi": self._bp_zi.copy(), "energy": self._energy,
                 "at_rest": self.at_rest, "offset_a": self._b_last, "w_ref": self._w_ref,
                 "hp_zi": self._hp_zi.copy(), "hf_energy": self._hf_energy, "offset_var": self._offset_var,
-                "sigma2": self._sigma2}
+                "sigma2": self._sigma2, "lp": self._lp}
 
     def set_state(self, state: dict) -> None:
         s = np.asarray(state.get("s"), float)
@@ -550,6 +565,7 @@ class KalmanEstimator:
         self._hf_energy = float(state["hf_energy"])
         self._offset_var = float(state["offset_var"])
         self._sigma2 = float(state["sigma2"])
+        self._lp = float(state["lp"])
 
     def current_output(self) -> np.ndarray:
         """Deflection held in the predicted state (per channel), m."""
