@@ -101,7 +101,7 @@ ENERGY_CLIP = 20.0
 #: current pulse's high-pass tail, time constant 1/(2 pi f)) is not seen.
 REST_BAND_LOW_HZ = 1.0
 #: Averaging time of the measured white-noise floor, s.
-NOISE_WINDOW_S = 2.0
+NOISE_WINDOW_S = 0.5
 
 
 def offset_corner_hz(reduced: ReducedModel, motion_velocity_m_s: float = DEFAULT_MOTION_VELOCITY_M_S,
