@@ -51,19 +51,32 @@ also erase slow deflection ramps).  It is learned when the sensor rests:
 
 Rest detector and gain scheduling
 ---------------------------------
-The current is band-passed (1 Hz to min(50 Hz, fs/4); each sample's energy capped at
-``ENERGY_CLIP`` times the noise's so a pulse delays rest by < 1 s) and its energy averaged
-over ``rest_window_s``.  The sensor is *at rest* when that energy falls below
-``rest_enter`` times the energy the white noise alone puts in the band, and
-*moving* again as soon as it exceeds ``rest_leave`` times it (hysteresis).
-At rest the leak and velocity noise are switched off (the deflection is held:
-w is frozen as a gyro's angle is when its bias is learned at standstill) and the
-offset is learned with the time constant ``rest_offset_time_s`` (the scalar
-steady-state Kalman gain of a random walk, ``g = 1/(fs tau)``).  Each mode is an
-LTI filter; within a run of samples of one mode the filter is run in modal
-coordinates (one first-order :func:`scipy.signal.lfilter` per eigenvalue of the
-closed-loop matrix, conjugate pairs once), so blocks are vectorised and the
-state passes exactly between modes.
+The current is band-passed (``REST_BAND_LOW_HZ`` = 1 Hz to min(50 Hz, fs/4)), each
+sample's energy capped at ``ENERGY_CLIP`` times the noise's (a pulse then delays
+rest by < 0.5 s) and averaged over ``rest_window_s``.  The noise energy is the
+larger of ``current_noise_a`` and the white noise measured above the motion band
+(fs/4 .. Nyquist, averaged over ``NOISE_WINDOW_S``).  The sensor is *at rest* when
+the band energy falls below ``rest_enter`` times the noise's; it is *moving* again
+as soon as the energy exceeds ``rest_leave`` times it (hysteresis), one sample
+exceeds 6 sigma, or the low-passed current departs from the offset estimate by
+more than 4 sigma of their difference (a slow deflection ramp is a steady current
+R0 dw/dt the band-pass cannot see).
+At rest the deflection is held (frozen, as a gyro's angle while its bias is
+learned at standstill), the charge and velocity states are zeroed and the offset
+is the running mean of the current, started with the weight sigma^2/P_b of its
+previous estimate (P_b grows by q_b per second of motion) and, once it has
+``fs * rest_offset_time_s`` samples, an exponential average that follows drift
+(lag 0.17 nA at 1 nA/min with the default 10 s).  Leaving rest, the leak pulls
+towards the held level (not zero).  The moving mode is an LTI filter run over each
+run of moving samples in modal coordinates (one first-order
+:func:`scipy.signal.lfilter` per eigenvalue of the closed-loop matrix, conjugate
+pairs once), so blocks are vectorised and the state passes exactly between modes.
+
+What this cannot do: an offset present while the sensor never rests is learned
+only at ``f_c`` (it acts like the leaky inverse's offset error); a deflection that
+moves slower than the rest detector's band *and* whose current R0 dw/dt stays
+within 4 sigma of the offset estimate is taken for rest and its current for
+offset; an offset *step* while moving is integrated until the next rest.
 
 Uncertainty
 -----------
