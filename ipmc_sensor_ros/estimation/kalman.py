@@ -14,11 +14,10 @@ charge model ``R_n`` driven by the tip *velocity* v.  The state is
     b'   = xi_b                           (current offset: constant + random-walk drift)
     i    = C_R x_R + D_R v + b + n        (measured current, A)
 
-with white noises of intensities ``q_v = 2 a sigma_v^2`` (so the velocity RMS
-is ``motion_velocity_m_s`` = sigma_v, flat up to ``motion_bandwidth_hz``),
-``q_b = offset_drift_a_per_s^2 * 60 s`` (a random walk that moves by
-``offset_drift_a_per_s * 60 s`` RMS per minute) and a measurement noise of RMS
-``current_noise_a`` per sample.  The tiny leak ``w_l`` makes w detectable
+with white noises of intensities ``q_v = 2 a sigma_v^2`` (velocity RMS sigma_v =
+``motion_velocity_m_s``, flat up to ``motion_bandwidth_hz``), ``q_b =
+offset_drift_a_per_s^2 * 60 s`` (moves by ``offset_drift_a_per_s * 60 s`` RMS per
+minute) and a measurement noise of RMS ``current_noise_a`` per sample.  The tiny leak ``w_l`` makes w detectable
 (a pure integrator that nothing measures has no steady-state Kalman gain); its
 default 0.002 Hz (``KALMAN_LEAK_CORNER_HZ``) is five times below the leaky inverse's.  The model is discretised
 exactly (Van Loan, :func:`scipy.linalg.expm`) and the steady-state gain comes
@@ -78,11 +77,8 @@ moves slower than the rest detector's band *and* whose current R0 dw/dt stays
 within 4 sigma of the offset estimate is taken for rest and its current for
 offset; an offset *step* while moving is integrated until the next rest.
 
-Uncertainty
------------
-``last_std`` is the standard deviation of w from the steady-state posterior
-covariance of the moving mode (held unchanged at rest, when w is frozen);
-it does not include the reduction error or an unmodelled offset step.
+Uncertainty: ``last_std`` is the standard deviation of w from the moving mode's
+steady-state posterior covariance (held at rest); it excludes reduction error.
 """
 from __future__ import annotations
 
@@ -182,9 +178,6 @@ class _Mode:
         self.f, self.gvec, self.k = f, g, k
         self.f_rows = [list(map(float, row)) for row in f]     # plain floats for process_one
         self.g_list = list(map(float, g))
-        c_motion = c.copy()
-        c_motion[ib] = 0.0
-        self.hm = (c_motion @ v)[self.keep] * pair[self.keep]   # predicted current without offset
         self.dropped = np.flatnonzero(~keep)
         self.partner = np.array([int(np.argmin(np.abs(self.lam - np.conj(lam[j])))) for j in self.dropped],
                                 dtype=int)
@@ -307,13 +300,9 @@ class KalmanEstimator:
         k = k_s * scale / self.current_noise_a
         self.std_moving_m = float(math.sqrt(max(post[iw, iw], 0.0)) * scale[iw])
         self._c, self._iw, self._ib, self._n = c, iw, ib, N
-        self._c_motion = c.copy()
-        self._c_motion[ib] = 0.0
         self._motion_idx = np.r_[np.arange(n), iv]
-        self._c_list, self._c_motion_list = c.tolist(), self._c_motion.tolist()
+        self._c_list = c.tolist()
         self._k_w, self._k_b = float(k[iw]), float(k[ib])
-        self._k_moving = k
-        self._ad_moving = ad
         self._moving = _Mode(ad, k, c, iw, ib, scale)
         # rest: see _run_rest (deflection held, offset averaged)
         self._n_max = fs * self.rest_offset_time_s
@@ -536,11 +525,10 @@ class KalmanEstimator:
         if self.at_rest:
             for j in self._motion_idx.tolist():
                 st[j] = 0.0
-            m = 0.0
             n0 = self.current_noise_a ** 2 / self._offset_var
             n1 = min(n0 + 1.0, self._n_max)
             g = 1.0 / (n1 if n0 + 1.0 <= self._n_max else self._n_max + 1.0)
-            b = st[ib] + g * (y - m - st[ib])
+            b = st[ib] + g * (y - st[ib])
             w = st[iw]
             new = st
             new[ib] = b
@@ -555,9 +543,6 @@ class KalmanEstimator:
             self._offset_var += self._q_b_step
         self._s[:] = new
         return w
-
-    def process_sample(self, current_a: float) -> float:
-        return self.process_one(current_a)
 
     def get_state(self) -> dict:
         return {"s": self._s.copy(), "bp_zi": self._bp_zi.copy(), "energy": self._energy,
