@@ -94,7 +94,7 @@ from ..lti.reduction import ReducedModel
 
 __all__ = ["KalmanEstimator", "offset_corner_hz", "DEFAULT_CURRENT_NOISE_A"]
 
-#: Default DAQ current noise, A RMS per sample (see the module docstring).
+#: Defaults (see the module docstring): DAQ noise A RMS per sample, motion, drift.
 DEFAULT_CURRENT_NOISE_A = 20e-9
 DEFAULT_MOTION_VELOCITY_M_S = 0.1
 DEFAULT_MOTION_BANDWIDTH_HZ = 50.0
@@ -106,8 +106,7 @@ KALMAN_LEAK_CORNER_HZ = 0.002
 OFFSET_PRIOR_A = 100e-9
 #: Cap on one sample's band-passed energy in the rest detector, in units of the noise's.
 ENERGY_CLIP = 20.0
-#: Low edge of the rest detector's band, Hz: a motion slower than this (and a
-#: current pulse's high-pass tail, time constant 1/(2 pi f)) is not seen.
+#: Low edge of the rest detector's band, Hz (slower motion is seen only by the offset test).
 REST_BAND_LOW_HZ = 1.0
 #: Averaging time of the measured white-noise floor, s.
 NOISE_WINDOW_S = 0.5
@@ -243,7 +242,7 @@ class KalmanEstimator:
         self.motion_velocity_m_s = _positive("motion_velocity_m_s", motion_velocity_m_s)
         self.motion_bandwidth_hz = _positive("motion_bandwidth_hz", motion_bandwidth_hz)
         self.leak_corner_hz = _positive("leak_corner_hz", leak_corner_hz)
-        self.offset_corner_hz = None      # interface parity with InverseEstimator
+        self.offset_corner_hz = None      # interface parity with InverseEstimator (no tracker)
         self.offset_drift_a_per_s = _positive("offset_drift_a_per_s", offset_drift_a_per_s)
         self.rest_offset_time_s = _positive("rest_offset_time_s", rest_offset_time_s)
         self.rest_window_s = _positive("rest_window_s", rest_window_s)
@@ -342,9 +341,8 @@ class KalmanEstimator:
         return self._b_last
 
     @property
-    def offset_corner_while_moving_hz(self) -> float:
-        return offset_corner_hz(self.reduced, self.motion_velocity_m_s, self.motion_bandwidth_hz,
-                                self.offset_drift_a_per_s)
+    def offset_corner_while_moving_hz(self) -> float:   # see offset_corner_hz
+        return offset_corner_hz(self.reduced, self.motion_velocity_m_s, self.motion_bandwidth_hz, self.offset_drift_a_per_s)
 
     # -- streaming ------------------------------------------------------------
     def reset(self) -> None:
