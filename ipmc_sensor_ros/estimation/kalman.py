@@ -102,6 +102,8 @@ DEFAULT_OFFSET_DRIFT_A_PER_S = 1e-9 / 60.0
 #: Default deflection leak while moving, Hz (time constant 80 s): a held deflection not yet
 #: detected as rest loses 1.3 % per second; a residual offset db gives at most db / (R0 w_l).
 KALMAN_LEAK_CORNER_HZ = 0.002
+#: Deflection leak before the first rest (level unknown), Hz: the leaky inverse's corner.
+START_LEAK_CORNER_HZ = 0.01
 #: Prior RMS of the current offset before any rest, A (DAQ offsets: tens of nA).
 OFFSET_PRIOR_A = 100e-9
 #: Cap on one sample's band-passed energy in the rest detector, in units of the noise's.
@@ -175,6 +177,7 @@ class _Mode:
         self.hb = (ikc[ib] @ v)[self.keep] * pair[self.keep]
         self.db = float(k[ib])
         self.f, self.gvec, self.k = f, g, k
+        self.k_w, self.k_b = float(k[iw]), float(k[ib])
         self.f_rows = [list(map(float, row)) for row in f]     # plain floats for process_one
         self.g_list = list(map(float, g))
         self.dropped = np.flatnonzero(~keep)
@@ -280,29 +283,20 @@ class KalmanEstimator:
         qc = np.zeros((N, N))
         qc[iv, iv] = 2 * a * sv ** 2
         qc[ib, ib] = self.offset_drift_a_per_s ** 2 * 60.0
-        moving = ac.copy()
-        moving[iw, iw] = -wl
-        ad, qd = _van_loan(moving, qc, dt)
         # scaling for a well-conditioned Riccati solve: x = S x~
         scale = np.ones(N)
         scale[:n] = sv / np.abs(np.diag(ar))
         scale[iw] = 1e-3
         scale[iv] = sv
         scale[ib] = self.current_noise_a
-        s_inv = 1.0 / scale
-        ad_s = ad * s_inv[:, None] * scale[None, :]
-        qd_s = qd * s_inv[:, None] * s_inv[None, :]
-        c_s = c * scale / self.current_noise_a
-        p_s = la.solve_discrete_are(ad_s.T, c_s[:, None], qd_s + 1e-30 * np.eye(N), np.array([[1.0]]))
-        k_s = p_s @ c_s / (c_s @ p_s @ c_s + 1.0)
-        post = p_s - np.outer(k_s, c_s @ p_s)
-        k = k_s * scale / self.current_noise_a
-        self.std_moving_m = float(math.sqrt(max(post[iw, iw], 0.0)) * scale[iw])
         self._c, self._iw, self._ib, self._n = c, iw, ib, N
         self._motion_idx = np.r_[np.arange(n), iv]
         self._c_list = c.tolist()
-        self._k_w, self._k_b = float(k[iw]), float(k[ib])
-        self._moving = _Mode(ad, k, c, iw, ib, scale)
+        self._moving = self._moving_mode(ac, qc, c, scale, wl, dt)
+        # until the first rest the deflection's level is unknown (the motion may have begun
+        # before the record): leak at the leaky inverse's corner, as it does
+        self._moving_start = self._moving_mode(ac, qc, c, scale, 2 * math.pi * START_LEAK_CORNER_HZ, dt)
+        self.std_moving_m = self._moving.std_m
         # rest: see _run_rest (deflection held, offset averaged)
         self._n_max = fs * self.rest_offset_time_s
         self._q_b_step = self.offset_drift_a_per_s ** 2 * 60.0 * dt
@@ -330,6 +324,23 @@ class KalmanEstimator:
             self._hp_ratio = float(np.sum(sig.sosfilt(self._bp, imp) ** 2) / np.sum(sig.sosfilt(self._hp, imp) ** 2))
             self.noise_energy_a2 = self.current_noise_a ** 2 * float(np.sum(sig.sosfilt(self._bp, imp) ** 2))
 
+    def _moving_mode(self, ac, qc, c, scale, wl, dt) -> "_Mode":
+        """Steady-state Kalman predictor of the moving model with deflection leak wl (rad/s)."""
+        N, iw, ib = ac.shape[0], self._iw, self._ib
+        moving = ac.copy()
+        moving[iw, iw] = -wl
+        ad, qd = _van_loan(moving, qc, dt)
+        s_inv = 1.0 / scale
+        ad_s = ad * s_inv[:, None] * scale[None, :]
+        qd_s = qd * s_inv[:, None] * s_inv[None, :]
+        c_s = c * scale / self.current_noise_a
+        p_s = la.solve_discrete_are(ad_s.T, c_s[:, None], qd_s + 1e-30 * np.eye(N), np.array([[1.0]]))
+        k_s = p_s @ c_s / (c_s @ p_s @ c_s + 1.0)
+        post = p_s - np.outer(k_s, c_s @ p_s)
+        mode = _Mode(ad, k_s * scale / self.current_noise_a, c, iw, ib, scale)
+        mode.std_m = float(math.sqrt(max(post[iw, iw], 0.0)) * scale[iw])
+        return mode
+
     # -- properties -----------------------------------------------------------
     @property
     def sample_rate_hz(self) -> float:
@@ -351,6 +362,7 @@ class KalmanEstimator:
         self._bp_zi = np.zeros((self._bp.shape[0], 2))
         # start as if just moving: rest is entered only after ~rest_window_s of quiet current
         self._w_ref = 0.0
+        self._seen_rest = False
         self._lp = 0.0
         self._energy = 10.0 * self.rest_leave * self.noise_energy_a2
         self._offset_var = OFFSET_PRIOR_A ** 2
@@ -359,7 +371,7 @@ class KalmanEstimator:
         self._hf_energy = 0.0 if self._hp is None else self.current_noise_a ** 2 * self._hp_unit
         self.at_rest = False
         self._b_last = 0.0
-        self.last_std = self.std_moving_m
+        self.last_std = self._moving_start.std_m
         self.last_rest = np.zeros(0, bool)
 
     def _clip_a2(self) -> float:
@@ -431,6 +443,7 @@ class KalmanEstimator:
         out = np.empty(y.size)
         for lo, hi in zip(bounds[:-1], bounds[1:]):
             if flags[lo]:
+                self._seen_rest = True
                 self._s[self._iw] += self._w_ref          # rest holds the absolute deflection
                 self._w_ref = 0.0
                 out[lo:hi] = self._run_rest(y[lo:hi])
@@ -438,13 +451,14 @@ class KalmanEstimator:
                 if was_rest:                              # leaving rest: leak towards this level
                     self._w_ref = float(self._s[self._iw])
                     self._s[self._iw] = 0.0
-                out[lo:hi], self._b_last, self._s = self._moving.run(y[lo:hi], self._s)
+                mode = self._moving if self._seen_rest else self._moving_start
+                out[lo:hi], self._b_last, self._s = mode.run(y[lo:hi], self._s)
                 out[lo:hi] += self._w_ref
                 self._offset_var += self._q_b_step * (hi - lo)
             was_rest = bool(flags[lo])
         self.at_rest = bool(flags[-1])
-        self.last_std = self.std_moving_m
-        return out, np.full(y.size, self.std_moving_m)
+        self.last_std = (self._moving if self._seen_rest else self._moving_start).std_m
+        return out, np.full(y.size, self.last_std)
 
     def _run_rest(self, y: np.ndarray) -> np.ndarray:
         """Rest: deflection held, velocity and charge states zero (the detector has seen
@@ -521,6 +535,7 @@ class KalmanEstimator:
             self._w_ref = st[iw]
             st[iw] = 0.0
         if self.at_rest:
+            self._seen_rest = True
             for j in self._motion_idx.tolist():
                 st[j] = 0.0
             n0 = self.current_noise_a ** 2 / self._offset_var
@@ -533,10 +548,10 @@ class KalmanEstimator:
             self._b_last = b
             self._offset_var = self.current_noise_a ** 2 / n1
         else:
-            mode = self._moving
+            mode = self._moving if self._seen_rest else self._moving_start
             innov = y - sum(map(mul, self._c_list, st))
-            w = st[iw] + self._k_w * innov + self._w_ref
-            self._b_last = st[ib] + self._k_b * innov
+            w = st[iw] + mode.k_w * innov + self._w_ref
+            self._b_last = st[ib] + mode.k_b * innov
             new = [sum(map(mul, row, st)) + g * y for row, g in zip(mode.f_rows, mode.g_list)]
             self._offset_var += self._q_b_step
         self._s[:] = new
@@ -546,7 +561,7 @@ class KalmanEstimator:
         return {"s": self._s.copy(), "bp_zi": self._bp_zi.copy(), "energy": self._energy,
                 "at_rest": self.at_rest, "offset_a": self._b_last, "w_ref": self._w_ref,
                 "hp_zi": self._hp_zi.copy(), "hf_energy": self._hf_energy, "offset_var": self._offset_var,
-                "sigma2": self._sigma2, "lp": self._lp}
+                "sigma2": self._sigma2, "lp": self._lp, "seen_rest": self._seen_rest}
 
     def set_state(self, state: dict) -> None:
         s = np.asarray(state.get("s"), float)
@@ -563,6 +578,7 @@ class KalmanEstimator:
         self._offset_var = float(state["offset_var"])
         self._sigma2 = float(state["sigma2"])
         self._lp = float(state["lp"])
+        self._seen_rest = bool(state["seen_rest"])
 
     def current_output(self) -> np.ndarray:
         """Deflection held in the predicted state (per channel), m."""
@@ -578,6 +594,7 @@ class KalmanEstimator:
         if isinstance(old, KalmanEstimator):
             self._s[self._iw] = old._s[old._iw]
             self._w_ref = old._w_ref
+            self._seen_rest = old._seen_rest
             self._offset_var = old._offset_var
             self._s[self._ib] = old._s[old._ib]
             self._b_last = old._b_last
