@@ -3,12 +3,10 @@
 Model (continuous time, designed from the same :class:`ReducedModel` that
 :class:`~ipmc_sensor_ros.estimation.inverse.InverseEstimator` inverts)
 ------------------------------------------------------------------------------
-The reduced sensor is ``H_n(s) = s R_n(s)`` (eqs. 45, 47): the current is the
-charge model ``R_n`` driven by the tip *velocity* v.  The state is
+``H_n(s) = s R_n(s)`` (eqs. 45, 47): the current is ``R_n`` driven by the tip
+*velocity* v.  State x = [x_R (n states of R_n), w, v, b]:
 
-    x = [x_R (n states of R_n), w, v, b]
-
-    x_R' = A_R x_R + B_R v                (R_n in state space, zpk2ss)
+    x_R' = A_R x_R + B_R v                (R_n, diagonal realisation)
     w'   = v - w_l w                      (deflection; w_l = 2 pi leak_corner_hz)
     v'   = -a v + xi_v                    (velocity: Ornstein-Uhlenbeck, a = 2 pi motion_bandwidth_hz)
     b'   = xi_b                           (current offset: constant + random-walk drift)
@@ -17,11 +15,11 @@ charge model ``R_n`` driven by the tip *velocity* v.  The state is
 with white noises of intensities ``q_v = 2 a sigma_v^2`` (velocity RMS sigma_v =
 ``motion_velocity_m_s``, flat up to ``motion_bandwidth_hz``), ``q_b =
 offset_drift_a_per_s^2 * 60 s`` (moves by ``offset_drift_a_per_s * 60 s`` RMS per
-minute) and a measurement noise of RMS ``current_noise_a`` per sample.  The tiny leak ``w_l`` makes w detectable
-(a pure integrator that nothing measures has no steady-state Kalman gain); its
-default 0.002 Hz (``KALMAN_LEAK_CORNER_HZ``) is five times below the leaky inverse's.  The model is discretised
-exactly (Van Loan, :func:`scipy.linalg.expm`) and the steady-state gain comes
-from :func:`scipy.linalg.solve_discrete_are`.
+minute), measurement noise RMS ``current_noise_a`` per sample.  The leak ``w_l``
+makes w detectable (an unmeasured integrator has no steady-state gain): 0.01 Hz
+(the leaky inverse's) until the first rest, when the level is unknown, then
+0.002 Hz towards the last held level.  Exact discretisation (Van Loan, expm),
+gain from :func:`scipy.linalg.solve_discrete_are`.
 
 Defaults (from the DAQ and the motion)
 --------------------------------------
@@ -34,10 +32,9 @@ free vibration); ``offset_drift_a_per_s`` = 1 nA/min.
 
 Observability, and how slow is too slow
 ---------------------------------------
-``H(0) = 0``: a constant offset b is exactly a constant velocity b / R_n(0).
-Separating them rests on the spectra only.  The current due to motion has the
-low-frequency PSD ``R0^2 q_v / a^2`` (flat), the offset's PSD is ``q_b / w^2``;
-they cross at
+``H(0) = 0``: a constant offset b is exactly a constant velocity b / R_n(0); only
+spectra separate them.  The motion current's low-frequency PSD ``R0^2 q_v / a^2``
+(flat) and the offset's ``q_b / w^2`` cross at
 
     w_c = sqrt(q_b a^2 / (R0^2 q_v)) = sqrt(q_b a / (2 R0^2 sigma_v^2)),
 
@@ -71,11 +68,10 @@ run of moving samples in modal coordinates (one first-order
 :func:`scipy.signal.lfilter` per eigenvalue of the closed-loop matrix, conjugate
 pairs once), so blocks are vectorised and the state passes exactly between modes.
 
-What this cannot do: an offset present while the sensor never rests is learned
-only at ``f_c`` (it acts like the leaky inverse's offset error); a deflection that
-moves slower than the rest detector's band *and* whose current R0 dw/dt stays
-within 4 sigma of the offset estimate is taken for rest and its current for
-offset; an offset *step* while moving is integrated until the next rest.
+Limits: an offset while the sensor never rests is learned only at ``f_c`` (as the
+leaky inverse's offset error); motion slower than the detector's band with R0 dw/dt
+within 4 sigma of the offset is taken for rest (its current for offset); an
+offset *step* while moving is integrated until the next rest.
 
 Uncertainty: ``last_std`` is the standard deviation of w from the moving mode's
 steady-state posterior covariance (held at rest); it excludes reduction error.
@@ -86,10 +82,11 @@ import math
 from operator import mul
 
 import numpy as np
-import scipy.linalg as la
+from scipy.linalg import solve_discrete_are
 import scipy.signal as sig
 
 from .inverse import EstimatorError, _positive
+from ..lti.discretize import van_loan
 from ..lti.reduction import ReducedModel
 
 __all__ = ["KalmanEstimator", "offset_corner_hz", "DEFAULT_CURRENT_NOISE_A"]
@@ -122,18 +119,6 @@ def offset_corner_hz(reduced: ReducedModel, motion_velocity_m_s: float = DEFAULT
     a = 2 * math.pi * motion_bandwidth_hz
     q_b = offset_drift_a_per_s ** 2 * 60.0
     return math.sqrt(q_b * a / (2 * r0 ** 2 * motion_velocity_m_s ** 2)) / (2 * math.pi)
-
-
-def _van_loan(ac: np.ndarray, qc: np.ndarray, dt: float):
-    n = ac.shape[0]
-    m = np.zeros((2 * n, 2 * n))
-    m[:n, :n] = -ac
-    m[:n, n:] = qc
-    m[n:, n:] = ac.T
-    e = la.expm(m * dt)
-    ad = e[n:, n:].T
-    qd = ad @ e[:n, n:]
-    return ad, 0.5 * (qd + qd.T)
 
 
 def _modal_realisation(reduced: ReducedModel):
@@ -269,7 +254,6 @@ class KalmanEstimator:
         N = n + 3
         a = 2 * math.pi * self.motion_bandwidth_hz
         wl = 2 * math.pi * self.leak_corner_hz
-        # scale: current in units of the noise, states so that they are O(1)
         sv = self.motion_velocity_m_s
         ac = np.zeros((N, N))
         ac[:n, :n] = ar
@@ -283,7 +267,7 @@ class KalmanEstimator:
         qc = np.zeros((N, N))
         qc[iv, iv] = 2 * a * sv ** 2
         qc[ib, ib] = self.offset_drift_a_per_s ** 2 * 60.0
-        # scaling for a well-conditioned Riccati solve: x = S x~
+        # state scaling x = S x~ (all O(1), current in units of the noise) for the Riccati solve
         scale = np.ones(N)
         scale[:n] = sv / np.abs(np.diag(ar))
         scale[iw] = 1e-3
@@ -297,7 +281,6 @@ class KalmanEstimator:
         # before the record): leak at the leaky inverse's corner, as it does
         self._moving_start = self._moving_mode(ac, qc, c, scale, 2 * math.pi * START_LEAK_CORNER_HZ, dt)
         self.std_moving_m = self._moving.std_m
-        # rest: see _run_rest (deflection held, offset averaged)
         self._n_max = fs * self.rest_offset_time_s
         self._q_b_step = self.offset_drift_a_per_s ** 2 * 60.0 * dt
         # detector: band-pass and one-pole energy average
@@ -329,12 +312,12 @@ class KalmanEstimator:
         N, iw, ib = ac.shape[0], self._iw, self._ib
         moving = ac.copy()
         moving[iw, iw] = -wl
-        ad, qd = _van_loan(moving, qc, dt)
+        ad, qd = van_loan(moving, qc, dt)
         s_inv = 1.0 / scale
         ad_s = ad * s_inv[:, None] * scale[None, :]
         qd_s = qd * s_inv[:, None] * s_inv[None, :]
         c_s = c * scale / self.current_noise_a
-        p_s = la.solve_discrete_are(ad_s.T, c_s[:, None], qd_s + 1e-30 * np.eye(N), np.array([[1.0]]))
+        p_s = solve_discrete_are(ad_s.T, c_s[:, None], qd_s + 1e-30 * np.eye(N), np.array([[1.0]]))
         k_s = p_s @ c_s / (c_s @ p_s @ c_s + 1.0)
         post = p_s - np.outer(k_s, c_s @ p_s)
         mode = _Mode(ad, k_s * scale / self.current_noise_a, c, iw, ib, scale)
