@@ -107,8 +107,8 @@ OFFSET_PRIOR_A = 100e-9
 ENERGY_CLIP = 20.0
 #: Low edge of the rest detector's band, Hz (slower motion is seen only by the offset test).
 REST_BAND_LOW_HZ = 1.0
-#: Averaging time of the measured white-noise floor, s.
-NOISE_WINDOW_S = 0.5
+NOISE_WINDOW_S = 0.5   # averaging time of the measured white-noise floor, s
+NOISE_CLIP = 100.0     # largest measured noise RMS accepted (x current_noise_a); caps transients
 
 
 def offset_corner_hz(reduced: ReducedModel, motion_velocity_m_s: float = DEFAULT_MOTION_VELOCITY_M_S,
@@ -303,7 +303,7 @@ class KalmanEstimator:
             imp[0] = 1.0
             self._hp_list = self._hp[0].tolist()
             self._hp_unit = float(np.sum(sig.sosfilt(self._hp, imp) ** 2))
-            self._hf_clip = ENERGY_CLIP ** 2 * self.current_noise_a ** 2 * self._hp_unit
+            self._hf_clip = NOISE_CLIP ** 2 * self.current_noise_a ** 2 * self._hp_unit
             self._hp_ratio = float(np.sum(sig.sosfilt(self._bp, imp) ** 2) / np.sum(sig.sosfilt(self._hp, imp) ** 2))
             self.noise_energy_a2 = self.current_noise_a ** 2 * float(np.sum(sig.sosfilt(self._bp, imp) ** 2))
 
