@@ -18,8 +18,8 @@ offset_drift_a_per_s^2 * 60 s`` (moves by ``offset_drift_a_per_s * 60 s`` RMS pe
 minute), measurement noise RMS ``current_noise_a`` per sample.  The leak ``w_l``
 makes w detectable (an unmeasured integrator has no steady-state gain): 0.01 Hz
 (the leaky inverse's) until the first rest, when the level is unknown, then
-0.002 Hz towards the last held level.  Exact discretisation (Van Loan, expm),
-gain from :func:`scipy.linalg.solve_discrete_are`.
+0.0005 Hz towards the last held level (``KALMAN_LEAK_CORNER_HZ``).  Exact
+discretisation (Van Loan, expm), gain from :func:`scipy.linalg.solve_discrete_are`.
 
 Defaults (from the DAQ and the motion)
 --------------------------------------
@@ -96,9 +96,9 @@ DEFAULT_CURRENT_NOISE_A = 20e-9
 DEFAULT_MOTION_VELOCITY_M_S = 0.1
 DEFAULT_MOTION_BANDWIDTH_HZ = 50.0
 DEFAULT_OFFSET_DRIFT_A_PER_S = 1e-9 / 60.0
-#: Default deflection leak while moving, Hz (time constant 80 s): a held deflection not yet
-#: detected as rest loses 1.3 % per second; a residual offset db gives at most db / (R0 w_l).
-KALMAN_LEAK_CORNER_HZ = 0.002
+#: Default deflection leak while moving after a rest, Hz (time constant 320 s): each move
+#: loses 0.3 %/s of its excursion from the held level; an offset error db adds db t / R0.
+KALMAN_LEAK_CORNER_HZ = 0.0005
 #: Deflection leak before the first rest (level unknown), Hz: the leaky inverse's corner.
 START_LEAK_CORNER_HZ = 0.01
 #: Prior RMS of the current offset before any rest, A (DAQ offsets: tens of nA).

@@ -63,18 +63,21 @@ def robot_motion(time_s, seed: int = 0, amplitude_m: float = 1.5e-3) -> np.ndarr
 
 def intermittent_motion(time_s, seed: int = 0, amplitude_m: float = 1.5e-3,
                         move_every_s: float = 60.0) -> np.ndarray:
-    """Long holds with a robot-like burst of 10 s every ``move_every_s`` seconds."""
+    """Long holds with a 10 s robot-like burst (:func:`robot_motion`, a new seed each
+    time) every ``move_every_s`` seconds; each burst blends in from the held level over
+    0.5 s and its last value is held, so levels stay within +-``amplitude_m``."""
     t = np.asarray(time_s, float)
-    burst = robot_motion(np.arange(0, 10.0, t[1] - t[0]), seed, amplitude_m)
+    dt = t[1] - t[0]
+    tb = np.arange(0, 10.0, dt)
     w = np.zeros_like(t)
     level = 0.0
-    n = burst.size
-    dt = t[1] - t[0]
     for k, start in enumerate(np.arange(move_every_s / 2, t[-1] - 10.0, move_every_s)):
         i0 = int(round((start - t[0]) / dt))
-        w[i0:i0 + n] = level + burst - burst[0]
-        level = w[min(i0 + n, t.size) - 1]
-        w[i0 + n:] = level
+        burst = robot_motion(tb, seed * 1000 + k, amplitude_m)
+        seg = burst + level * (1 - _ramp(tb / 0.5))
+        w[i0:i0 + tb.size] = seg[:max(0, min(tb.size, t.size - i0))]
+        level = float(seg[-1])
+        w[i0 + tb.size:] = level
     return w
 
 
