@@ -166,6 +166,14 @@ def test_deflection_estimator_options():
     _, w, std = est.process_with_std(t, np.zeros(100))
     assert np.all(np.isnan(std))          # the leaky inverse has no uncertainty model
     assert isinstance(est.inverse, InverseEstimator)
+    # the Kalman path: std from the covariance (positive, finite), bumpless rebuild
+    kal = DeflectionEstimator(SLIM, FS, estimator="kalman", mains_hz=60)
+    i = daq_current(SLIM, t, 1e-3 * np.sin(2 * np.pi * 5 * t), noise_a=20e-9, seed=1)
+    _, w, std = kal.process_with_std(t, i)
+    assert np.all(np.isfinite(std)) and np.all(std > 0)
+    new = kal.rebuilt(leak_corner_hz=0.001)
+    assert new.inverse.leak_corner_hz == 0.001 and new.mains_hz == 60 and new.estimator == "kalman"
+    assert new.inverse.current_output()[0] == pytest.approx(kal.inverse.current_output()[0], abs=1e-12)
 
 
 def test_robot_motion_with_hum_beats_leaky():
