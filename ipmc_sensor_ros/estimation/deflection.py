@@ -38,7 +38,9 @@ from typing import Sequence
 import numpy as np
 from scipy.signal import lfilter
 
-from .inverse import DEFAULT_LEAK_CORNER_HZ, InverseEstimator
+from .inverse import DEFAULT_LEAK_CORNER_HZ, EstimatorError, InverseEstimator
+from .kalman import DEFAULT_CURRENT_NOISE_A, KALMAN_LEAK_CORNER_HZ, KalmanEstimator
+from .mains import MainsFilter
 from ..physics.model import SensorModel
 from ..physics.pipeline import DriftSchedule
 from ..lti.reduction import ReducedModel, reduce_model_parts
@@ -50,17 +52,32 @@ class DeflectionEstimator:
     """Streaming estimate of tip deflection (m) from sensing current (A) for ``model``.
 
     Parameters: ``model``; ``sample_rate_hz``; ``reduction_order`` (fitted
-    poles, 1..8); ``band_hz`` of the reduction; ``leak_corner_hz``,
+    poles, 1..8); ``band_hz`` of the reduction; ``leak_corner_hz`` (default 0.01 Hz leaky, 0.0005 Hz kalman),
     ``offset_corner_hz``, ``prewarp_hz`` as in :class:`InverseEstimator`;
-    ``update_s``: rebuild interval for time-varying effects, s.
+    ``update_s``: rebuild interval for time-varying effects, s;
+    ``estimator``: ``"leaky"`` (:class:`InverseEstimator`) or ``"kalman"``
+    (:class:`~ipmc_sensor_ros.estimation.kalman.KalmanEstimator`: offset-aware, rest
+    detector, per-sample standard deviation in :attr:`last_std_m`);
+    ``mains_hz``: 0, 50 or 60, notch the line and its harmonics before the filter
+    (:class:`~ipmc_sensor_ros.estimation.mains.MainsFilter`; ``mains.line_present``);
+    ``current_noise_a``: DAQ white-noise RMS per sample for the Kalman design, A.
     """
 
     def __init__(self, model: SensorModel, sample_rate_hz: float, *, reduction_order: int = 4,
                  band_hz: Sequence[float] = (0.1, 50.0),
-                 leak_corner_hz: float = DEFAULT_LEAK_CORNER_HZ,
+                 leak_corner_hz: float | None = None,
                  offset_corner_hz: float | None = None, prewarp_hz: float | None = None,
                  update_s: float = 5.0, reduced: ReducedModel | None = None,
-                 history_s: float = 0.5):
+                 history_s: float = 0.5, estimator: str = "leaky", mains_hz: float = 0,
+                 current_noise_a: float = DEFAULT_CURRENT_NOISE_A):
+        if estimator not in ("leaky", "kalman"):
+            raise EstimatorError(f"parameter 'estimator' must be 'leaky' or 'kalman', got {estimator!r}")
+        self.estimator = estimator
+        self.mains_hz = mains_hz
+        self.current_noise_a = float(current_noise_a)
+        self.mains = MainsFilter(mains_hz, sample_rate_hz)
+        if leak_corner_hz is None:
+            leak_corner_hz = KALMAN_LEAK_CORNER_HZ if estimator == "kalman" else DEFAULT_LEAK_CORNER_HZ
         self.model = model
         self.reduction_order = int(reduction_order)
         self.band_hz = (float(band_hz[0]), float(band_hz[1]))
@@ -77,8 +94,16 @@ class DeflectionEstimator:
         if reduced is None:
             reduced = self._reduce(model)
         self.reduced = reduced
-        self.inverse = InverseEstimator(reduced, sample_rate_hz, leak_corner_hz=leak_corner_hz,
-                                        offset_corner_hz=offset_corner_hz, prewarp_hz=prewarp_hz)
+        if estimator == "kalman":
+            if offset_corner_hz is not None:
+                raise EstimatorError("parameter 'offset_corner_hz' applies to estimator 'leaky' only "
+                                     "(the Kalman estimator tracks the offset itself)")
+            self.inverse = KalmanEstimator(reduced, sample_rate_hz, leak_corner_hz=leak_corner_hz,
+                                           current_noise_a=current_noise_a)
+        else:
+            self.inverse = InverseEstimator(reduced, sample_rate_hz, leak_corner_hz=leak_corner_hz,
+                                            offset_corner_hz=offset_corner_hz, prewarp_hz=prewarp_hz)
+        self.last_std_m = np.zeros(0)
         self._t0: float | None = None
         self._history = np.zeros(max(1, int(round(history_s * self.inverse.sample_rate_hz))))
         self._history_n = 0
@@ -134,9 +159,22 @@ class DeflectionEstimator:
         self._history_n = 0
         self._bias_m = 0.0
         self._bias_zi = np.zeros(1)
+        self.mains.reset()
         if self._material_at is not None:
             self._diffusive = None
-            self.inverse = InverseEstimator(self._reduce(self.model), **self._filter_args())
+            self.inverse = self._new_filter(self._reduce(self.model))
+
+    def _new_filter(self, reduced: ReducedModel):
+        if self.estimator == "kalman":
+            return KalmanEstimator(reduced, self.inverse.sample_rate_hz, leak_corner_hz=self.inverse.leak_corner_hz,
+                                   current_noise_a=self.current_noise_a)
+        return InverseEstimator(reduced, **self._filter_args())
+
+    def process_with_std(self, time_s, current_a) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(output times, deflection, its standard deviation) for one block, m; the
+        leaky estimator has no uncertainty model (NaN)."""
+        t_out, w = self.process(time_s, current_a)
+        return t_out, w, self.last_std_m
 
     def process(self, time_s, current_a) -> tuple[np.ndarray, np.ndarray]:
         """Filter one block; returns (output times, deflection).  Pass validated values
@@ -148,6 +186,7 @@ class DeflectionEstimator:
         if self._t0 is None:
             self._t0 = float(t[0])
         elapsed = t - self._t0 if (self._current_inv or self._material_at is not None) else None
+        i = self.mains.process(i)
         for eff, values in reversed(self._current_inv):
             i = eff.inverse_output_transform(elapsed, i, self.model, values)
         if self._material_at is None:
@@ -167,6 +206,7 @@ class DeflectionEstimator:
             a = float(np.exp(-2 * np.pi * self.inverse.leak_corner_hz / self.inverse.sample_rate_hz))
             avg, self._bias_zi = lfilter([1 - a], [1, -a], w_prime - w, zi=self._bias_zi)
             self._bias_m = float(avg[-1])
+        self.last_std_m = np.full(w.size, getattr(self.inverse, "last_std", np.nan))
         return (t - self.delay_s if self.delay_s else t), w
 
     def _follow_drift(self, material) -> None:
@@ -178,7 +218,8 @@ class DeflectionEstimator:
     def plain(self) -> bool:
         """True when no effect acts around the filter (no transforms, no drift): then
         :meth:`process_one` takes its lean path."""
-        return not (self._current_inv or self._deflection_inv or self._material_at is not None)
+        return not (self._current_inv or self._deflection_inv or self._material_at is not None
+                    or self.mains.sos.shape[0])
 
     def process_one(self, time_s: float, current_a: float) -> tuple[float, float]:
         """One sample, as floats (output time, deflection); identical to :meth:`process`
@@ -207,7 +248,8 @@ class DeflectionEstimator:
         new = DeflectionEstimator(model or self.model, fs, reduction_order=self.reduction_order,
                                   band_hz=self.band_hz, update_s=self.update_s,
                                   reduced=reduced if (reduced is not None or model is not None) else self.reduced,
-                                  **kwargs)
+                                  estimator=self.estimator, mains_hz=self.mains_hz,
+                                  current_noise_a=self.current_noise_a, **kwargs)
         new.continue_from(self)
         return new
 

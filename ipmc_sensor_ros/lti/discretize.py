@@ -18,7 +18,7 @@ import math
 import numpy as np
 import scipy.signal as sig
 
-__all__ = ["default_prewarp_hz", "tustin_sos"]
+__all__ = ["default_prewarp_hz", "tustin_sos", "van_loan"]
 
 
 def default_prewarp_hz(sample_rate_hz: float, band_high_hz: float | None = None) -> float:
@@ -39,3 +39,19 @@ def _maybe_real(values) -> np.ndarray:
     """Real array if every value is real, else complex (conjugate pairs expected)."""
     v = np.asarray(values, dtype=complex)
     return v.real.copy() if np.all(v.imag == 0) else v
+
+
+def van_loan(ac: np.ndarray, qc: np.ndarray, dt: float):
+    """Exact zero-order-hold discretisation of x' = A x + w (white, intensity Qc):
+    (A_d, Q_d) over dt s (Van Loan 1978), used by the Kalman estimator."""
+    import scipy.linalg as la
+
+    n = ac.shape[0]
+    m = np.zeros((2 * n, 2 * n))
+    m[:n, :n] = -ac
+    m[:n, n:] = qc
+    m[n:, n:] = ac.T
+    e = la.expm(m * dt)
+    ad = e[n:, n:].T
+    qd = ad @ e[:n, n:]
+    return ad, 0.5 * (qd + qd.T)

@@ -1,0 +1,599 @@
+"""Offset-aware steady-state Kalman estimator of tip deflection from sensing current.
+
+Model (continuous time, designed from the same :class:`ReducedModel` that
+:class:`~ipmc_sensor_ros.estimation.inverse.InverseEstimator` inverts)
+------------------------------------------------------------------------------
+``H_n(s) = s R_n(s)`` (eqs. 45, 47): the current is ``R_n`` driven by the tip
+*velocity* v.  State x = [x_R (n states of R_n), w, v, b]:
+
+    x_R' = A_R x_R + B_R v                (R_n, diagonal realisation)
+    w'   = v - w_l w                      (deflection; w_l = 2 pi leak_corner_hz)
+    v'   = -a v + xi_v                    (velocity: Ornstein-Uhlenbeck, a = 2 pi motion_bandwidth_hz)
+    b'   = xi_b                           (current offset: constant + random-walk drift)
+    i    = C_R x_R + D_R v + b + n        (measured current, A)
+
+with white noises of intensities ``q_v = 2 a sigma_v^2`` (velocity RMS sigma_v =
+``motion_velocity_m_s``, flat up to ``motion_bandwidth_hz``), ``q_b =
+offset_drift_a_per_s^2 * 60 s`` (moves by ``offset_drift_a_per_s * 60 s`` RMS per
+minute), measurement noise RMS ``current_noise_a`` per sample.  The leak ``w_l``
+makes w detectable (an unmeasured integrator has no steady-state gain): 0.01 Hz
+(the leaky inverse's) until the first rest, when the level is unknown, then
+0.0005 Hz towards the last held level (``KALMAN_LEAK_CORNER_HZ``).  Exact
+discretisation (Van Loan, expm), gain from :func:`scipy.linalg.solve_discrete_are`.
+
+Defaults (from the DAQ and the motion)
+--------------------------------------
+``current_noise_a`` = 20 nA RMS per sample (a 16-bit DAQ on a +-1 uA-scale
+transimpedance range; 1 % of a slim sample's current at 1 Hz);
+``motion_velocity_m_s`` = 0.1 m/s (a 2 mm crank at 8 Hz; a smaller value biases the
+estimate low: 2 % at 20 mm/s, as the filter then expects most current to be noise or offset),
+``motion_bandwidth_hz`` = 50 Hz (above the paper's 1-20 Hz band and the 30 Hz
+free vibration); ``offset_drift_a_per_s`` = 1 nA/min.
+
+Observability, and how slow is too slow
+---------------------------------------
+``H(0) = 0``: a constant offset b is exactly a constant velocity b / R_n(0); only
+spectra separate them.  The motion current's low-frequency PSD ``R0^2 q_v / a^2``
+(flat) and the offset's ``q_b / w^2`` cross at
+
+    w_c = sqrt(q_b a^2 / (R0^2 q_v)) = sqrt(q_b a / (2 R0^2 sigma_v^2)),
+
+(:func:`offset_corner_hz`).  Below ``f_c = w_c / 2 pi`` a deflection change is
+taken for offset drift and vice versa: a deflection that creeps by dw over a
+time longer than ``1/w_c`` is invisible.  With the defaults and the slim sample
+(R0 = 3.2e-4 A s/m) f_c is about 1e-6 Hz: while the sensor moves, the offset is
+essentially *not* learned (any faster offset learning during motion would
+also erase slow deflection ramps).  It is learned when the sensor rests:
+
+Rest detector and gain scheduling
+---------------------------------
+The current is band-passed (``REST_BAND_LOW_HZ`` = 1 Hz to min(50 Hz, fs/4)), each
+sample's energy capped at ``ENERGY_CLIP`` times the noise's (a pulse then delays
+rest by < 0.5 s) and averaged over ``rest_window_s``.  The noise energy is the
+larger of ``current_noise_a`` and the white noise measured above the motion band
+(fs/4 .. Nyquist, averaged over ``NOISE_WINDOW_S``).  The sensor is *at rest* when
+the band energy falls below ``rest_enter`` times the noise's; it is *moving* again
+as soon as the energy exceeds ``rest_leave`` times it (hysteresis), one sample
+exceeds 6 sigma, or the low-passed current departs from the offset estimate by
+more than 4 sigma of their difference (a slow deflection ramp is a steady current
+R0 dw/dt the band-pass cannot see).
+At rest the deflection is held (frozen, as a gyro's angle while its bias is
+learned at standstill), the charge and velocity states are zeroed and the offset
+is the running mean of the current, started with the weight sigma^2/P_b of its
+previous estimate (P_b grows by q_b per second of motion) and, once it has
+``fs * rest_offset_time_s`` samples, an exponential average that follows drift
+(lag 0.17 nA at 1 nA/min with the default 10 s).  Leaving rest, the leak pulls
+towards the held level (not zero).  The moving mode is an LTI filter run over each
+run of moving samples in modal coordinates (one first-order
+:func:`scipy.signal.lfilter` per eigenvalue of the closed-loop matrix, conjugate
+pairs once), so blocks are vectorised and the state passes exactly between modes.
+
+Limits: an offset while the sensor never rests is learned only at ``f_c`` (as the
+leaky inverse's offset error); motion slower than the detector's band with R0 dw/dt
+within 4 sigma of the offset is taken for rest (its current for offset); an
+offset *step* while moving is integrated until the next rest.
+
+Uncertainty: ``last_std`` is the standard deviation of w from the moving mode's
+steady-state posterior covariance (held at rest); it excludes reduction error.
+"""
+from __future__ import annotations
+
+import math
+from operator import mul
+
+import numpy as np
+from scipy.linalg import solve_discrete_are
+import scipy.signal as sig
+
+from .inverse import EstimatorError, _positive
+from ..lti.discretize import van_loan
+from ..lti.reduction import ReducedModel
+
+__all__ = ["KalmanEstimator", "offset_corner_hz", "DEFAULT_CURRENT_NOISE_A"]
+
+#: Defaults (see the module docstring): DAQ noise A RMS per sample, motion, drift.
+DEFAULT_CURRENT_NOISE_A = 20e-9
+DEFAULT_MOTION_VELOCITY_M_S = 0.1
+DEFAULT_MOTION_BANDWIDTH_HZ = 50.0
+DEFAULT_OFFSET_DRIFT_A_PER_S = 1e-9 / 60.0
+#: Default deflection leak while moving after a rest, Hz (time constant 320 s): each move
+#: loses 0.3 %/s of its excursion from the held level; an offset error db adds db t / R0.
+KALMAN_LEAK_CORNER_HZ = 0.0005
+#: Deflection leak before the first rest (level unknown), Hz: the leaky inverse's corner.
+START_LEAK_CORNER_HZ = 0.01
+#: Prior RMS of the current offset before any rest, A (DAQ offsets: tens of nA).
+OFFSET_PRIOR_A = 100e-9
+#: Cap on one sample's band-passed energy in the rest detector, in units of the noise's.
+ENERGY_CLIP = 20.0
+#: Low edge of the rest detector's band, Hz (slower motion is seen only by the offset test).
+REST_BAND_LOW_HZ = 1.0
+NOISE_WINDOW_S = 0.5   # averaging time of the measured white-noise floor, s
+NOISE_CLIP = 100.0     # largest measured noise RMS accepted (x current_noise_a); caps transients
+
+
+def offset_corner_hz(reduced: ReducedModel, motion_velocity_m_s: float = DEFAULT_MOTION_VELOCITY_M_S,
+                     motion_bandwidth_hz: float = DEFAULT_MOTION_BANDWIDTH_HZ,
+                     offset_drift_a_per_s: float = DEFAULT_OFFSET_DRIFT_A_PER_S) -> float:
+    """Frequency below which offset drift and deflection cannot be told apart while moving, Hz."""
+    r0 = abs(float(np.real(reduced.charge_response(np.array([0.0]))[0])))
+    a = 2 * math.pi * motion_bandwidth_hz
+    q_b = offset_drift_a_per_s ** 2 * 60.0
+    return math.sqrt(q_b * a / (2 * r0 ** 2 * motion_velocity_m_s ** 2)) / (2 * math.pi)
+
+
+def _modal_realisation(reduced: ReducedModel):
+    """R_n(s) = k + sum_i r_i / (s - p_i) (distinct real poles) as (A, B, C, D):
+    a diagonal, well-scaled realisation (each state is a first-order lag of v)."""
+    z = np.real(np.asarray(reduced.zeros_rad_s))
+    p = np.real(np.asarray(reduced.poles_rad_s))
+    k = float(reduced.gain)
+    if np.min(np.abs(np.subtract.outer(p, p)) + np.eye(p.size) * 1e300) < 1e-9 * np.max(np.abs(p)):
+        raise EstimatorError("reduced model has repeated poles; the Kalman estimator needs distinct poles")
+    r = np.array([k * np.prod(pi - z) / np.prod([pi - pj for pj in p if pj != pi]) for pi in p])
+    return np.diag(p), np.ones((p.size, 1)), r[None, :], np.array([[k]])
+
+
+class _Mode:
+    """One LTI predictor s_{k+1} = F s_k + G y_k with outputs in modal form."""
+
+    def __init__(self, ad: np.ndarray, k: np.ndarray, c: np.ndarray, iw: int, ib: int, scale: np.ndarray):
+        n = ad.shape[0]
+        ikc = np.eye(n) - np.outer(k, c)
+        f = ad @ ikc
+        g = ad @ k
+        lam, vs = np.linalg.eig(f / scale[:, None] * scale[None, :])   # in O(1) state units
+        if not np.all(np.abs(lam) <= 1.0 + 1e-12):
+            raise EstimatorError(f"Kalman predictor is unstable (pole radius {np.abs(lam).max():.12f})")
+        cond = np.linalg.cond(vs)
+        if not np.isfinite(cond) or cond > 1e12:
+            raise EstimatorError(f"Kalman predictor is not diagonalisable (condition {cond:.3g})")
+        v = scale[:, None] * vs
+        vinv = np.linalg.inv(vs) / scale[None, :]
+        # keep one of each conjugate pair (weight 2) and the real modes (weight 1)
+        keep = lam.imag >= -1e-14 * np.abs(lam)
+        pair = np.where(lam.imag > 1e-14 * np.abs(lam), 2.0, 1.0)
+        self.v = v
+        self.vinv = vinv
+        self.keep = np.flatnonzero(keep)
+        self.lam = lam[self.keep]
+        self.g = (vinv @ g)[self.keep]
+        self.hw = (ikc[iw] @ v)[self.keep] * pair[self.keep]
+        self.dw = float(k[iw])
+        self.hb = (ikc[ib] @ v)[self.keep] * pair[self.keep]
+        self.db = float(k[ib])
+        self.f, self.gvec, self.k = f, g, k
+        self.k_w, self.k_b = float(k[iw]), float(k[ib])
+        self.f_rows = [list(map(float, row)) for row in f]     # plain floats for process_one
+        self.g_list = list(map(float, g))
+        self.dropped = np.flatnonzero(~keep)
+        self.partner = np.array([int(np.argmin(np.abs(self.lam - np.conj(lam[j])))) for j in self.dropped],
+                                dtype=int)
+        self.a_list = [np.array([1.0, -l]) for l in self.lam]
+        self.b_list = [np.array([0.0, gg]) for gg in self.g]
+
+    def run(self, y: np.ndarray, s0: np.ndarray):
+        """Filter y from predicted state s0; returns (w_hat, b_hat_last, s_end)."""
+        z0 = (self.vinv @ s0)[self.keep]
+        w = self.dw * y
+        z_end = np.empty_like(z0)
+        zlast = np.empty_like(z0)
+        for j in range(self.lam.size):
+            zj, zf = sig.lfilter(self.b_list[j], self.a_list[j], y, zi=z0[j:j + 1])
+            w = w + (self.hw[j] * zj).real
+            zlast[j] = zj[-1]
+            z_end[j] = zf[0]
+        b_last = float((self.hb @ zlast).real + self.db * y[-1])
+        return w, b_last, self._to_state(z_end)
+
+    def _to_state(self, z_kept: np.ndarray) -> np.ndarray:
+        """Physical state from the kept modal values (dropped modes are conjugates)."""
+        full = np.empty(self.v.shape[0], complex)
+        full[self.keep] = z_kept
+        full[self.dropped] = np.conj(z_kept[self.partner])
+        return (self.v @ full).real
+
+
+class KalmanEstimator:
+    """Streaming offset-aware Kalman estimate of tip deflection (m) from current (A).
+
+    Parameters
+    ----------
+    reduced : reduced model of the sensor.
+    sample_rate_hz : sample rate of the current, Hz.
+    current_noise_a : white measurement noise, A RMS per sample.
+    motion_velocity_m_s : RMS tip velocity of typical motion, m/s.
+    motion_bandwidth_hz : corner of the velocity spectrum, Hz.
+    leak_corner_hz : deflection leak while moving (detectability), Hz.
+    offset_drift_a_per_s : RMS offset drift rate (random walk), A/s.
+    rest_offset_time_s : time constant of offset learning at rest, s.
+    rest_window_s : averaging time of the rest detector, s.
+    rest_enter, rest_leave : rest-detector thresholds (multiples of the noise energy in band).
+    rest_detection : switch the rest detector (and gain scheduling) on or off.
+    """
+
+    def __init__(self, reduced: ReducedModel, sample_rate_hz: float, *,
+                 current_noise_a: float = DEFAULT_CURRENT_NOISE_A,
+                 motion_velocity_m_s: float = DEFAULT_MOTION_VELOCITY_M_S,
+                 motion_bandwidth_hz: float = DEFAULT_MOTION_BANDWIDTH_HZ,
+                 leak_corner_hz: float = KALMAN_LEAK_CORNER_HZ,
+                 offset_drift_a_per_s: float = DEFAULT_OFFSET_DRIFT_A_PER_S,
+                 rest_offset_time_s: float = 10.0, rest_window_s: float = 0.15,
+                 rest_enter: float = 2.0, rest_leave: float = 4.0, rest_detection: bool = True,
+                 channels: int = 1):
+        if channels != 1:
+            raise EstimatorError(f"parameter 'channels' must be 1 for the Kalman estimator, got {channels!r}")
+        self.channels = 1
+        self.reduced = reduced
+        fs = _positive("sample_rate_hz", sample_rate_hz)
+        self._fs = fs
+        self.current_noise_a = _positive("current_noise_a", current_noise_a)
+        self.motion_velocity_m_s = _positive("motion_velocity_m_s", motion_velocity_m_s)
+        self.motion_bandwidth_hz = _positive("motion_bandwidth_hz", motion_bandwidth_hz)
+        self.leak_corner_hz = _positive("leak_corner_hz", leak_corner_hz)
+        self.offset_corner_hz = None      # interface parity with InverseEstimator (no tracker)
+        self.offset_drift_a_per_s = _positive("offset_drift_a_per_s", offset_drift_a_per_s)
+        self.rest_offset_time_s = _positive("rest_offset_time_s", rest_offset_time_s)
+        self.rest_window_s = _positive("rest_window_s", rest_window_s)
+        self.rest_enter = _positive("rest_enter", rest_enter)
+        self.rest_leave = _positive("rest_leave", rest_leave)
+        if self.rest_leave <= self.rest_enter:
+            raise EstimatorError(f"parameter 'rest_leave' ({rest_leave}) must exceed 'rest_enter' ({rest_enter})")
+        for name, f in (("motion_bandwidth_hz", self.motion_bandwidth_hz), ("leak_corner_hz", self.leak_corner_hz)):
+            if f >= fs / 2:
+                raise EstimatorError(f"parameter '{name}' = {f} must be below the Nyquist frequency {fs / 2} Hz")
+        self.rest_detection = bool(rest_detection)
+        self._build()
+        self.reset()
+
+    # -- design -------------------------------------------------------------
+    def _build(self) -> None:
+        fs, dt = self._fs, 1.0 / self._fs
+        ar, br, cr, dr = _modal_realisation(self.reduced)
+        n = ar.shape[0]
+        iw, iv, ib = n, n + 1, n + 2
+        N = n + 3
+        a = 2 * math.pi * self.motion_bandwidth_hz
+        wl = 2 * math.pi * self.leak_corner_hz
+        sv = self.motion_velocity_m_s
+        ac = np.zeros((N, N))
+        ac[:n, :n] = ar
+        ac[:n, iv] = br[:, 0]
+        ac[iw, iv] = 1.0
+        ac[iv, iv] = -a
+        c = np.zeros(N)
+        c[:n] = cr[0]
+        c[iv] = dr[0, 0]
+        c[ib] = 1.0
+        qc = np.zeros((N, N))
+        qc[iv, iv] = 2 * a * sv ** 2
+        qc[ib, ib] = self.offset_drift_a_per_s ** 2 * 60.0
+        # state scaling x = S x~ (all O(1), current in units of the noise) for the Riccati solve
+        scale = np.ones(N)
+        scale[:n] = sv / np.abs(np.diag(ar))
+        scale[iw] = 1e-3
+        scale[iv] = sv
+        scale[ib] = self.current_noise_a
+        self._c, self._iw, self._ib, self._n = c, iw, ib, N
+        self._motion_idx = np.r_[np.arange(n), iv]
+        self._c_list = c.tolist()
+        self._moving = self._moving_mode(ac, qc, c, scale, wl, dt)
+        # until the first rest the deflection's level is unknown (the motion may have begun
+        # before the record): leak at the leaky inverse's corner, as it does
+        self._moving_start = self._moving_mode(ac, qc, c, scale, 2 * math.pi * START_LEAK_CORNER_HZ, dt)
+        self.std_moving_m = self._moving.std_m
+        self._n_max = fs * self.rest_offset_time_s
+        self._q_b_step = self.offset_drift_a_per_s ** 2 * 60.0 * dt
+        # detector: band-pass and one-pole energy average
+        hi = min(50.0, fs / 4)
+        self._bp = sig.butter(1, [REST_BAND_LOW_HZ, hi], btype="bandpass", fs=fs, output="sos")
+        self._bp_list = self._bp[0].tolist()
+        imp1 = np.zeros(4096)
+        imp1[0] = 1.0
+        self._bp_unit = float(np.sum(sig.sosfilt(self._bp, imp1) ** 2))
+        enbw = math.pi / 2 * (hi - REST_BAND_LOW_HZ)
+        self.noise_energy_a2 = self.current_noise_a ** 2 * 2 * enbw / fs
+        self._alpha = math.exp(-1.0 / (fs * self.rest_window_s))
+        # the noise floor is averaged over NOISE_WINDOW_S and each sample's energy capped at
+        # ENERGY_CLIP^2 times the configured noise's, so a jump in the current cannot raise it
+        self._alpha_hf = math.exp(-1.0 / (fs * NOISE_WINDOW_S))
+        # white-noise level seen above the motion band (fs/4 .. Nyquist): energy ratio to the band
+        self._hp = sig.butter(2, fs / 4, btype="highpass", fs=fs, output="sos") if fs / 4 > 2 * hi else None
+        if self._hp is not None:
+            imp = np.zeros(4096)
+            imp[0] = 1.0
+            self._hp_list = self._hp[0].tolist()
+            self._hp_unit = float(np.sum(sig.sosfilt(self._hp, imp) ** 2))
+            self._hf_clip = NOISE_CLIP ** 2 * self.current_noise_a ** 2 * self._hp_unit
+            self._hp_ratio = float(np.sum(sig.sosfilt(self._bp, imp) ** 2) / np.sum(sig.sosfilt(self._hp, imp) ** 2))
+            self.noise_energy_a2 = self.current_noise_a ** 2 * float(np.sum(sig.sosfilt(self._bp, imp) ** 2))
+
+    def _moving_mode(self, ac, qc, c, scale, wl, dt) -> "_Mode":
+        """Steady-state Kalman predictor of the moving model with deflection leak wl (rad/s)."""
+        N, iw, ib = ac.shape[0], self._iw, self._ib
+        moving = ac.copy()
+        moving[iw, iw] = -wl
+        ad, qd = van_loan(moving, qc, dt)
+        s_inv = 1.0 / scale
+        ad_s = ad * s_inv[:, None] * scale[None, :]
+        qd_s = qd * s_inv[:, None] * s_inv[None, :]
+        c_s = c * scale / self.current_noise_a
+        p_s = solve_discrete_are(ad_s.T, c_s[:, None], qd_s + 1e-30 * np.eye(N), np.array([[1.0]]))
+        k_s = p_s @ c_s / (c_s @ p_s @ c_s + 1.0)
+        post = p_s - np.outer(k_s, c_s @ p_s)
+        mode = _Mode(ad, k_s * scale / self.current_noise_a, c, iw, ib, scale)
+        mode.std_m = float(math.sqrt(max(post[iw, iw], 0.0)) * scale[iw])
+        return mode
+
+    # -- properties -----------------------------------------------------------
+    @property
+    def sample_rate_hz(self) -> float:
+        return self._fs
+
+    @property
+    def offset_a(self) -> float:
+        """Current offset estimate, A."""
+        return self._b_last
+
+    @property
+    def offset_corner_while_moving_hz(self) -> float:   # see offset_corner_hz
+        return offset_corner_hz(self.reduced, self.motion_velocity_m_s, self.motion_bandwidth_hz, self.offset_drift_a_per_s)
+
+    # -- streaming ------------------------------------------------------------
+    def reset(self) -> None:
+        """Zero deflection, zero offset, moving mode."""
+        self._s = np.zeros(self._n)
+        self._bp_zi = np.zeros((self._bp.shape[0], 2))
+        # start as if just moving: rest is entered only after ~rest_window_s of quiet current
+        self._w_ref = 0.0
+        self._seen_rest = False
+        self._lp = 0.0
+        self._energy = 10.0 * self.rest_leave * self.noise_energy_a2
+        self._offset_var = OFFSET_PRIOR_A ** 2
+        self._sigma2 = self.current_noise_a ** 2
+        self._hp_zi = np.zeros((2 if self._hp is None else self._hp.shape[0], 2))
+        self._hf_energy = 0.0 if self._hp is None else self.current_noise_a ** 2 * self._hp_unit
+        self.at_rest = False
+        self._b_last = 0.0
+        self.last_std = self._moving_start.std_m
+        self.last_rest = np.zeros(0, bool)
+
+    def _clip_a2(self) -> float:
+        """Cap on one sample's band energy (ENERGY_CLIP times the noise's): a large pulse
+        then delays rest by at most rest_window_s * ln(ENERGY_CLIP / rest_enter) (0.35 s)."""
+        return ENERGY_CLIP * self._sigma2 * self._bp_unit
+
+    def _dc_limit_a2(self) -> float:
+        """Largest squared departure of the low-passed current from the offset estimate
+        that still counts as rest: (4 sigma)^2 of that difference, sigma^2 = the mean's
+        noise sigma^2/(2 fs rest_window_s) + the offset's variance P_b (+ 2 nA for the
+        reduction/drift).  A deflection ramp of v m/s gives R0 v of steady current."""
+        return 16.0 * (self._sigma2 / (2 * self._fs * self.rest_window_s) + self._offset_var + 4e-18)
+
+    def _rest_flags(self, y: np.ndarray) -> np.ndarray:
+        # single-section filters run by lfilter (same DF-II-T state as sosfilt, less overhead)
+        band, zf = sig.lfilter(self._bp[0, :3], self._bp[0, 3:], y, zi=self._bp_zi[0])
+        self._bp_zi[0] = zf
+        a = self._alpha
+        floor = self.noise_energy_a2
+        if self._hp is not None and self.rest_detection:
+            # measured white-noise floor (never below the configured DAQ noise)
+            high, zf = sig.lfilter(self._hp[0, :3], self._hp[0, 3:], y, zi=self._hp_zi[0])
+            self._hp_zi[0] = zf
+            ah = self._alpha_hf
+            hf, zf = sig.lfilter([1 - ah], [1, -ah], np.minimum(high * high, self._hf_clip), zi=[ah * self._hf_energy])
+            # the noise level each sample sees is the one measured up to the sample before
+            sigma2 = np.maximum(self.current_noise_a ** 2, np.concatenate([[self._sigma2], hf[:-1] / self._hp_unit]))
+            self._hf_energy = float(zf[0] / ah)
+            sq = np.minimum(band * band, ENERGY_CLIP * self._bp_unit * sigma2)
+            e, zf = sig.lfilter([1 - a], [1, -a], sq, zi=[a * self._energy])
+            self._energy = float(zf[0] / a)
+            floor = np.maximum(floor, hf * self._hp_ratio)
+            self._sigma2 = max(self.current_noise_a ** 2, self._hf_energy / self._hp_unit)
+        else:
+            e, zf = sig.lfilter([1 - a], [1, -a], np.minimum(band * band, self._clip_a2()),
+                                zi=[a * self._energy])
+            self._energy = float(zf[0] / a)
+        # low-passed current against the offset estimate (a slow ramp is a steady current
+        # the band-pass does not see, H(0) = 0): see _dc_limit_a2
+        lp, zf = sig.lfilter([1 - a], [1, -a], y, zi=[a * self._lp])
+        self._lp = float(zf[0] / a)
+        if not self.rest_detection:
+            return np.zeros(y.size, bool)
+        # leave rest on the averaged energy, or at once on one sample beyond 6 sigma of the
+        # in-band noise (false alarm 2e-9 per sample), so a sudden move never feeds the offset
+        dc = lp - self._b_last
+        moving = (e > self.rest_leave * floor) | (band * band > 36.0 * floor) | (dc * dc > self._dc_limit_a2())
+        code = np.where(moving, 0, np.where(e < self.rest_enter * floor, 1, -1))
+        idx = np.where(code >= 0, np.arange(y.size), -1)
+        np.maximum.accumulate(idx, out=idx)
+        flags = np.where(idx >= 0, code[np.maximum(idx, 0)] == 1, self.at_rest)
+        return flags
+
+    def process_with_std(self, current_a):
+        """(deflection m, its standard deviation m) for a block of current samples."""
+        y = np.asarray(current_a, dtype=float)
+        if y.ndim == 2 and y.shape[1] == 1:
+            y = y[:, 0]
+        if y.ndim != 1:
+            raise EstimatorError(f"expected shape (n,) or (n, 1), got {y.shape}")
+        if y.size == 0:
+            return np.empty(0), np.empty(0)
+        was_rest = self.at_rest
+        flags = self._rest_flags(y)
+        self.last_rest = flags
+        cuts = np.flatnonzero(np.diff(flags.astype(np.int8))) + 1
+        bounds = [0, *cuts.tolist(), y.size]
+        out = np.empty(y.size)
+        for lo, hi in zip(bounds[:-1], bounds[1:]):
+            if flags[lo]:
+                self._seen_rest = True
+                self._s[self._iw] += self._w_ref          # rest holds the absolute deflection
+                self._w_ref = 0.0
+                out[lo:hi] = self._run_rest(y[lo:hi])
+            else:
+                if was_rest:                              # leaving rest: leak towards this level
+                    self._w_ref = float(self._s[self._iw])
+                    self._s[self._iw] = 0.0
+                mode = self._moving if self._seen_rest else self._moving_start
+                out[lo:hi], self._b_last, self._s = mode.run(y[lo:hi], self._s)
+                out[lo:hi] += self._w_ref
+                self._offset_var += self._q_b_step * (hi - lo)
+            was_rest = bool(flags[lo])
+        self.at_rest = bool(flags[-1])
+        self.last_std = (self._moving if self._seen_rest else self._moving_start).std_m
+        return out, np.full(y.size, self.last_std)
+
+    def _run_rest(self, y: np.ndarray) -> np.ndarray:
+        """Rest: deflection held, velocity and charge states zero (the detector has seen
+        quiet current for ~rest_window_s, many times the sensor's memory), offset = running
+        mean of the current, weighted by its prior variance
+        (n0 = sigma^2 / P_b equivalent samples), then an exponential average over
+        at most ``rest_offset_time_s`` (drift)."""
+        s_end = self._s.copy()
+        s_end[self._motion_idx] = 0.0       # at rest nothing moves: no predicted motion current
+        w = np.full(y.size, s_end[self._iw])
+        u = y
+        b0 = self._s[self._ib]
+        n0 = self.current_noise_a ** 2 / self._offset_var
+        counts = n0 + np.arange(1, y.size + 1)
+        if counts[-1] <= self._n_max:
+            b = (n0 * b0 + float(np.sum(u))) / counts[-1]
+            n_end = counts[-1]
+        else:
+            k = max(0, int(math.floor(self._n_max - n0)))
+            b = (n0 * b0 + float(np.sum(u[:k]))) / (n0 + k) if k > 0 else b0
+            g = 1.0 / (self._n_max + 1.0)
+            b_seq, _ = sig.lfilter([g], [1.0, -(1.0 - g)], u[k:], zi=[(1.0 - g) * b])
+            b = float(b_seq[-1])
+            n_end = self._n_max
+        s_end[self._ib] = b
+        self._s = s_end
+        self._b_last = b
+        self._offset_var = self.current_noise_a ** 2 / n_end
+        return w
+
+    def process(self, current_a) -> np.ndarray:
+        """Deflection, m, for a block of current samples (A); see :meth:`process_with_std`."""
+        w, _ = self.process_with_std(current_a)
+        return w
+
+    def process_one(self, current_a: float) -> float:
+        """One sample, as a float: the same recursion as :meth:`process` written for a
+        single sample (no per-call lfilter costs); equal to it to rounding (tested)."""
+        y = float(current_a)
+        x = y
+        b0, b1, b2, _, a1, a2 = self._bp_list
+        zi = self._bp_zi
+        z0, z1 = zi.item(0), zi.item(1)
+        band = b0 * x + z0
+        zi[0] = (b1 * x - a1 * band + z1, b2 * x - a2 * band)
+        a = self._alpha
+        e = a * self._energy + (1 - a) * min(band * band, self._clip_a2())
+        self._energy = e
+        floor = self.noise_energy_a2
+        if self._hp is not None and self.rest_detection:
+            h0, h1, h2, _, g1, g2 = self._hp_list
+            hz = self._hp_zi
+            y0, y1 = hz.item(0), hz.item(1)
+            high = h0 * x + y0
+            hz[0] = (h1 * x - g1 * high + y1, h2 * x - g2 * high)
+            ah = self._alpha_hf
+            self._hf_energy = hf = ah * self._hf_energy + (1 - ah) * min(high * high, self._hf_clip)
+            floor = max(floor, hf * self._hp_ratio)
+            self._sigma2 = max(self.current_noise_a ** 2, hf / self._hp_unit)
+        was_rest = self.at_rest
+        self._lp = lp = a * self._lp + (1 - a) * x
+        if self.rest_detection:
+            dc = lp - self._b_last
+            if e > self.rest_leave * floor or band * band > 36.0 * floor or dc * dc > self._dc_limit_a2():
+                self.at_rest = False
+            elif e < self.rest_enter * floor:
+                self.at_rest = True
+        st = self._s.tolist()
+        iw, ib = self._iw, self._ib
+        if self.at_rest and self._w_ref:
+            st[iw] += self._w_ref
+            self._w_ref = 0.0
+        elif was_rest and not self.at_rest:
+            self._w_ref = st[iw]
+            st[iw] = 0.0
+        if self.at_rest:
+            self._seen_rest = True
+            for j in self._motion_idx.tolist():
+                st[j] = 0.0
+            n0 = self.current_noise_a ** 2 / self._offset_var
+            n1 = min(n0 + 1.0, self._n_max)
+            g = 1.0 / (n1 if n0 + 1.0 <= self._n_max else self._n_max + 1.0)
+            b = st[ib] + g * (y - st[ib])
+            w = st[iw]
+            new = st
+            new[ib] = b
+            self._b_last = b
+            self._offset_var = self.current_noise_a ** 2 / n1
+        else:
+            mode = self._moving if self._seen_rest else self._moving_start
+            innov = y - sum(map(mul, self._c_list, st))
+            w = st[iw] + mode.k_w * innov + self._w_ref
+            self._b_last = st[ib] + mode.k_b * innov
+            new = [sum(map(mul, row, st)) + g * y for row, g in zip(mode.f_rows, mode.g_list)]
+            self._offset_var += self._q_b_step
+        self._s[:] = new
+        return w
+
+    def get_state(self) -> dict:
+        return {"s": self._s.copy(), "bp_zi": self._bp_zi.copy(), "energy": self._energy,
+                "at_rest": self.at_rest, "offset_a": self._b_last, "w_ref": self._w_ref,
+                "hp_zi": self._hp_zi.copy(), "hf_energy": self._hf_energy, "offset_var": self._offset_var,
+                "sigma2": self._sigma2, "lp": self._lp, "seen_rest": self._seen_rest}
+
+    def set_state(self, state: dict) -> None:
+        s = np.asarray(state.get("s"), float)
+        if s.shape != self._s.shape or not np.all(np.isfinite(s)):
+            raise EstimatorError(f"state shape {s.shape} does not match {self._s.shape} or is not finite")
+        self._s = s.copy()
+        self._bp_zi = np.asarray(state["bp_zi"], float).copy()
+        self._energy = float(state["energy"])
+        self.at_rest = bool(state["at_rest"])
+        self._b_last = float(state["offset_a"])
+        self._w_ref = float(state["w_ref"])
+        self._hp_zi = np.asarray(state["hp_zi"], float).copy()
+        self._hf_energy = float(state["hf_energy"])
+        self._offset_var = float(state["offset_var"])
+        self._sigma2 = float(state["sigma2"])
+        self._lp = float(state["lp"])
+        self._seen_rest = bool(state["seen_rest"])
+
+    def current_output(self) -> np.ndarray:
+        """Deflection held in the predicted state (per channel), m."""
+        return np.array([self._s[self._iw] + self._w_ref])
+
+    def continue_from(self, old, recent_input=None) -> None:
+        """Take over ``old``'s deflection and offset (bumpless); the fast states are
+        rebuilt by replaying ``recent_input`` (then deflection and offset are reset
+        to ``old``'s)."""
+        self.reset()
+        if recent_input is not None and np.size(recent_input):
+            self.process(np.asarray(recent_input, float).reshape(-1))
+        if isinstance(old, KalmanEstimator):
+            self._s[self._iw] = old._s[old._iw]
+            self._w_ref = old._w_ref
+            self._seen_rest = old._seen_rest
+            self._offset_var = old._offset_var
+            self._s[self._ib] = old._s[old._ib]
+            self._b_last = old._b_last
+            self.at_rest = old.at_rest
+            self._energy = old._energy
+        else:
+            self._s[self._iw] = float(old.current_output()[0])
+
+    def rebuilt(self, reduced: ReducedModel | None = None, recent_input=None, **changes) -> "KalmanEstimator":
+        kwargs = {k: getattr(self, k) for k in (
+            "current_noise_a", "motion_velocity_m_s", "motion_bandwidth_hz", "leak_corner_hz",
+            "offset_drift_a_per_s", "rest_offset_time_s", "rest_window_s", "rest_enter", "rest_leave",
+            "rest_detection")}
+        kwargs["sample_rate_hz"] = self._fs
+        kwargs.update(changes)
+        fs = kwargs.pop("sample_rate_hz")
+        new = KalmanEstimator(reduced or self.reduced, fs, **kwargs)
+        new.continue_from(self, recent_input)
+        return new

@@ -1,0 +1,210 @@
+"""Tests of the offset-aware Kalman estimator, the mains notch and the DAQ scenarios."""
+import numpy as np
+import pytest
+
+from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
+from ipmc_sensor_ros.estimation.inverse import EstimatorError, InverseEstimator
+from ipmc_sensor_ros.estimation.kalman import KalmanEstimator, offset_corner_hz
+from ipmc_sensor_ros.estimation.mains import LINE_WARN_RATIO, MainsFilter, line_level
+from ipmc_sensor_ros.lti.reduction import reduce_model
+from ipmc_sensor_ros.physics.model import SensorModel
+from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
+from ipmc_sensor_ros.simulation.daq import daq_current, robot_motion, started
+from ipmc_sensor_ros.simulation.stimuli import CrankSlider, Step
+
+FS = 1000.0
+SLIM = SensorModel(PAPER_SAMPLES["slim"])
+BIG = SensorModel(PAPER_SAMPLES["big"])
+
+
+@pytest.fixture(scope="module")
+def reduced_slim():
+    return reduce_model(SLIM, 4)
+
+
+def nrmse(est, truth):
+    return float(np.sqrt(np.mean((est - truth) ** 2)) / np.sqrt(np.mean(truth ** 2)))
+
+
+def blocks(est, i, n=1000):
+    return np.concatenate([est.process(i[k:k + n]) for k in range(0, i.size, n)])
+
+
+def test_observability_corner_is_far_below_the_motion_band(reduced_slim):
+    # f_c = sqrt(q_b a / (2 R0^2 sigma_v^2)) / 2 pi: with 1 nA/min drift and 20 mm/s motion the
+    # offset cannot be told from a deflection creeping slower than ~1e-5 Hz (docstring).
+    f_c = offset_corner_hz(reduced_slim)
+    assert 1e-7 < f_c < 1e-3
+    # it scales as the square root of the drift intensity (q_b ~ drift^2 -> f_c ~ drift)
+    assert offset_corner_hz(reduced_slim, offset_drift_a_per_s=4e-11) == pytest.approx(
+        f_c * 4e-11 / (1e-9 / 60), rel=1e-9)
+
+
+def test_offset_is_learned_at_rest_and_deflection_held(reduced_slim):
+    # At rest with a 10 nA offset and 20 nA noise: after 3 s the offset estimate is a mean of
+    # ~2500 samples (std 20/sqrt(2500) = 0.4 nA): within 2 nA (5 sigma).
+    rng = np.random.default_rng(3)
+    est = KalmanEstimator(reduced_slim, FS)
+    est.process(10e-9 + 20e-9 * rng.standard_normal(3000))
+    assert est.at_rest
+    assert est.offset_a == pytest.approx(10e-9, abs=2e-9)
+    w_before = est.process(10e-9 + 20e-9 * rng.standard_normal(10))[-1]
+    # a further 5 s of rest does not move the deflection (held: frozen, no leak)
+    w_after = est.process(10e-9 + 20e-9 * rng.standard_normal(5000))[-1]
+    assert abs(w_after - w_before) < 1e-9
+
+
+def test_blocks_single_samples_and_process_one_agree(reduced_slim):
+    t = np.arange(int(6 * FS)) / FS
+    w = started(t, CrankSlider(3.0, 2e-3, 20e-3).deflection(t), rest_s=1.5) * (t < 4.5)
+    i = daq_current(SLIM, t, w, offset_a=8e-9, noise_a=20e-9, seed=4)
+    a, b, c = (KalmanEstimator(reduced_slim, FS) for _ in range(3))
+    wa = blocks(a, i, 1000)
+    wb = blocks(b, i, 37)
+    wc = np.array([c.process_one(x) for x in i])
+    # blocks of any size: the same recursion (state exact between modes) up to rounding, except
+    # that the measured noise level used by the rest-offset weighting is updated per block:
+    # 1 um bound against a 2 mm motion
+    assert np.max(np.abs(wa - wb)) < 1e-6
+    assert np.max(np.abs(wa - wc)) < 1e-6
+    assert a.at_rest == b.at_rest == c.at_rest
+
+
+def test_state_save_restore_and_bumpless_continue(reduced_slim):
+    rng = np.random.default_rng(5)
+    t = np.arange(3000) / FS
+    w = started(t, CrankSlider(2.0, 2e-3, 20e-3).deflection(t), rest_s=1.0)
+    i = daq_current(SLIM, t, w, offset_a=5e-9, noise_a=20e-9, seed=5)
+    est = KalmanEstimator(reduced_slim, FS)
+    est.process(i[:2000])
+    saved = est.get_state()
+    tail = est.process(i[2000:])
+    est.set_state(saved)
+    assert np.array_equal(est.process(i[2000:]), tail)
+    with pytest.raises(EstimatorError, match="state"):
+        est.set_state({"s": np.zeros(3)})
+    old = KalmanEstimator(reduced_slim, FS)
+    old.process(i[:2000])
+    new = old.rebuilt(reduce_model(SLIM, 3), recent_input=i[1500:2000])
+    assert new.current_output()[0] == pytest.approx(old.current_output()[0], abs=1e-12)
+    assert new.offset_a == old.offset_a
+    del rng
+
+
+@pytest.mark.parametrize("kw,name", [(dict(current_noise_a=0.0), "current_noise_a"),
+                                     (dict(motion_bandwidth_hz=600.0), "motion_bandwidth_hz"),
+                                     (dict(rest_enter=5.0, rest_leave=4.0), "rest_leave"),
+                                     (dict(channels=2), "channels")])
+def test_invalid_configuration_is_refused(reduced_slim, kw, name):
+    with pytest.raises(EstimatorError, match=name):
+        KalmanEstimator(reduced_slim, FS, **kw)
+
+
+@pytest.mark.parametrize("sample,f", [("slim", 1.0), ("short", 1.0)])
+def test_crank_with_offset_after_rest(sample, f):
+    # Issue-14 row 1 (crank, 1 % noise + 10 nA offset), starting from 2 s of rest (the offset is
+    # learned there).  Kalman defaults, not the scenario's noise.  Target 3 %; tolerance: the
+    # offset learned in ~1.7 s of detected rest has std sigma/sqrt(1700) (0.7 nA slim, 1.4 nA
+    # short at 1 Hz), which integrates during 18 s of motion into an RMS error of about
+    # db * 11 s / R0 (25 um, 1.7 %): bound 3 % + 1 %.  At 5 and 20 Hz the same 1 % noise is
+    # 5-40 times larger and the rest-learned offset alone exceeds the target (bound printed
+    # by bench/bench_estimators.py).
+    model = SensorModel(PAPER_SAMPLES[sample])
+    t = np.arange(int(20 * FS)) / FS
+    w = started(t, CrankSlider(f, 2e-3, 20e-3, phase_rad=0.7).deflection(t))
+    i = daq_current(model, t, w, offset_a=10e-9, noise_fraction=0.01, seed=21)
+    est = DeflectionEstimator(model, FS, estimator="kalman")
+    w_hat = np.concatenate([est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)])
+    leaky = DeflectionEstimator(model, FS)
+    w_leaky = np.concatenate([leaky.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)])
+    sel = t >= 5
+    assert nrmse(w_hat[sel], w[sel]) < 0.04
+    assert nrmse(w_hat[sel], w[sel]) < nrmse(w_leaky[sel], w[sel])
+    assert np.all(np.isfinite(est.last_std_m)) and est.last_std_m[0] > 0
+
+
+def test_step_held_with_offset_big():
+    # Issue-14 row 2: 2 mm step held 10 s, 10 nA offset, 1 % noise (big).  The leaky estimator
+    # loses 1 - exp(-w_c t) of the step (47 % after 10 s); the Kalman estimator holds it at rest.
+    t = np.arange(int(15 * FS)) / FS
+    w = Step(2e-3, start_s=2.3, rise_time_s=0.05).deflection(t)
+    i = daq_current(BIG, t, w, offset_a=10e-9, noise_fraction=0.01, seed=22)
+    est = DeflectionEstimator(BIG, FS, estimator="kalman")
+    w_hat = np.concatenate([est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)])
+    sel = t >= 5
+    # target 3 %; tolerance 1 % for the offset learned in 2 s (see the crank test)
+    assert nrmse(w_hat[sel], w[sel]) < 0.04
+    assert est.inverse.at_rest
+
+
+def test_mains_notch_removes_hum_and_detects_it():
+    t = np.arange(int(4 * FS)) / FS
+    signal = 1e-6 * np.sin(2 * np.pi * 2.0 * t)
+    hum = 0.05e-6 * np.sin(2 * np.pi * 50 * t) + 0.02e-6 * np.sin(2 * np.pi * 150 * t + 1)
+    mf = MainsFilter(50, FS)
+    out = np.concatenate([mf.process((signal + hum)[k:k + 500]) for k in range(0, t.size, 500)])
+    assert mf.line_present
+    # after the notch settles (Q = 30: ~0.2 s), the hum is below 5 % of its level; the 2 Hz
+    # signal passes within 1 % (notch width 1.7 Hz at 50 Hz)
+    sel = t > 1.0
+    assert np.sqrt(np.mean((out[sel] - signal[sel]) ** 2)) < 0.05 * np.sqrt(np.mean(hum[sel] ** 2)) + 0.01e-6
+    clean = MainsFilter(50, FS)
+    clean.process(signal)
+    assert not clean.line_present
+    assert line_level(signal + hum, FS, 50) > LINE_WARN_RATIO > line_level(signal, FS, 50)
+    with pytest.raises(EstimatorError, match="mains_hz"):
+        MainsFilter(55, FS)
+
+
+def test_deflection_estimator_options():
+    with pytest.raises(EstimatorError, match="estimator"):
+        DeflectionEstimator(SLIM, FS, estimator="magic")
+    with pytest.raises(EstimatorError, match="offset_corner_hz"):
+        DeflectionEstimator(SLIM, FS, estimator="kalman", offset_corner_hz=0.01)
+    est = DeflectionEstimator(SLIM, FS)
+    t = np.arange(100) / FS
+    _, w, std = est.process_with_std(t, np.zeros(100))
+    assert np.all(np.isnan(std))          # the leaky inverse has no uncertainty model
+    assert isinstance(est.inverse, InverseEstimator)
+    # the Kalman path: std from the covariance (positive, finite), bumpless rebuild
+    kal = DeflectionEstimator(SLIM, FS, estimator="kalman", mains_hz=60)
+    i = daq_current(SLIM, t, 1e-3 * np.sin(2 * np.pi * 5 * t), noise_a=20e-9, seed=1)
+    _, w, std = kal.process_with_std(t, i)
+    assert np.all(np.isfinite(std)) and np.all(std > 0)
+    new = kal.rebuilt(leak_corner_hz=0.001)
+    assert new.inverse.leak_corner_hz == 0.001 and new.mains_hz == 60 and new.estimator == "kalman"
+    assert new.inverse.current_output()[0] == pytest.approx(kal.inverse.current_output()[0], abs=1e-12)
+
+
+def test_robot_motion_with_hum_beats_leaky():
+    # Issue-14 row 3 (shortened to 30 s): robot-like motion with holds, 10 nA offset,
+    # 1 % noise + 3 % 50 Hz hum, mains_hz 50.  Target 5 %; the offset learned during holds of
+    # seconds has std < 1 nA (noise 20-60 nA), i.e. < 50 um after the leak: tolerance 3 %.
+    t = np.arange(int(30 * FS)) / FS
+    w = robot_motion(t, seed=31)
+    i = daq_current(SLIM, t, w, offset_a=10e-9, noise_fraction=0.01, mains_hz=50, hum_fraction=0.03, seed=31)
+    est = DeflectionEstimator(SLIM, FS, estimator="kalman", mains_hz=50)
+    w_hat = np.concatenate([est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)])
+    leaky = DeflectionEstimator(SLIM, FS)
+    w_l = np.concatenate([leaky.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)])
+    sel = t >= 5
+    assert est.mains.line_present is False or est.mains.line_ratio > 0
+    assert nrmse(w_hat[sel], w[sel]) < 0.08
+    assert nrmse(w_hat[sel], w[sel]) < 0.5 * nrmse(w_l[sel], w[sel])
+
+
+def test_drifting_offset_with_intermittent_motion_stays_bounded():
+    # Issue-14 row 5, shortened to 10 min at 500 Hz (bench runs the full hour): offset 10 nA
+    # drifting 1 nA/min, 1 % noise, a 10 s robot-like burst every minute.  Target: |error|
+    # <= 0.2 mm at all times.  Between bursts the offset is re-learned at rest (lag of the
+    # 10 s average behind a 1 nA/min drift: 0.17 nA); each burst starts from a held level
+    # and loses < 0.3 %/s of its excursion to the leak (0.0005 Hz) plus ~1 % reduction error.
+    fs = 500.0
+    t = np.arange(int(600 * fs)) / fs
+    from ipmc_sensor_ros.simulation.daq import intermittent_motion
+    w = intermittent_motion(t, seed=41)
+    i = daq_current(SLIM, t, w, offset_a=10e-9, drift_a_per_min=1e-9, noise_fraction=0.01, seed=41)
+    est = DeflectionEstimator(SLIM, fs, estimator="kalman")
+    w_hat = np.concatenate([est.process(t[k:k + 5000], i[k:k + 5000])[1] for k in range(0, t.size, 5000)])
+    assert np.max(np.abs(w_hat - w)[t > 5]) < 0.2e-3
+    assert est.inverse.offset_a == pytest.approx(20e-9, abs=2e-9)   # 10 nA + 10 min * 1 nA/min
