@@ -198,7 +198,7 @@ def test_drifting_offset_with_intermittent_motion_stays_bounded():
     # drifting 1 nA/min, 1 % noise, a 10 s robot-like burst every minute.  Target: |error|
     # <= 0.2 mm at all times.  Between bursts the offset is re-learned at rest (lag of the
     # 10 s average behind a 1 nA/min drift: 0.17 nA); each burst starts from a held level
-    # and loses < 0.3 %/s of its excursion to the leak (0.0005 Hz) plus ~1 % reduction error.
+    # and loses < 0.6 %/s of its excursion to the leak (0.001 Hz) plus ~1 % reduction error.
     fs = 500.0
     t = np.arange(int(600 * fs)) / fs
     from ipmc_sensor_ros.simulation.daq import intermittent_motion

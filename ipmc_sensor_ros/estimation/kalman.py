@@ -18,7 +18,7 @@ offset_drift_a_per_s^2 * 60 s`` (moves by ``offset_drift_a_per_s * 60 s`` RMS pe
 minute), measurement noise RMS ``current_noise_a`` per sample.  The leak ``w_l``
 makes w detectable (an unmeasured integrator has no steady-state gain): 0.01 Hz
 (the leaky inverse's) until the first rest, when the level is unknown, then
-0.0005 Hz towards the last held level (``KALMAN_LEAK_CORNER_HZ``).  Exact
+0.001 Hz towards the last held level (``KALMAN_LEAK_CORNER_HZ``).  Exact
 discretisation (Van Loan, expm), gain from :func:`scipy.linalg.solve_discrete_are`.
 
 Defaults (from the DAQ and the motion)
@@ -96,9 +96,9 @@ DEFAULT_CURRENT_NOISE_A = 20e-9
 DEFAULT_MOTION_VELOCITY_M_S = 0.1
 DEFAULT_MOTION_BANDWIDTH_HZ = 50.0
 DEFAULT_OFFSET_DRIFT_A_PER_S = 1e-9 / 60.0
-#: Default deflection leak while moving after a rest, Hz (time constant 320 s): each move
-#: loses 0.3 %/s of its excursion from the held level; an offset error db adds db t / R0.
-KALMAN_LEAK_CORNER_HZ = 0.0005
+#: Default deflection leak while moving after a rest, Hz (time constant 160 s): each move
+#: loses 0.6 %/s of its excursion from the held level; an offset error db adds db t / R0.
+KALMAN_LEAK_CORNER_HZ = 0.001
 #: Deflection leak before the first rest (level unknown), Hz: the leaky inverse's corner.
 START_LEAK_CORNER_HZ = 0.01
 #: Prior RMS of the current offset before any rest, A (DAQ offsets: tens of nA).
@@ -108,7 +108,7 @@ ENERGY_CLIP = 20.0
 #: Low edge of the rest detector's band, Hz (slower motion is seen only by the offset test).
 REST_BAND_LOW_HZ = 1.0
 NOISE_WINDOW_S = 0.5   # averaging time of the measured white-noise floor, s
-NOISE_CLIP = 100.0     # largest measured noise RMS accepted (x current_noise_a); caps transients
+NOISE_CLIP = 20.0      # largest measured noise RMS accepted (x current_noise_a); caps transients
 
 
 def offset_corner_hz(reduced: ReducedModel, motion_velocity_m_s: float = DEFAULT_MOTION_VELOCITY_M_S,
