@@ -184,7 +184,7 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
     from std_msgs.msg import Float64MultiArray
 
     from ipmc_sensor_ros.nodes import params as P
-    from ipmc_sensor_ros.nodes.messages import DEFLECTION_COLUMNS, unpack_block
+    from ipmc_sensor_ros.nodes.messages import ESTIMATE_COLUMNS, unpack_block
 
     fs = rate * n
     domain = random.randint(100, 229)
@@ -207,7 +207,7 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
 
     def on_block(msg):
         now = time.time() - epoch
-        b = unpack_block(msg, DEFLECTION_COLUMNS)
+        b = unpack_block(msg, ESTIMATE_COLUMNS)
         received[0] += len(b.values)
         latencies.append(now - float(b.times_s[-1]))
 

@@ -42,7 +42,7 @@ class DirectNode:
         from rclpy.parameter import Parameter
 
         from ipmc_sensor_ros.nodes.estimator_node import EstimatorNode
-        from ipmc_sensor_ros.nodes.messages import DEFLECTION_COLUMNS, unpack_block
+        from ipmc_sensor_ros.nodes.messages import ESTIMATE_COLUMNS, unpack_block
 
         self.ctx = init_context()
         values = {"publish_points": "none", **overrides}
@@ -51,7 +51,7 @@ class DirectNode:
         self.published: list = []
         self.points: list = []
         self.node._pub_block.publish = lambda m: self.published.append(
-            unpack_block(m, DEFLECTION_COLUMNS))
+            unpack_block(m, ESTIMATE_COLUMNS))
         self.node._pub_point.publish = lambda p: self.points.append(
             (p.header.stamp.sec, p.header.stamp.nanosec, p.header.frame_id, p.point.x, p.point.z))
 

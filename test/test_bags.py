@@ -19,7 +19,7 @@ from std_msgs.msg import Float64MultiArray
 from ipmc_sensor_ros.cli.data_verbs import read_estimate
 from ipmc_sensor_ros.cli.main import main
 from ipmc_sensor_ros.nodes.estimator_node import EstimatorNode
-from ipmc_sensor_ros.nodes.messages import DEFLECTION_COLUMNS, unpack_block
+from ipmc_sensor_ros.nodes.messages import ESTIMATE_COLUMNS, unpack_block
 from conftest import TEST_DOMAIN
 
 pytestmark = pytest.mark.ros
@@ -87,7 +87,7 @@ def test_replay_into_live_node_equals_offline_and_loop_resets(tmp_path):
         pub_current = player.create_publisher(Float64MultiArray, "/current", qos)
         blocks = []
         player.create_subscription(Float64MultiArray, "/deflection/block",
-                                   lambda m: blocks.append(unpack_block(m, DEFLECTION_COLUMNS)), qos)
+                                   lambda m: blocks.append(unpack_block(m, ESTIMATE_COLUMNS)), qos)
         ex.add_node(est)
         ex.add_node(player)
         end = time.monotonic() + 10

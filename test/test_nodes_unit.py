@@ -26,7 +26,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 from ipmc_sensor_ros.estimation.inverse import InverseEstimator
 from ipmc_sensor_ros.nodes import params as P
 from ipmc_sensor_ros.nodes.estimator_node import ESTIMATOR_SPECS, EstimatorNode
-from ipmc_sensor_ros.nodes.messages import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, LayoutError,
+from ipmc_sensor_ros.nodes.messages import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, ESTIMATE_COLUMNS, LayoutError,
                                             claimed_samples, pack_block, unpack_block, BlockPacker)
 from ipmc_sensor_ros.nodes.simulator_node import SIMULATOR_SPECS, SimulatorNode
 from ipmc_sensor_ros.physics.model import SensorModel
@@ -164,7 +164,7 @@ class Harness:
         self.counters_msgs: list[dict] = []
         self.tester.create_subscription(
             Float64MultiArray, "deflection/block",
-            lambda m: self.blocks.append(unpack_block(m, DEFLECTION_COLUMNS)), qos)
+            lambda m: self.blocks.append(unpack_block(m, ESTIMATE_COLUMNS)), qos)
         self.tester.create_subscription(PointStamped, "deflection", self.points.append, qos)
         self.tester.create_subscription(
             Float64MultiArray, "deflection_truth",

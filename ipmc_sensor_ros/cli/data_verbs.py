@@ -211,7 +211,7 @@ def _cmd_estimate(args) -> int:
         model_text = estimator.model.describe()
         with Progress(f"estimating {data.current_a.size} samples of {src} with {model_text} "
                       f"(order {estimator.reduction_order}, fs {float(values['sample_rate_hz']):g} Hz, "
-                      f"leak {float(values['leak_corner_hz']):g} Hz)") as prog:
+                      f"{estimator.estimator} estimator, leak {estimator.inverse.leak_corner_hz:g} Hz)") as prog:
             prog.step("running")
             t_out, w, stream = estimate_record(estimator, data.time_s, current,
                                                max_gap_s=float(values["max_gap_s"]), source=src)
@@ -239,7 +239,7 @@ def _cmd_estimate(args) -> int:
             msg += f"; {resets} filter reset(s) at time gaps > {values['max_gap_s']} s or backward jumps"
         if measured is not None:
             err, used, what = estimate_accuracy(t_out, w, measured,
-                                                float(values["leak_corner_hz"]), estimator.delay_s)
+                                                estimator.inverse.leak_corner_hz, estimator.delay_s)
             row["nrmse"] = err
             msg += (f"; NRMSE {err:.4f} = RMS(estimate - measured) / RMS(measured), means and "
                     f"linear trends removed, over {fmt_time_s(used)} s ({what})")

@@ -40,12 +40,15 @@ from scipy.signal import lfilter
 
 from .inverse import DEFAULT_LEAK_CORNER_HZ, EstimatorError, InverseEstimator
 from .kalman import DEFAULT_CURRENT_NOISE_A, KALMAN_LEAK_CORNER_HZ, KalmanEstimator
-from .mains import MainsFilter
+from .mains import MainsFilter, detect_lines
 from ..physics.model import SensorModel
 from ..physics.pipeline import DriftSchedule
 from ..lti.reduction import ReducedModel, reduce_model_parts
 
-__all__ = ["DeflectionEstimator"]
+__all__ = ["DeflectionEstimator", "ESTIMATORS"]
+
+#: The estimator cores: the leaky inverse and the offset-aware Kalman filter.
+ESTIMATORS = ("leaky", "kalman")
 
 
 class DeflectionEstimator:
@@ -70,7 +73,7 @@ class DeflectionEstimator:
                  update_s: float = 5.0, reduced: ReducedModel | None = None,
                  history_s: float = 0.5, estimator: str = "leaky", mains_hz: float = 0,
                  current_noise_a: float = DEFAULT_CURRENT_NOISE_A):
-        if estimator not in ("leaky", "kalman"):
+        if estimator not in ESTIMATORS:
             raise EstimatorError(f"parameter 'estimator' must be 'leaky' or 'kalman', got {estimator!r}")
         self.estimator = estimator
         self.mains_hz = mains_hz
@@ -213,6 +216,30 @@ class DeflectionEstimator:
         """Rebuild the filter for the drifted ``material`` (bumpless: recent input replayed)."""
         drifted = self.model.with_material(material)
         self.inverse = self.inverse.rebuilt(self._reduce(drifted), self.recent_input)
+
+    @property
+    def std_m(self) -> float:
+        """Standard deviation of the latest estimate, m (Kalman: from the filter covariance of
+        the current mode; leaky: NaN, the leaky inverse has no uncertainty model)."""
+        std = getattr(self.inverse, "last_std", None)
+        return float("nan") if std is None else float(std)
+
+    def status(self) -> dict:
+        """The estimator's state for counters and diagnostics (JSON-able; None = not available):
+        ``estimator``, ``offset_a`` (the current offset the Kalman filter has learned),
+        ``at_rest``, ``deflection_std_m`` (standard deviation of the estimate; the leaky
+        inverse has none), and the mains line found in the last ``history_s`` of input
+        (``mains_line_hz`` 0/50/60, ``mains_line_level`` relative to the current's RMS; after
+        the notch when ``mains_hz`` is set)."""
+        inv = self.inverse
+        std = getattr(inv, "last_std", None)
+        offset = getattr(inv, "offset_a", None)
+        line = detect_lines(self.recent_input, self.sample_rate_hz)
+        return {"estimator": self.estimator,
+                "offset_a": None if offset is None else float(offset),
+                "at_rest": bool(getattr(inv, "at_rest", False)),
+                "deflection_std_m": None if std is None or not np.isfinite(std) else float(std),
+                "mains_line_hz": line["mains_hz"], "mains_line_level": line["level"]}
 
     @property
     def plain(self) -> bool:

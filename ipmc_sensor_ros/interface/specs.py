@@ -16,7 +16,9 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
 from ..estimation.deflection import DeflectionEstimator
+from ..estimation.deflection import ESTIMATORS
 from ..estimation.inverse import DEFAULT_LEAK_CORNER_HZ, EstimatorError
+from ..estimation.kalman import DEFAULT_CURRENT_NOISE_A, KALMAN_LEAK_CORNER_HZ
 from ..estimation.stream import MAX_BLOCK_SAMPLES
 from ..physics.effects import load_plugins  # noqa: F401 (re-exported for the node)
 from ..physics.model import BASES, SensorModel
@@ -85,6 +87,10 @@ MODEL_SPECS = (
     Spec("effects", [], list, "extra effects beyond the base model, each 'name' or "
          "'name(param=value, ...)' from the effects catalog, e.g. ['time_delay(delay_s=0.002)'];"
          " unknown names and effects already in the base model are refused"),
+    Spec("model_file", "", str, "saved model (ipmc-model/1 YAML written by 'ipmc-model fit|"
+         "diagnose --save-model'): its base, effects with their fitted values and its material "
+         "replace 'model', 'effects' and the material parameters, which must then keep their "
+         "defaults ('' = none)", read_only=True, max_length=4096),
     Spec("plugins", [], list, "Python files defining more effects (Effect subclasses, see the "
          "README's plugin API): arbitrary code, loaded once at start-up (sha256 logged), "
          "never re-read; they cannot replace a built-in effect", read_only=True),
@@ -117,11 +123,22 @@ ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
     Spec("sample_rate_hz", 1000.0, float, "sample rate of the current the filter is designed "
          "for, Hz; blocks whose median sample period differs by more than 1 % are rejected",
            low=1.0, high=1e6, read_only=True),
-    Spec("leak_corner_hz", DEFAULT_LEAK_CORNER_HZ, float, "leaky-integration corner f_c, Hz "
-         "(time constant 1/(2 pi f_c) of the initial-condition and held-step decay)",
-           low=1e-6, high=1e4),
-    Spec("offset_corner_hz", 0.0, float, "corner of the current-offset tracker, Hz "
-         "(0 = off)", low=0.0, high=1e4),
+    Spec("estimator", "leaky", str, "'leaky': the leaky inverse of the reduced model; "
+         "'kalman': offset-aware Kalman filter with a rest detector (learns the DAQ offset, "
+         "holds the deflection at rest, publishes its standard deviation)",
+         choices=ESTIMATORS),
+    Spec("leak_corner_hz", 0.0, float, "leak corner f_c, Hz (time constant 1/(2 pi f_c) of the "
+         f"initial-condition and held-step decay); 0 = the estimator's default "
+         f"({DEFAULT_LEAK_CORNER_HZ:g} Hz leaky, {KALMAN_LEAK_CORNER_HZ:g} Hz kalman)",
+         low=0.0, high=1e4),
+    Spec("offset_corner_hz", 0.0, float, "estimator 'leaky' only: corner of the current-offset "
+         "tracker, Hz (0 = off)", low=0.0, high=1e4),
+    Spec("current_noise_a", DEFAULT_CURRENT_NOISE_A, float, "estimator 'kalman': white-noise "
+         "RMS of the DAQ current per sample, A (the filter measures it at rest and never "
+         "assumes less)", low=1e-15, high=1e-3),
+    Spec("mains_hz", 0, int, "notch the mains line and its harmonics from the current before "
+         "the filter: 0 (off), 50 or 60 Hz; a line found while off is reported",
+         choices=(0, 50, 60)),
     Spec("frame_id", "ipmc_clamp", str, "frame of the deflection points: origin at the "
          "clamp, x along the beam to the tip, z in the bending direction",
          pattern=FRAME_ID_PATTERN, max_length=128),
@@ -155,6 +172,8 @@ def build_model(values: Mapping[str, Any]) -> SensorModel:
     except ParameterError as exc:
         raise ParameterError(f"parameter 'plugins': {exc}") from None
     geometry = Geometry(**{k: values[k] for k in GEOMETRY_NAMES})
+    if values.get("model_file"):
+        return _model_from_file(values, geometry)
     material = MaterialParameters(**{k: values[k] for k in MATERIAL_NAMES})
     extra = tuple(str(e) for e in values.get("effects") or ())
     try:
@@ -162,6 +181,23 @@ def build_model(values: Mapping[str, Any]) -> SensorModel:
     except ParameterError as exc:
         raise ParameterError(f"parameter 'effects' = {short_repr(list(extra))} with model "
                              f"'{short_repr(values['model'])}': {exc}") from None
+
+
+def _model_from_file(values: Mapping[str, Any], geometry: Geometry) -> SensorModel:
+    """The model of ``model_file`` for ``geometry``.  The file and the parameters are two
+    sources of the same values: a model, effect or material parameter that differs from its
+    default is refused (naming both), never silently overridden."""
+    from ..physics.modelfile import load_model
+
+    path = values["model_file"]
+    saved = load_model(path)
+    spec_default = {s.name: s.default for s in MODEL_SPECS + MATERIAL_SPECS}
+    for name in ("model", "effects") + MATERIAL_NAMES:
+        if values[name] != spec_default[name]:
+            raise ParameterError(f"parameter '{name}' = {short_repr(values[name])} and "
+                                 f"model_file {path} both define the model: leave '{name}' at "
+                                 f"its default ({short_repr(spec_default[name])}) or drop model_file")
+    return saved.sensor_model(geometry)
 
 
 #: Errors of the project that name the parameter; anything else raised while building
@@ -191,11 +227,14 @@ def build_estimator(values: Mapping[str, Any], reduced: ReducedModel | None = No
             raise ReductionError(f"parameters 'band_low_hz' ({band[0]}) and 'band_high_hz' "
                                  f"({band[1]}) must satisfy low < high")
         offset = float(values["offset_corner_hz"])
+        leak = float(values["leak_corner_hz"])
         return DeflectionEstimator(model, float(values["sample_rate_hz"]),
                                    reduction_order=int(values["reduction_order"]), band_hz=band,
-                                   leak_corner_hz=float(values["leak_corner_hz"]),
+                                   leak_corner_hz=leak if leak > 0.0 else None,
                                    offset_corner_hz=offset if offset > 0.0 else None,
-                                   reduced=reduced)
+                                   reduced=reduced, estimator=values["estimator"],
+                                   mains_hz=int(values["mains_hz"]),
+                                   current_noise_a=float(values["current_noise_a"]))
     except (*_NAMED_ERRORS, ConfigurationError):
         raise
     except Exception as exc:  # numerics of an extreme but in-range combination
@@ -320,7 +359,7 @@ def markdown_table(specs: Iterable[Spec]) -> str:
             default = f"{s.default:g}" if s.kind is float else str(s.default)
         fmt = "{:g}" if s.kind is float else "{}"
         rng = f"{fmt.format(s.low)} .. {fmt.format(s.high)}" if s.low is not None else (
-            " \\| ".join(s.choices) if s.choices else "")
+            " \\| ".join(str(c) for c in s.choices) if s.choices else "")
         ro = " **read-only**" if s.read_only else ""
         rows.append(f"| `{s.name}` | {names[s.kind]} | {default} | {rng} | {s.description}{ro} |")
     return "\n".join(rows)

@@ -38,7 +38,7 @@ from ..estimation.stream import COUNTER_NAMES, StreamEstimator
 from ..physics.parameters import ParameterError, short_repr
 from ..lti.reduction import ReductionError
 from . import params as P
-from .messages import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, SAMPLE_LABEL, BlockPacker,
+from .messages import (CURRENT_COLUMNS, ESTIMATE_COLUMNS, SAMPLE_LABEL, BlockPacker,
                        LayoutError, claimed_samples, unpack_block)
 from .runner import run
 
@@ -49,8 +49,9 @@ PUBLISH_POINTS = C.PUBLISH_POINTS
 ESTIMATOR_SPECS = C.ESTIMATOR_SPECS
 
 #: Parameters whose change needs a new reduction (the sensor model changes).
-_MODEL_KEYS = P.GEOMETRY_NAMES + P.MATERIAL_NAMES + ("model", "effects", "reduction_order",
-                                                      "band_low_hz", "band_high_hz")
+_MODEL_KEYS = P.GEOMETRY_NAMES + P.MATERIAL_NAMES + ("model", "effects", "model_file",
+                                                      "reduction_order", "band_low_hz",
+                                                      "band_high_hz")
 
 _ERRORS = (ParameterError, EstimatorError, ReductionError, LayoutError, P.ConfigurationError)
 
@@ -61,11 +62,8 @@ def _model_key(values: dict) -> tuple:
 
 
 def _filter_kwargs(values: dict) -> dict:
-    offset = float(values["offset_corner_hz"])
-    return {"sample_rate_hz": float(values["sample_rate_hz"]),
-            "leak_corner_hz": float(values["leak_corner_hz"]),
-            "offset_corner_hz": offset if offset > 0.0 else None,
-            "prewarp_hz": None}
+    return {k: values[k] for k in ("sample_rate_hz", "leak_corner_hz", "offset_corner_hz",
+                                   "estimator", "mains_hz", "current_noise_a")}
 
 
 def check_values(values: dict) -> None:
@@ -143,7 +141,7 @@ class EstimatorNode(Node):
         qos = P.make_qos(self._values)
         self._sub = self.create_subscription(Float64MultiArray, "current", self._on_current, qos)
         self._pub_block = self.create_publisher(Float64MultiArray, "deflection/block", qos)
-        self._packer = BlockPacker(DEFLECTION_COLUMNS)
+        self._packer = BlockPacker(ESTIMATE_COLUMNS)
         self._pub_point = self.create_publisher(PointStamped, "deflection", qos)
         self._pub_counters = self.create_publisher(String, "estimator/counters", P.COUNTERS_QOS)
         logger = self.get_logger()
@@ -206,7 +204,8 @@ class EstimatorNode(Node):
                 out = self._stream.feed_one(*one)
                 if out is not False:
                     if out is not None:
-                        self._publish(self._packer.pack_one(*out), out[0], out[1], 1)
+                        std = self._stream.estimator.std_m
+                        self._publish(self._packer.pack_one(out[0], out[1], std), out[0], out[1], 1)
                     return
             try:
                 block = unpack_block(msg, CURRENT_COLUMNS)
@@ -216,7 +215,8 @@ class EstimatorNode(Node):
             out = self._stream.feed(block.times_s, block.values, claimed=claimed_samples(msg))
             if out is not None:
                 t, w = out
-                self._publish(self._packer.pack(t, w), t, w, t.size)
+                std = np.full(t.size, self._stream.estimator.std_m)
+                self._publish(self._packer.pack(t, w, std), t, w, t.size)
 
     def _publish(self, block_msg: Float64MultiArray, times, deflections, n: int) -> None:
         """Publish a block and its points; a publish that cannot complete (e.g. a stalled
@@ -259,6 +259,8 @@ class EstimatorNode(Node):
         if counters["samples_in"] == 0 and self._ticks % 5 == 1:
             self.get_logger().info(f"waiting for data on {self._sub.topic_name}")
         counters["node"] = self.get_fully_qualified_name()
+        with self._lock:
+            counters.update(self._stream.estimator.status())
         self._pub_counters.publish(String(data=json.dumps(counters)))
 
     # -- parameters -------------------------------------------------------------

@@ -15,7 +15,7 @@ from std_msgs.msg import Float64MultiArray, String
 
 from . import params as P
 from ..workbench.metrics import nrmse
-from .messages import DEFLECTION_COLUMNS, unpack_block
+from .messages import DEFLECTION_COLUMNS, ESTIMATE_COLUMNS, unpack_block
 
 __all__ = ["TrackingMonitor", "nrmse"]
 
@@ -37,7 +37,7 @@ class TrackingMonitor:
         sub = node.create_subscription
         self.subscriptions = [
             sub(Float64MultiArray, prefix + "deflection/block",
-                lambda m: self._est.append(unpack_block(m, DEFLECTION_COLUMNS)), qos),
+                lambda m: self._est.append(unpack_block(m, ESTIMATE_COLUMNS)), qos),
             sub(Float64MultiArray, prefix + "deflection_truth",
                 lambda m: self._truth.append(unpack_block(m, DEFLECTION_COLUMNS)), qos),
             sub(String, prefix + "estimator/counters",

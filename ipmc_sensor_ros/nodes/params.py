@@ -39,7 +39,7 @@ def descriptor(spec: Spec) -> ParameterDescriptor:
     d = ParameterDescriptor(name=spec.name, type=_TYPES[spec.kind],
                             description=spec.description, read_only=spec.read_only)
     if spec.choices:
-        d.additional_constraints = "one of: " + ", ".join(spec.choices)
+        d.additional_constraints = "one of: " + ", ".join(str(c) for c in spec.choices)
     if spec.low is not None and spec.kind is float:
         d.floating_point_range = [FloatingPointRange(from_value=float(spec.low),
                                                      to_value=float(spec.high), step=0.0)]

@@ -39,7 +39,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ..interface.blocks import SAMPLE_LABEL, unpack_pairs
+from ..interface.blocks import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, ESTIMATE_COLUMNS, SAMPLE_LABEL,
+                                unpack_columns)
 from ..physics.parameters import Geometry, MaterialParameters, ParameterError
 from .formats import _fmt
 from .measurements import DataFormatError, PathLike, TimeSeries
@@ -48,8 +49,8 @@ __all__ = ["CURRENT_LABEL", "DEFLECTION_LABEL", "MULTIARRAY_TYPE", "POINT_STAMPE
            "read_bag", "write_bag"]
 
 #: Column label (dim[1].label) of current and deflection blocks in bags.
-CURRENT_LABEL = "time_s,current_A"
-DEFLECTION_LABEL = "time_s,deflection_m"
+CURRENT_LABEL = CURRENT_COLUMNS
+DEFLECTION_LABEL = DEFLECTION_COLUMNS
 MULTIARRAY_TYPE = "std_msgs/msg/Float64MultiArray"
 POINT_STAMPED_TYPE = "geometry_msgs/msg/PointStamped"
 SIDECAR_NAME = "ipmc.yaml"
@@ -86,8 +87,14 @@ def _describe_topics(topics: Mapping[str, Any]) -> str:
 
 
 def _unpack_block(msg, label: str) -> tuple[np.ndarray, np.ndarray]:
-    """Times and values of a block message; ValueError (LayoutError) describing a bad layout."""
-    return unpack_pairs(msg, label, values_only_ok=False)
+    """Times and values of a block message; ValueError (LayoutError) describing a bad layout.
+    A deflection topic may also hold the estimator's output (``ESTIMATE_COLUMNS``: the
+    estimate and its standard deviation); its first value column is the deflection."""
+    if label == DEFLECTION_LABEL and msg.layout.dim and len(msg.layout.dim) == 2 \
+            and msg.layout.dim[1].label == ESTIMATE_COLUMNS:
+        label = ESTIMATE_COLUMNS
+    times, table = unpack_columns(msg, label, values_only_ok=False)
+    return times, table[:, 0]
 
 
 def _read_topic(where: str, reader, name: str, info, label: str,
