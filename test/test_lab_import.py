@@ -192,3 +192,14 @@ def test_import_lab_files_writes_readable_timeseries(tmp_path):
     with pytest.raises(DataFormatError, match=r"tia_slim_5Hz\.csv:1: column 'Current \[V\]'"):
         import_lab_files([LAB / names[0], LAB / "tia_slim_5Hz.csv"], fresh, meta=META)
     assert not fresh.exists()
+
+
+def test_parse_columns_spec():
+    from ipmc_sensor_ros.workbench.labimport import parse_columns_spec
+
+    assert parse_columns_spec("time=Time [s], deflection=Tip (mm),current=I_nA") == {
+        "time": "Time [s]", "deflection": "Tip (mm)", "current": "I_nA"}
+    for bad, message in (("time", "not role=column"), ("time=", "not role=column"),
+                         ("speed=v", "unknown role 'speed'"), ("time=a,time=b", "twice")):
+        with pytest.raises(ValueError, match=message):
+            parse_columns_spec(bad)
