@@ -230,3 +230,24 @@ def test_read_records_reads_bags_in_a_directory(tmp_path):
     io.write_timeseries(d / "run_9b.csv", _series())
     got = io.read_records(d)
     assert [Path(r.path).name for r in got.records] == ["run_9", "run_9b.csv", "run_10"]
+
+
+def test_committed_frf_unit_files_are_converted():
+    # phase 1.48 rad and 1.05 rad -> degrees; 0.6 and 6.3 rad/s -> Hz; 1.0 uA/m -> A/m:
+    # one multiplication each (rtol 1e-15)
+    rad = io.read_frf(UNITS / "frf_phase_rad.csv")
+    np.testing.assert_allclose(rad.phase_deg, np.degrees([1.48, 1.05]), rtol=1e-15)
+    w = io.read_any(UNITS / "frf_frequency_rad_s.csv")
+    np.testing.assert_allclose(w.frequency_hz, np.array([0.6, 6.3]) / (2 * np.pi), rtol=1e-15)
+    std = io.read_frf(UNITS / "frf_gain_std.csv")
+    np.testing.assert_allclose(std.gain_std_a_per_m, [1e-6, 1e-6], rtol=1e-15)
+    assert std.phase_std_deg.tolist() == [1.0, 1.0]
+
+
+@pytest.mark.parametrize("column, factor", [("gain_uA_per_mm", 1e-3), ("gain_nA_per_um", 1e-3),
+                                            ("gain_mA_per_m", 1e-3), ("gain_A_per_mm", 1e3)])
+def test_frf_gain_units(tmp_path, column, factor):
+    p = tmp_path / "g.csv"
+    p.write_text(HEAD.replace("ipmc-timeseries/1", "ipmc-frf/1")
+                 + f"frequency_hz,{column},phase_deg\n1,2.0,10\n2,4.0,20\n")
+    np.testing.assert_allclose(io.read_frf(p).gain_a_per_m, [2 * factor, 4 * factor], rtol=1e-15)
