@@ -251,3 +251,20 @@ def test_frf_gain_units(tmp_path, column, factor):
     p.write_text(HEAD.replace("ipmc-timeseries/1", "ipmc-frf/1")
                  + f"frequency_hz,{column},phase_deg\n1,2.0,10\n2,4.0,20\n")
     np.testing.assert_allclose(io.read_frf(p).gain_a_per_m, [2 * factor, 4 * factor], rtol=1e-15)
+
+
+def test_bag_fifos_refused(tmp_path):
+    pytest.importorskip("rosbags")
+    fifo = tmp_path / "run.mcap"
+    os.mkfifo(fifo)
+    with pytest.raises(DataFormatError, match=r"run\.mcap: run\.mcap is not a regular file"):
+        io.read_any(fifo)
+    bag = tmp_path / "bag"
+    io.write_bag(bag, _series(), sidecar=False)
+    os.mkfifo(tmp_path / "side.yaml")
+    with pytest.raises(DataFormatError, match=r"side\.yaml: sidecar of bag .* is not a regular "
+                                              r"file"):
+        io.read_bag(bag, sidecar=tmp_path / "side.yaml")
+    os.mkfifo(bag / "ipmc.yaml")
+    with pytest.raises(DataFormatError, match=r"bag: ipmc\.yaml is not a regular file"):
+        io.read_bag(bag)
