@@ -268,3 +268,22 @@ def test_bag_fifos_refused(tmp_path):
     os.mkfifo(bag / "ipmc.yaml")
     with pytest.raises(DataFormatError, match=r"bag: ipmc\.yaml is not a regular file"):
         io.read_bag(bag)
+
+
+TOKENS = ["1.5e", "e5", "1e5.5", "--1", "+-1", "1-2", "1 2", "1.2.3", "1e+", "-", "+", ".",
+          "1..2", "1e-", "1+", ".e1", "1e999", "1e5", "+.5", "5.", "1E-3", " 7 ", "1e0001",
+          "00012", "-0", "4.9e-324"]
+
+
+@pytest.mark.parametrize("delimiter, decimal", [(",", "."), (";", ","), ("\t", ".")])
+def test_fast_path_accepts_exactly_what_the_line_parser_accepts(delimiter, decimal):
+    # the chunk parser (numpy.loadtxt) must never accept a cell the per-line parser
+    # refuses, nor read it differently
+    for token in TOKENS:
+        token = token.replace(".", decimal)
+        block = textread._fast_block(f"0{delimiter}{token}\n".encode(), 2, delimiter, decimal)
+        slow = textread.parse_number(token, decimal)
+        if block is not None:
+            assert slow is not None and block[0, 1] == slow, token
+        elif token.strip() in ("1e5", "+.5", "5.", "1E-3", "00012", "-0", "4.9e-324"):
+            pytest.fail(f"plain number {token!r} left the fast path")  # speed, not correctness
