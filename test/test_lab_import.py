@@ -98,6 +98,17 @@ def test_geometry_sources_and_conflict(tmp_path):
     bad.write_text('{"length_mm": 22, "width_mm": 7, "thickness_um": "thick"}')
     with pytest.raises(DataFormatError, match=r"bad\.json: run metadata thickness_um: 'thick'"):
         import_lab_file(LAB / "daq_slim_5Hz.tsv", meta=bad)
+    warm = tmp_path / "warm.json"
+    geometry = '"length_mm": 22, "width_mm": 7, "thickness_um": 360'
+    warm.write_text('{' + geometry + ', "temperature_k": "warm"}')
+    with pytest.raises(DataFormatError, match=r"warm\.json: run metadata temperature_k: 'warm' "
+                                              r"must be a number"):
+        import_lab_file(LAB / "daq_slim_5Hz.tsv", meta=warm)
+    cold = tmp_path / "cold.json"
+    cold.write_text('{' + geometry + ', "temperature_k": -3}')
+    with pytest.raises(DataFormatError, match=r"cold\.json: implausible known value: "
+                                              r".*temperature"):
+        import_lab_file(LAB / "daq_slim_5Hz.tsv", meta=cold)
     broken = tmp_path / "broken.json"
     broken.write_text('{"length_mm": 22,')
     with pytest.raises(DataFormatError, match=r"broken\.json.*not valid JSON"):

@@ -349,6 +349,9 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
     known: dict[str, float] = {}
     for key, value in meta_data.items():
         if key in KNOWN_KEYS:
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise DataFormatError(meta, None, f"run metadata {key}: {value!r} must be a "
+                                      "number in SI units")
             known[key] = float(value)
         elif key not in ("sample", "geometry") and key.partition("_")[0] not in _GEOMETRY_PARTS:
             if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_.\-]*", str(key)):
