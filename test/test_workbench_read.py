@@ -287,3 +287,25 @@ def test_fast_path_accepts_exactly_what_the_line_parser_accepts(delimiter, decim
             assert slow is not None and block[0, 1] == slow, token
         elif token.strip() in ("1e5", "+.5", "5.", "1E-3", "00012", "-0", "4.9e-324"):
             pytest.fail(f"plain number {token!r} left the fast path")  # speed, not correctness
+
+
+def test_geometry_header_keys_in_other_units(tmp_path):
+    head = HEAD.replace("# length_m: 0.022", "# length_mm: 22").replace(
+        "# thickness_m: 0.00036", "# thickness_um: 360")
+    p = tmp_path / "mm.csv"
+    p.write_text(head + "time_s,current_A\n0,0\n0.001,0\n")
+    ts = io.read_timeseries(p)
+    # converted from the decimal text: exactly the floats 0.022 and 0.00036
+    assert (ts.geometry.length_m, ts.geometry.width_m, ts.geometry.thickness_m) == \
+        (0.022, 0.007, 0.00036)
+    assert ts.extra == {}
+    p.write_text(head.replace("# width_m: 0.007", "# width_m: 0.007\n# width_mm: 7")
+                 + "time_s,current_A\n0,0\n0.001,0\n")
+    with pytest.raises(DataFormatError, match=r"mm\.csv:5: the width is given twice: 'width_m', "
+                                              r"'width_mm'"):
+        io.read_timeseries(p)
+    p.write_text(head.replace("# length_mm: 22", "# length_mm: 22000")
+                 + "time_s,current_A\n0,0\n0.001,0\n")
+    with pytest.raises(DataFormatError, match=r"mm\.csv:3: geometry out of physical range: "
+                                              r".*'length_m' = 22\.0 m"):
+        io.read_timeseries(p)

@@ -37,7 +37,8 @@ Header
 * ``format`` (required): ``ipmc-timeseries/1`` or ``ipmc-frf/1``.
 * ``sample`` (optional): name of the sample; also the :class:`Geometry` name.
 * ``length_m``, ``width_m``, ``thickness_m`` (required): free length L,
-  width W and total thickness 2h of the cantilever, metres.  They are checked
+  width W and total thickness 2h of the cantilever, metres (or in another
+  length unit named by the key: ``length_mm: 22``, ``thickness_um: 360``).  They are checked
   by :class:`~ipmc_sensor_ros.physics.parameters.Geometry`, whose plausible
   ranges catch unit mistakes (``length_m: 22`` is 22 m: refused).
 * ``temperature_k`` (K), ``youngs_modulus_pa`` (Pa), ``surface_resistance_ohm``
@@ -118,7 +119,7 @@ from ..physics.parameters import Geometry, MaterialParameters, ParameterError
 from .measurements import DataFormatError, FrequencyResponseData, PathLike, TimeSeries
 from .textread import (MAX_BYTES, MAX_ROWS, TextSource, first_bad, increasing_check, parse_number,
                        read_table)
-from .units import column_to_si, column_units, to_si
+from .units import LENGTH_UNITS, column_to_si, column_units, decimal_to_si, to_si, unit_factor
 
 __all__ = [
     "TIMESERIES_FORMAT", "FRF_FORMAT", "TIMESERIES_COLUMNS", "TIMESERIES_COLUMNS_NO_DEFLECTION",
@@ -256,6 +257,29 @@ def _parameter_line(header: _Header, exc: ParameterError, keys: Sequence[str]) -
     return min(header.lines[k] for k in keys if k in header.lines)
 
 
+def _geometry_in_other_units(path, header: _Header, numbers: dict) -> None:
+    """Accept ``length_mm``, ``thickness_um``... as ``length_m``, ``thickness_m`` (in place)."""
+    for key in GEOMETRY_KEYS:
+        part = key[:-2]
+        given = [k for k in header.values if k.startswith(part + "_") and k != key
+                 and unit_factor(k[len(part) + 1:], LENGTH_UNITS) is not None]
+        if not given:
+            continue
+        keys = ([key] if key in header.values else []) + given
+        if len(keys) > 1:
+            raise DataFormatError(path, header.lines[given[-1]], f"the {part} is given twice: "
+                                  + ", ".join(f"'{k}'" for k in keys))
+        other = given[0]
+        raw = header.values.pop(other)
+        if parse_number(raw) is None:
+            raise DataFormatError(path, header.lines[other], f"header key '{other}' must be a "
+                                  f"finite number, got {raw!r}")
+        numbers[key] = decimal_to_si(raw.strip(), unit_factor(other[len(part) + 1:],
+                                                              LENGTH_UNITS))
+        header.values[key] = raw
+        header.lines[key] = header.lines.pop(other)
+
+
 def _common_header(path, header: _Header, expected_format: str,
                    numeric_keys: Sequence[str], layouts: Sequence[tuple[str, ...]]):
     """Validate the header; return (sample, geometry, known, numbers, extra)."""
@@ -270,6 +294,7 @@ def _common_header(path, header: _Header, expected_format: str,
                               "line (expected " + " or ".join(repr(",".join(c)) for c in layouts)
                               + ") and data rows")
     col_line = header.column_line
+    _geometry_in_other_units(path, header, numbers)
     missing = [k for k in GEOMETRY_KEYS if k not in header.values]
     if missing:
         raise DataFormatError(path, col_line, "missing required header key(s) "
@@ -338,10 +363,7 @@ def _parse_columns(path, header: _Header, layouts: Sequence[tuple[str, ...]],
                           f"missing, repeated or out of order); expected {expected}")
 
 
-RowCheck = Callable[[np.ndarray, "np.ndarray | None", int, int], None]
-
-
-def _block_check(bad_rows: Callable[[np.ndarray, int], np.ndarray], row_check: RowCheck):
+def _block_check(bad_rows: Callable[[np.ndarray, int], np.ndarray], row_check: Callable):
     """A block check for :func:`read_table`: ``bad_rows(rows, n_prev)`` marks suspect rows
     (``rows`` starts with the previous row when there is one), ``row_check`` raises the
     message of the first of them."""
