@@ -98,6 +98,17 @@ def test_geometry_sources_and_conflict(tmp_path):
     bad.write_text('{"length_mm": 22, "width_mm": 7, "thickness_um": "thick"}')
     with pytest.raises(DataFormatError, match=r"bad\.json: run metadata thickness_um: 'thick'"):
         import_lab_file(LAB / "daq_slim_5Hz.tsv", meta=bad)
+    warm = tmp_path / "warm.json"
+    geometry = '"length_mm": 22, "width_mm": 7, "thickness_um": 360'
+    warm.write_text('{' + geometry + ', "temperature_k": "warm"}')
+    with pytest.raises(DataFormatError, match=r"warm\.json: run metadata temperature_k: 'warm' "
+                                              r"must be a number"):
+        import_lab_file(LAB / "daq_slim_5Hz.tsv", meta=warm)
+    cold = tmp_path / "cold.json"
+    cold.write_text('{' + geometry + ', "temperature_k": -3}')
+    with pytest.raises(DataFormatError, match=r"cold\.json: implausible known value: "
+                                              r".*temperature"):
+        import_lab_file(LAB / "daq_slim_5Hz.tsv", meta=cold)
     broken = tmp_path / "broken.json"
     broken.write_text('{"length_mm": 22,')
     with pytest.raises(DataFormatError, match=r"broken\.json.*not valid JSON"):
@@ -138,27 +149,28 @@ def test_columns_found_overridden_and_refused(tmp_path):
     assert ts.time_s.tolist() == [0.0, 0.002] and ts.current_a.tolist() == [1e-6, 1e-6]
     with pytest.raises(DataFormatError, match=r"columns: time='Zeit' is not a column"):
         import_lab_file(bare, geometry="22mm,7mm,360um", columns={"time": "Zeit"})
-    wrong = _lab(tmp_path, "wrong.csv", "Time [s],Deflection [A],Current [A]\n0,1,2\n1,1,2\n")
-    with pytest.raises(DataFormatError, match=r"column 'Deflection \[A\]' \(deflection\): unit "
-                                              r"'A' is not a unit of deflection"):
-        import_lab_file(wrong, geometry="22mm,7mm,360um")
-    nocur = _lab(tmp_path, "nocur.csv", "Time [s],Laser [mm]\n0,1\n1,1\n")
-    with pytest.raises(DataFormatError, match=r"no current column among"):
-        import_lab_file(nocur, geometry="22mm,7mm,360um")
 
 
-def test_rows_checked_with_file_lines(tmp_path):
-    back = _lab(tmp_path, "back.txt", "run 3\nTime [ms];Current [µA]\n0;1,5\n2;1,5\n1;1,5\n")
-    with pytest.raises(DataFormatError, match=r"back\.txt:5: time decreases: 1\.0 ms after "
-                                              r"2\.0 ms"):
-        import_lab_file(back, geometry="22mm,7mm,360um")
-    cell = _lab(tmp_path, "cell.csv", "Time [s],Current [A]\n0,1\n1,x\n")
-    with pytest.raises(DataFormatError, match=r"cell\.csv:3: non-numeric cell 'x' in column "
-                                              r"Current \[A\]"):
-        import_lab_file(cell, geometry="22mm,7mm,360um")
-    notable = _lab(tmp_path, "notable.csv", "just words\nand more words\n")
-    with pytest.raises(DataFormatError, match=r"notable\.csv:2: no table found in the file"):
-        import_lab_file(notable, geometry="22mm,7mm,360um")
+REFUSED = {  # file text -> the message it must give (file:line where a line applies)
+    "wrong.csv": ("Time [s],Deflection [A],Current [A]\n0,1,2\n1,1,2\n",
+                  r"wrong\.csv:1: column 'Deflection \[A\]' \(deflection\): unit 'A' is not a "
+                  r"unit of deflection"),
+    "nocur.csv": ("Time [s],Laser [mm]\n0,1\n1,1\n", r"nocur\.csv:1: no current column among"),
+    "back.txt": ("run 3\nTime [ms];Current [µA]\n0;1,5\n2;1,5\n1;1,5\n",
+                 r"back\.txt:5: time decreases: 1\.0 ms after 2\.0 ms"),
+    "cell.csv": ("Time [s],Current [A]\n0,1\n1,x\n",
+                 r"cell\.csv:3: non-numeric cell 'x' in column Current \[A\]"),
+    "notable.csv": ("just words\nand more words\n", r"notable\.csv:2: no table found in the file"),
+    "nan.csv": ("Time [s],Current [A]\n0,1\n1,NaN\n", r"nan\.csv:3: NaN/Inf cell 'NaN'"),
+    "dup.csv": ("Time [s],Current [A]\n0,1\n0,1\n", r"dup\.csv:3: duplicate time 0\.0 s"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(REFUSED))
+def test_refused_files_name_file_and_line(tmp_path, name):
+    text, message = REFUSED[name]
+    with pytest.raises(DataFormatError, match=message):
+        import_lab_file(_lab(tmp_path, name, text), geometry="22mm,7mm,360um")
 
 
 def test_fifo_refused(tmp_path):
@@ -192,3 +204,14 @@ def test_import_lab_files_writes_readable_timeseries(tmp_path):
     with pytest.raises(DataFormatError, match=r"tia_slim_5Hz\.csv:1: column 'Current \[V\]'"):
         import_lab_files([LAB / names[0], LAB / "tia_slim_5Hz.csv"], fresh, meta=META)
     assert not fresh.exists()
+
+
+def test_parse_columns_spec():
+    from ipmc_sensor_ros.workbench.labimport import parse_columns_spec
+
+    assert parse_columns_spec("time=Time [s], deflection=Tip (mm),current=I_nA") == {
+        "time": "Time [s]", "deflection": "Tip (mm)", "current": "I_nA"}
+    for bad, message in (("time", "not role=column"), ("time=", "not role=column"),
+                         ("speed=v", "unknown role 'speed'"), ("time=a,time=b", "twice")):
+        with pytest.raises(ValueError, match=message):
+            parse_columns_spec(bad)

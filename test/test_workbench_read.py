@@ -230,3 +230,82 @@ def test_read_records_reads_bags_in_a_directory(tmp_path):
     io.write_timeseries(d / "run_9b.csv", _series())
     got = io.read_records(d)
     assert [Path(r.path).name for r in got.records] == ["run_9", "run_9b.csv", "run_10"]
+
+
+def test_committed_frf_unit_files_are_converted():
+    # phase 1.48 rad and 1.05 rad -> degrees; 0.6 and 6.3 rad/s -> Hz; 1.0 uA/m -> A/m:
+    # one multiplication each (rtol 1e-15)
+    rad = io.read_frf(UNITS / "frf_phase_rad.csv")
+    np.testing.assert_allclose(rad.phase_deg, np.degrees([1.48, 1.05]), rtol=1e-15)
+    w = io.read_any(UNITS / "frf_frequency_rad_s.csv")
+    np.testing.assert_allclose(w.frequency_hz, np.array([0.6, 6.3]) / (2 * np.pi), rtol=1e-15)
+    std = io.read_frf(UNITS / "frf_gain_std.csv")
+    np.testing.assert_allclose(std.gain_std_a_per_m, [1e-6, 1e-6], rtol=1e-15)
+    assert std.phase_std_deg.tolist() == [1.0, 1.0]
+
+
+@pytest.mark.parametrize("column, factor", [("gain_uA_per_mm", 1e-3), ("gain_nA_per_um", 1e-3),
+                                            ("gain_mA_per_m", 1e-3), ("gain_A_per_mm", 1e3)])
+def test_frf_gain_units(tmp_path, column, factor):
+    p = tmp_path / "g.csv"
+    p.write_text(HEAD.replace("ipmc-timeseries/1", "ipmc-frf/1")
+                 + f"frequency_hz,{column},phase_deg\n1,2.0,10\n2,4.0,20\n")
+    np.testing.assert_allclose(io.read_frf(p).gain_a_per_m, [2 * factor, 4 * factor], rtol=1e-15)
+
+
+def test_bag_fifos_refused(tmp_path):
+    pytest.importorskip("rosbags")
+    fifo = tmp_path / "run.mcap"
+    os.mkfifo(fifo)
+    with pytest.raises(DataFormatError, match=r"run\.mcap: run\.mcap is not a regular file"):
+        io.read_any(fifo)
+    bag = tmp_path / "bag"
+    io.write_bag(bag, _series(), sidecar=False)
+    os.mkfifo(tmp_path / "side.yaml")
+    with pytest.raises(DataFormatError, match=r"side\.yaml: sidecar of bag .* is not a regular "
+                                              r"file"):
+        io.read_bag(bag, sidecar=tmp_path / "side.yaml")
+    os.mkfifo(bag / "ipmc.yaml")
+    with pytest.raises(DataFormatError, match=r"bag: ipmc\.yaml is not a regular file"):
+        io.read_bag(bag)
+
+
+TOKENS = ["1.5e", "e5", "1e5.5", "--1", "+-1", "1-2", "1 2", "1.2.3", "1e+", "-", "+", ".",
+          "1..2", "1e-", "1+", ".e1", "1e999", "1e5", "+.5", "5.", "1E-3", " 7 ", "1e0001",
+          "00012", "-0", "4.9e-324"]
+
+
+@pytest.mark.parametrize("delimiter, decimal", [(",", "."), (";", ","), ("\t", ".")])
+def test_fast_path_accepts_exactly_what_the_line_parser_accepts(delimiter, decimal):
+    # the chunk parser (numpy.loadtxt) must never accept a cell the per-line parser
+    # refuses, nor read it differently
+    for token in TOKENS:
+        token = token.replace(".", decimal)
+        block = textread._fast_block(f"0{delimiter}{token}\n".encode(), 2, delimiter, decimal)
+        slow = textread.parse_number(token, decimal)
+        if block is not None:
+            assert slow is not None and block[0, 1] == slow, token
+        elif token.strip() in ("1e5", "+.5", "5.", "1E-3", "00012", "-0", "4.9e-324"):
+            pytest.fail(f"plain number {token!r} left the fast path")  # speed, not correctness
+
+
+def test_geometry_header_keys_in_other_units(tmp_path):
+    head = HEAD.replace("# length_m: 0.022", "# length_mm: 22").replace(
+        "# thickness_m: 0.00036", "# thickness_um: 360")
+    p = tmp_path / "mm.csv"
+    p.write_text(head + "time_s,current_A\n0,0\n0.001,0\n")
+    ts = io.read_timeseries(p)
+    # converted from the decimal text: exactly the floats 0.022 and 0.00036
+    assert (ts.geometry.length_m, ts.geometry.width_m, ts.geometry.thickness_m) == \
+        (0.022, 0.007, 0.00036)
+    assert ts.extra == {}
+    p.write_text(head.replace("# width_m: 0.007", "# width_m: 0.007\n# width_mm: 7")
+                 + "time_s,current_A\n0,0\n0.001,0\n")
+    with pytest.raises(DataFormatError, match=r"mm\.csv:5: the width is given twice: 'width_m', "
+                                              r"'width_mm'"):
+        io.read_timeseries(p)
+    p.write_text(head.replace("# length_mm: 22", "# length_mm: 22000")
+                 + "time_s,current_A\n0,0\n0.001,0\n")
+    with pytest.raises(DataFormatError, match=r"mm\.csv:3: geometry out of physical range: "
+                                              r".*'length_m' = 22\.0 m"):
+        io.read_timeseries(p)

@@ -208,6 +208,8 @@ def _read_sidecar(bag: str, path: Path, need_geometry: bool):
 
     where = str(path)
     about = f"sidecar of bag '{bag}'"
+    if path.exists() and not path.is_file():
+        raise DataFormatError(where, None, f"{about} is not a regular file: refusing to read it")
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -292,6 +294,10 @@ def read_bag(path: PathLike, current_topic: str = "current",
     elif bag.suffix not in (".mcap", ".db3"):
         raise DataFormatError(where, None, "not a rosbag2 bag: expected a bag directory, a .mcap "
                               "or a .db3 file")
+    for member in (bag.iterdir() if bag.is_dir() else [bag]):
+        if not (member.is_file() or member.is_dir()):  # a FIFO or device would block the reader
+            raise DataFormatError(where, None, f"{member.name} is not a regular file (FIFO or "
+                                  "device?): refusing to read it")
     try:
         from rosbags.rosbag2 import Reader
     except ImportError as exc:  # pragma: no cover - rosbags is a workbench dependency

@@ -37,7 +37,8 @@ Header
 * ``format`` (required): ``ipmc-timeseries/1`` or ``ipmc-frf/1``.
 * ``sample`` (optional): name of the sample; also the :class:`Geometry` name.
 * ``length_m``, ``width_m``, ``thickness_m`` (required): free length L,
-  width W and total thickness 2h of the cantilever, metres.  They are checked
+  width W and total thickness 2h of the cantilever, metres (or in another
+  length unit named by the key: ``length_mm: 22``, ``thickness_um: 360``).  They are checked
   by :class:`~ipmc_sensor_ros.physics.parameters.Geometry`, whose plausible
   ranges catch unit mistakes (``length_m: 22`` is 22 m: refused).
 * ``temperature_k`` (K), ``youngs_modulus_pa`` (Pa), ``surface_resistance_ohm``
@@ -76,9 +77,12 @@ Time-series columns may carry another unit of the same quantity, converted
 to SI on reading: ``time_ms``/``time_us``; ``deflection_mm``,
 ``deflection_um`` (or ``µm``), ``deflection_nm``; ``current_mA``,
 ``current_uA`` (or ``µA``), ``current_nA``, ``current_pA`` (case-insensitive
-unit).  A unit of another dimension (``deflection_A``, ``time_m``) is refused
-as "wrong units".  ``ipmc-frf/1`` column names are exact (``phase_rad`` is
-refused naming ``phase_deg``).  Files are always written with the SI columns.
+unit).  ``ipmc-frf/1`` likewise: ``frequency_khz``, ``frequency_rad_s``
+(divided by 2 pi), ``phase_rad``/``phase_std_rad``, and any
+``<current unit>_per_<length unit>`` for the gain and its std
+(``gain_uA_per_mm``).  A unit of another dimension (``deflection_A``,
+``time_m``, ``phase_m``) is refused as "wrong units".  Files are always
+written with the SI columns.
 
 Rows
 ----
@@ -115,7 +119,7 @@ from ..physics.parameters import Geometry, MaterialParameters, ParameterError
 from .measurements import DataFormatError, FrequencyResponseData, PathLike, TimeSeries
 from .textread import (MAX_BYTES, MAX_ROWS, TextSource, first_bad, increasing_check, parse_number,
                        read_table)
-from .units import QUANTITY_UNITS, SI_SYMBOL, to_si, unit_factor
+from .units import LENGTH_UNITS, column_to_si, column_units, decimal_to_si, to_si, unit_factor
 
 __all__ = [
     "TIMESERIES_FORMAT", "FRF_FORMAT", "TIMESERIES_COLUMNS", "TIMESERIES_COLUMNS_NO_DEFLECTION",
@@ -253,6 +257,29 @@ def _parameter_line(header: _Header, exc: ParameterError, keys: Sequence[str]) -
     return min(header.lines[k] for k in keys if k in header.lines)
 
 
+def _geometry_in_other_units(path, header: _Header, numbers: dict) -> None:
+    """Accept ``length_mm``, ``thickness_um``... as ``length_m``, ``thickness_m`` (in place)."""
+    for key in GEOMETRY_KEYS:
+        part = key[:-2]
+        given = [k for k in header.values if k.startswith(part + "_") and k != key
+                 and unit_factor(k[len(part) + 1:], LENGTH_UNITS) is not None]
+        if not given:
+            continue
+        keys = ([key] if key in header.values else []) + given
+        if len(keys) > 1:
+            raise DataFormatError(path, header.lines[given[-1]], f"the {part} is given twice: "
+                                  + ", ".join(f"'{k}'" for k in keys))
+        other = given[0]
+        raw = header.values.pop(other)
+        if parse_number(raw) is None:
+            raise DataFormatError(path, header.lines[other], f"header key '{other}' must be a "
+                                  f"finite number, got {raw!r}")
+        numbers[key] = decimal_to_si(raw.strip(), unit_factor(other[len(part) + 1:],
+                                                              LENGTH_UNITS))
+        header.values[key] = raw
+        header.lines[key] = header.lines.pop(other)
+
+
 def _common_header(path, header: _Header, expected_format: str,
                    numeric_keys: Sequence[str], layouts: Sequence[tuple[str, ...]]):
     """Validate the header; return (sample, geometry, known, numbers, extra)."""
@@ -267,6 +294,7 @@ def _common_header(path, header: _Header, expected_format: str,
                               "line (expected " + " or ".join(repr(",".join(c)) for c in layouts)
                               + ") and data rows")
     col_line = header.column_line
+    _geometry_in_other_units(path, header, numbers)
     missing = [k for k in GEOMETRY_KEYS if k not in header.values]
     if missing:
         raise DataFormatError(path, col_line, "missing required header key(s) "
@@ -289,15 +317,6 @@ def _common_header(path, header: _Header, expected_format: str,
     return sample, geometry, known, numbers, extra
 
 
-def _canonical(name: str, bases: Sequence[str]) -> tuple[str, float] | None:
-    """(SI column, factor) of a time-series column with a unit, e.g. 'deflection_mm'."""
-    base, _, unit = name.partition("_")
-    if base not in bases or base not in QUANTITY_UNITS or not unit:
-        return None
-    factor = unit_factor(unit, QUANTITY_UNITS[base])
-    return (f"{base}_{SI_SYMBOL[base]}", factor) if factor is not None else None
-
-
 def _parse_columns(path, header: _Header, layouts: Sequence[tuple[str, ...]],
                    bases: Sequence[str]) -> tuple[tuple[str, ...], tuple[float, ...]]:
     """(SI column names, factor of each column to SI) of the column-header line."""
@@ -309,7 +328,7 @@ def _parse_columns(path, header: _Header, layouts: Sequence[tuple[str, ...]],
     allowed = {n for c in layouts for n in c}
     for k, name in enumerate(names):
         if name not in allowed:
-            found = _canonical(name, bases)
+            found = column_to_si(name)
             if found is not None:
                 canon[k], factors[k] = found
     if tuple(canon) in layouts:
@@ -332,9 +351,8 @@ def _parse_columns(path, header: _Header, layouts: Sequence[tuple[str, ...]],
         if match:
             base = max(match, key=len)
             good, unit = _COLUMN_UNITS[base]
-            accepted = ""
-            if base in QUANTITY_UNITS:
-                accepted = f" or another unit of it ({', '.join(QUANTITY_UNITS[base])})"
+            accepted = f" or another unit of it ({column_units(base)})" if base != "coherence" \
+                else ""
             raise DataFormatError(path, col_line, f"wrong units in column header: {name!r} "
                                   f"should be '{good}' ({unit}){accepted}; expected {expected}")
         raise DataFormatError(path, col_line, f"unknown column {name!r}; expected {expected}")
@@ -345,10 +363,7 @@ def _parse_columns(path, header: _Header, layouts: Sequence[tuple[str, ...]],
                           f"missing, repeated or out of order); expected {expected}")
 
 
-RowCheck = Callable[[np.ndarray, "np.ndarray | None", int, int], None]
-
-
-def _block_check(bad_rows: Callable[[np.ndarray, int], np.ndarray], row_check: RowCheck):
+def _block_check(bad_rows: Callable[[np.ndarray, int], np.ndarray], row_check: Callable):
     """A block check for :func:`read_table`: ``bad_rows(rows, n_prev)`` marks suspect rows
     (``rows`` starts with the previous row when there is one), ``row_check`` raises the
     message of the first of them."""
@@ -507,7 +522,7 @@ def write_timeseries(path: PathLike, ts: TimeSeries) -> None:
 def _frf_from(path, source: TextSource, header: _Header, max_rows) -> FrequencyResponseData:
     sample, geometry, known, _numbers, extra = _common_header(
         path, header, FRF_FORMAT, _FRF_NUMERIC_KEYS, _FRF_LAYOUTS)
-    columns, _factors = _parse_columns(path, header, _FRF_LAYOUTS, _FRF_BASES)
+    columns, factors = _parse_columns(path, header, _FRF_LAYOUTS, _FRF_BASES)
     coh = columns.index(FRF_COHERENCE_COLUMN) if FRF_COHERENCE_COLUMN in columns else None
     std = [columns.index(c) for c in FRF_STD_COLUMNS if c in columns]
 
@@ -541,6 +556,7 @@ def _frf_from(path, source: TextSource, header: _Header, max_rows) -> FrequencyR
         return bad
 
     data = _read_rows(source, header, _block_check(bad_rows, row_check), max_rows)
+    data = [to_si(col, factor) if factor != 1.0 else col for col, factor in zip(data, factors)]
     return FrequencyResponseData(
         path=str(path), sample=sample, geometry=geometry, known=known,
         frequency_hz=data[0], gain_a_per_m=data[1], phase_deg=data[2],

@@ -9,7 +9,9 @@ modules, re-exported here:
 * :mod:`.formats`: ``ipmc-timeseries/1`` and ``ipmc-frf/1`` text files;
 * :mod:`.bags`: rosbag2 bags (sqlite3 or mcap);
 * :mod:`.labimport`: free-form lab exports (LabVIEW-style headers, units in
-  column names) converted to ``ipmc-timeseries/1``.
+  column names) converted to ``ipmc-timeseries/1``;
+* :mod:`.textread`: the streaming reader under both (regular files only,
+  ``max_bytes`` / ``max_rows`` limits); :mod:`.units`: unit tables.
 """
 from __future__ import annotations
 

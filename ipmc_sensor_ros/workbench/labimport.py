@@ -52,7 +52,7 @@ from .textread import (MAX_BYTES, MAX_ROWS, TextSource, increasing_check, parse_
 from .units import (CURRENT_UNITS, LENGTH_UNITS, TIME_UNITS, VOLTAGE_UNITS, decimal_to_si,
                     parse_length, split_unit, to_si, unit_factor)
 
-__all__ = ["import_lab_file", "import_lab_files", "ROLE_NAMES"]
+__all__ = ["import_lab_file", "import_lab_files", "parse_columns_spec", "ROLE_NAMES"]
 
 #: Words that name each column role (matched against the words of a column stem).
 ROLE_NAMES = {
@@ -97,6 +97,27 @@ def _find_table(path, source: TextSource):
                     return notes, cells, head_line, delimiter, decimal
         if line.strip():
             previous.append((source.lineno, line))
+
+
+def parse_columns_spec(text: str) -> dict[str, str]:
+    """``"time=Time [s],current=I (nA)"`` -> ``{"time": "Time [s]", "current": "I (nA)"}``.
+
+    The text form of the ``columns`` argument (a CLI flag); raises ValueError
+    naming the bad item, an unknown role or a role given twice.
+    """
+    out: dict[str, str] = {}
+    for item in text.split(","):
+        role, sep, name = item.partition("=")
+        role, name = role.strip(), name.strip()
+        if not sep or not name:
+            raise ValueError(f"columns: {item.strip()!r} is not role=column "
+                             "(e.g. time=Time [s],current=I (nA))")
+        if role not in ROLE_NAMES:
+            raise ValueError(f"columns: unknown role {role!r}; roles are {list(ROLE_NAMES)}")
+        if role in out:
+            raise ValueError(f"columns: role {role!r} given twice")
+        out[role] = name
+    return out
 
 
 def _words(stem: str) -> list[str]:
@@ -328,6 +349,9 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
     known: dict[str, float] = {}
     for key, value in meta_data.items():
         if key in KNOWN_KEYS:
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise DataFormatError(meta, None, f"run metadata {key}: {value!r} must be a "
+                                      "number in SI units")
             known[key] = float(value)
         elif key not in ("sample", "geometry") and key.partition("_")[0] not in _GEOMETRY_PARTS:
             if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_.\-]*", str(key)):

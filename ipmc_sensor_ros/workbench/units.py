@@ -12,7 +12,8 @@ import re
 from decimal import Decimal
 
 __all__ = ["TIME_UNITS", "LENGTH_UNITS", "CURRENT_UNITS", "VOLTAGE_UNITS", "QUANTITY_UNITS",
-           "SI_SYMBOL", "unit_factor", "to_si", "decimal_to_si", "split_unit", "parse_length"]
+           "SI_SYMBOL", "unit_factor", "to_si", "decimal_to_si",
+           "column_to_si", "column_units", "split_unit", "parse_length"]
 
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
 LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "nm": 1e-9}
@@ -94,3 +95,48 @@ def parse_length(text: str) -> float:
         raise ValueError(f"{text.strip()!r}: unknown length unit {m.group(2)!r} "
                          f"(known: {', '.join(LENGTH_UNITS)})")
     return decimal_to_si(m.group(1), factor)
+
+
+FREQUENCY_UNITS = {"hz": 1.0, "khz": 1e3, "rad_s": 1.0 / (2.0 * math.pi)}
+PHASE_UNITS = {"deg": 1.0, "rad": 180.0 / math.pi}
+#: Column bases of the text formats, longest first, with their SI column names.
+_BASES = ("deflection", "frequency", "gain_std", "phase_std", "current", "phase", "gain", "time")
+
+
+def column_units(base: str) -> str:
+    """The units accepted after ``<base>_`` in a column name, for messages."""
+    if base in QUANTITY_UNITS:
+        return ", ".join(QUANTITY_UNITS[base])
+    if base == "frequency":
+        return ", ".join(FREQUENCY_UNITS)
+    if base.startswith("phase"):
+        return ", ".join(PHASE_UNITS)
+    return "<current>_per_<length>, e.g. A_per_m, uA_per_mm"
+
+
+def column_to_si(name: str) -> tuple[str, float] | None:
+    """(SI column, factor to SI) of a column named with another unit, or None.
+
+    ``deflection_mm`` -> ``('deflection_m', 1e-3)``, ``phase_rad`` ->
+    ``('phase_deg', 57.29...)``, ``frequency_rad_s`` -> ``('frequency_hz', 1/2pi)``,
+    ``gain_uA_per_mm`` -> ``('gain_A_per_m', 1e-3)``.
+    """
+    base = next((b for b in _BASES if name.startswith(b + "_")), None)
+    if base is None:
+        return None
+    unit = name[len(base) + 1:]
+    if base in QUANTITY_UNITS:
+        factor = unit_factor(unit, QUANTITY_UNITS[base])
+        return None if factor is None else (f"{base}_{SI_SYMBOL[base]}", factor)
+    if base == "frequency":
+        factor = FREQUENCY_UNITS.get(unit.lower())
+        return None if factor is None else ("frequency_hz", factor)
+    if base.startswith("phase"):
+        factor = PHASE_UNITS.get(unit.lower())
+        return None if factor is None else (f"{base}_deg", factor)
+    current, sep, length = unit.partition("_per_")
+    amps = unit_factor(current, CURRENT_UNITS) if sep else None
+    metres = unit_factor(length, LENGTH_UNITS) if sep else None
+    if amps is None or metres is None:
+        return None
+    return f"{base}_A_per_m", amps / metres
