@@ -151,7 +151,7 @@ def check_unknown_overrides(node, specs: Iterable[Spec], cli_args=None,
     fatal = [n for n in unknown if n in exact_keys or n not in wildcard_only]
     for name in unknown:
         if name not in fatal:
-            node.get_logger().warn(f"ignoring parameter '{name}' from {wildcard_only[name]}: "
+            node.get_logger().warning(f"ignoring parameter '{name}' from {wildcard_only[name]}: "
                                    f"not a parameter of {fqn} (another node's?)")
             del node._parameter_overrides[name]
     if fatal:
