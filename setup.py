@@ -12,6 +12,8 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/launch",
+         glob("launch/*.launch.py") + glob("launch/*.launch.xml")),
     ],
     install_requires=["setuptools", "numpy", "scipy", "control", "pyyaml"],
     extras_require={

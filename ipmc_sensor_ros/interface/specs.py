@@ -29,7 +29,7 @@ from ..lti.reduction import MAX_ORDER, ReducedModel, ReductionError
 __all__ = ["Spec", "ConfigurationError", "GEOMETRY_SPECS", "MATERIAL_SPECS", "MODEL_SPECS",
            "QOS_SPECS", "ESTIMATOR_SPECS", "PUBLISH_POINTS", "MATERIAL_NAMES", "GEOMETRY_NAMES",
            "defaults", "load_params_file", "build_model", "build_estimator", "check_choice",
-           "check_values", "markdown_table", "FRAME_ID_PATTERN"]
+           "check_values", "markdown_table", "FRAME_ID_PATTERN", "DIAGNOSTICS_SPECS"]
 
 
 class ConfigurationError(ParameterError):
@@ -113,6 +113,23 @@ PUBLISH_POINTS = ("per_sample", "last_of_block", "none")  # not "off": YAML read
 #: Characters allowed in ``frame_id`` (tf2 frame names: letters, digits, _ / . -).
 FRAME_ID_PATTERN = r"[A-Za-z0-9_/.\-]+"
 
+#: Parameters of the diagnostics (declared by every node that publishes /diagnostics).
+DIAGNOSTICS_SPECS = (
+    Spec("hardware_id", "", str, "hardware_id of the DiagnosticStatus messages (e.g. the DAQ "
+         "channel or sensor serial); empty = the node's fully qualified name", read_only=True),
+    Spec("stale_after_s", 2.0, float, "diagnostics: ERROR when no sample arrived for this "
+         "long, s", low=0.01, high=1e6),
+    Spec("rate_tolerance", 0.05, float, "diagnostics: WARN when the measured sample rate is "
+         "off sample_rate_hz by more than this fraction", low=0.0, high=10.0),
+    Spec("offset_warn_a", 100e-9, float, "diagnostics: WARN when the estimated current "
+         "offset (mean over offset_window_s) exceeds this, A", low=0.0, high=1.0),
+    Spec("offset_window_s", 10.0, float, "diagnostics: window of the current offset estimate, "
+         "s (much longer than the motion)", low=0.01, high=1e4),
+    Spec("line_warn_fraction", 0.05, float, "diagnostics: WARN when the 50/60 Hz line "
+         "amplitude exceeds this fraction of the current's RMS", low=0.0, high=10.0),
+)
+
+
 ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
     Spec("reduction_order", 4, int, "order n of the stable reduction of R(s) = H(s)/s",
          low=1, high=MAX_ORDER),
@@ -148,7 +165,7 @@ ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
          "'last_of_block' or 'none'", choices=PUBLISH_POINTS),
     Spec("max_block_samples", 100_000, int, "largest accepted input block, samples",
          low=1, high=MAX_BLOCK_SAMPLES, read_only=True),
-) + QOS_SPECS
+) + QOS_SPECS + DIAGNOSTICS_SPECS
 
 
 def check_choice(name: str, value: Any, choices: Iterable[str]) -> str:

@@ -40,6 +40,7 @@ from ..lti.reduction import ReductionError
 from . import params as P
 from .messages import (CURRENT_COLUMNS, ESTIMATE_COLUMNS, SAMPLE_LABEL, BlockPacker,
                        LayoutError, claimed_samples, unpack_block)
+from .diagnostics import DiagnosticsPublisher
 from .runner import run
 
 __all__ = ["EstimatorNode", "ESTIMATOR_SPECS", "COUNTER_NAMES", "PUBLISH_POINTS", "main"]
@@ -124,7 +125,8 @@ class EstimatorNode(Node):
     def __init__(self, node_name: str = "ipmc_estimator", **kwargs: Any):
         super().__init__(node_name, **kwargs)
         self._lock = threading.RLock()
-        P.check_unknown_overrides(self, ESTIMATOR_SPECS, kwargs.get("cli_args"))
+        P.check_unknown_overrides(self, ESTIMATOR_SPECS, kwargs.get("cli_args"),
+                                  default_name="ipmc_estimator")
         P.declare(self, ESTIMATOR_SPECS)
         self._values = P.read(self, ESTIMATOR_SPECS)
         try:
@@ -139,10 +141,11 @@ class EstimatorNode(Node):
         self._ticks = 0
 
         qos = P.make_qos(self._values)
-        self._sub = self.create_subscription(Float64MultiArray, "current", self._on_current, qos)
-        self._pub_block = self.create_publisher(Float64MultiArray, "deflection/block", qos)
+        self._sub = P.create_subscription(self, Float64MultiArray, "current", self._on_current, qos)
+        self._pub_block = P.create_publisher(self, Float64MultiArray, "deflection/block", qos)
         self._packer = BlockPacker(ESTIMATE_COLUMNS)
-        self._pub_point = self.create_publisher(PointStamped, "deflection", qos)
+        self._pub_point = P.create_publisher(self, PointStamped, "deflection", qos)
+        P.check_qos_overrides(self)
         self._pub_counters = self.create_publisher(String, "estimator/counters", P.COUNTERS_QOS)
         logger = self.get_logger()
         self._stream = StreamEstimator(
@@ -150,6 +153,9 @@ class EstimatorNode(Node):
             max_block_samples=int(self._values["max_block_samples"]),
             source=self._sub.topic_name, now_s=lambda: self.get_clock().now().nanoseconds * 1e-9,
             warn=lambda text: logger.warning(text, throttle_duration_sec=1.0))
+        self._diagnostics = DiagnosticsPublisher(
+            self, self._values, channels=(self._sub.topic_name,),
+            sample_rate_hz=estimator.sample_rate_hz, source=self._status)
         # Steady clock: counters and the waiting message must not stall under
         # use_sim_time before /clock arrives.
         self._timer = self.create_timer(1.0, self._on_timer,
@@ -168,6 +174,16 @@ class EstimatorNode(Node):
         :mod:`ipmc_sensor_ros.estimation.stream`."""
         with self._lock:
             return dict(self._stream.counters)
+
+    def _status(self) -> dict:
+        """Counters and estimator state (offset, rest, std, mains line) for the counters topic
+        and /diagnostics."""
+        with self._lock:
+            out = dict(self._stream.counters)
+            out.update(self._stream.estimator.status())
+        if out["offset_a"] is not None:
+            out["estimated_offset_a"] = out["offset_a"]   # the filter's own offset (kalman)
+        return out
 
     @property
     def stream(self) -> StreamEstimator:
@@ -203,6 +219,7 @@ class EstimatorNode(Node):
             if one:
                 out = self._stream.feed_one(*one)
                 if out is not False:
+                    self._diagnostics.observe((one[1],))
                     if out is not None:
                         std = self._stream.estimator.std_m
                         self._publish(self._packer.pack_one(out[0], out[1], std), out[0], out[1], 1)
@@ -214,6 +231,7 @@ class EstimatorNode(Node):
                 return
             out = self._stream.feed(block.times_s, block.values, claimed=claimed_samples(msg))
             if out is not None:
+                self._diagnostics.observe(block.values)
                 t, w = out
                 std = np.full(t.size, self._stream.estimator.std_m)
                 self._publish(self._packer.pack(t, w, std), t, w, t.size)
@@ -255,12 +273,10 @@ class EstimatorNode(Node):
     # -- periodic -------------------------------------------------------------
     def _on_timer(self) -> None:
         self._ticks += 1
-        counters = self.counters()
+        counters = self._status()
         if counters["samples_in"] == 0 and self._ticks % 5 == 1:
             self.get_logger().info(f"waiting for data on {self._sub.topic_name}")
         counters["node"] = self.get_fully_qualified_name()
-        with self._lock:
-            counters.update(self._stream.estimator.status())
         self._pub_counters.publish(String(data=json.dumps(counters)))
 
     # -- parameters -------------------------------------------------------------

@@ -27,7 +27,9 @@ from ..physics.parameters import ParameterError
 __all__ = ["ConfigurationError", "Spec", "GEOMETRY_SPECS", "MATERIAL_SPECS", "MODEL_SPECS",
            "QOS_SPECS", "declare", "read", "build_sensor_model", "make_qos", "COUNTERS_QOS",
            "check_choice", "ParameterError", "MATERIAL_NAMES", "GEOMETRY_NAMES", "markdown_table",
-           "params_files", "check_unknown_overrides"]
+           "params_files", "check_unknown_overrides", "section_matches", "params_file_sections",
+           "create_publisher", "create_subscription", "check_qos_overrides",
+           "qos_overriding_options"]
 
 _TYPES = {float: ParameterType.PARAMETER_DOUBLE, int: ParameterType.PARAMETER_INTEGER,
           str: ParameterType.PARAMETER_STRING, bool: ParameterType.PARAMETER_BOOL,
@@ -61,16 +63,137 @@ def params_files(cli_args: Iterable[str] | None = None) -> list[str]:
     return out
 
 
-def check_unknown_overrides(node, specs: Iterable[Spec], cli_args=None) -> None:
-    """Refuse parameter overrides (from params files or -p) that the node does not declare:
-    rclpy would ignore them silently, so a typo ('lenght_m') would go unnoticed."""
+def _ros_arg_params(cli_args) -> set[str]:
+    """Names set with ``-p name:=value`` in ``cli_args`` and this process's argv."""
+    import sys
+
+    out = set()
+    for args in (list(cli_args or ()), sys.argv):
+        for k, a in enumerate(args[:-1]):
+            if a in ("-p", "--param") and ":=" in args[k + 1]:
+                out.add(args[k + 1].split(":=", 1)[0])
+    return out
+
+
+def section_matches(key: str, fqn: str) -> bool:
+    """True if a params-file section ``key`` (``/**``, ``/**/name``, ``name``, ``/ns/*``)
+    applies to the node of fully qualified name ``fqn`` (rcl's matching rules)."""
+    import re
+
+    key = key if key.startswith("/") else "/" + key
+    pattern = re.escape(key).replace(r"/\*\*", "(/[^/]+)*").replace(r"\*", "[^/]+")
+    return re.fullmatch(pattern, fqn) is not None
+
+
+def params_file_sections(path: str) -> list[tuple[str, dict]]:
+    """``(section key, ros__parameters dict)`` of a params file, in file order."""
+    import yaml
+
+    try:
+        with open(path, encoding="utf-8") as f:
+            doc = yaml.safe_load(f)
+    except (OSError, yaml.YAMLError) as exc:
+        raise ConfigurationError(f"parameters file {path}: cannot read: {exc}") from None
+    if not isinstance(doc, dict):
+        return []
+    return [(str(k), dict((v or {}).get("ros__parameters") or {}))
+            for k, v in doc.items() if isinstance(v, dict)]
+
+
+def check_unknown_overrides(node, specs: Iterable[Spec], cli_args=None,
+                            default_name: str | None = None) -> None:
+    """Apply the params-file rules of the nodes, then refuse unknown overrides.
+
+    * A node renamed at start-up (``-r __node:=left_ipmc``) also takes the
+      sections keyed by its default name ``default_name`` (``/**/ipmc_estimator``,
+      ``ipmc_estimator``): rcl matches the new name only, and the file would be
+      silently ignored.  Sections naming the new name, and ``-p``, win.
+    * Parameters the node does not declare are refused when they come from
+      ``-p`` or a section naming this node (a typo such as ``lenght_m`` must not
+      go unnoticed), but only warned about when they come from a wildcard
+      section (``/**``) of a file shared with other nodes.
+    * ``qos_overrides.<topic>.<publisher|subscription>.<policy>`` are the standard
+      QoS parameters (checked by :func:`check_qos_overrides` once the topics exist).
+
+    Raises :class:`ConfigurationError` naming the parameters and the files.
+    """
     known = {s.name for s in specs} | {"use_sim_time", "start_type_description_service"}
-    unknown = sorted(set(node._parameter_overrides) - known)
-    if unknown:
-        files = params_files(cli_args)
+    fqn = node.get_fully_qualified_name()
+    ns = node.get_namespace().rstrip("/")
+    files = params_files(cli_args)
+    exact_keys: set[str] = set()
+    wildcard_only: dict[str, str] = {}
+    fallback: dict[str, Any] = {}
+    fallback_files = []
+    renamed = default_name is not None and default_name != node.get_name()
+    for path in files:
+        for key, section in params_file_sections(path):
+            if section_matches(key, fqn):
+                if "*" in key:
+                    for name in section:
+                        wildcard_only.setdefault(name, f"{path} section '{key}'")
+                else:
+                    exact_keys.update(section)
+            elif renamed and section_matches(key, f"{ns}/{default_name}") and "*" not in \
+                    key.rsplit("/", 1)[-1]:
+                fallback.update(section)
+                fallback_files.append(f"{path} section '{key}'")
+    if fallback:
+        explicit = exact_keys | _ros_arg_params(cli_args)
+        applied = sorted(n for n in fallback if n not in explicit)
+        for name in applied:
+            node._parameter_overrides[name] = Parameter(name, value=fallback[name])
+        node.get_logger().info(f"node renamed from '{default_name}': applying "
+                               f"{', '.join(fallback_files)} ({len(applied)} parameter(s))")
+        exact_keys |= set(fallback)
+    unknown = sorted(n for n in node._parameter_overrides
+                     if n not in known and not n.startswith("qos_overrides."))
+    fatal = [n for n in unknown if n in exact_keys or n not in wildcard_only]
+    for name in unknown:
+        if name not in fatal:
+            node.get_logger().warning(f"ignoring parameter '{name}' from {wildcard_only[name]}: "
+                                   f"not a parameter of {fqn} (another node's?)")
+            del node._parameter_overrides[name]
+    if fatal:
         where = f" in {', '.join(files)}" if files else ""
-        raise ConfigurationError(f"unknown parameter(s) {unknown}{where} for node "
+        raise ConfigurationError(f"unknown parameter(s) {fatal}{where} for node "
                                  f"'{node.get_name()}'; known: {sorted(known - {'use_sim_time'})}")
+
+
+#: QoS parameters of a topic are declared read-only by rclpy as
+#: ``qos_overrides.<fully qualified topic>.<publisher|subscription>.<policy>``.
+QOS_OVERRIDE_POLICIES = ("history", "depth", "reliability", "durability")
+
+
+def qos_overriding_options():
+    """The standard ``qos_overrides.*`` parameters (history, depth, reliability, durability)."""
+    from rclpy.qos_overriding_options import QoSOverridingOptions
+
+    return QoSOverridingOptions.with_default_policies()
+
+
+def create_publisher(node, msg_type, topic: str, qos: QoSProfile):
+    """``node.create_publisher`` with the standard QoS override parameters."""
+    return node.create_publisher(msg_type, topic, qos,
+                                 qos_overriding_options=qos_overriding_options())
+
+
+def create_subscription(node, msg_type, topic: str, callback, qos: QoSProfile):
+    """``node.create_subscription`` with the standard QoS override parameters."""
+    return node.create_subscription(msg_type, topic, callback, qos,
+                                    qos_overriding_options=qos_overriding_options())
+
+
+def check_qos_overrides(node) -> None:
+    """Refuse ``qos_overrides.*`` overrides naming no topic of the node (call after
+    creating the topics): a misspelt topic would otherwise be ignored silently."""
+    declared = set(node._parameters)
+    stray = sorted(n for n in node._parameter_overrides
+                   if n.startswith("qos_overrides.") and n not in declared)
+    if stray:
+        valid = sorted(n for n in declared if n.startswith("qos_overrides."))
+        raise ConfigurationError(f"unknown QoS override(s) {stray} for node "
+                                 f"'{node.get_name()}'; valid: {valid}")
 
 
 def declare(node, specs: Iterable[Spec]) -> None:

@@ -1,4 +1,32 @@
-"""Process entry helper shared by the node executables."""
+# SPDX-License-Identifier: Apache-2.0
+"""Process entry helper shared by the node executables.
+
+Executor
+    ``SingleThreadedExecutor`` by default.  ``IPMC_EXECUTOR=events`` selects
+    ``rclpy.experimental.EventsExecutor`` (rclpy >= 9) but it is NOT the default:
+    with these wheels (ros-rclpy 9.1.2) a node on it whose steady-clock timer
+    raises (or whose process got SIGTERM) kept spinning forever, the timer
+    callback never ran (README "ROS 2 interface": executor), so the
+    shutdown guard below cannot work on it.
+
+Signals
+    The process handles SIGINT and SIGTERM itself (rclpy's handlers are not
+    installed, ``SignalHandlerOptions.NO``): the Python handler only records
+    the signal, and a 0.1 s steady-clock guard timer on the node turns it into
+    ``ExternalShutdownException`` out of ``spin``; a signal during start-up is
+    seen right after the node is built.  So a signal at any moment exits 0
+    without a traceback, never in the middle of rcl calls.  Why not rclpy's
+    handlers: with them, a SIGTERM sent on the "ready" line left the process
+    spinning forever in 4 of 5 runs (EventsExecutor; also seen with
+    SingleThreadedExecutor), the context never shut down, and in 10 of 12
+    runs on main it raised ``RCLError`` ("the given context is not valid")
+    out of the executor's wait-set set-up.
+
+Teardown
+    executor, node, context are destroyed in that order; there is no
+    ``os._exit`` (the SIGSEGV seen once at exit under load with rclpy's own signal
+    handlers has not been seen since they are no longer installed).
+"""
 from __future__ import annotations
 
 import os
@@ -9,83 +37,154 @@ import sys
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-
-from rclpy._rclpy_pybind11 import RCLError
+from rclpy.signals import SignalHandlerOptions
 
 from ..physics.parameters import ParameterError, read_yaml
 from .params import ConfigurationError, params_files
 
-__all__ = ["run"]
+__all__ = ["run", "make_executor", "executor_name"]
+
+try:  # rclpy >= 9
+    from rclpy.experimental import EventsExecutor
+except ImportError:  # pragma: no cover - older rclpy
+    EventsExecutor = None
+
+try:
+    from rclpy._rclpy_pybind11 import RCLError
+except ImportError:  # pragma: no cover
+    from rclpy.impl.implementation_singleton import rclpy_implementation as _impl
+    RCLError = _impl.RCLError
+
+_SHUTDOWN = (KeyboardInterrupt, ExternalShutdownException)
+
+
+def executor_name() -> str:
+    """``events`` or ``single``: the executor :func:`make_executor` builds here."""
+    wanted = os.environ.get("IPMC_EXECUTOR", "single").strip().lower()
+    if wanted not in ("events", "single"):
+        raise ConfigurationError(f"environment variable IPMC_EXECUTOR={wanted!r}: expected "
+                                 "'events' or 'single'")
+    return "events" if wanted == "events" and EventsExecutor is not None else "single"
+
+
+def make_executor(context=None):
+    """The executor of the nodes (see the module docstring)."""
+    if executor_name() == "events":
+        return EventsExecutor(context=context)
+    return SingleThreadedExecutor(context=context)
+
+
+def _stopping(context=None) -> bool:
+    """True once a signal (or anyone) has shut the rclpy context down."""
+    try:
+        return not rclpy.ok(context=context)
+    except Exception:  # noqa: BLE001 - a destroyed context is stopping too
+        return True
+
+
+#: Signals received (set by the handler, read by the guard timer).
+_SIGNALLED: set = set()
+
+
+def _on_signal(signum, frame) -> None:
+    _SIGNALLED.add(signum)
+
+
+#: Period of the shutdown guard timer, s.
+GUARD_PERIOD_S = 0.1
+
+
+def _shutdown_guard(node):
+    """A steady-clock timer that raises ``ExternalShutdownException`` out of ``spin``
+    once the context is shut down.
+
+    rclpy wakes the executor when a signal shuts the context down, but a wake-up
+    that comes before ``spin`` has started is lost by ``EventsExecutor`` (measured:
+    4 of 5 SIGTERMs sent on the "ready" line left the process spinning forever),
+    and the single-threaded executor can miss it the same way.  The guard
+    bounds the exit delay to ``GUARD_PERIOD_S`` whatever the timing.
+    """
+    from rclpy.clock import Clock, ClockType
+
+    def check():
+        if _SIGNALLED or _stopping(node.context):
+            raise ExternalShutdownException()
+
+    return node.create_timer(GUARD_PERIOD_S, check, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+
+def _report_configuration_error(name: str, exc: Exception) -> None:
+    text = str(exc)
+    hint = ""
+    if "type 'INTEGER'" in text and "expecting type 'DOUBLE'" in text:
+        hint = " (write floating-point parameters with a decimal point, e.g. 1000.0)"
+    elif "out of range" in text and any(f"Parameter {n} out of range" in text
+                                        for n in ("length_m", "width_m", "thickness_m")):
+        hint = " (lengths are in metres: is it in millimetres?)"
+    files = params_files()
+    source = f" (parameters files: {', '.join(files)})" if files and not any(
+        f in text for f in files) else ""
+    print(f"{name}: invalid parameter: {exc}{hint}{source}", file=sys.stderr)
 
 
 def run(node_factory, name: str, args=None) -> int:
-    """Run the node (see :func:`_run`), then leave the process without interpreter
-    teardown.  After the orderly shutdown (executor, node, rclpy context), the
-    remaining finalisers of the DDS middleware's native objects run in an
-    unspecified order at interpreter exit; under load this crashed the process
-    (SIGSEGV, about once in a full test run) after a clean SIGINT.  Output is
-    flushed first, so nothing printed is lost."""
-    code = _run(node_factory, name, args)
-    if os.environ.get("IPMC_NODE_NO_HARD_EXIT") != "1":  # opt-out for in-process callers
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(code)
-    return code
+    """Init rclpy, build the node, spin until SIGINT/SIGTERM/shutdown; return the exit code.
 
+    ``node_factory()`` builds the node (a ``Node`` or a ``LifecycleNode``).
 
-def _run(node_factory, name: str, args=None) -> int:
-    """Init rclpy, build the node, spin until SIGINT/shutdown; return the exit code.
-
-    SIGINT (Ctrl-C, ``ros2 run``/launch shutdown) gives 0.  A configuration error
-    is printed on one line naming the parameter (no traceback) and gives 2.
+    A signal at any moment gives 0 without a traceback.  A configuration error is
+    printed on one line naming the parameter (no traceback) and gives 2.
     """
     # A shell starts background jobs with SIGINT ignored, and Python keeps an
     # inherited SIG_IGN: restore the default so SIGINT always stops the node.
-    signal.signal(signal.SIGINT, signal.default_int_handler)
+    _SIGNALLED.clear()
+    previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        return _run(node_factory, name, args)
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def _run(node_factory, name: str, args) -> int:
     try:
         # rcl reports a params file it cannot parse as an RCLError traceback (exit 1)
         # without the line: read each file first for a one-line file:line error
         for path in params_files(args):
             read_yaml(path, "parameters file")
-        rclpy.init(args=args)
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except (ParameterError, RCLError) as exc:
         text = str(exc)
         if isinstance(exc, RCLError):   # "...Error: <what> at line_num 3, at /src/parse.c:435, ..."
             text = re.sub(r",? at /\S+:\d+", "", text).replace("failed to initialize rcl: ", "")
         print(f"{name}: invalid parameters file: {' '.join(text.split())}", file=sys.stderr)
         return 2
-    # The executor exists before the node logs "ready", so a SIGINT sent on that
-    # line cannot interrupt the executor's construction (rclpy then prints an
-    # "Exception ignored in Executor.__del__" traceback).
-    executor = SingleThreadedExecutor()
+    executor = node = None
+    code = 0
     try:
+        # The executor exists before the node logs "ready", so a signal sent on that
+        # line finds a complete executor.
+        executor = make_executor()
         node = node_factory()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        executor.shutdown()
-        rclpy.try_shutdown()
-        return 0
-    except (ConfigurationError, ParameterException) as exc:
-        text = str(exc)
-        hint = ""
-        if "type 'INTEGER'" in text and "expecting type 'DOUBLE'" in text:
-            hint = " (write floating-point parameters with a decimal point, e.g. 1000.0)"
-        elif "out of range" in text and any(f"Parameter {n} out of range" in text
-                                            for n in ("length_m", "width_m", "thickness_m")):
-            hint = " (lengths are in metres: is it in millimetres?)"
-        files = params_files()
-        source = f" (parameters files: {', '.join(files)})" if files and not any(
-            f in str(exc) for f in files) else ""
-        print(f"{name}: invalid parameter: {exc}{hint}{source}", file=sys.stderr)
-        executor.shutdown()
-        rclpy.try_shutdown()
-        return 2
-    try:
+        node.get_logger().debug(f"executor: {type(executor).__name__}")
+        _guard = _shutdown_guard(node)  # noqa: F841 (kept alive; before add_node)
         executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
+        if not _SIGNALLED:
+            executor.spin()
+    except _SHUTDOWN:
         pass
+    except (ConfigurationError, ParameterException) as exc:
+        if not _SIGNALLED:
+            _report_configuration_error(name, exc)
+            code = 2
+    except RCLError:
+        if not _stopping():
+            raise
     finally:
-        executor.shutdown()
-        node.destroy_node()
+        # signals only set the flag: the teardown cannot be interrupted
+        if executor is not None:
+            executor.shutdown()
+        if node is not None:
+            node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    return code

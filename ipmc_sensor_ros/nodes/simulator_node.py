@@ -41,7 +41,9 @@ from ..physics.parameters import ParameterError
 from ..lti.reduction import ReductionError
 from ..simulation.sensor import FieldSensorSimulator, SensorSimulator
 from ..simulation.stimuli import STIMULUS_KINDS, Sampled, Stimulus, make_stimulus
+from ..interface.specs import DIAGNOSTICS_SPECS
 from . import params as P
+from .diagnostics import DiagnosticsPublisher
 from .messages import CURRENT_COLUMNS, DEFLECTION_COLUMNS, BlockPacker
 from .runner import run
 
@@ -103,7 +105,7 @@ _OWN_SPECS = (
 
 SIMULATOR_SPECS = tuple(dataclasses.replace(s, read_only=True) for s in
                         P.GEOMETRY_SPECS + P.MATERIAL_SPECS + P.MODEL_SPECS + _OWN_SPECS
-                        + P.QOS_SPECS)
+                        + P.QOS_SPECS) + DIAGNOSTICS_SPECS
 
 
 def read_stimulus_csv(path: str | Path) -> np.ndarray:
@@ -183,7 +185,8 @@ class SimulatorNode(Node):
 
     def __init__(self, node_name: str = "ipmc_simulator", **kwargs: Any):
         super().__init__(node_name, **kwargs)
-        P.check_unknown_overrides(self, SIMULATOR_SPECS, kwargs.get("cli_args"))
+        P.check_unknown_overrides(self, SIMULATOR_SPECS, kwargs.get("cli_args"),
+                                  default_name="ipmc_simulator")
         P.declare(self, SIMULATOR_SPECS)
         v = self._values = P.read(self, SIMULATOR_SPECS)
         try:
@@ -208,8 +211,9 @@ class SimulatorNode(Node):
         self._done = False
 
         qos = P.make_qos(v)
-        self._pub_current = self.create_publisher(Float64MultiArray, "current", qos)
-        self._pub_truth = self.create_publisher(Float64MultiArray, "deflection_truth", qos)
+        self._pub_current = P.create_publisher(self, Float64MultiArray, "current", qos)
+        self._pub_truth = P.create_publisher(self, Float64MultiArray, "deflection_truth", qos)
+        P.check_qos_overrides(self)
         self._pack_current = BlockPacker(CURRENT_COLUMNS)
         self._pack_truth = BlockPacker(DEFLECTION_COLUMNS)
         self._pub_counters = self.create_publisher(String, "simulator/counters", P.COUNTERS_QOS)
@@ -221,6 +225,12 @@ class SimulatorNode(Node):
                                             clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._counter_timer = self.create_timer(1.0, self._publish_counters,
                                                 clock=Clock(clock_type=ClockType.STEADY_TIME))
+        # /diagnostics: expected rate = realtime_factor x sample_rate_hz (no check in fast mode)
+        self._diagnostics = DiagnosticsPublisher(
+            self, v, channels=(self._pub_current.topic_name,),
+            sample_rate_hz=self._fs,
+            expected_rate_hz=self._fs * self._rtf if self._rtf > 0.0 else None,
+            samples_key="samples_published", source=self.counters)
         self.get_logger().info(
             f"ready: {model.describe()} model, stimulus "
             f"{describe_stimulus(self._stimulus, v)}, {self._fs} Hz in blocks of "
@@ -286,6 +296,7 @@ class SimulatorNode(Node):
         times = self._t_start_ns * 1e-9 + k / self._fs
         deflection, current = self._sim.run(self._stimulus, self._stim_t0 + k / self._fs)
         self._pub_current.publish(self._pack_current.pack(times, current))
+        self._diagnostics.observe(current)
         self._pub_truth.publish(self._pack_truth.pack(times, deflection))
         self._k = k1
         self._blocks += 1

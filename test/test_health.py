@@ -1,0 +1,106 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Health evaluator behind /diagnostics (ROS-free)."""
+import numpy as np
+
+from ipmc_sensor_ros.interface.health import (ERROR, OK, WARN, CurrentStatistics, HealthLimits,
+                                              HealthMonitor, worst)
+
+FS = 1000.0
+
+
+def _counters(samples, **kw):
+    c = dict(messages_in=samples // 10, samples_in=samples, messages_rejected=0, resets=0,
+             gaps=0, samples_dropped=0)
+    c.update(kw)
+    return c
+
+
+def test_ok_at_nominal_rate_then_error_when_stale():
+    mon = HealthMonitor(FS, HealthLimits(stale_after_s=2.0))
+    assert mon.evaluate(_counters(0), 0.0).level == OK          # just started
+    assert mon.evaluate(_counters(1000), 1.0).level == OK       # first data
+    h = mon.evaluate(_counters(2000), 2.0)
+    assert h.level == OK and h.values["measured_rate_hz"] == "1000"
+    assert mon.evaluate(_counters(2000), 3.5).level == OK       # 1.5 s < stale_after_s
+    h = mon.evaluate(_counters(2000), 4.5)                       # 2.5 s without data
+    assert h.level == ERROR and "no data for 2.5 s" in h.message
+
+
+def test_error_when_no_data_ever():
+    mon = HealthMonitor(FS, HealthLimits(stale_after_s=2.0))
+    mon.evaluate(_counters(0), 10.0)
+    h = mon.evaluate(_counters(0), 12.5)
+    assert h.level == ERROR and "since start" in h.message
+
+
+def test_warn_on_new_rejections_resets_gaps_only_while_they_happen():
+    mon = HealthMonitor(FS)
+    mon.evaluate(_counters(1000), 1.0)
+    h = mon.evaluate(_counters(2000, messages_rejected=2, resets=1, gaps=1), 2.0)
+    assert h.level == WARN
+    for text in ("2 message(s) rejected", "1 filter reset(s)", "1 time gap(s)"):
+        assert text in h.message
+    # same totals one second later: nothing new, back to OK
+    assert mon.evaluate(_counters(3000, messages_rejected=2, resets=1, gaps=1), 3.0).level == OK
+
+
+def test_warn_on_rate_off_sample_rate():
+    mon = HealthMonitor(FS, HealthLimits(rate_tolerance=0.05))
+    mon.evaluate(_counters(1000), 1.0)
+    h = mon.evaluate(_counters(1900), 2.0)       # 900 Hz: 10 % low
+    assert h.level == WARN and "sample rate 900 Hz, expected 1000 Hz" in h.message
+    assert mon.evaluate(_counters(2880), 3.0).level == OK      # 980 Hz: within 5 %
+
+
+def test_done_source_is_not_stale():
+    mon = HealthMonitor(FS, HealthLimits(stale_after_s=1.0), samples_key="samples_published")
+    mon.evaluate({"samples_published": 500, "done": True}, 0.0)
+    h = mon.evaluate({"samples_published": 500, "done": True}, 5.0)
+    assert h.level == OK and h.message == "done"
+
+
+def test_offset_estimate_recovers_daq_offset_under_motion():
+    # 2 Hz charge-rate current (zero mean over whole periods) + 80 nA offset + 2 % noise
+    rng = np.random.default_rng(3)
+    t = np.arange(int(12 * FS)) / FS
+    signal = 1e-6 * np.cos(2 * np.pi * 2.0 * t)
+    i = signal + 80e-9 + 0.02e-6 * rng.standard_normal(t.size)
+    stats = CurrentStatistics(FS, offset_window_s=10.0)
+    for k in range(0, t.size, 37):                 # uneven blocks
+        stats.observe(i[k:k + 37])
+    # the exponential mean weights a sinusoid by at most 1/sqrt(1+(w tau)^2) ~ 1/126 of
+    # its 1 uA amplitude = 8 nA: tolerance 10 nA
+    assert abs(stats.offset_a() - 80e-9) < 10e-9
+    mon = HealthMonitor(FS, HealthLimits(offset_warn_a=50e-9))
+    mon.evaluate(_counters(1000), 1.0, stats)
+    h = mon.evaluate(_counters(2000), 2.0, stats)
+    assert h.level == WARN and "estimated current offset" in h.message
+
+
+def test_mains_line_warns_but_noise_alone_does_not():
+    rng = np.random.default_rng(5)
+    t = np.arange(int(2 * FS)) / FS
+    motion = 1e-6 * np.sin(2 * np.pi * 1.0 * t)
+    noise = 0.03e-6 * rng.standard_normal(t.size)
+    clean, hum = CurrentStatistics(FS), CurrentStatistics(FS)
+    clean.observe(motion + noise)
+    hum.observe(motion + noise + 0.1e-6 * np.sin(2 * np.pi * 50.0 * t))
+    f, amp, rms, _ = hum.line()
+    # Hann window: a 50 Hz tone over a whole number of periods is measured to < 1 %;
+    # leakage of the 1 Hz motion at 49 Hz distance is below 1 nA
+    assert f == 50.0 and abs(amp - 0.1e-6) < 3e-9
+    mon_clean, mon_hum = HealthMonitor(FS), HealthMonitor(FS)
+    for mon, stats in ((mon_clean, clean), (mon_hum, hum)):
+        mon.evaluate(_counters(1000), 1.0, stats)
+    assert mon_clean.evaluate(_counters(2000), 2.0, clean).level == OK
+    h = mon_hum.evaluate(_counters(2000), 2.0, hum)
+    assert h.level == WARN and "mains line at 50 Hz" in h.message
+
+
+def test_worst_aggregates_channels():
+    mon_a, mon_b = HealthMonitor(FS), HealthMonitor(FS, HealthLimits(stale_after_s=0.5))
+    a = mon_a.evaluate(_counters(10), 0.0)
+    b = mon_b.evaluate(_counters(0), 0.0)
+    b = mon_b.evaluate(_counters(0), 1.0)
+    agg = worst([a, b])
+    assert agg.level == ERROR and agg.message == b.message
