@@ -61,10 +61,9 @@ def _material_from_args(args) -> MaterialParameters:
 
 def load_material(path) -> MaterialParameters:
     """Material from a workbench YAML (``material:``) or a ROS 2 params file (ros__parameters)."""
-    import yaml
+    from ..physics.parameters import read_yaml
 
-    text = Path(path).read_text()
-    data = yaml.safe_load(text) or {}
+    data = read_yaml(path, "parameters file") or {}
     if isinstance(data, dict) and any(isinstance(v, dict) and "ros__parameters" in v
                                       for v in data.values()):
         params = next(v["ros__parameters"] for v in data.values()
