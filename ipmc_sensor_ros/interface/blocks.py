@@ -22,6 +22,8 @@ import array
 
 import numpy as np
 
+from ..physics.parameters import short_repr
+
 __all__ = ["LayoutError", "SAMPLE_LABEL", "CURRENT_COLUMNS", "DEFLECTION_COLUMNS", "unpack_pairs"]
 
 #: Label of the row dimension.
@@ -66,9 +68,9 @@ def unpack_pairs(msg, columns: str, *, values_only_ok: bool = True):
                           f"got {len(dims)}{note}")
     d0, d1 = dims
     if d0.label != SAMPLE_LABEL:
-        raise LayoutError(f"dim[0].label is {d0.label!r}, expected '{SAMPLE_LABEL}'")
+        raise LayoutError(f"dim[0].label is {short_repr(d0.label)}, expected '{SAMPLE_LABEL}'")
     if d1.label != columns:
-        raise LayoutError(f"dim[1].label is {d1.label!r}, expected '{columns}' (wrong units or "
+        raise LayoutError(f"dim[1].label is {short_repr(d1.label)}, expected '{columns}' (wrong units or "
                           "wrong topic?)")
     if d1.size != 2 or d1.stride != 2:
         raise LayoutError(f"dim[1] must have size 2 and stride 2, got size {d1.size}, "
