@@ -202,3 +202,19 @@ def test_offset_corner_above_nyquist_is_refused_like_the_leak_corner():
     values = {**C.defaults(C.ESTIMATOR_SPECS), "sample_rate_hz": 100.0, "offset_corner_hz": 60.0}
     with pytest.raises(ValueError, match="offset_corner_hz.*Nyquist"):
         C.build_estimator(values)
+
+
+def test_estimate_to_bag_with_huge_time_origin_is_one_line_and_leaves_no_bag(tmp_path, capsys):
+    """A time origin of 1e10 s overflowed the int32 stamp (OverflowError traceback, a
+    half-written bag left behind)."""
+    from ipmc_sensor_ros.cli.main import main
+    t = 1e10 + np.arange(2000) / FS
+    src = tmp_path / "in.csv"
+    head = ("# format: ipmc-timeseries/1\n# sample: slim\n# length_m: 0.022\n# width_m: 0.007\n"
+            "# thickness_m: 0.00036\n# sample_rate_hz: 1000.0\ntime_s,deflection_m,current_A\n")
+    src.write_text(head + "\n".join(f"{a:.6f},0.0,{1e-7 * np.sin(a):.6e}" for a in t) + "\n")
+    code = main(["estimate", str(src), "--out", str(tmp_path / "x.db3")])
+    err = capsys.readouterr().err
+    errors = [line for line in err.splitlines() if "error" in line]
+    assert code == 2 and "Traceback" not in err and len(errors) == 1 and "ROS time stamp" in errors[0], err
+    assert not (tmp_path / "x").exists() and not (tmp_path / "x.db3").exists()

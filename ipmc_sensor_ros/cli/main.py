@@ -435,8 +435,19 @@ def _cmd_estimate(args) -> int:
     if as_bag:
         storage = "mcap" if (args.storage == "mcap" or out.suffix == ".mcap") else "sqlite3"
         out = out.with_suffix("") if out.suffix in (".mcap", ".db3") else out
-        write_bag(out, result, storage=storage, current_topic=args.current_topic,
-                  deflection_topic=args.estimate_topic)
+        if t_out.size and not (0.0 <= float(np.min(t_out)) and float(np.max(t_out)) < 2.0 ** 31):
+            raise ParameterError(f"{src}: sample times {float(np.min(t_out)):.6g}..{float(np.max(t_out)):.6g} s "
+                                 "do not fit a ROS time stamp (0 .. 2^31 s): write a time series "
+                                 "(--format timeseries) or shift the time origin")
+        existed = out.exists()
+        try:
+            write_bag(out, result, storage=storage, current_topic=args.current_topic,
+                      deflection_topic=args.estimate_topic)
+        except BaseException:
+            if not existed:                              # never leave a half-written bag
+                import shutil
+                shutil.rmtree(out, ignore_errors=True)
+            raise
     else:
         write_timeseries(out, result)
     msg = f"wrote {t_out.size} estimates to {out} ({'bag' if as_bag else 'ipmc-timeseries/1'})"
