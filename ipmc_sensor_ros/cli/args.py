@@ -178,9 +178,9 @@ def load_material(path) -> MaterialParameters:
     (:func:`~ipmc_sensor_ros.interface.specs.load_params_file`), so section
     precedence is the same as in the node.
     """
-    import yaml
+    from ..physics.parameters import read_yaml
 
-    data = yaml.safe_load(Path(path).read_text()) or {}
+    data = read_yaml(path, "parameters file") or {}
     if isinstance(data, dict) and any(isinstance(v, dict) and "ros__parameters" in v
                                       for v in data.values()):
         from ..interface.specs import load_params_file

@@ -93,9 +93,9 @@ def _cmd_simulate(args) -> int:
 # ---------------------------------------------------------------------------
 def _explicit_params(path) -> set[str]:
     """Names a ROS 2 params file sets itself (not filled in from the defaults)."""
-    import yaml
+    from ..physics.parameters import read_yaml
 
-    doc = yaml.safe_load(Path(path).read_text()) or {}
+    doc = read_yaml(path, "parameters file") or {}
     return {k for key in _PARAMS_SECTIONS if isinstance(doc.get(key), dict)
             for k in (doc[key].get("ros__parameters") or {})}
 

@@ -299,8 +299,8 @@ def _check_value(spec: Spec, value: Any, where: str) -> Any:
         raise ConfigurationError(f"{where}parameter '{spec.name}' = {shown} is outside "
                                  f"[{spec.low:g}, {spec.high:g}]")
     if spec.choices and value not in spec.choices:
-        raise ConfigurationError(f"{where}parameter '{spec.name}' must be one of "
-                                 f"{list(spec.choices)}, got {shown}")
+        raise ConfigurationError(f"{where}unknown {spec.name} {shown}: parameter '{spec.name}' "
+                                 f"must be one of {list(spec.choices)}")
     if spec.max_length is not None and len(value) > spec.max_length:
         raise ConfigurationError(f"{where}parameter '{spec.name}' is {len(value)} characters long, "
                                  f"more than {spec.max_length}: {shown}")

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import functools
 import re
+import shutil
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -377,8 +378,7 @@ def write_bag(path: PathLike, timeseries: TimeSeries, storage: str = "sqlite3",
     ``sidecar`` the geometry, known values and extra go to ``<bag>/ipmc.yaml``.
     Sample times must be >= 0 (they become bag timestamps).
     """
-    import yaml
-    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.rosbag2 import StoragePlugin
 
     plugins = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}
     if storage not in plugins:
@@ -389,11 +389,26 @@ def write_bag(path: PathLike, timeseries: TimeSeries, storage: str = "sqlite3",
         raise ValueError(f"deflection_msgtype must be {MULTIARRAY_TYPE!r} or "
                          f"{POINT_STAMPED_TYPE!r}, got {deflection_msgtype!r}")
     ts = timeseries
-    if ts.n_samples and ts.time_s.min() < 0.0:
-        raise ValueError("sample times must be >= 0 to be written as bag timestamps")
+    if ts.n_samples and not (ts.time_s.min() >= 0.0 and ts.time_s.max() < 2.0 ** 31):
+        raise DataFormatError(path, None, f"sample times {ts.time_s.min():.6g}..{ts.time_s.max():.6g} s "
+                              "do not fit a ROS time stamp (0 .. 2^31 s): write a time series "
+                              "or shift the time origin")
     bag = Path(path)
     if bag.exists():
         raise FileExistsError(f"{bag} exists; write_bag does not overwrite")
+    try:
+        _write_bag(bag, ts, plugins[storage], current_topic, deflection_topic, block_size,
+                   deflection_msgtype, sidecar)
+    except BaseException:
+        shutil.rmtree(bag, ignore_errors=True)      # never leave a half-written bag
+        raise
+
+
+def _write_bag(bag: Path, ts: TimeSeries, plugin, current_topic: str, deflection_topic: str,
+               block_size: int, deflection_msgtype: str, sidecar: bool) -> None:
+    import yaml
+    from rosbags.rosbag2 import Writer
+
     store = _typestore()
     types = store.types
     F64, Layout, Dim = (types["std_msgs/msg/Float64MultiArray"],
@@ -411,7 +426,7 @@ def write_bag(path: PathLike, timeseries: TimeSeries, storage: str = "sqlite3",
     def topic(name: str) -> str:
         return "/" + _topic_key(name)
 
-    with Writer(bag, version=8, storage_plugin=plugins[storage]) as writer:
+    with Writer(bag, version=8, storage_plugin=plugin) as writer:
         cur = writer.add_connection(topic(current_topic), MULTIARRAY_TYPE, typestore=store)
         dconn = None
         if ts.deflection_m is not None:
