@@ -136,8 +136,15 @@ class StreamEstimator:
         return self._fs
 
     def replace_estimator(self, new: DeflectionEstimator) -> None:
-        """Swap in ``new`` (parameter change); its output continues from the old one's."""
-        new.continue_from(self.estimator)
+        """Swap in ``new`` (parameter change); its output continues from the old one's.  Should
+        the hand-over itself fail, ``new`` starts afresh and that is counted as a reset."""
+        try:
+            new.continue_from(self.estimator)
+        except Exception as exc:  # never lose the stream over a hand-over
+            new.reset()
+            self.counters["resets"] += 1
+            self._say(f"filter rebuilt without continuity on {self.source} "
+                      f"({type(exc).__name__}): filter reset")
         self.estimator = new
         self._fs = float(new.sample_rate_hz)
 

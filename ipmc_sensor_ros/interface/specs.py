@@ -143,7 +143,7 @@ ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
     Spec("estimator", "leaky", str, "'leaky': the leaky inverse of the reduced model; "
          "'kalman': offset-aware Kalman filter with a rest detector (learns the DAQ offset, "
          "holds the deflection at rest, publishes its standard deviation)",
-         choices=ESTIMATORS),
+         choices=ESTIMATORS, read_only=True),
     Spec("leak_corner_hz", 0.0, float, "leak corner f_c, Hz (time constant 1/(2 pi f_c) of the "
          f"initial-condition and held-step decay); 0 = the estimator's default "
          f"({DEFAULT_LEAK_CORNER_HZ:g} Hz leaky, {KALMAN_LEAK_CORNER_HZ:g} Hz kalman)",
