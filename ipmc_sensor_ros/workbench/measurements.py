@@ -14,54 +14,11 @@ from typing import Any, Union
 import numpy as np
 
 from ..physics.parameters import Geometry
+from ..errors import DataFormatError
 
 __all__ = ["DataFormatError", "TimeSeries", "FrequencyResponseData", "PathLike"]
 
 PathLike = Union[str, Path]
-
-
-# ---------------------------------------------------------------------------
-# Errors
-# ---------------------------------------------------------------------------
-class DataFormatError(ValueError):
-    """An input file or bag that cannot be read as valid measurement data.
-
-    Attributes
-    ----------
-    path : str, the file or bag (as given).
-    line : int or None, 1-based line of the problem in a text file.
-    topic : str or None, the bag topic concerned.
-    reason : str, the message without the location prefix.
-
-    ``str()`` is ``"<path>:<line>: <reason>"``, ``"<path>: topic '<topic>':
-    <reason>"`` or ``"<path>: <reason>"``.
-    """
-
-    def __init__(self, path: PathLike, line: int | None, reason: str, *,
-                 topic: str | None = None) -> None:
-        self.path = str(path)
-        self.line = line
-        self.topic = topic
-        self.reason = reason
-        super().__init__(self._format())
-
-    def _format(self) -> str:
-        where = self.path
-        if self.line is not None:
-            where += f":{self.line}"
-        if self.topic is not None:
-            where += f": topic '{self.topic}'"
-        return f"{where}: {self.reason}"
-
-    def __str__(self) -> str:
-        return self._format()
-
-    def __reduce__(self):  # picklable despite the keyword-only argument
-        return (_rebuild_error, (self.path, self.line, self.reason, self.topic))
-
-
-def _rebuild_error(path, line, reason, topic):
-    return DataFormatError(path, line, reason, topic=topic)
 
 
 # ---------------------------------------------------------------------------
