@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from ipmc_sensor_ros.estimation.inverse import (DEFAULT_LEAK_CORNER_HZ, EstimatorError, InverseEstimator,
+from ipmc_sensor_ros.estimation.inverse import (DEFAULT_LEAK_CORNER_HZ, ParameterError, InverseEstimator,
                                        leak_tradeoff)
 from ipmc_sensor_ros.errors import DataError
 from ipmc_sensor_ros.estimation.stream import validate_block
@@ -45,7 +45,7 @@ def test_all_poles_strictly_inside_unit_circle(reduced_slim):
 def test_invalid_configuration_is_refused(reduced_slim, kw, name):
     args = dict(sample_rate_hz=FS)
     args.update(kw)
-    with pytest.raises(EstimatorError, match=name):
+    with pytest.raises(ParameterError, match=name):
         InverseEstimator(reduced_slim, **args)
 
 

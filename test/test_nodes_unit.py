@@ -26,7 +26,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 from ipmc_sensor_ros.estimation.inverse import InverseEstimator
 from ipmc_sensor_ros.nodes import params as P
 from ipmc_sensor_ros.nodes.estimator_node import ESTIMATOR_SPECS, EstimatorNode
-from ipmc_sensor_ros.nodes.messages import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, ESTIMATE_COLUMNS, LayoutError,
+from ipmc_sensor_ros.nodes.messages import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, ESTIMATE_COLUMNS, DataError,
                                             claimed_samples, pack_block, unpack_block, BlockPacker)
 from ipmc_sensor_ros.nodes.simulator_node import SIMULATOR_SPECS, SimulatorNode
 from ipmc_sensor_ros.physics.model import SensorModel
@@ -137,7 +137,7 @@ def test_malformed_layouts_are_refused_with_a_reason(case):
     mutate, needle = MALFORMED[case]
     msg = pack_block([1.0, 1.001, 1.002, 1.003], [1e-6] * 4)
     mutate(msg)
-    with pytest.raises(LayoutError, match=None) as err:
+    with pytest.raises(DataError, match=None) as err:
         unpack_block(msg, CURRENT_COLUMNS)
     assert needle in str(err.value)
 
@@ -182,7 +182,7 @@ class Harness:
     def _on_current(self, msg):
         try:
             self.currents.append(unpack_block(msg))
-        except LayoutError:
+        except DataError:
             pass        # the estimator tests send malformed messages on purpose
 
     def spin_until(self, predicate, timeout=TIMEOUT_S):
@@ -423,7 +423,7 @@ def test_invalid_startup_parameters_raise_naming_the_parameter():
                                     ("youngs_modulus_pa", -5.0, "youngs_modulus_pa"),
                                     ("effects", ["warp_drive"], "warp_drive"),
                                     ("publish_points", "all", "publish_points")]:
-            with pytest.raises((P.ConfigurationError, ParameterException)) as err:
+            with pytest.raises((P.ParameterError, ParameterException)) as err:
                 EstimatorNode(context=ctx, parameter_overrides=[Parameter(name, value=value)])
             assert needle in str(err.value)
         # Non-LTI and time-varying effects are simulated and estimated (core SensorSimulator /
@@ -519,7 +519,7 @@ def test_simulator_file_stimulus_and_csv_errors(harness, tmp_path):
     assert np.max(np.abs(w - 1e-3 * np.sin(2 * np.pi * np.arange(500) / FS))) < 1e-7
     bad = tmp_path / "bad.csv"
     bad.write_text("0.0,1.0\n0.1,oops\n")
-    with pytest.raises(P.ConfigurationError, match="bad.csv:2"):
+    with pytest.raises(P.ParameterError, match="bad.csv:2"):
         SimulatorNode(context=h.ctx, parameter_overrides=[
             Parameter("stimulus", value="file"), Parameter("stimulus_file", value=str(bad))])
 
@@ -578,7 +578,7 @@ def test_plugin_effect_is_used_by_the_estimator_node():
         # the high-pass of the leakage (zero at s = 0 in H) is in the reduced model the node inverts
         assert node.deflection_estimator.reduced.order == 4
         node.destroy_node()
-        with pytest.raises((P.ConfigurationError, ParameterException), match="plugins"):
+        with pytest.raises((P.ParameterError, ParameterException), match="plugins"):
             EstimatorNode(context=ctx, parameter_overrides=[
                 Parameter("plugins", value=[str(ROOT / "no_such_plugin.py")])])
     finally:
@@ -602,11 +602,11 @@ def test_simulator_node_field_fidelity_publishes():
         assert node.done and node.counters()["samples_published"] == 500
         ex.shutdown()
         node.destroy_node()
-        with pytest.raises(P.ConfigurationError, match="fidelity"):
+        with pytest.raises(P.ParameterError, match="fidelity"):
             SimulatorNode(context=ctx, parameter_overrides=[
                 Parameter("fidelity", value="field"), Parameter("effects", value=["time_delay"])])
         # the large-deflection beam needs the field solution, and says so by parameter name
-        with pytest.raises(P.ConfigurationError, match="beam_model"):
+        with pytest.raises(P.ParameterError, match="beam_model"):
             SimulatorNode(context=ctx, parameter_overrides=[Parameter("beam_model", value="elastica")])
         elastica = SimulatorNode(context=ctx, parameter_overrides=[
             Parameter("fidelity", value="field"), Parameter("beam_model", value="elastica")])

@@ -6,7 +6,7 @@ from hypothesis import strategies as st
 
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_PARAMETERS, PAPER_SAMPLES, Geometry
-from ipmc_sensor_ros.lti.reduction import (ReductionError, eq55_poles_zeros, paper_eq55,
+from ipmc_sensor_ros.lti.reduction import (ParameterError, eq55_poles_zeros, paper_eq55,
                                        reduce_model, reduction_error, reduction_error_table)
 
 MODELS = {name: SensorModel(g) for name, g in PAPER_SAMPLES.items()}
@@ -66,12 +66,12 @@ def test_reduction_valid_for_any_parameters(length, width, thickness, r0, d):
 
 @pytest.mark.parametrize("bad", [0, 9, 2.5, True])
 def test_invalid_order_refused(bad):
-    with pytest.raises(ReductionError, match="order"):
+    with pytest.raises(ParameterError, match="order"):
         reduce_model(MODELS["slim"], bad)
 
 
 def test_invalid_band_refused():
-    with pytest.raises(ReductionError, match="band_hz"):
+    with pytest.raises(ParameterError, match="band_hz"):
         reduce_model(MODELS["slim"], 2, band_hz=(10.0, 1.0))
 
 

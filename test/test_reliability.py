@@ -21,7 +21,7 @@ from ipmc_sensor_ros.estimation.inverse import InverseEstimator, leak_tradeoff
 from ipmc_sensor_ros.nodes.messages import pack_block
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_PARAMETERS, PAPER_SAMPLES, Geometry
-from ipmc_sensor_ros.lti.reduction import ReductionError, reduce_model
+from ipmc_sensor_ros.lti.reduction import ParameterError, reduce_model
 from conftest import DirectNode
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -219,7 +219,7 @@ def test_bad_params_file_stops_node_startup_naming_key_and_file(tmp_path, body, 
 def test_bad_params_file_offline_names_key_and_file(tmp_path, body, needle):
     f = tmp_path / "bad_params.yaml"
     f.write_text(f"/**/ipmc_estimator:\n  ros__parameters:\n    {body}\n")
-    with pytest.raises(config.ConfigurationError) as err:
+    with pytest.raises(config.ParameterError) as err:
         config.load_params_file(f)
     assert needle in str(err.value) and "bad_params.yaml" in str(err.value)
 
@@ -283,7 +283,7 @@ def test_models_finite_across_the_physical_range(thickness, length, width, r0, d
     assert np.all(np.isfinite(h)) and np.all(np.abs(h) > 0)
     try:
         red = reduce_model(m, 4)
-    except ReductionError as exc:     # allowed, if it says why
+    except ParameterError as exc:     # allowed, if it says why
         assert str(exc)
         return
     assert np.all(red.poles_rad_s.real < 0) and np.all(red.zeros_rad_s.real < 0)

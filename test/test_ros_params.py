@@ -47,7 +47,7 @@ def test_other_nodes_keys_in_wildcard_section_warn_but_typo_for_this_node_fails(
     assert "block_size" not in node._parameter_overrides
     node.destroy_node()
     node, args = _node(context, tmp_path, "ipmc_estimator:\n  ros__parameters:\n    gian: 1.0\n")
-    with pytest.raises(P.ConfigurationError, match="gian"):
+    with pytest.raises(P.ParameterError, match="gian"):
         P.check_unknown_overrides(node, SPECS, args, default_name="ipmc_estimator")
     node.destroy_node()
 
@@ -64,6 +64,6 @@ def test_standard_qos_override_applies_and_a_stray_one_is_refused(context, tmp_p
                        ["-p", "qos_overrides./uot.publisher.reliability:=best_effort"])
     P.check_unknown_overrides(node, SPECS, args)
     P.create_publisher(node, String, "out", P.COUNTERS_QOS)
-    with pytest.raises(P.ConfigurationError, match="uot"):
+    with pytest.raises(P.ParameterError, match="uot"):
         P.check_qos_overrides(node)
     node.destroy_node()

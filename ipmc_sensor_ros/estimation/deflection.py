@@ -38,7 +38,7 @@ from typing import Sequence
 import numpy as np
 from scipy.signal import lfilter
 
-from .inverse import DEFAULT_LEAK_CORNER_HZ, EstimatorError, InverseEstimator
+from .inverse import DEFAULT_LEAK_CORNER_HZ, ParameterError, InverseEstimator
 from .kalman import DEFAULT_CURRENT_NOISE_A, KALMAN_LEAK_CORNER_HZ, KalmanEstimator
 from .mains import MainsFilter, detect_lines
 from ..physics.model import SensorModel
@@ -74,7 +74,7 @@ class DeflectionEstimator:
                  history_s: float = 0.5, estimator: str = "leaky", mains_hz: float = 0,
                  current_noise_a: float = DEFAULT_CURRENT_NOISE_A):
         if estimator not in ESTIMATORS:
-            raise EstimatorError(f"parameter 'estimator' must be 'leaky' or 'kalman', got {estimator!r}")
+            raise ParameterError(f"parameter 'estimator' must be 'leaky' or 'kalman', got {estimator!r}")
         self.estimator = estimator
         self.mains_hz = mains_hz
         self.current_noise_a = float(current_noise_a)
@@ -99,7 +99,7 @@ class DeflectionEstimator:
         self.reduced = reduced
         if estimator == "kalman":
             if offset_corner_hz is not None:
-                raise EstimatorError("parameter 'offset_corner_hz' applies to estimator 'leaky' only "
+                raise ParameterError("parameter 'offset_corner_hz' applies to estimator 'leaky' only "
                                      "(the Kalman estimator tracks the offset itself)")
             self.inverse = KalmanEstimator(reduced, sample_rate_hz, leak_corner_hz=leak_corner_hz,
                                            current_noise_a=current_noise_a)

@@ -32,7 +32,7 @@ Tustin (bilinear) transform with frequency prewarping at ``prewarp_hz``
 realised as second-order sections.  Tustin maps the open
 left half plane into the unit disc, so stability is preserved for every sample
 rate; it is nevertheless checked at construction (every pole strictly inside
-the unit circle) and :class:`EstimatorError` is raised otherwise.  The
+the unit circle) and :class:`ParameterError` is raised otherwise.  The
 frequency warping error up to fs/10 is below 0.3 dB / 1 deg for these
 diffusion-type responses (tested).
 
@@ -56,7 +56,7 @@ from ..errors import ParameterError
 from ..lti.discretize import default_prewarp_hz, tustin_sos
 from ..lti.reduction import ReducedModel
 
-__all__ = ["EstimatorError", "InverseEstimator", "inverse_zpk", "leak_tradeoff",
+__all__ = ["ParameterError", "InverseEstimator", "inverse_zpk", "leak_tradeoff",
            "DEFAULT_LEAK_CORNER_HZ"]
 
 #: Blocks up to this many samples (single channel) are filtered by a plain-Python
@@ -69,8 +69,6 @@ SMALL_BLOCK_SAMPLES = 16
 DEFAULT_LEAK_CORNER_HZ = 0.01
 
 
-class EstimatorError(ParameterError):
-    """Invalid estimator configuration (names the parameter and the value)."""
 
 
 def _positive(name: str, value, allow_none: bool = False):
@@ -79,9 +77,9 @@ def _positive(name: str, value, allow_none: bool = False):
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise EstimatorError(f"parameter '{name}' must be a number, got {value!r}") from None
+        raise ParameterError(f"parameter '{name}' must be a number, got {value!r}") from None
     if not (math.isfinite(v) and v > 0.0):
-        raise EstimatorError(f"parameter '{name}' must be finite and > 0, got {value!r}")
+        raise ParameterError(f"parameter '{name}' must be finite and > 0, got {value!r}")
     return v
 
 
@@ -138,19 +136,19 @@ def _design(reduced: ReducedModel, sample_rate_hz: float, leak_corner_hz: float,
         prewarp_hz = default_prewarp_hz(fs, reduced.band_hz[1])
     prewarp_hz = _positive("prewarp_hz", prewarp_hz)
     if prewarp_hz >= fs / 2.0:
-        raise EstimatorError(f"parameter 'prewarp_hz' = {prewarp_hz} must be below the Nyquist "
+        raise ParameterError(f"parameter 'prewarp_hz' = {prewarp_hz} must be below the Nyquist "
                              f"frequency {fs / 2.0} Hz")
     for name, corner in (("leak_corner_hz", leak_corner_hz), ("offset_corner_hz", offset_corner_hz)):
         if corner is not None and corner >= fs / 2.0:
-            raise EstimatorError(f"parameter '{name}' = {corner} must be below the "
+            raise ParameterError(f"parameter '{name}' = {corner} must be below the "
                                  f"Nyquist frequency {fs / 2.0} Hz")
     sos = tustin_sos(*inverse_zpk(reduced, leak_corner_hz, offset_corner_hz), fs, prewarp_hz)
     radius = np.abs(sig.sos2zpk(sos)[1])
     if not np.all(radius < 1.0):
-        raise EstimatorError(f"discrete inverse is unstable: pole radius {radius.max():.12f} >= 1 "
+        raise ParameterError(f"discrete inverse is unstable: pole radius {radius.max():.12f} >= 1 "
                              f"(sample_rate_hz={fs}, leak_corner_hz={leak_corner_hz})")
     if not np.all(np.isfinite(sos)):
-        raise EstimatorError("discrete inverse has non-finite coefficients")
+        raise ParameterError("discrete inverse has non-finite coefficients")
     return _Design(sos=sos, sample_rate_hz=fs, prewarp_hz=prewarp_hz)
 
 
@@ -172,7 +170,7 @@ class InverseEstimator:
                  offset_corner_hz: float | None = None, prewarp_hz: float | None = None,
                  channels: int = 1):
         if isinstance(channels, bool) or not isinstance(channels, (int, np.integer)) or channels < 1:
-            raise EstimatorError(f"parameter 'channels' must be a positive integer, got {channels!r}")
+            raise ParameterError(f"parameter 'channels' must be a positive integer, got {channels!r}")
         self.reduced = reduced
         self.leak_corner_hz = _positive("leak_corner_hz", leak_corner_hz)
         self.offset_corner_hz = _positive("offset_corner_hz", offset_corner_hz, allow_none=True)
@@ -230,10 +228,10 @@ class InverseEstimator:
         squeeze = x.ndim == 1
         if squeeze:
             if self.channels != 1:
-                raise EstimatorError(f"expected shape (n, {self.channels}), got {x.shape}")
+                raise ParameterError(f"expected shape (n, {self.channels}), got {x.shape}")
             x = x[:, None]
         if x.ndim != 2 or x.shape[1] != self.channels:
-            raise EstimatorError(f"expected shape (n, {self.channels}), got {x.shape}")
+            raise ParameterError(f"expected shape (n, {self.channels}), got {x.shape}")
         if x.shape[0] == 0:
             return np.empty(0) if squeeze else np.empty((0, self.channels))
         if squeeze and x.shape[0] <= SMALL_BLOCK_SAMPLES:
@@ -246,7 +244,7 @@ class InverseEstimator:
         """One sample of a single-channel estimator, as a float; identical to
         :meth:`process` on a one-sample block, without numpy's per-call costs."""
         if self.channels != 1:
-            raise EstimatorError(f"process_one needs a single-channel estimator (channels = {self.channels})")
+            raise ParameterError(f"process_one needs a single-channel estimator (channels = {self.channels})")
         return self._process_small([float(current_a)])[0]
 
     def _process_small(self, values: list) -> list:
@@ -282,11 +280,11 @@ class InverseEstimator:
     def set_state(self, state: dict) -> None:
         zi = np.asarray(state.get("zi"), dtype=float)
         if zi.shape != self._zi.shape:
-            raise EstimatorError(f"state shape {zi.shape} does not match {self._zi.shape}")
+            raise ParameterError(f"state shape {zi.shape} does not match {self._zi.shape}")
         if "sos" in state and not np.array_equal(np.asarray(state["sos"]), self.sos):
-            raise EstimatorError("state was saved from a different filter design")
+            raise ParameterError("state was saved from a different filter design")
         if not np.all(np.isfinite(zi)):
-            raise EstimatorError("state contains non-finite values")
+            raise ParameterError("state contains non-finite values")
         self._zi = zi.copy()
 
     def continue_from(self, old: "InverseEstimator", recent_input=None) -> None:
@@ -377,7 +375,7 @@ class InverseEstimator:
         (:meth:`continue_from`, with ``recent_input`` if given).
 
         ``changes`` may set sample_rate_hz, leak_corner_hz, offset_corner_hz,
-        prewarp_hz.  Raises :class:`EstimatorError` (and leaves ``self`` intact)
+        prewarp_hz.  Raises :class:`ParameterError` (and leaves ``self`` intact)
         if the new design is invalid.
         """
         kwargs = {"sample_rate_hz": self.sample_rate_hz, "leak_corner_hz": self.leak_corner_hz,

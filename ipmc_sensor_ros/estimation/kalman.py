@@ -85,7 +85,7 @@ import numpy as np
 from scipy.linalg import solve_discrete_are
 import scipy.signal as sig
 
-from .inverse import EstimatorError, _positive
+from .inverse import ParameterError, _positive
 from ..lti.discretize import van_loan
 from ..lti.reduction import ReducedModel
 
@@ -128,7 +128,7 @@ def _modal_realisation(reduced: ReducedModel):
     p = np.real(np.asarray(reduced.poles_rad_s))
     k = float(reduced.gain)
     if np.min(np.abs(np.subtract.outer(p, p)) + np.eye(p.size) * 1e300) < 1e-9 * np.max(np.abs(p)):
-        raise EstimatorError("reduced model has repeated poles; the Kalman estimator needs distinct poles")
+        raise ParameterError("reduced model has repeated poles; the Kalman estimator needs distinct poles")
     r = np.array([k * np.prod(pi - z) / np.prod([pi - pj for pj in p if pj != pi]) for pi in p])
     return np.diag(p), np.ones((p.size, 1)), r[None, :], np.array([[k]])
 
@@ -143,10 +143,10 @@ class _Mode:
         g = ad @ k
         lam, vs = np.linalg.eig(f / scale[:, None] * scale[None, :])   # in O(1) state units
         if not np.all(np.abs(lam) <= 1.0 + 1e-12):
-            raise EstimatorError(f"Kalman predictor is unstable (pole radius {np.abs(lam).max():.12f})")
+            raise ParameterError(f"Kalman predictor is unstable (pole radius {np.abs(lam).max():.12f})")
         cond = np.linalg.cond(vs)
         if not np.isfinite(cond) or cond > 1e12:
-            raise EstimatorError(f"Kalman predictor is not diagonalisable (condition {cond:.3g})")
+            raise ParameterError(f"Kalman predictor is not diagonalisable (condition {cond:.3g})")
         v = scale[:, None] * vs
         vinv = np.linalg.inv(vs) / scale[None, :]
         # keep one of each conjugate pair (weight 2) and the real modes (weight 1)
@@ -221,7 +221,7 @@ class KalmanEstimator:
                  rest_enter: float = 2.0, rest_leave: float = 4.0, rest_detection: bool = True,
                  channels: int = 1):
         if channels != 1:
-            raise EstimatorError(f"parameter 'channels' must be 1 for the Kalman estimator, got {channels!r}")
+            raise ParameterError(f"parameter 'channels' must be 1 for the Kalman estimator, got {channels!r}")
         self.channels = 1
         self.reduced = reduced
         fs = _positive("sample_rate_hz", sample_rate_hz)
@@ -237,10 +237,10 @@ class KalmanEstimator:
         self.rest_enter = _positive("rest_enter", rest_enter)
         self.rest_leave = _positive("rest_leave", rest_leave)
         if self.rest_leave <= self.rest_enter:
-            raise EstimatorError(f"parameter 'rest_leave' ({rest_leave}) must exceed 'rest_enter' ({rest_enter})")
+            raise ParameterError(f"parameter 'rest_leave' ({rest_leave}) must exceed 'rest_enter' ({rest_enter})")
         for name, f in (("motion_bandwidth_hz", self.motion_bandwidth_hz), ("leak_corner_hz", self.leak_corner_hz)):
             if f >= fs / 2:
-                raise EstimatorError(f"parameter '{name}' = {f} must be below the Nyquist frequency {fs / 2} Hz")
+                raise ParameterError(f"parameter '{name}' = {f} must be below the Nyquist frequency {fs / 2} Hz")
         self.rest_detection = bool(rest_detection)
         self._build()
         self.reset()
@@ -415,7 +415,7 @@ class KalmanEstimator:
         if y.ndim == 2 and y.shape[1] == 1:
             y = y[:, 0]
         if y.ndim != 1:
-            raise EstimatorError(f"expected shape (n,) or (n, 1), got {y.shape}")
+            raise ParameterError(f"expected shape (n,) or (n, 1), got {y.shape}")
         if y.size == 0:
             return np.empty(0), np.empty(0)
         was_rest = self.at_rest
@@ -549,7 +549,7 @@ class KalmanEstimator:
     def set_state(self, state: dict) -> None:
         s = np.asarray(state.get("s"), float)
         if s.shape != self._s.shape or not np.all(np.isfinite(s)):
-            raise EstimatorError(f"state shape {s.shape} does not match {self._s.shape} or is not finite")
+            raise ParameterError(f"state shape {s.shape} does not match {self._s.shape} or is not finite")
         self._s = s.copy()
         self._bp_zi = np.asarray(state["bp_zi"], float).copy()
         self._energy = float(state["energy"])

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.signal as sig
 
-from .inverse import EstimatorError
+from .inverse import ParameterError
 
 __all__ = ["MainsFilter", "mains_sos", "line_level", "detect_lines", "LINE_WARN_RATIO"]
 
@@ -28,7 +28,7 @@ def mains_sos(mains_hz: float, sample_rate_hz: float, quality: float = 30.0,
               max_harmonics: int = 10) -> np.ndarray:
     """Second-order sections of notches at k * mains_hz (k = 1.. below 0.45 fs)."""
     if mains_hz not in (0, 50, 60):
-        raise EstimatorError(f"parameter 'mains_hz' must be 0, 50 or 60, got {mains_hz!r}")
+        raise ParameterError(f"parameter 'mains_hz' must be 0, 50 or 60, got {mains_hz!r}")
     rows = []
     k = 1
     while mains_hz and k * mains_hz < 0.45 * sample_rate_hz and k <= max_harmonics:

@@ -25,7 +25,7 @@ import numpy as np
 from ..errors import DataError
 from ..physics.parameters import short_repr
 
-__all__ = ["LayoutError", "SAMPLE_LABEL", "CURRENT_COLUMNS", "DEFLECTION_COLUMNS",
+__all__ = ["DataError", "SAMPLE_LABEL", "CURRENT_COLUMNS", "DEFLECTION_COLUMNS",
            "ESTIMATE_COLUMNS", "unpack_columns", "unpack_pairs"]
 
 #: Label of the row dimension.
@@ -38,8 +38,6 @@ DEFLECTION_COLUMNS = "time_s,deflection_m"
 #: of each estimate, metres.
 ESTIMATE_COLUMNS = "time_s,deflection_m,deflection_std_m"
 
-class LayoutError(DataError):
-    """A ``Float64MultiArray`` whose layout does not follow the block convention."""
 
 
 def _data(msg) -> np.ndarray:
@@ -52,7 +50,7 @@ def _data(msg) -> np.ndarray:
 def unpack_columns(msg, columns: str, *, values_only_ok: bool = True):
     """(times_s or None, table) of a block message whose ``dim[1]`` label is ``columns``
     (``"time_s,<value>[,<more>...]"``, k names): ``table`` has shape (n, k - 1).
-    :class:`LayoutError` if malformed.  ``values_only_ok``: accept a 1-D values-only message
+    :class:`DataError` if malformed.  ``values_only_ok``: accept a 1-D values-only message
     (times None, table of shape (n, 1)).  Values are not checked for finiteness here.
     """
     k = len(columns.split(","))
@@ -60,33 +58,33 @@ def unpack_columns(msg, columns: str, *, values_only_ok: bool = True):
     offset = int(msg.layout.data_offset)
     data = _data(msg)
     if offset < 0 or offset > data.size:
-        raise LayoutError(f"layout.data_offset {offset} is outside the data (length {data.size})")
+        raise DataError(f"layout.data_offset {offset} is outside the data (length {data.size})")
     data = data[offset:]
     if len(dims) <= 1 and values_only_ok:
         if dims and dims[0].size != data.size:
-            raise LayoutError(f"1-D layout: dim[0].size = {dims[0].size} but the data holds "
+            raise DataError(f"1-D layout: dim[0].size = {dims[0].size} but the data holds "
                               f"{data.size} value(s)")
         return None, data[:, None]
     if len(dims) != 2:
         note = " (values only, no sample times)" if len(dims) < 2 else ""
-        raise LayoutError(f"expected 2 dimensions (dim[0] '{SAMPLE_LABEL}', dim[1] '{columns}'), "
+        raise DataError(f"expected 2 dimensions (dim[0] '{SAMPLE_LABEL}', dim[1] '{columns}'), "
                           f"got {len(dims)}{note}")
     d0, d1 = dims
     if d0.label != SAMPLE_LABEL:
-        raise LayoutError(f"dim[0].label is {short_repr(d0.label)}, expected '{SAMPLE_LABEL}'")
+        raise DataError(f"dim[0].label is {short_repr(d0.label)}, expected '{SAMPLE_LABEL}'")
     if d1.label != columns:
-        raise LayoutError(f"dim[1].label is {short_repr(d1.label)}, expected '{columns}' (wrong units "
+        raise DataError(f"dim[1].label is {short_repr(d1.label)}, expected '{columns}' (wrong units "
                           "or wrong topic?)")
     if d1.size != k or d1.stride != k:
-        raise LayoutError(f"dim[1] must have size {k} and stride {k}, got size {d1.size}, "
+        raise DataError(f"dim[1] must have size {k} and stride {k}, got size {d1.size}, "
                           f"stride {d1.stride}")
     if data.size % k:
         what = "is odd: samples are (time, value) pairs" if k == 2 else \
             f"is not a multiple of {k}: samples are ({columns}) rows"
-        raise LayoutError(f"data length {data.size} {what}")
+        raise DataError(f"data length {data.size} {what}")
     n = data.size // k
     if d0.size != n or d0.stride != k * n:
-        raise LayoutError(f"dim[0] is (size {d0.size}, stride {d0.stride}) but the data holds {n} "
+        raise DataError(f"dim[0] is (size {d0.size}, stride {d0.stride}) but the data holds {n} "
                           f"row(s) of {k}: expected dim[0].size = {n}, dim[0].stride = {k * n}")
     rows = data.reshape(n, k)
     return rows[:, 0].copy(), rows[:, 1:].copy()

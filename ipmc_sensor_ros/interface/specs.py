@@ -15,25 +15,23 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
-from ..estimation.deflection import DeflectionEstimator
-from ..estimation.deflection import ESTIMATORS
-from ..estimation.inverse import DEFAULT_LEAK_CORNER_HZ, EstimatorError
+from ..errors import ParameterError
+from ..estimation.deflection import ESTIMATORS, DeflectionEstimator
+from ..estimation.inverse import DEFAULT_LEAK_CORNER_HZ
 from ..estimation.kalman import DEFAULT_CURRENT_NOISE_A, KALMAN_LEAK_CORNER_HZ
 from ..estimation.stream import MAX_BLOCK_SAMPLES
 from ..physics.effects import load_plugins  # noqa: F401 (re-exported for the node)
 from ..physics.model import BASES, SensorModel
 from ..physics.parameters import (GEOMETRY_LIMITS_M, MATERIAL_LIMITS, Geometry, MaterialParameters,
-                                  ParameterError, read_yaml, short_repr)
-from ..lti.reduction import MAX_ORDER, ReducedModel, ReductionError
+                                  read_yaml, short_repr)
+from ..lti.reduction import MAX_ORDER, ReducedModel
 
-__all__ = ["Spec", "ConfigurationError", "GEOMETRY_SPECS", "MATERIAL_SPECS", "MODEL_SPECS",
+__all__ = ["Spec", "ParameterError", "GEOMETRY_SPECS", "MATERIAL_SPECS", "MODEL_SPECS",
            "QOS_SPECS", "ESTIMATOR_SPECS", "PUBLISH_POINTS", "MATERIAL_NAMES", "GEOMETRY_NAMES",
            "defaults", "load_params_file", "build_model", "build_estimator", "check_choice",
            "check_values", "markdown_table", "FRAME_ID_PATTERN", "DIAGNOSTICS_SPECS"]
 
 
-class ConfigurationError(ParameterError):
-    """A parameter value the node cannot start (or continue) with; the message names it."""
 
 
 @dataclass(frozen=True)
@@ -217,15 +215,12 @@ def _model_from_file(values: Mapping[str, Any], geometry: Geometry) -> SensorMod
     return saved.sensor_model(geometry)
 
 
-#: Errors of the project that name the parameter; anything else raised while building
-#: is reported as a ConfigurationError (one line, never a traceback).
-_NAMED_ERRORS = (ParameterError, ReductionError, EstimatorError)
 
 
 def check_values(values: Mapping[str, Any], specs: Iterable[Spec] | None = None) -> None:
     """Check every value in ``values`` that has a spec (type, range, choices, pattern,
     length): the same rules as a params file and the ROS descriptors.  Raises
-    :class:`ConfigurationError` naming the parameter."""
+    :class:`ParameterError` naming the parameter."""
     for spec in (ESTIMATOR_SPECS if specs is None else specs):
         if spec.name in values:
             _check_value(spec, values[spec.name], "")
@@ -233,15 +228,15 @@ def check_values(values: Mapping[str, Any], specs: Iterable[Spec] | None = None)
 
 def build_estimator(values: Mapping[str, Any], reduced: ReducedModel | None = None) -> DeflectionEstimator:
     """The core estimator from parameter values (``reduced`` reused when the model part
-    did not change).  Raises ParameterError / ReductionError / EstimatorError /
-    ConfigurationError naming the parameter; any other failure of the numerics (e.g. a
-    LinAlgError) becomes a one-line ConfigurationError."""
+    did not change).  Raises ParameterError / ParameterError / ParameterError /
+    ParameterError naming the parameter; any other failure of the numerics (e.g. a
+    LinAlgError) becomes a one-line ParameterError."""
     check_values(values)
     try:
         model = build_model(values)
         band = (float(values["band_low_hz"]), float(values["band_high_hz"]))
         if not band[0] < band[1]:
-            raise ReductionError(f"parameters 'band_low_hz' ({band[0]}) and 'band_high_hz' "
+            raise ParameterError(f"parameters 'band_low_hz' ({band[0]}) and 'band_high_hz' "
                                  f"({band[1]}) must satisfy low < high")
         offset = float(values["offset_corner_hz"])
         leak = float(values["leak_corner_hz"])
@@ -252,10 +247,10 @@ def build_estimator(values: Mapping[str, Any], reduced: ReducedModel | None = No
                                    reduced=reduced, estimator=values["estimator"],
                                    mains_hz=int(values["mains_hz"]),
                                    current_noise_a=float(values["current_noise_a"]))
-    except (*_NAMED_ERRORS, ConfigurationError):
+    except ParameterError:
         raise
     except Exception as exc:  # numerics of an extreme but in-range combination
-        raise ConfigurationError(f"these parameter values do not give a usable model: "
+        raise ParameterError(f"these parameter values do not give a usable model: "
                                  f"{_one_line(exc)}") from None
 
 
@@ -275,37 +270,37 @@ def _check_value(spec: Spec, value: Any, where: str) -> Any:
     shown = short_repr(value)
     if spec.kind is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigurationError(f"{where}parameter '{spec.name}' must be a number, got {shown}")
+            raise ParameterError(f"{where}parameter '{spec.name}' must be a number, got {shown}")
         try:
             value = float(value)
         except OverflowError:
-            raise ConfigurationError(f"{where}parameter '{spec.name}' = {shown} is too large") from None
+            raise ParameterError(f"{where}parameter '{spec.name}' = {shown} is too large") from None
     elif spec.kind is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigurationError(f"{where}parameter '{spec.name}' must be an integer, got {shown}")
+            raise ParameterError(f"{where}parameter '{spec.name}' must be an integer, got {shown}")
     elif spec.kind is str:
         if not isinstance(value, str):
-            raise ConfigurationError(f"{where}parameter '{spec.name}' must be a string, got {shown}")
+            raise ParameterError(f"{where}parameter '{spec.name}' must be a string, got {shown}")
     elif spec.kind is bool:
         if not isinstance(value, bool):
-            raise ConfigurationError(f"{where}parameter '{spec.name}' must be true or false, got {shown}")
+            raise ParameterError(f"{where}parameter '{spec.name}' must be true or false, got {shown}")
     elif spec.kind is list:
         if isinstance(value, str) or not isinstance(value, (list, tuple)) \
                 or not all(isinstance(v, str) for v in value):
-            raise ConfigurationError(f"{where}parameter '{spec.name}' must be a list of strings, "
+            raise ParameterError(f"{where}parameter '{spec.name}' must be a list of strings, "
                                      f"got {shown}")
         value = [v for v in value if v]
     if spec.low is not None and not (spec.low <= value <= spec.high):  # NaN fails too
-        raise ConfigurationError(f"{where}parameter '{spec.name}' = {shown} is outside "
+        raise ParameterError(f"{where}parameter '{spec.name}' = {shown} is outside "
                                  f"[{spec.low:g}, {spec.high:g}]")
     if spec.choices and value not in spec.choices:
-        raise ConfigurationError(f"{where}unknown {spec.name} {shown}: parameter '{spec.name}' "
+        raise ParameterError(f"{where}unknown {spec.name} {shown}: parameter '{spec.name}' "
                                  f"must be one of {list(spec.choices)}")
     if spec.max_length is not None and len(value) > spec.max_length:
-        raise ConfigurationError(f"{where}parameter '{spec.name}' is {len(value)} characters long, "
+        raise ParameterError(f"{where}parameter '{spec.name}' is {len(value)} characters long, "
                                  f"more than {spec.max_length}: {shown}")
     if spec.pattern and not re.fullmatch(spec.pattern, value):
-        raise ConfigurationError(f"{where}parameter '{spec.name}' = {shown} does not match "
+        raise ParameterError(f"{where}parameter '{spec.name}' = {shown} does not match "
                                  f"{spec.pattern} (allowed characters, not empty)")
     return value
 
@@ -317,7 +312,7 @@ def load_params_file(path: str | Path, node_name: str = "ipmc_estimator",
     Sections that apply: ``/**``, ``/**/<node_name>``, ``<node_name>`` and
     ``/<node_name>`` (later ones win), each with ``ros__parameters``.  Unknown
     keys, wrong types, out-of-range values and unit mistakes (e.g. a length in
-    millimetres) raise :class:`ConfigurationError` naming the key and the file;
+    millimetres) raise :class:`ParameterError` naming the key and the file;
     so do unreadable files (not UTF-8, not YAML, ``!!python`` tags: one line with
     file:line).  ``use_sim_time`` is accepted and ignored here.
     """
@@ -326,9 +321,9 @@ def load_params_file(path: str | Path, node_name: str = "ipmc_estimator",
     try:
         doc = read_yaml(path, "parameters file")
     except ParameterError as exc:
-        raise ConfigurationError(str(exc)) from None
+        raise ParameterError(str(exc)) from None
     if not isinstance(doc, dict):
-        raise ConfigurationError(f"{path}: expected a mapping of node names to 'ros__parameters'")
+        raise ParameterError(f"{path}: expected a mapping of node names to 'ros__parameters'")
     values = defaults(specs)
     by_name = {s.name: s for s in specs}
     found = False
@@ -337,28 +332,28 @@ def load_params_file(path: str | Path, node_name: str = "ipmc_estimator",
         if section is None:
             continue
         if not isinstance(section, dict) or "ros__parameters" not in section:
-            raise ConfigurationError(f"{path}: section '{key}' has no 'ros__parameters'")
+            raise ParameterError(f"{path}: section '{key}' has no 'ros__parameters'")
         found = True
         params = section["ros__parameters"] or {}
         if not isinstance(params, dict):
-            raise ConfigurationError(f"{path}: 'ros__parameters' of section '{key}' must be a "
+            raise ParameterError(f"{path}: 'ros__parameters' of section '{key}' must be a "
                                      f"mapping, got {short_repr(params)}")
         for name, value in params.items():
             if name == "use_sim_time":
                 continue
             if name not in by_name:
-                raise ConfigurationError(f"{path}: unknown parameter {short_repr(name)} in section "
+                raise ParameterError(f"{path}: unknown parameter {short_repr(name)} in section "
                                          f"'{key}' (known: {sorted(by_name)})")
             values[name] = _check_value(by_name[name], value, str(path))
     if not found:
-        raise ConfigurationError(f"{path}: no section for node '{node_name}' (expected one of "
+        raise ParameterError(f"{path}: no section for node '{node_name}' (expected one of "
                                  f"'/**', '/**/{node_name}', '{node_name}')")
     try:
         build_model(values)
-    except (*_NAMED_ERRORS, ConfigurationError) as exc:
-        raise ConfigurationError(f"{path}: {exc}") from None
+    except ParameterError as exc:
+        raise ParameterError(f"{path}: {exc}") from None
     except Exception as exc:  # numerics of an extreme but in-range combination
-        raise ConfigurationError(f"{path}: these parameter values do not give a usable model: "
+        raise ParameterError(f"{path}: these parameter values do not give a usable model: "
                                  f"{_one_line(exc)}") from None
     return values
 

@@ -54,7 +54,7 @@ from ..physics.model import SensorModel
 
 __all__ = [
     "ReducedModel",
-    "ReductionError",
+    "ParameterError",
     "paper_eq55",
     "eq55_poles_zeros",
     "reduce_model",
@@ -71,8 +71,6 @@ _DB_SCALE = 0.1 * np.log(10.0) / 20.0   # 0.1 dB expressed as a natural-log magn
 _DEG_SCALE = np.pi / 180.0               # 1 degree in radians
 
 
-class ReductionError(ParameterError):
-    """A reduction request that cannot be honoured (order, band, response)."""
 
 
 @dataclass(frozen=True)
@@ -128,9 +126,9 @@ def _check_band(band_hz: Sequence[float]) -> tuple[float, float]:
     try:
         lo, hi = (float(band_hz[0]), float(band_hz[1]))
     except (TypeError, IndexError, ValueError):
-        raise ReductionError(f"band_hz must be (low, high) in Hz, got {band_hz!r}") from None
+        raise ParameterError(f"band_hz must be (low, high) in Hz, got {band_hz!r}") from None
     if not (np.isfinite(lo) and np.isfinite(hi) and 0.0 < lo < hi):
-        raise ReductionError(f"band_hz must satisfy 0 < low < high, got {band_hz!r}")
+        raise ParameterError(f"band_hz must satisfy 0 < low < high, got {band_hz!r}")
     return lo, hi
 
 
@@ -155,15 +153,15 @@ def reduce_response_all(response: Callable[[np.ndarray], np.ndarray], max_order:
     """Fits of orders 1..``max_order`` (each one continues from the previous)."""
     if isinstance(max_order, bool) or not isinstance(max_order, (int, np.integer)) \
             or not 1 <= max_order <= MAX_ORDER:
-        raise ReductionError(f"order must be an integer in 1..{MAX_ORDER}, got {max_order!r}")
+        raise ParameterError(f"order must be an integer in 1..{MAX_ORDER}, got {max_order!r}")
     band = _check_band(band_hz)
     if not extension >= 1.0:
-        raise ReductionError(f"extension must be >= 1, got {extension!r}")
+        raise ParameterError(f"extension must be >= 1, got {extension!r}")
     w = _grid(band, extension, n_points)
     s = 1j * w
     r = np.asarray(response(s), dtype=complex) / s
     if not np.all(np.isfinite(r)) or np.any(r == 0):
-        raise ReductionError("response is not finite and non-zero on the fit grid")
+        raise ParameterError("response is not finite and non-zero on the fit grid")
     target = np.log(np.abs(r)) + 1j * np.unwrap(np.angle(r))
     in_band = (w >= 2 * np.pi * band[0] * (1 - 1e-9)) & (w <= 2 * np.pi * band[1] * (1 + 1e-9))
     weight = np.where(in_band, 1.0, 0.3)

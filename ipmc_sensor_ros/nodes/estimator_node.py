@@ -33,13 +33,13 @@ from std_msgs.msg import Float64MultiArray, String
 
 from ..interface import specs as C
 from ..estimation.deflection import DeflectionEstimator
-from ..estimation.inverse import EstimatorError, InverseEstimator
+from ..estimation.inverse import InverseEstimator
 from ..estimation.stream import COUNTER_NAMES, StreamEstimator
-from ..physics.parameters import ParameterError, short_repr
-from ..lti.reduction import ReductionError
+from ..errors import DataError, IpmcError, ParameterError
+from ..physics.parameters import short_repr
 from . import params as P
 from .messages import (CURRENT_COLUMNS, ESTIMATE_COLUMNS, SAMPLE_LABEL, BlockPacker,
-                       LayoutError, claimed_samples, unpack_block)
+                       claimed_samples, unpack_block)
 from .diagnostics import DiagnosticsPublisher
 from .runner import run
 
@@ -54,7 +54,7 @@ _MODEL_KEYS = P.GEOMETRY_NAMES + P.MATERIAL_NAMES + ("model", "effects", "model_
                                                       "reduction_order", "band_low_hz",
                                                       "band_high_hz")
 
-_ERRORS = (ParameterError, EstimatorError, ReductionError, LayoutError, P.ConfigurationError)
+_ERRORS = (IpmcError,)  # every deliberate error of the package names the parameter
 
 
 def _model_key(values: dict) -> tuple:
@@ -68,17 +68,17 @@ def _filter_kwargs(values: dict) -> dict:
 
 
 def check_values(values: dict) -> None:
-    """Checks of the non-physical parameters; raise ConfigurationError naming one."""
+    """Checks of the non-physical parameters; raise ParameterError naming one."""
     try:
         P.check_choice("publish_points", values["publish_points"], PUBLISH_POINTS)
         P.check_choice("qos_reliability", values["qos_reliability"], ("reliable", "best_effort"))
     except ParameterError as exc:
-        raise P.ConfigurationError(str(exc)) from None
+        raise P.ParameterError(str(exc)) from None
     gap = float(values["max_gap_s"])
     if not (math.isfinite(gap) and gap > 0.0):
-        raise P.ConfigurationError(f"parameter 'max_gap_s' must be > 0 s, got {gap!r}")
+        raise P.ParameterError(f"parameter 'max_gap_s' must be > 0 s, got {gap!r}")
     if float(values["offset_corner_hz"]) < 0.0:
-        raise P.ConfigurationError("parameter 'offset_corner_hz' must be >= 0 Hz (0 = off), "
+        raise P.ParameterError("parameter 'offset_corner_hz' must be >= 0 Hz (0 = off), "
                                    f"got {values['offset_corner_hz']!r}")
 
 
@@ -87,7 +87,7 @@ def design(values: dict, reduced=None):
     (:func:`ipmc_sensor_ros.interface.specs.build_estimator`, as ``ipmc-model estimate`` does).
 
     ``reduced`` is reused when given (the model part did not change).  Raises
-    one of ParameterError / ReductionError / EstimatorError / ConfigurationError
+    one of ParameterError / ParameterError / ParameterError / ParameterError
     with a message naming the parameter.
     """
     check_values(values)
@@ -118,7 +118,7 @@ class EstimatorNode(Node):
 
     ``kwargs`` go to :class:`rclpy.node.Node` (context, namespace,
     parameter_overrides, ...), so several nodes can share one process.
-    Raises :class:`~ipmc_sensor_ros.nodes.params.ConfigurationError` if the
+    Raises :class:`~ipmc_sensor_ros.nodes.params.ParameterError` if the
     parameters cannot make a valid estimator.
     """
 
@@ -132,7 +132,7 @@ class EstimatorNode(Node):
         try:
             self._reduced, estimator = design(self._values)
         except _ERRORS as exc:
-            raise P.ConfigurationError(str(exc)) from None
+            raise P.ParameterError(str(exc)) from None
         for path, (digest, names) in C.load_plugins(self._values["plugins"]).items():
             self.get_logger().info(f"plugin {path} (sha256 {digest}): effects {', '.join(names)}; "
                                    "loaded once, not re-read")
@@ -226,7 +226,7 @@ class EstimatorNode(Node):
                     return
             try:
                 block = unpack_block(msg, CURRENT_COLUMNS)
-            except LayoutError as exc:
+            except DataError as exc:
                 self._stream.reject(claimed_samples(msg), str(exc))
                 return
             out = self._stream.feed(block.times_s, block.values, claimed=claimed_samples(msg))

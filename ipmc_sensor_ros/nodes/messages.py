@@ -17,7 +17,7 @@ column label: ``"time_s,current_A"`` for the sensing current (amperes),
 A plain 1-D array (no dimension, or one dimension whose size matches the data)
 is also accepted on input: values only, no times.
 
-Malformed layouts raise :class:`LayoutError` with a message saying what is
+Malformed layouts raise :class:`DataError` with a message saying what is
 wrong; nothing here touches ROS middleware, so it is usable (and tested)
 without a running context.
 """
@@ -30,10 +30,10 @@ import numpy as np
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from ..interface.blocks import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, ESTIMATE_COLUMNS, SAMPLE_LABEL,
-                                LayoutError, unpack_columns)
+                                DataError, unpack_columns)
 
 __all__ = [
-    "LayoutError",
+    "DataError",
     "Block",
     "SAMPLE_LABEL",
     "CURRENT_COLUMNS",
@@ -90,9 +90,9 @@ class BlockPacker:
         t = np.asarray(times_s, dtype=float).ravel()
         cols = [np.asarray(c, dtype=float).ravel() for c in columns]
         if len(cols) + 1 != self.width:
-            raise LayoutError(f"{len(cols) + 1} columns for the layout '{self.columns}'")
+            raise DataError(f"{len(cols) + 1} columns for the layout '{self.columns}'")
         if any(c.shape != t.shape for c in cols):
-            raise LayoutError(f"times ({t.size}) and values ({[c.size for c in cols]}) differ "
+            raise DataError(f"times ({t.size}) and values ({[c.size for c in cols]}) differ "
                               "in length")
         n = int(t.size)
         if n == 1:
@@ -137,7 +137,7 @@ def claimed_samples(msg: Float64MultiArray) -> int:
 
 
 def unpack_block(msg: Float64MultiArray, columns: str = CURRENT_COLUMNS) -> Block:
-    """Decode a block message; raise :class:`LayoutError` if the layout is malformed
+    """Decode a block message; raise :class:`DataError` if the layout is malformed
     (:func:`ipmc_sensor_ros.interface.blocks.unpack_columns`).
 
     Returns a :class:`Block`; ``times_s`` is None for a values-only 1-D message.

@@ -19,12 +19,11 @@ from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
 
 from ..interface.specs import (GEOMETRY_NAMES, GEOMETRY_SPECS, MATERIAL_NAMES, MATERIAL_SPECS,
-                      MODEL_SPECS, QOS_SPECS, ConfigurationError, Spec, check_choice,
+                      MODEL_SPECS, QOS_SPECS, ParameterError, Spec, check_choice,
                       markdown_table)
 from ..interface.specs import build_model as build_sensor_model
-from ..physics.parameters import ParameterError
 
-__all__ = ["ConfigurationError", "Spec", "GEOMETRY_SPECS", "MATERIAL_SPECS", "MODEL_SPECS",
+__all__ = ["ParameterError", "Spec", "GEOMETRY_SPECS", "MATERIAL_SPECS", "MODEL_SPECS",
            "QOS_SPECS", "declare", "read", "build_sensor_model", "make_qos", "COUNTERS_QOS",
            "check_choice", "ParameterError", "MATERIAL_NAMES", "GEOMETRY_NAMES", "markdown_table",
            "params_files", "check_unknown_overrides", "section_matches", "params_file_sections",
@@ -93,7 +92,7 @@ def params_file_sections(path: str) -> list[tuple[str, dict]]:
         with open(path, encoding="utf-8") as f:
             doc = yaml.safe_load(f)
     except (OSError, yaml.YAMLError) as exc:
-        raise ConfigurationError(f"parameters file {path}: cannot read: {exc}") from None
+        raise ParameterError(f"parameters file {path}: cannot read: {exc}") from None
     if not isinstance(doc, dict):
         return []
     return [(str(k), dict((v or {}).get("ros__parameters") or {}))
@@ -115,7 +114,7 @@ def check_unknown_overrides(node, specs: Iterable[Spec], cli_args=None,
     * ``qos_overrides.<topic>.<publisher|subscription>.<policy>`` are the standard
       QoS parameters (checked by :func:`check_qos_overrides` once the topics exist).
 
-    Raises :class:`ConfigurationError` naming the parameters and the files.
+    Raises :class:`ParameterError` naming the parameters and the files.
     """
     known = {s.name for s in specs} | {"use_sim_time", "start_type_description_service"}
     fqn = node.get_fully_qualified_name()
@@ -156,7 +155,7 @@ def check_unknown_overrides(node, specs: Iterable[Spec], cli_args=None,
             del node._parameter_overrides[name]
     if fatal:
         where = f" in {', '.join(files)}" if files else ""
-        raise ConfigurationError(f"unknown parameter(s) {fatal}{where} for node "
+        raise ParameterError(f"unknown parameter(s) {fatal}{where} for node "
                                  f"'{node.get_name()}'; known: {sorted(known - {'use_sim_time'})}")
 
 
@@ -192,7 +191,7 @@ def check_qos_overrides(node) -> None:
                    if n.startswith("qos_overrides.") and n not in declared)
     if stray:
         valid = sorted(n for n in declared if n.startswith("qos_overrides."))
-        raise ConfigurationError(f"unknown QoS override(s) {stray} for node "
+        raise ParameterError(f"unknown QoS override(s) {stray} for node "
                                  f"'{node.get_name()}'; valid: {valid}")
 
 

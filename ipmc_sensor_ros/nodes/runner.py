@@ -39,8 +39,8 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
-from ..physics.parameters import ParameterError, read_yaml
-from .params import ConfigurationError, params_files
+from ..physics.parameters import read_yaml
+from .params import ParameterError, params_files
 
 __all__ = ["run", "make_executor", "executor_name"]
 
@@ -62,7 +62,7 @@ def executor_name() -> str:
     """``events`` or ``single``: the executor :func:`make_executor` builds here."""
     wanted = os.environ.get("IPMC_EXECUTOR", "single").strip().lower()
     if wanted not in ("events", "single"):
-        raise ConfigurationError(f"environment variable IPMC_EXECUTOR={wanted!r}: expected "
+        raise ParameterError(f"environment variable IPMC_EXECUTOR={wanted!r}: expected "
                                  "'events' or 'single'")
     return "events" if wanted == "events" and EventsExecutor is not None else "single"
 
@@ -173,7 +173,7 @@ def _run(node_factory, name: str, args) -> int:
             executor.spin()
     except _SHUTDOWN:
         pass
-    except (ConfigurationError, ParameterException) as exc:
+    except (ParameterError, ParameterException) as exc:
         if not _SIGNALLED:
             _report_configuration_error(name, exc)
             code = 2

@@ -37,8 +37,7 @@ from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray, String
 
 from ..physics.beam import FIDELITIES, check_fidelity
-from ..physics.parameters import ParameterError
-from ..lti.reduction import ReductionError
+from ..lti.reduction import ParameterError
 from ..simulation.sensor import FieldSensorSimulator, SensorSimulator
 from ..simulation.stimuli import STIMULUS_KINDS, Sampled, Stimulus, make_stimulus
 from ..interface.specs import DIAGNOSTICS_SPECS
@@ -180,7 +179,7 @@ class SimulatorNode(Node):
     """Simulated sensor + DAQ node; see the module docstring and README "ROS 2 interface".
 
     ``kwargs`` go to :class:`rclpy.node.Node`.  Raises
-    :class:`~ipmc_sensor_ros.nodes.params.ConfigurationError` on invalid parameters.
+    :class:`~ipmc_sensor_ros.nodes.params.ParameterError` on invalid parameters.
     """
 
     def __init__(self, node_name: str = "ipmc_simulator", **kwargs: Any):
@@ -199,8 +198,8 @@ class SimulatorNode(Node):
                                                  beam_model=v["beam_model"], **chain)
             else:
                 self._sim = SensorSimulator(model, v["sample_rate_hz"], **chain)
-        except (ParameterError, ReductionError) as exc:
-            raise P.ConfigurationError(str(exc)) from None
+        except (ParameterError, ParameterError) as exc:
+            raise P.ParameterError(str(exc)) from None
         self._fs = float(v["sample_rate_hz"])
         self._block = int(v["block_size"])
         self._rtf = float(v["realtime_factor"])
