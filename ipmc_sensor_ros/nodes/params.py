@@ -128,7 +128,7 @@ def check_unknown_overrides(node, specs: Iterable[Spec], cli_args=None,
     for path in files:
         for key, section in params_file_sections(path):
             if section_matches(key, fqn):
-                if "*" in key:
+                if "*" in key.rsplit("/", 1)[-1]:     # '/**' (any node), not '/**/ipmc_estimator'
                     for name in section:
                         wildcard_only.setdefault(name, f"{path} section '{key}'")
                 else:

@@ -51,7 +51,9 @@ def short_repr(value: Any, limit: int = 60) -> str:
         return f"<{kind} of {len(value)} items>"
     if isinstance(value, (list, tuple, dict, set)):
         try:
-            text = reprlib.Repr(maxlevel=2, maxstring=limit, maxother=limit).repr(value)
+            short = reprlib.Repr()           # Python 3.11: no keyword arguments
+            short.maxlevel, short.maxstring, short.maxother = 2, limit, limit
+            text = short.repr(value)
         except Exception:  # a repr that fails must not hide the error being reported
             text = f"<{type(value).__name__}>"
     else:
