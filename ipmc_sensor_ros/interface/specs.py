@@ -166,6 +166,25 @@ ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
 ) + QOS_SPECS + DIAGNOSTICS_SPECS
 
 
+#: Parameters whose change needs a new reduction (the sensor model changes).
+MODEL_KEYS = GEOMETRY_NAMES + MATERIAL_NAMES + ("model", "effects", "model_file",
+                                                "reduction_order", "band_low_hz", "band_high_hz")
+#: Parameters whose change needs a new filter on the same reduction.
+FILTER_KEYS = ("sample_rate_hz", "leak_corner_hz", "offset_corner_hz", "estimator", "mains_hz",
+               "current_noise_a")
+
+
+def model_key(values: Mapping[str, Any]) -> tuple:
+    """The values that decide the reduced model (equal keys: the reduction can be reused)."""
+    return tuple((k, tuple(values[k]) if isinstance(values[k], list) else values[k])
+                 for k in MODEL_KEYS)
+
+
+def filter_key(values: Mapping[str, Any]) -> tuple:
+    """The values that decide the filter on a given reduction."""
+    return tuple(values[k] for k in FILTER_KEYS)
+
+
 def check_choice(name: str, value: Any, choices: Iterable[str]) -> str:
     """Return ``value`` if it is one of ``choices``, else raise ParameterError naming ``name``."""
     choices = tuple(choices)

@@ -1,25 +1,15 @@
 """ROS 2 node ``ipmc_estimator``: sensing current (A) in, tip deflection (m) out.
 
-A thin shell over :class:`ipmc_sensor_ros.estimation.deflection.DeflectionEstimator` (model-aware
-inverse filter; the same code path as ``ipmc-model estimate``):
-
-* subscribes ``current`` (``std_msgs/Float64MultiArray``, block layout of
-  :mod:`.messages`: 2-D ``time_s,current_A`` pairs, or a 1-D values-only array);
-* publishes ``deflection`` (``geometry_msgs/PointStamped``, point = (L, 0, w) in
-  the clamp frame, one per sample / last of block / off), ``deflection/block``
-  (``Float64MultiArray``, ``time_s,deflection_m``, one per accepted input
-  message) and ``estimator/counters`` (``std_msgs/String`` JSON, 1 Hz);
-* hands every block to the stream core
-  (:class:`ipmc_sensor_ros.estimation.stream.StreamEstimator`), which owns every rule of the
-  stream (values, times, gaps, resets, counters); this node only unpacks, feeds and publishes,
-  and rebuilds the filter without an output jump on runtime parameter changes.
-
-README "ROS 2 interface" documents topics, parameters and counters.
+Unpack -> :class:`~ipmc_sensor_ros.estimation.stream.StreamEstimator` (every rule of the
+stream: values, times, gaps, resets, counters) -> publish: ``deflection/block``
+(``time_s,deflection_m,deflection_std_m``, one per accepted input message), ``deflection``
+(``PointStamped`` (L, 0, w) in the clamp frame: per sample / last of block / none),
+``estimator/counters`` (JSON, 1 Hz) and ``/diagnostics``.  Parameter changes are validated by
+building the new estimator and applied without an output jump.  README "ROS 2 interface".
 """
 from __future__ import annotations
 
 import json
-import math
 import sys
 import threading
 from typing import Any
@@ -35,11 +25,11 @@ from ..interface import specs as C
 from ..estimation.deflection import DeflectionEstimator
 from ..estimation.inverse import InverseEstimator
 from ..estimation.stream import COUNTER_NAMES, StreamEstimator
-from ..errors import DataError, IpmcError, ParameterError
+from ..errors import DataError, IpmcError
 from ..physics.parameters import short_repr
 from . import params as P
-from .messages import (CURRENT_COLUMNS, ESTIMATE_COLUMNS, SAMPLE_LABEL, BlockPacker,
-                       claimed_samples, unpack_block)
+from .messages import (CURRENT_COLUMNS, ESTIMATE_COLUMNS, BlockPacker, claimed_samples,
+                       one_sample, unpack_block)
 from .diagnostics import DiagnosticsPublisher
 from .runner import run
 
@@ -49,68 +39,16 @@ PUBLISH_POINTS = C.PUBLISH_POINTS
 
 ESTIMATOR_SPECS = C.ESTIMATOR_SPECS
 
-#: Parameters whose change needs a new reduction (the sensor model changes).
-_MODEL_KEYS = P.GEOMETRY_NAMES + P.MATERIAL_NAMES + ("model", "effects", "model_file",
-                                                      "reduction_order", "band_low_hz",
-                                                      "band_high_hz")
-
 _ERRORS = (IpmcError,)  # every deliberate error of the package names the parameter
 
 
-def _model_key(values: dict) -> tuple:
-    return tuple((k, tuple(values[k]) if isinstance(values[k], list) else values[k])
-                 for k in _MODEL_KEYS)
-
-
-def _filter_kwargs(values: dict) -> dict:
-    return {k: values[k] for k in ("sample_rate_hz", "leak_corner_hz", "offset_corner_hz",
-                                   "estimator", "mains_hz", "current_noise_a")}
-
-
-def check_values(values: dict) -> None:
-    """Checks of the non-physical parameters; raise ParameterError naming one."""
-    try:
-        P.check_choice("publish_points", values["publish_points"], PUBLISH_POINTS)
-        P.check_choice("qos_reliability", values["qos_reliability"], ("reliable", "best_effort"))
-    except ParameterError as exc:
-        raise P.ParameterError(str(exc)) from None
-    gap = float(values["max_gap_s"])
-    if not (math.isfinite(gap) and gap > 0.0):
-        raise P.ParameterError(f"parameter 'max_gap_s' must be > 0 s, got {gap!r}")
-    if float(values["offset_corner_hz"]) < 0.0:
-        raise P.ParameterError("parameter 'offset_corner_hz' must be >= 0 Hz (0 = off), "
-                                   f"got {values['offset_corner_hz']!r}")
-
-
 def design(values: dict, reduced=None):
-    """Build (reduced model, fresh core DeflectionEstimator) from parameter values
-    (:func:`ipmc_sensor_ros.interface.specs.build_estimator`, as ``ipmc-model estimate`` does).
-
-    ``reduced`` is reused when given (the model part did not change).  Raises
-    one of ParameterError / ParameterError / ParameterError / ParameterError
-    with a message naming the parameter.
-    """
-    check_values(values)
+    """(reduced model, fresh core DeflectionEstimator) from parameter values, as
+    ``ipmc-model estimate`` builds them (:func:`ipmc_sensor_ros.interface.specs.build_estimator`:
+    every spec rule checked first); ``reduced`` is reused when the model part did not change.
+    Raises an :class:`~ipmc_sensor_ros.errors.IpmcError` naming the parameter."""
     est = C.build_estimator(values, reduced)
     return est.reduced, est
-
-
-def _one_sample(msg: Float64MultiArray):
-    """``(time, current)`` of a well-formed one-sample timed message (the layout the
-    simulator and DAQ drivers publish), as floats without numpy; ``None`` for any other
-    message, which then takes the general path and gets its precise layout check."""
-    layout = msg.layout
-    dims = layout.dim
-    if len(dims) != 2 or layout.data_offset != 0:
-        return None
-    d0, d1 = dims
-    if (d0.size != 1 or d0.stride != 2 or d1.size != 2 or d1.stride != 2
-            or d0.label != SAMPLE_LABEL or d1.label != CURRENT_COLUMNS):
-        return None
-    data = msg.data
-    if len(data) != 2:
-        return None
-    return data[0], data[1]
 
 
 class EstimatorNode(Node):
@@ -136,7 +74,7 @@ class EstimatorNode(Node):
         for path, (digest, names) in C.load_plugins(self._values["plugins"]).items():
             self.get_logger().info(f"plugin {path} (sha256 {digest}): effects {', '.join(names)}; "
                                    "loaded once, not re-read")
-        self._model_key = _model_key(self._values)
+        self._model_key = C.model_key(self._values)
         self._pending: tuple | None = None
         self._ticks = 0
 
@@ -215,7 +153,7 @@ class EstimatorNode(Node):
     # -- data path: unpack -> stream core -> publish ----------------------------
     def _on_current(self, msg: Float64MultiArray) -> None:
         with self._lock:
-            one = _one_sample(msg)
+            one = one_sample(msg)
             if one:
                 out = self._stream.feed_one(*one)
                 if out is not False:
@@ -294,7 +232,7 @@ class EstimatorNode(Node):
                                                reason=f"parameter '{p.name}' cannot be unset")
                 values[p.name] = list(p.value) if isinstance(values[p.name], list) else p.value
             try:
-                key = _model_key(values)
+                key = C.model_key(values)
                 reduced, new = design(values, self._reduced if key == self._model_key else None)
             except Exception as exc:  # a remote call must never kill the node
                 text = " ".join(str(exc).split())
@@ -315,7 +253,7 @@ class EstimatorNode(Node):
             old = self._values
             self._values = values
             self._stream.max_gap_s = float(values["max_gap_s"])
-            if key != self._model_key or _filter_kwargs(values) != _filter_kwargs(old):
+            if key != self._model_key or C.filter_key(values) != C.filter_key(old):
                 self._stream.replace_estimator(new)
                 self._reduced, self._model_key = reduced, key
                 self.get_logger().info("parameters changed: filter rebuilt ("

@@ -43,6 +43,7 @@ __all__ = [
     "BlockPacker",
     "unpack_block",
     "claimed_samples",
+    "one_sample",
 ]
 
 @dataclass(frozen=True)
@@ -146,3 +147,21 @@ def unpack_block(msg: Float64MultiArray, columns: str = CURRENT_COLUMNS) -> Bloc
     times, table = unpack_columns(msg, columns)
     return Block(times_s=times, values=table[:, 0],
                  extra=table[:, 1:] if table.shape[1] > 1 else None)
+
+
+def one_sample(msg: Float64MultiArray):
+    """``(time, current)`` of a well-formed one-sample timed current message (the layout the
+    simulator and DAQ drivers publish), as floats without numpy; ``None`` for any other
+    message, which then takes the general path and gets its precise layout check."""
+    layout = msg.layout
+    dims = layout.dim
+    if len(dims) != 2 or layout.data_offset != 0:
+        return None
+    d0, d1 = dims
+    if (d0.size != 1 or d0.stride != 2 or d1.size != 2 or d1.stride != 2
+            or d0.label != SAMPLE_LABEL or d1.label != CURRENT_COLUMNS):
+        return None
+    data = msg.data
+    if len(data) != 2:
+        return None
+    return data[0], data[1]
