@@ -216,6 +216,9 @@ def _cmd_estimate(args) -> int:
             t_out, w, stream = estimate_record(estimator, data.time_s, current,
                                                max_gap_s=float(values["max_gap_s"]), source=src)
         resets = stream.counters["resets"]
+        if not stream.kept.any():
+            raise ParameterError(f"{src}: no sample passed the stream rules "
+                                 f"({stream.last_rejection}); nothing written")
         if not stream.kept.all():
             say(f"{src}: {int((~stream.kept).sum())} sample(s) rejected by the stream rules "
                 f"(no estimate written for them): {stream.last_rejection}")

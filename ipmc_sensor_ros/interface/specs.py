@@ -153,7 +153,7 @@ ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
          "assumes less)", low=1e-15, high=1e-3),
     Spec("mains_hz", 0, int, "notch the mains line and its harmonics from the current before "
          "the filter: 0 (off), 50 or 60 Hz; a line found while off is reported",
-         choices=(0, 50, 60)),
+         low=0, high=60, choices=(0, 50, 60)),
     Spec("frame_id", "ipmc_clamp", str, "frame of the deflection points: origin at the "
          "clamp, x along the beam to the tip, z in the bending direction",
          pattern=FRAME_ID_PATTERN, max_length=128),

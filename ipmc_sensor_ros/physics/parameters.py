@@ -65,6 +65,21 @@ def short_repr(value: Any, limit: int = 60) -> str:
     return text
 
 
+def _check_keys(cls, data: Any, where: str, what: str, noun: str) -> str:
+    """Refuse a ``data`` that is not a mapping or has keys ``cls`` does not know; returns the
+    ``"<where>: "`` prefix of messages about it."""
+    names = {f.name for f in fields(cls)}
+    prefix = f"{where}: " if where else ""
+    if not isinstance(data, Mapping):
+        raise ParameterError(f"{prefix}{what} must be a mapping of names to values, "
+                             f"got {short_repr(data)}")
+    unknown = sorted(str(k) for k in set(data) - names)
+    if unknown:
+        raise ParameterError(f"{prefix}unknown {what} {noun} {short_repr(unknown)}; "
+                             f"known: {sorted(names)}")
+    return prefix
+
+
 def parse_number(value: Any) -> float:
     """``float(value)``, but a string must be plain ASCII: Python's ``float`` also reads
     Unicode digits ('\u0661\u0662' -> 12.0) and full-width forms, which no instrument or
@@ -179,15 +194,7 @@ class MaterialParameters:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], where: str = "") -> "MaterialParameters":
-        names = {f.name for f in fields(cls)}
-        prefix = f"{where}: " if where else ""
-        if not isinstance(data, Mapping):
-            raise ParameterError(f"{prefix}material must be a mapping of names to values, "
-                                 f"got {short_repr(data)}")
-        unknown = sorted(str(k) for k in set(data) - names)
-        if unknown:
-            raise ParameterError(f"{prefix}unknown material parameter(s) {short_repr(unknown)}; "
-                                 f"known: {sorted(names)}")
+        _check_keys(cls, data, where, "material", "parameter(s)")
         try:
             return cls(**dict(data))
         except ParameterError as exc:
@@ -243,15 +250,7 @@ class Geometry:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], where: str = "") -> "Geometry":
-        names = {f.name for f in fields(cls)}
-        prefix = f"{where}: " if where else ""
-        if not isinstance(data, Mapping):
-            raise ParameterError(f"{prefix}geometry must be a mapping of names to values, "
-                                 f"got {short_repr(data)}")
-        unknown = sorted(str(k) for k in set(data) - names)
-        if unknown:
-            raise ParameterError(f"{prefix}unknown geometry key(s) {short_repr(unknown)}; "
-                                 f"known: {sorted(names)}")
+        prefix = _check_keys(cls, data, where, "geometry", "key(s)")
         missing = sorted({"length_m", "width_m", "thickness_m"} - set(data))
         if missing:
             raise ParameterError(f"{prefix}missing geometry key(s) {missing}")

@@ -390,9 +390,9 @@ def write_bag(path: PathLike, timeseries: TimeSeries, storage: str = "sqlite3",
                          f"{POINT_STAMPED_TYPE!r}, got {deflection_msgtype!r}")
     ts = timeseries
     if ts.n_samples and not (ts.time_s.min() >= 0.0 and ts.time_s.max() < 2.0 ** 31):
-        raise DataFormatError(path, None, f"sample times {ts.time_s.min():.6g}..{ts.time_s.max():.6g} s "
-                              "do not fit a ROS time stamp (0 .. 2^31 s): write a time series "
-                              "or shift the time origin")
+        raise DataFormatError(path, None, f"sample times must be >= 0 and < 2^31 s to be bag "
+                              f"timestamps, got {ts.time_s.min():.6g}..{ts.time_s.max():.6g} s: "
+                              "write a time series or shift the time origin")
     bag = Path(path)
     if bag.exists():
         raise FileExistsError(f"{bag} exists; write_bag does not overwrite")
