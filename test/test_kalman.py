@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
-from ipmc_sensor_ros.estimation.inverse import EstimatorError, InverseEstimator
+from ipmc_sensor_ros.errors import ParameterError
+from ipmc_sensor_ros.estimation.inverse import InverseEstimator
 from ipmc_sensor_ros.estimation.kalman import KalmanEstimator, offset_corner_hz
 from ipmc_sensor_ros.estimation.mains import LINE_WARN_RATIO, MainsFilter, line_level
 from ipmc_sensor_ros.lti.reduction import reduce_model
@@ -81,7 +82,7 @@ def test_state_save_restore_and_bumpless_continue(reduced_slim):
     tail = est.process(i[2000:])
     est.set_state(saved)
     assert np.array_equal(est.process(i[2000:]), tail)
-    with pytest.raises(EstimatorError, match="state"):
+    with pytest.raises(ParameterError, match="state"):
         est.set_state({"s": np.zeros(3)})
     old = KalmanEstimator(reduced_slim, FS)
     old.process(i[:2000])
@@ -96,7 +97,7 @@ def test_state_save_restore_and_bumpless_continue(reduced_slim):
                                      (dict(rest_enter=5.0, rest_leave=4.0), "rest_leave"),
                                      (dict(channels=2), "channels")])
 def test_invalid_configuration_is_refused(reduced_slim, kw, name):
-    with pytest.raises(EstimatorError, match=name):
+    with pytest.raises(ParameterError, match=name):
         KalmanEstimator(reduced_slim, FS, **kw)
 
 
@@ -152,14 +153,14 @@ def test_mains_notch_removes_hum_and_detects_it():
     clean.process(signal)
     assert not clean.line_present
     assert line_level(signal + hum, FS, 50) > LINE_WARN_RATIO > line_level(signal, FS, 50)
-    with pytest.raises(EstimatorError, match="mains_hz"):
+    with pytest.raises(ParameterError, match="mains_hz"):
         MainsFilter(55, FS)
 
 
 def test_deflection_estimator_options():
-    with pytest.raises(EstimatorError, match="estimator"):
+    with pytest.raises(ParameterError, match="estimator"):
         DeflectionEstimator(SLIM, FS, estimator="magic")
-    with pytest.raises(EstimatorError, match="offset_corner_hz"):
+    with pytest.raises(ParameterError, match="offset_corner_hz"):
         DeflectionEstimator(SLIM, FS, estimator="kalman", offset_corner_hz=0.01)
     est = DeflectionEstimator(SLIM, FS)
     t = np.arange(100) / FS
