@@ -15,8 +15,8 @@ import threading
 from typing import Any
 
 import numpy as np
-from geometry_msgs.msg import PointStamped
 from rcl_interfaces.msg import SetParametersResult
+from geometry_msgs.msg import PointStamped as PointMsg
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray, String
@@ -29,7 +29,7 @@ from ..errors import DataError, IpmcError
 from ..physics.parameters import short_repr
 from . import params as P
 from .messages import (CURRENT_COLUMNS, ESTIMATE_COLUMNS, BlockPacker, claimed_samples,
-                       one_sample, unpack_block)
+                       one_sample, point_message, unpack_block)
 from .diagnostics import DiagnosticsPublisher
 from .runner import run
 
@@ -42,23 +42,9 @@ ESTIMATOR_SPECS = C.ESTIMATOR_SPECS
 _ERRORS = (IpmcError,)  # every deliberate error of the package names the parameter
 
 
-def design(values: dict, reduced=None):
-    """(reduced model, fresh core DeflectionEstimator) from parameter values, as
-    ``ipmc-model estimate`` builds them (:func:`ipmc_sensor_ros.interface.specs.build_estimator`:
-    every spec rule checked first); ``reduced`` is reused when the model part did not change.
-    Raises an :class:`~ipmc_sensor_ros.errors.IpmcError` naming the parameter."""
-    est = C.build_estimator(values, reduced)
-    return est.reduced, est
-
-
 class EstimatorNode(Node):
-    """Deflection estimator node; see the module docstring and README "ROS 2 interface".
-
-    ``kwargs`` go to :class:`rclpy.node.Node` (context, namespace,
-    parameter_overrides, ...), so several nodes can share one process.
-    Raises :class:`~ipmc_sensor_ros.nodes.params.ParameterError` if the
-    parameters cannot make a valid estimator.
-    """
+    """The estimator node (module docstring); ``kwargs`` go to :class:`rclpy.node.Node`, so
+    several nodes can share a process.  ParameterError if the parameters make no estimator."""
 
     def __init__(self, node_name: str = "ipmc_estimator", **kwargs: Any):
         super().__init__(node_name, **kwargs)
@@ -68,7 +54,8 @@ class EstimatorNode(Node):
         P.declare(self, ESTIMATOR_SPECS)
         self._values = P.read(self, ESTIMATOR_SPECS)
         try:
-            self._reduced, estimator = design(self._values)
+            estimator = C.build_estimator(self._values)
+            self._reduced = estimator.reduced
         except _ERRORS as exc:
             raise P.ParameterError(str(exc)) from None
         for path, (digest, names) in C.load_plugins(self._values["plugins"]).items():
@@ -82,7 +69,7 @@ class EstimatorNode(Node):
         self._sub = P.create_subscription(self, Float64MultiArray, "current", self._on_current, qos)
         self._pub_block = P.create_publisher(self, Float64MultiArray, "deflection/block", qos)
         self._packer = BlockPacker(ESTIMATE_COLUMNS)
-        self._pub_point = P.create_publisher(self, PointStamped, "deflection", qos)
+        self._pub_point = P.create_publisher(self, PointMsg, "deflection", qos)
         P.check_qos_overrides(self)
         self._pub_counters = self.create_publisher(String, "estimator/counters", P.COUNTERS_QOS)
         logger = self.get_logger()
@@ -94,9 +81,7 @@ class EstimatorNode(Node):
         self._diagnostics = DiagnosticsPublisher(
             self, self._values, channels=(self._sub.topic_name,),
             sample_rate_hz=estimator.sample_rate_hz, source=self._status)
-        # Steady clock: counters and the waiting message must not stall under
-        # use_sim_time before /clock arrives.
-        self._timer = self.create_timer(1.0, self._on_timer,
+        self._timer = self.create_timer(1.0, self._on_timer,  # steady: runs before /clock
                                         clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._on_parameters_set)
@@ -108,8 +93,7 @@ class EstimatorNode(Node):
 
     # -- public helpers -------------------------------------------------------
     def counters(self) -> dict[str, int]:
-        """Copy of the stream counters (ints); invariant in
-        :mod:`ipmc_sensor_ros.estimation.stream`."""
+        """Copy of the stream counters (invariant: :mod:`ipmc_sensor_ros.estimation.stream`)."""
         with self._lock:
             return dict(self._stream.counters)
 
@@ -199,14 +183,8 @@ class EstimatorNode(Node):
                                       throttle_duration_sec=1.0)
 
     def _publish_point(self, time_s: float, deflection_m: float) -> None:
-        sec, nsec = divmod(round(time_s * 1e9), 1_000_000_000)
-        p = PointStamped()
-        p.header.stamp.sec = sec
-        p.header.stamp.nanosec = nsec
-        p.header.frame_id = self._values["frame_id"]
-        p.point.x = float(self._values["length_m"])
-        p.point.z = deflection_m
-        self._pub_point.publish(p)
+        self._pub_point.publish(point_message(time_s, float(self._values["length_m"]),
+                                              deflection_m, self._values["frame_id"]))
 
     # -- periodic -------------------------------------------------------------
     def _on_timer(self) -> None:
@@ -233,7 +211,8 @@ class EstimatorNode(Node):
                 values[p.name] = list(p.value) if isinstance(values[p.name], list) else p.value
             try:
                 key = C.model_key(values)
-                reduced, new = design(values, self._reduced if key == self._model_key else None)
+                new = C.build_estimator(values, self._reduced if key == self._model_key else None)
+                reduced = new.reduced
             except Exception as exc:  # a remote call must never kill the node
                 text = " ".join(str(exc).split())
                 text = text if len(text) <= 300 else text[:300] + "..."

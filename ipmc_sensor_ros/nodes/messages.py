@@ -44,6 +44,7 @@ __all__ = [
     "unpack_block",
     "claimed_samples",
     "one_sample",
+    "point_message",
 ]
 
 @dataclass(frozen=True)
@@ -165,3 +166,17 @@ def one_sample(msg: Float64MultiArray):
     if len(data) != 2:
         return None
     return data[0], data[1]
+
+
+def point_message(time_s: float, length_m: float, deflection_m: float, frame_id: str):
+    """The tip as ``geometry_msgs/PointStamped``: (L, 0, w) in the clamp frame at ``time_s``."""
+    from geometry_msgs.msg import PointStamped
+
+    sec, nsec = divmod(round(time_s * 1e9), 1_000_000_000)
+    p = PointStamped()
+    p.header.stamp.sec = sec
+    p.header.stamp.nanosec = nsec
+    p.header.frame_id = frame_id
+    p.point.x = length_m
+    p.point.z = deflection_m
+    return p

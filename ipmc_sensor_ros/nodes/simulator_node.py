@@ -25,10 +25,8 @@ All simulator parameters are read-only (restart to change them).
 """
 from __future__ import annotations
 
-import dataclasses
 import json
 import sys
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -36,11 +34,13 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray, String
 
-from ..physics.beam import FIDELITIES, check_fidelity
-from ..lti.reduction import ParameterError
+from ..physics.beam import check_fidelity
+from ..errors import ParameterError
 from ..simulation.sensor import FieldSensorSimulator, SensorSimulator
-from ..simulation.stimuli import STIMULUS_KINDS, Sampled, Stimulus, make_stimulus
-from ..interface.specs import DIAGNOSTICS_SPECS
+from ..interface.simulator import (SIMULATOR_OWN_SPECS as _OWN_SPECS,  # noqa: F401 (re-exported)
+                                   SIMULATOR_SPECS, STIMULI,
+                                   build_stimulus, describe_stimulus, load_stimulus_csv,
+                                   read_stimulus_csv)
 from . import params as P
 from .diagnostics import DiagnosticsPublisher
 from .messages import CURRENT_COLUMNS, DEFLECTION_COLUMNS, BlockPacker
@@ -49,130 +49,8 @@ from .runner import run
 __all__ = ["SimulatorNode", "SIMULATOR_SPECS", "STIMULI", "load_stimulus_csv",
            "read_stimulus_csv", "build_stimulus", "main"]
 
-STIMULI = tuple(sorted(STIMULUS_KINDS)) + ("file",)
 MAX_BLOCKS_PER_TICK = 10
 MIN_TICK_S = 1e-3
-
-_OWN_SPECS = (
-    P.Spec("fidelity", "model", str, "sensor physics: 'model' (the closed-form model with every "
-           "effect, as an order-8 reduction) or 'field' (independent solution of the field "
-           "equations; base model and hydration_drift only; ~50x real time)", read_only=True,
-           choices=FIDELITIES),
-    P.Spec("beam_model", "linear", str, "fidelity 'field' only: stress profile from the tip "
-           "deflection, 'linear' (the paper's small-deflection beam, eq. 21) or 'elastica' "
-           "(large deflection: the physical source of the 'nonlinearity' effect)", read_only=True,
-           choices=("linear", "elastica")),
-    P.Spec("stimulus", "crank_slider", str, "tip-deflection stimulus: crank_slider, sweep, "
-           "free_vibration, step or file", choices=STIMULI),
-    P.Spec("motor_frequency_hz", 1.0, float, "crank_slider: motor (drive) frequency, Hz",
-           low=1e-3, high=1e3),
-    P.Spec("crank_radius_m", 0.002, float, "crank_slider: crank radius r (half the "
-           "peak-to-peak deflection), m", low=1e-6, high=1.0),
-    P.Spec("rod_length_m", 0.02, float, "crank_slider: connecting-rod length l (> r), m",
-           low=1e-6, high=10.0),
-    P.Spec("sweep_start_hz", 0.5, float, "sweep: start frequency, Hz", low=1e-3, high=1e4),
-    P.Spec("sweep_stop_hz", 50.0, float, "sweep: stop frequency, Hz", low=1e-3, high=1e4),
-    P.Spec("sweep_duration_s", 20.0, float, "sweep: duration of one sweep (then repeated), s",
-           low=1e-3, high=1e6),
-    P.Spec("amplitude_m", 0.001, float, "sweep, step and free_vibration: tip amplitude, m",
-           low=-1.0, high=1.0),
-    P.Spec("natural_frequency_hz", 30.0, float, "free_vibration: natural frequency, Hz",
-           low=1e-3, high=1e4),
-    P.Spec("damping_ratio", 0.05, float, "free_vibration: damping ratio (dimensionless, < 1)",
-           low=0.0, high=0.999999),
-    P.Spec("step_start_s", 0.5, float, "step: time of the step after the start, s",
-           low=0.0, high=1e6),
-    P.Spec("stimulus_file", "", str, "file: CSV with columns time_s,deflection_m ('#' comment "
-           "lines and one header line allowed), interpolated by a cubic spline"),
-    P.Spec("sample_rate_hz", 1000.0, float, "DAQ sample rate, Hz", low=1.0, high=1e6),
-    P.Spec("block_size", 10, int, "samples per published message", low=1, high=100000),
-    P.Spec("realtime_factor", 1.0, float, "simulated seconds per node-clock second; 0 = fast "
-           "mode (one block per 1 ms tick)", low=0.0, high=1e6),
-    P.Spec("duration_s", 0.0, float, "simulated duration, s (0 = forever); then it logs "
-           "'done' and stops publishing", low=0.0, high=1e9),
-    P.Spec("current_gain", 1.0, float, "measurement chain: amplifier gain error "
-           "(dimensionless, 1 = ideal)", low=-1e6, high=1e6),
-    P.Spec("current_offset_a", 0.0, float, "measurement chain: constant current offset, A",
-           low=-1.0, high=1.0),
-    P.Spec("noise_rms_a", 0.0, float, "measurement chain: white Gaussian noise RMS, A",
-           low=0.0, high=1.0),
-    P.Spec("seed", 0, int, "seed of the noise generator", low=0, high=2 ** 31 - 1),
-    P.Spec("wait_for_subscribers", 0, int, "start only when 'current' and 'deflection_truth' "
-           "each have at least this many matched subscriptions (0 = start at once)",
-           low=0, high=1000),
-)
-
-SIMULATOR_SPECS = tuple(dataclasses.replace(s, read_only=True) for s in
-                        P.GEOMETRY_SPECS + P.MATERIAL_SPECS + P.MODEL_SPECS + _OWN_SPECS
-                        + P.QOS_SPECS) + DIAGNOSTICS_SPECS
-
-
-def read_stimulus_csv(path: str | Path) -> np.ndarray:
-    """(n, 2) array of (time_s, deflection_m) rows from a CSV file (s, m)."""
-    path = Path(path)
-    try:
-        lines = path.read_text().splitlines()
-    except OSError as exc:
-        raise ParameterError(f"parameter 'stimulus_file': cannot read {str(path)!r}: "
-                             f"{exc.strerror}") from None
-    rows = []
-    for number, line in enumerate(lines, 1):
-        text = line.split("#", 1)[0].strip()
-        if not text:
-            continue
-        cells = [c.strip() for c in text.split(",")]
-        try:
-            values = [float(c) for c in cells]
-        except ValueError:
-            if not rows and cells[:2] == ["time_s", "deflection_m"]:
-                continue  # header line
-            raise ParameterError(f"parameter 'stimulus_file': {path}:{number}: not two numbers: "
-                                 f"{line!r}") from None
-        if len(values) != 2:
-            raise ParameterError(f"parameter 'stimulus_file': {path}:{number}: expected 2 "
-                                 f"columns (time_s, deflection_m), got {len(values)}")
-        rows.append(values)
-    return np.array(rows, dtype=float).reshape(-1, 2)
-
-
-def load_stimulus_csv(path: str | Path) -> Sampled:
-    """A :class:`Sampled` stimulus from a ``time_s,deflection_m`` CSV file (s, m)."""
-    data = read_stimulus_csv(path)
-    try:
-        return Sampled(data[:, 0], data[:, 1])
-    except ParameterError as exc:
-        raise ParameterError(f"parameter 'stimulus_file': {path}: {exc}") from None
-
-
-def build_stimulus(values: dict) -> tuple[Stimulus, float]:
-    """(stimulus, time offset in stimulus time of sample 0, s) from parameter values."""
-    kind = P.check_choice("stimulus", values["stimulus"], STIMULI)
-    if kind == "file":
-        if not values["stimulus_file"]:
-            raise ParameterError("parameter 'stimulus_file' must name a CSV file when "
-                                 "stimulus is 'file'")
-        stim = load_stimulus_csv(values["stimulus_file"])
-        return stim, float(read_stimulus_csv(values["stimulus_file"])[0, 0])
-    if kind == "crank_slider":
-        kw = {k: values[k] for k in ("motor_frequency_hz", "crank_radius_m", "rod_length_m")}
-    elif kind == "sweep":
-        kw = {"amplitude_m": values["amplitude_m"], "start_frequency_hz": values["sweep_start_hz"],
-              "stop_frequency_hz": values["sweep_stop_hz"],
-              "duration_s": values["sweep_duration_s"]}
-    elif kind == "free_vibration":
-        kw = {k: values[k] for k in ("amplitude_m", "natural_frequency_hz", "damping_ratio")}
-    else:  # step
-        kw = {"amplitude_m": values["amplitude_m"], "start_s": values["step_start_s"]}
-    return make_stimulus(kind, **kw), 0.0
-
-
-def describe_stimulus(stimulus: Stimulus, values: dict) -> str:
-    """Short text of the stimulus and its parameters for the log."""
-    if dataclasses.is_dataclass(stimulus):
-        args = ", ".join(f"{f.name}={getattr(stimulus, f.name):g}"
-                         for f in dataclasses.fields(stimulus))
-        return f"{values['stimulus']}({args})"
-    return f"{values['stimulus']}({values['stimulus_file']})"
 
 
 class SimulatorNode(Node):

@@ -205,9 +205,14 @@ class Sampled(Stimulus):
             raise ParameterError("sampled stimulus contains non-finite values")
         if np.any(np.diff(t) <= 0):
             raise ParameterError("sampled stimulus time must increase strictly")
-        self._t0, self._t1 = t[0], t[-1]
+        self._t0, self._t1 = float(t[0]), float(t[-1])    # the record's first and last time, s
         self._spline = CubicSpline(t, w)
         self._d = self._spline.derivative()
+
+    @property
+    def start_s(self) -> float:
+        """Time of the first sample of the record, s."""
+        return self._t0
 
     def deflection(self, t):
         return self._spline(np.clip(np.asarray(t, float), self._t0, self._t1))
