@@ -445,9 +445,10 @@ def _write_bag(bag: Path, ts: TimeSeries, plugin, current_topic: str, deflection
             for t, d in zip(ts.time_s.tolist(), ts.deflection_m.tolist()):
                 ns = _stamp_ns(t)
                 sec, nsec = divmod(ns, 10**9)
+                # the estimator node's convention: (L, 0, w) in the clamp frame
                 msg = PointStamped(header=Header(stamp=Time(sec=sec, nanosec=nsec),
-                                                 frame_id="ipmc_tip"),
-                                   point=Point(x=0.0, y=0.0, z=d))
+                                                 frame_id="ipmc_clamp"),
+                                   point=Point(x=float(ts.geometry.length_m), y=0.0, z=d))
                 writer.write(dconn, ns, store.serialize_cdr(msg, POINT_STAMPED_TYPE))
     if sidecar:
         geometry = ts.geometry.to_dict()
