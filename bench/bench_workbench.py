@@ -14,7 +14,7 @@ from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_PARAMETERS, PAPER_SAMPLES
 from ipmc_sensor_ros.workbench.compare import compare_records
 from ipmc_sensor_ros.workbench.diagnose import diagnose
-from ipmc_sensor_ros.workbench.fit import FitGroup, fit_parameters
+from ipmc_sensor_ros.workbench.freqfit import FitGroup, fit_parameters
 from ipmc_sensor_ros.workbench.freqresp import fundamental_response
 from ipmc_sensor_ros.workbench.scenarios import crank_slider_campaign
 

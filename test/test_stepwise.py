@@ -14,7 +14,7 @@ from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES, ParameterError
 from ipmc_sensor_ros.workbench.adequacy import magnitude_flags
 from ipmc_sensor_ros.workbench.diagnose import diagnose
-from ipmc_sensor_ros.workbench.fit import FitGroup, fit_parameters
+from ipmc_sensor_ros.workbench.freqfit import FitGroup, fit_parameters
 from ipmc_sensor_ros.workbench.freqresp import fundamental_response
 from ipmc_sensor_ros.workbench.interference import find_mains_lines
 from ipmc_sensor_ros.workbench.scenarios import crank_slider_campaign, hidden_effects_campaign

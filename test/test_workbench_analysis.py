@@ -9,7 +9,7 @@ from ipmc_sensor_ros.physics.parameters import PAPER_PARAMETERS, PAPER_SAMPLES
 from ipmc_sensor_ros.simulation.sensor import lti_response_fft
 from ipmc_sensor_ros.simulation.stimuli import CrankSlider, Sweep
 from ipmc_sensor_ros.workbench.compare import compare_records
-from ipmc_sensor_ros.workbench.fit import FitGroup, fit_parameters
+from ipmc_sensor_ros.workbench.freqfit import FitGroup, fit_parameters
 from ipmc_sensor_ros.workbench.freqresp import cross_spectral_response, fundamental_response
 from ipmc_sensor_ros.workbench.track import track_parameter
 
@@ -154,7 +154,7 @@ def test_fast_fit_prediction_matches_exact_prediction(effects):
     """The diagnosis fits with an interpolated transfer function; it must equal the exact
     FFT prediction to far below the noise (1e-5 relative; 5e-4 near a beam resonance)."""
     from ipmc_sensor_ros.simulation.sensor import predict_current
-    from ipmc_sensor_ros.workbench.modelfit import Record, predict, prepare
+    from ipmc_sensor_ros.workbench.timefit import Record, predict, prepare
 
     model = SensorModel.named("h2", PAPER_SAMPLES["short"], extra_effects=effects)
     t = np.arange(6000) / FS

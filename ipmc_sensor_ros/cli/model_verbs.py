@@ -82,7 +82,7 @@ def _save_params(path: Path, groups, data, res, args, effects) -> list[Path]:
 def _cmd_fit(args) -> int:
     from ..physics.parameters import save_yaml
     from ..workbench.data import groups_from
-    from ..workbench.fit import fit_parameters
+    from ..workbench.freqfit import fit_parameters
 
     from ..workbench.discovery import (acts_on_transfer, effect_free_names, effects_to_fit,
                                        free_names, next_command)

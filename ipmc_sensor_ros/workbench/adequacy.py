@@ -28,7 +28,7 @@ def _factor(ratio: float) -> float:
 
 def magnitude_flags(records: Sequence, model_for=None) -> list[str]:
     """Flags for records (objects with ``path``, ``time_s``, ``deflection_m``, ``current_a`` and
-    ``model``, :class:`~.modelfit.Record`, or give ``model_for(record)``) whose magnitudes are
+    ``model``, :class:`~.timefit.Record`, or give ``model_for(record)``) whose magnitudes are
     implausible."""
     from .freqresp import fundamental_response
 

@@ -7,10 +7,10 @@ import numpy as np
 
 from ..physics.model import SensorModel
 from ..physics.parameters import MaterialParameters
-from .fit import FitGroup
+from .freqfit import FitGroup
 from .freqresp import FrequencyPoint, fundamental_response
 from .measurements import FrequencyResponseData, TimeSeries
-from .modelfit import Record
+from .timefit import Record
 
 __all__ = ["material_for", "records_from", "groups_from", "frf_points"]
 

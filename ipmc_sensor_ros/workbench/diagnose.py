@@ -6,7 +6,7 @@ Procedure (:func:`diagnose`)
    removed from the currents (:mod:`.interference`).
 1. Fit the given model (base + effects) to all records: the free material
    parameters (default alpha0, d, kappa_e) and the parameters of the effects in
-   ``fit_effects`` by the time-domain output-error fit of :mod:`.modelfit`.
+   ``fit_effects`` by the time-domain output-error fit of :mod:`.timefit`.
 2. **Offset test**: the sensor cannot produce a mean current (H(0) = 0), so a
    mean residual over whole stimulus periods is an offset.  Per record its
    z-score (mean / (sigma/sqrt(n))) is computed; if the chi-square of the
@@ -51,7 +51,7 @@ from ..physics.effects import EFFECTS, get_effect
 from .blas import single_threaded_blas
 from .discovery import priors_from_headers
 from .interference import remove_mains, summarize_lines
-from .modelfit import FitSpec, ModelFit, PreparedRecord, Record, fit_model, predict, prepare
+from .timefit import FitSpec, ModelFit, PreparedRecord, Record, fit_model, predict, prepare
 
 __all__ = ["diagnose", "Diagnosis", "Candidate", "Step", "DEFAULT_FREE_MATERIAL", "priors_from_headers",
            "SHAPES"]
@@ -235,7 +235,7 @@ def _with_models(prepared, models):
 
 
 def _fit_vector(fit: ModelFit, spec: FitSpec) -> np.ndarray:
-    from .modelfit import _param
+    from .timefit import _param
 
     x = [np.log(getattr(fit.material, n)) for n in spec.material]
     for eff_name, par_name in spec.effect_params:
@@ -564,7 +564,7 @@ def _diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAU
 
 def _grid_for_spec(spec: FitSpec, priors, model) -> list[list[float]]:
     """Starts for the effect parameters of the baseline: current values, or the prior."""
-    from .modelfit import _param
+    from .timefit import _param
 
     x = []
     for e, n in spec.effect_params:

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..physics.model import SensorModel
 from ..physics.parameters import PAPER_PARAMETERS, PAPER_SAMPLES
-from .fit import fit_parameters
+from .freqfit import fit_parameters
 from .freqresp import fundamental_response
 from .scenarios import crank_slider_campaign
 
@@ -40,7 +40,7 @@ def _slope(points, f1=1.0, f2=20.0):
 
 
 def reproduce_figures(out_dir: Path | None, seed: int = 0) -> dict:
-    from .fit import FitGroup
+    from .freqfit import FitGroup
 
     freqs = tuple(np.geomspace(1.0, 20.0, 10))
     data = {s: _points(crank_slider_campaign(samples=(s,), frequencies_hz=freqs, seed=seed + k))

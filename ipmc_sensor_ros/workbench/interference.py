@@ -123,7 +123,7 @@ def find_mains_lines(records: Sequence, mains="auto", n_harmonics: int = 10):
     """Detect mains lines in every record (see module docstring).
 
     ``records``: objects with ``path``, ``time_s``, ``current_a`` and ``deflection_m``
-    (:class:`~.modelfit.Record`).  Returns ``(lines, fitted)``: the detected (and the
+    (:class:`~.timefit.Record`).  Returns ``(lines, fitted)``: the detected (and the
     non-separable) lines, and per record the fitted line sum to subtract.  ``mains``:
     50, 60, 'auto' or None (nothing done)."""
     mains = parse_mains(mains)

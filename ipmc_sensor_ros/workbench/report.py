@@ -432,7 +432,7 @@ def diagnose_report(out_dir: Path, diag) -> Path:
     from types import SimpleNamespace
 
     from .compare import fit_percent
-    from .modelfit import predict
+    from .timefit import predict
 
     labels = ["baseline (" + diag.baseline.fit.models[0].describe() + ")"] + \
         [f"+ {c.effect}" for c in diag.candidates]

@@ -19,7 +19,7 @@ from ..physics.model import SensorModel
 from ..physics.parameters import PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, MaterialParameters
 from ..simulation.sensor import predict_current
 from ..simulation.stimuli import CrankSlider
-from .modelfit import Record
+from .timefit import Record
 
 __all__ = ["crank_slider_campaign", "DETECTABLE_RANGES", "random_effect_values", "hidden_effects_campaign"]
 

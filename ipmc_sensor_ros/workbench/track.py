@@ -23,7 +23,7 @@ import numpy as np
 from ..physics.effects import get_effect
 from ..physics.model import SensorModel
 from ..physics.parameters import Geometry, MaterialParameters
-from .fit import FitGroup, fit_parameters
+from .freqfit import FitGroup, fit_parameters
 from .freqresp import fundamental_response
 
 __all__ = ["TrackPoint", "track_parameter", "model_trajectory"]
