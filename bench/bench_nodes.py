@@ -99,7 +99,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from bench.bench_nodes import DRIVER, PASSTHROUGH_CLASS, _env
 kind, rate, n, duration = sys.argv[1], float(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4])
-domain = random.randint(100, 229)
+domain = random.randint(201, 232)
 rclpy.init(domain_id=domain)
 if kind == "estimator":
     from ipmc_sensor_ros.nodes.estimator_node import EstimatorNode
@@ -187,7 +187,7 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
     from ipmc_sensor_ros.nodes.messages import ESTIMATE_COLUMNS, unpack_block
 
     fs = rate * n
-    domain = random.randint(100, 229)
+    domain = random.randint(201, 232)
     env = _env(domain)
     if kind == "estimator":
         node_cmd = [sys.executable, "-m", "ipmc_sensor_ros.nodes.estimator_node", "--ros-args",
@@ -344,7 +344,7 @@ def bench_simulator_rtf(smoke: bool = False) -> dict:
 
     duration = 5.0 if smoke else 60.0
     ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=random.randint(100, 200))
+    rclpy.init(context=ctx, domain_id=random.randint(201, 232))
     node = SimulatorNode(context=ctx, parameter_overrides=[
         Parameter("realtime_factor", value=0.0), Parameter("duration_s", value=duration),
         Parameter("block_size", value=200)])

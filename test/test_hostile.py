@@ -18,7 +18,7 @@ def _env(domain):
 
 
 def test_remote_extreme_parameter_sets_are_refused_and_the_node_lives():
-    domain = random.randint(100, 199)
+    domain = random.randint(150, 200)
     node = subprocess.Popen([sys.executable, "-m", "ipmc_sensor_ros.nodes.estimator_node"],
                             env=_env(domain), stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     ctx = rclpy.Context()
@@ -52,7 +52,7 @@ def test_bad_params_file_at_start_up_is_one_line_exit_2(tmp_path, text):
     f = tmp_path / "p.yaml"
     f.write_text(text)
     out = subprocess.run([sys.executable, "-m", "ipmc_sensor_ros.nodes.estimator_node", "--ros-args",
-                          "--params-file", str(f)], env=_env(random.randint(100, 199)),
+                          "--params-file", str(f)], env=_env(random.randint(150, 200)),
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == 2, out.stderr
     assert "Traceback" not in out.stderr

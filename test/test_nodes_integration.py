@@ -185,7 +185,7 @@ def _two_process_run(tmp_path, monkeypatch, duration_s: float, realtime_factor: 
     """Simulator and estimator as two processes; returns {name: (rss early, rss at end)}."""
     n_samples = int(duration_s * FS)
     timeout_s = TIMEOUT_S + 1.2 * duration_s * (realtime_factor > 0)
-    domain = random.randint(100, 200)
+    domain = random.randint(150, 200)
     env = dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(domain),
                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOG_DIR=str(tmp_path))
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")

@@ -438,7 +438,7 @@ def test_invalid_startup_parameters_raise_naming_the_parameter():
 
 
 def test_main_exits_nonzero_with_one_clear_line(tmp_path):
-    env = {"PYTHONPATH": str(ROOT), "ROS_DOMAIN_ID": str(random.randint(100, 200)),
+    env = {"PYTHONPATH": str(ROOT), "ROS_DOMAIN_ID": str(random.randint(150, 200)),
            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "PATH": "/usr/bin:/bin",
            "HOME": str(tmp_path), "ROS_LOG_DIR": str(tmp_path)}
     proc = subprocess.run([sys.executable, "-m", "ipmc_sensor_ros.nodes.estimator_node",
