@@ -203,7 +203,7 @@ def test_random_message_generator_and_oversized_message(direct):
 def test_bad_params_file_stops_node_startup_naming_key_and_file(tmp_path, body, needle):
     f = tmp_path / "bad_params.yaml"
     f.write_text(f"/**/ipmc_estimator:\n  ros__parameters:\n    {body}\n")
-    env = dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(random.randint(100, 200)))
+    env = dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(random.randint(150, 200)))
     res = subprocess.run([sys.executable, "-m", "ipmc_sensor_ros.nodes.estimator_node",
                           "--ros-args", "--params-file", str(f)], env=env, capture_output=True,
                          text=True, timeout=60)

@@ -77,7 +77,7 @@ def test_ros2_run_starts_and_exits_zero_on_sigint(workspace, tmp_path, monkeypat
     site = sorted(install.glob("lib/python3*/site-packages"))
     assert len(site) == 1, site
     env = dict(os.environ, PYTHONPATH=str(site[0]), AMENT_PREFIX_PATH=str(install),
-               ROS_DOMAIN_ID=str(random.randint(100, 200)),
+               ROS_DOMAIN_ID=str(random.randint(150, 200)),
                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOG_DIR=str(tmp_path))
     proc = subprocess.Popen([str(exe_path), "--ros-args", "--params-file", str(params),
                              "-p", override], cwd=tmp_path, env=env,
