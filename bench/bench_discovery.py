@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Discovery bench (issue 15): seeds x combinations of hidden effects, the look-alike case,
 exponential drying, speed.
 
@@ -31,14 +32,14 @@ from ipmc_sensor_ros.workbench.scenarios import crank_slider_campaign, hidden_ef
 
 COMBOS = [
     (),                                   # nothing missing: nothing may be named
-    ("surface_resistance", "amplifier_bandwidth"),
-    ("surface_resistance", "time_delay"),
-    ("amplifier_bandwidth", "current_offset"),
-    ("time_delay", "beam_inertia"),
-    ("current_offset", "beam_inertia"),
-    ("surface_resistance", "amplifier_bandwidth", "current_offset"),
-    ("surface_resistance", "time_delay", "beam_inertia"),
-    ("amplifier_bandwidth", "current_offset", "beam_inertia"),
+    ('surface_resistance', 'amplifier_bandwidth'),
+    ('surface_resistance', 'time_delay'),
+    ('amplifier_bandwidth', 'current_offset'),
+    ('time_delay', 'beam_inertia'),
+    ('current_offset', 'beam_inertia'),
+    ('surface_resistance', 'amplifier_bandwidth', 'current_offset'),
+    ('surface_resistance', 'time_delay', 'beam_inertia'),
+    ('amplifier_bandwidth', 'current_offset', 'beam_inertia'),
 ]
 
 
@@ -54,58 +55,84 @@ def run_combo(hidden, seeds, smoke=False):
         ok += good
         ratios.append(d.final.error / d.noise_floor)
         times.append(dt)
-        print(f"  {'+'.join(hidden) or 'none'} seed {seed}: named {d.missing_effects}, error/floor "
-              f"{ratios[-1]:.3f}, {dt:.1f} s {'OK' if good else 'FAIL'}", flush=True)
-    return {"combo": "+".join(hidden) or "(nothing missing)", "ok": ok, "n": len(seeds), "median_ratio": float(np.median(ratios)),
-            "median_s": float(np.median(times)), "max_s": float(np.max(times))}
+        print(
+            f"  {'+'.join(hidden) or 'none'} seed {seed}: named {d.missing_effects}, error/floor "
+            f"{ratios[-1]:.3f}, {dt:.1f} s {'OK' if good else 'FAIL'}",
+            flush=True,
+        )
+    return {
+        'combo': '+'.join(hidden) or '(nothing missing)',
+        'ok': ok,
+        'n': len(seeds),
+        'median_ratio': float(np.median(ratios)),
+        'median_s': float(np.median(times)),
+        'max_s': float(np.max(times)),
+    }
 
 
 class _DryingTruth(Effect):
     """Test truth outside the catalog's family: d(t) = d0 (0.4 + 0.6 / (1 + t / 600 s))
     (hyperbolic drying), so the relaxation shape must approximate it, not reproduce it."""
 
-    name = "bench_drying_truth"
+    name = 'bench_drying_truth'
     lti = False
 
     def material_at(self, model, values):
         d0 = model.material.diffusivity_m2_per_s
-        return lambda tau: model.material.replace(diffusivity_m2_per_s=d0 * (0.4 + 0.6 / (1 + tau / 600.0)))
+        return lambda tau: model.material.replace(
+            diffusivity_m2_per_s=d0 * (0.4 + 0.6 / (1 + tau / 600.0))
+        )
 
 
 def run_drying(duration_s=1800.0, rate_hz=100.0):
     register_effect(_DryingTruth)
     try:
-        recs = crank_slider_campaign(("surface_resistance", "bench_drying_truth"), frequencies_hz=(3.0,),
-                                     samples=("slim",), duration_s=duration_s, sample_rate_hz=rate_hz,
-                                     seed=7)
+        recs = crank_slider_campaign(
+            ('surface_resistance', 'bench_drying_truth'),
+            frequencies_hz=(3.0,),
+            samples=('slim',),
+            duration_s=duration_s,
+            sample_rate_hz=rate_hz,
+            seed=7,
+        )
     finally:
-        EFFECTS.pop("bench_drying_truth", None)
+        EFFECTS.pop('bench_drying_truth', None)
     t0 = time.perf_counter()
-    d = diagnose(recs, progress=lambda m: print("   ", m, flush=True))
+    d = diagnose(recs, progress=lambda m: print('   ', m, flush=True))
     dt = time.perf_counter() - t0
     print(d.summary())
-    return {"explained": d.explained, "error_over_floor": d.final.error / d.noise_floor, "seconds": dt,
-            "named": d.missing_effects}
+    return {
+        'explained': d.explained,
+        'error_over_floor': d.final.error / d.noise_floor,
+        'seconds': dt,
+        'named': d.missing_effects,
+    }
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--seeds", type=int, default=10)
-    ap.add_argument("--combos", help="comma list of combination indices (default all)")
-    ap.add_argument("--drying", action="store_true", help="also the 30-min exponential drying record")
-    ap.add_argument("--smoke", action="store_true")
+    ap.add_argument('--seeds', type=int, default=10)
+    ap.add_argument('--combos', help='comma list of combination indices (default all)')
+    ap.add_argument(
+        '--drying', action='store_true', help='also the 30-min exponential drying record'
+    )
+    ap.add_argument('--smoke', action='store_true')
     args = ap.parse_args(argv)
-    idx = [int(i) for i in args.combos.split(",")] if args.combos else range(len(COMBOS))
+    idx = [int(i) for i in args.combos.split(',')] if args.combos else range(len(COMBOS))
     rows = [run_combo(COMBOS[i], range(args.seeds), args.smoke) for i in idx]
-    print("| hidden effects | right set within 1.2x floor | median error/floor | median s | max s |")
-    print("|---|---|---|---|---|")
+    print(
+        '| hidden effects | right set within 1.2x floor | median error/floor | median s | max s |'
+    )
+    print('|---|---|---|---|---|')
     for r in rows:
-        print(f"| {r['combo']} | {r['ok']}/{r['n']} | {r['median_ratio']:.3f} | {r['median_s']:.1f} | "
-              f"{r['max_s']:.1f} |")
+        print(
+            f"| {r['combo']} | {r['ok']}/{r['n']} | {r['median_ratio']:.3f} | {r['median_s']:.1f} | "
+            f"{r['max_s']:.1f} |"
+        )
     if args.drying:
         print(run_drying())
     return 0
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     raise SystemExit(main())

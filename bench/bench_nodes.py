@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Node benchmarks: sustained input rate without loss and added latency of the estimator
 node against a pass-through node (subscribe, copy, publish) in the same harness, and the
 simulator's real-time factor.
@@ -44,14 +45,14 @@ class PassThrough(Node):
         self.pub.publish(out)
 '''
 
-PASSTHROUGH = PASSTHROUGH_CLASS + r'''
+PASSTHROUGH = PASSTHROUGH_CLASS + r"""
 rclpy.init()
 node = PassThrough()
 try:
     rclpy.spin(node)
 except KeyboardInterrupt:
     pass
-'''
+"""
 
 DRIVER = r'''
 import sys, time, rclpy, numpy as np
@@ -132,25 +133,27 @@ def bench_node_cpu(smoke: bool = False) -> list[dict]:
     rows = []
     for n, rate in ((1, 4000.0), (1000, 500.0)):
         cost = {}
-        for kind in ("passthrough", "estimator"):
-            res = subprocess.run([sys.executable, "-c", NODE_CPU, kind, str(rate), str(n),
-                                  "1.0" if smoke else "8.0"], cwd=str(ROOT),
+        for kind in ('passthrough', 'estimator'):
+            res = subprocess.run([sys.executable, '-c', NODE_CPU, kind, str(rate), str(n),
+                                  '1.0' if smoke else '8.0'], cwd=str(ROOT),
                                  env=dict(os.environ, PYTHONPATH=str(ROOT)), capture_output=True,
                                  text=True, timeout=120)
-            line = [x for x in res.stdout.splitlines() if x.startswith("CPU ")]
-            cpu, msgs = (float(line[0].split()[1]), int(line[0].split()[2])) if line else (float("nan"), 0)
-            cost[kind] = cpu / msgs * 1e6 if msgs else float("nan")
-        rows.append({"benchmark": f"node CPU per message, {n}-sample messages at {rate:.0f} msg/s "
-                                  "(process CPU / messages handled)",
-                     "value": cost["estimator"], "unit": "us/msg",
-                     "baseline": f"pass-through {cost['passthrough']:.0f} us/msg",
-                     "ratio": cost["estimator"] / cost["passthrough"], "target": "-"})
+            line = [x for x in res.stdout.splitlines() if x.startswith('CPU ')]
+            cpu, msgs = (
+                (float(line[0].split()[1]), int(line[0].split()[2])) if line else (float('nan'), 0)
+            )
+            cost[kind] = cpu / msgs * 1e6 if msgs else float('nan')
+        rows.append({'benchmark': f'node CPU per message, {n}-sample messages at {rate:.0f} msg/s '
+                                  '(process CPU / messages handled)',
+                     'value': cost['estimator'], 'unit': 'us/msg',
+                     'baseline': f"pass-through {cost['passthrough']:.0f} us/msg",
+                     'ratio': cost['estimator'] / cost['passthrough'], 'target': '-'})
     return rows
 
 
 def _env(domain: int) -> dict:
     return dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(domain),
-                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
 
 
 def _run_once(kind: str, rate: float, n: int, duration: float) -> dict:
@@ -158,24 +161,30 @@ def _run_once(kind: str, rate: float, n: int, duration: float) -> dict:
     DDS participants was seen to lose messages in later trials."""
     import json
 
-    code = ("import json, sys; from bench.bench_nodes import _trial; "
+    code = ('import json, sys; from bench.bench_nodes import _trial; '
             f"print('RESULT ' + json.dumps(_trial({kind!r}, {rate!r}, {n!r}, {duration!r})))")
-    res = subprocess.run([sys.executable, "-c", code], cwd=str(ROOT), env=dict(os.environ, PYTHONPATH=str(ROOT)),
-                         capture_output=True, text=True, timeout=duration + 120)
+    res = subprocess.run(
+        [sys.executable, '-c', code],
+        cwd=str(ROOT),
+        env=dict(os.environ, PYTHONPATH=str(ROOT)),
+        capture_output=True,
+        text=True,
+        timeout=duration + 120,
+    )
     for line in res.stdout.splitlines():
-        if line.startswith("RESULT "):
+        if line.startswith('RESULT '):
             return json.loads(line[7:])
-    return {"kind": kind, "rate_msg_s": rate, "n": n, "sent": -1, "received": 0, "lossless": False,
-            "latency_median_ms": float("nan"), "latency_p99_ms": float("nan")}
+    return {'kind': kind, 'rate_msg_s': rate, 'n': n, 'sent': -1, 'received': 0, 'lossless': False,
+            'latency_median_ms': float('nan'), 'latency_p99_ms': float('nan')}
 
 
 def _cpu_seconds(pid: int) -> float:
     """User + system CPU time of a process so far, s (Linux /proc)."""
     try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+        fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
     except (OSError, IndexError, ValueError):
-        return float("nan")
+        return float('nan')
 
 
 def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
@@ -189,17 +198,19 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
     fs = rate * n
     domain = random.randint(201, 232)
     env = _env(domain)
-    if kind == "estimator":
-        node_cmd = [sys.executable, "-m", "ipmc_sensor_ros.nodes.estimator_node", "--ros-args",
-                    "-p", f"sample_rate_hz:={fs:.1f}", "-p", "publish_points:=none",
-                    "-p", "max_gap_s:=1.0", "-p", f"band_high_hz:={min(50.0, fs / 4):.1f}"]
+    if kind == 'estimator':
+        node_cmd = [sys.executable, '-m', 'ipmc_sensor_ros.nodes.estimator_node', '--ros-args',
+                    '-p', f'sample_rate_hz:={fs:.1f}', '-p', 'publish_points:=none',
+                    '-p', 'max_gap_s:=1.0', '-p', f'band_high_hz:={min(50.0, fs / 4):.1f}']
     else:
-        node_cmd = [sys.executable, "-c", PASSTHROUGH]
-    proc = subprocess.Popen(node_cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        node_cmd = [sys.executable, '-c', PASSTHROUGH]
+    proc = subprocess.Popen(
+        node_cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=domain)
-    sink = rclpy.create_node("sink", context=ctx)
-    qos = P.make_qos({"qos_depth": 1000, "qos_reliability": "reliable"})
+    sink = rclpy.create_node('sink', context=ctx)
+    qos = P.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'})
     received = [0]
     latencies: list[float] = []
 
@@ -211,7 +222,7 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
         received[0] += len(b.values)
         latencies.append(now - float(b.times_s[-1]))
 
-    sub = sink.create_subscription(Float64MultiArray, "deflection/block", on_block, qos)
+    sub = sink.create_subscription(Float64MultiArray, 'deflection/block', on_block, qos)
     from rclpy.executors import SingleThreadedExecutor
 
     ex = SingleThreadedExecutor(context=ctx)
@@ -223,9 +234,13 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
         ex.spin_once(timeout_sec=0.05)
     cpu_start = _cpu_seconds(proc.pid)
     wall_start = time.monotonic()
-    driver = subprocess.Popen([sys.executable, "-c", DRIVER, str(rate), str(n), str(duration), str(fs),
-                               repr(epoch)],
-                              env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    driver = subprocess.Popen(
+        [sys.executable, '-c', DRIVER, str(rate), str(n), str(duration), str(fs), repr(epoch)],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
     end = time.monotonic() + duration + 40
     while driver.poll() is None and time.monotonic() < end:
         ex.spin_once(timeout_sec=0.01)
@@ -233,10 +248,10 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
     while time.monotonic() < deadline:
         ex.spin_once(timeout_sec=0.01)
     node_cpu = (_cpu_seconds(proc.pid) - cpu_start) / (time.monotonic() - wall_start)
-    out = driver.communicate(timeout=5)[0] if driver.poll() is not None else ""
-    sent = int(out.split()[2]) if out.startswith("SENT") else -1
+    out = driver.communicate(timeout=5)[0] if driver.poll() is not None else ''
+    sent = int(out.split()[2]) if out.startswith('SENT') else -1
     # the driver paces itself but cannot always keep up: a trial counts at the rate achieved
-    achieved = (int(out.split()[1]) / float(out.split()[3])) if out.startswith("SENT") else 0.0
+    achieved = (int(out.split()[1]) / float(out.split()[3])) if out.startswith('SENT') else 0.0
     proc.send_signal(signal.SIGINT)
     try:
         proc.wait(timeout=10)
@@ -247,13 +262,13 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
     sink.destroy_node()
     rclpy.shutdown(context=ctx)
     lat = np.array(latencies) if latencies else np.array([np.nan])
-    return {"kind": kind, "rate_msg_s": rate, "n": n, "sent": sent, "received": received[0],
-            "lossless": bool(sent > 0 and received[0] == sent),
-            "achieved_msg_s": achieved,
-            "node_cpu_fraction": node_cpu,
-            "driver_kept_up": bool(achieved >= 0.97 * rate),
-            "latency_median_ms": float(np.median(lat) * 1e3),
-            "latency_p99_ms": float(np.percentile(lat, 99) * 1e3)}
+    return {'kind': kind, 'rate_msg_s': rate, 'n': n, 'sent': sent, 'received': received[0],
+            'lossless': bool(sent > 0 and received[0] == sent),
+            'achieved_msg_s': achieved,
+            'node_cpu_fraction': node_cpu,
+            'driver_kept_up': bool(achieved >= 0.97 * rate),
+            'latency_median_ms': float(np.median(lat) * 1e3),
+            'latency_p99_ms': float(np.percentile(lat, 99) * 1e3)}
 
 
 def _ladder(n: int) -> list[float]:
@@ -272,14 +287,14 @@ def _ok(r: dict) -> bool:
           f"msg/s, node CPU {r.get('node_cpu_fraction', float('nan')):.0%} "
           f"-> {'pass' if r['lossless'] and r.get('driver_kept_up') else 'FAIL'}",
           file=sys.stderr, flush=True)
-    return bool(r["lossless"] and r.get("driver_kept_up"))
+    return bool(r['lossless'] and r.get('driver_kept_up'))
 
 
 def bench_nodes(smoke: bool = False) -> list[dict]:
     rows = []
     for n in (1, 1000):
         results = {}
-        for kind in ("passthrough", "estimator"):
+        for kind in ('passthrough', 'estimator'):
             if smoke:
                 best = _run_once(kind, _ladder(n)[0], n, 1.0)
             else:
@@ -300,35 +315,51 @@ def bench_nodes(smoke: bool = False) -> list[dict]:
                         best = r
                         break
             results[kind] = best
-        p, e = results["passthrough"], results["estimator"]
+        p, e = results['passthrough'], results['estimator']
         if p is None or e is None:
-            rows.append({"benchmark": f"node rate, {n}-sample messages", "value": float("nan"),
-                         "unit": "samples/s", "baseline": "pass-through node", "ratio": float("nan"),
-                         "target": ">= 0.9"})
+            rows.append(
+                {
+                    'benchmark': f'node rate, {n}-sample messages',
+                    'value': float('nan'),
+                    'unit': 'samples/s',
+                    'baseline': 'pass-through node',
+                    'ratio': float('nan'),
+                    'target': '>= 0.9',
+                }
+            )
             continue
-        rate_e = e["rate_msg_s"] * n if e["lossless"] else 0.0
-        rate_p = p["rate_msg_s"] * n if p["lossless"] else 0.0
+        rate_e = e['rate_msg_s'] * n if e['lossless'] else 0.0
+        rate_p = p['rate_msg_s'] * n if p['lossless'] else 0.0
         # latency and CPU are compared at the same message rate: the estimator's
-        same = p if p["rate_msg_s"] == e["rate_msg_s"] else _run_once("passthrough", e["rate_msg_s"], n,
-                                                                      1.0 if smoke else 10.0)
+        same = (
+            p
+            if p['rate_msg_s'] == e['rate_msg_s']
+            else _run_once('passthrough', e['rate_msg_s'], n, 1.0 if smoke else 10.0)
+        )
         _ok(same)
-        rows.append({"benchmark": f"estimator node sustained rate, {n}-sample messages"
-                                  + (" (smoke)" if smoke else ", 60 s without loss"),
-                     "value": rate_e, "unit": "samples/s",
-                     "baseline": f"pass-through node same harness: {rate_p:.0f} samples/s",
-                     "ratio": rate_e / rate_p if rate_p else float("nan"), "target": ">= 0.9"})
-        rows.append({"benchmark": f"estimator node added latency, {n}-sample messages at "
+        rows.append({'benchmark': f'estimator node sustained rate, {n}-sample messages'
+                                  + (' (smoke)' if smoke else ', 60 s without loss'),
+                     'value': rate_e, 'unit': 'samples/s',
+                     'baseline': f'pass-through node same harness: {rate_p:.0f} samples/s',
+                     'ratio': rate_e / rate_p if rate_p else float('nan'), 'target': '>= 0.9'})
+        rows.append({'benchmark': f'estimator node added latency, {n}-sample messages at '
                                   f"{e['rate_msg_s']:.0f} msg/s (median; ratio column: added p99)",
-                     "value": e["latency_median_ms"] - same["latency_median_ms"], "unit": "ms",
-                     "baseline": f"pass-through same rate {same['latency_median_ms']:.2f} / "
+                     'value': e['latency_median_ms'] - same['latency_median_ms'], 'unit': 'ms',
+                     'baseline': f"pass-through same rate {same['latency_median_ms']:.2f} / "
                                  f"{same['latency_p99_ms']:.2f} ms",
-                     "ratio": (e["latency_p99_ms"] - same["latency_p99_ms"]), "target": "-"})
-        rows.append({"benchmark": f"estimator node CPU, {n}-sample messages at "
-                                  f"{e['rate_msg_s']:.0f} msg/s",
-                     "value": 100.0 * e.get("node_cpu_fraction", float("nan")), "unit": "% of a core",
-                     "baseline": f"pass-through same rate {100.0 * same.get('node_cpu_fraction', float('nan')):.0f} %",
-                     "ratio": e.get("node_cpu_fraction", float("nan")) / same.get("node_cpu_fraction", float("nan")),
-                     "target": "-"})
+                     'ratio': (e['latency_p99_ms'] - same['latency_p99_ms']), 'target': '-'})
+        rows.append(
+            {
+                'benchmark': f'estimator node CPU, {n}-sample messages at '
+                f"{e['rate_msg_s']:.0f} msg/s",
+                'value': 100.0 * e.get('node_cpu_fraction', float('nan')),
+                'unit': '% of a core',
+                'baseline': f"pass-through same rate {100.0 * same.get('node_cpu_fraction', float('nan')):.0f} %",
+                'ratio': e.get('node_cpu_fraction', float('nan'))
+                / same.get('node_cpu_fraction', float('nan')),
+                'target': '-',
+            }
+        )
     rows.extend(bench_node_cpu(smoke))
     rows.append(bench_simulator_rtf(smoke))
     return rows
@@ -346,8 +377,8 @@ def bench_simulator_rtf(smoke: bool = False) -> dict:
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=random.randint(201, 232))
     node = SimulatorNode(context=ctx, parameter_overrides=[
-        Parameter("realtime_factor", value=0.0), Parameter("duration_s", value=duration),
-        Parameter("block_size", value=200)])
+        Parameter('realtime_factor', value=0.0), Parameter('duration_s', value=duration),
+        Parameter('block_size', value=200)])
     from rclpy.executors import SingleThreadedExecutor
 
     ex = SingleThreadedExecutor(context=ctx)
@@ -359,6 +390,6 @@ def bench_simulator_rtf(smoke: bool = False) -> dict:
     ex.shutdown()
     node.destroy_node()
     rclpy.shutdown(context=ctx)
-    return {"benchmark": "simulator node real-time factor at 1 kHz (fast mode)",
-            "value": duration / wall, "unit": "x real time", "baseline": "wall clock",
-            "ratio": duration / wall, "target": ">= 100"}
+    return {'benchmark': 'simulator node real-time factor at 1 kHz (fast mode)',
+            'value': duration / wall, 'unit': 'x real time', 'baseline': 'wall clock',
+            'ratio': duration / wall, 'target': '>= 100'}

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Time and peak memory of reading (and writing) a large ipmc-timeseries/1 file.
 
 Issue #18 (defect 11): a 5e6-row file took 65 s and 3.1 GB.  Usage:
@@ -52,15 +53,15 @@ print(f'read {ts.n_samples} rows: {time.perf_counter() - t0:.1f} s, peak RSS {pe
 
 
 def main(argv: list[str]) -> None:
-    rows = int(float(argv[0])) if argv and not argv[0].startswith("-") else 5_000_000
-    write = "--write" in argv
+    rows = int(float(argv[0])) if argv and not argv[0].startswith('-') else 5_000_000
+    write = '--write' in argv
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "big.csv"
-        subprocess.run([sys.executable, "-c", MAKE, str(rows), str(path), "1" if write else "0"],
+        path = Path(tmp) / 'big.csv'
+        subprocess.run([sys.executable, '-c', MAKE, str(rows), str(path), '1' if write else '0'],
                        check=True)
-        print(f"file {path.stat().st_size / 1e6:.0f} MB")
-        subprocess.run([sys.executable, "-c", READ, str(path)], check=True)
+        print(f'file {path.stat().st_size / 1e6:.0f} MB')
+        subprocess.run([sys.executable, '-c', READ, str(path)], check=True)
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     main(sys.argv[1:])

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Benchmarks of the workbench: fit, compare and diagnose on the standard sweep.
 
 The standard sweep: slim + short samples, 8 crank-slider frequencies 1-20 Hz,
@@ -27,7 +28,7 @@ def _timed(fn):
 
 def bench_workbench(smoke: bool = False) -> list[dict]:
     freqs = (1.0, 20.0) if smoke else tuple(np.geomspace(1, 20, 8))
-    recs = crank_slider_campaign(("surface_resistance", ("time_delay", {"delay_s": 2e-3})),
+    recs = crank_slider_campaign(('surface_resistance', ('time_delay', {'delay_s': 2e-3})),
                                  frequencies_hz=freqs, duration_s=3.0 if smoke else 6.0)
     groups = {}
     for r in recs:
@@ -35,22 +36,24 @@ def bench_workbench(smoke: bool = False) -> list[dict]:
             fundamental_response(r.time_s, r.deflection_m, r.current_a))
     groups = list(groups.values())
     f = np.array([p.frequency_hz for g in groups for p in g.points])
-    t_base = min(_timed(lambda: SensorModel(PAPER_SAMPLES["slim"]).frequency_response(f))[0]
+    t_base = min(_timed(lambda: SensorModel(PAPER_SAMPLES['slim']).frequency_response(f))[0]
                  for _ in range(20))
-    start = PAPER_PARAMETERS.replace(diffusivity_m2_per_s=5e-11, charge_stress_coupling_j_per_c=150.0)
-    free = ("diffusivity_m2_per_s", "anion_concentration_mol_per_m3", "permittivity_f_per_m",
-            "charge_stress_coupling_j_per_c")
+    start = PAPER_PARAMETERS.replace(
+        diffusivity_m2_per_s=5e-11, charge_stress_coupling_j_per_c=150.0
+    )
+    free = ('diffusivity_m2_per_s', 'anion_concentration_mol_per_m3', 'permittivity_f_per_m',
+            'charge_stress_coupling_j_per_c')
     t_fit, _ = _timed(lambda: fit_parameters(groups, free, start))
     t_cmp, _ = _timed(lambda: compare_records(recs, lambda r: r.model))
     rows = [
-        {"benchmark": f"fit 4 parameters, {f.size} frequency points", "value": t_fit, "unit": "s",
-         "baseline": "H2 at those points", "ratio": t_fit / t_base, "target": "< 0.5 s"},
-        {"benchmark": f"compare, {len(recs)} records", "value": t_cmp, "unit": "s",
-         "baseline": "H2 at those points", "ratio": t_cmp / t_base, "target": "-"},
+        {'benchmark': f'fit 4 parameters, {f.size} frequency points', 'value': t_fit, 'unit': 's',
+         'baseline': 'H2 at those points', 'ratio': t_fit / t_base, 'target': '< 0.5 s'},
+        {'benchmark': f'compare, {len(recs)} records', 'value': t_cmp, 'unit': 's',
+         'baseline': 'H2 at those points', 'ratio': t_cmp / t_base, 'target': '-'},
     ]
     if not smoke:
         t_diag, _ = _timed(lambda: diagnose(recs))
-        rows.append({"benchmark": f"diagnose, full catalog, {len(recs)} records", "value": t_diag,
-                     "unit": "s", "baseline": "H2 at those points", "ratio": t_diag / t_base,
-                     "target": "< 20 s on 2 cores"})
+        rows.append({'benchmark': f'diagnose, full catalog, {len(recs)} records', 'value': t_diag,
+                     'unit': 's', 'baseline': 'H2 at those points', 'ratio': t_diag / t_base,
+                     'target': '< 20 s on 2 cores'})
     return rows

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Run every benchmark and print one table: ``python -m bench.run [--smoke]``.
 
 ``--smoke`` runs each benchmark on tiny inputs (what CI does): it checks that
@@ -18,12 +19,14 @@ SUITES = [bench_core.bench_estimator, bench_core.bench_model, bench_core.bench_f
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--smoke", action="store_true")
+    ap.add_argument('--smoke', action='store_true')
     args = ap.parse_args(argv)
-    print(f"machine: {platform.machine()} {platform.processor() or ''} python {platform.python_version()}"
-          f" cores={__import__('os').cpu_count()}")
-    print("| benchmark | value | unit | ratio | baseline | target |")
-    print("|---|---|---|---|---|---|", flush=True)
+    print(
+        f"machine: {platform.machine()} {platform.processor() or ''} python {platform.python_version()}"
+        f" cores={__import__('os').cpu_count()}"
+    )
+    print('| benchmark | value | unit | ratio | baseline | target |')
+    print('|---|---|---|---|---|---|', flush=True)
     for suite in SUITES:          # rows are printed as each suite finishes
         for r in suite(smoke=args.smoke):
             print(f"| {r['benchmark']} | {r['value']:.3g} | {r['unit']} | {r['ratio']:.3g} | "
@@ -31,5 +34,5 @@ def main(argv=None) -> int:
     return 0
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     sys.exit(main())

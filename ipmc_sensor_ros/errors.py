@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """The package's errors: one base class, a subclass per kind of fault.
 
 Every error the package raises on purpose is an :class:`IpmcError` (a ``ValueError``), whose
@@ -12,7 +13,7 @@ it into one line and exit status 2, never a traceback.
 """
 from __future__ import annotations
 
-__all__ = ["IpmcError", "ParameterError", "DataError", "DataFormatError"]
+__all__ = ['IpmcError', 'ParameterError', 'DataError', 'DataFormatError']
 
 
 class IpmcError(ValueError):
@@ -51,10 +52,10 @@ class DataFormatError(DataError):
     def _format(self) -> str:
         where = self.path
         if self.line is not None:
-            where += f":{self.line}"
+            where += f':{self.line}'
         if self.topic is not None:
             where += f": topic '{self.topic}'"
-        return f"{where}: {self.reason}"
+        return f'{where}: {self.reason}'
 
     def __str__(self) -> str:
         return self._format()

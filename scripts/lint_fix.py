@@ -19,7 +19,7 @@ import sys
 import tokenize
 from pathlib import Path
 
-SPDX = "# SPDX-License-Identifier: Apache-2.0\n"
+SPDX = '# SPDX-License-Identifier: Apache-2.0\n'
 
 
 def requote(source: str) -> str:
@@ -36,13 +36,19 @@ def requote(source: str) -> str:
             continue
         text = tok.string
         i = 0
-        while i < len(text) and text[i] in "rbuRBUfF":
+        while i < len(text) and text[i] in 'rbuRBUfF':
             i += 1
         prefix, body = text[:i], text[i:]
+        if body.startswith("'''") and '"' not in body:
+            edits_q001 = prefix + '"""' + body[3:-3] + '"""'
+            start = offsets[tok.start[0] - 1] + tok.start[1]
+            end = offsets[tok.end[0] - 1] + tok.end[1]
+            edits.append((start, end, edits_q001))
+            continue
         if body.startswith('"""') or not body.startswith('"') or "'" in body:
             continue
-        if "f" in prefix.lower() and "{" in body:
-            continue  # nested expressions may hold quotes; leave to a human
+        # f-strings: before Python 3.12 a replacement field cannot hold the outer quote
+        # character, and a body without "'" holds none in its fields either
         new = prefix + "'" + body[1:-1].replace('\\"', '"') + "'"
         start = offsets[tok.start[0] - 1] + tok.start[1]
         end = offsets[tok.end[0] - 1] + tok.end[1]
@@ -53,32 +59,32 @@ def requote(source: str) -> str:
         out.append(new)
         pos = end
     out.append(source[pos:])
-    return "".join(out)
+    return ''.join(out)
 
 
 def add_spdx(source: str) -> str:
-    if "SPDX-License-Identifier" in "".join(source.splitlines(keepends=True)[:3]):
+    if 'SPDX-License-Identifier' in ''.join(source.splitlines(keepends=True)[:3]):
         return source
-    if source.startswith("#!"):
-        first, rest = source.split("\n", 1)
-        return first + "\n" + SPDX + rest
+    if source.startswith('#!'):
+        first, rest = source.split('\n', 1)
+        return first + '\n' + SPDX + rest
     return SPDX + source
 
 
 def main(argv) -> int:
-    roots = argv or ["ipmc_sensor_ros", "test", "launch", "scripts", "bench", "setup.py"]
+    roots = argv or ['ipmc_sensor_ros', 'test', 'launch', 'scripts', 'bench', 'setup.py']
     files = []
     for r in map(Path, roots):
-        files += sorted(r.rglob("*.py")) if r.is_dir() else [r]
+        files += sorted(r.rglob('*.py')) if r.is_dir() else [r]
     for f in files:
-        src = f.read_text(encoding="utf-8")
+        src = f.read_text(encoding='utf-8')
         new = add_spdx(requote(src))
-        compile(new, str(f), "exec")  # never write a file that no longer parses
+        compile(new, str(f), 'exec')  # never write a file that no longer parses
         if new != src:
-            f.write_text(new, encoding="utf-8")
-    print(f"{len(files)} files checked")
+            f.write_text(new, encoding='utf-8')
+    print(f'{len(files)} files checked')
     return 0
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     sys.exit(main(sys.argv[1:]))

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Shared test fixtures: one ROS domain per test run, ROS contexts, the estimator node driven
 synchronously, temporary workspaces."""
 from __future__ import annotations
@@ -11,7 +12,7 @@ import pytest
 #: ROS_DOMAIN_ID from the environment wins.  Domains are split so that nothing else a test
 #: run starts can land on it: this run's in-process nodes 100-149, child processes started by
 #: tests 150-200, benchmark processes 201-232.
-TEST_DOMAIN = int(os.environ.get("ROS_DOMAIN_ID") or 100 + os.getpid() % 50)
+TEST_DOMAIN = int(os.environ.get('ROS_DOMAIN_ID') or 100 + os.getpid() % 50)
 
 
 def init_context(**kwargs):
@@ -47,7 +48,7 @@ class DirectNode:
         from ipmc_sensor_ros.nodes.messages import ESTIMATE_COLUMNS, unpack_block
 
         self.ctx = init_context()
-        values = {"publish_points": "none", **overrides}
+        values = {'publish_points': 'none', **overrides}
         params = [Parameter(k, value=v) for k, v in values.items()]
         self.node = EstimatorNode(context=self.ctx, parameter_overrides=params)
         self.published: list = []

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Tests of the beam mechanics (small-deflection beam of the paper, eqs. 18-21, and the
 large-deflection elastica that goes past it)."""
 import numpy as np
@@ -21,7 +22,7 @@ def _first_integral_length(tip_angle: float, load: float) -> float:
         if gap <= 0.0:
             return 1.0 / np.sqrt(2.0 * load * np.cos(tip_angle))
         return np.sqrt(gap / (2.0 * load * (np.sin(tip_angle) - np.sin(th))))
-    return quad(smooth, 0.0, tip_angle, weight="alg", wvar=(0.0, -0.5), limit=200)[0]
+    return quad(smooth, 0.0, tip_angle, weight='alg', wvar=(0.0, -0.5), limit=200)[0]
 
 
 def test_elastica_matches_classical_large_deflection_values():
@@ -37,7 +38,7 @@ def test_elastica_matches_classical_large_deflection_values():
     assert theta[-1] == pytest.approx(0.4613, abs=1e-4)
 
 
-@pytest.mark.parametrize("load", [0.5, 2.0, 3.0])
+@pytest.mark.parametrize('load', [0.5, 2.0, 3.0])
 def test_elastica_tip_angle_agrees_with_first_integral_solution(load):
     """The BVP's tip angle equals the root of 'arc length = L' of the first integral
     (1e-6 rad: the BVP tolerance is 1e-10, quad's ~1e-9)."""
@@ -82,9 +83,9 @@ def test_elastica_coordinate_rates_are_the_chain_rule():
 
 
 def test_beam_refuses_unknown_names_and_deflections_beyond_its_table():
-    with pytest.raises(ParameterError, match="beam_model"):
-        make_beam("timoshenko")
-    with pytest.raises(ParameterError, match="of the length"):
+    with pytest.raises(ParameterError, match='beam_model'):
+        make_beam('timoshenko')
+    with pytest.raises(ParameterError, match='of the length'):
         ElasticaBeam().coordinates(np.array([(MAX_DEFLECTION_RATIO + 0.05) * 0.02]), 0.02)
-    with pytest.raises(ParameterError, match="n_shapes"):
+    with pytest.raises(ParameterError, match='n_shapes'):
         ElasticaBeam(n_shapes=9)

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """The reduce/eq55 verbs and a smoke run of every benchmark (no timing assertions)."""
 import json
 import subprocess
@@ -10,34 +11,34 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_reduce_table_json(tmp_path, capsys):
-    out = tmp_path / "t.json"
-    assert main(["reduce", "--orders", "3-4", "--samples", "short", "--json", str(out)]) == 0
-    rows = json.loads(out.read_text())["rows"]
-    assert [r["order"] for r in rows] == [3, 4]
-    assert rows[1]["max_mag_error_db"] < 0.1
-    assert "short" in capsys.readouterr().out
+    out = tmp_path / 't.json'
+    assert main(['reduce', '--orders', '3-4', '--samples', 'short', '--json', str(out)]) == 0
+    rows = json.loads(out.read_text())['rows']
+    assert [r['order'] for r in rows] == [3, 4]
+    assert rows[1]['max_mag_error_db'] < 0.1
+    assert 'short' in capsys.readouterr().out
 
 
 def test_eq55_verb_reports_unstable_inverse(capsys):
-    assert main(["eq55", "--samples", "slim"]) == 0
-    assert "UNSTABLE" in capsys.readouterr().out
+    assert main(['eq55', '--samples', 'slim']) == 0
+    assert 'UNSTABLE' in capsys.readouterr().out
 
 
 def test_bad_sample_is_a_clear_error(capsys):
-    assert main(["reduce", "--samples", "nope"]) == 2
-    assert "nope" in capsys.readouterr().err
+    assert main(['reduce', '--samples', 'nope']) == 2
+    assert 'nope' in capsys.readouterr().err
 
 
 def test_benchmarks_smoke():
-    res = subprocess.run([sys.executable, "-m", "bench.run", "--smoke"], cwd=ROOT,
+    res = subprocess.run([sys.executable, '-m', 'bench.run', '--smoke'], cwd=ROOT,
                          capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr
-    assert "estimator block" in res.stdout and "| benchmark |" in res.stdout
+    assert 'estimator block' in res.stdout and '| benchmark |' in res.stdout
 
 
 def test_effect_catalog_doc_is_in_sync():
     """docs/effects.md is the catalog's one place of documentation: it must match the code."""
     from ipmc_sensor_ros.physics.effects import catalog_markdown
 
-    doc = (ROOT / "docs" / "effects.md").read_text()
+    doc = (ROOT / 'docs' / 'effects.md').read_text()
     assert catalog_markdown().strip() in doc

@@ -1,4 +1,6 @@
+# SPDX-License-Identifier: Apache-2.0
 """ipmc-model estimate: accuracy at any length, named output columns, explicit geometry precedence."""
+
 import json
 from pathlib import Path
 
@@ -11,103 +13,124 @@ from ipmc_sensor_ros.cli.main import main
 from ipmc_sensor_ros.workbench.io import TimeSeries, read_timeseries, write_timeseries
 
 ROOT = Path(__file__).resolve().parents[1]
-SLIM_PARAMS = ROOT / "config" / "estimator.yaml"       # the shipped file: slim geometry
+SLIM_PARAMS = ROOT / 'config' / 'estimator.yaml'       # the shipped file: slim geometry
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def short_run(tmp_path_factory):
     """A 6 s short-sample record (L = 11 mm) at 5 Hz, 1 % current noise, and a 1.5 s one."""
-    out = tmp_path_factory.mktemp("short")
-    assert main(["simulate", "--out", str(out), "--samples", "short", "--frequencies", "5",
-                 "--duration", "6", "--seed", "4"]) == 0
-    assert main(["simulate", "--out", str(out / "brief"), "--samples", "short", "--frequencies", "3",
-                 "--duration", "1.5", "--seed", "5"]) == 0
+    out = tmp_path_factory.mktemp('short')
+    assert main(['simulate', '--out', str(out), '--samples', 'short', '--frequencies', '5',
+                 '--duration', '6', '--seed', '4']) == 0
+    assert (
+        main(
+            [
+                'simulate',
+                '--out',
+                str(out / 'brief'),
+                '--samples',
+                'short',
+                '--frequencies',
+                '3',
+                '--duration',
+                '1.5',
+                '--seed',
+                '5',
+            ]
+        )
+        == 0
+    )
     return out
 
 
 def test_conflicting_geometry_is_an_error_naming_both_values(short_run, tmp_path, capsys):
-    rc = main(["estimate", str(short_run / "short_5Hz.csv"), "--params", str(SLIM_PARAMS),
-               "--out", str(tmp_path)])
+    rc = main(['estimate', str(short_run / 'short_5Hz.csv'), '--params', str(SLIM_PARAMS),
+               '--out', str(tmp_path)])
     err = capsys.readouterr().err
     assert rc == 2
-    assert "length_m = 0.011" in err and "0.022" in err and "estimator.yaml" in err and "--prefer" in err
+    assert (
+        'length_m = 0.011' in err
+        and '0.022' in err
+        and 'estimator.yaml' in err
+        and '--prefer' in err
+    )
     assert not list(tmp_path.iterdir())                 # nothing written
 
 
 def test_prefer_chooses_and_nrmse_shows_the_consequence(short_run, tmp_path, capsys):
-    src = str(short_run / "short_5Hz.csv")
-    js = tmp_path / "e.json"
-    assert main(["estimate", src, "--params", str(SLIM_PARAMS), "--prefer", "header",
-                 "--out", str(tmp_path / "h"), "--json", str(js)]) == 0
-    right = json.loads(js.read_text())[0]["nrmse"]
-    assert main(["estimate", src, "--params", str(SLIM_PARAMS), "--prefer", "params",
-                 "--out", str(tmp_path / "p"), "--json", str(js)]) == 0
-    wrong = json.loads(js.read_text())[0]["nrmse"]
+    src = str(short_run / 'short_5Hz.csv')
+    js = tmp_path / 'e.json'
+    assert main(['estimate', src, '--params', str(SLIM_PARAMS), '--prefer', 'header',
+                 '--out', str(tmp_path / 'h'), '--json', str(js)]) == 0
+    right = json.loads(js.read_text())[0]['nrmse']
+    assert main(['estimate', src, '--params', str(SLIM_PARAMS), '--prefer', 'params',
+                 '--out', str(tmp_path / 'p'), '--json', str(js)]) == 0
+    wrong = json.loads(js.read_text())[0]['nrmse']
     # 1 % current noise -> about 1 % deflection error; 3 % leaves room for the reduction error.
     assert right < 0.03
     # the slim geometry (twice the length) gives a gain error of order 1: clearly wrong
     assert wrong > 0.5
-    assert "NRMSE" in capsys.readouterr().out
+    assert 'NRMSE' in capsys.readouterr().out
 
 
 def test_output_keeps_measured_and_names_the_estimate(short_run, tmp_path):
-    assert main(["estimate", str(short_run), "--out", str(tmp_path)]) == 0   # a directory works
-    est = read_estimate(tmp_path / "short_5Hz.estimate.csv")
-    measured = read_timeseries(short_run / "short_5Hz.csv")
-    assert set(est) == {"time_s", "current_A", "deflection_estimate_m", "deflection_m"}
-    assert np.array_equal(est["deflection_m"], measured.deflection_m)
-    assert np.array_equal(est["time_s"], measured.time_s)               # exact round trip
-    assert not np.allclose(est["deflection_estimate_m"], est["deflection_m"])
-    header = (tmp_path / "short_5Hz.estimate.csv").read_text().splitlines()[:12]
-    assert "# length_m: 0.011" in header                                 # the geometry used
+    assert main(['estimate', str(short_run), '--out', str(tmp_path)]) == 0   # a directory works
+    est = read_estimate(tmp_path / 'short_5Hz.estimate.csv')
+    measured = read_timeseries(short_run / 'short_5Hz.csv')
+    assert set(est) == {'time_s', 'current_A', 'deflection_estimate_m', 'deflection_m'}
+    assert np.array_equal(est['deflection_m'], measured.deflection_m)
+    assert np.array_equal(est['time_s'], measured.time_s)               # exact round trip
+    assert not np.allclose(est['deflection_estimate_m'], est['deflection_m'])
+    header = (tmp_path / 'short_5Hz.estimate.csv').read_text().splitlines()[:12]
+    assert '# length_m: 0.011' in header                                 # the geometry used
 
 
 def test_short_record_still_reports_accuracy(short_run, tmp_path, capsys):
     """1.5 s is far shorter than the 80 s leak transient; the NRMSE is reported anyway."""
-    assert main(["estimate", str(short_run / "brief"), "--out", str(tmp_path)]) == 0
+    assert main(['estimate', str(short_run / 'brief'), '--out', str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert "NRMSE" in out and "whole record" in out
-    value = float(out.split("NRMSE ")[1].split()[0])
+    assert 'NRMSE' in out and 'whole record' in out
+    value = float(out.split('NRMSE ')[1].split()[0])
     assert value < 0.05        # 1 % noise; a short record leaves a little more of the transient
 
 
 def test_params_without_geometry_takes_the_header_and_says_so(short_run, tmp_path, capsys):
     doc = yaml.safe_load(SLIM_PARAMS.read_text())
-    params = doc["/**/ipmc_estimator"]["ros__parameters"]
-    for key in ("length_m", "width_m", "thickness_m"):
+    params = doc['/**/ipmc_estimator']['ros__parameters']
+    for key in ('length_m', 'width_m', 'thickness_m'):
         del params[key]
-    nogeo = tmp_path / "nogeo.yaml"
+    nogeo = tmp_path / 'nogeo.yaml'
     nogeo.write_text(yaml.safe_dump(doc))
-    assert main(["estimate", str(short_run / "short_5Hz.csv"), "--params", str(nogeo),
-                 "--out", str(tmp_path / "o")]) == 0
+    assert main(['estimate', str(short_run / 'short_5Hz.csv'), '--params', str(nogeo),
+                 '--out', str(tmp_path / 'o')]) == 0
     err = capsys.readouterr().err
-    assert "geometry from the data header" in err
-    est = (tmp_path / "o" / "short_5Hz.estimate.csv").read_text()
-    assert "# length_m: 0.011" in est                                    # not the slim default
+    assert 'geometry from the data header' in err
+    est = (tmp_path / 'o' / 'short_5Hz.estimate.csv').read_text()
+    assert '# length_m: 0.011' in est                                    # not the slim default
 
 
 def test_explicit_sample_rate_mismatch_is_an_error(short_run, tmp_path, capsys):
     doc = yaml.safe_load(SLIM_PARAMS.read_text())
-    doc["/**/ipmc_estimator"]["ros__parameters"]["sample_rate_hz"] = 500.0
-    p = tmp_path / "rate.yaml"
+    doc['/**/ipmc_estimator']['ros__parameters']['sample_rate_hz'] = 500.0
+    p = tmp_path / 'rate.yaml'
     p.write_text(yaml.safe_dump(doc))
-    assert main(["estimate", str(short_run / "short_5Hz.csv"), "--params", str(p), "--prefer",
-                 "header", "--out", str(tmp_path / "o")]) == 2
-    assert "sample rate 1000 Hz" in capsys.readouterr().err
+    assert main(['estimate', str(short_run / 'short_5Hz.csv'), '--params', str(p), '--prefer',
+                 'header', '--out', str(tmp_path / 'o')]) == 2
+    assert 'sample rate 1000 Hz' in capsys.readouterr().err
 
 
 def test_current_only_input(short_run, tmp_path, capsys):
-    ts = read_timeseries(short_run / "short_5Hz.csv")
-    only = tmp_path / "in" / "current_only.csv"
+    ts = read_timeseries(short_run / 'short_5Hz.csv')
+    only = tmp_path / 'in' / 'current_only.csv'
     only.parent.mkdir()
-    write_timeseries(only, TimeSeries(path="", sample=ts.sample, geometry=ts.geometry, known={},
+    write_timeseries(only, TimeSeries(path='', sample=ts.sample, geometry=ts.geometry, known={},
                                       sample_rate_hz=ts.sample_rate_hz, time_s=ts.time_s,
                                       current_a=ts.current_a))
-    assert main(["estimate", str(only), "--out", str(tmp_path / "o")]) == 0
-    assert "accuracy not reported" in capsys.readouterr().out
-    assert set(read_estimate(tmp_path / "o" / "current_only.estimate.csv")) == {
-        "time_s", "current_A", "deflection_estimate_m"}
+    assert main(['estimate', str(only), '--out', str(tmp_path / 'o')]) == 0
+    assert 'accuracy not reported' in capsys.readouterr().out
+    assert set(read_estimate(tmp_path / 'o' / 'current_only.estimate.csv')) == {
+        'time_s', 'current_A', 'deflection_estimate_m'}
     # verbs that need a deflection skip it with a line; only current-only files -> clear error
-    assert main(["compare", str(only.parent)]) == 2
+    assert main(['compare', str(only.parent)]) == 2
     err = capsys.readouterr().err
-    assert "skipped" in err and "current only" in err and "no usable data" in err
+    assert 'skipped' in err and 'current only' in err and 'no usable data' in err

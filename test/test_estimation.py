@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Tests of the model-aware DeflectionEstimator (effects around the inverse filter)."""
 import numpy as np
 import pytest
@@ -9,7 +10,7 @@ from ipmc_sensor_ros.simulation.sensor import predict_current
 from ipmc_sensor_ros.simulation.stimuli import CrankSlider
 
 FS = 1000.0
-SLIM = PAPER_SAMPLES["slim"]
+SLIM = PAPER_SAMPLES['slim']
 
 
 def track(model_true, model_est, f=5.0, duration=120.0, block=250):
@@ -26,14 +27,14 @@ def track(model_true, model_est, f=5.0, duration=120.0, block=250):
     return float(np.sqrt(np.mean((y[sel] - truth[sel]) ** 2)) / np.sqrt(np.mean(truth[sel] ** 2)))
 
 
-@pytest.mark.parametrize("effect", [
-    "time_delay(delay_s=0.003)", "current_offset(offset_a=3e-7,drift_a_per_s=1e-9)",
-    "nonlinearity(quadratic=2,cubic=30)", "amplifier_bandwidth(corner_hz=20)",
-    "hydration_drift(diffusivity_rate_per_s=-0.003)",
+@pytest.mark.parametrize('effect', [
+    'time_delay(delay_s=0.003)', 'current_offset(offset_a=3e-7,drift_a_per_s=1e-9)',
+    'nonlinearity(quadratic=2,cubic=30)', 'amplifier_bandwidth(corner_hz=20)',
+    'hydration_drift(diffusivity_rate_per_s=-0.003)',
 ])
 def test_estimate_improves_when_the_model_gains_the_hidden_effect(effect):
-    true = SensorModel.named("h2", SLIM, extra_effects=effect)
-    plain = track(true, SensorModel.named("h2", SLIM))
+    true = SensorModel.named('h2', SLIM, extra_effects=effect)
+    plain = track(true, SensorModel.named('h2', SLIM))
     aware = track(true, true)
     # The aware estimator is back to the plain-data accuracy (~1 %, leak phase lead);
     # every hidden effect here costs the plain one at least twice that.
@@ -42,7 +43,7 @@ def test_estimate_improves_when_the_model_gains_the_hidden_effect(effect):
 
 
 def test_delay_restamps_output_times():
-    model = SensorModel.named("h2", SLIM, extra_effects="time_delay(delay_s=0.002)")
+    model = SensorModel.named('h2', SLIM, extra_effects='time_delay(delay_s=0.002)')
     est = DeflectionEstimator(model, FS)
     t = np.arange(100) / FS
     t_out, _ = est.process(t, np.zeros(100))
@@ -50,7 +51,7 @@ def test_delay_restamps_output_times():
 
 
 def test_rebuilt_continues_without_jump():
-    model = SensorModel.named("h2", SLIM)
+    model = SensorModel.named('h2', SLIM)
     t = np.arange(int(31 * FS)) / FS
     i = predict_current(model, t, CrankSlider(2.0, 2e-3, 15e-3).deflection(t))
     n = int(30 * FS)
@@ -65,7 +66,7 @@ def test_rebuilt_continues_without_jump():
 def test_recent_input_is_the_last_inputs_in_order_for_any_block_sizes():
     """The replay history (a ring buffer) holds exactly the last history_s of input,
     oldest first, whatever the block sizes (1 sample up to more than the buffer)."""
-    est = DeflectionEstimator(SensorModel(PAPER_SAMPLES["slim"]), 1000.0, history_s=0.05)
+    est = DeflectionEstimator(SensorModel(PAPER_SAMPLES['slim']), 1000.0, history_s=0.05)
     size = est._history.size
     rng = np.random.default_rng(3)
     x = rng.normal(0, 1e-6, 2000)

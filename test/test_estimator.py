@@ -1,9 +1,14 @@
+# SPDX-License-Identifier: Apache-2.0
 """Tests of the discrete inverse estimator (current -> deflection)."""
 import numpy as np
 import pytest
 
-from ipmc_sensor_ros.estimation.inverse import (DEFAULT_LEAK_CORNER_HZ, ParameterError, InverseEstimator,
-                                       leak_tradeoff)
+from ipmc_sensor_ros.estimation.inverse import (
+    DEFAULT_LEAK_CORNER_HZ,
+    ParameterError,
+    InverseEstimator,
+    leak_tradeoff,
+)
 from ipmc_sensor_ros.errors import DataError
 from ipmc_sensor_ros.estimation.stream import validate_block
 from ipmc_sensor_ros.physics.model import SensorModel
@@ -13,17 +18,17 @@ from ipmc_sensor_ros.simulation.sensor import SensorSimulator, periodic_response
 from ipmc_sensor_ros.workbench.metrics import nrmse
 from ipmc_sensor_ros.simulation.stimuli import CrankSlider, FreeVibration, Step
 
-SLIM = SensorModel(PAPER_SAMPLES["slim"])
-BIG = SensorModel(PAPER_SAMPLES["big"])
+SLIM = SensorModel(PAPER_SAMPLES['slim'])
+BIG = SensorModel(PAPER_SAMPLES['big'])
 FS = 1000.0
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def reduced_slim():
     return reduce_model(SLIM, 4)
 
 
-@pytest.mark.parametrize("fs", [200.0, 1000.0, 10000.0])
+@pytest.mark.parametrize('fs', [200.0, 1000.0, 10000.0])
 def test_discrete_matches_continuous_up_to_fs_over_10(reduced_slim, fs):
     est = InverseEstimator(reduced_slim, fs)
     f = np.logspace(-1, np.log10(fs / 10), 80)
@@ -37,10 +42,10 @@ def test_all_poles_strictly_inside_unit_circle(reduced_slim):
     assert np.all(np.abs(est.poles()) < 1.0)
 
 
-@pytest.mark.parametrize("kw,name", [
-    (dict(leak_corner_hz=0.0), "leak_corner_hz"), (dict(leak_corner_hz=-1.0), "leak_corner_hz"),
-    (dict(sample_rate_hz=float("nan")), "sample_rate_hz"), (dict(prewarp_hz=600.0), "prewarp_hz"),
-    (dict(leak_corner_hz=600.0), "leak_corner_hz"), (dict(channels=0), "channels"),
+@pytest.mark.parametrize('kw,name', [
+    (dict(leak_corner_hz=0.0), 'leak_corner_hz'), (dict(leak_corner_hz=-1.0), 'leak_corner_hz'),
+    (dict(sample_rate_hz=float('nan')), 'sample_rate_hz'), (dict(prewarp_hz=600.0), 'prewarp_hz'),
+    (dict(leak_corner_hz=600.0), 'leak_corner_hz'), (dict(channels=0), 'channels'),
 ])
 def test_invalid_configuration_is_refused(reduced_slim, kw, name):
     args = dict(sample_rate_hz=FS)
@@ -49,7 +54,7 @@ def test_invalid_configuration_is_refused(reduced_slim, kw, name):
         InverseEstimator(reduced_slim, **args)
 
 
-@pytest.mark.parametrize("drive_hz", [1.0, 5.0, 20.0])
+@pytest.mark.parametrize('drive_hz', [1.0, 5.0, 20.0])
 def test_crank_slider_tracking_from_exact_h2(reduced_slim, drive_hz):
     # Current from the exact H2 steady-state periodic response (frequency domain), 2 mm
     # crank radius; the record is repeated so that the leak transient (tau = 16 s) is gone.
@@ -72,7 +77,7 @@ def test_step_held_3s_stays_within_documented_leak_tradeoff():
     y = est.process(i)
     held = t >= 0.52
     rel_err_end = abs(y[-1] - w[-1]) / 2e-3
-    predicted = leak_tradeoff(red, DEFAULT_LEAK_CORNER_HZ, 3.0, 0.0)["held_step_relative_error"]
+    predicted = leak_tradeoff(red, DEFAULT_LEAK_CORNER_HZ, 3.0, 0.0)['held_step_relative_error']
     # The leak predicts exp(-w_c t) decay; the end error must match it within 2 % of the
     # step (sensor dynamics add a few ms of lag and a small static gain error).
     assert rel_err_end == pytest.approx(predicted, abs=0.02)
@@ -92,11 +97,15 @@ def test_offset_ramps_without_leak_tradeoff_and_is_bounded(reduced_slim):
     offset = 1e-7  # A
     est = InverseEstimator(reduced_slim, 100.0)
     y = est.process(np.full(int(200 * 100), offset))
-    bound = leak_tradeoff(reduced_slim, DEFAULT_LEAK_CORNER_HZ, 1.0, offset)["offset_steady_error_m"]
+    bound = leak_tradeoff(reduced_slim, DEFAULT_LEAK_CORNER_HZ, 1.0, offset)[
+        'offset_steady_error_m'
+    ]
     assert y[-1] == pytest.approx(bound, rel=0.02)   # 200 s = 12.5 leak time constants
     est2 = InverseEstimator(reduced_slim, 100.0, offset_corner_hz=0.002)
     y2 = est2.process(np.full(int(2000 * 100), offset))
-    peak = leak_tradeoff(reduced_slim, DEFAULT_LEAK_CORNER_HZ, 1.0, offset, 0.002)["offset_peak_error_m"]
+    peak = leak_tradeoff(reduced_slim, DEFAULT_LEAK_CORNER_HZ, 1.0, offset, 0.002)[
+        'offset_peak_error_m'
+    ]
     assert np.max(np.abs(y2)) <= peak * 1.02 and abs(y2[-1]) < 0.01 * peak
 
 
@@ -119,7 +128,7 @@ def test_blocks_and_single_samples_identical_and_state_restore(reduced_slim):
     assert np.array_equal(c.process(x), ya)
 
 
-@pytest.mark.parametrize("offset_corner_hz", [None, 0.05])
+@pytest.mark.parametrize('offset_corner_hz', [None, 0.05])
 def test_small_block_path_equals_sosfilt_bit_for_bit(reduced_slim, offset_corner_hz):
     """Blocks up to SMALL_BLOCK_SAMPLES run a plain-Python recursion (the one-sample
     fast path of the node); it must give exactly sosfilt's numbers, whatever the mix
@@ -135,7 +144,7 @@ def test_small_block_path_equals_sosfilt_bit_for_bit(reduced_slim, offset_corner
     y_mixed = np.concatenate([mixed.process(x[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
                              + [mixed.process(x[bounds[-1]:])])
     assert np.array_equal(y_whole, y_mixed)
-    assert np.array_equal(whole.get_state()["zi"], mixed.get_state()["zi"])
+    assert np.array_equal(whole.get_state()['zi'], mixed.get_state()['zi'])
 
 
 def test_multichannel_equals_independent_channels(reduced_slim):
@@ -159,9 +168,9 @@ def test_rebuild_continues_without_jump(reduced_slim):
     assert abs(y_next - y[-1]) < 50e-6
 
 
-@pytest.mark.parametrize("bad,msg", [
-    ([], "empty"), ([1e-6, float("nan")], "non-finite"), ([float("inf")], "non-finite"),
-    ([[1.0]], "1-D"), ([5.0], r"\|i\|"), (["x"], "numeric"),
+@pytest.mark.parametrize('bad,msg', [
+    ([], 'empty'), ([1e-6, float('nan')], 'non-finite'), ([float('inf')], 'non-finite'),
+    ([[1.0]], '1-D'), ([5.0], r'\|i\|'), (['x'], 'numeric'),
 ])
 def test_validate_block_rejects_bad_input(bad, msg):
     with pytest.raises(DataError, match=msg):
@@ -169,5 +178,5 @@ def test_validate_block_rejects_bad_input(bad, msg):
 
 
 def test_validate_block_rejects_oversized():
-    with pytest.raises(DataError, match="limit"):
+    with pytest.raises(DataError, match='limit'):
         validate_block(np.zeros(11), max_samples=10)

@@ -9,6 +9,6 @@ import pytest
 
 @pytest.mark.linter
 def test_flake8():
-    main_with_errors = pytest.importorskip("ament_flake8.main").main_with_errors
-    rc, errors = main_with_errors(argv=["--linelength", "99"])
-    assert rc == 0, f"{len(errors)} flake8 findings:\n" + "\n".join(errors[:50])
+    main_with_errors = pytest.importorskip('ament_flake8.main').main_with_errors
+    rc, errors = main_with_errors(argv=['--linelength', '99'])
+    assert rc == 0, f'{len(errors)} flake8 findings:\n' + '\n'.join(errors[:50])

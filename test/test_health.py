@@ -20,17 +20,17 @@ def test_ok_at_nominal_rate_then_error_when_stale():
     assert mon.evaluate(_counters(0), 0.0).level == OK          # just started
     assert mon.evaluate(_counters(1000), 1.0).level == OK       # first data
     h = mon.evaluate(_counters(2000), 2.0)
-    assert h.level == OK and h.values["measured_rate_hz"] == "1000"
+    assert h.level == OK and h.values['measured_rate_hz'] == '1000'
     assert mon.evaluate(_counters(2000), 3.5).level == OK       # 1.5 s < stale_after_s
     h = mon.evaluate(_counters(2000), 4.5)                       # 2.5 s without data
-    assert h.level == ERROR and "no data for 2.5 s" in h.message
+    assert h.level == ERROR and 'no data for 2.5 s' in h.message
 
 
 def test_error_when_no_data_ever():
     mon = HealthMonitor(FS, HealthLimits(stale_after_s=2.0))
     mon.evaluate(_counters(0), 10.0)
     h = mon.evaluate(_counters(0), 12.5)
-    assert h.level == ERROR and "since start" in h.message
+    assert h.level == ERROR and 'since start' in h.message
 
 
 def test_warn_on_new_rejections_resets_gaps_only_while_they_happen():
@@ -38,7 +38,7 @@ def test_warn_on_new_rejections_resets_gaps_only_while_they_happen():
     mon.evaluate(_counters(1000), 1.0)
     h = mon.evaluate(_counters(2000, messages_rejected=2, resets=1, gaps=1), 2.0)
     assert h.level == WARN
-    for text in ("2 message(s) rejected", "1 filter reset(s)", "1 time gap(s)"):
+    for text in ('2 message(s) rejected', '1 filter reset(s)', '1 time gap(s)'):
         assert text in h.message
     # same totals one second later: nothing new, back to OK
     assert mon.evaluate(_counters(3000, messages_rejected=2, resets=1, gaps=1), 3.0).level == OK
@@ -48,15 +48,15 @@ def test_warn_on_rate_off_sample_rate():
     mon = HealthMonitor(FS, HealthLimits(rate_tolerance=0.05))
     mon.evaluate(_counters(1000), 1.0)
     h = mon.evaluate(_counters(1900), 2.0)       # 900 Hz: 10 % low
-    assert h.level == WARN and "sample rate 900 Hz, expected 1000 Hz" in h.message
+    assert h.level == WARN and 'sample rate 900 Hz, expected 1000 Hz' in h.message
     assert mon.evaluate(_counters(2880), 3.0).level == OK      # 980 Hz: within 5 %
 
 
 def test_done_source_is_not_stale():
-    mon = HealthMonitor(FS, HealthLimits(stale_after_s=1.0), samples_key="samples_published")
-    mon.evaluate({"samples_published": 500, "done": True}, 0.0)
-    h = mon.evaluate({"samples_published": 500, "done": True}, 5.0)
-    assert h.level == OK and h.message == "done"
+    mon = HealthMonitor(FS, HealthLimits(stale_after_s=1.0), samples_key='samples_published')
+    mon.evaluate({'samples_published': 500, 'done': True}, 0.0)
+    h = mon.evaluate({'samples_published': 500, 'done': True}, 5.0)
+    assert h.level == OK and h.message == 'done'
 
 
 def test_offset_estimate_recovers_daq_offset_under_motion():
@@ -74,7 +74,7 @@ def test_offset_estimate_recovers_daq_offset_under_motion():
     mon = HealthMonitor(FS, HealthLimits(offset_warn_a=50e-9))
     mon.evaluate(_counters(1000), 1.0, stats)
     h = mon.evaluate(_counters(2000), 2.0, stats)
-    assert h.level == WARN and "estimated current offset" in h.message
+    assert h.level == WARN and 'estimated current offset' in h.message
 
 
 def test_mains_line_warns_but_noise_alone_does_not():
@@ -94,7 +94,7 @@ def test_mains_line_warns_but_noise_alone_does_not():
         mon.evaluate(_counters(1000), 1.0, stats)
     assert mon_clean.evaluate(_counters(2000), 2.0, clean).level == OK
     h = mon_hum.evaluate(_counters(2000), 2.0, hum)
-    assert h.level == WARN and "mains line at 50 Hz" in h.message
+    assert h.level == WARN and 'mains line at 50 Hz' in h.message
 
 
 def test_worst_aggregates_channels():

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Reliability from the outside (issue 18), ROS-free part: hostile parameter values,
 params files, plugins and YAML reach the core through the same functions the node
 and ``ipmc-model`` use; each must give a refusal naming the thing, or a correct
@@ -12,22 +13,22 @@ from ipmc_sensor_ros.simulation.sensor import predict_current
 from ipmc_sensor_ros.simulation.stimuli import CrankSlider
 
 FS = 1000.0
-SLIM = PAPER_SAMPLES["slim"]
+SLIM = PAPER_SAMPLES['slim']
 
 
 # -- defect 3: rebuilds with the offset tracker on ----------------------------------------
 
-@pytest.mark.parametrize("before,after,keeps_reference", [
-    ({}, {"offset_corner_hz": 0.01}, False),                         # tracker turned on
-    ({"offset_corner_hz": 0.01}, {"leak_corner_hz": 0.02}, True),    # change while it is on
-    ({"offset_corner_hz": 0.01}, {"offset_corner_hz": 0.05}, False),
-    ({"offset_corner_hz": 0.01}, {"leak_corner_hz": 0.0101}, True),  # nearly equal corners
+@pytest.mark.parametrize('before,after,keeps_reference', [
+    ({}, {'offset_corner_hz': 0.01}, False),                         # tracker turned on
+    ({'offset_corner_hz': 0.01}, {'leak_corner_hz': 0.02}, True),    # change while it is on
+    ({'offset_corner_hz': 0.01}, {'offset_corner_hz': 0.05}, False),
+    ({'offset_corner_hz': 0.01}, {'leak_corner_hz': 0.0101}, True),  # nearly equal corners
 ])
 def test_rebuild_with_offset_tracker_continues_without_jump_or_nan(before, after, keeps_reference):
     """continue_from divided by the DC gain, which is exactly 0 with the tracker on
     (zero at s = 0): NaN after every such rebuild.  Now: no jump, and the new filter
     keeps the old one's deflection and offset estimate."""
-    model = SensorModel.named("h2", SLIM)
+    model = SensorModel.named('h2', SLIM)
     t = np.arange(int(130 * FS)) / FS
     w = CrankSlider(2.0, 2e-3, 15e-3).deflection(t)
     i = predict_current(model, t, w) + 30e-9          # a DAQ offset of 30 nA
@@ -56,7 +57,9 @@ def test_rebuild_with_offset_tracker_continues_without_jump_or_nan(before, after
 def test_hydration_drift_with_offset_tracker_gives_no_nan():
     """hydration_drift rebuilds the filter every update_s (5 s): with the tracker on every
     rebuild gave NaN (15,000 of 20,000 outputs)."""
-    model = SensorModel.named("h2", SLIM, extra_effects="hydration_drift(diffusivity_rate_per_s=-1e-3)")
+    model = SensorModel.named(
+        'h2', SLIM, extra_effects='hydration_drift(diffusivity_rate_per_s=-1e-3)'
+    )
     t = np.arange(int(20 * FS)) / FS
     w = CrankSlider(2.0, 2e-3, 15e-3).deflection(t)
     i = predict_current(model, t, w) + 30e-9
@@ -77,9 +80,9 @@ from ipmc_sensor_ros.physics import effects as E                      # noqa: E4
 from ipmc_sensor_ros.physics.parameters import ParameterError, read_yaml   # noqa: E402
 
 
-@pytest.mark.parametrize("name,value", [("youngs_modulus_pa", 1e-296),
-                                        ("charge_stress_coupling_j_per_c", 1e304),
-                                        ("temperature_k", 5e-324)])
+@pytest.mark.parametrize('name,value', [('youngs_modulus_pa', 1e-296),
+                                        ('charge_stress_coupling_j_per_c', 1e304),
+                                        ('temperature_k', 5e-324)])
 def test_extreme_material_values_are_refused_naming_the_parameter(name, value):
     """These values raised LinAlgError / ZeroDivisionError (a dead node, a traceback)."""
     values = C.defaults(C.ESTIMATOR_SPECS)
@@ -96,34 +99,34 @@ def test_every_numeric_spec_has_a_range():
 
 def test_offline_estimate_with_extreme_params_is_one_line_exit_2(tmp_path, capsys):
     from ipmc_sensor_ros.cli.main import main
-    f = tmp_path / "p.yaml"
-    f.write_text("ipmc_estimator:\n  ros__parameters:\n    youngs_modulus_pa: 1.0e-296\n")
-    assert main(["estimate", str(tmp_path / "in.csv"), "--params", str(f),
-                 "--out", str(tmp_path / "o.csv")]) == 2
+    f = tmp_path / 'p.yaml'
+    f.write_text('ipmc_estimator:\n  ros__parameters:\n    youngs_modulus_pa: 1.0e-296\n')
+    assert main(['estimate', str(tmp_path / 'in.csv'), '--params', str(f),
+                 '--out', str(tmp_path / 'o.csv')]) == 2
     err = capsys.readouterr().err
-    assert "youngs_modulus_pa" in err and str(f) in err and len(err.strip().splitlines()) == 1
+    assert 'youngs_modulus_pa' in err and str(f) in err and len(err.strip().splitlines()) == 1
 
 
 # -- defect 5 / 7: bounded labels, truncated echoes ------------------------------------
 
 def test_frame_id_is_bounded_in_length_and_characters():
     values = C.defaults(C.ESTIMATOR_SPECS)
-    for bad in ("x" * 1_000_000, "a b", "", "fr\u00e4me"):
-        with pytest.raises(ValueError, match="frame_id") as info:
-            C.check_values({**values, "frame_id": bad})
+    for bad in ('x' * 1_000_000, 'a b', '', 'fr\u00e4me'):
+        with pytest.raises(ValueError, match='frame_id') as info:
+            C.check_values({**values, 'frame_id': bad})
         assert len(str(info.value)) < 300            # the value is not echoed in full
 
 
 def test_alias_bomb_yaml_gives_a_short_error_fast(tmp_path):
     """safe_load keeps aliases shared; the error message used to expand the value with
     !r (40 s, 2.9 GB, MemoryError)."""
-    lines = ["a0: &a0 [x, x, x, x, x, x, x, x, x]"]
+    lines = ['a0: &a0 [x, x, x, x, x, x, x, x, x]']
     for k in range(1, 10):
-        lines.append(f"a{k}: &a{k} [" + ", ".join([f"*a{k - 1}"] * 9) + "]")
-    lines.append("ipmc_estimator:\n  ros__parameters:\n    effects: *a9")
-    f = tmp_path / "bomb.yaml"
-    f.write_text("\n".join(lines) + "\n")
-    with pytest.raises(ValueError, match="effects") as info:
+        lines.append(f'a{k}: &a{k} [' + ', '.join([f'*a{k - 1}'] * 9) + ']')
+    lines.append('ipmc_estimator:\n  ros__parameters:\n    effects: *a9')
+    f = tmp_path / 'bomb.yaml'
+    f.write_text('\n'.join(lines) + '\n')
+    with pytest.raises(ValueError, match='effects') as info:
         C.load_params_file(f)
     assert len(str(info.value)) < 400
 
@@ -131,60 +134,60 @@ def test_alias_bomb_yaml_gives_a_short_error_fast(tmp_path):
 # -- defect 6: plugins once, hashed, built-ins protected ---------------------------------
 
 def test_plugin_is_executed_once_and_cannot_replace_a_builtin(tmp_path):
-    counter = tmp_path / "runs.txt"
-    plugin = tmp_path / "counted_effect.py"
+    counter = tmp_path / 'runs.txt'
+    plugin = tmp_path / 'counted_effect.py'
     plugin.write_text(
-        "from ipmc_sensor_ros.physics.effects import Effect\n"
+        'from ipmc_sensor_ros.physics.effects import Effect\n'
         f"open({str(counter)!r}, 'a').write('x')\n"
         "class Counted(Effect):\n    name = 'counted_effect_t'\n")
     try:
-        values = {**C.defaults(C.ESTIMATOR_SPECS), "plugins": [str(plugin)]}
+        values = {**C.defaults(C.ESTIMATOR_SPECS), 'plugins': [str(plugin)]}
         C.build_model(values)
         plugin.write_text("raise RuntimeError('swapped file must not run')\n")
         C.build_model(values)
-        C.build_model({**values, "frame_id": "other"})
-        assert counter.read_text() == "x"
+        C.build_model({**values, 'frame_id': 'other'})
+        assert counter.read_text() == 'x'
         digest, names = E.loaded_plugins()[str(plugin.resolve())]
-        assert len(digest) == 64 and names == ("counted_effect_t",)
+        assert len(digest) == 64 and names == ('counted_effect_t',)
     finally:
-        E.EFFECTS.pop("counted_effect_t", None)
-    rogue = tmp_path / "rogue.py"
-    rogue.write_text("from ipmc_sensor_ros.physics.effects import Effect\n"
+        E.EFFECTS.pop('counted_effect_t', None)
+    rogue = tmp_path / 'rogue.py'
+    rogue.write_text('from ipmc_sensor_ros.physics.effects import Effect\n'
                      "class Fake(Effect):\n    name = 'time_delay'\n")
-    with pytest.raises(ParameterError, match="built-in"):
+    with pytest.raises(ParameterError, match='built-in'):
         E.load_plugin(rogue)
-    assert type(E.EFFECTS["time_delay"]).__name__ == "TimeDelay"
+    assert type(E.EFFECTS['time_delay']).__name__ == 'TimeDelay'
 
 
-@pytest.mark.parametrize("exc", ["KeyboardInterrupt", "SystemExit(0)"])
+@pytest.mark.parametrize('exc', ['KeyboardInterrupt', 'SystemExit(0)'])
 def test_plugin_raising_at_load_is_a_clear_error(tmp_path, exc):
-    f = tmp_path / f"bad_{exc[:6]}.py"
-    f.write_text(f"raise {exc}\n")
-    with pytest.raises(ParameterError, match=str(f).replace(".", r"\.")):
+    f = tmp_path / f'bad_{exc[:6]}.py'
+    f.write_text(f'raise {exc}\n')
+    with pytest.raises(ParameterError, match=str(f).replace('.', r'\.')):
         E.load_plugin(f)
 
 
 # -- defect 9: YAML files give one line with file:line -----------------------------------
 
-@pytest.mark.parametrize("text,match", [
-    ("material: {a: [1, 2\n", r":\d+: not valid YAML"),
-    ("material: !!python/object/apply:os.system ['true']\n", "not valid YAML"),
+@pytest.mark.parametrize('text,match', [
+    ('material: {a: [1, 2\n', r':\d+: not valid YAML'),
+    ("material: !!python/object/apply:os.system ['true']\n", 'not valid YAML'),
 ])
 def test_compare_params_with_broken_yaml_is_one_line(tmp_path, capsys, text, match):
     from ipmc_sensor_ros.cli.args import load_material
-    f = tmp_path / "m.yaml"
+    f = tmp_path / 'm.yaml'
     f.write_text(text)
     with pytest.raises(ParameterError, match=match):
         load_material(f)
 
 
 def test_utf16_params_file_is_read_and_errors_name_the_file(tmp_path):
-    f = tmp_path / "u16.yaml"
-    f.write_bytes("ipmc_estimator:\n  ros__parameters:\n    length_m: 0.021\n".encode("utf-16"))
-    assert C.load_params_file(f)["length_m"] == 0.021
-    g = tmp_path / "latin.yaml"
-    g.write_bytes(b"a: \xe9\xff\n")
-    with pytest.raises(ParameterError, match="latin.yaml"):
+    f = tmp_path / 'u16.yaml'
+    f.write_bytes('ipmc_estimator:\n  ros__parameters:\n    length_m: 0.021\n'.encode('utf-16'))
+    assert C.load_params_file(f)['length_m'] == 0.021
+    g = tmp_path / 'latin.yaml'
+    g.write_bytes(b'a: \xe9\xff\n')
+    with pytest.raises(ParameterError, match='latin.yaml'):
         read_yaml(g)
 
 
@@ -192,15 +195,15 @@ def test_utf16_params_file_is_read_and_errors_name_the_file(tmp_path):
 
 def test_duplicated_effect_parameter_and_unicode_digits_are_refused():
     values = C.defaults(C.ESTIMATOR_SPECS)
-    with pytest.raises(ValueError, match="twice"):
-        C.build_model({**values, "effects": ["time_delay(delay_s=0.001, delay_s=0.002)"]})
-    with pytest.raises(ValueError, match="delay_s"):
-        C.build_model({**values, "effects": ["time_delay(delay_s=\u0660.\u0660\u0660\u0662)"]})
+    with pytest.raises(ValueError, match='twice'):
+        C.build_model({**values, 'effects': ['time_delay(delay_s=0.001, delay_s=0.002)']})
+    with pytest.raises(ValueError, match='delay_s'):
+        C.build_model({**values, 'effects': ['time_delay(delay_s=\u0660.\u0660\u0660\u0662)']})
 
 
 def test_offset_corner_above_nyquist_is_refused_like_the_leak_corner():
-    values = {**C.defaults(C.ESTIMATOR_SPECS), "sample_rate_hz": 100.0, "offset_corner_hz": 60.0}
-    with pytest.raises(ValueError, match="offset_corner_hz.*Nyquist"):
+    values = {**C.defaults(C.ESTIMATOR_SPECS), 'sample_rate_hz': 100.0, 'offset_corner_hz': 60.0}
+    with pytest.raises(ValueError, match='offset_corner_hz.*Nyquist'):
         C.build_estimator(values)
 
 
@@ -209,13 +212,15 @@ def test_estimate_to_bag_with_huge_time_origin_is_one_line_and_leaves_no_bag(tmp
     half-written bag left behind)."""
     from ipmc_sensor_ros.cli.main import main
     t = 1e10 + np.arange(2000) / FS
-    src = tmp_path / "in.csv"
-    head = ("# format: ipmc-timeseries/1\n# sample: slim\n# length_m: 0.022\n# width_m: 0.007\n"
-            "# thickness_m: 0.00036\n# sample_rate_hz: 1000.0\ntime_s,deflection_m,current_A\n")
-    src.write_text(head + "\n".join(f"{a:.6f},0.0,{1e-7 * np.sin(a):.6e}" for a in t) + "\n")
-    code = main(["estimate", str(src), "--out", str(tmp_path / "x"), "--format", "bag"])
+    src = tmp_path / 'in.csv'
+    head = ('# format: ipmc-timeseries/1\n# sample: slim\n# length_m: 0.022\n# width_m: 0.007\n'
+            '# thickness_m: 0.00036\n# sample_rate_hz: 1000.0\ntime_s,deflection_m,current_A\n')
+    src.write_text(head + '\n'.join(f'{a:.6f},0.0,{1e-7 * np.sin(a):.6e}' for a in t) + '\n')
+    code = main(['estimate', str(src), '--out', str(tmp_path / 'x'), '--format', 'bag'])
     err = capsys.readouterr().err
-    errors = [line for line in err.splitlines() if "error" in line]
+    errors = [line for line in err.splitlines() if 'error' in line]
     # the stream core's time rule (stamps are int32 seconds) refuses every block
-    assert code == 2 and "Traceback" not in err and len(errors) == 1 and "must lie in" in errors[0], err
-    assert not list((tmp_path / "x").glob("*")) if (tmp_path / "x").exists() else True
+    assert (
+        code == 2 and 'Traceback' not in err and len(errors) == 1 and 'must lie in' in errors[0]
+    ), err
+    assert not list((tmp_path / 'x').glob('*')) if (tmp_path / 'x').exists() else True

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Tests of workbench.labimport: lab exports in several dialects into ipmc-timeseries/1.
 
 The samples in test/data/lab/ are written by make_lab.py in five different dialects
@@ -18,22 +19,22 @@ from ipmc_sensor_ros.workbench import io
 from ipmc_sensor_ros.workbench.labimport import import_lab_file, import_lab_files
 from ipmc_sensor_ros.workbench.measurements import DataFormatError
 
-LAB = Path(__file__).resolve().parent / "data" / "lab"
-META = LAB / "run.json"
-SLIM = Geometry(0.022, 0.007, 0.00036, "slim")
+LAB = Path(__file__).resolve().parent / 'data' / 'lab'
+META = LAB / 'run.json'
+SLIM = Geometry(0.022, 0.007, 0.00036, 'slim')
 
 # row 2 of each file, converted by hand; unit conversions are one division by a power of
 # ten, so they equal the decimal literal within float rounding (rtol 1e-12)
 CASES = {
-    "labview_slim_5Hz.csv": ({}, 2.5129e-5, 3.2618e-7),
-    "daq_slim_5Hz.tsv": ({}, 2.513e-5, 3.2618e-7),
-    "tabelle_slim_5Hz.txt": ({}, 2.5129e-5, 3.2618e-7),
-    "tia_slim_5Hz.csv": ({"current_gain_a_per_v": 1e-6}, 2.5129e-5, 3.2618e-7),
-    "field_current_only.csv": ({}, None, 3.2618e-7),
+    'labview_slim_5Hz.csv': ({}, 2.5129e-5, 3.2618e-7),
+    'daq_slim_5Hz.tsv': ({}, 2.513e-5, 3.2618e-7),
+    'tabelle_slim_5Hz.txt': ({}, 2.5129e-5, 3.2618e-7),
+    'tia_slim_5Hz.csv': ({'current_gain_a_per_v': 1e-6}, 2.5129e-5, 3.2618e-7),
+    'field_current_only.csv': ({}, None, 3.2618e-7),
 }
 
 
-@pytest.mark.parametrize("name", sorted(CASES))
+@pytest.mark.parametrize('name', sorted(CASES))
 def test_each_dialect_is_read_in_si(name):
     options, deflection, current = CASES[name]
     ts = import_lab_file(LAB / name, meta=META, **options)
@@ -45,15 +46,15 @@ def test_each_dialect_is_read_in_si(name):
         assert ts.deflection_m is None
     else:
         assert ts.deflection_m[1] == pytest.approx(deflection, rel=1e-12)
-    assert ts.geometry == SLIM and ts.sample == "slim"
-    assert ts.known == {"temperature_k": 296.0}
-    assert ts.extra["meta.operator"] == "jd"
+    assert ts.geometry == SLIM and ts.sample == 'slim'
+    assert ts.known == {'temperature_k': 296.0}
+    assert ts.extra['meta.operator'] == 'jd'
 
 
 def test_dialects_agree_with_each_other():
     # the same signal in five dialects: equal up to the digits each file keeps
     # (the TSV keeps 0.01 um = 1e-8 m of deflection, 0.01 nA of current)
-    ref = import_lab_file(LAB / "labview_slim_5Hz.csv", meta=META)
+    ref = import_lab_file(LAB / 'labview_slim_5Hz.csv', meta=META)
     for name, (options, deflection, _) in CASES.items():
         ts = import_lab_file(LAB / name, meta=META, **options)
         np.testing.assert_allclose(ts.time_s, ref.time_s, rtol=0, atol=1e-12)
@@ -63,129 +64,129 @@ def test_dialects_agree_with_each_other():
 
 
 def test_free_text_header_kept_as_notes():
-    ts = import_lab_file(LAB / "labview_slim_5Hz.csv", geometry="22mm,7mm,360um")
-    notes = [v for k, v in sorted(ts.extra.items()) if k.startswith("note_")]
+    ts = import_lab_file(LAB / 'labview_slim_5Hz.csv', geometry='22mm,7mm,360um')
+    notes = [v for k, v in sorted(ts.extra.items()) if k.startswith('note_')]
     assert len(notes) == 9
-    assert notes[0] == "LabVIEW Measurement" and notes[-1] == "***End_of_Header***"
-    assert notes[4] == "Operator jd"  # tab collapsed to one space: one-line header value
-    assert ts.extra["lab_columns"] == ("time=Time [s], deflection=Laser [mm], "
-                                       "current=Current [uA]")
-    assert ts.sample == "" and ts.known == {}
+    assert notes[0] == 'LabVIEW Measurement' and notes[-1] == '***End_of_Header***'
+    assert notes[4] == 'Operator jd'  # tab collapsed to one space: one-line header value
+    assert ts.extra['lab_columns'] == ('time=Time [s], deflection=Laser [mm], '
+                                       'current=Current [uA]')
+    assert ts.sample == '' and ts.known == {}
 
 
 def test_geometry_sources_and_conflict(tmp_path):
-    by_flag = import_lab_file(LAB / "daq_slim_5Hz.tsv", geometry="22 mm, 7mm, 0.36mm")
+    by_flag = import_lab_file(LAB / 'daq_slim_5Hz.tsv', geometry='22 mm, 7mm, 0.36mm')
     assert by_flag.geometry == Geometry(0.022, 0.007, 0.00036)
-    by_yaml = import_lab_file(LAB / "daq_slim_5Hz.tsv", meta=LAB / "run.yaml")
+    by_yaml = import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=LAB / 'run.yaml')
     assert by_yaml.geometry == SLIM
-    agree = import_lab_file(LAB / "daq_slim_5Hz.tsv", meta=META, geometry="22mm,7mm,360um")
+    agree = import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=META, geometry='22mm,7mm,360um')
     assert agree.geometry == SLIM
-    with pytest.raises(DataFormatError, match=r"length conflict: geometry argument says 11mm "
-                                              r"\(0\.011 m\) but run metadata .*run\.json says "
-                                              r"length_mm: 22 \(0\.022 m\)"):
-        import_lab_file(LAB / "daq_slim_5Hz.tsv", meta=META, geometry="11mm,7mm,360um")
-    with pytest.raises(DataFormatError, match=r"no length, width, thickness: pass geometry="):
-        import_lab_file(LAB / "daq_slim_5Hz.tsv")
+    with pytest.raises(DataFormatError, match=r'length conflict: geometry argument says 11mm '
+                                              r'\(0\.011 m\) but run metadata .*run\.json says '
+                                              r'length_mm: 22 \(0\.022 m\)'):
+        import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=META, geometry='11mm,7mm,360um')
+    with pytest.raises(DataFormatError, match=r'no length, width, thickness: pass geometry='):
+        import_lab_file(LAB / 'daq_slim_5Hz.tsv')
     with pytest.raises(DataFormatError, match=r"geometry argument: '22' is not a length with a "
-                                              r"unit"):
-        import_lab_file(LAB / "daq_slim_5Hz.tsv", geometry="22,7,0.36")
-    with pytest.raises(DataFormatError, match=r"geometry out of physical range: .*length_m"):
-        import_lab_file(LAB / "daq_slim_5Hz.tsv", geometry="22m,7mm,360um")
+                                              r'unit'):
+        import_lab_file(LAB / 'daq_slim_5Hz.tsv', geometry='22,7,0.36')
+    with pytest.raises(DataFormatError, match=r'geometry out of physical range: .*length_m'):
+        import_lab_file(LAB / 'daq_slim_5Hz.tsv', geometry='22m,7mm,360um')
     with pytest.raises(DataFormatError, match=r"sample conflict: argument says 'big' but run "
                                               r"metadata .* says 'slim'"):
-        import_lab_file(LAB / "daq_slim_5Hz.tsv", meta=META, sample="big")
-    bad = tmp_path / "bad.json"
+        import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=META, sample='big')
+    bad = tmp_path / 'bad.json'
     bad.write_text('{"length_mm": 22, "width_mm": 7, "thickness_um": "thick"}')
     with pytest.raises(DataFormatError, match=r"bad\.json: run metadata thickness_um: 'thick'"):
-        import_lab_file(LAB / "daq_slim_5Hz.tsv", meta=bad)
-    warm = tmp_path / "warm.json"
+        import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=bad)
+    warm = tmp_path / 'warm.json'
     geometry = '"length_mm": 22, "width_mm": 7, "thickness_um": 360'
     warm.write_text('{' + geometry + ', "temperature_k": "warm"}')
     with pytest.raises(DataFormatError, match=r"warm\.json: run metadata temperature_k: 'warm' "
-                                              r"must be a number"):
-        import_lab_file(LAB / "daq_slim_5Hz.tsv", meta=warm)
-    cold = tmp_path / "cold.json"
+                                              r'must be a number'):
+        import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=warm)
+    cold = tmp_path / 'cold.json'
     cold.write_text('{' + geometry + ', "temperature_k": -3}')
-    with pytest.raises(DataFormatError, match=r"cold\.json: implausible known value: "
-                                              r".*temperature"):
-        import_lab_file(LAB / "daq_slim_5Hz.tsv", meta=cold)
-    broken = tmp_path / "broken.json"
+    with pytest.raises(DataFormatError, match=r'cold\.json: implausible known value: '
+                                              r'.*temperature'):
+        import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=cold)
+    broken = tmp_path / 'broken.json'
     broken.write_text('{"length_mm": 22,')
-    with pytest.raises(DataFormatError, match=r"broken\.json.*not valid JSON"):
-        import_lab_file(LAB / "daq_slim_5Hz.tsv", meta=broken)
+    with pytest.raises(DataFormatError, match=r'broken\.json.*not valid JSON'):
+        import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=broken)
 
 
 def test_voltage_needs_a_gain_and_a_current_refuses_one():
     with pytest.raises(DataFormatError, match=r"tia_slim_5Hz\.csv:1: column 'Current \[V\]' is a "
-                                              r"voltage: give current_gain_a_per_v"):
-        import_lab_file(LAB / "tia_slim_5Hz.csv", meta=META)
-    with pytest.raises(DataFormatError, match=r"current_gain_a_per_v = 1e-06 given but column "
+                                              r'voltage: give current_gain_a_per_v'):
+        import_lab_file(LAB / 'tia_slim_5Hz.csv', meta=META)
+    with pytest.raises(DataFormatError, match=r'current_gain_a_per_v = 1e-06 given but column '
                                               r"'Current \[uA\]' is already a current"):
-        import_lab_file(LAB / "labview_slim_5Hz.csv", meta=META, current_gain_a_per_v=1e-6)
-    with pytest.raises(DataFormatError, match=r"current_gain_a_per_v must be a finite number > 0"):
-        import_lab_file(LAB / "tia_slim_5Hz.csv", meta=META, current_gain_a_per_v=-1.0)
+        import_lab_file(LAB / 'labview_slim_5Hz.csv', meta=META, current_gain_a_per_v=1e-6)
+    with pytest.raises(DataFormatError, match=r'current_gain_a_per_v must be a finite number > 0'):
+        import_lab_file(LAB / 'tia_slim_5Hz.csv', meta=META, current_gain_a_per_v=-1.0)
 
 
 def _lab(tmp_path, name, text):
     p = tmp_path / name
-    p.write_text(text, encoding="utf-8")
+    p.write_text(text, encoding='utf-8')
     return p
 
 
 def test_columns_found_overridden_and_refused(tmp_path):
-    two = _lab(tmp_path, "two.csv", "Time [s],Laser [mm],Tip (mm),I [nA],Force [N]\n"
-                                    "0,1,2,3,9\n0.5,1,2,3,9\n")
-    with pytest.raises(DataFormatError, match=r"two\.csv:1: two columns could be the "
+    two = _lab(tmp_path, 'two.csv', 'Time [s],Laser [mm],Tip (mm),I [nA],Force [N]\n'
+                                    '0,1,2,3,9\n0.5,1,2,3,9\n')
+    with pytest.raises(DataFormatError, match=r'two\.csv:1: two columns could be the '
                                               r"deflection: \['Laser \[mm\]', 'Tip \(mm\)'\]"):
-        import_lab_file(two, geometry="22mm,7mm,360um")
-    ts = import_lab_file(two, geometry="22mm,7mm,360um", columns={"deflection": "Tip (mm)"})
+        import_lab_file(two, geometry='22mm,7mm,360um')
+    ts = import_lab_file(two, geometry='22mm,7mm,360um', columns={'deflection': 'Tip (mm)'})
     assert ts.deflection_m.tolist() == [0.002, 0.002]
     assert ts.current_a.tolist() == pytest.approx([3e-9, 3e-9], rel=1e-15)
-    bare = _lab(tmp_path, "bare.csv", "t,current_uA\n0,1\n2,1\n")
+    bare = _lab(tmp_path, 'bare.csv', 't,current_uA\n0,1\n2,1\n')
     with pytest.raises(DataFormatError, match=r"bare\.csv:1: column 't' \(time\) has no unit"):
-        import_lab_file(bare, geometry="22mm,7mm,360um")
+        import_lab_file(bare, geometry='22mm,7mm,360um')
     # an explicit name may add the missing unit
-    ts = import_lab_file(bare, geometry="22mm,7mm,360um", columns={"time": "t [ms]"})
+    ts = import_lab_file(bare, geometry='22mm,7mm,360um', columns={'time': 't [ms]'})
     assert ts.time_s.tolist() == [0.0, 0.002] and ts.current_a.tolist() == [1e-6, 1e-6]
     with pytest.raises(DataFormatError, match=r"columns: time='Zeit' is not a column"):
-        import_lab_file(bare, geometry="22mm,7mm,360um", columns={"time": "Zeit"})
+        import_lab_file(bare, geometry='22mm,7mm,360um', columns={'time': 'Zeit'})
 
 
 REFUSED = {  # file text -> the message it must give (file:line where a line applies)
-    "wrong.csv": ("Time [s],Deflection [A],Current [A]\n0,1,2\n1,1,2\n",
+    'wrong.csv': ('Time [s],Deflection [A],Current [A]\n0,1,2\n1,1,2\n',
                   r"wrong\.csv:1: column 'Deflection \[A\]' \(deflection\): unit 'A' is not a "
-                  r"unit of deflection"),
-    "nocur.csv": ("Time [s],Laser [mm]\n0,1\n1,1\n", r"nocur\.csv:1: no current column among"),
-    "back.txt": ("run 3\nTime [ms];Current [µA]\n0;1,5\n2;1,5\n1;1,5\n",
-                 r"back\.txt:5: time decreases: 1\.0 ms after 2\.0 ms"),
-    "cell.csv": ("Time [s],Current [A]\n0,1\n1,x\n",
+                  r'unit of deflection'),
+    'nocur.csv': ('Time [s],Laser [mm]\n0,1\n1,1\n', r'nocur\.csv:1: no current column among'),
+    'back.txt': ('run 3\nTime [ms];Current [µA]\n0;1,5\n2;1,5\n1;1,5\n',
+                 r'back\.txt:5: time decreases: 1\.0 ms after 2\.0 ms'),
+    'cell.csv': ('Time [s],Current [A]\n0,1\n1,x\n',
                  r"cell\.csv:3: non-numeric cell 'x' in column Current \[A\]"),
-    "notable.csv": ("just words\nand more words\n", r"notable\.csv:2: no table found in the file"),
-    "nan.csv": ("Time [s],Current [A]\n0,1\n1,NaN\n", r"nan\.csv:3: NaN/Inf cell 'NaN'"),
-    "dup.csv": ("Time [s],Current [A]\n0,1\n0,1\n", r"dup\.csv:3: duplicate time 0\.0 s"),
+    'notable.csv': ('just words\nand more words\n', r'notable\.csv:2: no table found in the file'),
+    'nan.csv': ('Time [s],Current [A]\n0,1\n1,NaN\n', r"nan\.csv:3: NaN/Inf cell 'NaN'"),
+    'dup.csv': ('Time [s],Current [A]\n0,1\n0,1\n', r'dup\.csv:3: duplicate time 0\.0 s'),
 }
 
 
-@pytest.mark.parametrize("name", sorted(REFUSED))
+@pytest.mark.parametrize('name', sorted(REFUSED))
 def test_refused_files_name_file_and_line(tmp_path, name):
     text, message = REFUSED[name]
     with pytest.raises(DataFormatError, match=message):
-        import_lab_file(_lab(tmp_path, name, text), geometry="22mm,7mm,360um")
+        import_lab_file(_lab(tmp_path, name, text), geometry='22mm,7mm,360um')
 
 
 def test_fifo_refused(tmp_path):
-    fifo = tmp_path / "daq.csv"
+    fifo = tmp_path / 'daq.csv'
     os.mkfifo(fifo)
-    with pytest.raises(DataFormatError, match=r"daq\.csv: not a regular file"):
-        import_lab_file(fifo, geometry="22mm,7mm,360um")
+    with pytest.raises(DataFormatError, match=r'daq\.csv: not a regular file'):
+        import_lab_file(fifo, geometry='22mm,7mm,360um')
 
 
 def test_import_lab_files_writes_readable_timeseries(tmp_path):
-    out = tmp_path / "imported"
-    names = ["labview_slim_5Hz.csv", "daq_slim_5Hz.tsv", "field_current_only.csv"]
+    out = tmp_path / 'imported'
+    names = ['labview_slim_5Hz.csv', 'daq_slim_5Hz.tsv', 'field_current_only.csv']
     written = import_lab_files([LAB / n for n in names], out, meta=META)
-    assert written == [out / "labview_slim_5Hz.csv", out / "daq_slim_5Hz.csv",
-                       out / "field_current_only.csv"]
+    assert written == [out / 'labview_slim_5Hz.csv', out / 'daq_slim_5Hz.csv',
+                       out / 'field_current_only.csv']
     for name, path in zip(names, written):
         direct = import_lab_file(LAB / name, meta=META)
         back = io.read_timeseries(path)
@@ -193,25 +194,25 @@ def test_import_lab_files_writes_readable_timeseries(tmp_path):
         assert np.array_equal(back.current_a, direct.current_a)
         assert back.geometry == direct.geometry and back.extra == direct.extra
         assert (back.deflection_m is None) == (direct.deflection_m is None)
-    with pytest.raises(DataFormatError, match=r"labview_slim_5Hz\.csv: output exists"):
+    with pytest.raises(DataFormatError, match=r'labview_slim_5Hz\.csv: output exists'):
         import_lab_files([LAB / names[0]], out, meta=META)
     assert import_lab_files([LAB / names[0]], out, meta=META, overwrite=True) == written[:1]
     # read_records over the imported directory skips the current-only record
     got = io.read_records(out)
-    assert len(got.records) == 2 and got.skipped[0][0].endswith("field_current_only.csv")
+    assert len(got.records) == 2 and got.skipped[0][0].endswith('field_current_only.csv')
     # one failing file: nothing written
-    fresh = tmp_path / "fresh"
+    fresh = tmp_path / 'fresh'
     with pytest.raises(DataFormatError, match=r"tia_slim_5Hz\.csv:1: column 'Current \[V\]'"):
-        import_lab_files([LAB / names[0], LAB / "tia_slim_5Hz.csv"], fresh, meta=META)
+        import_lab_files([LAB / names[0], LAB / 'tia_slim_5Hz.csv'], fresh, meta=META)
     assert not fresh.exists()
 
 
 def test_parse_columns_spec():
     from ipmc_sensor_ros.workbench.labimport import parse_columns_spec
 
-    assert parse_columns_spec("time=Time [s], deflection=Tip (mm),current=I_nA") == {
-        "time": "Time [s]", "deflection": "Tip (mm)", "current": "I_nA"}
-    for bad, message in (("time", "not role=column"), ("time=", "not role=column"),
-                         ("speed=v", "unknown role 'speed'"), ("time=a,time=b", "twice")):
+    assert parse_columns_spec('time=Time [s], deflection=Tip (mm),current=I_nA') == {
+        'time': 'Time [s]', 'deflection': 'Tip (mm)', 'current': 'I_nA'}
+    for bad, message in (('time', 'not role=column'), ('time=', 'not role=column'),
+                         ('speed=v', "unknown role 'speed'"), ('time=a,time=b', 'twice')):
         with pytest.raises(ValueError, match=message):
             parse_columns_spec(bad)

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Simulator -> estimator end to end: tracking accuracy and exact sample accounting.
 
 1. One process, one executor: three simulator/estimator pairs (crank-slider at
@@ -52,17 +53,17 @@ def _sim_params(f_hz: float, duration_s: float = DURATION_S, realtime_factor: fl
     # 120 s in blocks of 200 = 600 messages per topic, fewer than the QoS depth of
     # 1000: even a stalled subscriber cannot lose one, so exact accounting does not
     # depend on scheduling (fast mode: one block per ms, real-time factor ~200).
-    return {"motor_frequency_hz": f_hz, "realtime_factor": realtime_factor, "block_size": 200,
-            "duration_s": duration_s, "wait_for_subscribers": 1}
+    return {'motor_frequency_hz': f_hz, 'realtime_factor': realtime_factor, 'block_size': 200,
+            'duration_s': duration_s, 'wait_for_subscribers': 1}
 
 
 def _context_with_monitor(monkeypatch):
     """A fresh context on a random loopback domain, its executor and a monitor node."""
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=TEST_DOMAIN)
     ex = SingleThreadedExecutor(context=ctx)
-    monitor_node = rclpy.create_node("monitor", context=ctx)
+    monitor_node = rclpy.create_node('monitor', context=ctx)
     ex.add_node(monitor_node)
     return ctx, ex, monitor_node
 
@@ -72,10 +73,10 @@ def test_in_process_pairs_track_truth_and_account_exactly(monkeypatch):
     pairs = []
     try:
         for f in (1.0, 5.0, 20.0):
-            ns = f"/f{int(f)}"
+            ns = f'/f{int(f)}'
             monitor = TrackingMonitor(monitor_node, ns)
             est = EstimatorNode(context=ctx, namespace=ns, parameter_overrides=[
-                Parameter("publish_points", value="last_of_block")])
+                Parameter('publish_points', value='last_of_block')])
             sim = SimulatorNode(context=ctx, namespace=ns, parameter_overrides=[
                 Parameter(k, value=v) for k, v in _sim_params(f).items()])
             ex.add_node(est)
@@ -90,15 +91,15 @@ def test_in_process_pairs_track_truth_and_account_exactly(monkeypatch):
             ex.spin_once(timeout_sec=0.05)
         for f, sim, est, monitor in pairs:
             c = est.counters()
-            assert sim.counters()["samples_published"] == N_SAMPLES, f
-            assert c["samples_in"] == c["samples_out"] == N_SAMPLES, (f, c)
-            assert c["samples_rejected"] == c["samples_dropped"] == c["resets"] == 0, (f, c)
+            assert sim.counters()['samples_published'] == N_SAMPLES, f
+            assert c['samples_in'] == c['samples_out'] == N_SAMPLES, (f, c)
+            assert c['samples_rejected'] == c['samples_dropped'] == c['resets'] == 0, (f, c)
             assert monitor.estimate_samples == monitor.truth_samples == N_SAMPLES, f
             error, compared = monitor.score(last_s=20.0)
             # Every sample of the last 20 s is aligned (20000 or 20001 depending on how
             # the window edge rounds at the run's absolute start time).
             assert compared >= 20000, f
-            print(f"in-process {f:g} Hz: NRMSE {error:.4f} over {compared} samples")
+            print(f'in-process {f:g} Hz: NRMSE {error:.4f} over {compared} samples')
             assert error < NRMSE_LIMIT, (f, error)
     finally:
         ex.shutdown()
@@ -115,18 +116,18 @@ def test_estimator_improves_when_its_model_gains_the_hidden_effect(monkeypatch):
     parameter names it tracks the truth.  Two identical (seeded, deterministic) simulators
     feed the two estimators in namespaces /plain and /aware of one executor."""
     ctx, ex, monitor_node = _context_with_monitor(monkeypatch)
-    hidden = ["amplifier_bandwidth(corner_hz=40)"]
+    hidden = ['amplifier_bandwidth(corner_hz=40)']
     nodes, monitors = [], {}
     try:
-        for ns, est_effects in (("/plain", None), ("/aware", hidden)):
+        for ns, est_effects in (('/plain', None), ('/aware', hidden)):
             monitors[ns] = TrackingMonitor(monitor_node, ns)
-            est_params = [Parameter("publish_points", value="none")]
+            est_params = [Parameter('publish_points', value='none')]
             if est_effects:
-                est_params.append(Parameter("effects", value=est_effects))
+                est_params.append(Parameter('effects', value=est_effects))
             est = EstimatorNode(context=ctx, namespace=ns, parameter_overrides=est_params)
             sim = SimulatorNode(context=ctx, namespace=ns, parameter_overrides=[
                 Parameter(k, value=v) for k, v in _sim_params(10.0).items()]
-                + [Parameter("effects", value=hidden)])
+                + [Parameter('effects', value=hidden)])
             nodes += [est, sim]
             ex.add_node(est)
             ex.add_node(sim)
@@ -135,11 +136,13 @@ def test_estimator_improves_when_its_model_gains_the_hidden_effect(monkeypatch):
                and time.monotonic() < end):
             ex.spin_once(timeout_sec=0.05)
         errors = {ns: m.score(last_s=20.0)[0] for ns, m in monitors.items()}
-        print(f"hidden amplifier pole: NRMSE plain {errors['/plain']:.4f}, aware {errors['/aware']:.4f}")
+        print(
+            f"hidden amplifier pole: NRMSE plain {errors['/plain']:.4f}, aware {errors['/aware']:.4f}"
+        )
         # A 14 deg phase error alone is a 25 % NRMSE; knowing the pole leaves the ~1 %
         # of the leak and the reduction.  "Measurably better": at least 5x, and < 5 %.
-        assert errors["/aware"] < NRMSE_LIMIT
-        assert errors["/plain"] > 5 * errors["/aware"]
+        assert errors['/aware'] < NRMSE_LIMIT
+        assert errors['/plain'] > 5 * errors['/aware']
     finally:
         ex.shutdown()
         for n in nodes:
@@ -149,15 +152,15 @@ def test_estimator_improves_when_its_model_gains_the_hidden_effect(monkeypatch):
 
 
 def _ros_args(params: dict, namespace: str) -> list[str]:
-    args = ["--ros-args", "-r", f"__ns:={namespace}"]
+    args = ['--ros-args', '-r', f'__ns:={namespace}']
     for k, v in params.items():
-        args += ["-p", f"{k}:={v}"]
+        args += ['-p', f'{k}:={v}']
     return args
 
 
 def _start(module: str, params: dict, namespace: str, env: dict, log: Path):
-    cmd = [sys.executable, "-m", f"ipmc_sensor_ros.nodes.{module}"] + _ros_args(params, namespace)
-    return subprocess.Popen(cmd, env=env, stdout=log.open("w"), stderr=subprocess.STDOUT)
+    cmd = [sys.executable, '-m', f'ipmc_sensor_ros.nodes.{module}'] + _ros_args(params, namespace)
+    return subprocess.Popen(cmd, env=env, stdout=log.open('w'), stderr=subprocess.STDOUT)
 
 
 def test_two_processes_over_dds_track_truth_and_account_exactly(tmp_path, monkeypatch):
@@ -175,8 +178,8 @@ def test_ten_minute_live_run_accounts_exactly(tmp_path, monkeypatch):
 
 
 def _rss_bytes(pid: int) -> int:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
+    for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+        if line.startswith('VmRSS:'):
             return int(line.split()[1]) * 1024
     return 0
 
@@ -187,40 +190,45 @@ def _two_process_run(tmp_path, monkeypatch, duration_s: float, realtime_factor: 
     timeout_s = TIMEOUT_S + 1.2 * duration_s * (realtime_factor > 0)
     domain = random.randint(150, 200)
     env = dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(domain),
-               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_LOG_DIR=str(tmp_path))
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_LOG_DIR=str(tmp_path))
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=domain)
-    node = rclpy.create_node("monitor", context=ctx)
+    node = rclpy.create_node('monitor', context=ctx)
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
-    monitor = TrackingMonitor(node, "/rig")
+    monitor = TrackingMonitor(node, '/rig')
     procs = {}
-    logs = {"estimator": tmp_path / "estimator.log", "simulator": tmp_path / "simulator.log"}
+    logs = {'estimator': tmp_path / 'estimator.log', 'simulator': tmp_path / 'simulator.log'}
 
     def spin_until(predicate, what):
         end = time.monotonic() + timeout_s
         while not predicate():
             for name, p in procs.items():
-                assert p.poll() is None, f"{name} exited early:\n{logs[name].read_text()}"
-            assert time.monotonic() < end, f"timed out waiting for {what}"
+                assert p.poll() is None, f'{name} exited early:\n{logs[name].read_text()}'
+            assert time.monotonic() < end, f'timed out waiting for {what}'
             ex.spin_once(timeout_sec=0.05)
 
     try:
-        procs["estimator"] = _start("estimator_node", {"publish_points": "last_of_block"},
-                                    "/rig", env, logs["estimator"])
+        procs['estimator'] = _start('estimator_node', {'publish_points': 'last_of_block'},
+                                    '/rig', env, logs['estimator'])
         # Start the simulator only once the monitor is matched with the estimator's
         # output; the simulator itself waits for its subscribers (wait_for_subscribers).
         spin_until(lambda: monitor.subscriptions[0].get_publisher_count() > 0,
                    "the estimator's deflection/block publisher")
-        procs["simulator"] = _start("simulator_node", _sim_params(5.0, duration_s, realtime_factor),
-                                    "/rig", env, logs["simulator"])
-        spin_until(lambda: monitor.estimate_samples >= n_samples // 10, "10 % of the run")
+        procs['simulator'] = _start(
+            'simulator_node',
+            _sim_params(5.0, duration_s, realtime_factor),
+            '/rig',
+            env,
+            logs['simulator'],
+        )
+        spin_until(lambda: monitor.estimate_samples >= n_samples // 10, '10 % of the run')
         rss_early = {name: _rss_bytes(p.pid) for name, p in procs.items()}
-        spin_until(lambda: monitor.simulator_counters.get("done")
-                   and monitor.estimator_counters.get("samples_out") == n_samples
+        spin_until(lambda: monitor.simulator_counters.get('done')
+                   and monitor.estimator_counters.get('samples_out') == n_samples
                    and monitor.estimate_samples == n_samples
-                   and monitor.truth_samples == n_samples, "the run to complete")
+                   and monitor.truth_samples == n_samples, 'the run to complete')
         error, compared = monitor.score(last_s=20.0)
         rss = {name: (rss_early[name], _rss_bytes(p.pid)) for name, p in procs.items()}
     finally:
@@ -239,17 +247,17 @@ def _two_process_run(tmp_path, monkeypatch, duration_s: float, realtime_factor: 
         rclpy.shutdown(context=ctx)
 
     sim_c, est_c = monitor.simulator_counters, monitor.estimator_counters
-    print(f"two processes 5 Hz, {duration_s:g} s: NRMSE {error:.4f}; simulator {sim_c}; "
-          f"estimator {est_c}; monitor received {monitor.estimate_samples} estimated / "
-          f"{monitor.truth_samples} truth")
-    assert sim_c["samples_published"] == n_samples
-    assert est_c["samples_in"] == est_c["samples_out"] == n_samples
-    assert est_c["messages_in"] == sim_c["blocks_published"]
-    assert est_c["samples_rejected"] == est_c["samples_dropped"] == est_c["resets"] == 0
+    print(f'two processes 5 Hz, {duration_s:g} s: NRMSE {error:.4f}; simulator {sim_c}; '
+          f'estimator {est_c}; monitor received {monitor.estimate_samples} estimated / '
+          f'{monitor.truth_samples} truth')
+    assert sim_c['samples_published'] == n_samples
+    assert est_c['samples_in'] == est_c['samples_out'] == n_samples
+    assert est_c['messages_in'] == sim_c['blocks_published']
+    assert est_c['samples_rejected'] == est_c['samples_dropped'] == est_c['resets'] == 0
     assert monitor.estimate_samples == monitor.truth_samples == n_samples
     assert compared >= 20000
     assert error < NRMSE_LIMIT
-    assert codes == {"estimator": 0, "simulator": 0}, {k: logs[k].read_text() for k in logs}
-    print("resident memory (early, end) in MB: "
-          + ", ".join(f"{k} {a / 2**20:.1f} -> {b / 2**20:.1f}" for k, (a, b) in rss.items()))
+    assert codes == {'estimator': 0, 'simulator': 0}, {k: logs[k].read_text() for k in logs}
+    print('resident memory (early, end) in MB: '
+          + ', '.join(f'{k} {a / 2**20:.1f} -> {b / 2**20:.1f}' for k, (a, b) in rss.items()))
     return rss

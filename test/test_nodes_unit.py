@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Unit tests of the ROS 2 layer: message layout helpers and the nodes in-process.
 
 Every node test runs in its own rclpy Context on a random ROS_DOMAIN_ID in
@@ -26,8 +27,16 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 from ipmc_sensor_ros.estimation.inverse import InverseEstimator
 from ipmc_sensor_ros.nodes import params as P
 from ipmc_sensor_ros.nodes.estimator_node import ESTIMATOR_SPECS, EstimatorNode
-from ipmc_sensor_ros.nodes.messages import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, ESTIMATE_COLUMNS, DataError,
-                                            claimed_samples, pack_block, unpack_block, BlockPacker)
+from ipmc_sensor_ros.nodes.messages import (
+    CURRENT_COLUMNS,
+    DEFLECTION_COLUMNS,
+    ESTIMATE_COLUMNS,
+    DataError,
+    claimed_samples,
+    pack_block,
+    unpack_block,
+    BlockPacker,
+)
 from ipmc_sensor_ros.nodes.simulator_node import SIMULATOR_SPECS, SimulatorNode
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import Geometry
@@ -41,12 +50,12 @@ pytestmark = pytest.mark.ros
 ROOT = Path(__file__).resolve().parents[1]
 FS = 1000.0
 SLIM = Geometry(0.022, 0.007, 0.00036)
-MODEL = SensorModel.named("h2", SLIM)
+MODEL = SensorModel.named('h2', SLIM)
 T0 = 1000.0   # sample time of the first test sample, s
 TIMEOUT_S = 30.0
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def reduced():
     return reduce_model(MODEL, 4, (0.1, 50.0))
 
@@ -66,14 +75,14 @@ def crank_record(seconds: float, f_hz: float = 5.0):
 # ---------------------------------------------------------------------------
 # messages.py
 # ---------------------------------------------------------------------------
-@pytest.mark.parametrize("n", [1, 7, 1000])
+@pytest.mark.parametrize('n', [1, 7, 1000])
 def test_pack_unpack_round_trip_is_exact(n):
     rng = np.random.default_rng(n)
     t = 1.7e9 + np.arange(n) * 1e-3
     v = rng.normal(size=n) * 1e-6
     msg = pack_block(t, v, CURRENT_COLUMNS)
     dims = msg.layout.dim
-    assert [(d.label, d.size, d.stride) for d in dims] == [("sample", n, 2 * n),
+    assert [(d.label, d.size, d.stride) for d in dims] == [('sample', n, 2 * n),
                                                            (CURRENT_COLUMNS, 2, 2)]
     assert list(msg.data[:2]) == [t[0], v[0]]          # interleaved (t_0, i_0, ...)
     block = unpack_block(msg, CURRENT_COLUMNS)
@@ -102,12 +111,14 @@ def test_unpack_honours_data_offset_and_accepts_one_dimensional():
     msg.data = [99.0] + list(msg.data)
     msg.layout.data_offset = 1
     block = unpack_block(msg)
-    assert np.array_equal(block.times_s, [1.0, 1.001]) and np.array_equal(block.values, [2e-6, 3e-6])
+    assert np.array_equal(block.times_s, [1.0, 1.001]) and np.array_equal(
+        block.values, [2e-6, 3e-6]
+    )
     plain = Float64MultiArray(data=[1e-6, 2e-6, 3e-6])
     b = unpack_block(plain)
     assert b.times_s is None and np.array_equal(b.values, [1e-6, 2e-6, 3e-6])
     one = Float64MultiArray(data=[1e-6, 2e-6])
-    one.layout.dim = [MultiArrayDimension(label="current_A", size=2, stride=2)]
+    one.layout.dim = [MultiArrayDimension(label='current_A', size=2, stride=2)]
     assert unpack_block(one).times_s is None
     assert claimed_samples(plain) == 3
 
@@ -119,20 +130,20 @@ def _dims(msg, i, **kw):
 
 
 MALFORMED = {
-    "three dims": (lambda m: m.layout.dim.append(MultiArrayDimension(label="x", size=1, stride=1)),
-                   "expected 2 dimensions"),
-    "row label": (lambda m: _dims(m, 0, label="row"), "dim[0].label"),
-    "column label": (lambda m: _dims(m, 1, label="time_s,current_mA"), "dim[1].label"),
-    "column size": (lambda m: _dims(m, 1, size=3), "size 2 and stride 2"),
-    "row size": (lambda m: _dims(m, 0, size=5), "dim[0] is (size 5"),
-    "row stride": (lambda m: _dims(m, 0, stride=3), "dim[0].stride"),
-    "odd length": (lambda m: setattr(m, "data", list(m.data) + [1.0]), "odd"),
-    "offset": (lambda m: setattr(m.layout, "data_offset", 100), "data_offset"),
-    "1-D size": (lambda m: (m.layout.dim.pop(), _dims(m, 0, size=3)), "1-D layout"),
+    'three dims': (lambda m: m.layout.dim.append(MultiArrayDimension(label='x', size=1, stride=1)),
+                   'expected 2 dimensions'),
+    'row label': (lambda m: _dims(m, 0, label='row'), 'dim[0].label'),
+    'column label': (lambda m: _dims(m, 1, label='time_s,current_mA'), 'dim[1].label'),
+    'column size': (lambda m: _dims(m, 1, size=3), 'size 2 and stride 2'),
+    'row size': (lambda m: _dims(m, 0, size=5), 'dim[0] is (size 5'),
+    'row stride': (lambda m: _dims(m, 0, stride=3), 'dim[0].stride'),
+    'odd length': (lambda m: setattr(m, 'data', list(m.data) + [1.0]), 'odd'),
+    'offset': (lambda m: setattr(m.layout, 'data_offset', 100), 'data_offset'),
+    '1-D size': (lambda m: (m.layout.dim.pop(), _dims(m, 0, size=3)), '1-D layout'),
 }
 
 
-@pytest.mark.parametrize("case", sorted(MALFORMED))
+@pytest.mark.parametrize('case', sorted(MALFORMED))
 def test_malformed_layouts_are_refused_with_a_reason(case):
     mutate, needle = MALFORMED[case]
     msg = pack_block([1.0, 1.001, 1.002, 1.003], [1e-6] * 4)
@@ -153,25 +164,25 @@ class Harness:
         rclpy.init(context=self.ctx, domain_id=TEST_DOMAIN)
         params = [Parameter(k, value=v) for k, v in dict(overrides).items()]
         if use_sim_time:
-            params.append(Parameter("use_sim_time", value=True))
+            params.append(Parameter('use_sim_time', value=True))
         self.node = node_cls(context=self.ctx, parameter_overrides=params)
-        self.tester = rclpy.create_node("tester", context=self.ctx)
-        qos = P.make_qos({"qos_depth": 1000, "qos_reliability": "reliable"})
-        self.pub = self.tester.create_publisher(Float64MultiArray, "current", qos)
+        self.tester = rclpy.create_node('tester', context=self.ctx)
+        qos = P.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'})
+        self.pub = self.tester.create_publisher(Float64MultiArray, 'current', qos)
         self.blocks: list = []
         self.points: list[PointStamped] = []
         self.truth: list = []
         self.counters_msgs: list[dict] = []
         self.tester.create_subscription(
-            Float64MultiArray, "deflection/block",
+            Float64MultiArray, 'deflection/block',
             lambda m: self.blocks.append(unpack_block(m, ESTIMATE_COLUMNS)), qos)
-        self.tester.create_subscription(PointStamped, "deflection", self.points.append, qos)
+        self.tester.create_subscription(PointStamped, 'deflection', self.points.append, qos)
         self.tester.create_subscription(
-            Float64MultiArray, "deflection_truth",
+            Float64MultiArray, 'deflection_truth',
             lambda m: self.truth.append(unpack_block(m, DEFLECTION_COLUMNS)), qos)
         self.currents: list = []
-        self.tester.create_subscription(Float64MultiArray, "current", self._on_current, qos)
-        for topic in ("estimator/counters", "simulator/counters"):
+        self.tester.create_subscription(Float64MultiArray, 'current', self._on_current, qos)
+        for topic in ('estimator/counters', 'simulator/counters'):
             self.tester.create_subscription(
                 String, topic, lambda m: self.counters_msgs.append(json.loads(m.data)),
                 P.COUNTERS_QOS)
@@ -189,17 +200,19 @@ class Harness:
         end = time.monotonic() + timeout
         while not predicate():
             if time.monotonic() > end:
-                raise AssertionError("condition not reached within the timeout")
+                raise AssertionError('condition not reached within the timeout')
             self.ex.spin_once(timeout_sec=0.05)
 
     def send(self, msg) -> None:
         """Publish one message and spin until the node has handled it and its output arrived."""
         if self.pub.get_subscription_count() == 0:
             self.spin_until(lambda: self.pub.get_subscription_count() > 0)
-        n_in = self.node.counters()["messages_in"]
+        n_in = self.node.counters()['messages_in']
         self.pub.publish(msg)
-        self.spin_until(lambda: self.node.counters()["messages_in"] == n_in + 1)
-        self.spin_until(lambda: sum(len(b) for b in self.blocks) == self.node.counters()["samples_out"])
+        self.spin_until(lambda: self.node.counters()['messages_in'] == n_in + 1)
+        self.spin_until(
+            lambda: sum(len(b) for b in self.blocks) == self.node.counters()['samples_out']
+        )
 
     def outputs(self) -> np.ndarray:
         return np.concatenate([b.values for b in self.blocks]) if self.blocks else np.empty(0)
@@ -226,14 +239,14 @@ def harness(request):
 
 
 def check_accounting(c: dict) -> None:
-    assert c["samples_in"] == c["samples_out"] + c["samples_rejected"] + c["samples_dropped"]
+    assert c['samples_in'] == c['samples_out'] + c['samples_rejected'] + c['samples_dropped']
 
 
 # ---------------------------------------------------------------------------
 # Estimator node
 # ---------------------------------------------------------------------------
 def test_bad_messages_are_rejected_and_leave_the_filter_untouched(harness, reduced):
-    h = harness(overrides={"publish_points": "none", "max_block_samples": 500})
+    h = harness(overrides={'publish_points': 'none', 'max_block_samples': 500})
     t, _, i = crank_record(2.0)
     valid = [(t[k:k + 100], i[k:k + 100]) for k in range(0, 2000, 100)]
 
@@ -246,21 +259,21 @@ def test_bad_messages_are_rejected_and_leave_the_filter_untouched(harness, reduc
         shuffled = tb.copy()
         shuffled[[4, 5]] = shuffled[[5, 4]]
         wrong_label = pack_block(tb, ib)
-        wrong_label.layout.dim[1].label = "time_s,current_mA"
+        wrong_label.layout.dim[1].label = 'time_s,current_mA'
         odd = pack_block(tb, ib)
         odd.data = list(odd.data)[:-1]
         big = np.full(600, 1e-6)
         return [
-            (pack_block(tb, nan), "non-finite"),
-            (pack_block(tb, inf), "non-finite"),
-            (Float64MultiArray(), "empty"),
-            (pack_block(T0 + 50 + np.arange(600) / FS, big), "limit 500"),
-            (wrong_label, "dim[1].label"),
-            (odd, "odd"),
-            (pack_block(shuffled, ib), "strictly increasing"),
-            (pack_block(tb[0] + 2.0 * (tb - tb[0]), ib), "sample period"),   # a 500 Hz DAQ
-            (pack_block(tb, ib * 1e7), "not a sensing current"),
-            (pack_block(tb - 2 * T0, ib), "sample times must lie"),
+            (pack_block(tb, nan), 'non-finite'),
+            (pack_block(tb, inf), 'non-finite'),
+            (Float64MultiArray(), 'empty'),
+            (pack_block(T0 + 50 + np.arange(600) / FS, big), 'limit 500'),
+            (wrong_label, 'dim[1].label'),
+            (odd, 'odd'),
+            (pack_block(shuffled, ib), 'strictly increasing'),
+            (pack_block(tb[0] + 2.0 * (tb - tb[0]), ib), 'sample period'),   # a 500 Hz DAQ
+            (pack_block(tb, ib * 1e7), 'not a sensing current'),
+            (pack_block(tb - 2 * T0, ib), 'sample times must lie'),
         ]
 
     n_bad = 0
@@ -279,24 +292,24 @@ def test_bad_messages_are_rejected_and_leave_the_filter_untouched(harness, reduc
     assert np.max(np.abs(out - ref)) <= 1e-12
     assert np.array_equal(np.concatenate([b.times_s for b in h.blocks]), t)
     c = h.node.counters()
-    assert c["messages_in"] == len(valid) + n_bad
-    assert c["messages_rejected"] == n_bad
-    assert c["samples_out"] == 2000
-    assert c["resets"] == 0 and c["samples_dropped"] == 0
+    assert c['messages_in'] == len(valid) + n_bad
+    assert c['messages_rejected'] == n_bad
+    assert c['samples_out'] == 2000
+    assert c['resets'] == 0 and c['samples_dropped'] == 0
     check_accounting(c)
 
 
 def test_backward_time_jump_resets_the_filter_and_warns(harness, reduced, capfd):
-    h = harness(overrides={"publish_points": "none"})
+    h = harness(overrides={'publish_points': 'none'})
     t, _, i = crank_record(1.0)
     for k in range(0, 1000, 250):
         h.send(pack_block(t[k:k + 250], i[k:k + 250]))
     # Replay from the start (rosbag play --loop, clock reset): last sample 0.999 s -> 0 s.
     h.send(pack_block(t[:250], i[:250]))
     c = h.node.counters()
-    assert c["resets"] == 1 and c["gaps"] == 0 and c["messages_rejected"] == 0
-    assert "time jumped back by 0.999 s on /current: filter reset" in h.node.last_warning
-    assert "time jumped back by" in capfd.readouterr().err
+    assert c['resets'] == 1 and c['gaps'] == 0 and c['messages_rejected'] == 0
+    assert 'time jumped back by 0.999 s on /current: filter reset' in h.node.last_warning
+    assert 'time jumped back by' in capfd.readouterr().err
     # After the reset the output is that of a fresh filter fed the replayed block.
     replay = h.blocks[-1].values
     assert np.max(np.abs(replay - reference(reduced).process(i[:250]))) <= 1e-12
@@ -304,21 +317,21 @@ def test_backward_time_jump_resets_the_filter_and_warns(harness, reduced, capfd)
 
 
 def test_long_gap_resets_short_gap_is_bridged(harness, reduced):
-    h = harness(overrides={"publish_points": "none", "max_gap_s": 0.1})
+    h = harness(overrides={'publish_points': 'none', 'max_gap_s': 0.1})
     t, _, i = crank_record(1.0)
     h.send(pack_block(t[:100], i[:100]))
     h.send(pack_block(t[150:250], i[150:250]))    # 50 ms missing: bridged, no reset
     c = h.node.counters()
-    assert c["gaps"] == 0 and c["resets"] == 0 and c["gaps_bridged"] == 1
+    assert c['gaps'] == 0 and c['resets'] == 0 and c['gaps_bridged'] == 1
     h.send(pack_block(t[500:600], i[500:600]))    # 250 ms missing > max_gap_s: reset
     c = h.node.counters()
-    assert c["gaps"] == 1 and c["resets"] == 1
-    assert "gap of 0.25" in h.node.last_warning
+    assert c['gaps'] == 1 and c['resets'] == 1
+    assert 'gap of 0.25' in h.node.last_warning
     assert np.max(np.abs(h.blocks[-1].values - reference(reduced).process(i[500:600]))) <= 1e-12
 
 
 def test_one_dimensional_messages_infer_times_and_per_sample_points(harness, reduced):
-    h = harness(overrides={"frame_id": "beam", "publish_points": "per_sample"})
+    h = harness(overrides={'frame_id': 'beam', 'publish_points': 'per_sample'})
     _, _, i = crank_record(0.3)
     for k in range(0, 300, 60):
         h.send(Float64MultiArray(data=i[k:k + 60].tolist()))
@@ -328,7 +341,7 @@ def test_one_dimensional_messages_infer_times_and_per_sample_points(harness, red
     assert np.allclose(np.diff(times), 1.0 / FS, rtol=0, atol=1e-6)
     assert np.max(np.abs(h.outputs() - reference(reduced).process(i))) <= 1e-12
     p = h.points[-1]
-    assert p.header.frame_id == "beam" and p.point.x == pytest.approx(0.022) and p.point.y == 0.0
+    assert p.header.frame_id == 'beam' and p.point.x == pytest.approx(0.022) and p.point.y == 0.0
     assert p.point.z == h.outputs()[-1]
     stamp = p.header.stamp.sec + p.header.stamp.nanosec * 1e-9
     assert stamp == pytest.approx(times[-1], abs=1e-6)   # float-seconds resolution ~0.24 us
@@ -337,7 +350,7 @@ def test_one_dimensional_messages_infer_times_and_per_sample_points(harness, red
 def test_last_of_block_points_and_counters_topic_under_sim_time(harness):
     # use_sim_time without /clock: the node clock reads 0, yet stamps come from the
     # sample times and the counters (steady-clock timer) still flow.
-    h = harness(overrides={"publish_points": "last_of_block"}, use_sim_time=True)
+    h = harness(overrides={'publish_points': 'last_of_block'}, use_sim_time=True)
     assert h.node.get_clock().now().nanoseconds == 0
     t, _, i = crank_record(0.5)
     for k in range(0, 500, 100):
@@ -345,32 +358,32 @@ def test_last_of_block_points_and_counters_topic_under_sim_time(harness):
     h.spin_until(lambda: len(h.points) == 5)
     assert [p.header.stamp.sec + p.header.stamp.nanosec * 1e-9 for p in h.points] == \
         pytest.approx(t[99::100], abs=1e-6)
-    h.spin_until(lambda: any(m.get("samples_out") == 500 for m in h.counters_msgs))
-    last = [m for m in h.counters_msgs if m.get("samples_out") == 500][-1]
-    assert last["samples_in"] == 500 and last["node"] == "/ipmc_estimator"
+    h.spin_until(lambda: any(m.get('samples_out') == 500 for m in h.counters_msgs))
+    last = [m for m in h.counters_msgs if m.get('samples_out') == 500][-1]
+    assert last['samples_in'] == 500 and last['node'] == '/ipmc_estimator'
 
 
 def test_invalid_parameter_changes_are_refused_with_reason(harness, reduced):
-    h = harness(overrides={"publish_points": "none"})
+    h = harness(overrides={'publish_points': 'none'})
     before = h.node.estimator
     cases = {
-        "length_m": (-1.0, "length_m"),
-        "reduction_order": (99, "reduction_order"),
-        "sample_rate_hz": (500.0, "read-only"),
-        "qos_depth": (10, "read-only"),
-        "youngs_modulus_pa": (-5.0, "youngs_modulus_pa"),
-        "model": ("h3", "must be one of"),
-        "effects": (["bogus"], "unknown effect 'bogus'"),
-        "publish_points": ("all", "publish_points"),
-        "band_low_hz": (80.0, "band_low_hz"),
-        "leak_corner_hz": (600.0, "leak_corner_hz"),
+        'length_m': (-1.0, 'length_m'),
+        'reduction_order': (99, 'reduction_order'),
+        'sample_rate_hz': (500.0, 'read-only'),
+        'qos_depth': (10, 'read-only'),
+        'youngs_modulus_pa': (-5.0, 'youngs_modulus_pa'),
+        'model': ('h3', 'must be one of'),
+        'effects': (['bogus'], "unknown effect 'bogus'"),
+        'publish_points': ('all', 'publish_points'),
+        'band_low_hz': (80.0, 'band_low_hz'),
+        'leak_corner_hz': (600.0, 'leak_corner_hz'),
     }
     for name, (value, needle) in cases.items():
         result = h.node.set_parameters([Parameter(name, value=value)])[0]
         assert not result.successful, name
         assert needle in result.reason, (name, result.reason)
     assert h.node.estimator is before
-    assert h.node.get_parameter("length_m").value == 0.022
+    assert h.node.get_parameter('length_m').value == 0.022
     # The refused changes left no trace: output equals the default core estimator.
     t, _, i = crank_record(0.5)
     for k in range(0, 500, 100):
@@ -379,12 +392,12 @@ def test_invalid_parameter_changes_are_refused_with_reason(harness, reduced):
 
 
 def test_valid_leak_change_is_applied_without_an_output_jump(harness, reduced):
-    h = harness(overrides={"publish_points": "none"})
+    h = harness(overrides={'publish_points': 'none'})
     t, w, i = crank_record(31.0, f_hz=1.0)
     cut = 30000                      # at 30 s the 1 Hz crank is at its peak (2 mm)
     for k in range(0, cut, 1000):
         h.send(pack_block(t[k:k + 1000], i[k:k + 1000]))
-    result = h.node.set_parameters([Parameter("leak_corner_hz", value=0.02)])[0]
+    result = h.node.set_parameters([Parameter('leak_corner_hz', value=0.02)])[0]
     assert result.successful, result.reason
     assert h.node.estimator.leak_corner_hz == 0.02
     h.send(pack_block(t[cut:cut + 100], i[cut:cut + 100]))
@@ -397,19 +410,23 @@ def test_valid_leak_change_is_applied_without_an_output_jump(harness, reduced):
     assert abs(after - unchanged) <= 10e-6
     assert abs(after - before) <= 10e-6
     # A model change is applied too (new reduction) and refused values are not stored.
-    assert h.node.set_parameters([Parameter("length_m", value=0.02)])[0].successful
+    assert h.node.set_parameters([Parameter('length_m', value=0.02)])[0].successful
     assert h.node.estimator.reduced is not reduced
 
 
 def test_effects_current_offset_is_removed_and_delay_restamps(harness, reduced):
-    h = harness(overrides={"publish_points": "none",
-                           "effects": ["current_offset(offset_a=1e-6)", "time_delay(delay_s=0.002)"]})
+    h = harness(
+        overrides={
+            'publish_points': 'none',
+            'effects': ['current_offset(offset_a=1e-6)', 'time_delay(delay_s=0.002)'],
+        }
+    )
     t, _, i = crank_record(0.5)
     for k in range(0, 500, 100):
         h.send(pack_block(t[k:k + 100], i[k:k + 100] + 1e-6))
     # The offset is subtracted before the filter; the pure delay is not inverted
     # but re-stamped: output times are input times minus 2 ms.
-    delayed = SensorModel.named("h2", SLIM, extra_effects="time_delay(delay_s=0.002)")
+    delayed = SensorModel.named('h2', SLIM, extra_effects='time_delay(delay_s=0.002)')
     ref = InverseEstimator(reduce_model(delayed, 4, (0.1, 50.0)), FS).process(i)
     assert np.max(np.abs(h.outputs() - ref)) <= 1e-12
     assert np.allclose(np.concatenate([b.times_s for b in h.blocks]), t - 0.002, rtol=0, atol=1e-9)
@@ -419,10 +436,10 @@ def test_invalid_startup_parameters_raise_naming_the_parameter():
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=TEST_DOMAIN)
     try:
-        for name, value, needle in [("length_m", -1.0, "length_m"),
-                                    ("youngs_modulus_pa", -5.0, "youngs_modulus_pa"),
-                                    ("effects", ["warp_drive"], "warp_drive"),
-                                    ("publish_points", "all", "publish_points")]:
+        for name, value, needle in [('length_m', -1.0, 'length_m'),
+                                    ('youngs_modulus_pa', -5.0, 'youngs_modulus_pa'),
+                                    ('effects', ['warp_drive'], 'warp_drive'),
+                                    ('publish_points', 'all', 'publish_points')]:
             with pytest.raises((P.ParameterError, ParameterException)) as err:
                 EstimatorNode(context=ctx, parameter_overrides=[Parameter(name, value=value)])
             assert needle in str(err.value)
@@ -430,52 +447,59 @@ def test_invalid_startup_parameters_raise_naming_the_parameter():
         # DeflectionEstimator), so both nodes accept them.
         for node_cls in (EstimatorNode, SimulatorNode):
             node = node_cls(context=ctx, parameter_overrides=[Parameter(
-                "effects", value=["nonlinearity(quadratic=0.5)",
-                                  "hydration_drift(diffusivity_rate_per_s=-0.001)"])])
+                'effects', value=['nonlinearity(quadratic=0.5)',
+                                  'hydration_drift(diffusivity_rate_per_s=-0.001)'])])
             node.destroy_node()
     finally:
         rclpy.shutdown(context=ctx)
 
 
 def test_main_exits_nonzero_with_one_clear_line(tmp_path):
-    env = {"PYTHONPATH": str(ROOT), "ROS_DOMAIN_ID": str(random.randint(150, 200)),
-           "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "PATH": "/usr/bin:/bin",
-           "HOME": str(tmp_path), "ROS_LOG_DIR": str(tmp_path)}
-    proc = subprocess.run([sys.executable, "-m", "ipmc_sensor_ros.nodes.estimator_node",
-                           "--ros-args", "-p", "thickness_m:=0.36"],
+    env = {'PYTHONPATH': str(ROOT), 'ROS_DOMAIN_ID': str(random.randint(150, 200)),
+           'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'PATH': '/usr/bin:/bin',
+           'HOME': str(tmp_path), 'ROS_LOG_DIR': str(tmp_path)}
+    proc = subprocess.run([sys.executable, '-m', 'ipmc_sensor_ros.nodes.estimator_node',
+                           '--ros-args', '-p', 'thickness_m:=0.36'],
                           env=env, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
-    assert "thickness_m" in proc.stderr and "Traceback" not in proc.stderr
+    assert 'thickness_m' in proc.stderr and 'Traceback' not in proc.stderr
 
 
 def _yaml_params(path: Path, key: str) -> dict:
     doc = yaml.safe_load(path.read_text())
-    return doc[key]["ros__parameters"]
+    return doc[key]['ros__parameters']
 
 
-@pytest.mark.parametrize("file,key,specs", [("estimator.yaml", "/**/ipmc_estimator", ESTIMATOR_SPECS),
-                                            ("simulator.yaml", "/**/ipmc_simulator", SIMULATOR_SPECS)])
+@pytest.mark.parametrize(
+    'file,key,specs',
+    [
+        ('estimator.yaml', '/**/ipmc_estimator', ESTIMATOR_SPECS),
+        ('simulator.yaml', '/**/ipmc_simulator', SIMULATOR_SPECS),
+    ],
+)
 def test_config_files_list_every_parameter_with_its_default(file, key, specs):
-    values = _yaml_params(ROOT / "config" / file, key)
+    values = _yaml_params(ROOT / 'config' / file, key)
     for spec in specs:
         if spec.kind is list:
             continue            # empty string arrays cannot be typed in YAML: documented
         assert spec.name in values, spec.name
-        assert values[spec.name] == spec.default and type(values[spec.name]) is spec.kind, spec.name
+        assert (
+            values[spec.name] == spec.default and type(values[spec.name]) is spec.kind
+        ), spec.name
 
 
 def test_params_file_is_applied_in_any_namespace(tmp_path):
-    text = (ROOT / "config" / "estimator.yaml").read_text().replace(
-        "length_m: 0.022", "length_m: 0.011")
-    path = tmp_path / "est.yaml"
+    text = (ROOT / 'config' / 'estimator.yaml').read_text().replace(
+        'length_m: 0.022', 'length_m: 0.011')
+    path = tmp_path / 'est.yaml'
     path.write_text(text)
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=TEST_DOMAIN,
-               args=["--ros-args", "--params-file", str(path)])
+               args=['--ros-args', '--params-file', str(path)])
     try:
-        node = EstimatorNode(context=ctx, namespace="/rig3")
-        assert node.get_parameter("length_m").value == 0.011
-        assert node.input_topic == "/rig3/current"
+        node = EstimatorNode(context=ctx, namespace='/rig3')
+        assert node.get_parameter('length_m').value == 0.011
+        assert node.input_topic == '/rig3/current'
         node.destroy_node()
     finally:
         rclpy.shutdown(context=ctx)
@@ -486,12 +510,12 @@ def test_params_file_is_applied_in_any_namespace(tmp_path):
 # ---------------------------------------------------------------------------
 def test_simulator_fast_mode_publishes_exactly_the_core_simulation(harness):
     h = harness(node_cls=SimulatorNode,
-                overrides={"realtime_factor": 0.0, "duration_s": 0.95, "block_size": 100,
-                           "motor_frequency_hz": 5.0, "wait_for_subscribers": 1})
+                overrides={'realtime_factor': 0.0, 'duration_s': 0.95, 'block_size': 100,
+                           'motor_frequency_hz': 5.0, 'wait_for_subscribers': 1})
     h.spin_until(lambda: h.node.done)
     h.spin_until(lambda: sum(len(b) for b in h.currents) == 950 and
                  sum(len(b) for b in h.truth) == 950)
-    assert h.node.counters() == {"samples_published": 950, "blocks_published": 10, "done": True}
+    assert h.node.counters() == {'samples_published': 950, 'blocks_published': 10, 'done': True}
     t = np.concatenate([b.times_s for b in h.currents])
     i = np.concatenate([b.values for b in h.currents])
     w = np.concatenate([b.values for b in h.truth])
@@ -501,35 +525,35 @@ def test_simulator_fast_mode_publishes_exactly_the_core_simulation(harness):
     assert np.allclose(t - t[0], k / FS, rtol=0, atol=1e-6)
     w_ref, i_ref = SensorSimulator(MODEL, FS).run(CrankSlider(5.0), k / FS)
     assert np.max(np.abs(w - w_ref)) <= 1e-15 and np.max(np.abs(i - i_ref)) <= 1e-18
-    h.spin_until(lambda: any(m.get("done") for m in h.counters_msgs))
+    h.spin_until(lambda: any(m.get('done') for m in h.counters_msgs))
 
 
 def test_simulator_file_stimulus_and_csv_errors(harness, tmp_path):
-    csv = tmp_path / "w.csv"
+    csv = tmp_path / 'w.csv'
     tt = np.arange(0.0, 2.0, 0.01)
     ww = 1e-3 * np.sin(2 * np.pi * tt)
-    csv.write_text("# recorded tip deflection\ntime_s,deflection_m\n"
-                   + "\n".join(f"{a:.17g},{b:.17g}" for a, b in zip(tt + 5.0, ww)) + "\n")
+    csv.write_text('# recorded tip deflection\ntime_s,deflection_m\n'
+                   + '\n'.join(f'{a:.17g},{b:.17g}' for a, b in zip(tt + 5.0, ww)) + '\n')
     h = harness(node_cls=SimulatorNode,
-                overrides={"stimulus": "file", "stimulus_file": str(csv), "realtime_factor": 0.0,
-                           "duration_s": 0.5, "block_size": 50, "wait_for_subscribers": 1})
+                overrides={'stimulus': 'file', 'stimulus_file': str(csv), 'realtime_factor': 0.0,
+                           'duration_s': 0.5, 'block_size': 50, 'wait_for_subscribers': 1})
     h.spin_until(lambda: sum(len(b) for b in h.truth) == 500)
     w = np.concatenate([b.values for b in h.truth])
     # Cubic spline through 100 Hz samples of a 1 Hz sine: error << 1e-3 of the amplitude.
     assert np.max(np.abs(w - 1e-3 * np.sin(2 * np.pi * np.arange(500) / FS))) < 1e-7
-    bad = tmp_path / "bad.csv"
-    bad.write_text("0.0,1.0\n0.1,oops\n")
-    with pytest.raises(P.ParameterError, match="bad.csv:2"):
+    bad = tmp_path / 'bad.csv'
+    bad.write_text('0.0,1.0\n0.1,oops\n')
+    with pytest.raises(P.ParameterError, match='bad.csv:2'):
         SimulatorNode(context=h.ctx, parameter_overrides=[
-            Parameter("stimulus", value="file"), Parameter("stimulus_file", value=str(bad))])
+            Parameter('stimulus', value='file'), Parameter('stimulus_file', value=str(bad))])
 
 
 def test_sim_time_drives_the_simulator_and_stamps(harness):
     from rosgraph_msgs.msg import Clock
 
     h = harness(node_cls=SimulatorNode, use_sim_time=True,
-                overrides={"realtime_factor": 1.0, "block_size": 10})
-    clock_pub = h.tester.create_publisher(Clock, "/clock", 10)
+                overrides={'realtime_factor': 1.0, 'block_size': 10})
+    clock_pub = h.tester.create_publisher(Clock, '/clock', 10)
 
     def tick(t_s):
         msg = Clock()
@@ -541,12 +565,12 @@ def test_sim_time_drives_the_simulator_and_stamps(harness):
     h.spin_until(lambda: clock_pub.get_subscription_count() > 0)
     for _ in range(5):          # no /clock yet: the node clock reads 0 and nothing is sent
         h.ex.spin_once(timeout_sec=0.02)
-    assert h.node.counters()["samples_published"] == 0
+    assert h.node.counters()['samples_published'] == 0
     t_s = 500.0
-    while h.node.counters()["samples_published"] < 100:
+    while h.node.counters()['samples_published'] < 100:
         tick(t_s)
         t_s += 0.01
-        assert t_s < 520.0, "simulator did not follow /clock"
+        assert t_s < 520.0, 'simulator did not follow /clock'
     h.spin_until(lambda: len(h.currents) > 0)
     first = h.currents[0].times_s[0]
     # Stamps come from the simulated clock (~500 s), not from the wall clock (~1.7e9 s).
@@ -558,7 +582,7 @@ def test_sim_time_drives_the_simulator_and_stamps(harness):
 def test_docs_parameter_tables_match_the_declared_parameters():
     from ipmc_sensor_ros.nodes.simulator_node import _OWN_SPECS
 
-    doc = (ROOT / "README.md").read_text()
+    doc = (ROOT / 'README.md').read_text()
     # Generated from the specs: regenerate with params.markdown_table if this fails.
     assert P.markdown_table(ESTIMATOR_SPECS) in doc
     assert P.markdown_table(_OWN_SPECS) in doc
@@ -567,22 +591,24 @@ def test_docs_parameter_tables_match_the_declared_parameters():
 def test_plugin_effect_is_used_by_the_estimator_node():
     from ipmc_sensor_ros.physics.effects import EFFECTS
 
-    plugin = ROOT / "examples" / "polymer_leakage.py"
+    plugin = ROOT / 'examples' / 'polymer_leakage.py'
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=TEST_DOMAIN)
     try:
         node = EstimatorNode(context=ctx, parameter_overrides=[
-            Parameter("plugins", value=[str(plugin)]),
-            Parameter("effects", value=["polymer_leakage(time_constant_s=0.05)"])])
-        assert "polymer_leakage(time_constant_s=0.05)" in node.deflection_estimator.model.describe()
+            Parameter('plugins', value=[str(plugin)]),
+            Parameter('effects', value=['polymer_leakage(time_constant_s=0.05)'])])
+        assert (
+            'polymer_leakage(time_constant_s=0.05)' in node.deflection_estimator.model.describe()
+        )
         # the high-pass of the leakage (zero at s = 0 in H) is in the reduced model the node inverts
         assert node.deflection_estimator.reduced.order == 4
         node.destroy_node()
-        with pytest.raises((P.ParameterError, ParameterException), match="plugins"):
+        with pytest.raises((P.ParameterError, ParameterException), match='plugins'):
             EstimatorNode(context=ctx, parameter_overrides=[
-                Parameter("plugins", value=[str(ROOT / "no_such_plugin.py")])])
+                Parameter('plugins', value=[str(ROOT / 'no_such_plugin.py')])])
     finally:
-        EFFECTS.pop("polymer_leakage", None)
+        EFFECTS.pop('polymer_leakage', None)
         rclpy.shutdown(context=ctx)
 
 
@@ -591,26 +617,28 @@ def test_simulator_node_field_fidelity_publishes():
     rclpy.init(context=ctx, domain_id=TEST_DOMAIN)
     try:
         node = SimulatorNode(context=ctx, parameter_overrides=[
-            Parameter("fidelity", value="field"), Parameter("realtime_factor", value=0.0),
-            Parameter("duration_s", value=0.5), Parameter("block_size", value=100)])
+            Parameter('fidelity', value='field'), Parameter('realtime_factor', value=0.0),
+            Parameter('duration_s', value=0.5), Parameter('block_size', value=100)])
         from rclpy.executors import SingleThreadedExecutor
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
         end = time.monotonic() + 30
         while not node.done and time.monotonic() < end:
             ex.spin_once(timeout_sec=0.01)
-        assert node.done and node.counters()["samples_published"] == 500
+        assert node.done and node.counters()['samples_published'] == 500
         ex.shutdown()
         node.destroy_node()
-        with pytest.raises(P.ParameterError, match="fidelity"):
+        with pytest.raises(P.ParameterError, match='fidelity'):
             SimulatorNode(context=ctx, parameter_overrides=[
-                Parameter("fidelity", value="field"), Parameter("effects", value=["time_delay"])])
+                Parameter('fidelity', value='field'), Parameter('effects', value=['time_delay'])])
         # the large-deflection beam needs the field solution, and says so by parameter name
-        with pytest.raises(P.ParameterError, match="beam_model"):
-            SimulatorNode(context=ctx, parameter_overrides=[Parameter("beam_model", value="elastica")])
+        with pytest.raises(P.ParameterError, match='beam_model'):
+            SimulatorNode(
+                context=ctx, parameter_overrides=[Parameter('beam_model', value='elastica')]
+            )
         elastica = SimulatorNode(context=ctx, parameter_overrides=[
-            Parameter("fidelity", value="field"), Parameter("beam_model", value="elastica")])
-        assert elastica._sim._solver.beam.name == "elastica"
+            Parameter('fidelity', value='field'), Parameter('beam_model', value='elastica')])
+        assert elastica._sim._solver.beam.name == 'elastica'
         elastica.destroy_node()
     finally:
         rclpy.shutdown(context=ctx)

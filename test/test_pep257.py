@@ -5,5 +5,5 @@ import pytest
 
 @pytest.mark.linter
 def test_pep257():
-    main = pytest.importorskip("ament_pep257.main").main
-    assert main(argv=[".", "test"]) == 0, "docstring style findings (see output above)"
+    main = pytest.importorskip('ament_pep257.main').main
+    assert main(argv=['.', 'test']) == 0, 'docstring style findings (see output above)'

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Tests of the physical parameter set and of H1 (eq. 31) / H2 (eq. 45)."""
 import math
 
@@ -11,17 +12,17 @@ from ipmc_sensor_ros.physics.parameters import (PAPER_PARAMETERS, PAPER_SAMPLES,
 from ipmc_sensor_ros.physics.sensing import beta, h1, h2, surface_resistance_factor
 
 M = PAPER_PARAMETERS
-SLIM, BIG, SHORT = PAPER_SAMPLES["slim"], PAPER_SAMPLES["big"], PAPER_SAMPLES["short"]
+SLIM, BIG, SHORT = PAPER_SAMPLES['slim'], PAPER_SAMPLES['big'], PAPER_SAMPLES['short']
 
 
 def test_core_imports_without_rclpy():
     import subprocess
     import sys
     code = ("import sys; sys.modules['rclpy'] = None\n"
-            "import ipmc_sensor_ros.physics.model, ipmc_sensor_ros.lti.reduction, "
-            "ipmc_sensor_ros.estimation.inverse, ipmc_sensor_ros.simulation.sensor\n"
+            'import ipmc_sensor_ros.physics.model, ipmc_sensor_ros.lti.reduction, '
+            'ipmc_sensor_ros.estimation.inverse, ipmc_sensor_ros.simulation.sensor\n'
             "assert 'rclpy' not in [m for m in sys.modules if sys.modules[m] is not None]")
-    subprocess.run([sys.executable, "-c", code], check=True)
+    subprocess.run([sys.executable, '-c', code], check=True)
 
 
 def test_k_over_d_and_beta_h_match_paper_section_4():
@@ -32,9 +33,9 @@ def test_k_over_d_and_beta_h_match_paper_section_4():
     assert np.all(bh > 10)
 
 
-@pytest.mark.parametrize("name,value", [
-    ("youngs_modulus_pa", -1.0), ("diffusivity_m2_per_s", 0.0), ("temperature_k", float("nan")),
-    ("surface_resistance_ohm", -0.1), ("permittivity_f_per_m", "abc"),
+@pytest.mark.parametrize('name,value', [
+    ('youngs_modulus_pa', -1.0), ('diffusivity_m2_per_s', 0.0), ('temperature_k', float('nan')),
+    ('surface_resistance_ohm', -0.1), ('permittivity_f_per_m', 'abc'),
 ])
 def test_non_physical_material_values_are_refused_with_name_and_value(name, value):
     with pytest.raises(ParameterError) as exc:
@@ -42,10 +43,10 @@ def test_non_physical_material_values_are_refused_with_name_and_value(name, valu
     assert name in str(exc.value) and repr(value) in str(exc.value)
 
 
-@pytest.mark.parametrize("kwargs,key", [
-    (dict(length_m=0.0, width_m=7e-3, thickness_m=3.6e-4), "length_m"),
-    (dict(length_m=22e-3, width_m=-7e-3, thickness_m=3.6e-4), "width_m"),
-    (dict(length_m=22.0, width_m=7e-3, thickness_m=3.6e-4), "length_m"),  # mm given as m
+@pytest.mark.parametrize('kwargs,key', [
+    (dict(length_m=0.0, width_m=7e-3, thickness_m=3.6e-4), 'length_m'),
+    (dict(length_m=22e-3, width_m=-7e-3, thickness_m=3.6e-4), 'width_m'),
+    (dict(length_m=22.0, width_m=7e-3, thickness_m=3.6e-4), 'length_m'),  # mm given as m
 ])
 def test_non_physical_geometry_is_refused(kwargs, key):
     with pytest.raises(ParameterError, match=key):
@@ -60,22 +61,22 @@ def test_zero_surface_resistance_is_allowed_and_parameters_are_immutable():
 
 def test_yaml_round_trip(tmp_path):
     m = M.replace(diffusivity_m2_per_s=4e-11)
-    save_yaml(tmp_path / "p.yaml", m, SLIM)
-    m2, g2 = load_yaml(tmp_path / "p.yaml")
+    save_yaml(tmp_path / 'p.yaml', m, SLIM)
+    m2, g2 = load_yaml(tmp_path / 'p.yaml')
     assert m2 == m and g2 == SLIM
 
 
 def test_yaml_errors_name_file_and_key(tmp_path):
-    p = tmp_path / "bad.yaml"
-    p.write_text("material:\n  diffusivity: 3e-11\n")
-    with pytest.raises(ParameterError, match=r"bad\.yaml.*diffusivity"):
+    p = tmp_path / 'bad.yaml'
+    p.write_text('material:\n  diffusivity: 3e-11\n')
+    with pytest.raises(ParameterError, match=r'bad\.yaml.*diffusivity'):
         load_yaml(p)
-    p.write_text("material:\n  youngs_modulus_pa: -5\n")
-    with pytest.raises(ParameterError, match=r"bad\.yaml.*youngs_modulus_pa"):
+    p.write_text('material:\n  youngs_modulus_pa: -5\n')
+    with pytest.raises(ParameterError, match=r'bad\.yaml.*youngs_modulus_pa'):
         load_yaml(p)
 
 
-@pytest.mark.parametrize("geometry", list(PAPER_SAMPLES.values()), ids=list(PAPER_SAMPLES))
+@pytest.mark.parametrize('geometry', list(PAPER_SAMPLES.values()), ids=list(PAPER_SAMPLES))
 def test_h1_h2_finite_over_1e_minus4_to_1e5_hz(geometry):
     f = np.logspace(-4, 5, 400)
     for fn in (h1, h2):
@@ -148,7 +149,7 @@ def test_h1_over_s_is_a_sum_of_real_pole_lags():
     s = 2j * np.pi * np.array([0.3, 3.0, 30.0])
     h = SLIM.half_thickness_m
     n = np.arange(1, 2_000_001)[:, None]
-    lags = np.sum(1.0 / (s + M.k_rate_per_s + n ** 2 * np.pi ** 2 * M.diffusivity_m2_per_s / h ** 2), 0)
+    lags = np.sum(1.0 / (s + M.k_rate_per_s + n**2 * np.pi**2 * M.diffusivity_m2_per_s / h**2), 0)
     c = 3 * M.youngs_modulus_pa * SLIM.width_m * M.diffusivity_m2_per_s / (
         M.charge_stress_coupling_j_per_c * SLIM.length_m)
     # tail of the series beyond n = 2e6 is ~ h/(pi sqrt(d) ... ) 1/n: 1e-3 relative is enough

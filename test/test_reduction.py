@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Tests of the paper's eq. 55 and of the stable minimum-phase reductions."""
 import numpy as np
 import pytest
@@ -13,21 +14,21 @@ MODELS = {name: SensorModel(g) for name, g in PAPER_SAMPLES.items()}
 
 
 def test_eq55_has_rhp_zero_near_393_rad_s_so_its_inverse_is_unstable():
-    report = eq55_poles_zeros(MODELS["slim"])
-    assert not report["inverse_stable"]
-    assert report["rhp_zeros"].size == 1
-    assert report["rhp_zeros"][0].real == pytest.approx(393.0, abs=1.0)
+    report = eq55_poles_zeros(MODELS['slim'])
+    assert not report['inverse_stable']
+    assert report['rhp_zeros'].size == 1
+    assert report['rhp_zeros'][0].real == pytest.approx(393.0, abs=1.0)
     # The literal inverse (eq. 48) of the control object has an unstable pole there.
-    inv = 1 / paper_eq55(MODELS["slim"])
-    assert np.max(inv.poles().real) == pytest.approx(report["rhp_zeros"][0].real, rel=1e-6)
+    inv = 1 / paper_eq55(MODELS['slim'])
+    assert np.max(inv.poles().real) == pytest.approx(report['rhp_zeros'][0].real, rel=1e-6)
 
 
 def test_eq55_is_close_to_h2_at_low_frequency_only():
     # The Taylor series of sqrt(s+K) about 0 converges for |s| < K (~11 Hz): eq. 55 should be
     # good well below that and degrade above it.
-    tf = paper_eq55(MODELS["slim"])
+    tf = paper_eq55(MODELS['slim'])
     f = np.array([0.1, 1.0, 50.0])
-    ratio = np.array([tf(2j * np.pi * x) for x in f]) / MODELS["slim"].frequency_response(f)
+    ratio = np.array([tf(2j * np.pi * x) for x in f]) / MODELS['slim'].frequency_response(f)
     err_db = np.abs(20 * np.log10(np.abs(ratio)))
     assert err_db[0] < 0.5 and err_db[2] > err_db[1]
 
@@ -35,15 +36,15 @@ def test_eq55_is_close_to_h2_at_low_frequency_only():
 def test_error_table_meets_target_at_order_le_6_for_paper_samples():
     rows = reduction_error_table(MODELS, orders=range(1, 7))
     for name in MODELS:
-        ok = [r for r in rows if r["sample"] == name
-              and r["max_mag_error_db"] <= 0.1 and r["max_phase_error_deg"] <= 1.0]
-        assert ok, f"no order <= 6 meets 0.1 dB / 1 deg for {name}"
-        assert min(r["order"] for r in ok) <= 6
+        ok = [r for r in rows if r['sample'] == name
+              and r['max_mag_error_db'] <= 0.1 and r['max_phase_error_deg'] <= 1.0]
+        assert ok, f'no order <= 6 meets 0.1 dB / 1 deg for {name}'
+        assert min(r['order'] for r in ok) <= 6
 
 
-@pytest.mark.parametrize("order", [1, 3, 6, 8])
+@pytest.mark.parametrize('order', [1, 3, 6, 8])
 def test_reduction_is_stable_and_minimum_phase(order):
-    red = reduce_model(MODELS["short"], order)
+    red = reduce_model(MODELS['short'], order)
     assert red.order == order
     assert np.all(red.poles_rad_s < 0) and np.all(red.zeros_rad_s < 0)
     assert red.gain > 0
@@ -53,8 +54,10 @@ def test_reduction_is_stable_and_minimum_phase(order):
 @given(length=st.floats(5e-3, 0.1), width=st.floats(2e-3, 3e-2), thickness=st.floats(5e-5, 2e-3),
        r0=st.floats(0.0, 1000.0), d=st.floats(1e-12, 1e-9))
 def test_reduction_valid_for_any_parameters(length, width, thickness, r0, d):
-    model = SensorModel(Geometry(length, width, thickness),
-                        PAPER_PARAMETERS.replace(surface_resistance_ohm=r0, diffusivity_m2_per_s=d))
+    model = SensorModel(
+        Geometry(length, width, thickness),
+        PAPER_PARAMETERS.replace(surface_resistance_ohm=r0, diffusivity_m2_per_s=d),
+    )
     red = reduce_model(model, 6)
     assert np.all(red.poles_rad_s < 0) and np.all(red.zeros_rad_s < 0)
     mag, phase = reduction_error(red, model)
@@ -64,19 +67,19 @@ def test_reduction_valid_for_any_parameters(length, width, thickness, r0, d):
     assert mag < 0.5 and phase < 3.0
 
 
-@pytest.mark.parametrize("bad", [0, 9, 2.5, True])
+@pytest.mark.parametrize('bad', [0, 9, 2.5, True])
 def test_invalid_order_refused(bad):
-    with pytest.raises(ParameterError, match="order"):
-        reduce_model(MODELS["slim"], bad)
+    with pytest.raises(ParameterError, match='order'):
+        reduce_model(MODELS['slim'], bad)
 
 
 def test_invalid_band_refused():
-    with pytest.raises(ParameterError, match="band_hz"):
-        reduce_model(MODELS["slim"], 2, band_hz=(10.0, 1.0))
+    with pytest.raises(ParameterError, match='band_hz'):
+        reduce_model(MODELS['slim'], 2, band_hz=(10.0, 1.0))
 
 
 def test_control_object_matches_zpk():
-    red = reduce_model(MODELS["slim"], 3)
+    red = reduce_model(MODELS['slim'], 3)
     sys = red.to_control()
     f = np.array([0.5, 5.0, 40.0])
     resp = np.array([complex(sys(2j * np.pi * x)) for x in f])
@@ -87,18 +90,18 @@ def test_control_object_matches_zpk():
 # g(s) factor of eq. 54 (degree 5 over 3).  An earlier version tested the effect name against
 # effect objects and silently dropped g(s) (degree 3 over 1).
 EQ55_ROOTS = {
-    "big": ([392.6157, -104.97, -196.18, -392.37, 0.0], [-71.911, -82.917, -309.45]),
-    "slim": ([392.6157, -104.97, -196.18, -392.37, 0.0], [-71.911, -82.917, -309.45]),
-    "short": ([392.6157, -104.97, -784.74, -1569.5, 0.0], [-71.911, -331.67, -1237.8]),
+    'big': ([392.6157, -104.97, -196.18, -392.37, 0.0], [-71.911, -82.917, -309.45]),
+    'slim': ([392.6157, -104.97, -196.18, -392.37, 0.0], [-71.911, -82.917, -309.45]),
+    'short': ([392.6157, -104.97, -784.74, -1569.5, 0.0], [-71.911, -331.67, -1237.8]),
 }
 
 
-@pytest.mark.parametrize("sample", sorted(EQ55_ROOTS))
+@pytest.mark.parametrize('sample', sorted(EQ55_ROOTS))
 def test_eq55_of_h2_has_the_independently_computed_roots(sample):
     zeros_ref, poles_ref = EQ55_ROOTS[sample]
     report = eq55_poles_zeros(SensorModel(PAPER_SAMPLES[sample]))
-    zeros, poles = np.sort(report["zeros"].real), np.sort(report["poles"].real)
-    assert np.allclose(np.abs(report["zeros"].imag), 0) and np.allclose(report["poles"].imag, 0)
+    zeros, poles = np.sort(report['zeros'].real), np.sort(report['poles'].real)
+    assert np.allclose(np.abs(report['zeros'].imag), 0) and np.allclose(report['poles'].imag, 0)
     # the references carry 4-5 significant digits: compare to 5e-4 relative (1e-3 rad/s at 0)
     assert np.allclose(zeros, np.sort(zeros_ref), rtol=5e-4, atol=1e-3)
     assert np.allclose(poles, np.sort(poles_ref), rtol=5e-4)
@@ -107,5 +110,5 @@ def test_eq55_of_h2_has_the_independently_computed_roots(sample):
 
 
 def test_h1_eq55_has_no_surface_resistance_factor():
-    report = eq55_poles_zeros(SensorModel(PAPER_SAMPLES["slim"], effects=()))
-    assert report["zeros"].size == 3 and report["poles"].size == 1
+    report = eq55_poles_zeros(SensorModel(PAPER_SAMPLES['slim'], effects=()))
+    assert report['zeros'].size == 3 and report['poles'].size == 1

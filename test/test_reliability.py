@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Reliability: fuzzed input to the estimator node, bad configuration files, soak of the
 estimator core, and finite models across the physical parameter range."""
 from __future__ import annotations
@@ -26,13 +27,13 @@ from conftest import DirectNode
 
 ROOT = Path(__file__).resolve().parents[1]
 FS = 1000.0
-SLIM = PAPER_SAMPLES["slim"]
+SLIM = PAPER_SAMPLES['slim']
 
 
 # ---------------------------------------------------------------------------
 # Node input fuzzing
 # ---------------------------------------------------------------------------
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def direct():
     d = DirectNode()
     yield d
@@ -46,45 +47,45 @@ def _signal(n, start, rng):
 
 def _corrupt(kind: str, t, i, rng):
     """A message that must be rejected, by kind."""
-    if kind == "nan":
+    if kind == 'nan':
         i = i.copy(); i[rng.integers(i.size)] = np.nan
         return pack_block(t, i)
-    if kind == "inf":
+    if kind == 'inf':
         i = i.copy(); i[rng.integers(i.size)] = -np.inf
         return pack_block(t, i)
-    if kind == "huge":
+    if kind == 'huge':
         i = i.copy(); i[rng.integers(i.size)] = 1e30
         return pack_block(t, i)
-    if kind == "time_nan":
+    if kind == 'time_nan':
         t = t.copy(); t[rng.integers(t.size)] = np.nan
         return pack_block(t, i)
-    if kind == "not_increasing":
+    if kind == 'not_increasing':
         t = t.copy(); t[-1] = t[0]
         return pack_block(t, i)
-    if kind == "wrong_rate":
+    if kind == 'wrong_rate':
         return pack_block(t[0] + 2 * (t - t[0]), i)
-    if kind == "empty":
+    if kind == 'empty':
         return Float64MultiArray()
-    if kind == "odd":
+    if kind == 'odd':
         m = pack_block(t, i); m.data = list(m.data) + [0.0]
         return m
-    if kind == "wrong_label":
-        m = pack_block(t, i); m.layout.dim[1].label = "time_s,current_mA"
+    if kind == 'wrong_label':
+        m = pack_block(t, i); m.layout.dim[1].label = 'time_s,current_mA'
         return m
-    if kind == "bad_stride":
+    if kind == 'bad_stride':
         m = pack_block(t, i); m.layout.dim[0].stride = 3
         return m
-    if kind == "three_dims":
-        m = pack_block(t, i); m.layout.dim.append(MultiArrayDimension(label="x", size=1, stride=1))
+    if kind == 'three_dims':
+        m = pack_block(t, i); m.layout.dim.append(MultiArrayDimension(label='x', size=1, stride=1))
         return m
-    if kind == "bad_offset":
+    if kind == 'bad_offset':
         m = pack_block(t, i); m.layout.data_offset = 10 ** 6
         return m
     raise AssertionError(kind)
 
 
-CORRUPTIONS = ("nan", "inf", "huge", "time_nan", "not_increasing", "wrong_rate", "empty", "odd",
-               "wrong_label", "bad_stride", "three_dims", "bad_offset")
+CORRUPTIONS = ('nan', 'inf', 'huge', 'time_nan', 'not_increasing', 'wrong_rate', 'empty', 'odd',
+               'wrong_label', 'bad_stride', 'three_dims', 'bad_offset')
 
 
 def test_one_sample_lean_path_gives_the_general_paths_results():
@@ -100,9 +101,11 @@ def test_one_sample_lean_path_gives_the_general_paths_results():
     for k in range(t.size):
         msgs.append(pack_block(t[k:k + 1], i[k:k + 1]))
         if k % 37 == 5:
-            msgs.append(_corrupt(("nan", "huge", "time_nan", "wrong_label", "odd")[k % 5],
+            msgs.append(_corrupt(('nan', 'huge', 'time_nan', 'wrong_label', 'odd')[k % 5],
                                  t[k:k + 1], i[k:k + 1], rng))
-    lean, general = DirectNode(publish_points="per_sample"), DirectNode(publish_points="per_sample")
+    lean, general = DirectNode(publish_points='per_sample'), DirectNode(
+        publish_points='per_sample'
+    )
     general.node.stream.feed_one = lambda t, i: False   # never the lean path
     taken = []
     original = lean.node.stream.feed_one
@@ -111,9 +114,11 @@ def test_one_sample_lean_path_gives_the_general_paths_results():
         for m in msgs:
             lean.send(m)
             general.send(m)
-        assert sum(x is not False for x in taken) >= 590 - 3         # all but the reset/gap samples went the lean way
+        assert (
+            sum(x is not False for x in taken) >= 590 - 3
+        )  # all but the reset/gap samples went the lean way
         assert lean.node.counters() == general.node.counters()
-        assert lean.node.counters()["resets"] == 2 and lean.node.counters()["gaps_bridged"] == 1
+        assert lean.node.counters()['resets'] == 2 and lean.node.counters()['gaps_bridged'] == 1
         for a, b in zip(lean.published, general.published, strict=True):
             assert np.array_equal(a.times_s, b.times_s) and np.array_equal(a.values, b.values)
         assert lean.points == general.points and len(lean.points) == t.size
@@ -122,12 +127,23 @@ def test_one_sample_lean_path_gives_the_general_paths_results():
         general.close()
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow,
-                                                                  HealthCheck.function_scoped_fixture])
-@given(plan=st.lists(st.tuples(st.sampled_from(("ok",) * 4 + CORRUPTIONS), st.integers(1, 400)),
-                     min_size=1, max_size=25),
-       seed=st.integers(0, 2 ** 31 - 1), denormal=st.booleans())
-def test_fuzzed_messages_never_poison_the_filter_and_are_all_accounted(direct, plan, seed, denormal):
+@settings(
+    max_examples=40,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
+@given(
+    plan=st.lists(
+        st.tuples(st.sampled_from(('ok',) * 4 + CORRUPTIONS), st.integers(1, 400)),
+        min_size=1,
+        max_size=25,
+    ),
+    seed=st.integers(0, 2**31 - 1),
+    denormal=st.booleans(),
+)
+def test_fuzzed_messages_never_poison_the_filter_and_are_all_accounted(
+    direct, plan, seed, denormal
+):
     rng = np.random.default_rng(seed)
     node = direct.node
     # each example starts a fresh stream: a backward time jump resets the node
@@ -138,12 +154,12 @@ def test_fuzzed_messages_never_poison_the_filter_and_are_all_accounted(direct, p
     reference = DeflectionEstimator(node.deflection_estimator.model, FS, reduced=node._reduced)
     expected = []
     for kind, n in plan:
-        if kind in ("not_increasing", "wrong_rate"):
+        if kind in ('not_increasing', 'wrong_rate'):
             n = max(n, 3)     # a single sample has no order and no rate to get wrong
         t, i = _signal(n, start, rng)
         if denormal:
             i = i + 5e-320        # subnormal floats must not slow down or break anything
-        if kind == "ok":
+        if kind == 'ok':
             direct.send(pack_block(t, i))
             expected.append(reference.process(t, i)[1])
             start = t[-1] + 1 / FS
@@ -151,10 +167,10 @@ def test_fuzzed_messages_never_poison_the_filter_and_are_all_accounted(direct, p
             direct.send(_corrupt(kind, t, i, rng))
     after = node.counters()
     d = {k: after[k] - before[k] for k in after}
-    assert d["samples_in"] == d["samples_out"] + d["samples_rejected"] + d["samples_dropped"]
-    assert d["messages_in"] == len(plan)
-    assert d["samples_dropped"] == 0
-    assert d["messages_rejected"] == sum(k != "ok" for k, _ in plan)
+    assert d['samples_in'] == d['samples_out'] + d['samples_rejected'] + d['samples_dropped']
+    assert d['messages_in'] == len(plan)
+    assert d['samples_dropped'] == 0
+    assert d['messages_rejected'] == sum(k != 'ok' for k, _ in plan)
     out = np.concatenate([b.values for b in direct.published]) if direct.published else np.empty(0)
     assert np.all(np.isfinite(out))
     ref = np.concatenate(expected) if expected else np.empty(0)
@@ -172,7 +188,7 @@ def test_random_message_generator_and_oversized_message(direct):
         ndim = int(rng.integers(0, 4))
         for k in range(ndim):
             m.layout.dim.append(MultiArrayDimension(
-                label=str(rng.choice(["sample", "time_s,current_A", "x", ""])),
+                label=str(rng.choice(['sample', 'time_s,current_A', 'x', ''])),
                 size=int(rng.integers(0, 50)), stride=int(rng.integers(0, 100))))
         m.data = rng.standard_normal(int(rng.integers(0, 200))).view(np.float64).tolist()
         direct.send(m)
@@ -180,53 +196,53 @@ def test_random_message_generator_and_oversized_message(direct):
     big[0::2] = 5000.0 + np.arange(10_000_000) / FS
     msg = Float64MultiArray(data=big.tolist()[:0])
     msg.data = big                # array-like payload, as a fast driver would fill it
-    msg.layout.dim = [MultiArrayDimension(label="sample", size=10_000_000, stride=20_000_000),
-                      MultiArrayDimension(label="time_s,current_A", size=2, stride=2)]
+    msg.layout.dim = [MultiArrayDimension(label='sample', size=10_000_000, stride=20_000_000),
+                      MultiArrayDimension(label='time_s,current_A', size=2, stride=2)]
     direct.send(msg)
     after = direct.node.counters()
     d = {k: after[k] - before[k] for k in after}
-    assert d["messages_in"] == 301
-    assert d["samples_in"] == d["samples_out"] + d["samples_rejected"]
-    assert "limit" in direct.node.last_rejection or d["samples_out"] >= 10_000_000
+    assert d['messages_in'] == 301
+    assert d['samples_in'] == d['samples_out'] + d['samples_rejected']
+    assert 'limit' in direct.node.last_rejection or d['samples_out'] >= 10_000_000
 
 
 # ---------------------------------------------------------------------------
 # Configuration files
 # ---------------------------------------------------------------------------
-@pytest.mark.parametrize("body,needle", [
-    ("lenght_m: 0.022", "lenght_m"),                       # typo
-    ("length_m: 22.0", "millimetres"),                     # unit mistake
-    ("leak_corner_hz: fast", "leak_corner_hz"),            # wrong type
-    ("reduction_order: 12", "reduction_order"),            # out of range
-    ("effects: ['warp_drive']", "warp_drive"),             # unknown effect
+@pytest.mark.parametrize('body,needle', [
+    ('lenght_m: 0.022', 'lenght_m'),                       # typo
+    ('length_m: 22.0', 'millimetres'),                     # unit mistake
+    ('leak_corner_hz: fast', 'leak_corner_hz'),            # wrong type
+    ('reduction_order: 12', 'reduction_order'),            # out of range
+    ("effects: ['warp_drive']", 'warp_drive'),             # unknown effect
 ])
 def test_bad_params_file_stops_node_startup_naming_key_and_file(tmp_path, body, needle):
-    f = tmp_path / "bad_params.yaml"
-    f.write_text(f"/**/ipmc_estimator:\n  ros__parameters:\n    {body}\n")
+    f = tmp_path / 'bad_params.yaml'
+    f.write_text(f'/**/ipmc_estimator:\n  ros__parameters:\n    {body}\n')
     env = dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(random.randint(150, 200)))
-    res = subprocess.run([sys.executable, "-m", "ipmc_sensor_ros.nodes.estimator_node",
-                          "--ros-args", "--params-file", str(f)], env=env, capture_output=True,
+    res = subprocess.run([sys.executable, '-m', 'ipmc_sensor_ros.nodes.estimator_node',
+                          '--ros-args', '--params-file', str(f)], env=env, capture_output=True,
                          text=True, timeout=60)
     assert res.returncode == 2, res.stderr
-    assert needle in res.stderr and "bad_params.yaml" in res.stderr
-    assert "Traceback" not in res.stderr
+    assert needle in res.stderr and 'bad_params.yaml' in res.stderr
+    assert 'Traceback' not in res.stderr
 
 
-@pytest.mark.parametrize("body,needle", [
-    ("lenght_m: 0.022", "lenght_m"), ("length_m: 22.0", "length_m"),
-    ("leak_corner_hz: fast", "leak_corner_hz"), ("model: h3", "model"),
+@pytest.mark.parametrize('body,needle', [
+    ('lenght_m: 0.022', 'lenght_m'), ('length_m: 22.0', 'length_m'),
+    ('leak_corner_hz: fast', 'leak_corner_hz'), ('model: h3', 'model'),
 ])
 def test_bad_params_file_offline_names_key_and_file(tmp_path, body, needle):
-    f = tmp_path / "bad_params.yaml"
-    f.write_text(f"/**/ipmc_estimator:\n  ros__parameters:\n    {body}\n")
+    f = tmp_path / 'bad_params.yaml'
+    f.write_text(f'/**/ipmc_estimator:\n  ros__parameters:\n    {body}\n')
     with pytest.raises(config.ParameterError) as err:
         config.load_params_file(f)
-    assert needle in str(err.value) and "bad_params.yaml" in str(err.value)
+    assert needle in str(err.value) and 'bad_params.yaml' in str(err.value)
 
 
 def test_shipped_config_files_load():
-    values = config.load_params_file(ROOT / "config" / "estimator.yaml")
-    assert values["sample_rate_hz"] == 1000.0 and config.build_estimator(values) is not None
+    values = config.load_params_file(ROOT / 'config' / 'estimator.yaml')
+    assert values['sample_rate_hz'] == 1000.0 and config.build_estimator(values) is not None
 
 
 # ---------------------------------------------------------------------------
@@ -250,7 +266,7 @@ def soak(n_samples: int, block: int = 1_000_000, offset_a: float = 2e-8, noise_a
     mem_last, _ = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     # documented bound: the leak's steady offset error plus 6 sigma of the filtered noise
-    steady = leak_tradeoff(reduced, est.leak_corner_hz, 1.0, offset_a)["offset_steady_error_m"]
+    steady = leak_tradeoff(reduced, est.leak_corner_hz, 1.0, offset_a)['offset_steady_error_m']
     f = np.linspace(0, FS / 2, 200_001)
     gain2 = np.abs(est.frequency_response(f)) ** 2
     noise_sd = noise_a * np.sqrt(np.trapezoid(gain2, f) / (FS / 2))
@@ -274,7 +290,7 @@ def test_soak_core_hundred_million_samples():
 # ---------------------------------------------------------------------------
 @settings(max_examples=40, deadline=None)
 @given(thickness=st.floats(50e-6, 2e-3), length=st.floats(5e-3, 0.1), width=st.floats(1e-3, 0.05),
-       r0=st.floats(0.0, 1000.0), d=st.floats(1e-13, 1e-8), model=st.sampled_from(["h1", "h2"]))
+       r0=st.floats(0.0, 1000.0), d=st.floats(1e-13, 1e-8), model=st.sampled_from(['h1', 'h2']))
 def test_models_finite_across_the_physical_range(thickness, length, width, r0, d, model):
     material = PAPER_PARAMETERS.replace(surface_resistance_ohm=r0, diffusivity_m2_per_s=d)
     m = SensorModel.named(model, Geometry(length, width, thickness), material)

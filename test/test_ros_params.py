@@ -4,14 +4,14 @@ import os
 
 import pytest
 
-rclpy = pytest.importorskip("rclpy")
+rclpy = pytest.importorskip('rclpy')
 from rclpy.node import Node  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
 from ipmc_sensor_ros.nodes import params as P  # noqa: E402
 from ipmc_sensor_ros.interface.specs import Spec  # noqa: E402
 
-SPECS = (Spec("gain", 1.0, float, "test gain"),)
+SPECS = (Spec('gain', 1.0, float, 'test gain'),)
 
 
 @pytest.fixture
@@ -23,47 +23,47 @@ def context():
 
 
 def _node(context, tmp_path, text, extra=()):
-    path = tmp_path / "p.yaml"
+    path = tmp_path / 'p.yaml'
     path.write_text(text)
-    args = ["--ros-args", "--params-file", str(path), *extra]
-    node = Node("ipmc_estimator", context=context, cli_args=args)
+    args = ['--ros-args', '--params-file', str(path), *extra]
+    node = Node('ipmc_estimator', context=context, cli_args=args)
     return node, args
 
 
 def test_renamed_node_takes_its_default_name_section(context, tmp_path):
-    node, args = _node(context, tmp_path, "/**/ipmc_estimator:\n  ros__parameters:\n"
-                       "    gain: 2.5\n", ["-r", "__node:=left_ipmc"])
-    assert node.get_name() == "left_ipmc"
-    P.check_unknown_overrides(node, SPECS, args, default_name="ipmc_estimator")
+    node, args = _node(context, tmp_path, '/**/ipmc_estimator:\n  ros__parameters:\n'
+                       '    gain: 2.5\n', ['-r', '__node:=left_ipmc'])
+    assert node.get_name() == 'left_ipmc'
+    P.check_unknown_overrides(node, SPECS, args, default_name='ipmc_estimator')
     P.declare(node, SPECS)
-    assert node.get_parameter("gain").value == 2.5
+    assert node.get_parameter('gain').value == 2.5
     node.destroy_node()
 
 
 def test_other_nodes_keys_in_wildcard_section_warn_but_typo_for_this_node_fails(context,
                                                                               tmp_path):
-    node, args = _node(context, tmp_path, "/**:\n  ros__parameters:\n    block_size: 10\n")
-    P.check_unknown_overrides(node, SPECS, args, default_name="ipmc_estimator")  # no raise
-    assert "block_size" not in node._parameter_overrides
+    node, args = _node(context, tmp_path, '/**:\n  ros__parameters:\n    block_size: 10\n')
+    P.check_unknown_overrides(node, SPECS, args, default_name='ipmc_estimator')  # no raise
+    assert 'block_size' not in node._parameter_overrides
     node.destroy_node()
-    node, args = _node(context, tmp_path, "ipmc_estimator:\n  ros__parameters:\n    gian: 1.0\n")
-    with pytest.raises(P.ParameterError, match="gian"):
-        P.check_unknown_overrides(node, SPECS, args, default_name="ipmc_estimator")
+    node, args = _node(context, tmp_path, 'ipmc_estimator:\n  ros__parameters:\n    gian: 1.0\n')
+    with pytest.raises(P.ParameterError, match='gian'):
+        P.check_unknown_overrides(node, SPECS, args, default_name='ipmc_estimator')
     node.destroy_node()
 
 
 def test_standard_qos_override_applies_and_a_stray_one_is_refused(context, tmp_path):
-    node, args = _node(context, tmp_path, "/**:\n  ros__parameters:\n    gain: 1.0\n",
-                       ["-p", "qos_overrides./out.publisher.reliability:=best_effort"])
+    node, args = _node(context, tmp_path, '/**:\n  ros__parameters:\n    gain: 1.0\n',
+                       ['-p', 'qos_overrides./out.publisher.reliability:=best_effort'])
     P.check_unknown_overrides(node, SPECS, args)
-    pub = P.create_publisher(node, String, "out", P.COUNTERS_QOS)
+    pub = P.create_publisher(node, String, 'out', P.COUNTERS_QOS)
     P.check_qos_overrides(node)
     assert pub.qos_profile.reliability == rclpy.qos.ReliabilityPolicy.BEST_EFFORT
     node.destroy_node()
-    node, args = _node(context, tmp_path, "/**:\n  ros__parameters:\n    gain: 1.0\n",
-                       ["-p", "qos_overrides./uot.publisher.reliability:=best_effort"])
+    node, args = _node(context, tmp_path, '/**:\n  ros__parameters:\n    gain: 1.0\n',
+                       ['-p', 'qos_overrides./uot.publisher.reliability:=best_effort'])
     P.check_unknown_overrides(node, SPECS, args)
-    P.create_publisher(node, String, "out", P.COUNTERS_QOS)
-    with pytest.raises(P.ParameterError, match="uot"):
+    P.create_publisher(node, String, 'out', P.COUNTERS_QOS)
+    with pytest.raises(P.ParameterError, match='uot'):
         P.check_qos_overrides(node)
     node.destroy_node()

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Stepwise discovery (issue 15): several missing effects at once, the offset, mains hum,
 effect parameters in ``fit``, the model file and implausible magnitudes.
 
@@ -25,9 +26,9 @@ SMALL = dict(frequencies_hz=tuple(np.geomspace(1.0, 20.0, 5)), duration_s=4.0)
 FLOOR_FACTOR = 1.2
 
 
-@pytest.mark.parametrize("hidden,seed", [
-    (("surface_resistance", "amplifier_bandwidth"), 1),
-    (("surface_resistance", "time_delay", "current_offset"), 2),
+@pytest.mark.parametrize('hidden,seed', [
+    (('surface_resistance', 'amplifier_bandwidth'), 1),
+    (('surface_resistance', 'time_delay', 'current_offset'), 2),
 ])
 def test_several_hidden_effects_are_all_named(hidden, seed):
     recs, truth = hidden_effects_campaign(hidden, seed, **SMALL)
@@ -36,51 +37,65 @@ def test_several_hidden_effects_are_all_named(hidden, seed):
     assert diag.explained, diag.summary()
     assert diag.final.error <= FLOOR_FACTOR * diag.noise_floor, diag.summary()
     js = diag.to_json()
-    assert js["verdict"]["missing_effects"] == diag.missing_effects
-    assert js["verdict"]["missing_effect"] == diag.missing_effects[0]
+    assert js['verdict']['missing_effects'] == diag.missing_effects
+    assert js['verdict']['missing_effect'] == diag.missing_effects[0]
     # the held-out error falls at every added step
-    errs = [diag.baseline.error] + [s.error for s in diag.steps if s.action == "added"]
+    errs = [diag.baseline.error] + [s.error for s in diag.steps if s.action == 'added']
     assert all(b < a for a, b in zip(errs, errs[1:])), diag.summary()
     # fitted values of the effects carry their truth (10 %: 1 % noise over ~60k samples
     # determines them far better; the bound allows for the correlation with the material)
     final_values = diag.steps[-1].values
     for name, values in truth.items():
         for par, v in values.items():
-            if name == "current_offset" and par == "drift_a_per_s":
+            if name == 'current_offset' and par == 'drift_a_per_s':
                 continue    # a drift of +-2e-8 A/s over 4 s is below the noise
-            assert final_values[name][par] == pytest.approx(v, rel=0.1), (name, par, diag.summary())
+            assert final_values[name][par] == pytest.approx(v, rel=0.1), (
+                name,
+                par,
+                diag.summary(),
+            )
 
 
 def test_lab_like_data_offset_named_amplifier_not_delay_hum_reported():
     """H2 x 200 Hz amplifier, 15 nA offset, 3 % hum at 50 Hz, 2 % noise (the issue's lab case)."""
-    recs = crank_slider_campaign(("surface_resistance", ("amplifier_bandwidth", {"corner_hz": 200.0}),
-                                  ("current_offset", {"offset_a": 15e-9})), noise_rel=0.02,
-                                 hum_rel=0.03, seed=5, **SMALL)
+    recs = crank_slider_campaign(
+        (
+            'surface_resistance',
+            ('amplifier_bandwidth', {'corner_hz': 200.0}),
+            ('current_offset', {'offset_a': 15e-9}),
+        ),
+        noise_rel=0.02,
+        hum_rel=0.03,
+        seed=5,
+        **SMALL,
+    )
     diag = diagnose(recs)
-    assert diag.missing_effects[0] == "current_offset", diag.summary()
-    assert "amplifier_bandwidth" in diag.missing_effects, diag.summary()
+    assert diag.missing_effects[0] == 'current_offset', diag.summary()
+    assert 'amplifier_bandwidth' in diag.missing_effects, diag.summary()
     # the look-alike may be reported as a tie, but never named instead of the amplifier
-    assert "time_delay" not in diag.missing_effects, diag.summary()
-    lines = {round(d["frequency_hz"]): d for d in diag.to_json()["interference"]}
+    assert 'time_delay' not in diag.missing_effects, diag.summary()
+    lines = {round(d['frequency_hz']): d for d in diag.to_json()['interference']}
     assert 50 in lines, diag.summary()
     # level: 80 % of the 3 % hum power at 50 Hz -> RMS 0.027 of the clean current's RMS
     # (relative to the noisy current, a little less); 25 % tolerance for the estimate
-    assert lines[50]["level"] == pytest.approx(0.03 * np.sqrt(0.8), rel=0.25)
+    assert lines[50]['level'] == pytest.approx(0.03 * np.sqrt(0.8), rel=0.25)
     assert diag.explained and diag.final.error <= FLOOR_FACTOR * diag.noise_floor, diag.summary()
 
 
 def test_nothing_missing_names_nothing_and_finds_no_hum():
-    recs = crank_slider_campaign(("surface_resistance",), seed=21, **SMALL)
+    recs = crank_slider_campaign(('surface_resistance',), seed=21, **SMALL)
     diag = diagnose(recs)
     assert diag.missing_effects == [] and diag.explained, diag.summary()
-    assert diag.to_json()["interference"] == []
+    assert diag.to_json()['interference'] == []
 
 
 def test_mains_lines_are_found_at_their_level_and_only_when_present():
-    clean = crank_slider_campaign(("surface_resistance",), seed=3, **SMALL)
-    hum = crank_slider_campaign(("surface_resistance",), seed=3, hum_rel=0.05, hum_hz=60.0, **SMALL)
-    assert [ln for ln in find_mains_lines(clean, "auto")[0] if ln.separable] == []
-    lines = [ln for ln in find_mains_lines(hum, "auto")[0] if ln.separable]
+    clean = crank_slider_campaign(('surface_resistance',), seed=3, **SMALL)
+    hum = crank_slider_campaign(
+        ('surface_resistance',), seed=3, hum_rel=0.05, hum_hz=60.0, **SMALL
+    )
+    assert [ln for ln in find_mains_lines(clean, 'auto')[0] if ln.separable] == []
+    lines = [ln for ln in find_mains_lines(hum, 'auto')[0] if ln.separable]
     freqs = {ln.frequency_hz for ln in lines}
     assert {60.0, 180.0} <= freqs and not freqs & {50.0, 150.0}
     f60 = [ln.level for ln in lines if ln.frequency_hz == 60.0]
@@ -96,53 +111,67 @@ def _groups(recs):
 
 
 def test_fit_frees_effect_parameters_and_judges_adequacy():
-    recs = crank_slider_campaign(("surface_resistance", ("time_delay", {"delay_s": 2e-3})), seed=4, **SMALL)
+    recs = crank_slider_campaign(
+        ('surface_resistance', ('time_delay', {'delay_s': 2e-3})), seed=4, **SMALL
+    )
     groups = _groups(recs)
-    res = fit_parameters(groups, ("charge_stress_coupling_j_per_c", "diffusivity_m2_per_s", "delay_s"),
-                         effects=("surface_resistance", "time_delay"))
-    lo, hi = res.ci95["time_delay.delay_s"]
+    res = fit_parameters(
+        groups,
+        ('charge_stress_coupling_j_per_c', 'diffusivity_m2_per_s', 'delay_s'),
+        effects=('surface_resistance', 'time_delay'),
+    )
+    lo, hi = res.ci95['time_delay.delay_s']
     assert lo <= 2e-3 <= hi and hi - lo < 2e-4
-    assert res.adequate and "model adequate" in res.summary()
-    without = fit_parameters(groups, ("charge_stress_coupling_j_per_c", "diffusivity_m2_per_s"))
-    assert not without.adequate and "model inadequate" in without.summary()
-    assert "run diagnose" in without.summary()
-    with pytest.raises(ParameterError, match="add it with --effects time_delay"):
-        fit_parameters(groups, ("delay_s",))
+    assert res.adequate and 'model adequate' in res.summary()
+    without = fit_parameters(groups, ('charge_stress_coupling_j_per_c', 'diffusivity_m2_per_s'))
+    assert not without.adequate and 'model inadequate' in without.summary()
+    assert 'run diagnose' in without.summary()
+    with pytest.raises(ParameterError, match='add it with --effects time_delay'):
+        fit_parameters(groups, ('delay_s',))
 
 
 def test_model_file_round_trip_and_errors(tmp_path):
-    geom = PAPER_SAMPLES["slim"]
-    model = SensorModel(geom, effects=("surface_resistance", ("amplifier_bandwidth", {"corner_hz": 123.0})))
-    path = save_model(tmp_path / "m.yaml", model, tool="test", data_files=["a.csv"],
-                      error={"held_out": 0.01}, ci95={"d": (1.0, 2.0)})
+    geom = PAPER_SAMPLES['slim']
+    model = SensorModel(
+        geom, effects=('surface_resistance', ('amplifier_bandwidth', {'corner_hz': 123.0}))
+    )
+    path = save_model(tmp_path / 'm.yaml', model, tool='test', data_files=['a.csv'],
+                      error={'held_out': 0.01}, ci95={'d': (1.0, 2.0)})
     back = load_model(path)
     assert back.sensor_model(geom) == model
-    assert back.provenance["data_files"] == ["a.csv"] and back.provenance["ci95"]["d"] == [1.0, 2.0]
-    bad = tmp_path / "bad.yaml"
-    bad.write_text(path.read_text().replace("corner_hz", "corner_khz"))
-    with pytest.raises(ParameterError, match="bad.yaml: effects: .*corner_khz"):
+    assert back.provenance['data_files'] == ['a.csv'] and back.provenance['ci95']['d'] == [
+        1.0,
+        2.0,
+    ]
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text(path.read_text().replace('corner_hz', 'corner_khz'))
+    with pytest.raises(ParameterError, match='bad.yaml: effects: .*corner_khz'):
         load_model(bad)
 
 
 def test_unit_errors_are_flagged_with_their_factor():
-    recs = crank_slider_campaign(("surface_resistance",), seed=6, frequencies_hz=(5.0,), duration_s=3.0)
+    recs = crank_slider_campaign(
+        ('surface_resistance',), seed=6, frequencies_hz=(5.0,), duration_s=3.0
+    )
     r = recs[0]
     mm = [type(r)(r.path, r.sample, r.model, r.time_s, r.deflection_m * 1e3, r.current_a)]
     ua = [type(r)(r.path, r.sample, r.model, r.time_s, r.deflection_m, r.current_a * 1e6)]
     assert magnitude_flags(recs) == []
-    assert "multiply by 0.001" in magnitude_flags(mm)[0]
+    assert 'multiply by 0.001' in magnitude_flags(mm)[0]
     flag = magnitude_flags(ua)[0]
-    assert "current" in flag and ("1e-06" in flag or "0.001" in flag)
+    assert 'current' in flag and ('1e-06' in flag or '0.001' in flag)
 
 
 def test_hydration_relaxation_shape_limits():
     from ipmc_sensor_ros.physics.catalog import diffusivity_ratio_function
 
     t = np.array([0.0, 1.0, 600.0, 1e6])
-    plain = diffusivity_ratio_function({"diffusivity_rate_per_s": -1e-3, "equilibrium_ratio": 0.0})
+    plain = diffusivity_ratio_function({'diffusivity_rate_per_s': -1e-3, 'equilibrium_ratio': 0.0})
     assert plain(t) == pytest.approx(np.exp(-1e-3 * t))           # q = 0: the old exponential
-    relax = diffusivity_ratio_function({"diffusivity_rate_per_s": -1e-3, "equilibrium_ratio": 0.6})
-    assert relax(0.0) == 1.0 and relax(1e6) == pytest.approx(0.6)   # starts at d0, levels off at q d0
+    relax = diffusivity_ratio_function({'diffusivity_rate_per_s': -1e-3, 'equilibrium_ratio': 0.6})
+    assert relax(0.0) == 1.0 and relax(1e6) == pytest.approx(
+        0.6
+    )  # starts at d0, levels off at q d0
     # initial relative rate r_d (forward difference over 10 ms: curvature error ~1e-5 relative)
     assert (relax(0.01) - 1.0) / 0.01 == pytest.approx(-1e-3, rel=1e-4)
 
@@ -152,19 +181,25 @@ def test_priors_from_headers_and_their_errors():
 
     from ipmc_sensor_ros.workbench.diagnose import priors_from_headers
 
-    ts = [SimpleNamespace(path="a.csv", extra={"amplifier_bandwidth_hz": "200", "operator": "x"}),
-          SimpleNamespace(path="b.csv", extra={"time_delay.delay_s": "0.001"})]
-    assert priors_from_headers(ts) == {("amplifier_bandwidth", "corner_hz"): 200.0,
-                                       ("time_delay", "delay_s"): 0.001}
+    ts = [SimpleNamespace(path='a.csv', extra={'amplifier_bandwidth_hz': '200', 'operator': 'x'}),
+          SimpleNamespace(path='b.csv', extra={'time_delay.delay_s': '0.001'})]
+    assert priors_from_headers(ts) == {('amplifier_bandwidth', 'corner_hz'): 200.0,
+                                       ('time_delay', 'delay_s'): 0.001}
     with pytest.raises(ValueError, match="c.csv: header key 'amplifier_bandwidth_hz'"):
-        priors_from_headers([SimpleNamespace(path="c.csv", extra={"amplifier_bandwidth_hz": "fast"})])
+        priors_from_headers(
+            [SimpleNamespace(path='c.csv', extra={'amplifier_bandwidth_hz': 'fast'})]
+        )
 
 
 def test_effect_given_without_values_is_fitted_in_the_baseline():
     """The issue's trap: '--effects amplifier_bandwidth' must fit corner_hz, not use 200 Hz."""
-    recs = crank_slider_campaign(("surface_resistance", ("amplifier_bandwidth", {"corner_hz": 25.0})),
-                                 model_effects=("surface_resistance", "amplifier_bandwidth"), seed=8, **SMALL)
-    diag = diagnose(recs, fit_effects=["amplifier_bandwidth"])
+    recs = crank_slider_campaign(
+        ('surface_resistance', ('amplifier_bandwidth', {'corner_hz': 25.0})),
+        model_effects=('surface_resistance', 'amplifier_bandwidth'),
+        seed=8,
+        **SMALL,
+    )
+    diag = diagnose(recs, fit_effects=['amplifier_bandwidth'])
     assert diag.missing_effects == [] and diag.explained, diag.summary()
     # 1 % noise pins a 25 Hz corner to well under 5 % (its phase lag at 20 Hz is 0.7 rad)
-    assert diag.baseline.params["amplifier_bandwidth.corner_hz"] == pytest.approx(25.0, rel=0.05)
+    assert diag.baseline.params['amplifier_bandwidth.corner_hz'] == pytest.approx(25.0, rel=0.05)

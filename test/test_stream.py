@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """The stream core owns every rule of a live stream: the node, the core fed directly and the
 offline path must give identical outputs and counters on the same input, bad blocks included."""
 from __future__ import annotations
@@ -18,7 +19,7 @@ FS = 1000.0
 
 def _values_only(values) -> Float64MultiArray:
     m = Float64MultiArray()
-    m.layout.dim = [MultiArrayDimension(label="sample", size=len(values), stride=1)]
+    m.layout.dim = [MultiArrayDimension(label='sample', size=len(values), stride=1)]
     m.data = [float(v) for v in values]
     return m
 
@@ -27,50 +28,50 @@ def _random_stream(rng, n_blocks: int = 120):
     """(times or None, currents) blocks: good ones, and every kind of bad one a peer can send
     through a valid layout (values and times that break a stream rule)."""
     blocks, t0 = [], 50.0
-    kinds = ("ok",) * 6 + ("nan", "huge", "time_nan", "not_increasing", "wrong_rate",
-                           "backward_inside", "too_fast", "gap_bridged", "gap_reset",
-                           "jump_back", "values_only", "one_sample", "negative_time")
+    kinds = ('ok',) * 6 + ('nan', 'huge', 'time_nan', 'not_increasing', 'wrong_rate',
+                           'backward_inside', 'too_fast', 'gap_bridged', 'gap_reset',
+                           'jump_back', 'values_only', 'one_sample', 'negative_time')
     for _ in range(n_blocks):
         kind = str(rng.choice(kinds))
-        n = 1 if kind == "one_sample" else int(rng.integers(2, 60))
+        n = 1 if kind == 'one_sample' else int(rng.integers(2, 60))
         t = t0 + np.arange(n) / FS
         i = 3e-6 * np.sin(2 * np.pi * 2.0 * t) + rng.normal(0, 2e-8, n)
         advance = True
-        if kind == "nan":
+        if kind == 'nan':
             i[n // 2] = np.nan
             advance = False
-        elif kind == "huge":
+        elif kind == 'huge':
             i[0] = 5.0
             advance = False
-        elif kind == "time_nan":
+        elif kind == 'time_nan':
             t = t.copy()
             t[-1] = np.nan
             advance = False
-        elif kind == "not_increasing":
+        elif kind == 'not_increasing':
             t = t.copy()
             t[n // 2] = t[0]
             advance = False
-        elif kind == "wrong_rate":
+        elif kind == 'wrong_rate':
             t = t0 + np.arange(n) / (2 * FS)
             advance = False
-        elif kind == "backward_inside":
+        elif kind == 'backward_inside':
             t = np.concatenate([t[: n // 2], t[: n - n // 2] - 0.5])
             advance = False
-        elif kind == "too_fast":
+        elif kind == 'too_fast':
             t = t - 0.5 / FS           # starts half a period after the previous sample
             advance = False
-        elif kind == "gap_bridged":
+        elif kind == 'gap_bridged':
             t = t + 2 / FS
-        elif kind == "gap_reset":
+        elif kind == 'gap_reset':
             t = t + 0.3
-        elif kind == "jump_back":
+        elif kind == 'jump_back':
             t = t - 5.0
-        elif kind == "negative_time":
+        elif kind == 'negative_time':
             t = t - 1e6
             advance = False
-        blocks.append((None if kind == "values_only" else t, i))
+        blocks.append((None if kind == 'values_only' else t, i))
         if advance:
-            t0 = (t[-1] if kind != "values_only" else t0 + (n - 1) / FS) + 1 / FS
+            t0 = (t[-1] if kind != 'values_only' else t0 + (n - 1) / FS) + 1 / FS
     return blocks
 
 
@@ -81,12 +82,12 @@ def _message(times, values):
 def test_node_and_stream_core_give_identical_outputs_and_counters():
     rng = np.random.default_rng(11)
     blocks = _random_stream(rng)
-    node = DirectNode(publish_points="none")
+    node = DirectNode(publish_points='none')
     try:
         # the core fed directly, with the same design the node built
         est = node.node.deflection_estimator
         core = StreamEstimator(DeflectionEstimator(est.model, FS, reduced=est.reduced),
-                               max_gap_s=0.1, source="/current", now_s=lambda: 50.0)
+                               max_gap_s=0.1, source='/current', now_s=lambda: 50.0)
         outputs = []
         # the first block of a values-only stream starts at the node's clock: give both the same
         # start by sending a timed block first
@@ -99,7 +100,7 @@ def test_node_and_stream_core_give_identical_outputs_and_counters():
         c = core.counters
         assert core.check_invariant()
         # every kind of event happened, so the identity covers every rule
-        assert c["messages_rejected"] > 0 and c["resets"] >= 2 and c["gaps_bridged"] > 0
+        assert c['messages_rejected'] > 0 and c['resets'] >= 2 and c['gaps_bridged'] > 0
         assert len(node.published) == len(outputs)
         for pub, (t, w) in zip(node.published, outputs, strict=True):
             assert np.array_equal(pub.times_s, t) and np.array_equal(pub.values, w)
@@ -120,7 +121,7 @@ def test_offline_record_equals_the_stream_fed_block_by_block():
             t0 -= 3.0                                          # one run starting earlier
     t = np.concatenate(parts)
     i = 3e-6 * np.sin(2 * np.pi * 1.5 * t) + rng.normal(0, 2e-8, t.size)
-    proto = DirectNode(publish_points="none")
+    proto = DirectNode(publish_points='none')
     try:
         est = proto.node.deflection_estimator
         make = lambda: DeflectionEstimator(est.model, FS, reduced=est.reduced)  # noqa: E731
@@ -136,14 +137,14 @@ def test_offline_record_equals_the_stream_fed_block_by_block():
             out.append(live.feed(t[k:min(k + 500, stop)], i[k:min(k + 500, stop)]))
         start = stop
     assert stream.counters == live.counters
-    assert stream.counters["resets"] == 2 and stream.counters["gaps"] == 1
+    assert stream.counters['resets'] == 2 and stream.counters['gaps'] == 1
     assert np.array_equal(t_off, np.concatenate([o[0] for o in out]))
     assert np.array_equal(w_off, np.concatenate([o[1] for o in out]))
     assert stream.kept.all()
 
 
 def _fresh_stream():
-    proto = DirectNode(publish_points="none")
+    proto = DirectNode(publish_points='none')
     try:
         est = proto.node.deflection_estimator
         return StreamEstimator(DeflectionEstimator(est.model, FS, reduced=est.reduced),
@@ -157,18 +158,18 @@ def test_one_sample_messages_faster_than_the_sample_rate_are_refused():
     were all accepted; 10-sample blocks of the same data were all rejected.  One rule now."""
     t = 100.0 + np.arange(500) / (2 * FS)
     i = np.full(500, 1e-7)
-    node = DirectNode(publish_points="none")
+    node = DirectNode(publish_points='none')
     try:
         node.send(pack_block(np.array([t[0] - 1 / FS]), np.array([0.0])))  # a stream at 1 kHz
         for k in range(500):
             node.send(pack_block(t[k:k + 1], i[k:k + 1]))
         c = node.node.counters()
         # the first 2 kHz sample is one period after the last 1 kHz one: no rule broken yet
-        assert c["samples_rejected"] == 499 and c["samples_out"] == 2
-        assert "faster than sample_rate_hz" in node.node.last_rejection
+        assert c['samples_rejected'] == 499 and c['samples_out'] == 2
+        assert 'faster than sample_rate_hz' in node.node.last_rejection
         for k in range(0, 500, 10):
             node.send(pack_block(t[k:k + 10], i[k:k + 10]))
-        assert node.node.counters()["samples_rejected"] == 999
+        assert node.node.counters()['samples_rejected'] == 999
     finally:
         node.close()
 
@@ -179,26 +180,26 @@ def test_values_only_messages_obey_the_time_range():
     assert stream.feed(np.array([MAX_STAMP_S - 0.002]), np.array([0.0])) is not None
     assert stream.feed(None, np.zeros(2)) is not None                  # up to MAX_STAMP_S
     assert stream.feed(None, np.zeros(5)) is None
-    assert "must lie in" in stream.last_rejection
+    assert 'must lie in' in stream.last_rejection
     assert stream.check_invariant()
 
 
 def test_unpublished_output_is_counted_once_and_never_resets():
     """Issue #18 defect 1 (core part): a publish that cannot complete moves the block from
     samples_out to samples_unpublished; the filter runs on, no reset."""
-    node = DirectNode(publish_points="per_sample")
+    node = DirectNode(publish_points='per_sample')
     try:
         def refuse(_msg):
-            raise RuntimeError("cannot publish data")
+            raise RuntimeError('cannot publish data')
         node.node._pub_block.publish = refuse
         t = 5.0 + np.arange(300) / FS
         for k in range(0, 300, 1):
             node.send(pack_block(t[k:k + 1], np.full(1, 1e-7)))
         c = node.node.counters()
-        assert c["samples_unpublished"] == 300 and c["messages_unpublished"] == 300
-        assert c["samples_out"] == 0 and c["resets"] == 0
-        assert c["samples_in"] == (c["samples_out"] + c["samples_rejected"] + c["samples_dropped"]
-                                   + c["samples_unpublished"])
+        assert c['samples_unpublished'] == 300 and c['messages_unpublished'] == 300
+        assert c['samples_out'] == 0 and c['resets'] == 0
+        assert c['samples_in'] == (c['samples_out'] + c['samples_rejected'] + c['samples_dropped']
+                                   + c['samples_unpublished'])
         assert node.node.stream.last_time_s == t[-1]        # the filter ran on
     finally:
         node.close()
@@ -207,7 +208,7 @@ def test_unpublished_output_is_counted_once_and_never_resets():
 def test_counter_names_are_the_documented_ones():
     stream = _fresh_stream()
     assert tuple(stream.counters) == COUNTER_NAMES
-    with pytest.raises(DataError, match="max_gap_s"):
+    with pytest.raises(DataError, match='max_gap_s'):
         StreamEstimator(stream.estimator, max_gap_s=0.0)
 
 
@@ -219,7 +220,7 @@ def test_kalman_node_learns_the_offset_at_rest_and_publishes_its_uncertainty():
     from ipmc_sensor_ros.interface.blocks import ESTIMATE_COLUMNS
     from ipmc_sensor_ros.nodes.messages import unpack_block
 
-    node = DirectNode(publish_points="none", estimator="kalman", mains_hz=50)
+    node = DirectNode(publish_points='none', estimator='kalman', mains_hz=50)
     try:
         node.node._pub_block.publish = lambda m: node.published.append(
             unpack_block(m, ESTIMATE_COLUMNS))
@@ -230,11 +231,11 @@ def test_kalman_node_learns_the_offset_at_rest_and_publishes_its_uncertainty():
             node.send(pack_block(t[k:k + 100], i[k:k + 100]))
         node.node._on_timer()
         status = node.node.stream.estimator.status()
-        assert status["estimator"] == "kalman" and status["at_rest"]
+        assert status['estimator'] == 'kalman' and status['at_rest']
         # the offset learned from 20 s of rest: within 3 nA of 15 nA (noise 5 nA per sample,
         # hum notched; the running mean's sd is far below that, 3 nA allows for the detector's
         # settling time)
-        assert abs(status["offset_a"] - 15e-9) < 3e-9
+        assert abs(status['offset_a'] - 15e-9) < 3e-9
         w = np.concatenate([b.values for b in node.published])
         std = np.concatenate([b.extra[:, 0] for b in node.published])
         assert np.all(np.isfinite(std)) and np.all(std >= 0)

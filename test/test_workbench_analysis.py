@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Tests of the workbench analysis: FRF extraction, fitting, identifiability, compare, track."""
 from types import SimpleNamespace
 
@@ -26,7 +27,7 @@ def record(model, f0, seed, noise_rel=0.01, duration=6.0, name=None):
     keep = t >= 1.0
     t, w, i = t[keep] - 1.0, w[keep], i[keep]
     i = i + rng.normal(0, noise_rel * np.std(i), i.size)
-    return SimpleNamespace(path=f"{name or model.geometry.name}_{f0:.3g}Hz.csv",
+    return SimpleNamespace(path=f'{name or model.geometry.name}_{f0:.3g}Hz.csv',
                            sample=name or model.geometry.name, geometry=model.geometry,
                            time_s=t, deflection_m=w, current_a=i)
 
@@ -40,7 +41,7 @@ def groups_from(records):
 
 
 def test_fundamental_ignores_crank_slider_harmonics_and_uncertainty_is_calibrated():
-    model = SensorModel(PAPER_SAMPLES["slim"])
+    model = SensorModel(PAPER_SAMPLES['slim'])
     z_mag, z_ph = [], []
     for seed in range(30):
         r = record(model, 3.7, seed)
@@ -56,24 +57,31 @@ def test_fundamental_ignores_crank_slider_harmonics_and_uncertainty_is_calibrate
 
 
 def test_cross_spectral_estimate_on_sweep():
-    model = SensorModel(PAPER_SAMPLES["short"])
+    model = SensorModel(PAPER_SAMPLES['short'])
     t = np.arange(int(80 * FS)) / FS
     w = Sweep(1e-3, 0.5, 50.0, 10.0).deflection(t)
     i = lti_response_fft(model.transfer, t, w) + np.random.default_rng(0).normal(0, 2e-8, t.size)
     pts = cross_spectral_response(t[2000:], w[2000:], i[2000:], band_hz=(2, 30))
     assert len(pts) > 20
-    err = np.array([abs(np.log(p.response / model.frequency_response(p.frequency_hz))) for p in pts])
+    err = np.array(
+        [abs(np.log(p.response / model.frequency_response(p.frequency_hz))) for p in pts]
+    )
     # Welch leakage on a swept sine limits accuracy to a few percent; 5 % median, 15 % max.
     assert np.median(err) < 0.05 and err.max() < 0.15
     assert all(0.5 <= p.coherence <= 1.0 for p in pts)
 
 
 def test_fit_recovers_parameters_within_confidence_intervals():
-    true = PAPER_PARAMETERS.replace(diffusivity_m2_per_s=4.1e-11, charge_stress_coupling_j_per_c=92.0)
+    true = PAPER_PARAMETERS.replace(
+        diffusivity_m2_per_s=4.1e-11, charge_stress_coupling_j_per_c=92.0
+    )
     recs = [record(SensorModel(PAPER_SAMPLES[s], true), f, seed=k)
-            for k, (s, f) in enumerate((s, f) for s in ("slim", "short") for f in FREQS)]
-    res = fit_parameters(groups_from(recs), ("diffusivity_m2_per_s", "charge_stress_coupling_j_per_c"),
-                         PAPER_PARAMETERS)
+            for k, (s, f) in enumerate((s, f) for s in ('slim', 'short') for f in FREQS)]
+    res = fit_parameters(
+        groups_from(recs),
+        ('diffusivity_m2_per_s', 'charge_stress_coupling_j_per_c'),
+        PAPER_PARAMETERS,
+    )
     assert res.success
     for name in res.free:
         lo, hi = res.ci95[name]
@@ -85,84 +93,111 @@ def test_fit_recovers_parameters_within_confidence_intervals():
 
 def test_identifiability_flags_d_alpha0_degeneracy():
     recs = [record(SensorModel(PAPER_SAMPLES[s]), f, seed=k)
-            for k, (s, f) in enumerate((s, f) for s in ("slim", "short") for f in FREQS)]
-    start = PAPER_PARAMETERS.replace(diffusivity_m2_per_s=5e-11, anion_concentration_mol_per_m3=800.0,
-                                     charge_stress_coupling_j_per_c=150.0)
-    free = ("diffusivity_m2_per_s", "anion_concentration_mol_per_m3", "permittivity_f_per_m",
-            "charge_stress_coupling_j_per_c")
+            for k, (s, f) in enumerate((s, f) for s in ('slim', 'short') for f in FREQS)]
+    start = PAPER_PARAMETERS.replace(
+        diffusivity_m2_per_s=5e-11,
+        anion_concentration_mol_per_m3=800.0,
+        charge_stress_coupling_j_per_c=150.0,
+    )
+    free = ('diffusivity_m2_per_s', 'anion_concentration_mol_per_m3', 'permittivity_f_per_m',
+            'charge_stress_coupling_j_per_c')
     res = fit_parameters(groups_from(recs), free, start)
-    assert {"diffusivity_m2_per_s", "charge_stress_coupling_j_per_c"} <= set(res.not_identifiable)
-    undetermined = [c for c in res.identifiability if not c["determined"]]
+    assert {'diffusivity_m2_per_s', 'charge_stress_coupling_j_per_c'} <= set(res.not_identifiable)
+    undetermined = [c for c in res.identifiability if not c['determined']]
     assert len(undetermined) >= 1
-    named = {c["name"].split(" ")[0]: c for c in res.named_combinations}
-    assert named["sqrt(d)/alpha0"]["determined"]
-    true_ratio = np.sqrt(PAPER_PARAMETERS.diffusivity_m2_per_s) / PAPER_PARAMETERS.charge_stress_coupling_j_per_c
-    assert named["sqrt(d)/alpha0"]["value"] == pytest.approx(true_ratio, rel=0.01)
-    assert "NOT IDENTIFIABLE" in res.summary() and "cannot be estimated separately" in res.summary()
+    named = {c['name'].split(' ')[0]: c for c in res.named_combinations}
+    assert named['sqrt(d)/alpha0']['determined']
+    true_ratio = (
+        np.sqrt(PAPER_PARAMETERS.diffusivity_m2_per_s)
+        / PAPER_PARAMETERS.charge_stress_coupling_j_per_c
+    )
+    assert named['sqrt(d)/alpha0']['value'] == pytest.approx(true_ratio, rel=0.01)
+    assert (
+        'NOT IDENTIFIABLE' in res.summary() and 'cannot be estimated separately' in res.summary()
+    )
 
 
 def test_h1_model_on_h2_data_fails_where_expected():
     """Paper section 5.3: H1 fitted on slim, predicted for short: the failure is located in
     the phase at high frequency and on the short sample."""
     recs = {s: [record(SensorModel(PAPER_SAMPLES[s]), f, seed=k) for k, f in enumerate(FREQS)]
-            for s in ("slim", "short")}
-    free = ("diffusivity_m2_per_s", "anion_concentration_mol_per_m3", "charge_stress_coupling_j_per_c")
+            for s in ('slim', 'short')}
+    free = (
+        'diffusivity_m2_per_s',
+        'anion_concentration_mol_per_m3',
+        'charge_stress_coupling_j_per_c',
+    )
     fits = {}
-    for effects in ((), ("surface_resistance",)):
-        fits[effects] = fit_parameters(groups_from(recs["slim"]), free, PAPER_PARAMETERS, effects).material
-    cmp = {e: compare_records(recs["slim"] + recs["short"],
+    for effects in ((), ('surface_resistance',)):
+        fits[effects] = fit_parameters(
+            groups_from(recs['slim']), free, PAPER_PARAMETERS, effects
+        ).material
+    cmp = {e: compare_records(recs['slim'] + recs['short'],
                               lambda r, e=e: SensorModel(r.geometry, fits[e], e)) for e in fits}
-    wrong, right = cmp[()], cmp[("surface_resistance",)]
+    wrong, right = cmp[()], cmp[('surface_resistance',)]
     assert right.fit_percent > 97.0          # noise is 1 % of the signal
     assert wrong.fit_percent < right.fit_percent - 3.0
     # Located: the predicted sample (short) is worse than the one fitted (slim) ...
-    by_sample = {c["label"]: c for c in wrong.where["sample"]}
-    assert by_sample["short"]["error"] > by_sample["slim"]["error"] and by_sample["short"]["flagged"]
+    by_sample = {c['label']: c for c in wrong.where['sample']}
+    assert (
+        by_sample['short']['error'] > by_sample['slim']['error'] and by_sample['short']['flagged']
+    )
     # ... and on short the complex response error grows with frequency (high-frequency failure).
-    short = [r for r in wrong.records if r.sample == "short"]
-    log_err = [np.hypot(r.mag_error_db * np.log(10) / 20, np.radians(r.phase_error_deg)) for r in short]
+    short = [r for r in wrong.records if r.sample == 'short']
+    log_err = [
+        np.hypot(r.mag_error_db * np.log(10) / 20, np.radians(r.phase_error_deg)) for r in short
+    ]
     assert log_err[-1] > 2 * log_err[0]
-    assert any(c["flagged"] for c in wrong.where["frequency_band"] if c["label"].startswith("10"))
-    assert not any(c["flagged"] for c in right.where["frequency_band"] + right.where["sample"])
+    assert any(c['flagged'] for c in wrong.where['frequency_band'] if c['label'].startswith('10'))
+    assert not any(c['flagged'] for c in right.where['frequency_band'] + right.where['sample'])
 
 
 def test_track_follows_drifting_diffusivity():
     fs = 500.0
     t = np.arange(int(300 * fs)) / fs
     w = CrankSlider(6.0, 2e-3, 15e-3).deflection(t)
-    g = PAPER_SAMPLES["slim"]
+    g = PAPER_SAMPLES['slim']
     ds = np.linspace(4e-11, 2.5e-11, 5)
     i = np.zeros_like(t)
     for k, d in enumerate(ds):
-        full = lti_response_fft(SensorModel(g, PAPER_PARAMETERS.replace(diffusivity_m2_per_s=d)).transfer, t, w)
+        full = lti_response_fft(
+            SensorModel(g, PAPER_PARAMETERS.replace(diffusivity_m2_per_s=d)).transfer, t, w
+        )
         sel = (t >= 60 * k) & (t < 60 * (k + 1))
         i[sel] = full[sel]
     i += np.random.default_rng(0).normal(0, 1e-8, i.size)
     track = track_parameter(t, w, i, g, PAPER_PARAMETERS, window_s=60.0)
     assert len(track) == 5
     for p, d in zip(track, ds):
-        lo, hi = p.ci95["diffusivity_m2_per_s"]
+        lo, hi = p.ci95['diffusivity_m2_per_s']
         # the window's first ~0.1 s carries the previous d's memory: allow 1 % beyond the CI
         assert lo * 0.99 <= d <= hi * 1.01
 
 
-@pytest.mark.parametrize("effects", ["", "time_delay(delay_s=0.004)", "nonlinearity(quadratic=1,cubic=5)",
-                                     "hydration_drift(diffusivity_rate_per_s=-0.01)",
-                                     "beam_inertia(natural_frequency_hz=30,damping_ratio=0.03)",
-                                     "current_offset(offset_a=1e-7,drift_a_per_s=1e-9)"])
+@pytest.mark.parametrize(
+    'effects',
+    [
+        '',
+        'time_delay(delay_s=0.004)',
+        'nonlinearity(quadratic=1,cubic=5)',
+        'hydration_drift(diffusivity_rate_per_s=-0.01)',
+        'beam_inertia(natural_frequency_hz=30,damping_ratio=0.03)',
+        'current_offset(offset_a=1e-7,drift_a_per_s=1e-9)',
+    ],
+)
 def test_fast_fit_prediction_matches_exact_prediction(effects):
     """The diagnosis fits with an interpolated transfer function; it must equal the exact
     FFT prediction to far below the noise (1e-5 relative; 5e-4 near a beam resonance)."""
     from ipmc_sensor_ros.simulation.sensor import predict_current
     from ipmc_sensor_ros.workbench.timefit import Record, predict, prepare
 
-    model = SensorModel.named("h2", PAPER_SAMPLES["short"], extra_effects=effects)
+    model = SensorModel.named('h2', PAPER_SAMPLES['short'], extra_effects=effects)
     t = np.arange(6000) / FS
     w = CrankSlider(7.3, 2e-3, 15e-3).deflection(t)
-    rec = Record("r", "short", model, t, w, np.sin(t))
+    rec = Record('r', 'short', model, t, w, np.sin(t))
     p = prepare([rec])[0]
     exact = predict_current(model, t, w, pad_s=1.0)
     fast = predict(p, model)
     k = p.keep
-    tol = 5e-4 if "beam" in effects else 1e-5
+    tol = 5e-4 if 'beam' in effects else 1e-5
     assert np.sqrt(np.mean((fast[k] - exact[k]) ** 2)) / np.std(exact[k]) < tol

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Shared pieces of the ``ipmc-model`` verbs: one flag vocabulary, argument
 parsing helpers, data loading, progress lines and JSON output.
 
@@ -33,30 +34,30 @@ from ..workbench.discovery import SYMBOL_TO_NAME
 from ..physics.parameters import (PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, MaterialParameters,
                                  ParameterError, load_yaml)
 
-__all__ = ["HelpFormatter", "Progress", "say", "natural_key", "fmt_time_s", "param_names",
-           "parse_geometry", "material_from_args", "load_material", "effects_from_args",
-           "load_data", "add_model_args", "add_data_args", "add_output_args", "write_json",
-           "report_dir", "parse_samples", "renamed_flag", "SYMBOL_TO_NAME"]
+__all__ = ['HelpFormatter', 'Progress', 'say', 'natural_key', 'fmt_time_s', 'param_names',
+           'parse_geometry', 'material_from_args', 'load_material', 'effects_from_args',
+           'load_data', 'add_model_args', 'add_data_args', 'add_output_args', 'write_json',
+           'report_dir', 'parse_samples', 'renamed_flag', 'SYMBOL_TO_NAME']
 
 MATERIAL_KEYS = tuple(MaterialParameters.__dataclass_fields__)
-LENGTH_UNITS_M = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "μm": 1e-6}
+LENGTH_UNITS_M = {'m': 1.0, 'mm': 1e-3, 'um': 1e-6, 'µm': 1e-6, 'μm': 1e-6}
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
     """Shows ``(default: X)`` for every flag that has a real default (not None/False)."""
 
     def _get_help_string(self, action):
-        text = action.help or ""
-        if action.default in (None, False, "", argparse.SUPPRESS) or "%(default)" in text:
+        text = action.help or ''
+        if action.default in (None, False, '', argparse.SUPPRESS) or '%(default)' in text:
             return text
         if action.option_strings or action.nargs in (argparse.OPTIONAL, argparse.ZERO_OR_MORE):
-            return text + " (default: %(default)s)"
+            return text + ' (default: %(default)s)'
         return text
 
 
 def say(msg: str) -> None:
     """A progress/status line on stderr (stdout keeps the results)."""
-    print(f"... {msg}", file=sys.stderr, flush=True)
+    print(f'... {msg}', file=sys.stderr, flush=True)
 
 
 class Progress:
@@ -76,7 +77,7 @@ class Progress:
         self.out = out or sys.stderr
         self.t0 = time.monotonic()
         self._last = -np.inf
-        self._last_msg = ""
+        self._last_msg = ''
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._lock = threading.Lock()
@@ -84,7 +85,9 @@ class Progress:
     def _print(self, msg: str) -> None:
         with self._lock:
             self._last = time.monotonic()
-            print(f"... {self.what}: {msg} [{self._last - self.t0:.0f} s]", file=self.out, flush=True)
+            print(
+                f'... {self.what}: {msg} [{self._last - self.t0:.0f} s]', file=self.out, flush=True
+            )
 
     def step(self, msg: str) -> None:
         self._last_msg = msg
@@ -99,7 +102,7 @@ class Progress:
             if now - self.t0 >= self.quiet_s and now - self._last >= self.heartbeat_s:
                 self._print(f"still working ({self._last_msg or 'running'})")
 
-    def __enter__(self) -> "Progress":
+    def __enter__(self) -> 'Progress':
         self._thread = threading.Thread(target=self._beat, daemon=True)
         self._thread.start()
         return self
@@ -109,10 +112,10 @@ class Progress:
         if self._thread is not None:
             self._thread.join()
         if time.monotonic() - self.t0 >= self.quiet_s and exc[0] is None:
-            self._print("done")
+            self._print('done')
 
 
-_NUMBER = re.compile(r"\d+(?:[.p]\d+)?")
+_NUMBER = re.compile(r'\d+(?:[.p]\d+)?')
 
 
 def natural_key(path) -> tuple:
@@ -122,7 +125,7 @@ def natural_key(path) -> tuple:
     parts: list = []
     pos = 0
     for m in _NUMBER.finditer(text):
-        parts += [(0, text[pos:m.start()]), (1, float(m.group().replace("p", ".")))]
+        parts += [(0, text[pos:m.start()]), (1, float(m.group().replace('p', '.')))]
         pos = m.end()
     parts.append((0, text[pos:]))
     return tuple(parts)
@@ -130,44 +133,46 @@ def natural_key(path) -> tuple:
 
 def fmt_time_s(t: float) -> str:
     """A time with sensible precision: 4 significant digits, no float noise."""
-    return f"{float(t):.4g}"
+    return f'{float(t):.4g}'
 
 
-def param_names(text: str, flag: str = "--free") -> tuple[str, ...]:
+def param_names(text: str, flag: str = '--free') -> tuple[str, ...]:
     """Full material names from a comma list of symbols (d, alpha0, ...) or full names."""
     out = []
-    for item in filter(None, (x.strip() for x in text.split(","))):
+    for item in filter(None, (x.strip() for x in text.split(','))):
         name = SYMBOL_TO_NAME.get(item, item)
         if name not in MATERIAL_KEYS:
-            raise ParameterError(f"{flag}: unknown parameter '{item}'; use {sorted(SYMBOL_TO_NAME)} "
-                                 f"or full names {list(MATERIAL_KEYS)}")
+            raise ParameterError(
+                f"{flag}: unknown parameter '{item}'; use {sorted(SYMBOL_TO_NAME)} "
+                f'or full names {list(MATERIAL_KEYS)}'
+            )
         out.append(name)
     if not out:
-        raise ParameterError(f"{flag}: no parameter given")
+        raise ParameterError(f'{flag}: no parameter given')
     return tuple(out)
 
 
-def parse_geometry(text: str, name: str = "", flag: str = "--geometry") -> Geometry:
+def parse_geometry(text: str, name: str = '', flag: str = '--geometry') -> Geometry:
     """'L,W,T' in metres, or each value with a unit: '22mm,7mm,360um'."""
-    parts = [p.strip() for p in text.split(",")]
+    parts = [p.strip() for p in text.split(',')]
     if len(parts) != 3:
         raise ParameterError(f"{flag}: expected 'L,W,T' (length, width, thickness), got {text!r}")
     values = []
     for part in parts:
-        m = re.fullmatch(r"([-+0-9.eE]+)\s*([a-zµμ]*)", part)
-        if not m or m.group(2) not in ("", *LENGTH_UNITS_M):
-            raise ParameterError(f"{flag}: cannot read {part!r}; use metres or a unit "
-                                 f"{sorted(LENGTH_UNITS_M)}, e.g. 22mm,7mm,360um")
-        values.append(float(m.group(1)) * LENGTH_UNITS_M.get(m.group(2) or "m"))
+        m = re.fullmatch(r'([-+0-9.eE]+)\s*([a-zµμ]*)', part)
+        if not m or m.group(2) not in ('', *LENGTH_UNITS_M):
+            raise ParameterError(f'{flag}: cannot read {part!r}; use metres or a unit '
+                                 f'{sorted(LENGTH_UNITS_M)}, e.g. 22mm,7mm,360um')
+        values.append(float(m.group(1)) * LENGTH_UNITS_M.get(m.group(2) or 'm'))
     return Geometry(*values, name=name)
 
 
-def parse_samples(text: str, flag: str = "--samples") -> list[str]:
-    names = [s.strip() for s in text.split(",") if s.strip()]
+def parse_samples(text: str, flag: str = '--samples') -> list[str]:
+    names = [s.strip() for s in text.split(',') if s.strip()]
     unknown = [n for n in names if n not in PAPER_SAMPLES]
     if unknown or not names:
-        raise ParameterError(f"{flag}: unknown sample(s) {unknown}; paper samples are "
-                             f"{sorted(PAPER_SAMPLES)}")
+        raise ParameterError(f'{flag}: unknown sample(s) {unknown}; paper samples are '
+                             f'{sorted(PAPER_SAMPLES)}')
     return names
 
 
@@ -180,26 +185,27 @@ def load_material(path) -> MaterialParameters:
     """
     from ..physics.parameters import read_yaml
 
-    data = read_yaml(path, "parameters file") or {}
-    if isinstance(data, dict) and any(isinstance(v, dict) and "ros__parameters" in v
+    data = read_yaml(path, 'parameters file') or {}
+    if isinstance(data, dict) and any(isinstance(v, dict) and 'ros__parameters' in v
                                       for v in data.values()):
         from ..interface.specs import load_params_file
 
         values = load_params_file(path)
-        return MaterialParameters.from_dict({k: v for k, v in values.items() if k in MATERIAL_KEYS},
-                                            where=str(path))
+        return MaterialParameters.from_dict(
+            {k: v for k, v in values.items() if k in MATERIAL_KEYS}, where=str(path)
+        )
     return load_yaml(path)[0]
 
 
 def _model_file(args):
     """The saved model of ``--model-file`` (None without it); with ``--params`` it is refused:
     two sources of the material, nothing chosen silently."""
-    path = getattr(args, "model_file", None)
+    path = getattr(args, 'model_file', None)
     if not path:
         return None
-    if getattr(args, "params", None):
-        raise ParameterError(f"--model-file {path} and --params {args.params} both give the "
-                             "material: use one")
+    if getattr(args, 'params', None):
+        raise ParameterError(f'--model-file {path} and --params {args.params} both give the '
+                             'material: use one')
     from ..physics.modelfile import load_model
 
     return load_model(path)
@@ -210,21 +216,21 @@ def material_from_args(args) -> MaterialParameters:
     saved = _model_file(args)
     if saved is not None:
         material = saved.material
-    elif getattr(args, "params", None):
+    elif getattr(args, 'params', None):
         material = load_material(args.params)
-    for item in getattr(args, "set", None) or []:
-        if "=" not in item:
-            raise ParameterError(f"--set expects name=value, got {item!r}")
-        k, v = item.split("=", 1)
-        material = material.replace(**{param_names(k, "--set")[0]: float(v)})
+    for item in getattr(args, 'set', None) or []:
+        if '=' not in item:
+            raise ParameterError(f'--set expects name=value, got {item!r}')
+        k, v = item.split('=', 1)
+        material = material.replace(**{param_names(k, '--set')[0]: float(v)})
     return material
 
 
 def effects_from_args(args) -> tuple:
-    for plugin in getattr(args, "plugin", None) or []:
+    for plugin in getattr(args, 'plugin', None) or []:
         names = load_plugin(plugin)
         say(f"plugin {plugin}: effects {', '.join(names)}")
-    extra = getattr(args, "effects", "") or ""
+    extra = getattr(args, 'effects', '') or ''
     saved = _model_file(args)
     if saved is None:
         return model_effects(args.model, extra)
@@ -233,7 +239,7 @@ def effects_from_args(args) -> tuple:
     for e in added:
         if e.name in {b.name for b in base}:
             raise ParameterError(f"--effects: '{e.name}' is already in --model-file "
-                                 f"{args.model_file} (with its fitted values)")
+                                 f'{args.model_file} (with its fitted values)')
     return tuple(base) + tuple(added)
 
 
@@ -242,11 +248,11 @@ def _expand(paths) -> list[Path]:
     out: list[Path] = []
     for path in paths:
         p = Path(path)
-        if p.is_dir() and not (p / "metadata.yaml").exists():
-            inner = [x for x in p.iterdir() if x.suffix in (".csv", ".txt", ".tsv")
-                     or (x.is_dir() and (x / "metadata.yaml").exists())]
+        if p.is_dir() and not (p / 'metadata.yaml').exists():
+            inner = [x for x in p.iterdir() if x.suffix in ('.csv', '.txt', '.tsv')
+                     or (x.is_dir() and (x / 'metadata.yaml').exists())]
             if not inner:
-                raise ParameterError(f"{p}: directory holds no .csv/.txt files and no bags")
+                raise ParameterError(f'{p}: directory holds no .csv/.txt files and no bags')
             out.extend(sorted(inner, key=natural_key))
         else:
             out.append(p)
@@ -261,21 +267,21 @@ def load_data(args, *, need_deflection: bool = True) -> list:
     """
     from ..workbench.io import TimeSeries, read_any, read_bag
 
-    geometry = parse_geometry(args.geometry, getattr(args, "sample", "") or "") \
-        if getattr(args, "geometry", None) else None
+    geometry = parse_geometry(args.geometry, getattr(args, 'sample', '') or '') \
+        if getattr(args, 'geometry', None) else None
     out = []
     for p in sorted(_expand(args.data), key=natural_key):
-        if p.is_dir() or p.suffix in (".mcap", ".db3"):
+        if p.is_dir() or p.suffix in ('.mcap', '.db3'):
             item = read_bag(p, args.current_topic, args.deflection_topic, geometry)
         else:
             item = read_any(p)
         if need_deflection and isinstance(item, TimeSeries) and item.deflection_m is None:
-            say(f"skipped {p}: current only (no deflection column)")
+            say(f'skipped {p}: current only (no deflection column)')
             continue
         out.append(item)
     if not out:
-        raise ParameterError("no usable data: " + ("every input lacks a deflection column"
-                                                   if need_deflection else "no input given"))
+        raise ParameterError('no usable data: ' + ('every input lacks a deflection column'
+                                                   if need_deflection else 'no input given'))
     return out
 
 
@@ -284,50 +290,55 @@ def renamed_flag(parser: argparse.ArgumentParser, old: str, new: str) -> None:
 
     class _Renamed(argparse.Action):
         def __call__(self, parser, namespace, values, option_string=None):
-            parser.error(f"{old} was renamed {new} (same meaning)")
+            parser.error(f'{old} was renamed {new} (same meaning)')
 
     parser.add_argument(old, action=_Renamed, help=argparse.SUPPRESS)
 
 
 def add_model_args(p: argparse.ArgumentParser, *, effects: bool = True) -> None:
-    g = p.add_argument_group("model")
-    g.add_argument("--model", default="h2", metavar="h1|h2",
-                   help="base model: h1 (eq. 31) or h2 = h1 + surface_resistance (eq. 45)")
+    g = p.add_argument_group('model')
+    g.add_argument('--model', default='h2', metavar='h1|h2',
+                   help='base model: h1 (eq. 31) or h2 = h1 + surface_resistance (eq. 45)')
     if effects:
-        g.add_argument("--effects", default="", metavar="LIST",
+        g.add_argument('--effects', default='', metavar='LIST',
                        help="extra effects, e.g. 'time_delay' or "
                             "'time_delay(delay_s=0.002),nonlinearity' (see: ipmc-model effects)")
-        g.add_argument("--plugin", action="append", metavar="FILE",
-                       help="Python file defining more effects (repeatable)")
-    g.add_argument("--model-file", metavar="FILE",
-                   help="a saved model (ipmc-model/1 YAML from --save-model): its effects with "
-                        "their values and its material replace --model and --params")
-    g.add_argument("--params", metavar="FILE",
+        g.add_argument('--plugin', action='append', metavar='FILE',
+                       help='Python file defining more effects (repeatable)')
+    g.add_argument('--model-file', metavar='FILE',
+                   help='a saved model (ipmc-model/1 YAML from --save-model): its effects with '
+                        'their values and its material replace --model and --params')
+    g.add_argument('--params', metavar='FILE',
                    help="material YAML ('material:') or a ROS 2 params file of the nodes "
                         "(default: the paper's Tables 1-2)")
-    g.add_argument("--set", action="append", metavar="NAME=VALUE",
-                   help="override a material parameter, e.g. --set d=3e-11 (repeatable)")
+    g.add_argument('--set', action='append', metavar='NAME=VALUE',
+                   help='override a material parameter, e.g. --set d=3e-11 (repeatable)')
 
 
 def add_data_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("data", nargs="+",
-                   help="ipmc-timeseries/1 or ipmc-frf/1 files, directories of them, or rosbag2 "
-                        "bags (see: ipmc-model import for lab files)")
-    g = p.add_argument_group("data")
-    g.add_argument("--current-topic", default="current", metavar="TOPIC", help="bags: topic of the current blocks")
-    g.add_argument("--deflection-topic", default="deflection_truth", metavar="TOPIC",
-                   help="bags: topic of the measured deflection")
-    g.add_argument("--geometry", metavar="L,W,T",
-                   help="bags without ipmc.yaml sidecar: length, width, thickness in metres or "
-                        "with units (22mm,7mm,360um)")
+    p.add_argument('data', nargs='+',
+                   help='ipmc-timeseries/1 or ipmc-frf/1 files, directories of them, or rosbag2 '
+                        'bags (see: ipmc-model import for lab files)')
+    g = p.add_argument_group('data')
+    g.add_argument(
+        '--current-topic',
+        default='current',
+        metavar='TOPIC',
+        help='bags: topic of the current blocks',
+    )
+    g.add_argument('--deflection-topic', default='deflection_truth', metavar='TOPIC',
+                   help='bags: topic of the measured deflection')
+    g.add_argument('--geometry', metavar='L,W,T',
+                   help='bags without ipmc.yaml sidecar: length, width, thickness in metres or '
+                        'with units (22mm,7mm,360um)')
 
 
 def add_output_args(p: argparse.ArgumentParser, *, report: bool = True) -> None:
-    g = p.add_argument_group("output")
-    g.add_argument("--json", metavar="FILE", help="write the numbers as JSON to this file")
+    g = p.add_argument_group('output')
+    g.add_argument('--json', metavar='FILE', help='write the numbers as JSON to this file')
     if report:
-        g.add_argument("--report", metavar="DIR",
-                       help="write index.html and PNG plots into this directory")
+        g.add_argument('--report', metavar='DIR',
+                       help='write index.html and PNG plots into this directory')
 
 
 def _json_default(o):

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """``ipmc-model``: the model workbench on the command line (parser assembly and dispatch).
 
 The verbs live in three modules: :mod:`.data_verbs` (simulate, estimate,
@@ -13,7 +14,7 @@ import sys
 from . import data_verbs, info_verbs, model_verbs
 from .args import HelpFormatter
 
-__all__ = ["main", "build_parser"]
+__all__ = ['main', 'build_parser']
 
 DESCRIPTION = """\
 IPMC sensor model workbench (Chen-Tan-Will-Ziel 2007): make, import and
@@ -31,9 +32,9 @@ Every verb prints its results; most also take --json FILE and --report DIR.
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="ipmc-model", description=DESCRIPTION,
+    parser = argparse.ArgumentParser(prog='ipmc-model', description=DESCRIPTION,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="verb", required=True, metavar="VERB")
+    sub = parser.add_subparsers(dest='verb', required=True, metavar='VERB')
     for module in (data_verbs, model_verbs, info_verbs):
         module.add_parsers(sub, HelpFormatter)
     return parser
@@ -45,9 +46,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except (ValueError, OSError) as exc:   # ParameterError, DataFormatError, ... are ValueErrors
-        print(f"ipmc-model {args.verb}: error: {exc}", file=sys.stderr)
+        print(f'ipmc-model {args.verb}: error: {exc}', file=sys.stderr)
         return 2
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     sys.exit(main())

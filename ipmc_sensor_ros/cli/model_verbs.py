@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Verbs that test a model against measurements: ``fit``, ``compare``, ``track``, ``diagnose``.
 
 Each verb: parse -> call the workbench -> print a summary -> optional JSON and report.
@@ -13,13 +14,13 @@ from .args import (Progress, add_data_args, add_model_args, add_output_args, eff
                    load_data, material_from_args, param_names, renamed_flag, report_dir, say,
                    write_json)
 
-__all__ = ["add_parsers", "params_file_doc"]
+__all__ = ['add_parsers', 'params_file_doc']
 
-FREE_HELP = ("parameters estimated from the data, comma list of symbols d, alpha0, C-, kappa_e, "
-             "Y, r0, T or full names")
+FREE_HELP = ('parameters estimated from the data, comma list of symbols d, alpha0, C-, kappa_e, '
+             'Y, r0, T or full names')
 #: physical constants of MaterialParameters that are not node parameters
-_NOT_NODE_PARAMS = ("faraday_constant_c_per_mol", "gas_constant_j_per_mol_k",
-                    "one_minus_anion_volume_fraction")
+_NOT_NODE_PARAMS = ('faraday_constant_c_per_mol', 'gas_constant_j_per_mol_k',
+                    'one_minus_anion_volume_fraction')
 
 
 def _records(args, with_data: bool = False):
@@ -41,15 +42,15 @@ def _model_text(data, material, effects) -> str:
 def params_file_doc(material: MaterialParameters, geometry, base: str, extra_effects,
                     sample_rate_hz: float | None = None) -> dict:
     """ROS 2 params file contents for both nodes, under ``/**/<node>`` (any namespace)."""
-    params = {"length_m": geometry.length_m, "width_m": geometry.width_m,
-              "thickness_m": geometry.thickness_m}
+    params = {'length_m': geometry.length_m, 'width_m': geometry.width_m,
+              'thickness_m': geometry.thickness_m}
     params.update({k: v for k, v in material.to_dict().items() if k not in _NOT_NODE_PARAMS})
     if sample_rate_hz:
-        params["sample_rate_hz"] = float(sample_rate_hz)
-    params["model"] = base
-    params["effects"] = [format_effect(e) for e in extra_effects] or [""]
-    return {"/**/ipmc_estimator": {"ros__parameters": params},
-            "/**/ipmc_simulator": {"ros__parameters": dict(params)}}
+        params['sample_rate_hz'] = float(sample_rate_hz)
+    params['model'] = base
+    params['effects'] = [format_effect(e) for e in extra_effects] or ['']
+    return {'/**/ipmc_estimator': {'ros__parameters': params},
+            '/**/ipmc_simulator': {'ros__parameters': dict(params)}}
 
 
 def _save_params(path: Path, groups, data, res, args, effects) -> list[Path]:
@@ -62,19 +63,32 @@ def _save_params(path: Path, groups, data, res, args, effects) -> list[Path]:
     extra = effects[len(parse_model_name(base)[1]):]
     written = []
     for g in groups:
-        out = path if len(groups) == 1 else path.with_name(f"{path.stem}_{g.name}{path.suffix}")
-        material = res.material.replace(**{k: v for k, v in g.known.items()
-                                           if k not in res.free and k in MaterialParameters.__dataclass_fields__})
-        rates = {d.sample_rate_hz for d in data if isinstance(d, TimeSeries) and d.geometry == g.geometry}
-        doc = params_file_doc(material, g.geometry, base, extra, rates.pop() if len(rates) == 1 else None)
-        sources = sorted({Path(p.source).name for p in g.points if getattr(p, "source", "")})
-        head = [f"# Written by ipmc-model fit on {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC",
-                f"# sample {g.name}: geometry from the data; model {base}"
-                f"{' + ' + ', '.join(doc['/**/ipmc_estimator']['ros__parameters']['effects']) if extra else ''}",
-                f"# fitted: {', '.join(res.free)}; chi2/dof {res.chi2:.4g}/{res.dof}",
-                f"# data: {', '.join(sources[:12])}{' ...' if len(sources) > 12 else ''}",
-                "# use: ros2 run ipmc_sensor_ros ipmc_estimator --ros-args --params-file THIS_FILE"]
-        out.write_text("\n".join(head) + "\n" + yaml.safe_dump(doc, sort_keys=False))
+        out = path if len(groups) == 1 else path.with_name(f'{path.stem}_{g.name}{path.suffix}')
+        material = res.material.replace(
+            **{
+                k: v
+                for k, v in g.known.items()
+                if k not in res.free and k in MaterialParameters.__dataclass_fields__
+            }
+        )
+        rates = {
+            d.sample_rate_hz
+            for d in data
+            if isinstance(d, TimeSeries) and d.geometry == g.geometry
+        }
+        doc = params_file_doc(
+            material, g.geometry, base, extra, rates.pop() if len(rates) == 1 else None
+        )
+        sources = sorted({Path(p.source).name for p in g.points if getattr(p, 'source', '')})
+        head = [
+            f'# Written by ipmc-model fit on {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC',
+            f'# sample {g.name}: geometry from the data; model {base}'
+            f"{' + ' + ', '.join(doc['/**/ipmc_estimator']['ros__parameters']['effects']) if extra else ''}",
+            f"# fitted: {', '.join(res.free)}; chi2/dof {res.chi2:.4g}/{res.dof}",
+            f"# data: {', '.join(sources[:12])}{' ...' if len(sources) > 12 else ''}",
+            '# use: ros2 run ipmc_sensor_ros ipmc_estimator --ros-args --params-file THIS_FILE',
+        ]
+        out.write_text('\n'.join(head) + '\n' + yaml.safe_dump(doc, sort_keys=False))
         written.append(out)
     return written
 
@@ -96,40 +110,42 @@ def _cmd_fit(args) -> int:
     free += tuple(n for n in effect_free_names(fit_eff, frequency_domain=True) if n not in free)
     for e in fit_eff:
         if not acts_on_transfer(e):
-            say(f"{e}: kept at its catalog values (a frequency-response fit cannot see it; "
-                "diagnose fits it in the time domain)")
+            say(f'{e}: kept at its catalog values (a frequency-response fit cannot see it; '
+                'diagnose fits it in the time domain)')
     say(f"fitting {', '.join(free)} to {sum(len(g.points) for g in groups)} frequency point(s) "
-        f"of {len(groups)} sample(s)")
-    with Progress("fit"):
+        f'of {len(groups)} sample(s)')
+    with Progress('fit'):
         res = fit_parameters(groups, free, material, effects)
     print(res.summary())
-    print("  chi2/dof about 1: the model explains the points within their error bars (>> 1: it does "
-          "not); 95% CI from the curvature of chi2; sd(ln) = relative sd of a parameter combination")
-    write_json(args.json, {"free": list(res.free), "estimates": res.estimates, "ci95": res.ci95,
-                           "correlation": res.correlation, "chi2": res.chi2, "dof": res.dof,
-                           "identifiability": res.identifiability,
-                           "named_combinations": res.named_combinations,
-                           "not_identifiable": res.not_identifiable, "success": res.success,
-                           "p_value": res.p_value, "adequate": res.adequate,
-                           "material": res.material.to_dict(),
-                           "model": SensorModel(groups[0].geometry, res.material,
+    print(
+        '  chi2/dof about 1: the model explains the points within their error bars (>> 1: it does '
+        'not); 95% CI from the curvature of chi2; sd(ln) = relative sd of a parameter combination'
+    )
+    write_json(args.json, {'free': list(res.free), 'estimates': res.estimates, 'ci95': res.ci95,
+                           'correlation': res.correlation, 'chi2': res.chi2, 'dof': res.dof,
+                           'identifiability': res.identifiability,
+                           'named_combinations': res.named_combinations,
+                           'not_identifiable': res.not_identifiable, 'success': res.success,
+                           'p_value': res.p_value, 'adequate': res.adequate,
+                           'material': res.material.to_dict(),
+                           'model': SensorModel(groups[0].geometry, res.material,
                                                 res.effects).describe()})
     if args.save_model:
         from ..physics.modelfile import save_model
 
         save_model(args.save_model, effects=res.effects, material=res.material,
-                   tool="ipmc-model fit", data_files=args.data, ci95=res.ci95,
-                   error={"chi2": res.chi2, "dof": res.dof, "p_value": res.p_value})
-        print(f"saved the whole model to {args.save_model}")
+                   tool='ipmc-model fit', data_files=args.data, ci95=res.ci95,
+                   error={'chi2': res.chi2, 'dof': res.dof, 'p_value': res.p_value})
+        print(f'saved the whole model to {args.save_model}')
     if args.save:
         for path in _save_params(Path(args.save), groups, data, res, args, effects):
-            print(f"saved node parameters (key /**/ipmc_estimator, geometry included) to {path}")
+            print(f'saved node parameters (key /**/ipmc_estimator, geometry included) to {path}')
     if args.save_material:
         save_yaml(args.save_material, res.material)
-        print(f"saved fitted material to {args.save_material}")
-    print("next: " + (next_command("compare", args.data, args.save_model)
+        print(f'saved fitted material to {args.save_material}')
+    print('next: ' + (next_command('compare', args.data, args.save_model)
                       if res.adequate or args.save_model
-                      else next_command("diagnose", args.data, None, f"--model {args.model}")))
+                      else next_command('diagnose', args.data, None, f'--model {args.model}')))
     rd = report_dir(args.report)
     if rd:
         from ..workbench.report import fit_report
@@ -138,10 +154,13 @@ def _cmd_fit(args) -> int:
         models = {}
         for g in groups:
             known = {k: v for k, v in g.known.items() if k not in free}
-            models[g.name] = {"fitted": SensorModel(g.geometry, res.material.replace(**known),
-                                                    effects).frequency_response,
-                              "start": SensorModel(g.geometry, material, effects).frequency_response}
-        print(f"report: {fit_report(rd, res, pts, models, _model_text(data, material, effects))}")
+            models[g.name] = {
+                'fitted': SensorModel(
+                    g.geometry, res.material.replace(**known), effects
+                ).frequency_response,
+                'start': SensorModel(g.geometry, material, effects).frequency_response,
+            }
+        print(f'report: {fit_report(rd, res, pts, models, _model_text(data, material, effects))}')
     return 0
 
 
@@ -150,7 +169,7 @@ def _cmd_compare(args) -> int:
 
     recs = _records(args)
     model_text = recs[0].model.describe()
-    with Progress(f"comparing {model_text} with {len(recs)} record(s)") as prog:
+    with Progress(f'comparing {model_text} with {len(recs)} record(s)') as prog:
         position = {id(rec): k for k, rec in enumerate(recs, start=1)}
 
         def model_for(rec):
@@ -159,9 +178,9 @@ def _cmd_compare(args) -> int:
 
         cmp = compare_records(recs, model_for, settle_s=args.settle)
     print(cmp.summary())
-    print("  fit % = 100 (1 - error); error = ||y - ŷ|| / ||y - mean y|| of the current; "
-          "noise = error of a perfect model; dMag/dPhase = measured/model at f0 +- 1 sd")
-    write_json(args.json, {**cmp.to_json(), "model": model_text})
+    print('  fit % = 100 (1 - error); error = ||y - ŷ|| / ||y - mean y|| of the current; '
+          'noise = error of a perfect model; dMag/dPhase = measured/model at f0 +- 1 sd')
+    write_json(args.json, {**cmp.to_json(), 'model': model_text})
     rd = report_dir(args.report)
     if rd:
         from ..workbench.report import compare_report
@@ -170,8 +189,8 @@ def _cmd_compare(args) -> int:
         for r, rec in zip(cmp.records, recs):
             if r.point is not None:
                 pts.setdefault(r.sample, []).append(r.point)
-            curves.setdefault(r.sample, {"model": rec.model.frequency_response})
-        print(f"report: {compare_report(rd, cmp, model_text, pts, curves)}")
+            curves.setdefault(r.sample, {'model': rec.model.frequency_response})
+        print(f'report: {compare_report(rd, cmp, model_text, pts, curves)}')
     return 0
 
 
@@ -185,27 +204,41 @@ def _cmd_track(args) -> int:
     tracks, rows = {}, []
     for ts in load_data(args):
         with Progress(f"tracking {', '.join(free)} in {args.window:g} s windows of {ts.path}"):
-            tr = track_parameter(ts.time_s, ts.deflection_m, ts.current_a, ts.geometry,
-                                 material_for(ts, material), free, effects,
-                                 window_s=args.window, step_s=args.step, source=ts.path,
-                                 model=SensorModel(ts.geometry, material_for(ts, material), effects)
-                                 if getattr(args, "model_file", None) else None)
-        print(f"{ts.path}: (value [95 % confidence interval])")
-        print(f"{'t (s)':>9} {'f0 (Hz)':>8} " + " ".join(f"{n:>36}" for n in free))
+            tr = track_parameter(
+                ts.time_s,
+                ts.deflection_m,
+                ts.current_a,
+                ts.geometry,
+                material_for(ts, material),
+                free,
+                effects,
+                window_s=args.window,
+                step_s=args.step,
+                source=ts.path,
+                model=(
+                    SensorModel(ts.geometry, material_for(ts, material), effects)
+                    if getattr(args, 'model_file', None)
+                    else None
+                ),
+            )
+        print(f'{ts.path}: (value [95 % confidence interval])')
+        print(f"{'t (s)':>9} {'f0 (Hz)':>8} " + ' '.join(f'{n:>36}' for n in free))
         for p in tr:
-            cells = " ".join(f"{p.estimates[n]:>11.4g} [{p.ci95[n][0]:.4g}, {p.ci95[n][1]:.4g}]".rjust(36)
-                             for n in free)
-            model_cells = ("  model: " + ", ".join(f"{v:.4g}" for v in p.model_estimates.values())
-                           if p.model_estimates else "")
-            print(f"{p.time_s:9.1f} {p.frequency_hz:8.3f} {cells}{model_cells}")
+            cells = ' '.join(
+                f'{p.estimates[n]:>11.4g} [{p.ci95[n][0]:.4g}, {p.ci95[n][1]:.4g}]'.rjust(36)
+                for n in free
+            )
+            model_cells = ('  model: ' + ', '.join(f'{v:.4g}' for v in p.model_estimates.values())
+                           if p.model_estimates else '')
+            print(f'{p.time_s:9.1f} {p.frequency_hz:8.3f} {cells}{model_cells}')
         tracks[ts.path] = tr
-        rows.append({"source": ts.path, "track": [p.__dict__ for p in tr]})
+        rows.append({'source': ts.path, 'track': [p.__dict__ for p in tr]})
     write_json(args.json, rows)
     rd = report_dir(args.report)
     if rd:
         from ..workbench.report import track_report
 
-        print(f"report: {track_report(rd, tracks, free[0])}")
+        print(f'report: {track_report(rd, tracks, free[0])}')
     return 0
 
 
@@ -216,101 +249,127 @@ def _cmd_diagnose(args) -> int:
 
     recs, data = _records(args, with_data=True)
     free = param_names(args.free)
-    mains = {"off": None, "auto": "auto", "50": 50.0, "60": 60.0}.get(str(args.mains).lower(), "?")
-    if mains == "?":
-        raise ParameterError(f"--mains must be 50, 60, auto or off, got {args.mains!r}")
-    cands = [c.strip() for c in args.candidates.split(",")] if args.candidates else None
+    mains = {'off': None, 'auto': 'auto', '50': 50.0, '60': 60.0}.get(str(args.mains).lower(), '?')
+    if mains == '?':
+        raise ParameterError(f'--mains must be 50, 60, auto or off, got {args.mains!r}')
+    cands = [c.strip() for c in args.candidates.split(',')] if args.candidates else None
     for c in cands or []:
         if c not in EFFECTS:
             raise ParameterError(f"--candidates: unknown effect '{c}' (see: ipmc-model effects)")
     names = [n for n in (cands or EFFECTS) if not recs[0].model.has_effect(n)]
-    with Progress(f"diagnosing {recs[0].model.describe()} on {len(recs)} record(s), "
-                  f"{len(names)} candidate(s)") as prog:
+    with Progress(f'diagnosing {recs[0].model.describe()} on {len(recs)} record(s), '
+                  f'{len(names)} candidate(s)') as prog:
         diag = diagnose(recs, free_material=free, candidates=cands, progress=prog.step,
                         settle_s=args.settle, fit_effects=effects_to_fit(args.effects),
                         max_effects=args.max_effects, mains=mains,
                         priors=priors_from_headers(data))
     print(diag.summary())
-    print("  error = held-out ||y - ŷ|| / ||y - mean y||; x better = baseline error / error; "
-          "dBIC = BIC change vs the baseline (< -20: very strong evidence for the effect)")
+    print('  error = held-out ||y - ŷ|| / ||y - mean y||; x better = baseline error / error; '
+          'dBIC = BIC change vs the baseline (< -20: very strong evidence for the effect)')
     if args.save_model:
         from ..physics.modelfile import save_model
 
-        save_model(args.save_model, diag.final_model, tool="ipmc-model diagnose",
+        save_model(args.save_model, diag.final_model, tool='ipmc-model diagnose',
                    data_files=args.data,
-                   error={"held_out": diag.final.error, "noise_floor": diag.noise_floor},
-                   extra={"missing_effects": diag.missing_effects, "explained": diag.explained})
-        print(f"saved the whole model to {args.save_model}")
+                   error={'held_out': diag.final.error, 'noise_floor': diag.noise_floor},
+                   extra={'missing_effects': diag.missing_effects, 'explained': diag.explained})
+        print(f'saved the whole model to {args.save_model}')
     print(diagnosis_next_command(diag, args.data, args.save_model, args.model))
     write_json(args.json, diag.to_json())
     rd = report_dir(args.report)
     if rd:
         from ..workbench.report import diagnose_report
 
-        print(f"report: {diagnose_report(rd, diag)}")
+        print(f'report: {diagnose_report(rd, diag)}')
     return 0
 
 
 def _add_settle(p) -> None:
-    p.add_argument("--settle", type=float, default=0.5, metavar="S",
-                   help="seconds left out at each record start (they depend on motion before it), s")
+    p.add_argument(
+        '--settle',
+        type=float,
+        default=0.5,
+        metavar='S',
+        help='seconds left out at each record start (they depend on motion before it), s',
+    )
 
 
 def add_parsers(sub, formatter) -> None:
-    p = sub.add_parser("fit", formatter_class=formatter,
-                       help="identify material parameters from the frequency response (paper 5.2)",
-                       description="Fit the --free parameters to the measured frequency response "
-                                   "(time series through the response at the excitation fundamental).")
+    p = sub.add_parser(
+        'fit',
+        formatter_class=formatter,
+        help='identify material parameters from the frequency response (paper 5.2)',
+        description='Fit the --free parameters to the measured frequency response '
+        '(time series through the response at the excitation fundamental).',
+    )
     add_model_args(p)
     add_data_args(p)
-    p.add_argument("--free", metavar="LIST", default="alpha0,d,kappa_e", help=FREE_HELP)
-    p.add_argument("--save", metavar="FILE",
-                   help="write a ROS 2 params file for the nodes (key /**/ipmc_estimator, with the "
-                        "data's geometry; one file per sample: FILE_<sample>.yaml when several)")
-    p.add_argument("--save-material", metavar="FILE", help="write the fitted material as workbench YAML")
-    p.add_argument("--save-model", metavar="FILE",
-                   help="write the whole fitted model (effects with values, material, provenance) "
-                        "as ipmc-model/1 YAML, read back by --model-file and the nodes' model_file")
+    p.add_argument('--free', metavar='LIST', default='alpha0,d,kappa_e', help=FREE_HELP)
+    p.add_argument(
+        '--save',
+        metavar='FILE',
+        help='write a ROS 2 params file for the nodes (key /**/ipmc_estimator, with the '
+        "data's geometry; one file per sample: FILE_<sample>.yaml when several)",
+    )
+    p.add_argument(
+        '--save-material', metavar='FILE', help='write the fitted material as workbench YAML'
+    )
+    p.add_argument(
+        '--save-model',
+        metavar='FILE',
+        help='write the whole fitted model (effects with values, material, provenance) '
+        "as ipmc-model/1 YAML, read back by --model-file and the nodes' model_file",
+    )
     add_output_args(p)
     p.set_defaults(func=_cmd_fit)
 
-    p = sub.add_parser("compare", formatter_class=formatter,
-                       help="fixed model vs measurements: fit %%, errors, where it fails",
-                       description="Predict the current of each record from its deflection and compare "
-                                   "(MATLAB compare/resid style).")
+    p = sub.add_parser(
+        'compare',
+        formatter_class=formatter,
+        help='fixed model vs measurements: fit %%, errors, where it fails',
+        description='Predict the current of each record from its deflection and compare '
+        '(MATLAB compare/resid style).',
+    )
     add_model_args(p)
     add_data_args(p)
     _add_settle(p)
     add_output_args(p)
     p.set_defaults(func=_cmd_compare)
 
-    p = sub.add_parser("track", formatter_class=formatter,
-                       help="refit parameter(s) in consecutive windows (paper 5.4)")
+    p = sub.add_parser('track', formatter_class=formatter,
+                       help='refit parameter(s) in consecutive windows (paper 5.4)')
     add_model_args(p)
     add_data_args(p)
-    p.add_argument("--free", metavar="LIST", default="d", help=FREE_HELP + "; refitted in every window")
-    renamed_flag(p, "--param", "--free")
-    p.add_argument("--window", type=float, default=60.0, metavar="S", help="window length, s")
-    p.add_argument("--step", type=float, default=None, metavar="S",
-                   help="window step, s (default: the window length)")
+    p.add_argument(
+        '--free', metavar='LIST', default='d', help=FREE_HELP + '; refitted in every window'
+    )
+    renamed_flag(p, '--param', '--free')
+    p.add_argument('--window', type=float, default=60.0, metavar='S', help='window length, s')
+    p.add_argument('--step', type=float, default=None, metavar='S',
+                   help='window step, s (default: the window length)')
     add_output_args(p)
     p.set_defaults(func=_cmd_track)
 
-    p = sub.add_parser("diagnose", formatter_class=formatter,
-                       help="rank the physical effects missing from the model (held-out error)")
+    p = sub.add_parser('diagnose', formatter_class=formatter,
+                       help='rank the physical effects missing from the model (held-out error)')
     add_model_args(p)
-    renamed_flag(p, "--base", "--model")
+    renamed_flag(p, '--base', '--model')
     add_data_args(p)
-    p.add_argument("--free", metavar="LIST", default="alpha0,d,kappa_e", help=FREE_HELP + "; refitted with each model")
-    p.add_argument("--candidates", metavar="LIST",
-                   help="restrict to these effects, comma list (default: the whole catalog)")
-    p.add_argument("--max-effects", type=int, default=3, metavar="N",
-                   help="at most this many effects added by the stepwise search")
-    p.add_argument("--mains", default="auto", metavar="50|60|auto|off",
-                   help="mains lines to find and remove from the current before fitting")
-    p.add_argument("--save-model", metavar="FILE",
-                   help="write the final model (effects with fitted values, material, provenance) "
-                        "as ipmc-model/1 YAML")
+    p.add_argument(
+        '--free',
+        metavar='LIST',
+        default='alpha0,d,kappa_e',
+        help=FREE_HELP + '; refitted with each model',
+    )
+    p.add_argument('--candidates', metavar='LIST',
+                   help='restrict to these effects, comma list (default: the whole catalog)')
+    p.add_argument('--max-effects', type=int, default=3, metavar='N',
+                   help='at most this many effects added by the stepwise search')
+    p.add_argument('--mains', default='auto', metavar='50|60|auto|off',
+                   help='mains lines to find and remove from the current before fitting')
+    p.add_argument('--save-model', metavar='FILE',
+                   help='write the final model (effects with fitted values, material, provenance) '
+                        'as ipmc-model/1 YAML')
     _add_settle(p)
     add_output_args(p)
     p.set_defaults(func=_cmd_diagnose)

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Model-aware streaming deflection estimator: a :class:`SensorModel` in, deflection out.
 
 :class:`DeflectionEstimator` is what the estimator node and ``ipmc-model
@@ -45,10 +46,10 @@ from ..physics.model import SensorModel
 from ..physics.pipeline import DriftSchedule
 from ..lti.reduction import ReducedModel, reduce_model_parts
 
-__all__ = ["DeflectionEstimator", "ESTIMATORS"]
+__all__ = ['DeflectionEstimator', 'ESTIMATORS']
 
 #: The estimator cores: the leaky inverse and the offset-aware Kalman filter.
-ESTIMATORS = ("leaky", "kalman")
+ESTIMATORS = ('leaky', 'kalman')
 
 
 class DeflectionEstimator:
@@ -71,16 +72,20 @@ class DeflectionEstimator:
                  leak_corner_hz: float | None = None,
                  offset_corner_hz: float | None = None, prewarp_hz: float | None = None,
                  update_s: float = 5.0, reduced: ReducedModel | None = None,
-                 history_s: float = 0.5, estimator: str = "leaky", mains_hz: float = 0,
+                 history_s: float = 0.5, estimator: str = 'leaky', mains_hz: float = 0,
                  current_noise_a: float = DEFAULT_CURRENT_NOISE_A):
         if estimator not in ESTIMATORS:
-            raise ParameterError(f"parameter 'estimator' must be 'leaky' or 'kalman', got {estimator!r}")
+            raise ParameterError(
+                f"parameter 'estimator' must be 'leaky' or 'kalman', got {estimator!r}"
+            )
         self.estimator = estimator
         self.mains_hz = mains_hz
         self.current_noise_a = float(current_noise_a)
         self.mains = MainsFilter(mains_hz, sample_rate_hz)
         if leak_corner_hz is None:
-            leak_corner_hz = KALMAN_LEAK_CORNER_HZ if estimator == "kalman" else DEFAULT_LEAK_CORNER_HZ
+            leak_corner_hz = (
+                KALMAN_LEAK_CORNER_HZ if estimator == 'kalman' else DEFAULT_LEAK_CORNER_HZ
+            )
         self.model = model
         self.reduction_order = int(reduction_order)
         self.band_hz = (float(band_hz[0]), float(band_hz[1]))
@@ -97,15 +102,22 @@ class DeflectionEstimator:
         if reduced is None:
             reduced = self._reduce(model)
         self.reduced = reduced
-        if estimator == "kalman":
+        if estimator == 'kalman':
             if offset_corner_hz is not None:
-                raise ParameterError("parameter 'offset_corner_hz' applies to estimator 'leaky' only "
-                                     "(the Kalman estimator tracks the offset itself)")
+                raise ParameterError(
+                    "parameter 'offset_corner_hz' applies to estimator 'leaky' only "
+                    '(the Kalman estimator tracks the offset itself)'
+                )
             self.inverse = KalmanEstimator(reduced, sample_rate_hz, leak_corner_hz=leak_corner_hz,
                                            current_noise_a=current_noise_a)
         else:
-            self.inverse = InverseEstimator(reduced, sample_rate_hz, leak_corner_hz=leak_corner_hz,
-                                            offset_corner_hz=offset_corner_hz, prewarp_hz=prewarp_hz)
+            self.inverse = InverseEstimator(
+                reduced,
+                sample_rate_hz,
+                leak_corner_hz=leak_corner_hz,
+                offset_corner_hz=offset_corner_hz,
+                prewarp_hz=prewarp_hz,
+            )
         self.last_std_m = np.zeros(0)
         self._t0: float | None = None
         self._history = np.zeros(max(1, int(round(history_s * self.inverse.sample_rate_hz))))
@@ -148,9 +160,9 @@ class DeflectionEstimator:
 
     @property
     def filter_kwargs(self) -> dict:
-        return {"sample_rate_hz": self.inverse.sample_rate_hz,
-                "leak_corner_hz": self.inverse.leak_corner_hz,
-                "offset_corner_hz": self.inverse.offset_corner_hz}
+        return {'sample_rate_hz': self.inverse.sample_rate_hz,
+                'leak_corner_hz': self.inverse.leak_corner_hz,
+                'offset_corner_hz': self.inverse.offset_corner_hz}
 
     # -- streaming --------------------------------------------------------------
     def reset(self) -> None:
@@ -168,9 +180,13 @@ class DeflectionEstimator:
             self.inverse = self._new_filter(self._reduce(self.model))
 
     def _new_filter(self, reduced: ReducedModel):
-        if self.estimator == "kalman":
-            return KalmanEstimator(reduced, self.inverse.sample_rate_hz, leak_corner_hz=self.inverse.leak_corner_hz,
-                                   current_noise_a=self.current_noise_a)
+        if self.estimator == 'kalman':
+            return KalmanEstimator(
+                reduced,
+                self.inverse.sample_rate_hz,
+                leak_corner_hz=self.inverse.leak_corner_hz,
+                current_noise_a=self.current_noise_a,
+            )
         return InverseEstimator(reduced, **self._filter_args())
 
     def process_with_std(self, time_s, current_a) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -206,10 +222,12 @@ class DeflectionEstimator:
             w = w_prime
             for eff, values in reversed(self._deflection_inv):
                 w = np.asarray(eff.inverse_input_transform(w, self.model, values), dtype=float)
-            a = float(np.exp(-2 * np.pi * self.inverse.leak_corner_hz / self.inverse.sample_rate_hz))
+            a = float(
+                np.exp(-2 * np.pi * self.inverse.leak_corner_hz / self.inverse.sample_rate_hz)
+            )
             avg, self._bias_zi = lfilter([1 - a], [1, -a], w_prime - w, zi=self._bias_zi)
             self._bias_m = float(avg[-1])
-        self.last_std_m = np.full(w.size, getattr(self.inverse, "last_std", np.nan))
+        self.last_std_m = np.full(w.size, getattr(self.inverse, 'last_std', np.nan))
         return (t - self.delay_s if self.delay_s else t), w
 
     def _follow_drift(self, material) -> None:
@@ -221,8 +239,8 @@ class DeflectionEstimator:
     def std_m(self) -> float:
         """Standard deviation of the latest estimate, m (Kalman: from the filter covariance of
         the current mode; leaky: NaN, the leaky inverse has no uncertainty model)."""
-        std = getattr(self.inverse, "last_std", None)
-        return float("nan") if std is None else float(std)
+        std = getattr(self.inverse, 'last_std', None)
+        return float('nan') if std is None else float(std)
 
     def status(self) -> dict:
         """The estimator's state for counters and diagnostics (JSON-able; None = not available):
@@ -232,14 +250,14 @@ class DeflectionEstimator:
         (``mains_line_hz`` 0/50/60, ``mains_line_level`` relative to the current's RMS; after
         the notch when ``mains_hz`` is set)."""
         inv = self.inverse
-        std = getattr(inv, "last_std", None)
-        offset = getattr(inv, "offset_a", None)
+        std = getattr(inv, 'last_std', None)
+        offset = getattr(inv, 'offset_a', None)
         line = detect_lines(self.recent_input, self.sample_rate_hz)
-        return {"estimator": self.estimator,
-                "offset_a": None if offset is None else float(offset),
-                "at_rest": bool(getattr(inv, "at_rest", False)),
-                "deflection_std_m": None if std is None or not np.isfinite(std) else float(std),
-                "mains_line_hz": line["mains_hz"], "mains_line_level": line["level"]}
+        return {'estimator': self.estimator,
+                'offset_a': None if offset is None else float(offset),
+                'at_rest': bool(getattr(inv, 'at_rest', False)),
+                'deflection_std_m': None if std is None or not np.isfinite(std) else float(std),
+                'mains_line_hz': line['mains_hz'], 'mains_line_level': line['level']}
 
     @property
     def plain(self) -> bool:
@@ -266,21 +284,28 @@ class DeflectionEstimator:
         return (time_s - self.delay_s if self.delay_s else float(time_s)), w
 
     def rebuilt(self, model: SensorModel | None = None, reduced: ReducedModel | None = None,
-                **filter_changes) -> "DeflectionEstimator":
+                **filter_changes) -> 'DeflectionEstimator':
         """A new estimator (new model and/or filter settings) whose output continues from
         this one's without a jump; ``self`` is untouched if the new design is invalid."""
         kwargs = dict(self.filter_kwargs)
         kwargs.update(filter_changes)
-        fs = kwargs.pop("sample_rate_hz")
-        new = DeflectionEstimator(model or self.model, fs, reduction_order=self.reduction_order,
-                                  band_hz=self.band_hz, update_s=self.update_s,
-                                  reduced=reduced if (reduced is not None or model is not None) else self.reduced,
-                                  estimator=self.estimator, mains_hz=self.mains_hz,
-                                  current_noise_a=self.current_noise_a, **kwargs)
+        fs = kwargs.pop('sample_rate_hz')
+        new = DeflectionEstimator(
+            model or self.model,
+            fs,
+            reduction_order=self.reduction_order,
+            band_hz=self.band_hz,
+            update_s=self.update_s,
+            reduced=reduced if (reduced is not None or model is not None) else self.reduced,
+            estimator=self.estimator,
+            mains_hz=self.mains_hz,
+            current_noise_a=self.current_noise_a,
+            **kwargs,
+        )
         new.continue_from(self)
         return new
 
-    def continue_from(self, old: "DeflectionEstimator") -> None:
+    def continue_from(self, old: 'DeflectionEstimator') -> None:
         """Take over ``old``'s stream: its recent input, output level and time origin."""
         if old._history.size == self._history.size:
             self._history = old._history.copy()
@@ -291,6 +316,6 @@ class DeflectionEstimator:
         self._t0 = old._t0
 
     def _filter_args(self) -> dict:
-        return {"sample_rate_hz": self.inverse.sample_rate_hz,
-                "leak_corner_hz": self.inverse.leak_corner_hz,
-                "offset_corner_hz": self.inverse.offset_corner_hz}
+        return {'sample_rate_hz': self.inverse.sample_rate_hz,
+                'leak_corner_hz': self.inverse.leak_corner_hz,
+                'offset_corner_hz': self.inverse.offset_corner_hz}

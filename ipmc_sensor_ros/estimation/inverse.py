@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Discrete, stable inverse of a reduced sensing model: current (A) -> deflection (m).
 
 Continuous inverse
@@ -56,8 +57,8 @@ from ..errors import ParameterError
 from ..lti.discretize import default_prewarp_hz, tustin_sos
 from ..lti.reduction import ReducedModel
 
-__all__ = ["ParameterError", "InverseEstimator", "inverse_zpk", "leak_tradeoff",
-           "DEFAULT_LEAK_CORNER_HZ"]
+__all__ = ['ParameterError', 'InverseEstimator', 'inverse_zpk', 'leak_tradeoff',
+           'DEFAULT_LEAK_CORNER_HZ']
 
 #: Blocks up to this many samples (single channel) are filtered by a plain-Python
 #: recursion instead of :func:`scipy.signal.sosfilt` (identical output, lower fixed
@@ -86,11 +87,11 @@ def _positive(name: str, value, allow_none: bool = False):
 def inverse_zpk(reduced: ReducedModel, leak_corner_hz: float = DEFAULT_LEAK_CORNER_HZ,
                 offset_corner_hz: float | None = None):
     """Continuous inverse (zeros, poles, gain) in rad/s: 1/((s+w_c) R_n(s)) [* s/(s+w_o)]."""
-    wc = 2.0 * np.pi * _positive("leak_corner_hz", leak_corner_hz)
+    wc = 2.0 * np.pi * _positive('leak_corner_hz', leak_corner_hz)
     zeros = np.asarray(reduced.poles_rad_s)
     poles = np.concatenate([np.asarray(reduced.zeros_rad_s), [-wc]])
     if offset_corner_hz is not None:
-        wo = 2.0 * np.pi * _positive("offset_corner_hz", offset_corner_hz)
+        wo = 2.0 * np.pi * _positive('offset_corner_hz', offset_corner_hz)
         zeros = np.concatenate([zeros, [0.0]])
         poles = np.concatenate([poles, [-wo]])
     return zeros, poles, 1.0 / reduced.gain
@@ -104,22 +105,25 @@ def leak_tradeoff(reduced: ReducedModel, leak_corner_hz: float, hold_time_s: flo
     deflection error (m) caused by ``current_offset_a``: its steady value and
     its peak.
     """
-    wc = 2.0 * np.pi * _positive("leak_corner_hz", leak_corner_hz)
+    wc = 2.0 * np.pi * _positive('leak_corner_hz', leak_corner_hz)
     r0 = float(np.real(reduced.charge_response(np.array([0.0]))[0]))
     step_err = 1.0 - math.exp(-wc * hold_time_s)
     if offset_corner_hz is None:
         steady = current_offset_a / (wc * r0)
         peak = steady
     else:
-        wo = 2.0 * np.pi * _positive("offset_corner_hz", offset_corner_hz)
+        wo = 2.0 * np.pi * _positive('offset_corner_hz', offset_corner_hz)
         step_err = 1.0 - (wc * math.exp(-wc * hold_time_s) - wo * math.exp(-wo * hold_time_s)) \
             / (wc - wo) if wc != wo else 1.0 - (1 - wc * hold_time_s) * math.exp(-wc * hold_time_s)
         t_peak = math.log(wo / wc) / (wo - wc) if wo != wc else 1.0 / wc
-        peak = current_offset_a / r0 * (math.exp(-wc * t_peak) - math.exp(-wo * t_peak)) / (wo - wc) \
-            if wo != wc else current_offset_a / r0 * t_peak * math.exp(-wc * t_peak)
+        peak = (
+            current_offset_a / r0 * (math.exp(-wc * t_peak) - math.exp(-wo * t_peak)) / (wo - wc)
+            if wo != wc
+            else current_offset_a / r0 * t_peak * math.exp(-wc * t_peak)
+        )
         steady = 0.0
-    return {"held_step_relative_error": step_err, "offset_steady_error_m": steady,
-            "offset_peak_error_m": peak}
+    return {'held_step_relative_error': step_err, 'offset_steady_error_m': steady,
+            'offset_peak_error_m': peak}
 
 
 @dataclass(frozen=True)
@@ -131,24 +135,27 @@ class _Design:
 
 def _design(reduced: ReducedModel, sample_rate_hz: float, leak_corner_hz: float,
             offset_corner_hz: float | None, prewarp_hz: float | None) -> _Design:
-    fs = _positive("sample_rate_hz", sample_rate_hz)
+    fs = _positive('sample_rate_hz', sample_rate_hz)
     if prewarp_hz is None:
         prewarp_hz = default_prewarp_hz(fs, reduced.band_hz[1])
-    prewarp_hz = _positive("prewarp_hz", prewarp_hz)
+    prewarp_hz = _positive('prewarp_hz', prewarp_hz)
     if prewarp_hz >= fs / 2.0:
         raise ParameterError(f"parameter 'prewarp_hz' = {prewarp_hz} must be below the Nyquist "
-                             f"frequency {fs / 2.0} Hz")
-    for name, corner in (("leak_corner_hz", leak_corner_hz), ("offset_corner_hz", offset_corner_hz)):
+                             f'frequency {fs / 2.0} Hz')
+    for name, corner in (
+        ('leak_corner_hz', leak_corner_hz),
+        ('offset_corner_hz', offset_corner_hz),
+    ):
         if corner is not None and corner >= fs / 2.0:
             raise ParameterError(f"parameter '{name}' = {corner} must be below the "
-                                 f"Nyquist frequency {fs / 2.0} Hz")
+                                 f'Nyquist frequency {fs / 2.0} Hz')
     sos = tustin_sos(*inverse_zpk(reduced, leak_corner_hz, offset_corner_hz), fs, prewarp_hz)
     radius = np.abs(sig.sos2zpk(sos)[1])
     if not np.all(radius < 1.0):
-        raise ParameterError(f"discrete inverse is unstable: pole radius {radius.max():.12f} >= 1 "
-                             f"(sample_rate_hz={fs}, leak_corner_hz={leak_corner_hz})")
+        raise ParameterError(f'discrete inverse is unstable: pole radius {radius.max():.12f} >= 1 '
+                             f'(sample_rate_hz={fs}, leak_corner_hz={leak_corner_hz})')
     if not np.all(np.isfinite(sos)):
-        raise ParameterError("discrete inverse has non-finite coefficients")
+        raise ParameterError('discrete inverse has non-finite coefficients')
     return _Design(sos=sos, sample_rate_hz=fs, prewarp_hz=prewarp_hz)
 
 
@@ -169,11 +176,17 @@ class InverseEstimator:
                  leak_corner_hz: float = DEFAULT_LEAK_CORNER_HZ,
                  offset_corner_hz: float | None = None, prewarp_hz: float | None = None,
                  channels: int = 1):
-        if isinstance(channels, bool) or not isinstance(channels, (int, np.integer)) or channels < 1:
-            raise ParameterError(f"parameter 'channels' must be a positive integer, got {channels!r}")
+        if (
+            isinstance(channels, bool)
+            or not isinstance(channels, (int, np.integer))
+            or channels < 1
+        ):
+            raise ParameterError(
+                f"parameter 'channels' must be a positive integer, got {channels!r}"
+            )
         self.reduced = reduced
-        self.leak_corner_hz = _positive("leak_corner_hz", leak_corner_hz)
-        self.offset_corner_hz = _positive("offset_corner_hz", offset_corner_hz, allow_none=True)
+        self.leak_corner_hz = _positive('leak_corner_hz', leak_corner_hz)
+        self.offset_corner_hz = _positive('offset_corner_hz', offset_corner_hz, allow_none=True)
         self.channels = int(channels)
         self._slow_cache = None
         self._design = _design(reduced, sample_rate_hz, self.leak_corner_hz,
@@ -228,10 +241,10 @@ class InverseEstimator:
         squeeze = x.ndim == 1
         if squeeze:
             if self.channels != 1:
-                raise ParameterError(f"expected shape (n, {self.channels}), got {x.shape}")
+                raise ParameterError(f'expected shape (n, {self.channels}), got {x.shape}')
             x = x[:, None]
         if x.ndim != 2 or x.shape[1] != self.channels:
-            raise ParameterError(f"expected shape (n, {self.channels}), got {x.shape}")
+            raise ParameterError(f'expected shape (n, {self.channels}), got {x.shape}')
         if x.shape[0] == 0:
             return np.empty(0) if squeeze else np.empty((0, self.channels))
         if squeeze and x.shape[0] <= SMALL_BLOCK_SAMPLES:
@@ -244,7 +257,9 @@ class InverseEstimator:
         """One sample of a single-channel estimator, as a float; identical to
         :meth:`process` on a one-sample block, without numpy's per-call costs."""
         if self.channels != 1:
-            raise ParameterError(f"process_one needs a single-channel estimator (channels = {self.channels})")
+            raise ParameterError(
+                f'process_one needs a single-channel estimator (channels = {self.channels})'
+            )
         return self._process_small([float(current_a)])[0]
 
     def _process_small(self, values: list) -> list:
@@ -275,19 +290,19 @@ class InverseEstimator:
 
     def get_state(self) -> dict:
         """A copy of the filter state, restorable with :meth:`set_state`."""
-        return {"zi": self._zi.copy(), "sos": self.sos.copy()}
+        return {'zi': self._zi.copy(), 'sos': self.sos.copy()}
 
     def set_state(self, state: dict) -> None:
-        zi = np.asarray(state.get("zi"), dtype=float)
+        zi = np.asarray(state.get('zi'), dtype=float)
         if zi.shape != self._zi.shape:
-            raise ParameterError(f"state shape {zi.shape} does not match {self._zi.shape}")
-        if "sos" in state and not np.array_equal(np.asarray(state["sos"]), self.sos):
-            raise ParameterError("state was saved from a different filter design")
+            raise ParameterError(f'state shape {zi.shape} does not match {self._zi.shape}')
+        if 'sos' in state and not np.array_equal(np.asarray(state['sos']), self.sos):
+            raise ParameterError('state was saved from a different filter design')
         if not np.all(np.isfinite(zi)):
-            raise ParameterError("state contains non-finite values")
+            raise ParameterError('state contains non-finite values')
         self._zi = zi.copy()
 
-    def continue_from(self, old: "InverseEstimator", recent_input=None) -> None:
+    def continue_from(self, old: 'InverseEstimator', recent_input=None) -> None:
         """Set this filter's state so its output continues ``old``'s without a jump.
 
         With ``recent_input`` (the last samples fed to ``old``, shape (n,) or
@@ -362,7 +377,7 @@ class InverseEstimator:
         m = 1 if self.offset_corner_hz is None else 2
         radius = np.sort(np.abs(np.linalg.eigvals(step)))[::-1]
         cut = 0.5 * (radius[m - 1] + radius[m]) if radius.size > m else 0.0
-        t, q, dim = schur(step, output="real", sort=lambda re, im: np.hypot(re, im) > cut)
+        t, q, dim = schur(step, output='real', sort=lambda re, im: np.hypot(re, im) > cut)
         t11, t12, t22 = t[:dim, :dim], t[:dim, dim:], t[dim:, dim:]
         x_syl = solve_sylvester(t11, -t22, -t12)
         proj = q[:, :dim].T - x_syl @ q[:, dim:].T
@@ -370,7 +385,7 @@ class InverseEstimator:
         return self._slow_cache
 
     def rebuilt(self, reduced: ReducedModel | None = None, recent_input=None,
-                **changes) -> "InverseEstimator":
+                **changes) -> 'InverseEstimator':
         """A new estimator with changed design whose output continues from this one's
         (:meth:`continue_from`, with ``recent_input`` if given).
 
@@ -378,10 +393,10 @@ class InverseEstimator:
         prewarp_hz.  Raises :class:`ParameterError` (and leaves ``self`` intact)
         if the new design is invalid.
         """
-        kwargs = {"sample_rate_hz": self.sample_rate_hz, "leak_corner_hz": self.leak_corner_hz,
-                  "offset_corner_hz": self.offset_corner_hz, "channels": self.channels}
-        if "prewarp_hz" not in changes and "sample_rate_hz" not in changes:
-            kwargs["prewarp_hz"] = self.prewarp_hz
+        kwargs = {'sample_rate_hz': self.sample_rate_hz, 'leak_corner_hz': self.leak_corner_hz,
+                  'offset_corner_hz': self.offset_corner_hz, 'channels': self.channels}
+        if 'prewarp_hz' not in changes and 'sample_rate_hz' not in changes:
+            kwargs['prewarp_hz'] = self.prewarp_hz
         kwargs.update(changes)
         new = InverseEstimator(reduced or self.reduced, **kwargs)
         new.continue_from(self, recent_input)

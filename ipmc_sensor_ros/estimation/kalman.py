@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Offset-aware steady-state Kalman estimator of tip deflection from sensing current.
 
 Model (continuous time, designed from the same :class:`ReducedModel` that
@@ -76,6 +77,7 @@ offset *step* while moving is integrated until the next rest.
 Uncertainty: ``last_std`` is the standard deviation of w from the moving mode's
 steady-state posterior covariance (held at rest); it excludes reduction error.
 """
+
 from __future__ import annotations
 
 import math
@@ -89,7 +91,7 @@ from .inverse import ParameterError, _positive
 from ..lti.discretize import van_loan
 from ..lti.reduction import ReducedModel
 
-__all__ = ["KalmanEstimator", "offset_corner_hz", "DEFAULT_CURRENT_NOISE_A"]
+__all__ = ['KalmanEstimator', 'offset_corner_hz', 'DEFAULT_CURRENT_NOISE_A']
 
 #: Defaults (see the module docstring): DAQ noise A RMS per sample, motion, drift.
 DEFAULT_CURRENT_NOISE_A = 20e-9
@@ -111,9 +113,12 @@ NOISE_WINDOW_S = 0.5   # averaging time of the measured white-noise floor, s
 NOISE_CLIP = 20.0      # largest measured noise RMS accepted (x current_noise_a); caps transients
 
 
-def offset_corner_hz(reduced: ReducedModel, motion_velocity_m_s: float = DEFAULT_MOTION_VELOCITY_M_S,
-                     motion_bandwidth_hz: float = DEFAULT_MOTION_BANDWIDTH_HZ,
-                     offset_drift_a_per_s: float = DEFAULT_OFFSET_DRIFT_A_PER_S) -> float:
+def offset_corner_hz(
+    reduced: ReducedModel,
+    motion_velocity_m_s: float = DEFAULT_MOTION_VELOCITY_M_S,
+    motion_bandwidth_hz: float = DEFAULT_MOTION_BANDWIDTH_HZ,
+    offset_drift_a_per_s: float = DEFAULT_OFFSET_DRIFT_A_PER_S,
+) -> float:
     """Frequency below which offset drift and deflection cannot be told apart while moving, Hz."""
     r0 = abs(float(np.real(reduced.charge_response(np.array([0.0]))[0])))
     a = 2 * math.pi * motion_bandwidth_hz
@@ -128,7 +133,9 @@ def _modal_realisation(reduced: ReducedModel):
     p = np.real(np.asarray(reduced.poles_rad_s))
     k = float(reduced.gain)
     if np.min(np.abs(np.subtract.outer(p, p)) + np.eye(p.size) * 1e300) < 1e-9 * np.max(np.abs(p)):
-        raise ParameterError("reduced model has repeated poles; the Kalman estimator needs distinct poles")
+        raise ParameterError(
+            'reduced model has repeated poles; the Kalman estimator needs distinct poles'
+        )
     r = np.array([k * np.prod(pi - z) / np.prod([pi - pj for pj in p if pj != pi]) for pi in p])
     return np.diag(p), np.ones((p.size, 1)), r[None, :], np.array([[k]])
 
@@ -136,17 +143,21 @@ def _modal_realisation(reduced: ReducedModel):
 class _Mode:
     """One LTI predictor s_{k+1} = F s_k + G y_k with outputs in modal form."""
 
-    def __init__(self, ad: np.ndarray, k: np.ndarray, c: np.ndarray, iw: int, ib: int, scale: np.ndarray):
+    def __init__(
+        self, ad: np.ndarray, k: np.ndarray, c: np.ndarray, iw: int, ib: int, scale: np.ndarray
+    ):
         n = ad.shape[0]
         ikc = np.eye(n) - np.outer(k, c)
         f = ad @ ikc
         g = ad @ k
         lam, vs = np.linalg.eig(f / scale[:, None] * scale[None, :])   # in O(1) state units
         if not np.all(np.abs(lam) <= 1.0 + 1e-12):
-            raise ParameterError(f"Kalman predictor is unstable (pole radius {np.abs(lam).max():.12f})")
+            raise ParameterError(
+                f'Kalman predictor is unstable (pole radius {np.abs(lam).max():.12f})'
+            )
         cond = np.linalg.cond(vs)
         if not np.isfinite(cond) or cond > 1e12:
-            raise ParameterError(f"Kalman predictor is not diagonalisable (condition {cond:.3g})")
+            raise ParameterError(f'Kalman predictor is not diagonalisable (condition {cond:.3g})')
         v = scale[:, None] * vs
         vinv = np.linalg.inv(vs) / scale[None, :]
         # keep one of each conjugate pair (weight 2) and the real modes (weight 1)
@@ -166,8 +177,9 @@ class _Mode:
         self.f_rows = [list(map(float, row)) for row in f]     # plain floats for process_one
         self.g_list = list(map(float, g))
         self.dropped = np.flatnonzero(~keep)
-        self.partner = np.array([int(np.argmin(np.abs(self.lam - np.conj(lam[j])))) for j in self.dropped],
-                                dtype=int)
+        self.partner = np.array(
+            [int(np.argmin(np.abs(self.lam - np.conj(lam[j])))) for j in self.dropped], dtype=int
+        )
         self.a_list = [np.array([1.0, -l]) for l in self.lam]
         self.b_list = [np.array([0.0, gg]) for gg in self.g]
 
@@ -221,26 +233,35 @@ class KalmanEstimator:
                  rest_enter: float = 2.0, rest_leave: float = 4.0, rest_detection: bool = True,
                  channels: int = 1):
         if channels != 1:
-            raise ParameterError(f"parameter 'channels' must be 1 for the Kalman estimator, got {channels!r}")
+            raise ParameterError(
+                f"parameter 'channels' must be 1 for the Kalman estimator, got {channels!r}"
+            )
         self.channels = 1
         self.reduced = reduced
-        fs = _positive("sample_rate_hz", sample_rate_hz)
+        fs = _positive('sample_rate_hz', sample_rate_hz)
         self._fs = fs
-        self.current_noise_a = _positive("current_noise_a", current_noise_a)
-        self.motion_velocity_m_s = _positive("motion_velocity_m_s", motion_velocity_m_s)
-        self.motion_bandwidth_hz = _positive("motion_bandwidth_hz", motion_bandwidth_hz)
-        self.leak_corner_hz = _positive("leak_corner_hz", leak_corner_hz)
+        self.current_noise_a = _positive('current_noise_a', current_noise_a)
+        self.motion_velocity_m_s = _positive('motion_velocity_m_s', motion_velocity_m_s)
+        self.motion_bandwidth_hz = _positive('motion_bandwidth_hz', motion_bandwidth_hz)
+        self.leak_corner_hz = _positive('leak_corner_hz', leak_corner_hz)
         self.offset_corner_hz = None      # interface parity with InverseEstimator (no tracker)
-        self.offset_drift_a_per_s = _positive("offset_drift_a_per_s", offset_drift_a_per_s)
-        self.rest_offset_time_s = _positive("rest_offset_time_s", rest_offset_time_s)
-        self.rest_window_s = _positive("rest_window_s", rest_window_s)
-        self.rest_enter = _positive("rest_enter", rest_enter)
-        self.rest_leave = _positive("rest_leave", rest_leave)
+        self.offset_drift_a_per_s = _positive('offset_drift_a_per_s', offset_drift_a_per_s)
+        self.rest_offset_time_s = _positive('rest_offset_time_s', rest_offset_time_s)
+        self.rest_window_s = _positive('rest_window_s', rest_window_s)
+        self.rest_enter = _positive('rest_enter', rest_enter)
+        self.rest_leave = _positive('rest_leave', rest_leave)
         if self.rest_leave <= self.rest_enter:
-            raise ParameterError(f"parameter 'rest_leave' ({rest_leave}) must exceed 'rest_enter' ({rest_enter})")
-        for name, f in (("motion_bandwidth_hz", self.motion_bandwidth_hz), ("leak_corner_hz", self.leak_corner_hz)):
+            raise ParameterError(
+                f"parameter 'rest_leave' ({rest_leave}) must exceed 'rest_enter' ({rest_enter})"
+            )
+        for name, f in (
+            ('motion_bandwidth_hz', self.motion_bandwidth_hz),
+            ('leak_corner_hz', self.leak_corner_hz),
+        ):
             if f >= fs / 2:
-                raise ParameterError(f"parameter '{name}' = {f} must be below the Nyquist frequency {fs / 2} Hz")
+                raise ParameterError(
+                    f"parameter '{name}' = {f} must be below the Nyquist frequency {fs / 2} Hz"
+                )
         self.rest_detection = bool(rest_detection)
         self._build()
         self.reset()
@@ -279,13 +300,15 @@ class KalmanEstimator:
         self._moving = self._moving_mode(ac, qc, c, scale, wl, dt)
         # until the first rest the deflection's level is unknown (the motion may have begun
         # before the record): leak at the leaky inverse's corner, as it does
-        self._moving_start = self._moving_mode(ac, qc, c, scale, 2 * math.pi * START_LEAK_CORNER_HZ, dt)
+        self._moving_start = self._moving_mode(
+            ac, qc, c, scale, 2 * math.pi * START_LEAK_CORNER_HZ, dt
+        )
         self.std_moving_m = self._moving.std_m
         self._n_max = fs * self.rest_offset_time_s
         self._q_b_step = self.offset_drift_a_per_s ** 2 * 60.0 * dt
         # detector: band-pass and one-pole energy average
         hi = min(50.0, fs / 4)
-        self._bp = sig.butter(1, [REST_BAND_LOW_HZ, hi], btype="bandpass", fs=fs, output="sos")
+        self._bp = sig.butter(1, [REST_BAND_LOW_HZ, hi], btype='bandpass', fs=fs, output='sos')
         self._bp_list = self._bp[0].tolist()
         imp1 = np.zeros(4096)
         imp1[0] = 1.0
@@ -297,17 +320,25 @@ class KalmanEstimator:
         # ENERGY_CLIP^2 times the configured noise's, so a jump in the current cannot raise it
         self._alpha_hf = math.exp(-1.0 / (fs * NOISE_WINDOW_S))
         # white-noise level seen above the motion band (fs/4 .. Nyquist): energy ratio to the band
-        self._hp = sig.butter(2, fs / 4, btype="highpass", fs=fs, output="sos") if fs / 4 > 2 * hi else None
+        self._hp = (
+            sig.butter(2, fs / 4, btype='highpass', fs=fs, output='sos')
+            if fs / 4 > 2 * hi
+            else None
+        )
         if self._hp is not None:
             imp = np.zeros(4096)
             imp[0] = 1.0
             self._hp_list = self._hp[0].tolist()
             self._hp_unit = float(np.sum(sig.sosfilt(self._hp, imp) ** 2))
             self._hf_clip = NOISE_CLIP ** 2 * self.current_noise_a ** 2 * self._hp_unit
-            self._hp_ratio = float(np.sum(sig.sosfilt(self._bp, imp) ** 2) / np.sum(sig.sosfilt(self._hp, imp) ** 2))
-            self.noise_energy_a2 = self.current_noise_a ** 2 * float(np.sum(sig.sosfilt(self._bp, imp) ** 2))
+            self._hp_ratio = float(
+                np.sum(sig.sosfilt(self._bp, imp) ** 2) / np.sum(sig.sosfilt(self._hp, imp) ** 2)
+            )
+            self.noise_energy_a2 = self.current_noise_a**2 * float(
+                np.sum(sig.sosfilt(self._bp, imp) ** 2)
+            )
 
-    def _moving_mode(self, ac, qc, c, scale, wl, dt) -> "_Mode":
+    def _moving_mode(self, ac, qc, c, scale, wl, dt) -> '_Mode':
         """Steady-state Kalman predictor of the moving model with deflection leak wl (rad/s)."""
         N, iw, ib = ac.shape[0], self._iw, self._ib
         moving = ac.copy()
@@ -336,7 +367,12 @@ class KalmanEstimator:
 
     @property
     def offset_corner_while_moving_hz(self) -> float:   # see offset_corner_hz
-        return offset_corner_hz(self.reduced, self.motion_velocity_m_s, self.motion_bandwidth_hz, self.offset_drift_a_per_s)
+        return offset_corner_hz(
+            self.reduced,
+            self.motion_velocity_m_s,
+            self.motion_bandwidth_hz,
+            self.offset_drift_a_per_s,
+        )
 
     # -- streaming ------------------------------------------------------------
     def reset(self) -> None:
@@ -367,7 +403,9 @@ class KalmanEstimator:
         that still counts as rest: (4 sigma)^2 of that difference, sigma^2 = the mean's
         noise sigma^2/(2 fs rest_window_s) + the offset's variance P_b (+ 2 nA for the
         reduction/drift).  A deflection ramp of v m/s gives R0 v of steady current."""
-        return 16.0 * (self._sigma2 / (2 * self._fs * self.rest_window_s) + self._offset_var + 4e-18)
+        return 16.0 * (
+            self._sigma2 / (2 * self._fs * self.rest_window_s) + self._offset_var + 4e-18
+        )
 
     def _rest_flags(self, y: np.ndarray) -> np.ndarray:
         # single-section filters run by lfilter (same DF-II-T state as sosfilt, less overhead)
@@ -380,9 +418,16 @@ class KalmanEstimator:
             high, zf = sig.lfilter(self._hp[0, :3], self._hp[0, 3:], y, zi=self._hp_zi[0])
             self._hp_zi[0] = zf
             ah = self._alpha_hf
-            hf, zf = sig.lfilter([1 - ah], [1, -ah], np.minimum(high * high, self._hf_clip), zi=[ah * self._hf_energy])
+            hf, zf = sig.lfilter(
+                [1 - ah],
+                [1, -ah],
+                np.minimum(high * high, self._hf_clip),
+                zi=[ah * self._hf_energy],
+            )
             # the noise level each sample sees is the one measured up to the sample before
-            sigma2 = np.maximum(self.current_noise_a ** 2, np.concatenate([[self._sigma2], hf[:-1] / self._hp_unit]))
+            sigma2 = np.maximum(
+                self.current_noise_a**2, np.concatenate([[self._sigma2], hf[:-1] / self._hp_unit])
+            )
             self._hf_energy = float(zf[0] / ah)
             sq = np.minimum(band * band, ENERGY_CLIP * self._bp_unit * sigma2)
             e, zf = sig.lfilter([1 - a], [1, -a], sq, zi=[a * self._energy])
@@ -402,7 +447,11 @@ class KalmanEstimator:
         # leave rest on the averaged energy, or at once on one sample beyond 6 sigma of the
         # in-band noise (false alarm 2e-9 per sample), so a sudden move never feeds the offset
         dc = lp - self._b_last
-        moving = (e > self.rest_leave * floor) | (band * band > 36.0 * floor) | (dc * dc > self._dc_limit_a2())
+        moving = (
+            (e > self.rest_leave * floor)
+            | (band * band > 36.0 * floor)
+            | (dc * dc > self._dc_limit_a2())
+        )
         code = np.where(moving, 0, np.where(e < self.rest_enter * floor, 1, -1))
         idx = np.where(code >= 0, np.arange(y.size), -1)
         np.maximum.accumulate(idx, out=idx)
@@ -415,7 +464,7 @@ class KalmanEstimator:
         if y.ndim == 2 and y.shape[1] == 1:
             y = y[:, 0]
         if y.ndim != 1:
-            raise ParameterError(f"expected shape (n,) or (n, 1), got {y.shape}")
+            raise ParameterError(f'expected shape (n,) or (n, 1), got {y.shape}')
         if y.size == 0:
             return np.empty(0), np.empty(0)
         was_rest = self.at_rest
@@ -498,14 +547,20 @@ class KalmanEstimator:
             high = h0 * x + y0
             hz[0] = (h1 * x - g1 * high + y1, h2 * x - g2 * high)
             ah = self._alpha_hf
-            self._hf_energy = hf = ah * self._hf_energy + (1 - ah) * min(high * high, self._hf_clip)
+            self._hf_energy = hf = ah * self._hf_energy + (1 - ah) * min(
+                high * high, self._hf_clip
+            )
             floor = max(floor, hf * self._hp_ratio)
             self._sigma2 = max(self.current_noise_a ** 2, hf / self._hp_unit)
         was_rest = self.at_rest
         self._lp = lp = a * self._lp + (1 - a) * x
         if self.rest_detection:
             dc = lp - self._b_last
-            if e > self.rest_leave * floor or band * band > 36.0 * floor or dc * dc > self._dc_limit_a2():
+            if (
+                e > self.rest_leave * floor
+                or band * band > 36.0 * floor
+                or dc * dc > self._dc_limit_a2()
+            ):
                 self.at_rest = False
             elif e < self.rest_enter * floor:
                 self.at_rest = True
@@ -541,27 +596,39 @@ class KalmanEstimator:
         return w
 
     def get_state(self) -> dict:
-        return {"s": self._s.copy(), "bp_zi": self._bp_zi.copy(), "energy": self._energy,
-                "at_rest": self.at_rest, "offset_a": self._b_last, "w_ref": self._w_ref,
-                "hp_zi": self._hp_zi.copy(), "hf_energy": self._hf_energy, "offset_var": self._offset_var,
-                "sigma2": self._sigma2, "lp": self._lp, "seen_rest": self._seen_rest}
+        return {
+            's': self._s.copy(),
+            'bp_zi': self._bp_zi.copy(),
+            'energy': self._energy,
+            'at_rest': self.at_rest,
+            'offset_a': self._b_last,
+            'w_ref': self._w_ref,
+            'hp_zi': self._hp_zi.copy(),
+            'hf_energy': self._hf_energy,
+            'offset_var': self._offset_var,
+            'sigma2': self._sigma2,
+            'lp': self._lp,
+            'seen_rest': self._seen_rest,
+        }
 
     def set_state(self, state: dict) -> None:
-        s = np.asarray(state.get("s"), float)
+        s = np.asarray(state.get('s'), float)
         if s.shape != self._s.shape or not np.all(np.isfinite(s)):
-            raise ParameterError(f"state shape {s.shape} does not match {self._s.shape} or is not finite")
+            raise ParameterError(
+                f'state shape {s.shape} does not match {self._s.shape} or is not finite'
+            )
         self._s = s.copy()
-        self._bp_zi = np.asarray(state["bp_zi"], float).copy()
-        self._energy = float(state["energy"])
-        self.at_rest = bool(state["at_rest"])
-        self._b_last = float(state["offset_a"])
-        self._w_ref = float(state["w_ref"])
-        self._hp_zi = np.asarray(state["hp_zi"], float).copy()
-        self._hf_energy = float(state["hf_energy"])
-        self._offset_var = float(state["offset_var"])
-        self._sigma2 = float(state["sigma2"])
-        self._lp = float(state["lp"])
-        self._seen_rest = bool(state["seen_rest"])
+        self._bp_zi = np.asarray(state['bp_zi'], float).copy()
+        self._energy = float(state['energy'])
+        self.at_rest = bool(state['at_rest'])
+        self._b_last = float(state['offset_a'])
+        self._w_ref = float(state['w_ref'])
+        self._hp_zi = np.asarray(state['hp_zi'], float).copy()
+        self._hf_energy = float(state['hf_energy'])
+        self._offset_var = float(state['offset_var'])
+        self._sigma2 = float(state['sigma2'])
+        self._lp = float(state['lp'])
+        self._seen_rest = bool(state['seen_rest'])
 
     def current_output(self) -> np.ndarray:
         """Deflection held in the predicted state (per channel), m."""
@@ -586,14 +653,27 @@ class KalmanEstimator:
         else:
             self._s[self._iw] = float(old.current_output()[0])
 
-    def rebuilt(self, reduced: ReducedModel | None = None, recent_input=None, **changes) -> "KalmanEstimator":
-        kwargs = {k: getattr(self, k) for k in (
-            "current_noise_a", "motion_velocity_m_s", "motion_bandwidth_hz", "leak_corner_hz",
-            "offset_drift_a_per_s", "rest_offset_time_s", "rest_window_s", "rest_enter", "rest_leave",
-            "rest_detection")}
-        kwargs["sample_rate_hz"] = self._fs
+    def rebuilt(
+        self, reduced: ReducedModel | None = None, recent_input=None, **changes
+    ) -> 'KalmanEstimator':
+        kwargs = {
+            k: getattr(self, k)
+            for k in (
+                'current_noise_a',
+                'motion_velocity_m_s',
+                'motion_bandwidth_hz',
+                'leak_corner_hz',
+                'offset_drift_a_per_s',
+                'rest_offset_time_s',
+                'rest_window_s',
+                'rest_enter',
+                'rest_leave',
+                'rest_detection',
+            )
+        }
+        kwargs['sample_rate_hz'] = self._fs
         kwargs.update(changes)
-        fs = kwargs.pop("sample_rate_hz")
+        fs = kwargs.pop('sample_rate_hz')
         new = KalmanEstimator(reduced or self.reduced, fs, **kwargs)
         new.continue_from(self, recent_input)
         return new

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Mains interference: streaming notch at 50 or 60 Hz and harmonics, and a line detector.
 
 A DAQ near mains wiring picks up the line frequency and its odd/even harmonics.
@@ -18,7 +19,7 @@ import scipy.signal as sig
 
 from .inverse import ParameterError
 
-__all__ = ["MainsFilter", "mains_sos", "line_level", "detect_lines", "LINE_WARN_RATIO"]
+__all__ = ['MainsFilter', 'mains_sos', 'line_level', 'detect_lines', 'LINE_WARN_RATIO']
 
 #: Line RMS / signal RMS above which a line component is reported as present.
 LINE_WARN_RATIO = 0.01
@@ -38,7 +39,9 @@ def mains_sos(mains_hz: float, sample_rate_hz: float, quality: float = 30.0,
     return np.array(rows) if rows else np.zeros((0, 6))
 
 
-def line_level(current_a, sample_rate_hz: float, mains_hz: float = 50.0, quality: float = 30.0) -> float:
+def line_level(
+    current_a, sample_rate_hz: float, mains_hz: float = 50.0, quality: float = 30.0
+) -> float:
     """RMS of the line component (fundamental and harmonics) over the RMS of the
     current with its mean removed (0 .. 1)."""
     x = np.asarray(current_a, float) - np.mean(current_a)
@@ -96,7 +99,7 @@ def detect_lines(current_a, sample_rate_hz: float, families=(50.0, 60.0), n_harm
     """
     x = np.asarray(current_a, float)
     n = x.size
-    out = {"mains_hz": 0, "level": 0.0, "harmonics": []}
+    out = {'mains_hz': 0, 'level': 0.0, 'harmonics': []}
     if n < 8 or not np.any(x):
         return out
     x = x - x.mean()

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """The stream core: sample blocks in, deflection blocks out, with every rule of a live stream.
 
 :class:`StreamEstimator` is what the estimator node, ``ipmc-model estimate`` and bag replay
@@ -35,8 +36,8 @@ import numpy as np
 from ..errors import DataError
 from .deflection import DeflectionEstimator
 
-__all__ = ["StreamEstimator", "validate_block", "COUNTER_NAMES", "MAX_ABS_CURRENT_A",
-           "MAX_BLOCK_SAMPLES", "MAX_STAMP_S", "PERIOD_TOLERANCE", "estimate_record"]
+__all__ = ['StreamEstimator', 'validate_block', 'COUNTER_NAMES', 'MAX_ABS_CURRENT_A',
+           'MAX_BLOCK_SAMPLES', 'MAX_STAMP_S', 'PERIOD_TOLERANCE', 'estimate_record']
 
 #: Largest block accepted by default (samples).
 MAX_BLOCK_SAMPLES = 1_000_000
@@ -55,9 +56,9 @@ PERIOD_TOLERANCE = 0.01
 GAP_PERIODS = 1.5
 
 #: Counters kept per stream; see the module docstring for the invariant.
-COUNTER_NAMES = ("messages_in", "samples_in", "samples_out", "samples_rejected",
-                 "messages_rejected", "samples_dropped", "samples_unpublished",
-                 "messages_unpublished", "resets", "gaps", "gaps_bridged")
+COUNTER_NAMES = ('messages_in', 'samples_in', 'samples_out', 'samples_rejected',
+                 'messages_rejected', 'samples_dropped', 'samples_unpublished',
+                 'messages_unpublished', 'resets', 'gaps', 'gaps_bridged')
 
 def validate_block(values, max_samples: int = MAX_BLOCK_SAMPLES,
                    max_abs_current_a: float = MAX_ABS_CURRENT_A) -> np.ndarray:
@@ -70,22 +71,22 @@ def validate_block(values, max_samples: int = MAX_BLOCK_SAMPLES,
     try:
         x = np.asarray(values, dtype=float)
     except (TypeError, ValueError):
-        raise DataError("current block is not numeric") from None
+        raise DataError('current block is not numeric') from None
     if x.ndim != 1:
-        raise DataError(f"current block must be 1-D, got shape {x.shape}")
+        raise DataError(f'current block must be 1-D, got shape {x.shape}')
     if x.size == 0:
-        raise DataError("current block is empty")
+        raise DataError('current block is empty')
     if x.size > max_samples:
-        raise DataError(f"current block has {x.size} samples, more than the limit {max_samples}")
+        raise DataError(f'current block has {x.size} samples, more than the limit {max_samples}')
     if float(np.max(np.abs(x))) <= max_abs_current_a:   # one pass; NaN makes it False
         return x
     finite = np.isfinite(x)
     if not finite.all():
-        raise DataError(f"current block has {int((~finite).sum())} non-finite sample(s) "
-                        f"(first at index {int(np.argmin(finite))})")
+        raise DataError(f'current block has {int((~finite).sum())} non-finite sample(s) '
+                        f'(first at index {int(np.argmin(finite))})')
     k = int(np.argmax(np.abs(x) > max_abs_current_a))
-    raise DataError(f"current block has |i| > {max_abs_current_a} A at index {k} "
-                    f"({x[k]!r} A): not a sensing current")
+    raise DataError(f'current block has |i| > {max_abs_current_a} A at index {k} '
+                    f'({x[k]!r} A): not a sensing current')
 
 
 def _no_log(text: str) -> None:
@@ -112,11 +113,11 @@ class StreamEstimator:
     """
 
     def __init__(self, estimator: DeflectionEstimator, *, max_gap_s: float = 0.1,
-                 max_block_samples: int = MAX_BLOCK_SAMPLES, source: str = "current",
+                 max_block_samples: int = MAX_BLOCK_SAMPLES, source: str = 'current',
                  now_s: Callable[[], float] | None = None,
                  warn: Callable[[str], None] | None = None):
         if not (math.isfinite(max_gap_s) and max_gap_s > 0.0):
-            raise DataError(f"max_gap_s must be > 0 s, got {max_gap_s!r}")
+            raise DataError(f'max_gap_s must be > 0 s, got {max_gap_s!r}')
         self.estimator = estimator
         self.max_gap_s = float(max_gap_s)
         self.max_block_samples = int(max_block_samples)
@@ -124,8 +125,8 @@ class StreamEstimator:
         self._now_s = now_s or (lambda: 0.0)
         self._warn = warn or _no_log
         self.counters: dict[str, int] = dict.fromkeys(COUNTER_NAMES, 0)
-        self.last_rejection = ""
-        self.last_warning = ""
+        self.last_rejection = ''
+        self.last_warning = ''
         self.last_time_s: float | None = None   # last sample fed to the filter
         self._last_valid_s: float | None = None  # last well-formed sample time seen (period rule)
         self._fs = float(estimator.sample_rate_hz)
@@ -142,9 +143,9 @@ class StreamEstimator:
             new.continue_from(self.estimator)
         except Exception as exc:  # never lose the stream over a hand-over
             new.reset()
-            self.counters["resets"] += 1
-            self._say(f"filter rebuilt without continuity on {self.source} "
-                      f"({type(exc).__name__}): filter reset")
+            self.counters['resets'] += 1
+            self._say(f'filter rebuilt without continuity on {self.source} '
+                      f'({type(exc).__name__}): filter reset')
         self.estimator = new
         self._fs = float(new.sample_rate_hz)
 
@@ -156,8 +157,8 @@ class StreamEstimator:
 
     def check_invariant(self) -> bool:
         c = self.counters
-        return c["samples_in"] == (c["samples_out"] + c["samples_rejected"] + c["samples_dropped"]
-                                   + c["samples_unpublished"])
+        return c['samples_in'] == (c['samples_out'] + c['samples_rejected'] + c['samples_dropped']
+                                   + c['samples_unpublished'])
 
     # -- events -------------------------------------------------------------------------
     def _say(self, text: str) -> None:
@@ -167,25 +168,25 @@ class StreamEstimator:
     def reject(self, n_samples: int, reason: str) -> None:
         """Count a message of ``n_samples`` claimed samples as received and rejected."""
         c = self.counters
-        c["messages_in"] += 1
-        c["samples_in"] += n_samples
-        c["messages_rejected"] += 1
-        c["samples_rejected"] += n_samples
+        c['messages_in'] += 1
+        c['samples_in'] += n_samples
+        c['messages_rejected'] += 1
+        c['samples_rejected'] += n_samples
         self.last_rejection = reason
-        self._say(f"rejected message on {self.source} ({n_samples} sample(s)): {reason}")
+        self._say(f'rejected message on {self.source} ({n_samples} sample(s)): {reason}')
 
     def unpublished(self, n_samples: int, reason: str) -> None:
         """Move ``n_samples`` just counted as ``samples_out`` to ``samples_unpublished``: the
         estimate exists (the filter ran) but could not be delivered.  No reset."""
         c = self.counters
-        c["samples_out"] -= n_samples
-        c["samples_unpublished"] += n_samples
-        c["messages_unpublished"] += 1
-        self._say(f"could not publish {n_samples} estimate(s) from {self.source}: {reason}")
+        c['samples_out'] -= n_samples
+        c['samples_unpublished'] += n_samples
+        c['messages_unpublished'] += 1
+        self._say(f'could not publish {n_samples} estimate(s) from {self.source}: {reason}')
 
     def _reset(self, text: str) -> None:
         self.estimator.reset()
-        self.counters["resets"] += 1
+        self.counters['resets'] += 1
         self._say(text)
 
     # -- rules --------------------------------------------------------------------------
@@ -199,33 +200,33 @@ class StreamEstimator:
             start = self._now_s() if self.last_time_s is None else self.last_time_s + 1.0 / fs
             times = start + np.arange(n) / fs
         elif times.size != n:
-            raise DataError(f"{times.size} sample times for {n} samples")
+            raise DataError(f'{times.size} sample times for {n} samples')
         # strictly increasing with finite ends implies all finite and within the ends
         # (NaN fails 'dt > 0'), so the range is checked on the first and last time only
         dt = np.diff(times)
         if not (dt > 0.0).all():
             if not np.all(np.isfinite(times)):
-                raise DataError("sample times contain non-finite values")
+                raise DataError('sample times contain non-finite values')
             k = int(np.argmax(~(dt > 0.0)))
-            raise DataError(f"sample times are not strictly increasing (index {k + 1}: "
-                            f"{times[k + 1]!r} s after {times[k]!r} s)")
+            raise DataError(f'sample times are not strictly increasing (index {k + 1}: '
+                            f'{times[k + 1]!r} s after {times[k]!r} s)')
         first, last = float(times[0]), float(times[-1])
         if not (math.isfinite(first) and math.isfinite(last)):
-            raise DataError("sample times contain non-finite values")
+            raise DataError('sample times contain non-finite values')
         if first < 0.0 or last > MAX_STAMP_S:
-            raise DataError(f"sample times must lie in [0, {MAX_STAMP_S:.0f}] s "
-                            f"(got {first!r} .. {last!r} s)")
+            raise DataError(f'sample times must lie in [0, {MAX_STAMP_S:.0f}] s '
+                            f'(got {first!r} .. {last!r} s)')
         if n >= 2:
             period = float(np.median(dt))
             if abs(period * fs - 1.0) > PERIOD_TOLERANCE:
-                raise DataError(f"median sample period {period:.6g} s does not match "
-                                f"sample_rate_hz = {fs:g} Hz (1/fs = {1.0 / fs:.6g} s, "
-                                f"tolerance {PERIOD_TOLERANCE:.0%})")
+                raise DataError(f'median sample period {period:.6g} s does not match '
+                                f'sample_rate_hz = {fs:g} Hz (1/fs = {1.0 / fs:.6g} s, '
+                                f'tolerance {PERIOD_TOLERANCE:.0%})')
         previous, self._last_valid_s = self._last_valid_s, last
         if previous is not None and 0.0 < (first - previous) * fs < 1.0 - PERIOD_TOLERANCE:
-            raise DataError(f"sample at {first!r} s only {first - previous:.6g} s after the "
-                            f"previous one at {previous!r} s: faster than sample_rate_hz = "
-                            f"{fs:g} Hz (1/fs = {1.0 / fs:.6g} s)")
+            raise DataError(f'sample at {first!r} s only {first - previous:.6g} s after the '
+                            f'previous one at {previous!r} s: faster than sample_rate_hz = '
+                            f'{fs:g} Hz (1/fs = {1.0 / fs:.6g} s)')
         return times
 
     def _continuity(self, first_time_s: float) -> None:
@@ -234,13 +235,13 @@ class StreamEstimator:
             return
         step = first_time_s - self.last_time_s
         if step <= 0.0:
-            self._reset(f"time jumped back by {-step:.6g} s on {self.source}: filter reset")
+            self._reset(f'time jumped back by {-step:.6g} s on {self.source}: filter reset')
         elif step > self.max_gap_s:
-            self.counters["gaps"] += 1
-            self._reset(f"gap of {step:.6g} s (> max_gap_s = {self.max_gap_s:g} s) on "
-                        f"{self.source}: filter reset")
+            self.counters['gaps'] += 1
+            self._reset(f'gap of {step:.6g} s (> max_gap_s = {self.max_gap_s:g} s) on '
+                        f'{self.source}: filter reset')
         elif step * self._fs > GAP_PERIODS:
-            self.counters["gaps_bridged"] += 1
+            self.counters['gaps_bridged'] += 1
 
     # -- data path ----------------------------------------------------------------------
     def feed(self, times, currents, claimed: int | None = None):
@@ -270,8 +271,8 @@ class StreamEstimator:
             self.reject(n, str(exc))
             return None
         c = self.counters
-        c["messages_in"] += 1
-        c["samples_in"] += current.size
+        c['messages_in'] += 1
+        c['samples_in'] += current.size
         # a gap inside a block obeys the rules of a gap between blocks
         cuts = np.flatnonzero(np.diff(t) * self._fs > GAP_PERIODS) + 1 if t.size > 1 else ()
         if len(cuts):
@@ -287,12 +288,12 @@ class StreamEstimator:
             t_out, w = self.estimator.process(t, current)
         if not np.all(np.isfinite(w)):
             self.estimator.reset()
-            c["samples_dropped"] += current.size
-            c["resets"] += 1
-            self._say(f"non-finite estimate on {self.source}: block dropped, filter reset")
+            c['samples_dropped'] += current.size
+            c['resets'] += 1
+            self._say(f'non-finite estimate on {self.source}: block dropped, filter reset')
             return None
         self.last_time_s = float(t[-1])
-        c["samples_out"] += current.size
+        c['samples_out'] += current.size
         return t_out, w
 
     def feed_one(self, time_s: float, current_a: float):
@@ -316,17 +317,17 @@ class StreamEstimator:
             return False
         t_out, w = est.process_one(t, i)
         c = self.counters
-        c["messages_in"] += 1
-        c["samples_in"] += 1
+        c['messages_in'] += 1
+        c['samples_in'] += 1
         if not math.isfinite(w):
             est.reset()
-            c["samples_dropped"] += 1
-            c["resets"] += 1
-            self._say(f"non-finite estimate on {self.source}: block dropped, filter reset")
+            c['samples_dropped'] += 1
+            c['resets'] += 1
+            self._say(f'non-finite estimate on {self.source}: block dropped, filter reset')
             self._last_valid_s = t
             return None
         self.last_time_s = self._last_valid_s = t
-        c["samples_out"] += 1
+        c['samples_out'] += 1
         return t_out, w
 
     def run_record(self, time_s, current_a, block_samples: int = 1000):
@@ -355,7 +356,7 @@ class StreamEstimator:
 
 
 def estimate_record(estimator: DeflectionEstimator, time_s, current_a, *, max_gap_s: float = 0.1,
-                    block_samples: int = 1000, source: str = "record"):
+                    block_samples: int = 1000, source: str = 'record'):
     """Offline estimate of a whole record with the live stream's rules
     (:meth:`StreamEstimator.run_record`).  Returns (output times, deflection, stream) — the
     stream's ``counters`` say how many samples were rejected and how often it reset.  Only

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """The sample-block layout of ``std_msgs/Float64MultiArray`` messages, without ROS.
 
 A block of ``n`` timed samples is a 2-D array, row-major::
@@ -25,24 +26,24 @@ import numpy as np
 from ..errors import DataError
 from ..physics.parameters import short_repr
 
-__all__ = ["DataError", "SAMPLE_LABEL", "CURRENT_COLUMNS", "DEFLECTION_COLUMNS",
-           "ESTIMATE_COLUMNS", "unpack_columns", "unpack_pairs"]
+__all__ = ['DataError', 'SAMPLE_LABEL', 'CURRENT_COLUMNS', 'DEFLECTION_COLUMNS',
+           'ESTIMATE_COLUMNS', 'unpack_columns', 'unpack_pairs']
 
 #: Label of the row dimension.
-SAMPLE_LABEL = "sample"
+SAMPLE_LABEL = 'sample'
 #: Column label of current blocks: seconds, amperes.
-CURRENT_COLUMNS = "time_s,current_A"
+CURRENT_COLUMNS = 'time_s,current_A'
 #: Column label of deflection blocks: seconds, metres.
-DEFLECTION_COLUMNS = "time_s,deflection_m"
+DEFLECTION_COLUMNS = 'time_s,deflection_m'
 #: Column label of the estimator's output blocks: seconds, metres, and the standard deviation
 #: of each estimate, metres.
-ESTIMATE_COLUMNS = "time_s,deflection_m,deflection_std_m"
+ESTIMATE_COLUMNS = 'time_s,deflection_m,deflection_std_m'
 
 
 
 def _data(msg) -> np.ndarray:
     data = msg.data
-    if isinstance(data, array.array) and data.typecode == "d":
+    if isinstance(data, array.array) and data.typecode == 'd':
         return np.frombuffer(data, dtype=float)
     return np.asarray(data, dtype=float)
 
@@ -53,39 +54,41 @@ def unpack_columns(msg, columns: str, *, values_only_ok: bool = True):
     :class:`DataError` if malformed.  ``values_only_ok``: accept a 1-D values-only message
     (times None, table of shape (n, 1)).  Values are not checked for finiteness here.
     """
-    k = len(columns.split(","))
+    k = len(columns.split(','))
     dims = list(msg.layout.dim)
     offset = int(msg.layout.data_offset)
     data = _data(msg)
     if offset < 0 or offset > data.size:
-        raise DataError(f"layout.data_offset {offset} is outside the data (length {data.size})")
+        raise DataError(f'layout.data_offset {offset} is outside the data (length {data.size})')
     data = data[offset:]
     if len(dims) <= 1 and values_only_ok:
         if dims and dims[0].size != data.size:
-            raise DataError(f"1-D layout: dim[0].size = {dims[0].size} but the data holds "
-                              f"{data.size} value(s)")
+            raise DataError(f'1-D layout: dim[0].size = {dims[0].size} but the data holds '
+                              f'{data.size} value(s)')
         return None, data[:, None]
     if len(dims) != 2:
-        note = " (values only, no sample times)" if len(dims) < 2 else ""
+        note = ' (values only, no sample times)' if len(dims) < 2 else ''
         raise DataError(f"expected 2 dimensions (dim[0] '{SAMPLE_LABEL}', dim[1] '{columns}'), "
-                          f"got {len(dims)}{note}")
+                          f'got {len(dims)}{note}')
     d0, d1 = dims
     if d0.label != SAMPLE_LABEL:
         raise DataError(f"dim[0].label is {short_repr(d0.label)}, expected '{SAMPLE_LABEL}'")
     if d1.label != columns:
-        raise DataError(f"dim[1].label is {short_repr(d1.label)}, expected '{columns}' (wrong units "
-                          "or wrong topic?)")
+        raise DataError(
+            f"dim[1].label is {short_repr(d1.label)}, expected '{columns}' (wrong units "
+            'or wrong topic?)'
+        )
     if d1.size != k or d1.stride != k:
-        raise DataError(f"dim[1] must have size {k} and stride {k}, got size {d1.size}, "
-                          f"stride {d1.stride}")
+        raise DataError(f'dim[1] must have size {k} and stride {k}, got size {d1.size}, '
+                          f'stride {d1.stride}')
     if data.size % k:
-        what = "is odd: samples are (time, value) pairs" if k == 2 else \
-            f"is not a multiple of {k}: samples are ({columns}) rows"
-        raise DataError(f"data length {data.size} {what}")
+        what = 'is odd: samples are (time, value) pairs' if k == 2 else \
+            f'is not a multiple of {k}: samples are ({columns}) rows'
+        raise DataError(f'data length {data.size} {what}')
     n = data.size // k
     if d0.size != n or d0.stride != k * n:
-        raise DataError(f"dim[0] is (size {d0.size}, stride {d0.stride}) but the data holds {n} "
-                          f"row(s) of {k}: expected dim[0].size = {n}, dim[0].stride = {k * n}")
+        raise DataError(f'dim[0] is (size {d0.size}, stride {d0.stride}) but the data holds {n} '
+                          f'row(s) of {k}: expected dim[0].size = {n}, dim[0].stride = {k * n}')
     rows = data.reshape(n, k)
     return rows[:, 0].copy(), rows[:, 1:].copy()
 

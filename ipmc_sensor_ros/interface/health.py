@@ -39,11 +39,11 @@ import numpy as np
 
 from .specs import DIAGNOSTICS_SPECS
 
-__all__ = ["OK", "WARN", "ERROR", "LEVEL_NAMES", "Health", "HealthLimits", "HealthMonitor",
-           "CurrentStatistics", "DIAGNOSTICS_SPECS", "limits_from_values", "worst"]
+__all__ = ['OK', 'WARN', 'ERROR', 'LEVEL_NAMES', 'Health', 'HealthLimits', 'HealthMonitor',
+           'CurrentStatistics', 'DIAGNOSTICS_SPECS', 'limits_from_values', 'worst']
 
 OK, WARN, ERROR = 0, 1, 2
-LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR"}
+LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR'}
 
 @dataclass(frozen=True)
 class HealthLimits:
@@ -59,9 +59,9 @@ class HealthLimits:
 
 def limits_from_values(values: Mapping[str, Any]) -> HealthLimits:
     """:class:`HealthLimits` from parameter values (names of :data:`DIAGNOSTICS_SPECS`)."""
-    kw = {name: float(values[name]) for name in ("stale_after_s", "rate_tolerance",
-                                                 "offset_warn_a", "offset_window_s",
-                                                 "line_warn_fraction") if name in values}
+    kw = {name: float(values[name]) for name in ('stale_after_s', 'rate_tolerance',
+                                                 'offset_warn_a', 'offset_window_s',
+                                                 'line_warn_fraction') if name in values}
     return HealthLimits(**kw)
 
 
@@ -78,13 +78,13 @@ class Health:
         return LEVEL_NAMES[self.level]
 
 
-def worst(items: Sequence[Health], message_ok: str = "all channels OK") -> Health:
+def worst(items: Sequence[Health], message_ok: str = 'all channels OK') -> Health:
     """Aggregate health of a node: the highest level, messages of the non-OK items."""
     if not items:
         return Health(OK, message_ok)
     level = max(h.level for h in items)
     bad = [h.message for h in items if h.level > OK]
-    return Health(level, "; ".join(bad) if bad else message_ok)
+    return Health(level, '; '.join(bad) if bad else message_ok)
 
 
 class CurrentStatistics:
@@ -189,11 +189,11 @@ class HealthMonitor:
         ``samples_published`` for a source).
     """
 
-    WARN_COUNTERS = (("messages_rejected", "message(s) rejected"), ("resets", "filter reset(s)"),
-                     ("gaps", "time gap(s)"), ("samples_dropped", "sample(s) dropped"))
+    WARN_COUNTERS = (('messages_rejected', 'message(s) rejected'), ('resets', 'filter reset(s)'),
+                     ('gaps', 'time gap(s)'), ('samples_dropped', 'sample(s) dropped'))
 
     def __init__(self, sample_rate_hz: float | None, limits: HealthLimits = HealthLimits(),
-                 samples_key: str = "samples_in"):
+                 samples_key: str = 'samples_in'):
         self.sample_rate_hz = None if sample_rate_hz is None else float(sample_rate_hz)
         self.limits = limits
         self.samples_key = samples_key
@@ -220,59 +220,59 @@ class HealthMonitor:
         values = {k: _text(v) for k, v in status.items()}
         errors, warnings = [], []
 
-        done = bool(status.get("done", False))
+        done = bool(status.get('done', False))
         since = now_s - (self._last_data_s if self._last_data_s is not None else self._start_s)
-        values["seconds_since_data"] = f"{since:.3f}"
+        values['seconds_since_data'] = f'{since:.3f}'
         if not done and since > lim.stale_after_s:
-            errors.append("no data for " + (f"{since:.1f} s" if self._last_data_s is not None
-                                           else f"{since:.1f} s since start")
-                          + f" (stale_after_s {lim.stale_after_s:g})")
+            errors.append('no data for ' + (f'{since:.1f} s' if self._last_data_s is not None
+                                           else f'{since:.1f} s since start')
+                          + f' (stale_after_s {lim.stale_after_s:g})')
         if self._prev is not None:
             for key, text in self.WARN_COUNTERS:
                 if delta.get(key, 0) > 0:
-                    warnings.append(f"{delta[key]} {text}")
+                    warnings.append(f'{delta[key]} {text}')
         if dt is not None and dt >= 0.999 and new > 0 and self.sample_rate_hz and not done \
                 and prev.get(self.samples_key, 0) > 0:
             rate = new / dt
-            values["measured_rate_hz"] = f"{rate:.6g}"
+            values['measured_rate_hz'] = f'{rate:.6g}'
             if abs(rate / self.sample_rate_hz - 1.0) > lim.rate_tolerance:
-                warnings.append(f"sample rate {rate:.4g} Hz, expected {self.sample_rate_hz:g} Hz"
-                                f" (rate_tolerance {lim.rate_tolerance:g})")
-        offset = status.get("estimated_offset_a")
+                warnings.append(f'sample rate {rate:.4g} Hz, expected {self.sample_rate_hz:g} Hz'
+                                f' (rate_tolerance {lim.rate_tolerance:g})')
+        offset = status.get('estimated_offset_a')
         if statistics is not None:
             if offset is None and statistics.window_filled():
                 offset = statistics.offset_a()
             line = statistics.line()
             if line is not None:
                 f, amp, rms, floor = line
-                values["line_frequency_hz"] = f"{f:g}"
-                values["line_amplitude_a"] = f"{amp:.4g}"
-                values["current_rms_a"] = f"{rms:.4g}"
+                values['line_frequency_hz'] = f'{f:g}'
+                values['line_amplitude_a'] = f'{amp:.4g}'
+                values['current_rms_a'] = f'{rms:.4g}'
                 # a line stands out of its neighbourhood (4x the median of nearby bins:
                 # white noise alone exceeds it with probability ~exp(-4^2 pi/4)) and is a
                 # sizeable part of the current
                 if amp > lim.line_warn_fraction * rms and amp > 4.0 * floor:
-                    warnings.append(f"mains line at {f:g} Hz: {amp:.3g} A "
-                                    f"({100.0 * amp / rms:.0f} % of the current RMS)")
+                    warnings.append(f'mains line at {f:g} Hz: {amp:.3g} A '
+                                    f'({100.0 * amp / rms:.0f} % of the current RMS)')
         if offset is not None:
-            values["estimated_offset_a"] = f"{offset:.4g}"
+            values['estimated_offset_a'] = f'{offset:.4g}'
             if abs(offset) > lim.offset_warn_a:
-                warnings.append(f"estimated current offset {offset:.3g} A over the last "
-                                f"{lim.offset_window_s:g} s (offset_warn_a {lim.offset_warn_a:g})")
+                warnings.append(f'estimated current offset {offset:.3g} A over the last '
+                                f'{lim.offset_window_s:g} s (offset_warn_a {lim.offset_warn_a:g})')
 
         self._prev = {k: v for k, v in status.items()
                       if isinstance(v, (int, np.integer)) and not isinstance(v, bool)}
         self._prev_s = now_s
         if errors:
-            return Health(ERROR, "; ".join(errors + warnings), values)
+            return Health(ERROR, '; '.join(errors + warnings), values)
         if warnings:
-            return Health(WARN, "; ".join(warnings), values)
-        return Health(OK, "done" if done else "OK", values)
+            return Health(WARN, '; '.join(warnings), values)
+        return Health(OK, 'done' if done else 'OK', values)
 
 
 def _text(value: Any) -> str:
     if isinstance(value, float):
-        return f"{value:.6g}"
+        return f'{value:.6g}'
     if isinstance(value, bool):
-        return "true" if value else "false"
+        return 'true' if value else 'false'
     return str(value)

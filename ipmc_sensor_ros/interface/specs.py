@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Parameters of the nodes and of ``ipmc-model estimate``, without ROS.
 
 One source for the parameter names, defaults, units and ranges
@@ -26,10 +27,10 @@ from ..physics.parameters import (GEOMETRY_LIMITS_M, MATERIAL_LIMITS, Geometry, 
                                   read_yaml, short_repr)
 from ..lti.reduction import MAX_ORDER, ReducedModel
 
-__all__ = ["Spec", "ParameterError", "GEOMETRY_SPECS", "MATERIAL_SPECS", "MODEL_SPECS",
-           "QOS_SPECS", "ESTIMATOR_SPECS", "PUBLISH_POINTS", "MATERIAL_NAMES", "GEOMETRY_NAMES",
-           "defaults", "load_params_file", "build_model", "build_estimator", "check_choice",
-           "check_values", "markdown_table", "FRAME_ID_PATTERN", "DIAGNOSTICS_SPECS"]
+__all__ = ['Spec', 'ParameterError', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_SPECS',
+           'QOS_SPECS', 'ESTIMATOR_SPECS', 'PUBLISH_POINTS', 'MATERIAL_NAMES', 'GEOMETRY_NAMES',
+           'defaults', 'load_params_file', 'build_model', 'build_estimator', 'check_choice',
+           'check_values', 'markdown_table', 'FRAME_ID_PATTERN', 'DIAGNOSTICS_SPECS']
 
 
 
@@ -52,53 +53,53 @@ class Spec:
     high: float | None = None
     read_only: bool = False
     choices: tuple[str, ...] = ()
-    pattern: str = ""
+    pattern: str = ''
     max_length: int | None = None
 
 
 _M = MaterialParameters()
-_SLIM = {"length_m": 0.022, "width_m": 0.007, "thickness_m": 0.00036}
+_SLIM = {'length_m': 0.022, 'width_m': 0.007, 'thickness_m': 0.00036}
 
 GEOMETRY_SPECS = tuple(
     Spec(name, _SLIM[name], float, f"{text}, m (default: the paper's 'slim' sample)",
          low=GEOMETRY_LIMITS_M[name][0], high=GEOMETRY_LIMITS_M[name][1])
-    for name, text in (("length_m", "free length L of the cantilever, clamp to tip"),
-                       ("width_m", "width W of the sample"),
-                       ("thickness_m", "total thickness 2h of the sample")))
+    for name, text in (('length_m', 'free length L of the cantilever, clamp to tip'),
+                       ('width_m', 'width W of the sample'),
+                       ('thickness_m', 'total thickness 2h of the sample')))
 
 MATERIAL_SPECS = tuple(
     Spec(name, getattr(_M, name), float, text,
          low=MATERIAL_LIMITS[name][0], high=MATERIAL_LIMITS[name][1])
     for name, text in (
-        ("youngs_modulus_pa", "Young's modulus Y, Pa"),
-        ("surface_resistance_ohm", "surface-electrode resistance r0 per unit length and width, "
-                                   "ohm (H2 only)"),
-        ("diffusivity_m2_per_s", "ionic diffusivity d, m^2/s"),
-        ("anion_concentration_mol_per_m3", "anion concentration C-, mol/m^3"),
-        ("permittivity_f_per_m", "effective dielectric permittivity kappa_e, F/m"),
-        ("charge_stress_coupling_j_per_c", "charge-stress coupling alpha0, J/C"),
-        ("temperature_k", "absolute temperature T, K")))
+        ('youngs_modulus_pa', "Young's modulus Y, Pa"),
+        ('surface_resistance_ohm', 'surface-electrode resistance r0 per unit length and width, '
+                                   'ohm (H2 only)'),
+        ('diffusivity_m2_per_s', 'ionic diffusivity d, m^2/s'),
+        ('anion_concentration_mol_per_m3', 'anion concentration C-, mol/m^3'),
+        ('permittivity_f_per_m', 'effective dielectric permittivity kappa_e, F/m'),
+        ('charge_stress_coupling_j_per_c', 'charge-stress coupling alpha0, J/C'),
+        ('temperature_k', 'absolute temperature T, K')))
 
 MODEL_SPECS = (
-    Spec("model", "h2", str, "base model: 'h1' (eq. 31) or 'h2' (eq. 45, with surface "
-         "resistance)", choices=tuple(sorted(BASES))),
-    Spec("effects", [], list, "extra effects beyond the base model, each 'name' or "
+    Spec('model', 'h2', str, "base model: 'h1' (eq. 31) or 'h2' (eq. 45, with surface "
+         'resistance)', choices=tuple(sorted(BASES))),
+    Spec('effects', [], list, "extra effects beyond the base model, each 'name' or "
          "'name(param=value, ...)' from the effects catalog, e.g. ['time_delay(delay_s=0.002)'];"
-         " unknown names and effects already in the base model are refused"),
-    Spec("model_file", "", str, "saved model (ipmc-model/1 YAML written by 'ipmc-model fit|"
+         ' unknown names and effects already in the base model are refused'),
+    Spec('model_file', '', str, "saved model (ipmc-model/1 YAML written by 'ipmc-model fit|"
          "diagnose --save-model'): its base, effects with their fitted values and its material "
          "replace 'model', 'effects' and the material parameters, which must then keep their "
          "defaults ('' = none)", read_only=True, max_length=4096),
-    Spec("plugins", [], list, "Python files defining more effects (Effect subclasses, see the "
+    Spec('plugins', [], list, 'Python files defining more effects (Effect subclasses, see the '
          "README's plugin API): arbitrary code, loaded once at start-up (sha256 logged), "
-         "never re-read; they cannot replace a built-in effect", read_only=True),
+         'never re-read; they cannot replace a built-in effect', read_only=True),
 )
 
 QOS_SPECS = (
-    Spec("qos_depth", 1000, int, "KEEP_LAST history depth of the data subscription and "
-         "publishers, messages", low=1, high=100000, read_only=True),
-    Spec("qos_reliability", "reliable", str, "'reliable' or 'best_effort' for the data topics",
-         read_only=True, choices=("reliable", "best_effort")),
+    Spec('qos_depth', 1000, int, 'KEEP_LAST history depth of the data subscription and '
+         'publishers, messages', low=1, high=100000, read_only=True),
+    Spec('qos_reliability', 'reliable', str, "'reliable' or 'best_effort' for the data topics",
+         read_only=True, choices=('reliable', 'best_effort')),
 )
 
 MATERIAL_NAMES = tuple(s.name for s in MATERIAL_SPECS)
@@ -106,72 +107,72 @@ GEOMETRY_NAMES = tuple(s.name for s in GEOMETRY_SPECS)
 
 
 #: Allowed values of ``publish_points``.
-PUBLISH_POINTS = ("per_sample", "last_of_block", "none")  # not "off": YAML reads off as false
+PUBLISH_POINTS = ('per_sample', 'last_of_block', 'none')  # not "off": YAML reads off as false
 
 #: Characters allowed in ``frame_id`` (tf2 frame names: letters, digits, _ / . -).
-FRAME_ID_PATTERN = r"[A-Za-z0-9_/.\-]+"
+FRAME_ID_PATTERN = r'[A-Za-z0-9_/.\-]+'
 
 #: Parameters of the diagnostics (declared by every node that publishes /diagnostics).
 DIAGNOSTICS_SPECS = (
-    Spec("hardware_id", "", str, "hardware_id of the DiagnosticStatus messages (e.g. the DAQ "
+    Spec('hardware_id', '', str, 'hardware_id of the DiagnosticStatus messages (e.g. the DAQ '
          "channel or sensor serial); empty = the node's fully qualified name", read_only=True),
-    Spec("stale_after_s", 2.0, float, "diagnostics: ERROR when no sample arrived for this "
-         "long, s", low=0.01, high=1e6),
-    Spec("rate_tolerance", 0.05, float, "diagnostics: WARN when the measured sample rate is "
-         "off sample_rate_hz by more than this fraction", low=0.0, high=10.0),
-    Spec("offset_warn_a", 100e-9, float, "diagnostics: WARN when the estimated current "
-         "offset (mean over offset_window_s) exceeds this, A", low=0.0, high=1.0),
-    Spec("offset_window_s", 10.0, float, "diagnostics: window of the current offset estimate, "
-         "s (much longer than the motion)", low=0.01, high=1e4),
-    Spec("line_warn_fraction", 0.05, float, "diagnostics: WARN when the 50/60 Hz line "
+    Spec('stale_after_s', 2.0, float, 'diagnostics: ERROR when no sample arrived for this '
+         'long, s', low=0.01, high=1e6),
+    Spec('rate_tolerance', 0.05, float, 'diagnostics: WARN when the measured sample rate is '
+         'off sample_rate_hz by more than this fraction', low=0.0, high=10.0),
+    Spec('offset_warn_a', 100e-9, float, 'diagnostics: WARN when the estimated current '
+         'offset (mean over offset_window_s) exceeds this, A', low=0.0, high=1.0),
+    Spec('offset_window_s', 10.0, float, 'diagnostics: window of the current offset estimate, '
+         's (much longer than the motion)', low=0.01, high=1e4),
+    Spec('line_warn_fraction', 0.05, float, 'diagnostics: WARN when the 50/60 Hz line '
          "amplitude exceeds this fraction of the current's RMS", low=0.0, high=10.0),
 )
 
 
 ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
-    Spec("reduction_order", 4, int, "order n of the stable reduction of R(s) = H(s)/s",
+    Spec('reduction_order', 4, int, 'order n of the stable reduction of R(s) = H(s)/s',
          low=1, high=MAX_ORDER),
-    Spec("band_low_hz", 0.1, float, "lower edge of the reduction fit band, Hz",
+    Spec('band_low_hz', 0.1, float, 'lower edge of the reduction fit band, Hz',
          low=1e-4, high=1e5),
-    Spec("band_high_hz", 50.0, float, "upper edge of the reduction fit band, Hz",
+    Spec('band_high_hz', 50.0, float, 'upper edge of the reduction fit band, Hz',
          low=1e-4, high=1e5),
-    Spec("sample_rate_hz", 1000.0, float, "sample rate of the current the filter is designed "
-         "for, Hz; blocks whose median sample period differs by more than 1 % are rejected",
+    Spec('sample_rate_hz', 1000.0, float, 'sample rate of the current the filter is designed '
+         'for, Hz; blocks whose median sample period differs by more than 1 % are rejected',
            low=1.0, high=1e6, read_only=True),
-    Spec("estimator", "leaky", str, "'leaky': the leaky inverse of the reduced model; "
+    Spec('estimator', 'leaky', str, "'leaky': the leaky inverse of the reduced model; "
          "'kalman': offset-aware Kalman filter with a rest detector (learns the DAQ offset, "
-         "holds the deflection at rest, publishes its standard deviation)",
+         'holds the deflection at rest, publishes its standard deviation)',
          choices=ESTIMATORS, read_only=True),
-    Spec("leak_corner_hz", 0.0, float, "leak corner f_c, Hz (time constant 1/(2 pi f_c) of the "
+    Spec('leak_corner_hz', 0.0, float, 'leak corner f_c, Hz (time constant 1/(2 pi f_c) of the '
          f"initial-condition and held-step decay); 0 = the estimator's default "
-         f"({DEFAULT_LEAK_CORNER_HZ:g} Hz leaky, {KALMAN_LEAK_CORNER_HZ:g} Hz kalman)",
+         f'({DEFAULT_LEAK_CORNER_HZ:g} Hz leaky, {KALMAN_LEAK_CORNER_HZ:g} Hz kalman)',
          low=0.0, high=1e4),
-    Spec("offset_corner_hz", 0.0, float, "estimator 'leaky' only: corner of the current-offset "
-         "tracker, Hz (0 = off)", low=0.0, high=1e4),
-    Spec("current_noise_a", DEFAULT_CURRENT_NOISE_A, float, "estimator 'kalman': white-noise "
-         "RMS of the DAQ current per sample, A (the filter measures it at rest and never "
-         "assumes less)", low=1e-15, high=1e-3),
-    Spec("mains_hz", 0, int, "notch the mains line and its harmonics from the current before "
-         "the filter: 0 (off), 50 or 60 Hz; a line found while off is reported",
+    Spec('offset_corner_hz', 0.0, float, "estimator 'leaky' only: corner of the current-offset "
+         'tracker, Hz (0 = off)', low=0.0, high=1e4),
+    Spec('current_noise_a', DEFAULT_CURRENT_NOISE_A, float, "estimator 'kalman': white-noise "
+         'RMS of the DAQ current per sample, A (the filter measures it at rest and never '
+         'assumes less)', low=1e-15, high=1e-3),
+    Spec('mains_hz', 0, int, 'notch the mains line and its harmonics from the current before '
+         'the filter: 0 (off), 50 or 60 Hz; a line found while off is reported',
          low=0, high=60, choices=(0, 50, 60)),
-    Spec("frame_id", "ipmc_clamp", str, "frame of the deflection points: origin at the "
-         "clamp, x along the beam to the tip, z in the bending direction",
+    Spec('frame_id', 'ipmc_clamp', str, 'frame of the deflection points: origin at the '
+         'clamp, x along the beam to the tip, z in the bending direction',
          pattern=FRAME_ID_PATTERN, max_length=128),
-    Spec("max_gap_s", 0.1, float, "largest time gap between consecutive samples bridged "
-         "without a filter reset, s", low=1e-6, high=1e6),
-    Spec("publish_points", "per_sample", str, "deflection PointStamped output: 'per_sample', "
+    Spec('max_gap_s', 0.1, float, 'largest time gap between consecutive samples bridged '
+         'without a filter reset, s', low=1e-6, high=1e6),
+    Spec('publish_points', 'per_sample', str, "deflection PointStamped output: 'per_sample', "
          "'last_of_block' or 'none'", choices=PUBLISH_POINTS),
-    Spec("max_block_samples", 100_000, int, "largest accepted input block, samples",
+    Spec('max_block_samples', 100_000, int, 'largest accepted input block, samples',
          low=1, high=MAX_BLOCK_SAMPLES, read_only=True),
 ) + QOS_SPECS + DIAGNOSTICS_SPECS
 
 
 #: Parameters whose change needs a new reduction (the sensor model changes).
-MODEL_KEYS = GEOMETRY_NAMES + MATERIAL_NAMES + ("model", "effects", "model_file",
-                                                "reduction_order", "band_low_hz", "band_high_hz")
+MODEL_KEYS = GEOMETRY_NAMES + MATERIAL_NAMES + ('model', 'effects', 'model_file',
+                                                'reduction_order', 'band_low_hz', 'band_high_hz')
 #: Parameters whose change needs a new filter on the same reduction.
-FILTER_KEYS = ("sample_rate_hz", "leak_corner_hz", "offset_corner_hz", "estimator", "mains_hz",
-               "current_noise_a")
+FILTER_KEYS = ('sample_rate_hz', 'leak_corner_hz', 'offset_corner_hz', 'estimator', 'mains_hz',
+               'current_noise_a')
 
 
 def model_key(values: Mapping[str, Any]) -> tuple:
@@ -190,7 +191,7 @@ def check_choice(name: str, value: Any, choices: Iterable[str]) -> str:
     choices = tuple(choices)
     if value not in choices:
         raise ParameterError(f"parameter '{name}' must be one of {list(choices)}, "
-                             f"got {short_repr(value)}")
+                             f'got {short_repr(value)}')
     return value
 
 
@@ -202,16 +203,16 @@ def build_model(values: Mapping[str, Any]) -> SensorModel:
     Raises :class:`ParameterError` naming the offending parameter.
     """
     try:
-        load_plugins(values.get("plugins") or ())
+        load_plugins(values.get('plugins') or ())
     except ParameterError as exc:
         raise ParameterError(f"parameter 'plugins': {exc}") from None
     geometry = Geometry(**{k: values[k] for k in GEOMETRY_NAMES})
-    if values.get("model_file"):
+    if values.get('model_file'):
         return _model_from_file(values, geometry)
     material = MaterialParameters(**{k: values[k] for k in MATERIAL_NAMES})
-    extra = tuple(str(e) for e in values.get("effects") or ())
+    extra = tuple(str(e) for e in values.get('effects') or ())
     try:
-        return SensorModel.named(values["model"], geometry, material, extra)
+        return SensorModel.named(values['model'], geometry, material, extra)
     except ParameterError as exc:
         raise ParameterError(f"parameter 'effects' = {short_repr(list(extra))} with model "
                              f"'{short_repr(values['model'])}': {exc}") from None
@@ -223,14 +224,16 @@ def _model_from_file(values: Mapping[str, Any], geometry: Geometry) -> SensorMod
     default is refused (naming both), never silently overridden."""
     from ..physics.modelfile import load_model
 
-    path = values["model_file"]
+    path = values['model_file']
     saved = load_model(path)
     spec_default = {s.name: s.default for s in MODEL_SPECS + MATERIAL_SPECS}
-    for name in ("model", "effects") + MATERIAL_NAMES:
+    for name in ('model', 'effects') + MATERIAL_NAMES:
         if values[name] != spec_default[name]:
-            raise ParameterError(f"parameter '{name}' = {short_repr(values[name])} and "
-                                 f"model_file {path} both define the model: leave '{name}' at "
-                                 f"its default ({short_repr(spec_default[name])}) or drop model_file")
+            raise ParameterError(
+                f"parameter '{name}' = {short_repr(values[name])} and "
+                f"model_file {path} both define the model: leave '{name}' at "
+                f'its default ({short_repr(spec_default[name])}) or drop model_file'
+            )
     return saved.sensor_model(geometry)
 
 
@@ -242,10 +245,12 @@ def check_values(values: Mapping[str, Any], specs: Iterable[Spec] | None = None)
     :class:`ParameterError` naming the parameter."""
     for spec in (ESTIMATOR_SPECS if specs is None else specs):
         if spec.name in values:
-            _check_value(spec, values[spec.name], "")
+            _check_value(spec, values[spec.name], '')
 
 
-def build_estimator(values: Mapping[str, Any], reduced: ReducedModel | None = None) -> DeflectionEstimator:
+def build_estimator(
+    values: Mapping[str, Any], reduced: ReducedModel | None = None
+) -> DeflectionEstimator:
     """The core estimator from parameter values (``reduced`` reused when the model part
     did not change).  Raises ParameterError / ParameterError / ParameterError /
     ParameterError naming the parameter; any other failure of the numerics (e.g. a
@@ -253,30 +258,30 @@ def build_estimator(values: Mapping[str, Any], reduced: ReducedModel | None = No
     check_values(values)
     try:
         model = build_model(values)
-        band = (float(values["band_low_hz"]), float(values["band_high_hz"]))
+        band = (float(values['band_low_hz']), float(values['band_high_hz']))
         if not band[0] < band[1]:
             raise ParameterError(f"parameters 'band_low_hz' ({band[0]}) and 'band_high_hz' "
-                                 f"({band[1]}) must satisfy low < high")
-        offset = float(values["offset_corner_hz"])
-        leak = float(values["leak_corner_hz"])
-        return DeflectionEstimator(model, float(values["sample_rate_hz"]),
-                                   reduction_order=int(values["reduction_order"]), band_hz=band,
+                                 f'({band[1]}) must satisfy low < high')
+        offset = float(values['offset_corner_hz'])
+        leak = float(values['leak_corner_hz'])
+        return DeflectionEstimator(model, float(values['sample_rate_hz']),
+                                   reduction_order=int(values['reduction_order']), band_hz=band,
                                    leak_corner_hz=leak if leak > 0.0 else None,
                                    offset_corner_hz=offset if offset > 0.0 else None,
-                                   reduced=reduced, estimator=values["estimator"],
-                                   mains_hz=int(values["mains_hz"]),
-                                   current_noise_a=float(values["current_noise_a"]))
+                                   reduced=reduced, estimator=values['estimator'],
+                                   mains_hz=int(values['mains_hz']),
+                                   current_noise_a=float(values['current_noise_a']))
     except ParameterError:
         raise
     except Exception as exc:  # numerics of an extreme but in-range combination
-        raise ParameterError(f"these parameter values do not give a usable model: "
-                                 f"{_one_line(exc)}") from None
+        raise ParameterError(f'these parameter values do not give a usable model: '
+                                 f'{_one_line(exc)}') from None
 
 
 def _one_line(exc: BaseException, limit: int = 200) -> str:
-    text = " ".join(str(exc).split())
-    text = text if len(text) <= limit else text[:limit] + "..."
-    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+    text = ' '.join(str(exc).split())
+    text = text if len(text) <= limit else text[:limit] + '...'
+    return f'{type(exc).__name__}: {text}' if text else type(exc).__name__
 
 
 def defaults(specs: Iterable[Spec]) -> dict[str, Any]:
@@ -285,7 +290,7 @@ def defaults(specs: Iterable[Spec]) -> dict[str, Any]:
 
 
 def _check_value(spec: Spec, value: Any, where: str) -> Any:
-    where = f"{where}: " if where else ""
+    where = f'{where}: ' if where else ''
     shown = short_repr(value)
     if spec.kind is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -293,7 +298,9 @@ def _check_value(spec: Spec, value: Any, where: str) -> Any:
         try:
             value = float(value)
         except OverflowError:
-            raise ParameterError(f"{where}parameter '{spec.name}' = {shown} is too large") from None
+            raise ParameterError(
+                f"{where}parameter '{spec.name}' = {shown} is too large"
+            ) from None
     elif spec.kind is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ParameterError(f"{where}parameter '{spec.name}' must be an integer, got {shown}")
@@ -302,29 +309,31 @@ def _check_value(spec: Spec, value: Any, where: str) -> Any:
             raise ParameterError(f"{where}parameter '{spec.name}' must be a string, got {shown}")
     elif spec.kind is bool:
         if not isinstance(value, bool):
-            raise ParameterError(f"{where}parameter '{spec.name}' must be true or false, got {shown}")
+            raise ParameterError(
+                f"{where}parameter '{spec.name}' must be true or false, got {shown}"
+            )
     elif spec.kind is list:
         if isinstance(value, str) or not isinstance(value, (list, tuple)) \
                 or not all(isinstance(v, str) for v in value):
             raise ParameterError(f"{where}parameter '{spec.name}' must be a list of strings, "
-                                     f"got {shown}")
+                                     f'got {shown}')
         value = [v for v in value if v]
     if spec.low is not None and not (spec.low <= value <= spec.high):  # NaN fails too
         raise ParameterError(f"{where}parameter '{spec.name}' = {shown} is outside "
-                                 f"[{spec.low:g}, {spec.high:g}]")
+                                 f'[{spec.low:g}, {spec.high:g}]')
     if spec.choices and value not in spec.choices:
         raise ParameterError(f"{where}unknown {spec.name} {shown}: parameter '{spec.name}' "
-                                 f"must be one of {list(spec.choices)}")
+                                 f'must be one of {list(spec.choices)}')
     if spec.max_length is not None and len(value) > spec.max_length:
         raise ParameterError(f"{where}parameter '{spec.name}' is {len(value)} characters long, "
-                                 f"more than {spec.max_length}: {shown}")
+                                 f'more than {spec.max_length}: {shown}')
     if spec.pattern and not re.fullmatch(spec.pattern, value):
         raise ParameterError(f"{where}parameter '{spec.name}' = {shown} does not match "
-                                 f"{spec.pattern} (allowed characters, not empty)")
+                                 f'{spec.pattern} (allowed characters, not empty)')
     return value
 
 
-def load_params_file(path: str | Path, node_name: str = "ipmc_estimator",
+def load_params_file(path: str | Path, node_name: str = 'ipmc_estimator',
                      specs: Sequence[Spec] | None = None) -> dict[str, Any]:
     """Parameter values for ``node_name`` from a ROS 2 params file, on top of the defaults.
 
@@ -338,7 +347,7 @@ def load_params_file(path: str | Path, node_name: str = "ipmc_estimator",
     specs = ESTIMATOR_SPECS if specs is None else specs
     path = Path(path)
     try:
-        doc = read_yaml(path, "parameters file")
+        doc = read_yaml(path, 'parameters file')
     except ParameterError as exc:
         raise ParameterError(str(exc)) from None
     if not isinstance(doc, dict):
@@ -346,22 +355,22 @@ def load_params_file(path: str | Path, node_name: str = "ipmc_estimator",
     values = defaults(specs)
     by_name = {s.name: s for s in specs}
     found = False
-    for key in ("/**", f"/**/{node_name}", node_name, f"/{node_name}"):
+    for key in ('/**', f'/**/{node_name}', node_name, f'/{node_name}'):
         section = doc.get(key)
         if section is None:
             continue
-        if not isinstance(section, dict) or "ros__parameters" not in section:
+        if not isinstance(section, dict) or 'ros__parameters' not in section:
             raise ParameterError(f"{path}: section '{key}' has no 'ros__parameters'")
         found = True
-        params = section["ros__parameters"] or {}
+        params = section['ros__parameters'] or {}
         if not isinstance(params, dict):
             raise ParameterError(f"{path}: 'ros__parameters' of section '{key}' must be a "
-                                     f"mapping, got {short_repr(params)}")
+                                     f'mapping, got {short_repr(params)}')
         for name, value in params.items():
-            if name == "use_sim_time":
+            if name == 'use_sim_time':
                 continue
             if name not in by_name:
-                raise ParameterError(f"{path}: unknown parameter {short_repr(name)} in section "
+                raise ParameterError(f'{path}: unknown parameter {short_repr(name)} in section '
                                          f"'{key}' (known: {sorted(by_name)})")
             values[name] = _check_value(by_name[name], value, str(path))
     if not found:
@@ -370,27 +379,27 @@ def load_params_file(path: str | Path, node_name: str = "ipmc_estimator",
     try:
         build_model(values)
     except ParameterError as exc:
-        raise ParameterError(f"{path}: {exc}") from None
+        raise ParameterError(f'{path}: {exc}') from None
     except Exception as exc:  # numerics of an extreme but in-range combination
-        raise ParameterError(f"{path}: these parameter values do not give a usable model: "
-                                 f"{_one_line(exc)}") from None
+        raise ParameterError(f'{path}: these parameter values do not give a usable model: '
+                                 f'{_one_line(exc)}') from None
     return values
 
 
 def markdown_table(specs: Iterable[Spec]) -> str:
     """Parameter table (name, type, default, range, description) for the docs."""
-    names = {float: "double", int: "int", str: "string", bool: "bool", list: "string[]"}
-    rows = ["| parameter | type | default | range | description |", "|---|---|---|---|---|"]
+    names = {float: 'double', int: 'int', str: 'string', bool: 'bool', list: 'string[]'}
+    rows = ['| parameter | type | default | range | description |', '|---|---|---|---|---|']
     for s in specs:
         if s.kind is list:
-            default = "[]"
+            default = '[]'
         elif s.kind is str:
             default = f'"{s.default}"'
         else:
-            default = f"{s.default:g}" if s.kind is float else str(s.default)
-        fmt = "{:g}" if s.kind is float else "{}"
-        rng = f"{fmt.format(s.low)} .. {fmt.format(s.high)}" if s.low is not None else (
-            " \\| ".join(str(c) for c in s.choices) if s.choices else "")
-        ro = " **read-only**" if s.read_only else ""
-        rows.append(f"| `{s.name}` | {names[s.kind]} | {default} | {rng} | {s.description}{ro} |")
-    return "\n".join(rows)
+            default = f'{s.default:g}' if s.kind is float else str(s.default)
+        fmt = '{:g}' if s.kind is float else '{}'
+        rng = f'{fmt.format(s.low)} .. {fmt.format(s.high)}' if s.low is not None else (
+            ' \\| '.join(str(c) for c in s.choices) if s.choices else '')
+        ro = ' **read-only**' if s.read_only else ''
+        rows.append(f'| `{s.name}` | {names[s.kind]} | {default} | {rng} | {s.description}{ro} |')
+    return '\n'.join(rows)

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Tustin (bilinear) discretisation with prewarping, in zpk form.
 
 Used by the estimator (inverse model) and the simulator (forward model), so the
@@ -18,7 +19,7 @@ import math
 import numpy as np
 import scipy.signal as sig
 
-__all__ = ["default_prewarp_hz", "tustin_sos", "van_loan"]
+__all__ = ['default_prewarp_hz', 'tustin_sos', 'van_loan']
 
 
 def default_prewarp_hz(sample_rate_hz: float, band_high_hz: float | None = None) -> float:

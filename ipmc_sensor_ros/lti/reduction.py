@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Finite-order models of the IPMC sensing dynamics.
 
 Two things live here:
@@ -53,17 +54,17 @@ from ..errors import ParameterError
 from ..physics.model import SensorModel
 
 __all__ = [
-    "ReducedModel",
-    "ParameterError",
-    "paper_eq55",
-    "eq55_poles_zeros",
-    "reduce_model",
-    "reduce_response",
-    "append_rational",
-    "reduce_model_parts",
-    "reduction_error",
-    "reduction_error_table",
-    "MAX_ORDER",
+    'ReducedModel',
+    'ParameterError',
+    'paper_eq55',
+    'eq55_poles_zeros',
+    'reduce_model',
+    'reduce_response',
+    'append_rational',
+    'reduce_model_parts',
+    'reduction_error',
+    'reduction_error_table',
+    'MAX_ORDER',
 ]
 
 MAX_ORDER = 8
@@ -126,9 +127,9 @@ def _check_band(band_hz: Sequence[float]) -> tuple[float, float]:
     try:
         lo, hi = (float(band_hz[0]), float(band_hz[1]))
     except (TypeError, IndexError, ValueError):
-        raise ParameterError(f"band_hz must be (low, high) in Hz, got {band_hz!r}") from None
+        raise ParameterError(f'band_hz must be (low, high) in Hz, got {band_hz!r}') from None
     if not (np.isfinite(lo) and np.isfinite(hi) and 0.0 < lo < hi):
-        raise ParameterError(f"band_hz must satisfy 0 < low < high, got {band_hz!r}")
+        raise ParameterError(f'band_hz must satisfy 0 < low < high, got {band_hz!r}')
     return lo, hi
 
 
@@ -147,21 +148,27 @@ def reduce_response(response: Callable[[np.ndarray], np.ndarray], order: int,
                                n_points=n_points, initial=initial)[-1]
 
 
-def reduce_response_all(response: Callable[[np.ndarray], np.ndarray], max_order: int,
-                        band_hz: Sequence[float] = (0.1, 50.0), *, extension: float = 10.0,
-                        n_points: int = 160, initial: ReducedModel | None = None) -> list[ReducedModel]:
+def reduce_response_all(
+    response: Callable[[np.ndarray], np.ndarray],
+    max_order: int,
+    band_hz: Sequence[float] = (0.1, 50.0),
+    *,
+    extension: float = 10.0,
+    n_points: int = 160,
+    initial: ReducedModel | None = None,
+) -> list[ReducedModel]:
     """Fits of orders 1..``max_order`` (each one continues from the previous)."""
     if isinstance(max_order, bool) or not isinstance(max_order, (int, np.integer)) \
             or not 1 <= max_order <= MAX_ORDER:
-        raise ParameterError(f"order must be an integer in 1..{MAX_ORDER}, got {max_order!r}")
+        raise ParameterError(f'order must be an integer in 1..{MAX_ORDER}, got {max_order!r}')
     band = _check_band(band_hz)
     if not extension >= 1.0:
-        raise ParameterError(f"extension must be >= 1, got {extension!r}")
+        raise ParameterError(f'extension must be >= 1, got {extension!r}')
     w = _grid(band, extension, n_points)
     s = 1j * w
     r = np.asarray(response(s), dtype=complex) / s
     if not np.all(np.isfinite(r)) or np.any(r == 0):
-        raise ParameterError("response is not finite and non-zero on the fit grid")
+        raise ParameterError('response is not finite and non-zero on the fit grid')
     target = np.log(np.abs(r)) + 1j * np.unwrap(np.angle(r))
     in_band = (w >= 2 * np.pi * band[0] * (1 - 1e-9)) & (w <= 2 * np.pi * band[1] * (1 + 1e-9))
     weight = np.where(in_band, 1.0, 0.3)
@@ -205,7 +212,7 @@ def reduce_response_all(response: Callable[[np.ndarray], np.ndarray], max_order:
         for start in starts:
             start = np.clip(start, lower + 1e-9, upper - 1e-9)
             sol = least_squares(residual, start, jac=jacobian, args=(n,), bounds=(lower, upper),
-                                method="trf", x_scale="jac", max_nfev=400)
+                                method='trf', x_scale='jac', max_nfev=400)
             if best is None or sol.cost < best.cost:
                 best = sol
         previous = best.x
@@ -270,10 +277,11 @@ def reduction_error_table(models: dict[str, SensorModel], orders: Sequence[int] 
     for name, model in models.items():
         fits = reduce_response_all(model.diffusive_transfer, max(orders), band_hz)
         for order in orders:
-            mag, phase = reduction_error(append_rational(fits[order - 1], model.rational_factors()),
-                                         model, band_hz)
-            rows.append({"sample": name, "order": int(order), "max_mag_error_db": mag,
-                         "max_phase_error_deg": phase})
+            mag, phase = reduction_error(
+                append_rational(fits[order - 1], model.rational_factors()), model, band_hz
+            )
+            rows.append({'sample': name, 'order': int(order), 'max_mag_error_db': mag,
+                         'max_phase_error_deg': phase})
     return rows
 
 
@@ -291,7 +299,7 @@ def _eq55_polynomials(model: SensorModel) -> tuple[np.ndarray, np.ndarray]:
     y, w, l, h = m.youngs_modulus_pa, g.width_m, g.length_m, g.half_thickness_m
     d, k, a0 = m.diffusivity_m2_per_s, m.k_rate_per_s, m.charge_stress_coupling_j_per_c
     b = (m.permittivity_f_per_m * m.surface_resistance_ohm / h
-         if model.has_effect("surface_resistance") else 0.0)  # B(s) = b s, eq. 42
+         if model.has_effect('surface_resistance') else 0.0)  # B(s) = b s, eq. 42
     # f-part, eq. 52: 3 s Y W sqrt(d) (h sqrt(K)(1 + s/2K - s^2/8K^2) - sqrt(d)) / (a0 L^3 (s+K))
     quad = np.array([-h * np.sqrt(k) / (8 * k ** 2), h * np.sqrt(k) / (2 * k),
                      h * np.sqrt(k) - np.sqrt(d)])
@@ -301,7 +309,9 @@ def _eq55_polynomials(model: SensorModel) -> tuple[np.ndarray, np.ndarray]:
     # [(1/2) L^2 + (1/8) B L^4 + (1/144) B^2 L^6] / [1 + B L^2/2 + B^2 L^4/24]
     num_g = np.array([b ** 2 * l ** 6 / 144.0, b * l ** 4 / 8.0, l ** 2 / 2.0])
     den_g = np.array([b ** 2 * l ** 4 / 24.0, b * l ** 2 / 2.0, 1.0])
-    return np.trim_zeros(np.polymul(num_f, num_g), "f"), np.trim_zeros(np.polymul(den_f, den_g), "f")
+    return np.trim_zeros(np.polymul(num_f, num_g), 'f'), np.trim_zeros(
+        np.polymul(den_f, den_g), 'f'
+    )
 
 
 def paper_eq55(model: SensorModel):
@@ -326,4 +336,4 @@ def eq55_poles_zeros(model: SensorModel) -> dict:
     num, den = _eq55_polynomials(model)
     zeros, poles = np.roots(num), np.roots(den)
     rhp = zeros[zeros.real > 0]
-    return {"poles": poles, "zeros": zeros, "rhp_zeros": rhp, "inverse_stable": rhp.size == 0}
+    return {'poles': poles, 'zeros': zeros, 'rhp_zeros': rhp, 'inverse_stable': rhp.size == 0}

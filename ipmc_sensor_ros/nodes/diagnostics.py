@@ -30,9 +30,9 @@ from rclpy.qos import QoSProfile
 from ..interface.health import (DIAGNOSTICS_SPECS, CurrentStatistics, Health, HealthMonitor,
                                 limits_from_values, worst)
 
-__all__ = ["DiagnosticsPublisher", "DIAGNOSTICS_SPECS", "DIAGNOSTICS_TOPIC", "to_status"]
+__all__ = ['DiagnosticsPublisher', 'DIAGNOSTICS_SPECS', 'DIAGNOSTICS_TOPIC', 'to_status']
 
-DIAGNOSTICS_TOPIC = "/diagnostics"
+DIAGNOSTICS_TOPIC = '/diagnostics'
 _LEVELS = {0: DiagnosticStatus.OK, 1: DiagnosticStatus.WARN, 2: DiagnosticStatus.ERROR}
 
 
@@ -60,17 +60,17 @@ class DiagnosticsPublisher:
         ``sample_rate_hz``; a simulator in fast mode passes None: no rate check).
     """
 
-    def __init__(self, node, values: Mapping[str, Any], channels: Sequence[str] = ("data",),
-                 sample_rate_hz: float | None = None, samples_key: str = "samples_in",
+    def __init__(self, node, values: Mapping[str, Any], channels: Sequence[str] = ('data',),
+                 sample_rate_hz: float | None = None, samples_key: str = 'samples_in',
                  source: Callable[[], Mapping[str, Any]] | None = None, period_s: float = 1.0,
-                 expected_rate_hz: float | None | str = "sample_rate_hz"):
+                 expected_rate_hz: float | None | str = 'sample_rate_hz'):
         merged = {s.name: s.default for s in DIAGNOSTICS_SPECS}
         merged.update({k: v for k, v in values.items() if k in merged})
         self._node = node
         self._limits = limits_from_values(merged)
-        self.hardware_id = str(merged["hardware_id"]) or node.get_fully_qualified_name()
+        self.hardware_id = str(merged['hardware_id']) or node.get_fully_qualified_name()
         self.channels = tuple(channels)
-        if expected_rate_hz == "sample_rate_hz":
+        if expected_rate_hz == 'sample_rate_hz':
             expected_rate_hz = sample_rate_hz
         self._monitors = {c: HealthMonitor(expected_rate_hz, self._limits, samples_key)
                           for c in self.channels}
@@ -108,7 +108,7 @@ class DiagnosticsPublisher:
             msg.status.append(to_status(worst(list(results.values())), node_name,
                                         self.hardware_id))
         for channel, health in results.items():
-            msg.status.append(to_status(health, f"{node_name}: {channel}", self.hardware_id))
+            msg.status.append(to_status(health, f'{node_name}: {channel}', self.hardware_id))
         self.last = results
         self._pub.publish(msg)
         return msg

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """ROS 2 node ``ipmc_estimator``: sensing current (A) in, tip deflection (m) out.
 
 Unpack -> :class:`~ipmc_sensor_ros.estimation.stream.StreamEstimator` (every rule of the
@@ -33,7 +34,7 @@ from .messages import (CURRENT_COLUMNS, ESTIMATE_COLUMNS, BlockPacker, claimed_s
 from .diagnostics import DiagnosticsPublisher
 from .runner import run
 
-__all__ = ["EstimatorNode", "ESTIMATOR_SPECS", "COUNTER_NAMES", "PUBLISH_POINTS", "main"]
+__all__ = ['EstimatorNode', 'ESTIMATOR_SPECS', 'COUNTER_NAMES', 'PUBLISH_POINTS', 'main']
 
 PUBLISH_POINTS = C.PUBLISH_POINTS
 
@@ -46,11 +47,11 @@ class EstimatorNode(Node):
     """The estimator node (module docstring); ``kwargs`` go to :class:`rclpy.node.Node`, so
     several nodes can share a process.  ParameterError if the parameters make no estimator."""
 
-    def __init__(self, node_name: str = "ipmc_estimator", **kwargs: Any):
+    def __init__(self, node_name: str = 'ipmc_estimator', **kwargs: Any):
         super().__init__(node_name, **kwargs)
         self._lock = threading.RLock()
-        P.check_unknown_overrides(self, ESTIMATOR_SPECS, kwargs.get("cli_args"),
-                                  default_name="ipmc_estimator")
+        P.check_unknown_overrides(self, ESTIMATOR_SPECS, kwargs.get('cli_args'),
+                                  default_name='ipmc_estimator')
         P.declare(self, ESTIMATOR_SPECS)
         self._values = P.read(self, ESTIMATOR_SPECS)
         try:
@@ -58,24 +59,26 @@ class EstimatorNode(Node):
             self._reduced = estimator.reduced
         except _ERRORS as exc:
             raise P.ParameterError(str(exc)) from None
-        for path, (digest, names) in C.load_plugins(self._values["plugins"]).items():
+        for path, (digest, names) in C.load_plugins(self._values['plugins']).items():
             self.get_logger().info(f"plugin {path} (sha256 {digest}): effects {', '.join(names)}; "
-                                   "loaded once, not re-read")
+                                   'loaded once, not re-read')
         self._model_key = C.model_key(self._values)
         self._pending: tuple | None = None
         self._ticks = 0
 
         qos = P.make_qos(self._values)
-        self._sub = P.create_subscription(self, Float64MultiArray, "current", self._on_current, qos)
-        self._pub_block = P.create_publisher(self, Float64MultiArray, "deflection/block", qos)
+        self._sub = P.create_subscription(
+            self, Float64MultiArray, 'current', self._on_current, qos
+        )
+        self._pub_block = P.create_publisher(self, Float64MultiArray, 'deflection/block', qos)
         self._packer = BlockPacker(ESTIMATE_COLUMNS)
-        self._pub_point = P.create_publisher(self, PointMsg, "deflection", qos)
+        self._pub_point = P.create_publisher(self, PointMsg, 'deflection', qos)
         P.check_qos_overrides(self)
-        self._pub_counters = self.create_publisher(String, "estimator/counters", P.COUNTERS_QOS)
+        self._pub_counters = self.create_publisher(String, 'estimator/counters', P.COUNTERS_QOS)
         logger = self.get_logger()
         self._stream = StreamEstimator(
-            estimator, max_gap_s=float(self._values["max_gap_s"]),
-            max_block_samples=int(self._values["max_block_samples"]),
+            estimator, max_gap_s=float(self._values['max_gap_s']),
+            max_block_samples=int(self._values['max_block_samples']),
             source=self._sub.topic_name, now_s=lambda: self.get_clock().now().nanoseconds * 1e-9,
             warn=lambda text: logger.warning(text, throttle_duration_sec=1.0))
         self._diagnostics = DiagnosticsPublisher(
@@ -87,9 +90,10 @@ class EstimatorNode(Node):
         self.add_post_set_parameters_callback(self._on_parameters_set)
         r = self._reduced
         logger.info(
-            f"ready: {estimator.model.describe()} model, order {r.order} reduction "
-            f"over {r.band_hz[0]}-{r.band_hz[1]} Hz, fs = {estimator.sample_rate_hz} Hz, "
-            f"leak corner {estimator.inverse.leak_corner_hz} Hz; listening on {self._sub.topic_name}")
+            f'ready: {estimator.model.describe()} model, order {r.order} reduction '
+            f'over {r.band_hz[0]}-{r.band_hz[1]} Hz, fs = {estimator.sample_rate_hz} Hz, '
+            f'leak corner {estimator.inverse.leak_corner_hz} Hz; listening on {self._sub.topic_name}'
+        )
 
     # -- public helpers -------------------------------------------------------
     def counters(self) -> dict[str, int]:
@@ -103,8 +107,8 @@ class EstimatorNode(Node):
         with self._lock:
             out = dict(self._stream.counters)
             out.update(self._stream.estimator.status())
-        if out["offset_a"] is not None:
-            out["estimated_offset_a"] = out["offset_a"]   # the filter's own offset (kalman)
+        if out['offset_a'] is not None:
+            out['estimated_offset_a'] = out['offset_a']   # the filter's own offset (kalman)
         return out
 
     @property
@@ -144,7 +148,9 @@ class EstimatorNode(Node):
                     self._diagnostics.observe((one[1],))
                     if out is not None:
                         std = self._stream.estimator.std_m
-                        self._publish(self._packer.pack_one(out[0], out[1], std), out[0], out[1], 1)
+                        self._publish(
+                            self._packer.pack_one(out[0], out[1], std), out[0], out[1], 1
+                        )
                     return
             try:
                 block = unpack_block(msg, CURRENT_COLUMNS)
@@ -166,33 +172,35 @@ class EstimatorNode(Node):
         except Exception as exc:  # rclpy raises RCLError and others: back-pressure, not a bug
             self._stream.unpublished(n, short_repr(str(exc)))
             return
-        mode = self._values["publish_points"]
-        if mode == "none":
+        mode = self._values['publish_points']
+        if mode == 'none':
             return
         try:
             if n == 1 and not isinstance(times, np.ndarray):
                 self._publish_point(times, deflections)
-            elif mode == "last_of_block":
+            elif mode == 'last_of_block':
                 self._publish_point(float(times[-1]), float(deflections[-1]))
             else:
                 for t, w in zip(times.tolist(), deflections.tolist()):
                     self._publish_point(t, w)
         except Exception as exc:  # the block went out; points are a convenience view
-            self._stream.counters["messages_unpublished"] += 1
-            self.get_logger().warning(f"could not publish deflection points: {short_repr(str(exc))}",
-                                      throttle_duration_sec=1.0)
+            self._stream.counters['messages_unpublished'] += 1
+            self.get_logger().warning(
+                f'could not publish deflection points: {short_repr(str(exc))}',
+                throttle_duration_sec=1.0,
+            )
 
     def _publish_point(self, time_s: float, deflection_m: float) -> None:
-        self._pub_point.publish(point_message(time_s, float(self._values["length_m"]),
-                                              deflection_m, self._values["frame_id"]))
+        self._pub_point.publish(point_message(time_s, float(self._values['length_m']),
+                                              deflection_m, self._values['frame_id']))
 
     # -- periodic -------------------------------------------------------------
     def _on_timer(self) -> None:
         self._ticks += 1
         counters = self._status()
-        if counters["samples_in"] == 0 and self._ticks % 5 == 1:
-            self.get_logger().info(f"waiting for data on {self._sub.topic_name}")
-        counters["node"] = self.get_fully_qualified_name()
+        if counters['samples_in'] == 0 and self._ticks % 5 == 1:
+            self.get_logger().info(f'waiting for data on {self._sub.topic_name}')
+        counters['node'] = self.get_fully_qualified_name()
         self._pub_counters.publish(String(data=json.dumps(counters)))
 
     # -- parameters -------------------------------------------------------------
@@ -214,10 +222,10 @@ class EstimatorNode(Node):
                 new = C.build_estimator(values, self._reduced if key == self._model_key else None)
                 reduced = new.reduced
             except Exception as exc:  # a remote call must never kill the node
-                text = " ".join(str(exc).split())
-                text = text if len(text) <= 300 else text[:300] + "..."
+                text = ' '.join(str(exc).split())
+                text = text if len(text) <= 300 else text[:300] + '...'
                 if not isinstance(exc, _ERRORS):
-                    text = f"{type(exc).__name__}: {text}"
+                    text = f'{type(exc).__name__}: {text}'
                 return SetParametersResult(successful=False, reason=text)
             self._pending = (values, key, reduced, new)
             return SetParametersResult(successful=True)
@@ -231,18 +239,18 @@ class EstimatorNode(Node):
             self._pending = None
             old = self._values
             self._values = values
-            self._stream.max_gap_s = float(values["max_gap_s"])
+            self._stream.max_gap_s = float(values['max_gap_s'])
             if key != self._model_key or C.filter_key(values) != C.filter_key(old):
                 self._stream.replace_estimator(new)
                 self._reduced, self._model_key = reduced, key
-                self.get_logger().info("parameters changed: filter rebuilt ("
-                                       + ", ".join(p.name for p in parameters) + ")")
+                self.get_logger().info('parameters changed: filter rebuilt ('
+                                       + ', '.join(p.name for p in parameters) + ')')
 
 
 def main(args=None) -> int:
     """Entry point of ``ros2 run ipmc_sensor_ros ipmc_estimator``."""
-    return run(EstimatorNode, "ipmc_estimator", args)
+    return run(EstimatorNode, 'ipmc_estimator', args)
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     sys.exit(main())

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Pack and unpack sample blocks in ``std_msgs/Float64MultiArray`` (pure numpy + std_msgs).
 
 Block layout (defined in :mod:`ipmc_sensor_ros.interface.blocks`; README "ROS 2 interface")
@@ -29,22 +30,28 @@ from dataclasses import dataclass
 import numpy as np
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from ..interface.blocks import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, ESTIMATE_COLUMNS, SAMPLE_LABEL,
-                                DataError, unpack_columns)
+from ..interface.blocks import (
+    CURRENT_COLUMNS,
+    DEFLECTION_COLUMNS,
+    ESTIMATE_COLUMNS,
+    SAMPLE_LABEL,
+    DataError,
+    unpack_columns,
+)
 
 __all__ = [
-    "DataError",
-    "Block",
-    "SAMPLE_LABEL",
-    "CURRENT_COLUMNS",
-    "DEFLECTION_COLUMNS",
-    "ESTIMATE_COLUMNS",
-    "pack_block",
-    "BlockPacker",
-    "unpack_block",
-    "claimed_samples",
-    "one_sample",
-    "point_message",
+    'DataError',
+    'Block',
+    'SAMPLE_LABEL',
+    'CURRENT_COLUMNS',
+    'DEFLECTION_COLUMNS',
+    'ESTIMATE_COLUMNS',
+    'pack_block',
+    'BlockPacker',
+    'unpack_block',
+    'claimed_samples',
+    'one_sample',
+    'point_message',
 ]
 
 @dataclass(frozen=True)
@@ -61,8 +68,8 @@ class Block:
 
 
 def _to_array_d(values: np.ndarray) -> array.array:
-    out = array.array("d")
-    out.frombytes(np.ascontiguousarray(values, dtype="=f8").tobytes())
+    out = array.array('d')
+    out.frombytes(np.ascontiguousarray(values, dtype='=f8').tobytes())
     return out
 
 
@@ -83,7 +90,7 @@ class BlockPacker:
 
     def __init__(self, columns: str = CURRENT_COLUMNS):
         self.columns = columns
-        self.width = len(columns.split(","))
+        self.width = len(columns.split(','))
         self._msg = Float64MultiArray()
         self._n = -1
 
@@ -94,8 +101,8 @@ class BlockPacker:
         if len(cols) + 1 != self.width:
             raise DataError(f"{len(cols) + 1} columns for the layout '{self.columns}'")
         if any(c.shape != t.shape for c in cols):
-            raise DataError(f"times ({t.size}) and values ({[c.size for c in cols]}) differ "
-                              "in length")
+            raise DataError(f'times ({t.size}) and values ({[c.size for c in cols]}) differ '
+                              'in length')
         n = int(t.size)
         if n == 1:
             return self.pack_one(float(t[0]), *(float(c[0]) for c in cols))
@@ -111,7 +118,7 @@ class BlockPacker:
     def pack_one(self, time_s: float, *values: float) -> Float64MultiArray:
         """A one-sample block from floats (no numpy on the way)."""
         msg = self._with_layout(1)
-        msg.data = array.array("d", (time_s, *values))
+        msg.data = array.array('d', (time_s, *values))
         return msg
 
     def _with_layout(self, n: int) -> Float64MultiArray:

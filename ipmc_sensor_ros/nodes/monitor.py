@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Tracking monitor: collect estimate and ground truth, align them by time, score.
 
 Used by the demo (``python -m ipmc_sensor_ros.nodes.demo``) and the integration
@@ -17,7 +18,7 @@ from . import params as P
 from ..workbench.metrics import nrmse
 from .messages import DEFLECTION_COLUMNS, ESTIMATE_COLUMNS, unpack_block
 
-__all__ = ["TrackingMonitor", "nrmse"]
+__all__ = ['TrackingMonitor', 'nrmse']
 
 
 class TrackingMonitor:
@@ -27,23 +28,23 @@ class TrackingMonitor:
     node's own namespace, relative names).
     """
 
-    def __init__(self, node: Node, namespace: str = "", qos_depth: int = 1000):
-        prefix = namespace.rstrip("/") + "/" if namespace else ""
-        qos = P.make_qos({"qos_depth": qos_depth, "qos_reliability": "reliable"})
+    def __init__(self, node: Node, namespace: str = '', qos_depth: int = 1000):
+        prefix = namespace.rstrip('/') + '/' if namespace else ''
+        qos = P.make_qos({'qos_depth': qos_depth, 'qos_reliability': 'reliable'})
         self._est: list = []
         self._truth: list = []
         self.estimator_counters: dict = {}
         self.simulator_counters: dict = {}
         sub = node.create_subscription
         self.subscriptions = [
-            sub(Float64MultiArray, prefix + "deflection/block",
+            sub(Float64MultiArray, prefix + 'deflection/block',
                 lambda m: self._est.append(unpack_block(m, ESTIMATE_COLUMNS)), qos),
-            sub(Float64MultiArray, prefix + "deflection_truth",
+            sub(Float64MultiArray, prefix + 'deflection_truth',
                 lambda m: self._truth.append(unpack_block(m, DEFLECTION_COLUMNS)), qos),
-            sub(String, prefix + "estimator/counters",
-                lambda m: setattr(self, "estimator_counters", json.loads(m.data)), P.COUNTERS_QOS),
-            sub(String, prefix + "simulator/counters",
-                lambda m: setattr(self, "simulator_counters", json.loads(m.data)), P.COUNTERS_QOS),
+            sub(String, prefix + 'estimator/counters',
+                lambda m: setattr(self, 'estimator_counters', json.loads(m.data)), P.COUNTERS_QOS),
+            sub(String, prefix + 'simulator/counters',
+                lambda m: setattr(self, 'simulator_counters', json.loads(m.data)), P.COUNTERS_QOS),
         ]
 
     @property
@@ -74,6 +75,6 @@ class TrackingMonitor:
         """(NRMSE over the last ``last_s`` seconds of common samples, samples compared)."""
         t, est, truth = self.series()
         if t.size == 0:
-            return float("nan"), 0
+            return float('nan'), 0
         sel = t >= t[-1] - last_s
         return nrmse(est[sel], truth[sel]), int(sel.sum())

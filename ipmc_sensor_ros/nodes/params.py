@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """ROS parameter specifications shared by the nodes, and model building from them.
 
 Every parameter is declared with a ``ParameterDescriptor`` carrying a
@@ -23,12 +24,12 @@ from ..interface.specs import (GEOMETRY_NAMES, GEOMETRY_SPECS, MATERIAL_NAMES, M
                       markdown_table)
 from ..interface.specs import build_model as build_sensor_model
 
-__all__ = ["ParameterError", "Spec", "GEOMETRY_SPECS", "MATERIAL_SPECS", "MODEL_SPECS",
-           "QOS_SPECS", "declare", "read", "build_sensor_model", "make_qos", "COUNTERS_QOS",
-           "check_choice", "ParameterError", "MATERIAL_NAMES", "GEOMETRY_NAMES", "markdown_table",
-           "params_files", "check_unknown_overrides", "section_matches", "params_file_sections",
-           "create_publisher", "create_subscription", "check_qos_overrides",
-           "qos_overriding_options"]
+__all__ = ['ParameterError', 'Spec', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_SPECS',
+           'QOS_SPECS', 'declare', 'read', 'build_sensor_model', 'make_qos', 'COUNTERS_QOS',
+           'check_choice', 'ParameterError', 'MATERIAL_NAMES', 'GEOMETRY_NAMES', 'markdown_table',
+           'params_files', 'check_unknown_overrides', 'section_matches', 'params_file_sections',
+           'create_publisher', 'create_subscription', 'check_qos_overrides',
+           'qos_overriding_options']
 
 _TYPES = {float: ParameterType.PARAMETER_DOUBLE, int: ParameterType.PARAMETER_INTEGER,
           str: ParameterType.PARAMETER_STRING, bool: ParameterType.PARAMETER_BOOL,
@@ -40,7 +41,7 @@ def descriptor(spec: Spec) -> ParameterDescriptor:
     d = ParameterDescriptor(name=spec.name, type=_TYPES[spec.kind],
                             description=spec.description, read_only=spec.read_only)
     if spec.choices:
-        d.additional_constraints = "one of: " + ", ".join(str(c) for c in spec.choices)
+        d.additional_constraints = 'one of: ' + ', '.join(str(c) for c in spec.choices)
     if spec.low is not None and spec.kind is float:
         d.floating_point_range = [FloatingPointRange(from_value=float(spec.low),
                                                      to_value=float(spec.high), step=0.0)]
@@ -57,7 +58,7 @@ def params_files(cli_args: Iterable[str] | None = None) -> list[str]:
     out = []
     for args in (list(cli_args or ()), sys.argv):
         for k, a in enumerate(args[:-1]):
-            if a == "--params-file":
+            if a == '--params-file':
                 out.append(args[k + 1])
     return out
 
@@ -69,8 +70,8 @@ def _ros_arg_params(cli_args) -> set[str]:
     out = set()
     for args in (list(cli_args or ()), sys.argv):
         for k, a in enumerate(args[:-1]):
-            if a in ("-p", "--param") and ":=" in args[k + 1]:
-                out.add(args[k + 1].split(":=", 1)[0])
+            if a in ('-p', '--param') and ':=' in args[k + 1]:
+                out.add(args[k + 1].split(':=', 1)[0])
     return out
 
 
@@ -79,8 +80,8 @@ def section_matches(key: str, fqn: str) -> bool:
     applies to the node of fully qualified name ``fqn`` (rcl's matching rules)."""
     import re
 
-    key = key if key.startswith("/") else "/" + key
-    pattern = re.escape(key).replace(r"/\*\*", "(/[^/]+)*").replace(r"\*", "[^/]+")
+    key = key if key.startswith('/') else '/' + key
+    pattern = re.escape(key).replace(r'/\*\*', '(/[^/]+)*').replace(r'\*', '[^/]+')
     return re.fullmatch(pattern, fqn) is not None
 
 
@@ -89,13 +90,13 @@ def params_file_sections(path: str) -> list[tuple[str, dict]]:
     import yaml
 
     try:
-        with open(path, encoding="utf-8") as f:
+        with open(path, encoding='utf-8') as f:
             doc = yaml.safe_load(f)
     except (OSError, yaml.YAMLError) as exc:
-        raise ParameterError(f"parameters file {path}: cannot read: {exc}") from None
+        raise ParameterError(f'parameters file {path}: cannot read: {exc}') from None
     if not isinstance(doc, dict):
         return []
-    return [(str(k), dict((v or {}).get("ros__parameters") or {}))
+    return [(str(k), dict((v or {}).get('ros__parameters') or {}))
             for k, v in doc.items() if isinstance(v, dict)]
 
 
@@ -116,9 +117,9 @@ def check_unknown_overrides(node, specs: Iterable[Spec], cli_args=None,
 
     Raises :class:`ParameterError` naming the parameters and the files.
     """
-    known = {s.name for s in specs} | {"use_sim_time", "start_type_description_service"}
+    known = {s.name for s in specs} | {'use_sim_time', 'start_type_description_service'}
     fqn = node.get_fully_qualified_name()
-    ns = node.get_namespace().rstrip("/")
+    ns = node.get_namespace().rstrip('/')
     files = params_files(cli_args)
     exact_keys: set[str] = set()
     wildcard_only: dict[str, str] = {}
@@ -128,13 +129,13 @@ def check_unknown_overrides(node, specs: Iterable[Spec], cli_args=None,
     for path in files:
         for key, section in params_file_sections(path):
             if section_matches(key, fqn):
-                if "*" in key.rsplit("/", 1)[-1]:     # '/**' (any node), not '/**/ipmc_estimator'
+                if '*' in key.rsplit('/', 1)[-1]:     # '/**' (any node), not '/**/ipmc_estimator'
                     for name in section:
                         wildcard_only.setdefault(name, f"{path} section '{key}'")
                 else:
                     exact_keys.update(section)
-            elif renamed and section_matches(key, f"{ns}/{default_name}") and "*" not in \
-                    key.rsplit("/", 1)[-1]:
+            elif renamed and section_matches(key, f'{ns}/{default_name}') and '*' not in \
+                    key.rsplit('/', 1)[-1]:
                 fallback.update(section)
                 fallback_files.append(f"{path} section '{key}'")
     if fallback:
@@ -146,7 +147,7 @@ def check_unknown_overrides(node, specs: Iterable[Spec], cli_args=None,
                                f"{', '.join(fallback_files)} ({len(applied)} parameter(s))")
         exact_keys |= set(fallback)
     unknown = sorted(n for n in node._parameter_overrides
-                     if n not in known and not n.startswith("qos_overrides."))
+                     if n not in known and not n.startswith('qos_overrides.'))
     fatal = [n for n in unknown if n in exact_keys or n not in wildcard_only]
     for name in unknown:
         if name not in fatal:
@@ -154,14 +155,14 @@ def check_unknown_overrides(node, specs: Iterable[Spec], cli_args=None,
                                    f"not a parameter of {fqn} (another node's?)")
             del node._parameter_overrides[name]
     if fatal:
-        where = f" in {', '.join(files)}" if files else ""
-        raise ParameterError(f"unknown parameter(s) {fatal}{where} for node "
+        where = f" in {', '.join(files)}" if files else ''
+        raise ParameterError(f'unknown parameter(s) {fatal}{where} for node '
                                  f"'{node.get_name()}'; known: {sorted(known - {'use_sim_time'})}")
 
 
 #: QoS parameters of a topic are declared read-only by rclpy as
 #: ``qos_overrides.<fully qualified topic>.<publisher|subscription>.<policy>``.
-QOS_OVERRIDE_POLICIES = ("history", "depth", "reliability", "durability")
+QOS_OVERRIDE_POLICIES = ('history', 'depth', 'reliability', 'durability')
 
 
 def qos_overriding_options():
@@ -188,10 +189,10 @@ def check_qos_overrides(node) -> None:
     creating the topics): a misspelt topic would otherwise be ignored silently."""
     declared = set(node._parameters)
     stray = sorted(n for n in node._parameter_overrides
-                   if n.startswith("qos_overrides.") and n not in declared)
+                   if n.startswith('qos_overrides.') and n not in declared)
     if stray:
-        valid = sorted(n for n in declared if n.startswith("qos_overrides."))
-        raise ParameterError(f"unknown QoS override(s) {stray} for node "
+        valid = sorted(n for n in declared if n.startswith('qos_overrides.'))
+        raise ParameterError(f'unknown QoS override(s) {stray} for node '
                                  f"'{node.get_name()}'; valid: {valid}")
 
 
@@ -226,9 +227,9 @@ COUNTERS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
 
 def make_qos(values: Mapping[str, Any]) -> QoSProfile:
     """KEEP_LAST(qos_depth), reliability per ``qos_reliability``, VOLATILE."""
-    rel = check_choice("qos_reliability", values["qos_reliability"], ("reliable", "best_effort"))
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=int(values["qos_depth"]),
-                      reliability=(ReliabilityPolicy.RELIABLE if rel == "reliable"
+    rel = check_choice('qos_reliability', values['qos_reliability'], ('reliable', 'best_effort'))
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=int(values['qos_depth']),
+                      reliability=(ReliabilityPolicy.RELIABLE if rel == 'reliable'
                                    else ReliabilityPolicy.BEST_EFFORT),
                       durability=DurabilityPolicy.VOLATILE)
 

@@ -42,7 +42,7 @@ from rclpy.signals import SignalHandlerOptions
 from ..physics.parameters import read_yaml
 from .params import ParameterError, params_files
 
-__all__ = ["run", "make_executor", "executor_name"]
+__all__ = ['run', 'make_executor', 'executor_name']
 
 try:  # rclpy >= 9
     from rclpy.experimental import EventsExecutor
@@ -60,16 +60,16 @@ _SHUTDOWN = (KeyboardInterrupt, ExternalShutdownException)
 
 def executor_name() -> str:
     """``events`` or ``single``: the executor :func:`make_executor` builds here."""
-    wanted = os.environ.get("IPMC_EXECUTOR", "single").strip().lower()
-    if wanted not in ("events", "single"):
-        raise ParameterError(f"environment variable IPMC_EXECUTOR={wanted!r}: expected "
+    wanted = os.environ.get('IPMC_EXECUTOR', 'single').strip().lower()
+    if wanted not in ('events', 'single'):
+        raise ParameterError(f'environment variable IPMC_EXECUTOR={wanted!r}: expected '
                                  "'events' or 'single'")
-    return "events" if wanted == "events" and EventsExecutor is not None else "single"
+    return 'events' if wanted == 'events' and EventsExecutor is not None else 'single'
 
 
 def make_executor(context=None):
     """The executor of the nodes (see the module docstring)."""
-    if executor_name() == "events":
+    if executor_name() == 'events':
         return EventsExecutor(context=context)
     return SingleThreadedExecutor(context=context)
 
@@ -115,16 +115,16 @@ def _shutdown_guard(node):
 
 def _report_configuration_error(name: str, exc: Exception) -> None:
     text = str(exc)
-    hint = ""
+    hint = ''
     if "type 'INTEGER'" in text and "expecting type 'DOUBLE'" in text:
-        hint = " (write floating-point parameters with a decimal point, e.g. 1000.0)"
-    elif "out of range" in text and any(f"Parameter {n} out of range" in text
-                                        for n in ("length_m", "width_m", "thickness_m")):
-        hint = " (lengths are in metres: is it in millimetres?)"
+        hint = ' (write floating-point parameters with a decimal point, e.g. 1000.0)'
+    elif 'out of range' in text and any(f'Parameter {n} out of range' in text
+                                        for n in ('length_m', 'width_m', 'thickness_m')):
+        hint = ' (lengths are in metres: is it in millimetres?)'
     files = params_files()
     source = f" (parameters files: {', '.join(files)})" if files and not any(
-        f in text for f in files) else ""
-    print(f"{name}: invalid parameter: {exc}{hint}{source}", file=sys.stderr)
+        f in text for f in files) else ''
+    print(f'{name}: invalid parameter: {exc}{hint}{source}', file=sys.stderr)
 
 
 def run(node_factory, name: str, args=None) -> int:
@@ -151,12 +151,12 @@ def _run(node_factory, name: str, args) -> int:
         # rcl reports a params file it cannot parse as an RCLError traceback (exit 1)
         # without the line: read each file first for a one-line file:line error
         for path in params_files(args):
-            read_yaml(path, "parameters file")
+            read_yaml(path, 'parameters file')
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except (ParameterError, RCLError) as exc:
         text = str(exc)
-        if isinstance(exc, RCLError):   # "...Error: <what> at line_num 3, at /src/parse.c:435, ..."
-            text = re.sub(r",? at /\S+:\d+", "", text).replace("failed to initialize rcl: ", "")
+        if isinstance(exc, RCLError):  # "...Error: <what> at line_num 3, at /src/parse.c:435, ..."
+            text = re.sub(r',? at /\S+:\d+', '', text).replace('failed to initialize rcl: ', '')
         print(f"{name}: invalid parameters file: {' '.join(text.split())}", file=sys.stderr)
         return 2
     executor = node = None
@@ -166,7 +166,7 @@ def _run(node_factory, name: str, args) -> int:
         # line finds a complete executor.
         executor = make_executor()
         node = node_factory()
-        node.get_logger().debug(f"executor: {type(executor).__name__}")
+        node.get_logger().debug(f'executor: {type(executor).__name__}')
         _guard = _shutdown_guard(node)  # noqa: F841 (kept alive; before add_node)
         executor.add_node(node)
         if not _SIGNALLED:

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """ROS 2 node ``ipmc_simulator``: a simulated IPMC sensor and its DAQ.
 
 Publishes the measured sensing current on ``current`` (``time_s,current_A``
@@ -46,8 +47,8 @@ from .diagnostics import DiagnosticsPublisher
 from .messages import CURRENT_COLUMNS, DEFLECTION_COLUMNS, BlockPacker
 from .runner import run
 
-__all__ = ["SimulatorNode", "SIMULATOR_SPECS", "STIMULI", "load_stimulus_csv",
-           "read_stimulus_csv", "build_stimulus", "main"]
+__all__ = ['SimulatorNode', 'SIMULATOR_SPECS', 'STIMULI', 'load_stimulus_csv',
+           'read_stimulus_csv', 'build_stimulus', 'main']
 
 MAX_BLOCKS_PER_TICK = 10
 MIN_TICK_S = 1e-3
@@ -60,40 +61,40 @@ class SimulatorNode(Node):
     :class:`~ipmc_sensor_ros.nodes.params.ParameterError` on invalid parameters.
     """
 
-    def __init__(self, node_name: str = "ipmc_simulator", **kwargs: Any):
+    def __init__(self, node_name: str = 'ipmc_simulator', **kwargs: Any):
         super().__init__(node_name, **kwargs)
-        P.check_unknown_overrides(self, SIMULATOR_SPECS, kwargs.get("cli_args"),
-                                  default_name="ipmc_simulator")
+        P.check_unknown_overrides(self, SIMULATOR_SPECS, kwargs.get('cli_args'),
+                                  default_name='ipmc_simulator')
         P.declare(self, SIMULATOR_SPECS)
         v = self._values = P.read(self, SIMULATOR_SPECS)
         try:
             model = P.build_sensor_model(v)
             self._stimulus, self._stim_t0 = build_stimulus(v)
-            chain = dict(current_gain=v["current_gain"], current_offset_a=v["current_offset_a"],
-                         noise_rms_a=v["noise_rms_a"], seed=v["seed"])
-            if check_fidelity(v["fidelity"], v["beam_model"]):
-                self._sim = FieldSensorSimulator(model, v["sample_rate_hz"],
-                                                 beam_model=v["beam_model"], **chain)
+            chain = dict(current_gain=v['current_gain'], current_offset_a=v['current_offset_a'],
+                         noise_rms_a=v['noise_rms_a'], seed=v['seed'])
+            if check_fidelity(v['fidelity'], v['beam_model']):
+                self._sim = FieldSensorSimulator(model, v['sample_rate_hz'],
+                                                 beam_model=v['beam_model'], **chain)
             else:
-                self._sim = SensorSimulator(model, v["sample_rate_hz"], **chain)
+                self._sim = SensorSimulator(model, v['sample_rate_hz'], **chain)
         except (ParameterError, ParameterError) as exc:
             raise P.ParameterError(str(exc)) from None
-        self._fs = float(v["sample_rate_hz"])
-        self._block = int(v["block_size"])
-        self._rtf = float(v["realtime_factor"])
-        self._total = int(round(float(v["duration_s"]) * self._fs)) or None
+        self._fs = float(v['sample_rate_hz'])
+        self._block = int(v['block_size'])
+        self._rtf = float(v['realtime_factor'])
+        self._total = int(round(float(v['duration_s']) * self._fs)) or None
         self._k = 0                       # next sample index
         self._blocks = 0
         self._t_start_ns: int | None = None
         self._done = False
 
         qos = P.make_qos(v)
-        self._pub_current = P.create_publisher(self, Float64MultiArray, "current", qos)
-        self._pub_truth = P.create_publisher(self, Float64MultiArray, "deflection_truth", qos)
+        self._pub_current = P.create_publisher(self, Float64MultiArray, 'current', qos)
+        self._pub_truth = P.create_publisher(self, Float64MultiArray, 'deflection_truth', qos)
         P.check_qos_overrides(self)
         self._pack_current = BlockPacker(CURRENT_COLUMNS)
         self._pack_truth = BlockPacker(DEFLECTION_COLUMNS)
-        self._pub_counters = self.create_publisher(String, "simulator/counters", P.COUNTERS_QOS)
+        self._pub_counters = self.create_publisher(String, 'simulator/counters', P.COUNTERS_QOS)
         if self._rtf > 0.0:
             period = max(self._block / self._fs / self._rtf, MIN_TICK_S)
             self._timer = self.create_timer(period, self._on_tick)   # node clock: sim-time aware
@@ -107,19 +108,19 @@ class SimulatorNode(Node):
             self, v, channels=(self._pub_current.topic_name,),
             sample_rate_hz=self._fs,
             expected_rate_hz=self._fs * self._rtf if self._rtf > 0.0 else None,
-            samples_key="samples_published", source=self.counters)
+            samples_key='samples_published', source=self.counters)
         self.get_logger().info(
-            f"ready: {model.describe()} model, stimulus "
-            f"{describe_stimulus(self._stimulus, v)}, {self._fs} Hz in blocks of "
-            f"{self._block}, realtime_factor {self._rtf}"
-            + (f", duration {v['duration_s']} s" if self._total else ", no end")
-            + f"; publishing {self._pub_current.topic_name}")
+            f'ready: {model.describe()} model, stimulus '
+            f'{describe_stimulus(self._stimulus, v)}, {self._fs} Hz in blocks of '
+            f'{self._block}, realtime_factor {self._rtf}'
+            + (f", duration {v['duration_s']} s" if self._total else ', no end')
+            + f'; publishing {self._pub_current.topic_name}')
 
     # -- public helpers -----------------------------------------------------------
     def counters(self) -> dict[str, Any]:
         """``samples_published``, ``blocks_published`` (ints) and ``done`` (bool)."""
-        return {"samples_published": self._k, "blocks_published": self._blocks,
-                "done": self._done}
+        return {'samples_published': self._k, 'blocks_published': self._blocks,
+                'done': self._done}
 
     @property
     def done(self) -> bool:
@@ -128,19 +129,19 @@ class SimulatorNode(Node):
     # -- publishing -------------------------------------------------------------
     def _publish_counters(self) -> None:
         c = self.counters()
-        c["node"] = self.get_fully_qualified_name()
+        c['node'] = self.get_fully_qualified_name()
         self._pub_counters.publish(String(data=json.dumps(c)))
 
     def _ready_to_start(self, now_ns: int) -> bool:
-        need = int(self._values["wait_for_subscribers"])
+        need = int(self._values['wait_for_subscribers'])
         if need and (self._pub_current.get_subscription_count() < need
                      or self._pub_truth.get_subscription_count() < need):
-            self.get_logger().info(f"waiting for {need} subscriber(s) on "
-                                   f"{self._pub_current.topic_name} and "
-                                   f"{self._pub_truth.topic_name}", throttle_duration_sec=5.0)
+            self.get_logger().info(f'waiting for {need} subscriber(s) on '
+                                   f'{self._pub_current.topic_name} and '
+                                   f'{self._pub_truth.topic_name}', throttle_duration_sec=5.0)
             return False
         if now_ns <= 0:
-            self.get_logger().info("waiting for the clock (use_sim_time without /clock?)",
+            self.get_logger().info('waiting for the clock (use_sim_time without /clock?)',
                                    throttle_duration_sec=5.0)
             return False
         return True
@@ -187,14 +188,14 @@ class SimulatorNode(Node):
             self._done = True
             self._timer.cancel()
             self._publish_counters()
-            self.get_logger().info(f"done: published {self._k} samples in {self._blocks} blocks "
-                                   f"({self._k / self._fs:g} s of data)")
+            self.get_logger().info(f'done: published {self._k} samples in {self._blocks} blocks '
+                                   f'({self._k / self._fs:g} s of data)')
 
 
 def main(args=None) -> int:
     """Entry point of ``ros2 run ipmc_sensor_ros ipmc_simulator``."""
-    return run(SimulatorNode, "ipmc_simulator", args)
+    return run(SimulatorNode, 'ipmc_simulator', args)
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     sys.exit(main())

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Beam mechanics that turn a tip deflection into the surface-stress profile sigma(h, z).
 
 The paper uses small-deflection Euler-Bernoulli theory (eqs. 18-21):
@@ -43,8 +44,8 @@ from scipy.interpolate import CubicSpline
 
 from .parameters import ParameterError
 
-__all__ = ["LinearBeam", "ElasticaBeam", "BEAM_MODELS", "make_beam", "elastica_solution",
-           "require_field_fidelity"]
+__all__ = ['LinearBeam', 'ElasticaBeam', 'BEAM_MODELS', 'make_beam', 'elastica_solution',
+           'require_field_fidelity']
 
 #: Largest |w| / L the elastica tables cover (lambda ~ 3.1; the tip is then at 1.1 rad,
 #: well past IPMC sensing use).
@@ -54,7 +55,7 @@ MAX_DEFLECTION_RATIO = 0.6
 class LinearBeam:
     """Small-deflection beam of the paper (eqs. 18-21): one shape, q_1 = w."""
 
-    name = "linear"
+    name = 'linear'
     n_shapes = 1
 
     def shapes(self, zeta) -> np.ndarray:
@@ -91,7 +92,7 @@ def elastica_solution(tip_load: float, n_nodes: int = 201, guess=None):
     sol = solve_bvp(lambda x, y: np.vstack([y[1], -lam * np.cos(y[0])]),
                     lambda ya, yb: np.array([ya[0], yb[1]]), s, y0, tol=1e-10, max_nodes=20000)
     if not sol.success:
-        raise RuntimeError(f"elastica did not converge for lambda = {lam}: {sol.message}")
+        raise RuntimeError(f'elastica did not converge for lambda = {lam}: {sol.message}')
     return sol
 
 
@@ -122,7 +123,7 @@ class ElasticaBeam:
     """Large-deflection (elastica) cantilever under a vertical tip force; see the module
     docstring.  ``n_shapes`` polynomial shapes (1..6)."""
 
-    name = "elastica"
+    name = 'elastica'
 
     def __init__(self, n_shapes: int = 5):
         if not 1 <= int(n_shapes) <= 6:
@@ -144,9 +145,9 @@ class ElasticaBeam:
     def _ratio(self, deflection_m, length_m: float) -> np.ndarray:
         r = np.asarray(deflection_m, float).ravel() / float(length_m)
         if r.size and np.max(np.abs(r)) > self.max_ratio:
-            raise ParameterError(f"tip deflection {np.max(np.abs(r)) * length_m:.4g} m is "
-                                 f"{np.max(np.abs(r)):.2f} of the length: beyond the elastica "
-                                 f"table (|w|/L <= {self.max_ratio:.2f})")
+            raise ParameterError(f'tip deflection {np.max(np.abs(r)) * length_m:.4g} m is '
+                                 f'{np.max(np.abs(r)):.2f} of the length: beyond the elastica '
+                                 f'table (|w|/L <= {self.max_ratio:.2f})')
         return r
 
     def coordinates(self, deflection_m, length_m: float) -> np.ndarray:
@@ -165,39 +166,43 @@ class ElasticaBeam:
         return self._tip(self._ratio(deflection_m, length_m))
 
 
-BEAM_MODELS = ("linear", "elastica")
+BEAM_MODELS = ('linear', 'elastica')
 
 #: How a simulator computes the current: ``model`` -- the closed-form model with its effects
 #: (offline by exact FFT prediction, in the node by an order-8 reduction); ``field`` -- the
 #: independent solution of the field equations (:mod:`ipmc_sensor_ros.physics.field`).
-FIDELITIES = ("model", "field")
+FIDELITIES = ('model', 'field')
 
 
-def check_fidelity(fidelity: str, beam_model: str = "linear") -> bool:
+def check_fidelity(fidelity: str, beam_model: str = 'linear') -> bool:
     """Validate ``fidelity`` and ``beam_model`` together; True for the field solution.
 
     A large-deflection beam needs the field solution (the closed form assumes the
     small-deflection beam, eq. 21).  Raises ParameterError naming the parameter."""
     if fidelity not in FIDELITIES:
-        hint = " ('reduced' and 'exact' are now 'model')" if fidelity in ("reduced", "exact") else ""
+        hint = (
+            " ('reduced' and 'exact' are now 'model')" if fidelity in ('reduced', 'exact') else ''
+        )
         raise ParameterError(f"parameter 'fidelity' must be one of {list(FIDELITIES)}, "
-                             f"got {fidelity!r}{hint}")
-    require_field_fidelity(beam_model, fidelity == "field")
-    return fidelity == "field"
+                             f'got {fidelity!r}{hint}')
+    require_field_fidelity(beam_model, fidelity == 'field')
+    return fidelity == 'field'
 
 
 def require_field_fidelity(beam_model: str, field: bool) -> None:
     """Refuse a large-deflection beam where the closed form (small-deflection beam,
     eq. 21) is used instead of the field solution; ParameterError naming the parameter."""
-    if beam_model != "linear" and not field:
+    if beam_model != 'linear' and not field:
         raise ParameterError(f"parameter 'beam_model' = {beam_model!r} needs fidelity 'field' "
-                             "(the closed form assumes the small-deflection beam, eq. 21)")
+                             '(the closed form assumes the small-deflection beam, eq. 21)')
 
 
 def make_beam(name: str):
     """``linear`` (the paper, eq. 21) or ``elastica`` (large deflection)."""
-    if name == "linear":
+    if name == 'linear':
         return LinearBeam()
-    if name == "elastica":
+    if name == 'elastica':
         return ElasticaBeam()
-    raise ParameterError(f"parameter 'beam_model' must be one of {list(BEAM_MODELS)}, got {name!r}")
+    raise ParameterError(
+        f"parameter 'beam_model' must be one of {list(BEAM_MODELS)}, got {name!r}"
+    )

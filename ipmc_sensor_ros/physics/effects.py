@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Physical effects that can be added to the base model H1 (eq. 31).
 
 A model is ``h1`` plus an ordered list of effects; the paper's H2 (eq. 45) is
@@ -39,8 +40,17 @@ import numpy as np
 
 from .parameters import ParameterError, parse_number, short_repr
 
-__all__ = ["EffectParameter", "Effect", "EFFECTS", "register_effect", "load_plugin", "load_plugins",
-           "loaded_plugins", "get_effect", "catalog_markdown"]
+__all__ = [
+    'EffectParameter',
+    'Effect',
+    'EFFECTS',
+    'register_effect',
+    'load_plugin',
+    'load_plugins',
+    'loaded_plugins',
+    'get_effect',
+    'catalog_markdown',
+]
 
 
 @dataclass(frozen=True)
@@ -61,27 +71,29 @@ class EffectParameter:
     description: str
     log_scale: bool = True
 
-    def check(self, value, where: str = "") -> float:
+    def check(self, value, where: str = '') -> float:
         try:
             v = parse_number(value)
         except (TypeError, ValueError, OverflowError):
             raise ParameterError(f"{where}parameter '{self.name}' must be a number, "
-                                 f"got {short_repr(value)}") from None
+                                 f'got {short_repr(value)}') from None
         if not math.isfinite(v) or not (self.lower <= v <= self.upper):
-            raise ParameterError(f"{where}parameter '{self.name}' = {short_repr(value)} {self.unit} "
-                                 f"is outside [{self.lower:g}, {self.upper:g}] {self.unit}")
+            raise ParameterError(
+                f"{where}parameter '{self.name}' = {short_repr(value)} {self.unit} "
+                f'is outside [{self.lower:g}, {self.upper:g}] {self.unit}'
+            )
         return v
 
 
 class Effect:
     """Base class of all effects (see the module docstring)."""
 
-    name: ClassVar[str] = ""
-    summary: ClassVar[str] = ""
-    physics: ClassVar[str] = ""
-    equation: ClassVar[str] = ""
-    signature: ClassVar[str] = ""
-    reference: ClassVar[str] = ""
+    name: ClassVar[str] = ''
+    summary: ClassVar[str] = ''
+    physics: ClassVar[str] = ''
+    equation: ClassVar[str] = ''
+    signature: ClassVar[str] = ''
+    reference: ClassVar[str] = ''
     parameters: ClassVar[tuple[EffectParameter, ...]] = ()
     #: True if the effect is linear and time-invariant (only ``factor``).
     lti: ClassVar[bool] = True
@@ -95,8 +107,10 @@ class Effect:
         known = {p.name: p for p in self.parameters}
         unknown = sorted(str(k) for k in set(values) - set(known))
         if unknown:
-            raise ParameterError(f"effect '{self.name}': unknown parameter(s) {short_repr(unknown)}; "
-                                 f"known: {sorted(known)}")
+            raise ParameterError(
+                f"effect '{self.name}': unknown parameter(s) {short_repr(unknown)}; "
+                f'known: {sorted(known)}'
+            )
         out = self.defaults()
         for k, v in values.items():
             out[k] = known[k].check(v, f"effect '{self.name}': ")
@@ -134,7 +148,9 @@ class Effect:
         """Invert ``input_transform`` (for estimators); identity by default."""
         return w_prime
 
-    def inverse_output_transform(self, t: np.ndarray, i: np.ndarray, model, values: dict) -> np.ndarray:
+    def inverse_output_transform(
+        self, t: np.ndarray, i: np.ndarray, model, values: dict
+    ) -> np.ndarray:
         """Invert ``output_transform`` (for estimators); identity by default."""
         return i
 
@@ -149,18 +165,18 @@ _PLUGINS: dict[str, tuple[str, tuple[str, ...]]] = {}
 _PLUGIN_CLASSES: dict[str, list[type]] = {}
 
 
-def register_effect(cls, source: str = "built-in"):
+def register_effect(cls, source: str = 'built-in'):
     """Class decorator / function: register an :class:`Effect` subclass by its ``name``.
 
     A name already registered from another source (a built-in effect, another plugin)
     is refused: a plugin cannot silently replace an effect."""
     if not (isinstance(cls, type) and issubclass(cls, Effect)) or not cls.name:
-        raise ParameterError(f"{short_repr(cls)} is not an Effect subclass with a name")
+        raise ParameterError(f'{short_repr(cls)} is not an Effect subclass with a name')
     if not isinstance(cls.name, str) or not cls.name.isidentifier():
-        raise ParameterError(f"effect name {short_repr(cls.name)} must be an identifier")
+        raise ParameterError(f'effect name {short_repr(cls.name)} must be an identifier')
     previous = _SOURCES.get(cls.name)
     if previous is not None and previous != source:
-        what = "a built-in effect" if previous == "built-in" else f"defined by plugin {previous}"
+        what = 'a built-in effect' if previous == 'built-in' else f'defined by plugin {previous}'
         raise ParameterError(f"effect '{cls.name}' is {what}; a plugin cannot replace it "
                              "(give the plugin's effect another name)")
     EFFECTS[cls.name] = cls()
@@ -172,8 +188,8 @@ def get_effect(name: str) -> Effect:
     try:
         return EFFECTS[name]
     except (KeyError, TypeError):
-        raise ParameterError(f"unknown effect {short_repr(name)}; known: {sorted(EFFECTS)} "
-                             "(or load a plugin with --plugin FILE)") from None
+        raise ParameterError(f'unknown effect {short_repr(name)}; known: {sorted(EFFECTS)} '
+                             '(or load a plugin with --plugin FILE)') from None
 
 
 def load_plugin(path: str | Path) -> list[str]:
@@ -186,7 +202,7 @@ def load_plugin(path: str | Path) -> list[str]:
     """
     path = Path(path)
     if not path.is_file():
-        raise ParameterError(f"{path}: plugin file not found (or not a regular file)")
+        raise ParameterError(f'{path}: plugin file not found (or not a regular file)')
     key = str(path.resolve())
     if key in _PLUGINS:
         for obj in _PLUGIN_CLASSES[key]:      # re-register (not re-run) if one was removed
@@ -195,16 +211,18 @@ def load_plugin(path: str | Path) -> list[str]:
         return list(_PLUGINS[key][1])
     source = path.read_bytes()
     digest = hashlib.sha256(source).hexdigest()
-    spec = importlib.util.spec_from_file_location(f"ipmc_plugin_{path.stem}", path)
+    spec = importlib.util.spec_from_file_location(f'ipmc_plugin_{path.stem}', path)
     module = importlib.util.module_from_spec(spec)
     try:
         # the bytes hashed are the bytes run (not a second read of the file)
-        exec(compile(source, str(path), "exec"), module.__dict__)
+        exec(compile(source, str(path), 'exec'), module.__dict__)
     except (KeyboardInterrupt, SystemExit) as exc:
-        raise ParameterError(f"{path}: plugin raised {type(exc).__name__} while loading") from None
+        raise ParameterError(f'{path}: plugin raised {type(exc).__name__} while loading') from None
     except BaseException as exc:  # a user's file: report any failure with its name
-        text = " ".join(str(exc).split())[:200]
-        raise ParameterError(f"{path}: plugin failed to import: {type(exc).__name__}: {text}") from None
+        text = ' '.join(str(exc).split())[:200]
+        raise ParameterError(
+            f'{path}: plugin failed to import: {type(exc).__name__}: {text}'
+        ) from None
     classes = [obj for obj in vars(module).values()
                if isinstance(obj, type) and issubclass(obj, Effect) and obj is not Effect
                and obj.name and obj.__module__ == module.__name__]
@@ -213,7 +231,9 @@ def load_plugin(path: str | Path) -> list[str]:
     for obj in classes:   # check all names before registering any
         previous = _SOURCES.get(obj.name)
         if previous is not None:
-            what = "a built-in effect" if previous == "built-in" else f"defined by plugin {previous}"
+            what = (
+                'a built-in effect' if previous == 'built-in' else f'defined by plugin {previous}'
+            )
             raise ParameterError(f"{path}: effect '{obj.name}' is {what}; a plugin cannot "
                                  "replace it (give the plugin's effect another name)")
     for obj in classes:
@@ -244,13 +264,13 @@ def catalog_markdown() -> str:
     """The catalog as Markdown (used in the README and `ipmc-model effects`)."""
     lines = []
     for eff in EFFECTS.values():
-        lines.append(f"### `{eff.name}`\n\n{eff.summary}\n")
-        lines.append(f"* **Physics**: {eff.physics}")
-        lines.append(f"* **Equation**: {eff.equation}")
+        lines.append(f'### `{eff.name}`\n\n{eff.summary}\n')
+        lines.append(f'* **Physics**: {eff.physics}')
+        lines.append(f'* **Equation**: {eff.equation}')
         if eff.parameters:
-            lines.append("* **Parameters**: " + "; ".join(
-                f"`{p.name}` ({p.unit}; bounds {p.lower:g}..{p.upper:g}; typical "
-                f"{p.typical[0]:g}..{p.typical[1]:g}): {p.description}" for p in eff.parameters))
-        lines.append(f"* **Signature in residuals**: {eff.signature}")
-        lines.append(f"* **Reference**: {eff.reference}\n")
-    return "\n".join(lines)
+            lines.append('* **Parameters**: ' + '; '.join(
+                f'`{p.name}` ({p.unit}; bounds {p.lower:g}..{p.upper:g}; typical '
+                f'{p.typical[0]:g}..{p.typical[1]:g}): {p.description}' for p in eff.parameters))
+        lines.append(f'* **Signature in residuals**: {eff.signature}')
+        lines.append(f'* **Reference**: {eff.reference}\n')
+    return '\n'.join(lines)

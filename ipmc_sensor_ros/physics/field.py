@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Independent numerical solution of the paper's field equations (no closed-form H1/H2).
 
 What is solved
@@ -43,6 +44,7 @@ Discretisation (method of lines)
 :func:`ipmc_sensor_ros.workbench.studies.convergence_table` shows the error against the closed forms falling with
 refinement; the tests require 0.1 dB / 0.5 deg over 0.1-100 Hz.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -53,7 +55,7 @@ import scipy.sparse.linalg as spla
 
 from .model import SensorModel
 
-__all__ = ["FieldSolver", "FieldStream", "NonlinearFieldSolver"]
+__all__ = ['FieldSolver', 'FieldStream', 'NonlinearFieldSolver']
 
 
 def _graded_nodes(h: float, first: float, growth: float) -> np.ndarray:
@@ -73,7 +75,11 @@ def _second_derivative(x: np.ndarray) -> sp.csr_matrix:
     rows, cols, vals = [], [], []
     for i in range(1, n - 1):
         hm, hp = x[i] - x[i - 1], x[i + 1] - x[i]
-        for j, v in ((i - 1, 2 / (hm * (hm + hp))), (i, -2 / (hm * hp)), (i + 1, 2 / (hp * (hm + hp)))):
+        for j, v in (
+            (i - 1, 2 / (hm * (hm + hp))),
+            (i, -2 / (hm * hp)),
+            (i + 1, 2 / (hp * (hm + hp))),
+        ):
             rows.append(i - 1)
             cols.append(j)
             vals.append(v)
@@ -126,23 +132,25 @@ class FieldSolver:
         nx = self.x.size
         d2x = _second_derivative(self.x)
         # thickness states (one copy per shape): interior u_1..u_{N-1}; u_0 = 0, u_N = q_k
-        a_u = d * d2x[:, 1:-1] - K * sp.identity(nx - 2, format="csr")
+        a_u = d * d2x[:, 1:-1] - K * sp.identity(nx - 2, format='csr')
         b_u = d * d2x[:, -1].toarray().ravel()
         wx = _trapezoid_weights(self.x) * self.x / self.h     # m = sum wx u
         p_u, p_w = wx[1:-1], wx[-1]
         a0 = m.charge_stress_coupling_j_per_c
         self.c0 = 3 * m.youngs_modulus_pa * self.h / (a0 * self.L ** 3)   # c(z) = c0 (L - z)
         n_shapes = self.beam.n_shapes
-        eye_p = sp.identity(n_shapes, format="csr")
-        a_uu = sp.kron(eye_p, a_u, format="csr")
-        b_uu = sp.kron(eye_p, sp.csr_matrix(b_u[:, None]), format="csr").toarray()   # (P n_u, P)
-        self.resistive = self.model.has_effect("surface_resistance") and \
+        eye_p = sp.identity(n_shapes, format='csr')
+        a_uu = sp.kron(eye_p, a_u, format='csr')
+        b_uu = sp.kron(eye_p, sp.csr_matrix(b_u[:, None]), format='csr').toarray()   # (P n_u, P)
+        self.resistive = self.model.has_effect('surface_resistance') and \
             m.surface_resistance_ohm > 0
         kap = m.permittivity_f_per_m
         if not self.resistive:
             # Q = W int rho-shape m dz = W c0 L sum_k (int phi_k dz) m_k
             zg, wg = np.polynomial.legendre.leggauss(8)     # exact for shapes up to degree 15
-            gains = self.W * self.c0 * self.L * (0.5 * self.L * wg) @ self.beam.shapes(0.5 * (zg + 1))
+            gains = (
+                self.W * self.c0 * self.L * (0.5 * self.L * wg) @ self.beam.shapes(0.5 * (zg + 1))
+            )
             self.A = a_uu.tocsc()
             self.B = b_uu
             self.C = np.concatenate([gk * p_u for gk in gains])
@@ -154,7 +162,7 @@ class FieldSolver:
         dz = z[1] - z[0]
         # phi_1..phi_nz (phi_0 = 0), Neumann at z = L via ghost node phi_{nz+1} = phi_{nz-1}
         main = -2 * np.ones(nz)
-        lap = sp.diags([np.ones(nz - 1), main, np.ones(nz - 1)], [-1, 0, 1], format="lil")
+        lap = sp.diags([np.ones(nz - 1), main, np.ones(nz - 1)], [-1, 0, 1], format='lil')
         lap[nz - 1, nz - 2] = 2.0
         lap = (lap / dz ** 2).tocsr()
         tau = r0 * kap / self.h                 # r0 c per unit length^2 (time constant factor)
@@ -163,9 +171,11 @@ class FieldSolver:
         # psi' = (1/tau) lap (psi + sum_k g_k m_k),  m_k = p_u u_k + p_w q_k
         lap_g = lap @ g_all[1:]                                                  # (nz, P)
         a_pp = lap / tau
-        a_pu = sp.hstack([sp.csr_matrix(np.outer(lap_g[:, k] / tau, p_u)) for k in range(n_shapes)])
+        a_pu = sp.hstack(
+            [sp.csr_matrix(np.outer(lap_g[:, k] / tau, p_u)) for k in range(n_shapes)]
+        )
         b_p = lap_g / tau * p_w
-        self.A = sp.bmat([[a_uu, None], [a_pu, a_pp]], format="csc")
+        self.A = sp.bmat([[a_uu, None], [a_pu, a_pp]], format='csc')
         self.B = np.vstack([b_uu, b_p])
         # Q = W int q dz, q = rho-shape m - (kappa/h) phi = -(kappa/h) psi: trapezoid over z
         # (psi_0 at z = 0 equals -sum_k g_k(0) m_k because phi_0 = 0)
@@ -184,7 +194,7 @@ class FieldSolver:
         beam: its small-signal linearisation at w = 0)."""
         f = np.atleast_1d(np.asarray(frequency_hz, float))
         out = np.empty(f.size, dtype=complex)
-        eye = sp.identity(self.n_states, format="csc")
+        eye = sp.identity(self.n_states, format='csc')
         direction = self.beam.small_signal_direction()
         b = (self.B @ direction).astype(complex)
         cw = float(self.Cw @ direction)
@@ -194,7 +204,9 @@ class FieldSolver:
             out[k] = s * (self.C @ x + cw)
         return out
 
-    def simulate(self, time_s, deflection_m, diffusivity_at=None, update_s: float = 0.5) -> np.ndarray:
+    def simulate(
+        self, time_s, deflection_m, diffusivity_at=None, update_s: float = 0.5
+    ) -> np.ndarray:
         """Sensing current (A) for a deflection record (uniform time steps, starting from
         rest), by Crank-Nicolson; i = C (A x + B q) + C_w dq/dt with q = beam(w).
 
@@ -209,12 +221,17 @@ class FieldSolver:
         dt = float(t[1] - t[0])
         stream = self.stream(1.0 / dt, diffusivity_at, update_s)
         return stream.step(w, np.gradient(w, dt))
-    def stream(self, sample_rate_hz: float, diffusivity_at=None, update_s: float = 0.5) -> "FieldStream":
+
+    def stream(
+        self, sample_rate_hz: float, diffusivity_at=None, update_s: float = 0.5
+    ) -> 'FieldStream':
         """A streaming (block by block) Crank-Nicolson integrator of this system."""
         return FieldStream(self, sample_rate_hz, diffusivity_at, update_s)
 
-    def _with_diffusivity(self, d: float) -> "FieldSolver":
-        model = self.model.with_material(self.model.material.replace(diffusivity_m2_per_s=float(d)))
+    def _with_diffusivity(self, d: float) -> 'FieldSolver':
+        model = self.model.with_material(
+            self.model.material.replace(diffusivity_m2_per_s=float(d))
+        )
         return FieldSolver(model, self.surface_cell, self.growth, self.n_length, self.beam)
 
 
@@ -246,25 +263,41 @@ class NonlinearFieldSolver:
         self.x = np.concatenate([-half[::-1], half[1:]])
         d2 = _second_derivative(self.x)
         n = self.x.size
-        self.A = (self.d * d2[:, 1:-1] - self.K * sp.identity(n - 2, format="csr")).tocsc()
+        self.A = (self.d * d2[:, 1:-1] - self.K * sp.identity(n - 2, format='csr')).tocsc()
         self.b_left = self.d * d2[:, 0].toarray().ravel()
         self.b_right = self.d * d2[:, -1].toarray().ravel()
         # derivative on interior nodes (non-uniform central differences)
         xm, x0, xp = self.x[:-2], self.x[1:-1], self.x[2:]
         hm, hp = x0 - xm, xp - x0
-        self._dm, self._d0, self._dp = -hp / (hm * (hm + hp)), (hp - hm) / (hm * hp), hm / (hp * (hm + hp))
+        self._dm, self._d0, self._dp = (
+            -hp / (hm * (hm + hp)),
+            (hp - hm) / (hm * hp),
+            hm / (hp * (hm + hp)),
+        )
         zg, wg = np.polynomial.legendre.leggauss(n_gauss)
         self.z = 0.5 * self.L * (zg + 1)
         self.wz = 0.5 * self.L * wg
-        self.c = 3 * m.youngs_modulus_pa * self.h / (m.charge_stress_coupling_j_per_c * self.L ** 3) \
+        self.c = (
+            3
+            * m.youngs_modulus_pa
+            * self.h
+            / (m.charge_stress_coupling_j_per_c * self.L**3)
             * (self.L - self.z)
+        )
         self.dx = np.diff(self.x)
 
     def _field(self, rho: np.ndarray) -> np.ndarray:
         """E at all nodes (columns of rho: one per z point) with zero electrode potential
         difference: int_{-h}^{h} E dx = 0."""
-        cum = np.vstack([np.zeros((1, rho.shape[1])),
-                         np.cumsum(0.5 * (rho[1:] + rho[:-1]) * self.dx[:, None], axis=0)]) / self.kappa
+        cum = (
+            np.vstack(
+                [
+                    np.zeros((1, rho.shape[1])),
+                    np.cumsum(0.5 * (rho[1:] + rho[:-1]) * self.dx[:, None], axis=0),
+                ]
+            )
+            / self.kappa
+        )
         integral = np.sum(0.5 * (cum[1:] + cum[:-1]) * self.dx[:, None], axis=0)
         e_left = -integral / (2 * self.h)
         return e_left[None, :] + cum
@@ -281,7 +314,7 @@ class NonlinearFieldSolver:
         w = np.asarray(deflection_m, float)
         dt = float(t[1] - t[0])
         n_in = self.x.size - 2
-        eye = sp.identity(n_in, format="csc")
+        eye = sp.identity(n_in, format='csc')
         lhs = spla.splu((eye - 0.5 * dt * self.A).tocsc())
         rhs_m = (eye + 0.5 * dt * self.A).tocsr()
         u = np.zeros((n_in, self.z.size))
@@ -321,11 +354,11 @@ class FieldStream:
         self.x = np.zeros(solver.n_states)
         self.q_prev = np.zeros(solver.beam.n_shapes)
         self.elapsed = 0.0
-        self._next_update = 0.0 if diffusivity_at else float("inf")
+        self._next_update = 0.0 if diffusivity_at else float('inf')
         self._factor(solver)
 
     def _factor(self, sol: FieldSolver) -> None:
-        eye = sp.identity(sol.n_states, format="csc")
+        eye = sp.identity(sol.n_states, format='csc')
         self.sol = sol
         self.lhs = spla.splu((eye - 0.5 * self.dt * sol.A).tocsc())
         self.rhs = (eye + 0.5 * self.dt * sol.A).tocsr()
@@ -343,7 +376,9 @@ class FieldStream:
                 self._next_update += self.update_s
             qk = q_all[k]
             bq = self.sol.B @ qk
-            self.x = self.lhs.solve(self.rhs @ self.x + 0.5 * self.dt * (self.sol.B @ self.q_prev + bq))
+            self.x = self.lhs.solve(
+                self.rhs @ self.x + 0.5 * self.dt * (self.sol.B @ self.q_prev + bq)
+            )
             out[k] = self.sol.C @ (self.a @ self.x + bq) + self.sol.Cw @ q_rate[k]
             self.q_prev = qk
             self.elapsed += self.dt

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """A sensing model: material + geometry + base transfer function + effects.
 
 ``SensorModel`` is the one description that fitting, comparison, reduction,
@@ -26,11 +27,18 @@ from . import catalog as _catalog  # noqa: F401  (registers the built-in effects
 from .effects import get_effect
 from .parameters import PAPER_PARAMETERS, Geometry, MaterialParameters, ParameterError, short_repr
 
-__all__ = ["SensorModel", "EffectSpec", "BASES", "model_effects", "parse_model_name", "parse_effects",
-           "format_effect"]
+__all__ = [
+    'SensorModel',
+    'EffectSpec',
+    'BASES',
+    'model_effects',
+    'parse_model_name',
+    'parse_effects',
+    'format_effect',
+]
 
 #: base name -> effects implied by it
-BASES = {"h1": (), "h2": ("surface_resistance",)}
+BASES = {'h1': (), 'h2': ('surface_resistance',)}
 
 
 @dataclass(frozen=True)
@@ -50,20 +58,20 @@ def _spec(name: str, values: Mapping[str, Any] | None = None) -> EffectSpec:
     return EffectSpec(name, tuple(sorted(checked.items())))
 
 
-_EFFECT_RE = re.compile(r"^\s*([A-Za-z_]\w*)\s*(?:\((.*)\))?\s*$")
+_EFFECT_RE = re.compile(r'^\s*([A-Za-z_]\w*)\s*(?:\((.*)\))?\s*$')
 
 
 def parse_effects(text: str | Iterable) -> tuple[EffectSpec, ...]:
     """Parse ``"a,b(p=1e-3),c"`` (or a list of such items) into effect specs."""
     if isinstance(text, str):
-        items, depth, cur = [], 0, ""
+        items, depth, cur = [], 0, ''
         for ch in text:
-            if ch == "," and depth == 0:
+            if ch == ',' and depth == 0:
                 items.append(cur)
-                cur = ""
+                cur = ''
                 continue
-            depth += ch == "("
-            depth -= ch == ")"
+            depth += ch == '('
+            depth -= ch == ')'
             cur += ch
         items.append(cur)
     else:
@@ -80,18 +88,18 @@ def parse_effects(text: str | Iterable) -> tuple[EffectSpec, ...]:
             continue
         m = _EFFECT_RE.match(str(item))
         if not m:
-            raise ParameterError(f"cannot parse effect {short_repr(str(item))}; expected name or "
-                                 "name(param=value,...)")
+            raise ParameterError(f'cannot parse effect {short_repr(str(item))}; expected name or '
+                                 'name(param=value,...)')
         values = {}
         if m.group(2):
-            for kv in m.group(2).split(","):
-                if "=" not in kv:
-                    raise ParameterError(f"effect {short_repr(str(item))}: expected param=value, "
-                                         f"got {short_repr(kv)}")
-                k, v = kv.split("=", 1)
+            for kv in m.group(2).split(','):
+                if '=' not in kv:
+                    raise ParameterError(f'effect {short_repr(str(item))}: expected param=value, '
+                                         f'got {short_repr(kv)}')
+                k, v = kv.split('=', 1)
                 if k.strip() in values:
-                    raise ParameterError(f"effect {short_repr(str(item))}: parameter "
-                                         f"{short_repr(k.strip())} is given twice")
+                    raise ParameterError(f'effect {short_repr(str(item))}: parameter '
+                                         f'{short_repr(k.strip())} is given twice')
                 values[k.strip()] = v.strip()
         out.append(_spec(m.group(1), values))
     return tuple(out)
@@ -113,7 +121,7 @@ def model_effects(name: str, extra_effects: str | Iterable = ()) -> tuple[Effect
     for e in names:
         if e in base:
             raise ParameterError(f"effect '{e}' is already part of model '{name}' "
-                                 f"(h2 = h1 + surface_resistance)")
+                                 f'(h2 = h1 + surface_resistance)')
         if names.count(e) > 1:
             raise ParameterError(f"effect '{e}' listed twice")
     return tuple(parse_effects(base)) + tuple(extra)
@@ -123,8 +131,10 @@ def parse_model_name(name: str) -> tuple[str, tuple[str, ...]]:
     """'h2' -> ('h1', ('surface_resistance',)); refuse unknown names."""
     key = str(name).strip().lower()
     if key not in BASES:
-        raise ParameterError(f"unknown model {short_repr(str(name))}; choose one of {sorted(BASES)}")
-    return "h1", BASES[key]
+        raise ParameterError(
+            f'unknown model {short_repr(str(name))}; choose one of {sorted(BASES)}'
+        )
+    return 'h1', BASES[key]
 
 
 @dataclass(frozen=True)
@@ -142,19 +152,19 @@ class SensorModel:
 
     geometry: Geometry
     material: MaterialParameters = PAPER_PARAMETERS
-    effects: tuple = field(default=("surface_resistance",))
+    effects: tuple = field(default=('surface_resistance',))
 
     def __post_init__(self) -> None:
         specs = parse_effects(self.effects)
         names = [e.name for e in specs]
         if len(set(names)) != len(names):
-            raise ParameterError(f"effect listed twice in {names}")
-        object.__setattr__(self, "effects", specs)
+            raise ParameterError(f'effect listed twice in {names}')
+        object.__setattr__(self, 'effects', specs)
 
     # -- construction helpers ------------------------------------------------
     @classmethod
     def named(cls, name: str, geometry: Geometry, material: MaterialParameters = PAPER_PARAMETERS,
-              extra_effects: str | Iterable = ()) -> "SensorModel":
+              extra_effects: str | Iterable = ()) -> 'SensorModel':
         """``h1`` or ``h2`` (the paper's models) for ``geometry``, plus ``extra_effects``
         (:func:`model_effects`: an effect already in the base is refused, not ignored)."""
         return cls(geometry=geometry, material=material,
@@ -167,16 +177,16 @@ class SensorModel:
     @property
     def name(self) -> str:
         names = self.effect_names
-        if names[:1] == ("surface_resistance",):
-            return "+".join(("h2",) + names[1:])
-        return "+".join(("h1",) + names)
+        if names[:1] == ('surface_resistance',):
+            return '+'.join(('h2',) + names[1:])
+        return '+'.join(('h1',) + names)
 
     def describe(self) -> str:
         """Text form: base plus formatted effects."""
         names = self.effect_names
-        if names[:1] == ("surface_resistance",):
-            return ",".join(["h2"] + [format_effect(e) for e in self.effects[1:]])
-        return ",".join(["h1"] + [format_effect(e) for e in self.effects])
+        if names[:1] == ('surface_resistance',):
+            return ','.join(['h2'] + [format_effect(e) for e in self.effects[1:]])
+        return ','.join(['h1'] + [format_effect(e) for e in self.effects])
 
     def has_effect(self, name: str) -> bool:
         return name in self.effect_names
@@ -187,7 +197,7 @@ class SensorModel:
                 return e.as_dict()
         raise ParameterError(f"model {self.name} has no effect '{name}'")
 
-    def with_effect(self, name: str, **values) -> "SensorModel":
+    def with_effect(self, name: str, **values) -> 'SensorModel':
         """Add (or replace the values of) an effect."""
         new = _spec(name, values)
         effects = [new if e.name == name else e for e in self.effects]
@@ -195,10 +205,12 @@ class SensorModel:
             effects.append(new)
         return SensorModel(self.geometry, self.material, tuple(effects))
 
-    def without_effect(self, name: str) -> "SensorModel":
-        return SensorModel(self.geometry, self.material, tuple(e for e in self.effects if e.name != name))
+    def without_effect(self, name: str) -> 'SensorModel':
+        return SensorModel(
+            self.geometry, self.material, tuple(e for e in self.effects if e.name != name)
+        )
 
-    def with_material(self, material: MaterialParameters) -> "SensorModel":
+    def with_material(self, material: MaterialParameters) -> 'SensorModel':
         return SensorModel(geometry=self.geometry, material=material, effects=self.effects)
 
     # -- evaluation (physics/pipeline.py holds the rules) -------------------------
@@ -206,7 +218,7 @@ class SensorModel:
         """Pickle the description only; the compiled pipeline (which may hold closures, e.g. a
         drift's ``material_at``) is rebuilt on first use after unpickling."""
         state = dict(self.__dict__)
-        state.pop("compiled", None)
+        state.pop('compiled', None)
         return state
 
     @functools.cached_property

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Material parameters and sample geometry of an IPMC sensor, in SI units.
 
 Reference: Z. Chen, X. Tan, A. Will, C. Ziel, "A dynamic model for ionic
@@ -26,17 +27,17 @@ from typing import Any, Mapping
 from ..errors import ParameterError
 
 __all__ = [
-    "ParameterError",
-    "MATERIAL_LIMITS",
-    "short_repr",
-    "parse_number",
-    "read_yaml",
-    "MaterialParameters",
-    "Geometry",
-    "PAPER_PARAMETERS",
-    "PAPER_SAMPLES",
-    "load_yaml",
-    "save_yaml",
+    'ParameterError',
+    'MATERIAL_LIMITS',
+    'short_repr',
+    'parse_number',
+    'read_yaml',
+    'MaterialParameters',
+    'Geometry',
+    'PAPER_PARAMETERS',
+    'PAPER_SAMPLES',
+    'load_yaml',
+    'save_yaml',
 ]
 
 
@@ -48,20 +49,20 @@ def short_repr(value: Any, limit: int = 60) -> str:
     Containers are summarised before ``repr`` expands them."""
     if isinstance(value, (list, tuple, dict, set)) and len(value) > 8:
         kind = type(value).__name__
-        return f"<{kind} of {len(value)} items>"
+        return f'<{kind} of {len(value)} items>'
     if isinstance(value, (list, tuple, dict, set)):
         try:
             short = reprlib.Repr()           # Python 3.11: no keyword arguments
             short.maxlevel, short.maxstring, short.maxother = 2, limit, limit
             text = short.repr(value)
         except Exception:  # a repr that fails must not hide the error being reported
-            text = f"<{type(value).__name__}>"
+            text = f'<{type(value).__name__}>'
     else:
         text = repr(value) if not isinstance(value, str) or len(value) <= 4 * limit \
             else repr(value[:limit + 1])
     if len(text) > limit:
         full = len(value) if isinstance(value, str) else len(text)
-        text = f"{text[:limit]}... ({full} characters)"
+        text = f'{text[:limit]}... ({full} characters)'
     return text
 
 
@@ -69,14 +70,14 @@ def _check_keys(cls, data: Any, where: str, what: str, noun: str) -> str:
     """Refuse a ``data`` that is not a mapping or has keys ``cls`` does not know; returns the
     ``"<where>: "`` prefix of messages about it."""
     names = {f.name for f in fields(cls)}
-    prefix = f"{where}: " if where else ""
+    prefix = f'{where}: ' if where else ''
     if not isinstance(data, Mapping):
-        raise ParameterError(f"{prefix}{what} must be a mapping of names to values, "
-                             f"got {short_repr(data)}")
+        raise ParameterError(f'{prefix}{what} must be a mapping of names to values, '
+                             f'got {short_repr(data)}')
     unknown = sorted(str(k) for k in set(data) - names)
     if unknown:
-        raise ParameterError(f"{prefix}unknown {what} {noun} {short_repr(unknown)}; "
-                             f"known: {sorted(names)}")
+        raise ParameterError(f'{prefix}unknown {what} {noun} {short_repr(unknown)}; '
+                             f'known: {sorted(names)}')
     return prefix
 
 
@@ -85,9 +86,9 @@ def parse_number(value: Any) -> float:
     Unicode digits ('\u0661\u0662' -> 12.0) and full-width forms, which no instrument or
     file of this project writes (raises ValueError)."""
     if isinstance(value, bool):
-        raise TypeError("a boolean is not a number")
+        raise TypeError('a boolean is not a number')
     if isinstance(value, str) and not value.isascii():
-        raise ValueError(f"not an ASCII number: {short_repr(value)}")
+        raise ValueError(f'not an ASCII number: {short_repr(value)}')
     return float(value)
 
 
@@ -97,24 +98,24 @@ def parse_number(value: Any) -> float:
 #: like Y = 1e-300 Pa or T = 5e-324 K made the model's linear algebra fail.
 #: ``None`` as upper bound = none.
 MATERIAL_LIMITS: dict[str, tuple[float, float]] = {
-    "faraday_constant_c_per_mol": (9.6e4, 9.7e4),       # a constant (96485.3)
-    "gas_constant_j_per_mol_k": (8.3, 8.35),             # a constant (8.3145)
-    "temperature_k": (200.0, 400.0),                     # hydrated Nafion: well above freezing
-    "youngs_modulus_pa": (1e5, 1e12),                     # soft gels .. stiffer than steel
-    "surface_resistance_ohm": (0.0, 1e6),
-    "diffusivity_m2_per_s": (1e-20, 1e-6),                # ions in polymers .. liquids 1e-9
-    "anion_concentration_mol_per_m3": (1e-2, 1e5),        # water is 5.5e4 mol/m^3
-    "permittivity_f_per_m": (8.8e-12, 10.0),              # vacuum .. effective (Table 2: 1.9e-3)
-    "charge_stress_coupling_j_per_c": (1e-3, 1e6),
-    "one_minus_anion_volume_fraction": (1e-6, 1.0),
+    'faraday_constant_c_per_mol': (9.6e4, 9.7e4),       # a constant (96485.3)
+    'gas_constant_j_per_mol_k': (8.3, 8.35),             # a constant (8.3145)
+    'temperature_k': (200.0, 400.0),                     # hydrated Nafion: well above freezing
+    'youngs_modulus_pa': (1e5, 1e12),                     # soft gels .. stiffer than steel
+    'surface_resistance_ohm': (0.0, 1e6),
+    'diffusivity_m2_per_s': (1e-20, 1e-6),                # ions in polymers .. liquids 1e-9
+    'anion_concentration_mol_per_m3': (1e-2, 1e5),        # water is 5.5e4 mol/m^3
+    'permittivity_f_per_m': (8.8e-12, 10.0),              # vacuum .. effective (Table 2: 1.9e-3)
+    'charge_stress_coupling_j_per_c': (1e-3, 1e6),
+    'one_minus_anion_volume_fraction': (1e-6, 1.0),
 }
 
 
 def _check(name: str, value: Any, *, positive: bool = True, allow_zero: bool = False,
-           upper: float | None = None, where: str = "", limits: tuple[float, float] | None = None,
-           unit: str = "") -> float:
+           upper: float | None = None, where: str = '', limits: tuple[float, float] | None = None,
+           unit: str = '') -> float:
     """Return ``value`` as float or raise :class:`ParameterError` naming it."""
-    prefix = f"{where}: " if where else ""
+    prefix = f'{where}: ' if where else ''
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         try:
             value = parse_number(value)
@@ -133,7 +134,7 @@ def _check(name: str, value: Any, *, positive: bool = True, allow_zero: bool = F
         raise ParameterError(f"{prefix}parameter '{name}' must be <= {upper}, got {value!r}")
     if limits is not None and not limits[0] <= value <= limits[1]:
         raise ParameterError(f"{prefix}parameter '{name}' = {value!r}{unit} is outside the "
-                             f"physical range [{limits[0]:g}, {limits[1]:g}]{unit}")
+                             f'physical range [{limits[0]:g}, {limits[1]:g}]{unit}')
     return value
 
 
@@ -172,7 +173,7 @@ class MaterialParameters:
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            allow_zero = f.name == "surface_resistance_ohm"
+            allow_zero = f.name == 'surface_resistance_ohm'
             object.__setattr__(self, f.name, _check(f.name, getattr(self, f.name),
                                                     allow_zero=allow_zero,
                                                     limits=MATERIAL_LIMITS[f.name]))
@@ -185,7 +186,7 @@ class MaterialParameters:
                 * self.anion_concentration_mol_per_m3 * self.one_minus_anion_volume_fraction
                 / (self.permittivity_f_per_m * self.gas_constant_j_per_mol_k * self.temperature_k))
 
-    def replace(self, **changes: float) -> "MaterialParameters":
+    def replace(self, **changes: float) -> 'MaterialParameters':
         """Return a copy with ``changes`` applied (validated)."""
         return dataclasses.replace(self, **changes)
 
@@ -193,22 +194,22 @@ class MaterialParameters:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], where: str = "") -> "MaterialParameters":
-        _check_keys(cls, data, where, "material", "parameter(s)")
+    def from_dict(cls, data: Mapping[str, Any], where: str = '') -> 'MaterialParameters':
+        _check_keys(cls, data, where, 'material', 'parameter(s)')
         try:
             return cls(**dict(data))
         except ParameterError as exc:
             if where:
-                raise ParameterError(f"{where}: {exc}") from None
+                raise ParameterError(f'{where}: {exc}') from None
             raise
 
 
 #: Plausible physical ranges of each geometric quantity, used to catch unit
 #: mistakes (millimetres given as metres).  A 2 m long IPMC does not exist.
 GEOMETRY_LIMITS_M = {
-    "length_m": (1e-4, 1.0),
-    "width_m": (1e-4, 1.0),
-    "thickness_m": (1e-6, 1e-2),
+    'length_m': (1e-4, 1.0),
+    'width_m': (1e-4, 1.0),
+    'thickness_m': (1e-6, 1e-2),
 }
 
 
@@ -225,7 +226,7 @@ class Geometry:
     length_m: float
     width_m: float
     thickness_m: float
-    name: str = ""
+    name: str = ''
 
     def __post_init__(self) -> None:
         for key, (lo, hi) in GEOMETRY_LIMITS_M.items():
@@ -233,7 +234,7 @@ class Geometry:
             if not lo <= value <= hi:
                 raise ParameterError(
                     f"{self.name + ': ' if self.name else ''}parameter '{key}' = {value!r} m is "
-                    f"outside the physical range [{lo}, {hi}] m (is it in millimetres?)")
+                    f'outside the physical range [{lo}, {hi}] m (is it in millimetres?)')
             object.__setattr__(self, key, value)
 
     @property
@@ -241,24 +242,24 @@ class Geometry:
         """h, distance from the neutral axis to the surface (paper Fig. 1)."""
         return 0.5 * self.thickness_m
 
-    def replace(self, **changes: Any) -> "Geometry":
+    def replace(self, **changes: Any) -> 'Geometry':
         return dataclasses.replace(self, **changes)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"length_m": self.length_m, "width_m": self.width_m,
-                "thickness_m": self.thickness_m, "name": self.name}
+        return {'length_m': self.length_m, 'width_m': self.width_m,
+                'thickness_m': self.thickness_m, 'name': self.name}
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], where: str = "") -> "Geometry":
-        prefix = _check_keys(cls, data, where, "geometry", "key(s)")
-        missing = sorted({"length_m", "width_m", "thickness_m"} - set(data))
+    def from_dict(cls, data: Mapping[str, Any], where: str = '') -> 'Geometry':
+        prefix = _check_keys(cls, data, where, 'geometry', 'key(s)')
+        missing = sorted({'length_m', 'width_m', 'thickness_m'} - set(data))
         if missing:
-            raise ParameterError(f"{prefix}missing geometry key(s) {missing}")
+            raise ParameterError(f'{prefix}missing geometry key(s) {missing}')
         try:
             return cls(**dict(data))
         except ParameterError as exc:
             if where:
-                raise ParameterError(f"{prefix}{exc}") from None
+                raise ParameterError(f'{prefix}{exc}') from None
             raise
 
 
@@ -267,9 +268,9 @@ PAPER_PARAMETERS = MaterialParameters()
 
 #: Paper Table 3: the three samples cut from one sheet.
 PAPER_SAMPLES: dict[str, Geometry] = {
-    "big": Geometry(22e-3, 14e-3, 360e-6, "big"),
-    "slim": Geometry(22e-3, 7e-3, 360e-6, "slim"),
-    "short": Geometry(11e-3, 7e-3, 360e-6, "short"),
+    'big': Geometry(22e-3, 14e-3, 360e-6, 'big'),
+    'slim': Geometry(22e-3, 7e-3, 360e-6, 'slim'),
+    'short': Geometry(11e-3, 7e-3, 360e-6, 'short'),
 }
 
 
@@ -277,7 +278,7 @@ PAPER_SAMPLES: dict[str, Geometry] = {
 MAX_YAML_BYTES = 1_000_000
 
 
-def read_yaml(path: str | Path, what: str = "YAML file") -> Any:
+def read_yaml(path: str | Path, what: str = 'YAML file') -> Any:
     """Parse a small YAML file with ``yaml.safe_load``; every failure is one
     :class:`ParameterError` line naming the file (and the line for syntax errors):
     missing, not a regular file (a FIFO would block), too large, not text (UTF-8,
@@ -287,32 +288,32 @@ def read_yaml(path: str | Path, what: str = "YAML file") -> Any:
     path = Path(path)
     try:
         if not path.exists():
-            raise ParameterError(f"{path}: {what} not found")
+            raise ParameterError(f'{path}: {what} not found')
         if not path.is_file():
-            raise ParameterError(f"{path}: {what} is not a regular file")
+            raise ParameterError(f'{path}: {what} is not a regular file')
         size = path.stat().st_size
         if size > MAX_YAML_BYTES:
-            raise ParameterError(f"{path}: {what} is {size} bytes, more than the limit "
-                                 f"{MAX_YAML_BYTES} (is it the right file?)")
+            raise ParameterError(f'{path}: {what} is {size} bytes, more than the limit '
+                                 f'{MAX_YAML_BYTES} (is it the right file?)')
         raw = path.read_bytes()[:MAX_YAML_BYTES + 1]
     except OSError as exc:
-        raise ParameterError(f"{path}: cannot read the {what}: {exc.strerror or exc}") from None
-    bom16 = raw[:2] in (b"\xff\xfe", b"\xfe\xff")      # UTF-16 with a byte-order mark
+        raise ParameterError(f'{path}: cannot read the {what}: {exc.strerror or exc}') from None
+    bom16 = raw[:2] in (b'\xff\xfe', b'\xfe\xff')      # UTF-16 with a byte-order mark
     try:
-        text = raw.decode("utf-16" if bom16 else "utf-8-sig")
+        text = raw.decode('utf-16' if bom16 else 'utf-8-sig')
     except UnicodeDecodeError as exc:
-        raise ParameterError(f"{path}: {what} is not UTF-8 (or UTF-16 with a byte-order mark) "
-                             f"text: undecodable byte at offset {exc.start}") from None
+        raise ParameterError(f'{path}: {what} is not UTF-8 (or UTF-16 with a byte-order mark) '
+                             f'text: undecodable byte at offset {exc.start}') from None
     try:
         return yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = f":{mark.line + 1}" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or str(exc)
-        problem = " ".join(str(problem).split())[:200]
-        raise ParameterError(f"{path}{line}: not valid YAML for a {what}: {problem}") from None
+        mark = getattr(exc, 'problem_mark', None)
+        line = f':{mark.line + 1}' if mark is not None else ''
+        problem = getattr(exc, 'problem', None) or str(exc)
+        problem = ' '.join(str(problem).split())[:200]
+        raise ParameterError(f'{path}{line}: not valid YAML for a {what}: {problem}') from None
     except RecursionError:
-        raise ParameterError(f"{path}: {what} is nested too deeply") from None
+        raise ParameterError(f'{path}: {what} is nested too deeply') from None
 
 
 def load_yaml(path: str | Path) -> tuple[MaterialParameters, Geometry | None]:
@@ -321,17 +322,17 @@ def load_yaml(path: str | Path) -> tuple[MaterialParameters, Geometry | None]:
     Missing material keys take the paper's defaults.  Errors name the file.
     """
     path = Path(path)
-    data = read_yaml(path, "parameters file") or {}
+    data = read_yaml(path, 'parameters file') or {}
     if not isinstance(data, dict):
         raise ParameterError(f"{path}: expected a mapping with 'material' and 'geometry' keys")
-    unknown = sorted(set(data) - {"material", "geometry", "model"})
+    unknown = sorted(set(data) - {'material', 'geometry', 'model'})
     if unknown:
-        raise ParameterError(f"{path}: unknown top-level key(s) {short_repr(unknown)}; "
+        raise ParameterError(f'{path}: unknown top-level key(s) {short_repr(unknown)}; '
                              "known: ['geometry', 'material', 'model']")
-    material = MaterialParameters.from_dict(data.get("material") or {}, where=str(path))
+    material = MaterialParameters.from_dict(data.get('material') or {}, where=str(path))
     geometry = None
-    if data.get("geometry") is not None:
-        geometry = Geometry.from_dict(data["geometry"], where=str(path))
+    if data.get('geometry') is not None:
+        geometry = Geometry.from_dict(data['geometry'], where=str(path))
     return material, geometry
 
 
@@ -340,9 +341,9 @@ def save_yaml(path: str | Path, material: MaterialParameters,
     """Write ``material`` (and ``geometry``) as YAML readable by :func:`load_yaml`."""
     import yaml
 
-    doc: dict[str, Any] = {"material": material.to_dict()}
+    doc: dict[str, Any] = {'material': material.to_dict()}
     if geometry is not None:
-        doc["geometry"] = geometry.to_dict()
+        doc['geometry'] = geometry.to_dict()
     if extra:
         doc.update(extra)
     Path(path).write_text(yaml.safe_dump(doc, sort_keys=False))

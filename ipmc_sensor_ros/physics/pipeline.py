@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """One compiled model pipeline: a :class:`SensorModel` taken apart once into the pieces every
 user needs (prediction, fitting, simulation, reduction, estimation).
 
@@ -30,8 +31,8 @@ from ..errors import ParameterError
 from .effects import Effect, get_effect
 from .sensing import h1
 
-__all__ = ["CompiledModel", "DriftSchedule", "compile_model", "material_nodes",
-           "time_varying_response"]
+__all__ = ['CompiledModel', 'DriftSchedule', 'compile_model', 'material_nodes',
+           'time_varying_response']
 
 
 def _overrides(effect: Effect, name: str) -> bool:
@@ -103,27 +104,30 @@ class CompiledModel:
         if self.material_at is None:
             i = linear_response(self.model, w)
         else:
-            i = time_varying_response(elapsed_s, self.material_at,
-                                      lambda mat: linear_response(self.model.with_material(mat), w))
+            i = time_varying_response(
+                elapsed_s,
+                self.material_at,
+                lambda mat: linear_response(self.model.with_material(mat), w),
+            )
         return self.apply_output_transforms(elapsed_s, i)
 
     def require_inverse(self) -> None:
         """Refuse a model an estimator cannot invert: a transform without its inverse."""
         for eff, _ in self.output_transforms:
-            if not _overrides(eff, "inverse_output_transform"):
+            if not _overrides(eff, 'inverse_output_transform'):
                 raise ParameterError(f"parameter 'effects': '{eff.name}' transforms the current "
-                                     "but defines no inverse_output_transform")
+                                     'but defines no inverse_output_transform')
         for eff, _ in self.input_transforms:
-            if not _overrides(eff, "inverse_input_transform"):
+            if not _overrides(eff, 'inverse_input_transform'):
                 raise ParameterError(f"parameter 'effects': '{eff.name}' transforms the "
-                                     "deflection but defines no inverse_input_transform")
+                                     'deflection but defines no inverse_input_transform')
 
     @property
     def is_lti(self) -> bool:
         """True when no effect acts outside the transfer function (no transforms, no drift)."""
         return not (self.input_transforms or self.output_transforms or self.material_at)
 
-    def at_material(self, material) -> "CompiledModel":
+    def at_material(self, material) -> 'CompiledModel':
         """The pipeline of the same model with another material (a drift update)."""
         return compile_model(self.model.with_material(material))
 
@@ -145,8 +149,8 @@ def compile_model(model) -> CompiledModel:
             rational_idx.append(k)
     return CompiledModel(
         model=model, effects=effects,
-        input_transforms=tuple(e for e in effects if _overrides(e[0], "input_transform")),
-        output_transforms=tuple(e for e in effects if _overrides(e[0], "output_transform")),
+        input_transforms=tuple(e for e in effects if _overrides(e[0], 'input_transform')),
+        output_transforms=tuple(e for e in effects if _overrides(e[0], 'output_transform')),
         material_at=material_at,
         delay_s=float(sum(eff.delay_s(values) for eff, values in effects)),
         rational_factors=tuple(rational), _rational_effects=tuple(rational_idx))
@@ -173,7 +177,7 @@ class DriftSchedule:
     def slices(self, elapsed_s: np.ndarray, on_update: Callable) -> Iterator[slice]:
         start, n = 0, elapsed_s.size
         while start < n:
-            cut = int(np.searchsorted(elapsed_s, self.next_update_s, side="left"))
+            cut = int(np.searchsorted(elapsed_s, self.next_update_s, side='left'))
             if cut <= start:
                 on_update(self.material_at(self.next_update_s))
                 self.next_update_s += self.update_s

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Infinite-dimensional sensing transfer functions H1 (eq. 31) and H2 (eq. 45).
 
 Both map tip deflection w(s) (metres) to short-circuit sensing current i(s)
@@ -33,12 +34,12 @@ import numpy as np
 from .parameters import Geometry, MaterialParameters
 
 __all__ = [
-    "beta",
-    "h1",
-    "h2",
-    "surface_resistance_factor",
-    "surface_resistance_time_constant_s",
-    "thickness_function",
+    'beta',
+    'h1',
+    'h2',
+    'surface_resistance_factor',
+    'surface_resistance_time_constant_s',
+    'thickness_function',
 ]
 
 _PHI_SERIES = (1.0 / 3.0, -1.0 / 45.0, 2.0 / 945.0, -1.0 / 4725.0, 2.0 / 93555.0)

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Realistic DAQ current for a deflection trajectory, for evaluating estimators.
 
 The sensing current comes from the exact model (H1/H2 with effects,
@@ -21,7 +22,7 @@ import numpy as np
 from ..physics.model import SensorModel
 from .sensor import predict_current
 
-__all__ = ["daq_current", "robot_motion", "started", "intermittent_motion"]
+__all__ = ['daq_current', 'robot_motion', 'started', 'intermittent_motion']
 
 
 def _ramp(u):
@@ -56,7 +57,9 @@ def robot_motion(time_s, seed: int = 0, amplitude_m: float = 1.5e-3) -> np.ndarr
         else:
             f = rng.uniform(0.2, 2.0)
             amp = rng.uniform(0.2, 0.6) * amplitude_m
-            w[sel] = level + amp * np.sin(2 * np.pi * f * tau) * _ramp(tau / 0.3) * _ramp((dur - tau) / 0.3)
+            w[sel] = level + amp * np.sin(2 * np.pi * f * tau) * _ramp(tau / 0.3) * _ramp(
+                (dur - tau) / 0.3
+            )
         start += dur
     return w
 

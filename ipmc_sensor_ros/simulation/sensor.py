@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Time-domain simulation of the sensing current, and exact periodic responses.
 
 Two simulators:
@@ -33,8 +34,15 @@ from ..physics.pipeline import DriftSchedule
 from ..lti.reduction import ReducedModel, reduce_model, reduce_model_parts
 from .stimuli import Stimulus
 
-__all__ = ["periodic_response", "padded_record", "lti_response_fft", "predict_current", "SensorSimulator", "FieldSensorSimulator",
-           "forward_reduction"]
+__all__ = [
+    'periodic_response',
+    'padded_record',
+    'lti_response_fft',
+    'predict_current',
+    'SensorSimulator',
+    'FieldSensorSimulator',
+    'forward_reduction',
+]
 
 
 def periodic_response(model: SensorModel, deflection_m, sample_rate_hz: float) -> np.ndarray:
@@ -60,7 +68,7 @@ def forward_reduction(model: SensorModel, sample_rate_hz: float, order: int = 8,
     simulator (cached per model and rate); any pure delay is applied separately."""
     high = 0.45 * sample_rate_hz
     if high <= low_hz * 10:
-        raise ParameterError(f"sample_rate_hz={sample_rate_hz} is too low to simulate")
+        raise ParameterError(f'sample_rate_hz={sample_rate_hz} is too low to simulate')
     return reduce_model(model, order, (low_hz, high), extension=3.0)
 
 
@@ -76,11 +84,11 @@ class FieldSensorSimulator:
     as :class:`SensorSimulator`; about 50x real time at 1 kHz (linear beam).
     """
 
-    SUPPORTED = ("surface_resistance", "hydration_drift")
+    SUPPORTED = ('surface_resistance', 'hydration_drift')
 
     def __init__(self, model: SensorModel, sample_rate_hz: float, *, current_gain: float = 1.0,
                  current_offset_a: float = 0.0, noise_rms_a: float = 0.0, seed: int = 0,
-                 beam_model: str = "linear"):
+                 beam_model: str = 'linear'):
         from ..physics.beam import make_beam
         from ..physics.effects import get_effect
         from ..physics.field import FieldSolver
@@ -88,17 +96,19 @@ class FieldSensorSimulator:
         bad = [n for n in model.effect_names if n not in self.SUPPORTED]
         if bad:
             raise ParameterError(f"parameter 'fidelity' = 'field' supports the effects "
-                                 f"{list(self.SUPPORTED)} only, not {bad}")
+                                 f'{list(self.SUPPORTED)} only, not {bad}')
         self.model = model
         self.sample_rate_hz = float(sample_rate_hz)
         self.current_gain, self.current_offset_a = float(current_gain), float(current_offset_a)
         self.noise_rms_a = float(noise_rms_a)
         self._rng = np.random.default_rng(seed)
-        base = model.without_effect("hydration_drift")
+        base = model.without_effect('hydration_drift')
         self._solver = FieldSolver(base, beam=make_beam(beam_model))
         self._diffusivity_at = None
-        if model.has_effect("hydration_drift"):
-            mat_at = get_effect("hydration_drift").material_at(model, model.effect_values("hydration_drift"))
+        if model.has_effect('hydration_drift'):
+            mat_at = get_effect('hydration_drift').material_at(
+                model, model.effect_values('hydration_drift')
+            )
             self._diffusivity_at = lambda tau: mat_at(tau).diffusivity_m2_per_s
         self.reset()
 
@@ -150,8 +160,8 @@ class SensorSimulator:
         fs = float(sample_rate_hz)
         if not (math.isfinite(fs) and fs > 0):
             raise ParameterError(f"parameter 'sample_rate_hz' must be > 0, got {sample_rate_hz!r}")
-        for name, value in (("current_gain", current_gain), ("current_offset_a", current_offset_a),
-                            ("noise_rms_a", noise_rms_a)):
+        for name, value in (('current_gain', current_gain), ('current_offset_a', current_offset_a),
+                            ('noise_rms_a', noise_rms_a)):
             if not math.isfinite(float(value)):
                 raise ParameterError(f"parameter '{name}' must be finite, got {value!r}")
         if noise_rms_a < 0:
@@ -175,12 +185,16 @@ class SensorSimulator:
             if self._material_at is not None else None
         self.sos = self._sos_for(self.reduced)
         delay = model.delay_s() * fs
-        self._delay_int, self._delay_frac = int(math.floor(delay)), float(delay - math.floor(delay))
+        self._delay_int, self._delay_frac = int(math.floor(delay)), float(
+            delay - math.floor(delay)
+        )
         self._rng = np.random.default_rng(seed)
         self._zi = np.zeros((self.sos.shape[0], 2))
         self._history = np.zeros(self._delay_int + 1)
         self._t_start: float | None = None
-        self._replay = np.zeros(int(round(replay_s * fs))) if self._material_at is not None else None
+        self._replay = (
+            np.zeros(int(round(replay_s * fs))) if self._material_at is not None else None
+        )
 
     def _sos_for(self, reduced: ReducedModel) -> np.ndarray:
         return tustin_sos(reduced.zeros_rad_s, reduced.poles_rad_s, reduced.gain,
@@ -309,7 +323,7 @@ def lti_response_fft(transfer, time_s, deflection_m, pad_s: float = 2.0) -> np.n
     t = np.asarray(time_s, float)
     w = np.asarray(deflection_m, float)
     if t.size < 2:
-        raise ValueError("need at least two samples")
+        raise ValueError('need at least two samples')
     x, n, fs, _ = padded_record(t, w, pad_s)
     f = np.fft.rfftfreq(n, 1.0 / fs)
     h = np.asarray(transfer(2j * np.pi * f), dtype=complex)

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Tip-deflection stimuli w(t) (m) with their exact velocities dw/dt (m/s).
 
 The sensor responds to the *rate* of deformation (H(s) = s R(s), eq. 31), so
@@ -13,18 +14,22 @@ import numpy as np
 
 from ..physics.parameters import ParameterError
 
-__all__ = ["Stimulus", "CrankSlider", "Sweep", "FreeVibration", "Step", "Sampled", "make_stimulus",
-           "STIMULUS_KINDS"]
+__all__ = ['Stimulus', 'CrankSlider', 'Sweep', 'FreeVibration', 'Step', 'Sampled', 'make_stimulus',
+           'STIMULUS_KINDS']
 
 
 def _pos(name, value, allow_zero=False):
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise ParameterError(f"stimulus parameter '{name}' must be a number, got {value!r}") from None
+        raise ParameterError(
+            f"stimulus parameter '{name}' must be a number, got {value!r}"
+        ) from None
     if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
-        raise ParameterError(f"stimulus parameter '{name}' must be {'>= 0' if allow_zero else '> 0'}, "
-                             f"got {value!r}")
+        raise ParameterError(
+            f"stimulus parameter '{name}' must be {'>= 0' if allow_zero else '> 0'}, "
+            f'got {value!r}'
+        )
     return v
 
 
@@ -56,12 +61,14 @@ class CrankSlider(Stimulus):
     phase_rad: float = 0.0
 
     def __post_init__(self):
-        _pos("motor_frequency_hz", self.motor_frequency_hz)
-        _pos("crank_radius_m", self.crank_radius_m)
-        _pos("rod_length_m", self.rod_length_m)
+        _pos('motor_frequency_hz', self.motor_frequency_hz)
+        _pos('crank_radius_m', self.crank_radius_m)
+        _pos('rod_length_m', self.rod_length_m)
         if self.rod_length_m <= self.crank_radius_m:
-            raise ParameterError(f"stimulus parameter 'rod_length_m' ({self.rod_length_m}) must exceed "
-                                 f"'crank_radius_m' ({self.crank_radius_m})")
+            raise ParameterError(
+                f"stimulus parameter 'rod_length_m' ({self.rod_length_m}) must exceed "
+                f"'crank_radius_m' ({self.crank_radius_m})"
+            )
 
     def _theta(self, t):
         return 2 * np.pi * self.motor_frequency_hz * np.asarray(t, dtype=float) + self.phase_rad
@@ -98,7 +105,7 @@ class Sweep(Stimulus):
     duration_s: float = 20.0
 
     def __post_init__(self):
-        for k in ("amplitude_m", "start_frequency_hz", "stop_frequency_hz", "duration_s"):
+        for k in ('amplitude_m', 'start_frequency_hz', 'stop_frequency_hz', 'duration_s'):
             _pos(k, getattr(self, k))
 
     def _phase(self, t):
@@ -133,11 +140,14 @@ class Step(Stimulus):
     rise_time_s: float = 0.02
 
     def __post_init__(self):
-        _pos("start_s", self.start_s, allow_zero=True)
-        _pos("rise_time_s", self.rise_time_s)
+        _pos('start_s', self.start_s, allow_zero=True)
+        _pos('rise_time_s', self.rise_time_s)
 
     def deflection(self, t):
-        return self.amplitude_m * _smoothstep((np.asarray(t, float) - self.start_s) / self.rise_time_s)[0]
+        return (
+            self.amplitude_m
+            * _smoothstep((np.asarray(t, float) - self.start_s) / self.rise_time_s)[0]
+        )
 
     def velocity(self, t):
         u = (np.asarray(t, float) - self.start_s) / self.rise_time_s
@@ -158,12 +168,12 @@ class FreeVibration(Stimulus):
     ramp_s: float = 0.3
 
     def __post_init__(self):
-        _pos("natural_frequency_hz", self.natural_frequency_hz)
-        _pos("release_s", self.release_s)
-        _pos("ramp_s", self.ramp_s)
+        _pos('natural_frequency_hz', self.natural_frequency_hz)
+        _pos('release_s', self.release_s)
+        _pos('ramp_s', self.ramp_s)
         if not 0.0 <= float(self.damping_ratio) < 1.0:
             raise ParameterError(f"stimulus parameter 'damping_ratio' must be in [0, 1), "
-                                 f"got {self.damping_ratio!r}")
+                                 f'got {self.damping_ratio!r}')
 
     def _parts(self, t):
         t = np.asarray(t, float)
@@ -200,11 +210,13 @@ class Sampled(Stimulus):
         t = np.asarray(time_s, float)
         w = np.asarray(deflection_m, float)
         if t.ndim != 1 or t.shape != w.shape or t.size < 4:
-            raise ParameterError("sampled stimulus needs at least 4 (time, deflection) pairs of equal length")
+            raise ParameterError(
+                'sampled stimulus needs at least 4 (time, deflection) pairs of equal length'
+            )
         if not (np.all(np.isfinite(t)) and np.all(np.isfinite(w))):
-            raise ParameterError("sampled stimulus contains non-finite values")
+            raise ParameterError('sampled stimulus contains non-finite values')
         if np.any(np.diff(t) <= 0):
-            raise ParameterError("sampled stimulus time must increase strictly")
+            raise ParameterError('sampled stimulus time must increase strictly')
         self._t0, self._t1 = float(t[0]), float(t[-1])    # the record's first and last time, s
         self._spline = CubicSpline(t, w)
         self._d = self._spline.derivative()
@@ -219,18 +231,20 @@ class Sampled(Stimulus):
 
     def velocity(self, t):
         t = np.asarray(t, float)
-        return np.where((t >= self._t0) & (t <= self._t1), self._d(np.clip(t, self._t0, self._t1)), 0.0)
+        return np.where(
+            (t >= self._t0) & (t <= self._t1), self._d(np.clip(t, self._t0, self._t1)), 0.0
+        )
 
 
-STIMULUS_KINDS = {"crank_slider": CrankSlider, "sweep": Sweep, "free_vibration": FreeVibration,
-                  "step": Step}
+STIMULUS_KINDS = {'crank_slider': CrankSlider, 'sweep': Sweep, 'free_vibration': FreeVibration,
+                  'step': Step}
 
 
 def make_stimulus(kind: str, **params) -> Stimulus:
     """Build a stimulus by name (``crank_slider``, ``sweep``, ``free_vibration``, ``step``)."""
     if kind not in STIMULUS_KINDS:
         raise ParameterError(f"unknown stimulus '{kind}'; choose one of {sorted(STIMULUS_KINDS)} "
-                             "(or a file via Sampled)")
+                             '(or a file via Sampled)')
     try:
         return STIMULUS_KINDS[kind](**params)
     except TypeError as exc:

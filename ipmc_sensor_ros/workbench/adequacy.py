@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Implausible magnitudes in measured records, with the likely unit factor.
 
 A tip deflection beyond L/2 cannot be bent by the crank-slider on these
@@ -14,11 +15,11 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["magnitude_flags", "MAX_CURRENT_A", "MAX_GAIN_DB"]
+__all__ = ['magnitude_flags', 'MAX_CURRENT_A', 'MAX_GAIN_DB']
 
 MAX_CURRENT_A = 1e-3
 MAX_GAIN_DB = 60.0
-_UNIT = {1e-3: "milli", 1e-6: "micro", 1e-9: "nano", 1e3: "kilo"}
+_UNIT = {1e-3: 'milli', 1e-6: 'micro', 1e-9: 'nano', 1e3: 'kilo'}
 
 
 def _factor(ratio: float) -> float:
@@ -41,14 +42,16 @@ def magnitude_flags(records: Sequence, model_for=None) -> list[str]:
         if w is not None and np.max(np.abs(w)) > L / 2:
             wmax = float(np.max(np.abs(w)))
             f = _factor(wmax / (0.05 * L))
-            out.append(f"{r.path}: deflection up to {wmax:.4g} m on a {L:.4g} m beam (> L/2): "
+            out.append(f'{r.path}: deflection up to {wmax:.4g} m on a {L:.4g} m beam (> L/2): '
                        f"likely stored in {_UNIT.get(f, f'x{f:g}')}metres; multiply by {f:g}")
             continue
         if np.max(np.abs(i)) > MAX_CURRENT_A:
             imax = float(np.max(np.abs(i)))
             f = _factor(imax / 1e-7)
-            out.append(f"{r.path}: current up to {imax:.4g} A (> {MAX_CURRENT_A:g} A for these "
-                       f"geometries): likely stored in {_UNIT.get(f, f'x{f:g}')}amperes; multiply by {f:g}")
+            out.append(
+                f'{r.path}: current up to {imax:.4g} A (> {MAX_CURRENT_A:g} A for these '
+                f"geometries): likely stored in {_UNIT.get(f, f'x{f:g}')}amperes; multiply by {f:g}"
+            )
             continue
         if w is None:
             continue
@@ -60,7 +63,9 @@ def magnitude_flags(records: Sequence, model_for=None) -> list[str]:
         ratio = p.gain_a_per_m / model_gain if model_gain > 0 else np.inf
         if np.isfinite(ratio) and ratio > 0 and abs(20 * np.log10(ratio)) > MAX_GAIN_DB:
             f = _factor(ratio)
-            out.append(f"{r.path}: gain at {p.frequency_hz:.3g} Hz is {20 * np.log10(ratio):+.0f} dB off the "
-                       f"model (> {MAX_GAIN_DB:g} dB): a unit error of current or deflection; the "
-                       f"current x {f:g} (or the deflection / {f:g}) would fit")
+            out.append(
+                f'{r.path}: gain at {p.frequency_hz:.3g} Hz is {20 * np.log10(ratio):+.0f} dB off the '
+                f'model (> {MAX_GAIN_DB:g} dB): a unit error of current or deflection; the '
+                f'current x {f:g} (or the deflection / {f:g}) would fit'
+            )
     return out

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """rosbag2 bags in and out of the workbench (read with ``rosbags``; no rclpy needed).
 
 Bags (rosbag2, read with ``rosbags``)
@@ -40,22 +41,27 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ..interface.blocks import (CURRENT_COLUMNS, DEFLECTION_COLUMNS, ESTIMATE_COLUMNS, SAMPLE_LABEL,
-                                unpack_columns)
+from ..interface.blocks import (
+    CURRENT_COLUMNS,
+    DEFLECTION_COLUMNS,
+    ESTIMATE_COLUMNS,
+    SAMPLE_LABEL,
+    unpack_columns,
+)
 from ..physics.parameters import Geometry, MaterialParameters, ParameterError
 from .formats import _fmt
 from .measurements import DataFormatError, PathLike, TimeSeries
 
-__all__ = ["CURRENT_LABEL", "DEFLECTION_LABEL", "MULTIARRAY_TYPE", "POINT_STAMPED_TYPE",
-           "read_bag", "write_bag"]
+__all__ = ['CURRENT_LABEL', 'DEFLECTION_LABEL', 'MULTIARRAY_TYPE', 'POINT_STAMPED_TYPE',
+           'read_bag', 'write_bag']
 
 #: Column label (dim[1].label) of current and deflection blocks in bags.
 CURRENT_LABEL = CURRENT_COLUMNS
 DEFLECTION_LABEL = DEFLECTION_COLUMNS
-MULTIARRAY_TYPE = "std_msgs/msg/Float64MultiArray"
-POINT_STAMPED_TYPE = "geometry_msgs/msg/PointStamped"
-SIDECAR_NAME = "ipmc.yaml"
-_SIDECAR_KEYS = ("geometry", "material", "extra", "model")
+MULTIARRAY_TYPE = 'std_msgs/msg/Float64MultiArray'
+POINT_STAMPED_TYPE = 'geometry_msgs/msg/PointStamped'
+SIDECAR_NAME = 'ipmc.yaml'
+_SIDECAR_KEYS = ('geometry', 'material', 'extra', 'model')
 
 
 # ---------------------------------------------------------------------------
@@ -69,21 +75,21 @@ def _typestore():
 
 
 def _topic_key(name: str) -> str:
-    return name.strip().lstrip("/")
+    return name.strip().lstrip('/')
 
 
 def _find_topic(where: str, topics: Mapping[str, Any], wanted: str):
     """(name, info) of ``wanted`` in the bag (leading '/' optional), or None."""
     matches = [name for name in topics if _topic_key(name) == _topic_key(wanted)]
     if len(matches) > 1:
-        raise DataFormatError(where, None, f"ambiguous: the bag has both {matches}", topic=wanted)
+        raise DataFormatError(where, None, f'ambiguous: the bag has both {matches}', topic=wanted)
     return (matches[0], topics[matches[0]]) if matches else None
 
 
 def _describe_topics(topics: Mapping[str, Any]) -> str:
     if not topics:
-        return "the bag has no topics"
-    return "the bag has: " + ", ".join(f"{name} ({info.msgtype}, {info.msgcount} msgs)"
+        return 'the bag has no topics'
+    return 'the bag has: ' + ', '.join(f'{name} ({info.msgtype}, {info.msgcount} msgs)'
                                        for name, info in sorted(topics.items()))
 
 
@@ -103,10 +109,12 @@ def _read_topic(where: str, reader, name: str, info, label: str,
     """All (time, value) samples of one topic, in time order, validated."""
     store = _typestore()
     msgtype = info.msgtype
-    allowed = (MULTIARRAY_TYPE,) if quantity == "current" else (MULTIARRAY_TYPE, POINT_STAMPED_TYPE)
+    allowed = (
+        (MULTIARRAY_TYPE,) if quantity == 'current' else (MULTIARRAY_TYPE, POINT_STAMPED_TYPE)
+    )
     if msgtype not in allowed:
-        raise DataFormatError(where, None, f"has message type {msgtype!r}; expected "
-                              + " or ".join(repr(a) for a in allowed), topic=name)
+        raise DataFormatError(where, None, f'has message type {msgtype!r}; expected '
+                              + ' or '.join(repr(a) for a in allowed), topic=name)
     times: list[np.ndarray] = []
     values: list[np.ndarray] = []
     count = 0
@@ -116,8 +124,8 @@ def _read_topic(where: str, reader, name: str, info, label: str,
         try:
             msg = store.deserialize_cdr(raw, conn.msgtype)
         except Exception as exc:  # corrupt payload: any decoder failure
-            raise DataFormatError(where, None, f"message {count}: cannot deserialize "
-                                  f"{conn.msgtype}: {type(exc).__name__}: {exc}",
+            raise DataFormatError(where, None, f'message {count}: cannot deserialize '
+                                  f'{conn.msgtype}: {type(exc).__name__}: {exc}',
                                   topic=name) from exc
         if msgtype == POINT_STAMPED_TYPE:
             t = np.array([msg.header.stamp.sec + msg.header.stamp.nanosec / 1e9])
@@ -126,39 +134,43 @@ def _read_topic(where: str, reader, name: str, info, label: str,
             try:
                 t, v = _unpack_block(msg, label)
             except ValueError as exc:
-                raise DataFormatError(where, None, f"message {count}: {exc}", topic=name) from None
+                raise DataFormatError(where, None, f'message {count}: {exc}', topic=name) from None
         bad = ~(np.isfinite(t) & np.isfinite(v))
         if bad.any():
             k = int(np.argmax(bad))
-            raise DataFormatError(where, None, f"message {count}, sample {k}: NaN/Inf "
-                                  f"(time {_fmt(t[k])}, {quantity} {_fmt(v[k])})", topic=name)
+            raise DataFormatError(where, None, f'message {count}, sample {k}: NaN/Inf '
+                                  f'(time {_fmt(t[k])}, {quantity} {_fmt(v[k])})', topic=name)
         if msgtype == MULTIARRAY_TYPE and t.size:
             steps = np.diff(t)
             if (steps <= 0).any():
                 k = int(np.argmax(steps <= 0)) + 1
-                raise DataFormatError(where, None, f"message {count}, sample {k}: time "
-                                      f"{_fmt(t[k])} s is not after {_fmt(t[k - 1])} s (sample "
-                                      "times must be strictly increasing)", topic=name)
+                raise DataFormatError(where, None, f'message {count}, sample {k}: time '
+                                      f'{_fmt(t[k])} s is not after {_fmt(t[k - 1])} s (sample '
+                                      'times must be strictly increasing)', topic=name)
             if prev_end is not None and t[0] <= prev_end:
-                raise DataFormatError(where, None, f"message {count} starts at {_fmt(t[0])} s, not "
-                                      "after the previous message's last sample at "
-                                      f"{_fmt(prev_end)} s (blocks overlap or are out of order)",
-                                      topic=name)
+                raise DataFormatError(
+                    where,
+                    None,
+                    f'message {count} starts at {_fmt(t[0])} s, not '
+                    "after the previous message's last sample at "
+                    f'{_fmt(prev_end)} s (blocks overlap or are out of order)',
+                    topic=name,
+                )
             prev_end = float(t[-1])
         times.append(t)
         values.append(v)
     if count != info.msgcount and info.msgcount:
-        raise DataFormatError(where, None, f"the bag lists {info.msgcount} messages but only "
-                              f"{count} could be read (truncated bag?)", topic=name)
+        raise DataFormatError(where, None, f'the bag lists {info.msgcount} messages but only '
+                              f'{count} could be read (truncated bag?)', topic=name)
     t = np.concatenate(times) if times else np.empty(0)
     v = np.concatenate(values) if values else np.empty(0)
     if msgtype == POINT_STAMPED_TYPE and t.size:
-        order = np.argsort(t, kind="stable")
+        order = np.argsort(t, kind='stable')
         t, v = t[order], v[order]
         dup = np.diff(t) == 0
         if dup.any():
             k = int(np.argmax(dup))
-            raise DataFormatError(where, None, f"two samples with the same stamp {_fmt(t[k])} s",
+            raise DataFormatError(where, None, f'two samples with the same stamp {_fmt(t[k])} s',
                                   topic=name)
     return t, v
 
@@ -167,19 +179,19 @@ def _align(where: str, name: str, tc: np.ndarray, td: np.ndarray,
            vd: np.ndarray) -> tuple[np.ndarray, str]:
     """Deflection at the current times ``tc``: exact match or linear interpolation."""
     if td.size == 0:
-        raise DataFormatError(where, None, "has no deflection samples", topic=name)
+        raise DataFormatError(where, None, 'has no deflection samples', topic=name)
     tol = 1e-9 + 4.0 * float(np.spacing(max(abs(tc).max(), abs(td).max())))
     idx = np.clip(np.searchsorted(td, tc), 1, max(td.size - 1, 1))
     lo = np.clip(idx - 1, 0, td.size - 1)
     hi = np.clip(idx, 0, td.size - 1)
     nearest = np.where(np.abs(td[lo] - tc) <= np.abs(td[hi] - tc), lo, hi)
     if np.all(np.abs(td[nearest] - tc) <= tol):
-        return vd[nearest].copy(), "exact"
+        return vd[nearest].copy(), 'exact'
     if td.size < 2 or td[0] > tc[0] + tol or td[-1] < tc[-1] - tol:
-        raise DataFormatError(where, None, f"deflection covers {_fmt(td[0])}..{_fmt(td[-1])} s "
-                              f"but the current covers {_fmt(tc[0])}..{_fmt(tc[-1])} s: cannot "
-                              "align without extrapolating (trim the recording)", topic=name)
-    return np.interp(tc, td, vd), "linear"
+        raise DataFormatError(where, None, f'deflection covers {_fmt(td[0])}..{_fmt(td[-1])} s '
+                              f'but the current covers {_fmt(tc[0])}..{_fmt(tc[-1])} s: cannot '
+                              'align without extrapolating (trim the recording)', topic=name)
+    return np.interp(tc, td, vd), 'linear'
 
 
 def _yaml_line(text: str, keys: Sequence[str]) -> int | None:
@@ -195,7 +207,7 @@ def _yaml_line(text: str, keys: Sequence[str]) -> int | None:
         if not isinstance(node, yaml.MappingNode):
             break
         for k, v in node.value:
-            if getattr(k, "value", None) == key:
+            if getattr(k, 'value', None) == key:
                 line, node = k.start_mark.line + 1, v
                 break
         else:
@@ -210,66 +222,66 @@ def _read_sidecar(bag: str, path: Path, need_geometry: bool):
     where = str(path)
     about = f"sidecar of bag '{bag}'"
     if path.exists() and not path.is_file():
-        raise DataFormatError(where, None, f"{about} is not a regular file: refusing to read it")
+        raise DataFormatError(where, None, f'{about} is not a regular file: refusing to read it')
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding='utf-8')
     except FileNotFoundError:
-        raise DataFormatError(where, None, f"{about} not found") from None
+        raise DataFormatError(where, None, f'{about} not found') from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise DataFormatError(where, None, f"cannot read {about}: {exc}") from None
+        raise DataFormatError(where, None, f'cannot read {about}: {exc}') from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        problem = getattr(exc, "problem", None) or exc
+        mark = getattr(exc, 'problem_mark', None)
+        problem = getattr(exc, 'problem', None) or exc
         raise DataFormatError(where, mark.line + 1 if mark else None,
-                              f"{about} is not valid YAML: {problem}") from None
+                              f'{about} is not valid YAML: {problem}') from None
     data = {} if data is None else data
     if not isinstance(data, dict):
         raise DataFormatError(where, 1, f"{about} must be a mapping with a 'geometry' key")
     unknown = sorted(str(k) for k in set(data) - set(_SIDECAR_KEYS))
     if unknown:
-        raise DataFormatError(where, _yaml_line(text, [unknown[0]]), f"unknown key(s) {unknown} "
-                              f"in {about}; known: {list(_SIDECAR_KEYS)}")
+        raise DataFormatError(where, _yaml_line(text, [unknown[0]]), f'unknown key(s) {unknown} '
+                              f'in {about}; known: {list(_SIDECAR_KEYS)}')
     geometry = None
-    if data.get("geometry") is not None:
-        g = data["geometry"]
+    if data.get('geometry') is not None:
+        g = data['geometry']
         if not isinstance(g, dict):
-            raise DataFormatError(where, _yaml_line(text, ["geometry"]),
+            raise DataFormatError(where, _yaml_line(text, ['geometry']),
                                   f"'geometry' in {about} must be a mapping")
         try:
             geometry = Geometry.from_dict(g)
         except (ParameterError, TypeError) as exc:
             m = re.search(r"parameter '(\w+)'", str(exc))
-            line = _yaml_line(text, ["geometry", m.group(1)] if m else ["geometry"])
-            raise DataFormatError(where, line, f"geometry in {about}: {exc}") from None
+            line = _yaml_line(text, ['geometry', m.group(1)] if m else ['geometry'])
+            raise DataFormatError(where, line, f'geometry in {about}: {exc}') from None
     elif need_geometry:
         raise DataFormatError(where, None, f"{about} has no 'geometry' (length_m, width_m, "
-                              "thickness_m in metres) and no geometry was passed")
+                              'thickness_m in metres) and no geometry was passed')
     known: dict[str, float] = {}
-    if data.get("material") is not None:
-        mat = data["material"]
+    if data.get('material') is not None:
+        mat = data['material']
         if not isinstance(mat, dict):
-            raise DataFormatError(where, _yaml_line(text, ["material"]),
+            raise DataFormatError(where, _yaml_line(text, ['material']),
                                   f"'material' in {about} must be a mapping")
         try:
             MaterialParameters.from_dict(mat)
         except (ParameterError, TypeError) as exc:
-            raise DataFormatError(where, _yaml_line(text, ["material"]),
-                                  f"material in {about}: {exc}") from None
+            raise DataFormatError(where, _yaml_line(text, ['material']),
+                                  f'material in {about}: {exc}') from None
         known = {str(k): float(v) for k, v in mat.items()}
-    extra = data.get("extra") or {}
+    extra = data.get('extra') or {}
     if not isinstance(extra, dict):
-        raise DataFormatError(where, _yaml_line(text, ["extra"]),
+        raise DataFormatError(where, _yaml_line(text, ['extra']),
                               f"'extra' in {about} must be a mapping")
     extra = dict(extra)
-    if "model" in data:
-        extra["model"] = data["model"]
+    if 'model' in data:
+        extra['model'] = data['model']
     return geometry, known, extra
 
 
-def read_bag(path: PathLike, current_topic: str = "current",
-             deflection_topic: str | None = "deflection_truth",
+def read_bag(path: PathLike, current_topic: str = 'current',
+             deflection_topic: str | None = 'deflection_truth',
              geometry: Geometry | Mapping[str, Any] | None = None,
              sidecar: PathLike | None = None, *, require_deflection: bool = False) -> TimeSeries:
     """Read a rosbag2 bag (directory, ``.mcap`` or ``.db3``) into a :class:`TimeSeries`.
@@ -286,19 +298,19 @@ def read_bag(path: PathLike, current_topic: str = "current",
     bag = Path(path)
     where = str(path)
     if not bag.exists():
-        raise DataFormatError(where, None, "bag not found (no such file or directory)")
+        raise DataFormatError(where, None, 'bag not found (no such file or directory)')
     if bag.is_dir():
-        if not (bag / "metadata.yaml").is_file():
+        if not (bag / 'metadata.yaml').is_file():
             content = sorted(p.name for p in bag.iterdir())[:8]
-            raise DataFormatError(where, None, "not a rosbag2 bag: the directory has no "
-                                  f"metadata.yaml (it contains {content})")
-    elif bag.suffix not in (".mcap", ".db3"):
-        raise DataFormatError(where, None, "not a rosbag2 bag: expected a bag directory, a .mcap "
-                              "or a .db3 file")
+            raise DataFormatError(where, None, 'not a rosbag2 bag: the directory has no '
+                                  f'metadata.yaml (it contains {content})')
+    elif bag.suffix not in ('.mcap', '.db3'):
+        raise DataFormatError(where, None, 'not a rosbag2 bag: expected a bag directory, a .mcap '
+                              'or a .db3 file')
     for member in (bag.iterdir() if bag.is_dir() else [bag]):
         if not (member.is_file() or member.is_dir()):  # a FIFO or device would block the reader
-            raise DataFormatError(where, None, f"{member.name} is not a regular file (FIFO or "
-                                  "device?): refusing to read it")
+            raise DataFormatError(where, None, f'{member.name} is not a regular file (FIFO or '
+                                  'device?): refusing to read it')
     try:
         from rosbags.rosbag2 import Reader
     except ImportError as exc:  # pragma: no cover - rosbags is a workbench dependency
@@ -311,32 +323,32 @@ def read_bag(path: PathLike, current_topic: str = "current",
             topics = reader.topics
             found = _find_topic(where, topics, current_topic)
             if found is None:
-                raise DataFormatError(where, None, f"current topic not found; "
-                                      f"{_describe_topics(topics)}", topic=current_topic)
+                raise DataFormatError(where, None, f'current topic not found; '
+                                      f'{_describe_topics(topics)}', topic=current_topic)
             cur_name, cur_info = found
             dfound = None
             if deflection_topic is not None:
                 dfound = _find_topic(where, topics, deflection_topic)
                 if dfound is None and require_deflection:
-                    raise DataFormatError(where, None, f"deflection topic not found; "
-                                          f"{_describe_topics(topics)}", topic=deflection_topic)
+                    raise DataFormatError(where, None, f'deflection topic not found; '
+                                          f'{_describe_topics(topics)}', topic=deflection_topic)
             reading = cur_name
-            tc, current = _read_topic(where, reader, cur_name, cur_info, CURRENT_LABEL, "current")
+            tc, current = _read_topic(where, reader, cur_name, cur_info, CURRENT_LABEL, 'current')
             if tc.size < 2:
-                raise DataFormatError(where, None, f"only {tc.size} current sample(s); at least 2 "
-                                      "are needed", topic=cur_name)
+                raise DataFormatError(where, None, f'only {tc.size} current sample(s); at least 2 '
+                                      'are needed', topic=cur_name)
             deflection = alignment = None
             if dfound is not None:
                 reading = dfound[0]
                 td, vd = _read_topic(where, reader, dfound[0], dfound[1], DEFLECTION_LABEL,
-                                     "deflection")
+                                     'deflection')
                 deflection, alignment = _align(where, dfound[0], tc, td, vd)
             reading = None
     except DataFormatError:
         raise
     except Exception as exc:  # rosbags/sqlite3/mcap raise many types on corrupt input
-        raise DataFormatError(where, None, f"cannot read bag (corrupt or truncated?): "
-                              f"{type(exc).__name__}: {exc}", topic=reading) from exc
+        raise DataFormatError(where, None, f'cannot read bag (corrupt or truncated?): '
+                              f'{type(exc).__name__}: {exc}', topic=reading) from exc
 
     known: dict[str, float] = {}
     extra: dict[str, Any] = {}
@@ -347,14 +359,14 @@ def read_bag(path: PathLike, current_topic: str = "current",
         if geometry is None:
             geometry = side_geometry
     if geometry is None:
-        raise DataFormatError(where, None, "no geometry: pass geometry= or put an "
+        raise DataFormatError(where, None, 'no geometry: pass geometry= or put an '
                               f"{SIDECAR_NAME} sidecar with 'geometry: {{length_m, width_m, "
                               "thickness_m}' (metres) next to the bag")
     if not isinstance(geometry, Geometry):
         try:
             geometry = Geometry.from_dict(dict(geometry))
         except (ParameterError, TypeError) as exc:
-            raise DataFormatError(where, None, f"geometry argument: {exc}") from None
+            raise DataFormatError(where, None, f'geometry argument: {exc}') from None
     rate = 1.0 / float(np.median(np.diff(tc)))
     return TimeSeries(path=where, sample=geometry.name, geometry=geometry, known=known,
                       sample_rate_hz=rate, time_s=tc, current_a=current, deflection_m=deflection,
@@ -365,8 +377,8 @@ def _stamp_ns(t: float) -> int:
     return int(round(float(t) * 1e9))
 
 
-def write_bag(path: PathLike, timeseries: TimeSeries, storage: str = "sqlite3",
-              current_topic: str = "current", deflection_topic: str = "deflection_truth",
+def write_bag(path: PathLike, timeseries: TimeSeries, storage: str = 'sqlite3',
+              current_topic: str = 'current', deflection_topic: str = 'deflection_truth',
               block_size: int = 100, *, deflection_msgtype: str = MULTIARRAY_TYPE,
               sidecar: bool = True) -> None:
     """Write ``timeseries`` as a rosbag2 bag (format version 8) readable by :func:`read_bag`.
@@ -380,22 +392,22 @@ def write_bag(path: PathLike, timeseries: TimeSeries, storage: str = "sqlite3",
     """
     from rosbags.rosbag2 import StoragePlugin
 
-    plugins = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}
+    plugins = {'sqlite3': StoragePlugin.SQLITE3, 'mcap': StoragePlugin.MCAP}
     if storage not in plugins:
         raise ValueError(f"storage must be 'sqlite3' or 'mcap', got {storage!r}")
     if int(block_size) != block_size or block_size < 1:
-        raise ValueError(f"block_size must be a positive integer, got {block_size!r}")
+        raise ValueError(f'block_size must be a positive integer, got {block_size!r}')
     if deflection_msgtype not in (MULTIARRAY_TYPE, POINT_STAMPED_TYPE):
-        raise ValueError(f"deflection_msgtype must be {MULTIARRAY_TYPE!r} or "
-                         f"{POINT_STAMPED_TYPE!r}, got {deflection_msgtype!r}")
+        raise ValueError(f'deflection_msgtype must be {MULTIARRAY_TYPE!r} or '
+                         f'{POINT_STAMPED_TYPE!r}, got {deflection_msgtype!r}')
     ts = timeseries
     if ts.n_samples and not (ts.time_s.min() >= 0.0 and ts.time_s.max() < 2.0 ** 31):
-        raise DataFormatError(path, None, f"sample times must be >= 0 and < 2^31 s to be bag "
-                              f"timestamps, got {ts.time_s.min():.6g}..{ts.time_s.max():.6g} s: "
-                              "write a time series or shift the time origin")
+        raise DataFormatError(path, None, f'sample times must be >= 0 and < 2^31 s to be bag '
+                              f'timestamps, got {ts.time_s.min():.6g}..{ts.time_s.max():.6g} s: '
+                              'write a time series or shift the time origin')
     bag = Path(path)
     if bag.exists():
-        raise FileExistsError(f"{bag} exists; write_bag does not overwrite")
+        raise FileExistsError(f'{bag} exists; write_bag does not overwrite')
     try:
         _write_bag(bag, ts, plugins[storage], current_topic, deflection_topic, block_size,
                    deflection_msgtype, sidecar)
@@ -411,9 +423,9 @@ def _write_bag(bag: Path, ts: TimeSeries, plugin, current_topic: str, deflection
 
     store = _typestore()
     types = store.types
-    F64, Layout, Dim = (types["std_msgs/msg/Float64MultiArray"],
-                        types["std_msgs/msg/MultiArrayLayout"],
-                        types["std_msgs/msg/MultiArrayDimension"])
+    F64, Layout, Dim = (types['std_msgs/msg/Float64MultiArray'],
+                        types['std_msgs/msg/MultiArrayLayout'],
+                        types['std_msgs/msg/MultiArrayDimension'])
 
     def block(t: np.ndarray, v: np.ndarray, label: str):
         n = int(t.size)
@@ -424,7 +436,7 @@ def _write_bag(bag: Path, ts: TimeSeries, plugin, current_topic: str, deflection
         return store.serialize_cdr(F64(layout=layout, data=data), MULTIARRAY_TYPE)
 
     def topic(name: str) -> str:
-        return "/" + _topic_key(name)
+        return '/' + _topic_key(name)
 
     with Writer(bag, version=8, storage_plugin=plugin) as writer:
         cur = writer.add_connection(topic(current_topic), MULTIARRAY_TYPE, typestore=store)
@@ -440,24 +452,22 @@ def _write_bag(bag: Path, ts: TimeSeries, plugin, current_topic: str, deflection
             if dconn is not None and deflection_msgtype == MULTIARRAY_TYPE:
                 writer.write(dconn, stamp, block(t, ts.deflection_m[sl], DEFLECTION_LABEL))
         if dconn is not None and deflection_msgtype == POINT_STAMPED_TYPE:
-            Point, PointStamped = types["geometry_msgs/msg/Point"], types[POINT_STAMPED_TYPE]
-            Header, Time = types["std_msgs/msg/Header"], types["builtin_interfaces/msg/Time"]
+            Point, PointStamped = types['geometry_msgs/msg/Point'], types[POINT_STAMPED_TYPE]
+            Header, Time = types['std_msgs/msg/Header'], types['builtin_interfaces/msg/Time']
             for t, d in zip(ts.time_s.tolist(), ts.deflection_m.tolist()):
                 ns = _stamp_ns(t)
                 sec, nsec = divmod(ns, 10**9)
                 # the estimator node's convention: (L, 0, w) in the clamp frame
                 msg = PointStamped(header=Header(stamp=Time(sec=sec, nanosec=nsec),
-                                                 frame_id="ipmc_clamp"),
+                                                 frame_id='ipmc_clamp'),
                                    point=Point(x=float(ts.geometry.length_m), y=0.0, z=d))
                 writer.write(dconn, ns, store.serialize_cdr(msg, POINT_STAMPED_TYPE))
     if sidecar:
         geometry = ts.geometry.to_dict()
-        geometry["name"] = ts.sample or ts.geometry.name
-        doc: dict[str, Any] = {"geometry": geometry}
+        geometry['name'] = ts.sample or ts.geometry.name
+        doc: dict[str, Any] = {'geometry': geometry}
         if ts.known:
-            doc["material"] = dict(ts.known)
+            doc['material'] = dict(ts.known)
         if ts.extra:
-            doc["extra"] = dict(ts.extra)
-        (bag / SIDECAR_NAME).write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
-
-
+            doc['extra'] = dict(ts.extra)
+        (bag / SIDECAR_NAME).write_text(yaml.safe_dump(doc, sort_keys=False), encoding='utf-8')

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Single-threaded BLAS for the fits (:func:`single_threaded_blas`).
 
 The fits here do many small matrix products (thousands of rows x tens of
@@ -12,18 +13,18 @@ from __future__ import annotations
 import contextlib
 import ctypes
 
-__all__ = ["single_threaded_blas"]
+__all__ = ['single_threaded_blas']
 
-_SETTERS = ("scipy_openblas_set_num_threads64_", "scipy_openblas_set_num_threads",
-            "openblas_set_num_threads64_", "openblas_set_num_threads")
-_GETTERS = ("scipy_openblas_get_num_threads64_", "scipy_openblas_get_num_threads",
-            "openblas_get_num_threads64_", "openblas_get_num_threads")
+_SETTERS = ('scipy_openblas_set_num_threads64_', 'scipy_openblas_set_num_threads',
+            'openblas_set_num_threads64_', 'openblas_set_num_threads')
+_GETTERS = ('scipy_openblas_get_num_threads64_', 'scipy_openblas_get_num_threads',
+            'openblas_get_num_threads64_', 'openblas_get_num_threads')
 
 
 def _openblas_libraries():
     try:
-        with open("/proc/self/maps") as f:
-            paths = {line.split()[-1] for line in f if "openblas" in line.lower() and "/" in line}
+        with open('/proc/self/maps') as f:
+            paths = {line.split()[-1] for line in f if 'openblas' in line.lower() and '/' in line}
     except OSError:
         return []
     libs = []
@@ -53,7 +54,7 @@ def single_threaded_blas():
     except ImportError:
         threadpool_limits = None
     if threadpool_limits is not None:
-        with threadpool_limits(limits=1, user_api="blas"):
+        with threadpool_limits(limits=1, user_api='blas'):
             yield
         return
     pairs = _pairs()

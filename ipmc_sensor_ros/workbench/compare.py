@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Compare a fixed model with measurements and locate where it fails.
 
 Prediction
@@ -39,7 +40,7 @@ from .adequacy import magnitude_flags
 from .freqresp import FrequencyPoint, fundamental_response
 from .metrics import fit_percent, noise_rms
 
-__all__ = ["RecordComparison", "Comparison", "compare_records", "FREQUENCY_BANDS_HZ"]
+__all__ = ['RecordComparison', 'Comparison', 'compare_records', 'FREQUENCY_BANDS_HZ']
 
 FREQUENCY_BANDS_HZ = ((0.0, 2.0), (2.0, 5.0), (5.0, 10.0), (10.0, 20.0), (20.0, np.inf))
 _BOUND99 = 2.576
@@ -91,39 +92,49 @@ class Comparison:
 
     def to_json(self) -> dict:
         return {
-            "magnitude_flags": self.magnitude_flags,
-            "error": self.error, "fit_percent": self.fit_percent, "noise_floor": self.noise_floor,
-            "records": [{
-                "source": r.source, "sample": r.sample, "error": r.error,
-                "fit_percent": r.fit_percent, "noise_floor": r.noise_floor,
-                "frequency_hz": r.point.frequency_hz if r.point else None,
-                "mag_error_db": r.mag_error_db, "mag_sd_db": r.mag_sd_db,
-                "phase_error_deg": r.phase_error_deg, "phase_sd_deg": r.phase_sd_deg,
-                "whiteness": r.whiteness, "input_correlation": r.input_correlation,
+            'magnitude_flags': self.magnitude_flags,
+            'error': self.error, 'fit_percent': self.fit_percent, 'noise_floor': self.noise_floor,
+            'records': [{
+                'source': r.source, 'sample': r.sample, 'error': r.error,
+                'fit_percent': r.fit_percent, 'noise_floor': r.noise_floor,
+                'frequency_hz': r.point.frequency_hz if r.point else None,
+                'mag_error_db': r.mag_error_db, 'mag_sd_db': r.mag_sd_db,
+                'phase_error_deg': r.phase_error_deg, 'phase_sd_deg': r.phase_sd_deg,
+                'whiteness': r.whiteness, 'input_correlation': r.input_correlation,
             } for r in self.records],
-            "where": self.where,
+            'where': self.where,
         }
 
     def summary(self) -> str:
-        lines = [f"{'record':<28} {'sample':<8} {'f0 Hz':>7} {'fit %':>7} {'error':>7} {'noise':>7} "
-                 f"{'dMag dB':>14} {'dPhase deg':>14}"]
+        lines = [
+            f"{'record':<28} {'sample':<8} {'f0 Hz':>7} {'fit %':>7} {'error':>7} {'noise':>7} "
+            f"{'dMag dB':>14} {'dPhase deg':>14}"
+        ]
         for r in self.records:
-            f0 = f"{r.point.frequency_hz:7.3g}" if r.point else "      -"
-            dm = f"{r.mag_error_db:+6.2f}+-{r.mag_sd_db:.2f}" if r.mag_error_db is not None else "-"
-            dp = f"{r.phase_error_deg:+6.2f}+-{r.phase_sd_deg:.2f}" if r.phase_error_deg is not None else "-"
-            lines.append(f"{_short(r.source):<28} {r.sample:<8} {f0} {r.fit_percent:7.2f} "
-                         f"{r.error:7.4f} {r.noise_floor:7.4f} {dm:>14} {dp:>14}")
-        lines.append(f"overall: fit {self.fit_percent:.2f} %, error {self.error:.4f} "
-                     f"(noise floor {self.noise_floor:.4f})")
-        flagged = [f"{k}={c['label']}" for k, cells in self.where.items() for c in cells if c["flagged"]]
-        lines.append("model fails beyond measurement uncertainty at: " +
-                     (", ".join(flagged) if flagged else "nowhere"))
-        lines += [f"IMPLAUSIBLE MAGNITUDE: {f}" for f in self.magnitude_flags]
-        return "\n".join(lines)
+            f0 = f'{r.point.frequency_hz:7.3g}' if r.point else '      -'
+            dm = (
+                f'{r.mag_error_db:+6.2f}+-{r.mag_sd_db:.2f}' if r.mag_error_db is not None else '-'
+            )
+            dp = (
+                f'{r.phase_error_deg:+6.2f}+-{r.phase_sd_deg:.2f}'
+                if r.phase_error_deg is not None
+                else '-'
+            )
+            lines.append(f'{_short(r.source):<28} {r.sample:<8} {f0} {r.fit_percent:7.2f} '
+                         f'{r.error:7.4f} {r.noise_floor:7.4f} {dm:>14} {dp:>14}')
+        lines.append(f'overall: fit {self.fit_percent:.2f} %, error {self.error:.4f} '
+                     f'(noise floor {self.noise_floor:.4f})')
+        flagged = [
+            f"{k}={c['label']}" for k, cells in self.where.items() for c in cells if c['flagged']
+        ]
+        lines.append('model fails beyond measurement uncertainty at: ' +
+                     (', '.join(flagged) if flagged else 'nowhere'))
+        lines += [f'IMPLAUSIBLE MAGNITUDE: {f}' for f in self.magnitude_flags]
+        return '\n'.join(lines)
 
 
 def _short(path: str) -> str:
-    return path if len(path) <= 28 else "..." + path[-25:]
+    return path if len(path) <= 28 else '...' + path[-25:]
 
 
 def compare_records(records: Sequence, model_for: Callable[[object], SensorModel], *,
@@ -139,14 +150,16 @@ def compare_records(records: Sequence, model_for: Callable[[object], SensorModel
     out: list[RecordComparison] = []
     for rec in records:
         if rec.deflection_m is None:
-            raise ValueError(f"{rec.path}: no deflection column: cannot compare")
+            raise ValueError(f'{rec.path}: no deflection column: cannot compare')
         model = model_for(rec)
         transfer = transfer_for(rec) if transfer_for else model.transfer
         t, w, y = np.asarray(rec.time_s), np.asarray(rec.deflection_m), np.asarray(rec.current_a)
         y_hat_full = lti_response_fft(transfer, t, w)
         keep = t >= t[0] + settle_s
         if keep.sum() < 16:
-            raise ValueError(f"{rec.path}: record shorter than settle time {settle_s} s + 16 samples")
+            raise ValueError(
+                f'{rec.path}: record shorter than settle time {settle_s} s + 16 samples'
+            )
         tt, yy, yh, ww = t[keep], y[keep], y_hat_full[keep], w[keep]
         try:
             point = fundamental_response(tt, ww, yy, source=rec.path)
@@ -154,7 +167,7 @@ def compare_records(records: Sequence, model_for: Callable[[object], SensorModel
             point = None
         fp = fit_percent(yy, yh)
         den = np.linalg.norm(yy - yy.mean())
-        noise = noise_rms(tt, ww, yy) * np.sqrt(yy.size) / den if den > 0 else float("nan")
+        noise = noise_rms(tt, ww, yy) * np.sqrt(yy.size) / den if den > 0 else float('nan')
         resid = yy - yh
         lags = np.arange(1, max_lag + 1)
         acf = _xcorr_normalised(resid, resid, lags)
@@ -178,27 +191,43 @@ def compare_records(records: Sequence, model_for: Callable[[object], SensorModel
             if sel.sum() < 8:
                 continue
             d = np.linalg.norm(yy[sel] - yy[sel].mean())
-            windows.append({"start_s": float(a), "stop_s": float(b),
-                            "error": float(np.linalg.norm(resid[sel]) / d) if d > 0 else float("nan"),
-                            "amplitude_m": float(0.5 * np.ptp(ww[sel]))})
+            windows.append(
+                {
+                    'start_s': float(a),
+                    'stop_s': float(b),
+                    'error': float(np.linalg.norm(resid[sel]) / d) if d > 0 else float('nan'),
+                    'amplitude_m': float(0.5 * np.ptp(ww[sel])),
+                }
+            )
         out.append(RecordComparison(
-            source=str(rec.path), sample=str(getattr(rec, "sample", "") or model.geometry.name),
+            source=str(rec.path), sample=str(getattr(rec, 'sample', '') or model.geometry.name),
             time_s=tt, measured_a=yy, predicted_a=yh, deflection_m=ww, fit_percent=fp,
             error=float(1 - fp / 100), noise_floor=float(noise), point=point, model_response=hm,
             mag_error_db=mag_err, phase_error_deg=ph_err, mag_sd_db=mag_sd, phase_sd_deg=ph_sd,
-            whiteness={"max_abs": float(np.max(np.abs(acf))), "bound99": float(bound),
-                       "fraction_outside": float(np.mean(np.abs(acf) > bound)),
-                       "passed": bool(np.mean(np.abs(acf) > bound) <= 0.05)},
-            input_correlation={"max_abs": float(np.max(np.abs(ccf))), "bound99": float(bound),
-                               "fraction_outside": float(np.mean(np.abs(ccf) > bound)),
-                               "passed": bool(np.mean(np.abs(ccf) > bound) <= 0.05)},
+            whiteness={'max_abs': float(np.max(np.abs(acf))), 'bound99': float(bound),
+                       'fraction_outside': float(np.mean(np.abs(acf) > bound)),
+                       'passed': bool(np.mean(np.abs(acf) > bound) <= 0.05)},
+            input_correlation={'max_abs': float(np.max(np.abs(ccf))), 'bound99': float(bound),
+                               'fraction_outside': float(np.mean(np.abs(ccf) > bound)),
+                               'passed': bool(np.mean(np.abs(ccf) > bound) <= 0.05)},
             windows=windows))
     y_all = np.concatenate([r.measured_a for r in out])
     yh_all = np.concatenate([r.predicted_a for r in out])
     fp_all = fit_percent(y_all, yh_all)
     den_all = np.linalg.norm(y_all - y_all.mean())
-    noise_all = float(np.sqrt(sum((r.noise_floor * np.linalg.norm(r.measured_a - r.measured_a.mean())) ** 2
-                                  for r in out)) / den_all) if den_all > 0 else float("nan")
+    noise_all = (
+        float(
+            np.sqrt(
+                sum(
+                    (r.noise_floor * np.linalg.norm(r.measured_a - r.measured_a.mean())) ** 2
+                    for r in out
+                )
+            )
+            / den_all
+        )
+        if den_all > 0
+        else float('nan')
+    )
     return Comparison(records=out, fit_percent=fp_all, error=float(1 - fp_all / 100),
                       noise_floor=noise_all, where=_where_it_fails(out),
                       magnitude_flags=magnitude_flags(records, model_for))
@@ -210,17 +239,17 @@ def _freq_cell(label: str, recs: list[RecordComparison]) -> dict:
     msd = np.array([r.mag_sd_db for r in recs])
     psd = np.array([r.phase_sd_deg for r in recs])
     flagged = bool(np.any(np.abs(mags) > 3 * msd) or np.any(np.abs(phs) > 3 * psd))
-    return {"label": label, "n": len(recs), "rms_mag_error_db": float(np.sqrt(np.mean(mags ** 2))),
-            "rms_phase_error_deg": float(np.sqrt(np.mean(phs ** 2))),
-            "max_mag_z": float(np.max(np.abs(mags) / np.maximum(msd, 1e-12))),
-            "max_phase_z": float(np.max(np.abs(phs) / np.maximum(psd, 1e-12))), "flagged": flagged}
+    return {'label': label, 'n': len(recs), 'rms_mag_error_db': float(np.sqrt(np.mean(mags ** 2))),
+            'rms_phase_error_deg': float(np.sqrt(np.mean(phs ** 2))),
+            'max_mag_z': float(np.max(np.abs(mags) / np.maximum(msd, 1e-12))),
+            'max_phase_z': float(np.max(np.abs(phs) / np.maximum(psd, 1e-12))), 'flagged': flagged}
 
 
 def _error_cell(label: str, errors: list[float], floors: list[float]) -> dict:
     e = float(np.sqrt(np.mean(np.square(errors))))
     nf = float(np.sqrt(np.mean(np.square(floors))))
-    return {"label": label, "n": len(errors), "error": e, "noise_floor": nf,
-            "flagged": bool(e > 1.5 * nf + 0.01)}
+    return {'label': label, 'n': len(errors), 'error': e, 'noise_floor': nf,
+            'flagged': bool(e > 1.5 * nf + 0.01)}
 
 
 def _where_it_fails(recs: list[RecordComparison]) -> dict:
@@ -229,7 +258,7 @@ def _where_it_fails(recs: list[RecordComparison]) -> dict:
     for lo, hi in FREQUENCY_BANDS_HZ:
         sel = [r for r in with_point if lo <= r.point.frequency_hz < hi]
         if sel:
-            by_band.append(_freq_cell(f"{lo:g}-{hi:g} Hz", sel))
+            by_band.append(_freq_cell(f'{lo:g}-{hi:g} Hz', sel))
     by_sample = []
     for name in sorted({r.sample for r in recs}):
         sel = [r for r in recs if r.sample == name]
@@ -237,16 +266,16 @@ def _where_it_fails(recs: list[RecordComparison]) -> dict:
         sp = [r for r in sel if r.point is not None]
         if sp:
             fc = _freq_cell(name, sp)
-            cell.update({k: fc[k] for k in ("rms_mag_error_db", "rms_phase_error_deg")})
-            cell["flagged"] = cell["flagged"] or fc["flagged"]
+            cell.update({k: fc[k] for k in ('rms_mag_error_db', 'rms_phase_error_deg')})
+            cell['flagged'] = cell['flagged'] or fc['flagged']
         by_sample.append(cell)
     by_time = []
     n_w = max((len(r.windows) for r in recs), default=0)
     for k in range(n_w):
-        errs = [r.windows[k]["error"] for r in recs if k < len(r.windows)]
+        errs = [r.windows[k]['error'] for r in recs if k < len(r.windows)]
         floors = [r.noise_floor for r in recs if k < len(r.windows)]
-        by_time.append(_error_cell(f"window {k + 1}/{n_w}", errs, floors))
-    amps = [(w["amplitude_m"], w["error"], r.noise_floor) for r in recs for w in r.windows]
+        by_time.append(_error_cell(f'window {k + 1}/{n_w}', errs, floors))
+    amps = [(w['amplitude_m'], w['error'], r.noise_floor) for r in recs for w in r.windows]
     by_amp = []
     if amps:
         a = np.array([x[0] for x in amps])
@@ -254,7 +283,7 @@ def _where_it_fails(recs: list[RecordComparison]) -> dict:
         for lo, hi in zip(qs[:-1], qs[1:]):
             sel = [x for x in amps if lo <= x[0] <= hi]
             if sel:
-                by_amp.append(_error_cell(f"{lo * 1e3:.3g}-{hi * 1e3:.3g} mm",
+                by_amp.append(_error_cell(f'{lo * 1e3:.3g}-{hi * 1e3:.3g} mm',
                                           [x[1] for x in sel], [x[2] for x in sel]))
-    return {"frequency_band": by_band, "sample": by_sample, "time_window": by_time,
-            "amplitude": by_amp}
+    return {'frequency_band': by_band, 'sample': by_sample, 'time_window': by_time,
+            'amplitude': by_amp}

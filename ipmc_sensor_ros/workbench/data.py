@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Glue between loaded measurements and the analyses: per-record models and FRF groups."""
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from .freqresp import FrequencyPoint, fundamental_response
 from .measurements import FrequencyResponseData, TimeSeries
 from .timefit import Record
 
-__all__ = ["material_for", "records_from", "groups_from", "frf_points"]
+__all__ = ['material_for', 'records_from', 'groups_from', 'frf_points']
 
 #: relative gain / phase uncertainty assumed for FRF files without std columns
 #: or coherence (1 % and 0.01 rad, typical of a careful crank-slider sweep)
@@ -21,7 +22,7 @@ DEFAULT_FRF_SD = 0.01
 
 def material_for(data, material: MaterialParameters) -> MaterialParameters:
     """``material`` with the values the file header says are known."""
-    known = {k: v for k, v in getattr(data, "known", {}).items()
+    known = {k: v for k, v in getattr(data, 'known', {}).items()
              if k in MaterialParameters.__dataclass_fields__}
     return material.replace(**known) if known else material
 
@@ -32,11 +33,11 @@ def records_from(series: Sequence[TimeSeries], material: MaterialParameters,
     for ts in series:
         if not isinstance(ts, TimeSeries):
             raise ValueError(f"{getattr(ts, 'path', ts)}: a time series is needed here "
-                             "(this is a frequency-response file)")
+                             '(this is a frequency-response file)')
         if ts.deflection_m is None:
-            raise ValueError(f"{ts.path}: no deflection column: cannot compare or fit")
+            raise ValueError(f'{ts.path}: no deflection column: cannot compare or fit')
         model = SensorModel(ts.geometry, material_for(ts, material), effects)
-        out.append(Record(ts.path, ts.sample or ts.geometry.name or "sample", model,
+        out.append(Record(ts.path, ts.sample or ts.geometry.name or 'sample', model,
                           ts.time_s, ts.deflection_m, ts.current_a))
     return out
 
@@ -57,7 +58,7 @@ def frf_points(frf: FrequencyResponseData) -> list[FrequencyPoint]:
         pts.append(FrequencyPoint(frequency_hz=float(f), response=complex(frf.response[k]),
                                   sd_log_mag=sdm, sd_phase_rad=sdp, source=frf.path,
                                   coherence=float(frf.coherence[k]) if frf.coherence is not None
-                                  else float("nan")))
+                                  else float('nan')))
     return pts
 
 
@@ -73,7 +74,7 @@ def groups_from(data: Sequence, min_periods: int = 2) -> list[FitGroup]:
             g.points.extend(frf_points(d))
         else:
             if d.deflection_m is None:
-                raise ValueError(f"{d.path}: no deflection column: cannot measure the response")
+                raise ValueError(f'{d.path}: no deflection column: cannot measure the response')
             g.points.append(fundamental_response(d.time_s, d.deflection_m, d.current_a,
                                                  source=d.path, min_periods=min_periods))
     return list(groups.values())

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Missing-physics discovery: which effects does the model lack?
 
 Procedure (:func:`diagnose`)
@@ -53,12 +54,28 @@ from .discovery import priors_from_headers
 from .interference import remove_mains, summarize_lines
 from .timefit import FitSpec, ModelFit, PreparedRecord, Record, fit_model, predict, prepare
 
-__all__ = ["diagnose", "Diagnosis", "Candidate", "Step", "DEFAULT_FREE_MATERIAL", "priors_from_headers",
-           "SHAPES"]
+__all__ = [
+    'diagnose',
+    'Diagnosis',
+    'Candidate',
+    'Step',
+    'DEFAULT_FREE_MATERIAL',
+    'priors_from_headers',
+    'SHAPES',
+]
 
-DEFAULT_FREE_MATERIAL = ("charge_stress_coupling_j_per_c", "diffusivity_m2_per_s", "permittivity_f_per_m")
+DEFAULT_FREE_MATERIAL = (
+    'charge_stress_coupling_j_per_c',
+    'diffusivity_m2_per_s',
+    'permittivity_f_per_m',
+)
 #: effects tried in several shapes: name -> tuples of free parameters (the rest stay at default)
-SHAPES = {"hydration_drift": (("diffusivity_rate_per_s",), ("diffusivity_rate_per_s", "equilibrium_ratio"))}
+SHAPES = {
+    'hydration_drift': (
+        ('diffusivity_rate_per_s',),
+        ('diffusivity_rate_per_s', 'equilibrium_ratio'),
+    )
+}
 #: a fitted value more than this factor from its header prior is implausible
 PRIOR_FACTOR = 3.0
 
@@ -81,14 +98,14 @@ class Candidate:
     def plausible(self) -> bool:
         return not self.flags
 
-    def to_json(self, baseline: "Candidate | None" = None) -> dict:
-        d = {"effect": self.effect, "error": self.error, "fold_errors": self.fold_errors,
-             "params": self.params, "bic": self.fit.bic, "aic": self.fit.aic,
-             "chi2": self.fit.chi2, "n_params": self.fit.n_params, "flags": self.flags,
-             "fitted_parameters": list(self.shape), "held_out": self.held_out}
+    def to_json(self, baseline: 'Candidate | None' = None) -> dict:
+        d = {'effect': self.effect, 'error': self.error, 'fold_errors': self.fold_errors,
+             'params': self.params, 'bic': self.fit.bic, 'aic': self.fit.aic,
+             'chi2': self.fit.chi2, 'n_params': self.fit.n_params, 'flags': self.flags,
+             'fitted_parameters': list(self.shape), 'held_out': self.held_out}
         if baseline is not None:
-            d["delta_bic"] = self.fit.bic - baseline.fit.bic
-            d["improvement"] = baseline.error / self.error if self.error > 0 else float("inf")
+            d['delta_bic'] = self.fit.bic - baseline.fit.bic
+            d['improvement'] = baseline.error / self.error if self.error > 0 else float('inf')
         return d
 
 
@@ -106,8 +123,8 @@ class Step:
     alternatives: list[str] = field(default_factory=list)   # plausible scored runners-up
 
     def to_json(self) -> dict:
-        return {"effect": self.effect, "action": self.action, "error": self.error, "bic": self.bic,
-                "values": self.values, "reason": self.reason, "ties": self.ties}
+        return {'effect': self.effect, 'action': self.action, 'error': self.error, 'bic': self.bic,
+                'values': self.values, 'reason': self.reason, 'ties': self.ties}
 
 
 @dataclass
@@ -135,55 +152,73 @@ class Diagnosis:
     def to_json(self) -> dict:
         final = self.final or self.baseline
         return {
-            "baseline": {**self.baseline.to_json(), "model": self.baseline.fit.models[0].describe()},
-            "candidates": [c.to_json(self.baseline) for c in self.candidates],
-            "steps": [s.to_json() for s in self.steps],
-            "final": {**final.to_json(), "model": final.fit.models[0].describe()},
-            "noise_floor": self.noise_floor,
-            "cross_validation": self.cv,
-            "interference": [d for d in self.interference if d.get("removable")],
-            "interference_not_separable": [d for d in self.interference if not d.get("removable")],
-            "offset_test": self.offset_test,
-            "verdict": {"missing_effects": self.missing_effects, "missing_effect": self.missing_effect,
-                        "explained": self.explained, "reason": self.reason, "ties": self.ties,
-                        "error": final.error},
+            'baseline': {
+                **self.baseline.to_json(),
+                'model': self.baseline.fit.models[0].describe(),
+            },
+            'candidates': [c.to_json(self.baseline) for c in self.candidates],
+            'steps': [s.to_json() for s in self.steps],
+            'final': {**final.to_json(), 'model': final.fit.models[0].describe()},
+            'noise_floor': self.noise_floor,
+            'cross_validation': self.cv,
+            'interference': [d for d in self.interference if d.get('removable')],
+            'interference_not_separable': [d for d in self.interference if not d.get('removable')],
+            'offset_test': self.offset_test,
+            'verdict': {
+                'missing_effects': self.missing_effects,
+                'missing_effect': self.missing_effect,
+                'explained': self.explained,
+                'reason': self.reason,
+                'ties': self.ties,
+                'error': final.error,
+            },
         }
 
     def summary(self) -> str:
-        lines = [f"baseline {self.baseline.fit.models[0].describe()}: held-out error "
-                 f"{self.baseline.error:.4f} (noise floor {self.noise_floor:.4f}; {self.cv})"]
+        lines = [f'baseline {self.baseline.fit.models[0].describe()}: held-out error '
+                 f'{self.baseline.error:.4f} (noise floor {self.noise_floor:.4f}; {self.cv})']
         for d in self.interference:
-            if d.get("removable"):
-                lines.append(f"interference: {d['frequency_hz']:g} Hz line, level {d['level']:.3g} of the "
-                             f"signal RMS in {d['records']} record(s): removed before fitting")
+            if d.get('removable'):
+                lines.append(
+                    f"interference: {d['frequency_hz']:g} Hz line, level {d['level']:.3g} of the "
+                    f"signal RMS in {d['records']} record(s): removed before fitting"
+                )
         if self.offset_test:
             ot = self.offset_test
             lines.append(f"offset test: mean residual current {ot['mean_a'] * 1e9:.3g} nA, chi2 "
                          f"{ot['chi2']:.1f}/{ot['dof']} (p = {ot['p_value']:.2g})")
-        lines.append(f"first step: {'rank':>4} {'effect':<24} {'error':>8} {'x better':>8} {'dBIC':>10}  "
-                     "params / flags")
+        lines.append(
+            f"first step: {'rank':>4} {'effect':<24} {'error':>8} {'x better':>8} {'dBIC':>10}  "
+            'params / flags'
+        )
         for k, c in enumerate(self.candidates, 1):
-            ratio = self.baseline.error / c.error if c.error > 0 else float("inf")
-            params = ", ".join(f"{n}={v:.4g}" for n, v in c.params.items())
-            flags = ("  [" + "; ".join(c.flags) + "]") if c.flags else ""
-            mark = " " if c.held_out else "*"
-            lines.append(f"            {k:>4} {c.effect:<24} {c.error:8.4f}{mark}{ratio:7.2f} "
-                         f"{c.fit.bic - self.baseline.fit.bic:10.1f}  {params}{flags}")
+            ratio = self.baseline.error / c.error if c.error > 0 else float('inf')
+            params = ', '.join(f'{n}={v:.4g}' for n, v in c.params.items())
+            flags = ('  [' + '; '.join(c.flags) + ']') if c.flags else ''
+            mark = ' ' if c.held_out else '*'
+            lines.append(f'            {k:>4} {c.effect:<24} {c.error:8.4f}{mark}{ratio:7.2f} '
+                         f'{c.fit.bic - self.baseline.fit.bic:10.1f}  {params}{flags}')
         if any(not c.held_out for c in self.candidates):
-            lines.append("            (* in-sample error: the BIC rule already rejects it, not cross-validated)")
+            lines.append(
+                '            (* in-sample error: the BIC rule already rejects it, not cross-validated)'
+            )
         for k, s in enumerate(self.steps, 1):
-            vals = "; ".join(f"{e}: " + ", ".join(f"{n}={v:.4g}" for n, v in vs.items())
-                             for e, vs in s.values.items() if e != "material")
-            lines.append(f"step {k}: {s.action} {s.effect}: held-out error {s.error:.4f}  ({vals})")
+            vals = '; '.join(f'{e}: ' + ', '.join(f'{n}={v:.4g}' for n, v in vs.items())
+                             for e, vs in s.values.items() if e != 'material')
+            lines.append(
+                f'step {k}: {s.action} {s.effect}: held-out error {s.error:.4f}  ({vals})'
+            )
             for t in s.ties:
-                lines.append(f"        tie: {t['effect']} (error {t['error']:.4f}, dBIC {t['delta_bic']:+.0f}"
-                             f"{', implausible' if t['flags'] else ''}): " +
-                             ", ".join(f"{n}={v:.4g}" for n, v in t["params"].items()))
+                lines.append(
+                    f"        tie: {t['effect']} (error {t['error']:.4f}, dBIC {t['delta_bic']:+.0f}"
+                    f"{', implausible' if t['flags'] else ''}): "
+                    + ', '.join(f'{n}={v:.4g}' for n, v in t['params'].items())
+                )
         lines.append(f"verdict: missing effects = {self.missing_effects or 'none'}; explained = "
-                     f"{self.explained} ({self.reason})")
+                     f'{self.explained} ({self.reason})')
         if self.ties:
-            lines.append("ties (indistinguishable on these data): " + ", ".join(self.ties))
-        return "\n".join(lines)
+            lines.append('ties (indistinguishable on these data): ' + ', '.join(self.ties))
+        return '\n'.join(lines)
 
 
 def _folds(prepared: Sequence[PreparedRecord], n_folds: int) -> tuple[list[list[np.ndarray]], str]:
@@ -194,7 +229,7 @@ def _folds(prepared: Sequence[PreparedRecord], n_folds: int) -> tuple[list[list[
         for k in range(n_folds):
             test_recs = set(range(k, n, n_folds))
             folds.append([np.full(p.t.size, r in test_recs) for r, p in enumerate(prepared)])
-        return folds, f"{n_folds}-fold over {n} records"
+        return folds, f'{n_folds}-fold over {n} records'
     folds = []
     for k in range(n_folds):
         masks = []
@@ -202,7 +237,7 @@ def _folds(prepared: Sequence[PreparedRecord], n_folds: int) -> tuple[list[list[
             edges = np.linspace(p.t[0], p.t[-1], n_folds + 1)
             masks.append((p.t >= edges[k]) & (p.t <= edges[k + 1]))
         folds.append(masks)
-    return folds, f"{n_folds}-fold over contiguous time blocks of {n} record(s)"
+    return folds, f'{n_folds}-fold over contiguous time blocks of {n} record(s)'
 
 
 def _grid(effect_name: str, shape: Sequence[str], priors: dict) -> list[list[float]]:
@@ -214,7 +249,11 @@ def _grid(effect_name: str, shape: Sequence[str], priors: dict) -> list[list[flo
         par = pars[name]
         lo, hi = par.typical
         if par.log_scale:
-            pts = list(np.log(np.exp(np.linspace(np.log(max(lo, par.lower)), np.log(min(hi, par.upper)), 3))))
+            pts = list(
+                np.log(
+                    np.exp(np.linspace(np.log(max(lo, par.lower)), np.log(min(hi, par.upper)), 3))
+                )
+            )
         else:
             pts = [lo, 0.0 if lo < 0 < hi else 0.5 * (lo + hi), hi]
         if (effect_name, name) in priors:
@@ -244,8 +283,18 @@ def _fit_vector(fit: ModelFit, spec: FitSpec) -> np.ndarray:
     return np.asarray(x, float)
 
 
-def _evaluate(prepared, spec: FitSpec, starts, folds, fold_nfev, effect=None, shape=(), priors=None,
-              max_nfev=60, held_out=True) -> Candidate:
+def _evaluate(
+    prepared,
+    spec: FitSpec,
+    starts,
+    folds,
+    fold_nfev,
+    effect=None,
+    shape=(),
+    priors=None,
+    max_nfev=60,
+    held_out=True,
+) -> Candidate:
     """Full-data fit from ``starts``; then (``held_out``) the held-out error over ``folds``."""
     full = fit_model(prepared, spec, starts=starts, max_nfev=max_nfev)
     x = _fit_vector(full, spec)
@@ -262,7 +311,9 @@ def _evaluate(prepared, spec: FitSpec, starts, folds, fold_nfev, effect=None, sh
         got = full.effect_values.get(e, {}).get(n)
         if got is not None and v != 0 and not (1 / PRIOR_FACTOR <= got / v <= PRIOR_FACTOR):
             flags.append(f"{e}/{n} = {got:.4g} far from the header's {v:.4g}")
-    c = Candidate(effect, float(np.sqrt(num / den)), [], full, params, flags, tuple(shape), x, spec)
+    c = Candidate(
+        effect, float(np.sqrt(num / den)), [], full, params, flags, tuple(shape), x, spec
+    )
     c.held_out = False
     return _held_out(prepared, c, folds, fold_nfev) if held_out else c
 
@@ -284,7 +335,7 @@ def _held_out(prepared, c: Candidate, folds, fold_nfev) -> Candidate:
             y = p.y[sel]
             fn += float(np.sum((y - predict(p, m)[sel]) ** 2))
             fd += float(np.sum((y - y.mean()) ** 2))
-        per_fold.append(float(np.sqrt(fn / fd)) if fd > 0 else float("nan"))
+        per_fold.append(float(np.sqrt(fn / fd)) if fd > 0 else float('nan'))
         num += fn
         den += fd
     c.in_sample_error = c.error
@@ -306,10 +357,23 @@ class _Job:
         name, shape = item
         models = [p.rec.model.with_effect(name) for p in self.prepared]
         prepared = _with_models(self.prepared, models)
-        spec = FitSpec(self.spec.material, self.spec.effect_params + tuple((name, n) for n in shape))
-        starts = [np.concatenate([self.x, np.asarray(c, float)]) for c in _grid(name, shape, self.priors)]
-        return _evaluate(prepared, spec, starts, self.folds, self.fold_nfev, name, shape, self.priors,
-                         held_out=False)
+        spec = FitSpec(
+            self.spec.material, self.spec.effect_params + tuple((name, n) for n in shape)
+        )
+        starts = [
+            np.concatenate([self.x, np.asarray(c, float)]) for c in _grid(name, shape, self.priors)
+        ]
+        return _evaluate(
+            prepared,
+            spec,
+            starts,
+            self.folds,
+            self.fold_nfev,
+            name,
+            shape,
+            self.priors,
+            held_out=False,
+        )
 
 
 _JOB = None
@@ -325,7 +389,7 @@ def _map(job, items, n_jobs, say):
         import multiprocessing as mp
 
         try:
-            ctx = mp.get_context("fork")
+            ctx = mp.get_context('fork')
         except ValueError:
             ctx = None
         if ctx is not None:
@@ -337,7 +401,7 @@ def _map(job, items, n_jobs, say):
                 _JOB = None
     out = []
     for item in items:
-        say(f"fitting {item.effect if isinstance(item, Candidate) else item[0]}")
+        say(f'fitting {item.effect if isinstance(item, Candidate) else item[0]}')
         out.append(job(item))
     return out
 
@@ -356,7 +420,7 @@ def _rank(cands: list[Candidate], tie_tol: float) -> list[Candidate]:
 def _values(fit: ModelFit, material_names) -> dict:
     m = fit.models[0]
     out = {e.name: e.as_dict() for e in m.effects if e.as_dict()}
-    out["material"] = {n: getattr(fit.material, n) for n in material_names}
+    out['material'] = {n: getattr(fit.material, n) for n in material_names}
     return out
 
 
@@ -379,8 +443,8 @@ def _offset_test(prepared, models) -> dict:
         means.append(float(np.mean(r)))
         ns.append(r.size)
     c2 = float(np.sum(np.square(zs)))
-    return {"mean_a": float(np.average(means, weights=ns)), "chi2": c2, "dof": len(zs),
-            "p_value": float(chi2_dist.sf(c2, len(zs))), "max_abs_z": float(np.max(np.abs(zs)))}
+    return {'mean_a': float(np.average(means, weights=ns)), 'chi2': c2, 'dof': len(zs),
+            'p_value': float(chi2_dist.sf(c2, len(zs))), 'max_abs_z': float(np.max(np.abs(zs)))}
 
 
 def diagnose(records: Sequence[Record], **kwargs) -> Diagnosis:
@@ -391,13 +455,28 @@ def diagnose(records: Sequence[Record], **kwargs) -> Diagnosis:
         return _diagnose(records, **kwargs)
 
 
-def _diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAULT_FREE_MATERIAL,
-             candidates: Sequence[str] | None = None, fit_effects: Sequence[str] = (),
-             max_effects: int = 3, n_folds: int = 4, explained_factor: float = 1.15,
-             min_gain: float = 0.03, min_delta_bic: float = 20.0, tie_tol: float = 0.05,
-             offset_p: float = 1e-6, mains="auto", stop_factor: float = 1.05, priors: dict | None = None,
-             progress: Callable[[str], None] | None = None, settle_s: float = 0.5,
-             fold_nfev: int = 15, max_cv: int = 4, n_jobs: int | None = None) -> Diagnosis:
+def _diagnose(
+    records: Sequence[Record],
+    *,
+    free_material: Sequence[str] = DEFAULT_FREE_MATERIAL,
+    candidates: Sequence[str] | None = None,
+    fit_effects: Sequence[str] = (),
+    max_effects: int = 3,
+    n_folds: int = 4,
+    explained_factor: float = 1.15,
+    min_gain: float = 0.03,
+    min_delta_bic: float = 20.0,
+    tie_tol: float = 0.05,
+    offset_p: float = 1e-6,
+    mains='auto',
+    stop_factor: float = 1.05,
+    priors: dict | None = None,
+    progress: Callable[[str], None] | None = None,
+    settle_s: float = 0.5,
+    fold_nfev: int = 15,
+    max_cv: int = 4,
+    n_jobs: int | None = None,
+) -> Diagnosis:
     """Find the effects missing from the records' models (see module docstring).
 
     ``fit_effects``: effects of the given model whose parameters are fitted too
@@ -406,23 +485,27 @@ def _diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAU
     """
     say = progress or (lambda msg: None)
     if max_effects < 0:
-        raise ValueError(f"max_effects must be >= 0, got {max_effects}")
+        raise ValueError(f'max_effects must be >= 0, got {max_effects}')
     n_jobs = min(2, os.cpu_count() or 1) if n_jobs is None else int(n_jobs)
     priors = dict(priors or {})
     records, lines = remove_mains(records, mains)
     prepared = prepare(records, settle_s=settle_s)
     present = list(records[0].model.effect_names)
-    pool_names = [n for n in (candidates if candidates is not None else list(EFFECTS)) if n not in present]
+    pool_names = [
+        n for n in (candidates if candidates is not None else list(EFFECTS)) if n not in present
+    ]
     folds, cv = _folds(prepared, n_folds)
     free_mat = tuple(free_material)
-    spec = FitSpec(free_mat, tuple((e, p.name) for e in fit_effects for p in get_effect(e).parameters))
+    spec = FitSpec(
+        free_mat, tuple((e, p.name) for e in fit_effects for p in get_effect(e).parameters)
+    )
 
-    say("fitting baseline")
+    say('fitting baseline')
     base_x0 = [np.concatenate([np.log([getattr(records[0].model.material, n) for n in free_mat]),
                                np.asarray(c, float)])
                for c in _grid_for_spec(spec, priors, records[0].model)]
     baseline = _evaluate(prepared, spec, base_x0, folds, fold_nfev, priors=priors, max_nfev=60)
-    baseline.params = {**baseline.params, **{f"{e}.{n}": baseline.fit.effect_values[e][n]
+    baseline.params = {**baseline.params, **{f'{e}.{n}': baseline.fit.effect_values[e][n]
                                             for e, n in spec.effect_params}}
     nf_num = sum(p.sigma ** 2 * p.keep.sum() for p in prepared)
     nf_den = sum(float(np.sum((p.y[p.keep] - p.y[p.keep].mean()) ** 2)) for p in prepared)
@@ -443,35 +526,47 @@ def _diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAU
         prepared = _with_models(prepared, c.fit.models)
 
     # -- offset test (H(0) = 0: a mean current is an offset) ----------------------
-    if "current_offset" in pool_names and max_effects > 0:
+    if 'current_offset' in pool_names and max_effects > 0:
         offset_info = _offset_test(prepared, current.fit.models)
-        if offset_info["p_value"] < offset_p:
-            say("mean current found: fitting current_offset")
-            shape = tuple(p.name for p in get_effect("current_offset").parameters)
-            c = _Job(prepared, current.spec, current.x, folds, fold_nfev, priors)(("current_offset", shape))
-            steps.append(Step("current_offset", "added", c.error, c.fit.bic, _values(c.fit, free_mat),
-                              f"mean residual current {offset_info['mean_a'] * 1e9:.3g} nA (offset test "
-                              f"p = {offset_info['p_value']:.2g}; the sensor has H(0) = 0)"))
-            chosen.append(("current_offset", shape))
+        if offset_info['p_value'] < offset_p:
+            say('mean current found: fitting current_offset')
+            shape = tuple(p.name for p in get_effect('current_offset').parameters)
+            c = _Job(prepared, current.spec, current.x, folds, fold_nfev, priors)(
+                ('current_offset', shape)
+            )
+            steps.append(
+                Step(
+                    'current_offset',
+                    'added',
+                    c.error,
+                    c.fit.bic,
+                    _values(c.fit, free_mat),
+                    f"mean residual current {offset_info['mean_a'] * 1e9:.3g} nA (offset test "
+                    f"p = {offset_info['p_value']:.2g}; the sensor has H(0) = 0)",
+                )
+            )
+            chosen.append(('current_offset', shape))
             current = c
             adopt(c)
 
     while len(chosen) < max_effects and current.error > stop_factor * noise_floor:
         # an effect dropped by the backward check is not offered again (no add/drop cycles)
-        dropped = {st.effect for st in steps if st.action == "dropped"} | replaced
+        dropped = {st.effect for st in steps if st.action == 'dropped'} | replaced
         remaining = [n for n in pool_names if n not in {e for e, _ in chosen} | dropped]
         if not remaining:
             break
         items = [(n, s) for n in remaining
                  for s in SHAPES.get(n, (tuple(p.name for p in get_effect(n).parameters),))]
-        say(f"step {len(steps) + 1}: {len(items)} candidate fits on {min(n_jobs, len(items))} process(es)")
+        say(
+            f'step {len(steps) + 1}: {len(items)} candidate fits on {min(n_jobs, len(items))} process(es)'
+        )
         job = _Job(prepared, current.spec, current.x, folds, fold_nfev, priors)
         fitted = _map(job, items, n_jobs, say)
         # held-out error only for contenders: a candidate that does not pass the BIC rule on
         # the full data cannot be significant (its error stays the in-sample one, marked)
         contenders = sorted((c for c in fitted if c.fit.bic <= current.fit.bic - min_delta_bic),
                             key=lambda c: c.fit.bic)[:max_cv]
-        say(f"step {len(steps) + 1}: held-out error of {len(contenders)} contender(s)")
+        say(f'step {len(steps) + 1}: held-out error of {len(contenders)} contender(s)')
         scored = _map(job, contenders, n_jobs, say)
         others = [c for c in fitted if not any(c is k for k in contenders)]
         cands = _merge_shapes(scored, tie_tol)
@@ -484,19 +579,44 @@ def _diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAU
                        and best.fit.bic <= current.fit.bic - min_delta_bic)
         if not significant:
             break
-        ties = [c for c in ranked[1:] if c.error <= (1 + tie_tol) * best.error
-                and c.error <= (1 - min_gain) * current.error and c.fit.bic <= current.fit.bic - min_delta_bic]
+        ties = [
+            c
+            for c in ranked[1:]
+            if c.error <= (1 + tie_tol) * best.error
+            and c.error <= (1 - min_gain) * current.error
+            and c.fit.bic <= current.fit.bic - min_delta_bic
+        ]
         if first_iteration:
             first_ties = [c.effect for c in ties]
-        reason = (f"held-out error {current.error:.4f} -> {best.error:.4f} "
-                  f"({current.error / best.error:.2f}x), BIC -{current.fit.bic - best.fit.bic:.0f}")
+        reason = (
+            f'held-out error {current.error:.4f} -> {best.error:.4f} '
+            f'({current.error / best.error:.2f}x), BIC -{current.fit.bic - best.fit.bic:.0f}'
+        )
         if ties:
-            reason += ("; tie broken by " + ("plausibility" if best.plausible and any(not t.plausible for t in ties)
-                                            else "BIC"))
-        steps.append(Step(best.effect, "added", best.error, best.fit.bic, _values(best.fit, free_mat), reason,
-                          [{"effect": t.effect, "error": t.error, "delta_bic": t.fit.bic - best.fit.bic,
-                            "params": t.params, "flags": t.flags} for t in ties],
-                          [c.effect for c in ranked[1:] if c.held_out and c.plausible]))
+            reason += '; tie broken by ' + (
+                'plausibility' if best.plausible and any(not t.plausible for t in ties) else 'BIC'
+            )
+        steps.append(
+            Step(
+                best.effect,
+                'added',
+                best.error,
+                best.fit.bic,
+                _values(best.fit, free_mat),
+                reason,
+                [
+                    {
+                        'effect': t.effect,
+                        'error': t.error,
+                        'delta_bic': t.fit.bic - best.fit.bic,
+                        'params': t.params,
+                        'flags': t.flags,
+                    }
+                    for t in ties
+                ],
+                [c.effect for c in ranked[1:] if c.held_out and c.plausible],
+            )
+        )
         chosen.append((best.effect, best.shape))
         current = best
         adopt(best)
@@ -506,11 +626,21 @@ def _diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAU
             if without.fit.bic >= current.fit.bic + min_delta_bic:
                 continue            # removal costs evidence: keep (no need to score it)
             without = _held_out(prepared, without, folds, fold_nfev)
-            if without.error <= 1.01 * current.error and without.fit.bic < current.fit.bic + min_delta_bic:
-                steps.append(Step(name, "dropped", without.error, without.fit.bic,
-                                  _values(without.fit, free_mat),
-                                  f"removing it costs nothing (held-out error {current.error:.4f} -> "
-                                  f"{without.error:.4f})"))
+            if (
+                without.error <= 1.01 * current.error
+                and without.fit.bic < current.fit.bic + min_delta_bic
+            ):
+                steps.append(
+                    Step(
+                        name,
+                        'dropped',
+                        without.error,
+                        without.fit.bic,
+                        _values(without.fit, free_mat),
+                        f'removing it costs nothing (held-out error {current.error:.4f} -> '
+                        f'{without.error:.4f})',
+                    )
+                )
                 chosen.remove((name, shape))
                 current = without
                 adopt(without)
@@ -520,24 +650,42 @@ def _diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAU
         for name, shape in list(chosen[:-1]):
             if (name, shape) not in chosen:
                 continue
-            added = [st for st in steps if st.effect == name and st.action in ("added", "swapped")]
+            added = [st for st in steps if st.effect == name and st.action in ('added', 'swapped')]
             for alt in [a for st in added[-1:] for a in st.alternatives]:
                 if alt in {e for e, _ in chosen} or alt in replaced:
                     continue
                 base = _without(prepared, current, name, folds, fold_nfev, priors)
-                alt_shape = SHAPES.get(alt, (tuple(p.name for p in get_effect(alt).parameters),))[0]
-                cand = _Job(_with_models(prepared, base.fit.models), base.spec, base.x, folds, fold_nfev,
-                            priors)((alt, alt_shape))
+                alt_shape = SHAPES.get(alt, (tuple(p.name for p in get_effect(alt).parameters),))[
+                    0
+                ]
+                cand = _Job(
+                    _with_models(prepared, base.fit.models),
+                    base.spec,
+                    base.x,
+                    folds,
+                    fold_nfev,
+                    priors,
+                )((alt, alt_shape))
                 if cand.fit.bic >= current.fit.bic or not cand.plausible:
                     continue
                 cand = _held_out(prepared, cand, folds, fold_nfev)
                 if cand.error <= (1 + tie_tol) * current.error and cand.error >= current.error:
-                    late_ties.append(f"{alt} instead of {name} (held-out error {cand.error:.4f} vs "
-                                     f"{current.error:.4f}, dBIC {cand.fit.bic - current.fit.bic:+.0f})")
+                    late_ties.append(
+                        f'{alt} instead of {name} (held-out error {cand.error:.4f} vs '
+                        f'{current.error:.4f}, dBIC {cand.fit.bic - current.fit.bic:+.0f})'
+                    )
                 if cand.error < current.error:
-                    steps.append(Step(alt, "swapped", cand.error, cand.fit.bic, _values(cand.fit, free_mat),
-                                      f"replaces {name} (its tie): held-out error {current.error:.4f} -> "
-                                      f"{cand.error:.4f}, BIC -{current.fit.bic - cand.fit.bic:.0f}"))
+                    steps.append(
+                        Step(
+                            alt,
+                            'swapped',
+                            cand.error,
+                            cand.fit.bic,
+                            _values(cand.fit, free_mat),
+                            f'replaces {name} (its tie): held-out error {current.error:.4f} -> '
+                            f'{cand.error:.4f}, BIC -{current.fit.bic - cand.fit.bic:.0f}',
+                        )
+                    )
                     chosen[chosen.index((name, shape))] = (alt, alt_shape)
                     replaced.add(name)
                     current = cand
@@ -546,20 +694,42 @@ def _diagnose(records: Sequence[Record], *, free_material: Sequence[str] = DEFAU
     missing = [e for e, _ in chosen]
     explained = bool(current.error <= threshold)
     if missing:
-        reason = (f"adding {', '.join(missing)} lowers the held-out error {baseline.error:.4f} -> "
-                  f"{current.error:.4f} ({baseline.error / current.error:.2f}x)" +
-                  ("" if explained else f"; the residual stays above the noise floor {noise_floor:.4f}: "
-                   "something else is missing too"))
+        reason = (
+            f"adding {', '.join(missing)} lowers the held-out error {baseline.error:.4f} -> "
+            f'{current.error:.4f} ({baseline.error / current.error:.2f}x)'
+            + (
+                ''
+                if explained
+                else f'; the residual stays above the noise floor {noise_floor:.4f}: '
+                'something else is missing too'
+            )
+        )
     elif explained:
-        reason = (f"baseline error {baseline.error:.4f} is at the noise floor ({noise_floor:.4f}) and "
-                  "no effect improves it significantly: nothing is missing")
+        reason = (
+            f'baseline error {baseline.error:.4f} is at the noise floor ({noise_floor:.4f}) and '
+            'no effect improves it significantly: nothing is missing'
+        )
     else:
-        reason = (f"baseline error {baseline.error:.4f} is above the noise floor {noise_floor:.4f} "
-                  "and no catalog effect explains it")
-    return Diagnosis(baseline=baseline, candidates=first_ranking, noise_floor=noise_floor,
-                     missing_effect=missing[0] if missing else None, explained=explained, reason=reason,
-                     ties=first_ties + late_ties, prepared=prepared, cv=cv, steps=steps, missing_effects=missing,
-                     final=current, interference=summarize_lines(lines), offset_test=offset_info)
+        reason = (
+            f'baseline error {baseline.error:.4f} is above the noise floor {noise_floor:.4f} '
+            'and no catalog effect explains it'
+        )
+    return Diagnosis(
+        baseline=baseline,
+        candidates=first_ranking,
+        noise_floor=noise_floor,
+        missing_effect=missing[0] if missing else None,
+        explained=explained,
+        reason=reason,
+        ties=first_ties + late_ties,
+        prepared=prepared,
+        cv=cv,
+        steps=steps,
+        missing_effects=missing,
+        final=current,
+        interference=summarize_lines(lines),
+        offset_test=offset_info,
+    )
 
 
 def _grid_for_spec(spec: FitSpec, priors, model) -> list[list[float]]:
@@ -592,8 +762,12 @@ def _without(prepared, current: Candidate, name, folds, fold_nfev, priors) -> Ca
     """The current model without effect ``name``, refitted (warm start)."""
     keep = [k for k, (e, _) in enumerate(current.spec.effect_params)]
     n_mat = len(current.spec.material)
-    idx = list(range(n_mat)) + [n_mat + k for k in keep if current.spec.effect_params[k][0] != name]
-    spec = FitSpec(current.spec.material, tuple(ep for ep in current.spec.effect_params if ep[0] != name))
+    idx = list(range(n_mat)) + [
+        n_mat + k for k in keep if current.spec.effect_params[k][0] != name
+    ]
+    spec = FitSpec(
+        current.spec.material, tuple(ep for ep in current.spec.effect_params if ep[0] != name)
+    )
     models = [p.rec.model.without_effect(name) for p in prepared]
     return _evaluate(_with_models(prepared, models), spec, [current.x[idx]], folds, fold_nfev,
                      None, (), priors, held_out=False)

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Glue of the discovery loop for the command line: which names are fitted, what to run next.
 
 * ``--effects name`` without values means *fit its parameters* (in ``fit`` and
@@ -19,41 +20,51 @@ from typing import Sequence
 from ..physics.effects import EFFECTS, get_effect
 from ..physics.model import parse_effects
 
-__all__ = ["PRIOR_KEYS", "priors_from_headers", "SYMBOL_TO_NAME", "free_names", "effects_to_fit", "effect_free_names", "acts_on_transfer",
-           "next_command",
-           "diagnosis_next_command"]
+__all__ = [
+    'PRIOR_KEYS',
+    'priors_from_headers',
+    'SYMBOL_TO_NAME',
+    'free_names',
+    'effects_to_fit',
+    'effect_free_names',
+    'acts_on_transfer',
+    'next_command',
+    'diagnosis_next_command',
+]
 
-SYMBOL_TO_NAME = {"T": "temperature_k", "Y": "youngs_modulus_pa", "r0": "surface_resistance_ohm",
-                  "d": "diffusivity_m2_per_s", "C-": "anion_concentration_mol_per_m3",
-                  "kappa_e": "permittivity_f_per_m", "alpha0": "charge_stress_coupling_j_per_c"}
+SYMBOL_TO_NAME = {'T': 'temperature_k', 'Y': 'youngs_modulus_pa', 'r0': 'surface_resistance_ohm',
+                  'd': 'diffusivity_m2_per_s', 'C-': 'anion_concentration_mol_per_m3',
+                  'kappa_e': 'permittivity_f_per_m', 'alpha0': 'charge_stress_coupling_j_per_c'}
 
 
 def free_names(text: str) -> tuple[str, ...]:
     """Comma list -> names: material symbols mapped to full names, effect parameters kept
     (resolved against the model by :func:`~.fit.resolve_effect_parameter`)."""
-    return tuple(SYMBOL_TO_NAME.get(x, x) for x in (s.strip() for s in (text or "").split(",")) if x)
+    return tuple(
+        SYMBOL_TO_NAME.get(x, x) for x in (s.strip() for s in (text or '').split(',')) if x
+    )
 
 
 def effects_to_fit(text: str) -> list[str]:
     """Effects of an ``--effects`` text given by name only (no ``(...)``): their parameters are fitted."""
-    out, depth, cur = [], 0, ""
-    for ch in (text or "") + ",":
-        if ch == "," and depth == 0:
+    out, depth, cur = [], 0, ''
+    for ch in (text or '') + ',':
+        if ch == ',' and depth == 0:
             item = cur.strip()
-            if item and "(" not in item:
+            if item and '(' not in item:
                 out.append(item)
-            cur = ""
+            cur = ''
             continue
-        depth += (ch == "(") - (ch == ")")
+        depth += (ch == '(') - (ch == ')')
         cur += ch
-    parse_effects(",".join(out))          # unknown names: the usual clear error
+    parse_effects(','.join(out))          # unknown names: the usual clear error
     return [n for n in out if get_effect(n).parameters]
 
 
 def effect_free_names(effects: Sequence[str], frequency_domain: bool = False) -> tuple[str, ...]:
     """Qualified parameter names of ``effects`` (``frequency_domain``: only of effects that act
     on the transfer function, the only ones a frequency-response fit can see)."""
-    return tuple(f"{e}.{p.name}" for e in effects for p in get_effect(e).parameters
+    return tuple(f'{e}.{p.name}' for e in effects for p in get_effect(e).parameters
                  if not frequency_domain or acts_on_transfer(e))
 
 
@@ -64,33 +75,39 @@ def acts_on_transfer(name: str) -> bool:
     return type(get_effect(name)).factor is not Effect.factor
 
 
-def next_command(verb: str, data: Sequence[str], model_file: str | None, extra: str = "") -> str:
+def next_command(verb: str, data: Sequence[str], model_file: str | None, extra: str = '') -> str:
     """``ipmc-model VERB DATA... --model-file FILE`` quoted for a POSIX shell."""
-    parts = ["ipmc-model", verb, *[str(d) for d in data]]
+    parts = ['ipmc-model', verb, *[str(d) for d in data]]
     if model_file:
-        parts += ["--model-file", str(model_file)]
-    return " ".join(shlex.quote(p) for p in parts) + (f" {extra}" if extra else "")
+        parts += ['--model-file', str(model_file)]
+    return ' '.join(shlex.quote(p) for p in parts) + (f' {extra}' if extra else '')
 
 
-def diagnosis_next_command(diag, data: Sequence[str], model_file: str | None, base: str = "h1") -> str:
+def diagnosis_next_command(
+    diag, data: Sequence[str], model_file: str | None, base: str = 'h1'
+) -> str:
     """What to run after a diagnosis: check the saved model on the data (compare), or, without a
     saved model, re-run with the named effects fitted."""
     if model_file:
-        return "next: " + next_command("compare", data, model_file)
+        return 'next: ' + next_command('compare', data, model_file)
     if diag.missing_effects:
-        names = [e for e in diag.missing_effects if e != "surface_resistance"]
-        b = "h2" if "surface_resistance" in diag.missing_effects or base == "h2" else "h1"
-        effects = ",".join(names)
-        cmd = ["ipmc-model", "fit", *map(str, data), "--model", b] + (["--effects", effects] if effects else [])
-        return ("next (fits the named effects' parameters with the material; add --save-model FILE "
-                "to keep them): " + " ".join(shlex.quote(p) for p in cmd))
-    return "next: " + next_command("compare", data, None, f"--model {base}")
+        names = [e for e in diag.missing_effects if e != 'surface_resistance']
+        b = 'h2' if 'surface_resistance' in diag.missing_effects or base == 'h2' else 'h1'
+        effects = ','.join(names)
+        cmd = ['ipmc-model', 'fit', *map(str, data), '--model', b] + (
+            ['--effects', effects] if effects else []
+        )
+        return (
+            "next (fits the named effects' parameters with the material; add --save-model FILE "
+            'to keep them): ' + ' '.join(shlex.quote(p) for p in cmd)
+        )
+    return 'next: ' + next_command('compare', data, None, f'--model {base}')
 
 
 #: data-header keys that give a prior value of an effect parameter
-PRIOR_KEYS = {"amplifier_bandwidth_hz": ("amplifier_bandwidth", "corner_hz"),
-              "time_delay_s": ("time_delay", "delay_s"),
-              "current_offset_a": ("current_offset", "offset_a")}
+PRIOR_KEYS = {'amplifier_bandwidth_hz': ('amplifier_bandwidth', 'corner_hz'),
+              'time_delay_s': ('time_delay', 'delay_s'),
+              'current_offset_a': ('current_offset', 'offset_a')}
 
 
 def priors_from_headers(series: Sequence) -> dict[tuple[str, str], float]:
@@ -98,12 +115,14 @@ def priors_from_headers(series: Sequence) -> dict[tuple[str, str], float]:
     or ``effect.parameter``); the first file giving a key wins."""
     out: dict[tuple[str, str], float] = {}
     for ts in series:
-        for key, raw in getattr(ts, "extra", {}).items():
-            target = PRIOR_KEYS.get(key) or (tuple(key.split(".", 1)) if "." in key else None)
+        for key, raw in getattr(ts, 'extra', {}).items():
+            target = PRIOR_KEYS.get(key) or (tuple(key.split('.', 1)) if '.' in key else None)
             if target is None or target[0] not in EFFECTS:
                 continue
             try:
                 out.setdefault(target, float(raw))
             except (TypeError, ValueError):
-                raise ValueError(f"{ts.path}: header key '{key}' must be a number, got {raw!r}") from None
+                raise ValueError(
+                    f"{ts.path}: header key '{key}' must be a number, got {raw!r}"
+                ) from None
     return out

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Parameter identification from measured frequency response (paper section 5.2, done better).
 
 The paper tunes d, C-, kappa_e and alpha0 with ``fminsearch`` on one sample.
@@ -47,32 +48,36 @@ from ..physics.model import EffectSpec, SensorModel, parse_effects
 from ..physics.parameters import PAPER_PARAMETERS, Geometry, MaterialParameters, ParameterError
 from .freqresp import FrequencyPoint
 
-__all__ = ["FitGroup", "FitResult", "fit_parameters", "FITTABLE", "SYMBOLS", "model_for_group",
-           "resolve_effect_parameter", "effect_parameter_names", "ADEQUACY_P"]
+__all__ = ['FitGroup', 'FitResult', 'fit_parameters', 'FITTABLE', 'SYMBOLS', 'model_for_group',
+           'resolve_effect_parameter', 'effect_parameter_names', 'ADEQUACY_P']
 
 #: chi^2 p-value below which the model is declared inadequate for the data
 ADEQUACY_P = 1e-3
 
 #: Parameters that may be fitted (F and R are constants).
-FITTABLE = ("temperature_k", "youngs_modulus_pa", "surface_resistance_ohm", "diffusivity_m2_per_s",
-            "anion_concentration_mol_per_m3", "permittivity_f_per_m",
-            "charge_stress_coupling_j_per_c")
+FITTABLE = ('temperature_k', 'youngs_modulus_pa', 'surface_resistance_ohm', 'diffusivity_m2_per_s',
+            'anion_concentration_mol_per_m3', 'permittivity_f_per_m',
+            'charge_stress_coupling_j_per_c')
 #: Physical combinations worth reporting (exponents of ln-parameters).  Y and
 #: alpha0 enter H only as Y/alpha0 (eq. 31); sqrt(d)/alpha0 and K set H1 when
 #: |beta h| >> 1 (eq. 51); kappa_e r0 sets the surface-resistance line (eq. 42).
 NAMED_COMBINATIONS = {
-    "sqrt(d)/alpha0": {"diffusivity_m2_per_s": 0.5, "charge_stress_coupling_j_per_c": -1.0},
-    "K = F^2 d C-/(kappa_e R T) [1/s]": {"diffusivity_m2_per_s": 1.0, "anion_concentration_mol_per_m3": 1.0,
-                             "permittivity_f_per_m": -1.0, "temperature_k": -1.0},
-    "Y/alpha0": {"youngs_modulus_pa": 1.0, "charge_stress_coupling_j_per_c": -1.0},
-    "kappa_e r0": {"permittivity_f_per_m": 1.0, "surface_resistance_ohm": 1.0},
+    'sqrt(d)/alpha0': {'diffusivity_m2_per_s': 0.5, 'charge_stress_coupling_j_per_c': -1.0},
+    'K = F^2 d C-/(kappa_e R T) [1/s]': {
+        'diffusivity_m2_per_s': 1.0,
+        'anion_concentration_mol_per_m3': 1.0,
+        'permittivity_f_per_m': -1.0,
+        'temperature_k': -1.0,
+    },
+    'Y/alpha0': {'youngs_modulus_pa': 1.0, 'charge_stress_coupling_j_per_c': -1.0},
+    'kappa_e r0': {'permittivity_f_per_m': 1.0, 'surface_resistance_ohm': 1.0},
 }
 
 #: Short physics symbols for reports.
-SYMBOLS = {"temperature_k": "T", "youngs_modulus_pa": "Y", "surface_resistance_ohm": "r0",
-           "diffusivity_m2_per_s": "d", "anion_concentration_mol_per_m3": "C-",
-           "permittivity_f_per_m": "kappa_e", "charge_stress_coupling_j_per_c": "alpha0",
-           "one_minus_anion_volume_fraction": "(1-C-dV)"}
+SYMBOLS = {'temperature_k': 'T', 'youngs_modulus_pa': 'Y', 'surface_resistance_ohm': 'r0',
+           'diffusivity_m2_per_s': 'd', 'anion_concentration_mol_per_m3': 'C-',
+           'permittivity_f_per_m': 'kappa_e', 'charge_stress_coupling_j_per_c': 'alpha0',
+           'one_minus_anion_volume_fraction': '(1-C-dV)'}
 
 
 @dataclass
@@ -82,7 +87,7 @@ class FitGroup:
     geometry: Geometry
     points: list[FrequencyPoint]
     known: dict[str, float] = field(default_factory=dict)
-    name: str = ""
+    name: str = ''
 
 
 @dataclass
@@ -120,45 +125,58 @@ class FitResult:
 
     def adequacy_text(self) -> str:
         if self.adequate:
-            return (f"model adequate: chi2/dof = {self.reduced_chi2:.3g}, p = {self.p_value:.3g} "
-                    f"(>= {ADEQUACY_P:g})")
-        return (f"model inadequate: chi2/dof = {self.reduced_chi2:.3g}, p = {self.p_value:.2g} "
-                f"(< {ADEQUACY_P:g}): the misfit is far above the measurement noise; run diagnose "
-                "to find the missing effect (the intervals above include the misfit, not just noise)")
+            return (f'model adequate: chi2/dof = {self.reduced_chi2:.3g}, p = {self.p_value:.3g} '
+                    f'(>= {ADEQUACY_P:g})')
+        return (
+            f'model inadequate: chi2/dof = {self.reduced_chi2:.3g}, p = {self.p_value:.2g} '
+            f'(< {ADEQUACY_P:g}): the misfit is far above the measurement noise; run diagnose '
+            'to find the missing effect (the intervals above include the misfit, not just noise)'
+        )
 
     def summary(self) -> str:
-        lines = [f"fit of {', '.join(SYMBOLS.get(n, n) for n in self.free)} "
-                 f"({'+'.join(('h1',) + tuple(getattr(e, 'name', e) for e in self.effects))}): chi2/dof = {self.chi2:.4g}/{self.dof} "
-                 f"= {self.reduced_chi2:.3g}, p = {self.p_value:.3g}"]
+        lines = [
+            f"fit of {', '.join(SYMBOLS.get(n, n) for n in self.free)} "
+            f"({'+'.join(('h1',) + tuple(getattr(e, 'name', e) for e in self.effects))}): chi2/dof = {self.chi2:.4g}/{self.dof} "
+            f'= {self.reduced_chi2:.3g}, p = {self.p_value:.3g}'
+        ]
         lines.append(f"{'parameter':<32} {'estimate':>12} {'95% CI':>27}  note")
         for name in self.free:
             lo, hi = self.ci95[name]
             note = []
             if name in self.not_identifiable:
-                note.append("NOT IDENTIFIABLE alone")
+                note.append('NOT IDENTIFIABLE alone')
             if name in self.at_bound:
-                note.append("at bound")
-            lines.append(f"{name:<32} {self.estimates[name]:>12.4g} [{lo:>11.4g}, {hi:>11.4g}]  "
+                note.append('at bound')
+            lines.append(f'{name:<32} {self.estimates[name]:>12.4g} [{lo:>11.4g}, {hi:>11.4g}]  '
                          f"{'; '.join(note)}")
         if len(self.free) > 1:
-            lines.append("correlation:")
+            lines.append('correlation:')
             for k, name in enumerate(self.free):
-                row = " ".join(f"{c:+.3f}" for c in self.correlation[k])
-                lines.append(f"  {SYMBOLS.get(name, name):>8} {row}")
-        lines.append("identifiability (SVD of the scaled Jacobian; combinations of the free parameters):")
+                row = ' '.join(f'{c:+.3f}' for c in self.correlation[k])
+                lines.append(f'  {SYMBOLS.get(name, name):>8} {row}')
+        lines.append(
+            'identifiability (SVD of the scaled Jacobian; combinations of the free parameters):'
+        )
         for comb in self.identifiability:
-            lines.append(f"  {comb['expression']:<44} sd(ln) = {comb['sd_log']:.3g}, sensitivity "
-                         f"{comb['sensitivity']:.3g}  "
-                         f"{'determined' if comb['determined'] else 'NOT determined by these data'}")
+            lines.append(
+                f"  {comb['expression']:<44} sd(ln) = {comb['sd_log']:.3g}, sensitivity "
+                f"{comb['sensitivity']:.3g}  "
+                f"{'determined' if comb['determined'] else 'NOT determined by these data'}"
+            )
         for comb in self.named_combinations:
-            lines.append(f"  {comb['name']:<44} = {comb['value']:.5g}, sd(ln) = {comb['sd_log']:.3g}  "
-                         f"{'determined' if comb['determined'] else 'NOT determined'}")
+            lines.append(
+                f"  {comb['name']:<44} = {comb['value']:.5g}, sd(ln) = {comb['sd_log']:.3g}  "
+                f"{'determined' if comb['determined'] else 'NOT determined'}"
+            )
         if self.not_identifiable:
-            lines.append("WARNING: " + ", ".join(SYMBOLS.get(n, n) for n in self.not_identifiable)
-                         + " cannot be estimated separately from these data; report the determined "
-                         "combinations above, or fix some of them from independent measurements.")
+            lines.append(
+                'WARNING: '
+                + ', '.join(SYMBOLS.get(n, n) for n in self.not_identifiable)
+                + ' cannot be estimated separately from these data; report the determined '
+                'combinations above, or fix some of them from independent measurements.'
+            )
         lines.append(self.adequacy_text())
-        return "\n".join(lines)
+        return '\n'.join(lines)
 
 
 def model_for_group(material: MaterialParameters, group: FitGroup, free: Sequence[str],
@@ -171,7 +189,9 @@ def model_for_group(material: MaterialParameters, group: FitGroup, free: Sequenc
 
 def effect_parameter_names(effects) -> list[str]:
     """Qualified names ``effect.parameter`` of every parameter of ``effects``."""
-    return [f"{e.name}.{p.name}" for e in parse_effects(effects) for p in get_effect(e.name).parameters]
+    return [
+        f'{e.name}.{p.name}' for e in parse_effects(effects) for p in get_effect(e.name).parameters
+    ]
 
 
 def resolve_effect_parameter(name: str, effects) -> tuple[str, str]:
@@ -179,27 +199,33 @@ def resolve_effect_parameter(name: str, effects) -> tuple[str, str]:
     ``effects``; a clear error when unknown, ambiguous or its effect is not in the model."""
     specs = parse_effects(effects)
     in_model = [e.name for e in specs]
-    if "." in name:
-        eff, par = name.split(".", 1)
+    if '.' in name:
+        eff, par = name.split('.', 1)
         if eff not in in_model:
-            raise ParameterError(f"cannot fit '{name}': effect '{eff}' is not in the model "
-                                 f"({', '.join(in_model) or 'h1 only'}); add it with --effects {eff}")
+            raise ParameterError(
+                f"cannot fit '{name}': effect '{eff}' is not in the model "
+                f"({', '.join(in_model) or 'h1 only'}); add it with --effects {eff}"
+            )
         if par not in {p.name for p in get_effect(eff).parameters}:
             raise ParameterError(f"cannot fit '{name}': effect '{eff}' has parameters "
-                                 f"{[p.name for p in get_effect(eff).parameters]}")
+                                 f'{[p.name for p in get_effect(eff).parameters]}')
         return eff, par
     owners = [e for e in in_model if name in {p.name for p in get_effect(e).parameters}]
     if len(owners) == 1:
         return owners[0], name
     if len(owners) > 1:
         raise ParameterError(f"parameter '{name}' is ambiguous (effects {owners}); qualify it, "
-                             f"e.g. {owners[0]}.{name}")
+                             f'e.g. {owners[0]}.{name}')
     catalog = [n for n, e in EFFECTS.items() if name in {p.name for p in e.parameters}]
     if catalog:
-        raise ParameterError(f"cannot fit '{name}': it belongs to effect '{catalog[0]}', which is not in "
-                             f"the model; add it with --effects {catalog[0]}")
-    raise ParameterError(f"cannot fit '{name}'; fittable: {', '.join(FITTABLE)} or an effect parameter "
-                         f"of the model ({', '.join(effect_parameter_names(specs)) or 'none'})")
+        raise ParameterError(
+            f"cannot fit '{name}': it belongs to effect '{catalog[0]}', which is not in "
+            f'the model; add it with --effects {catalog[0]}'
+        )
+    raise ParameterError(
+        f"cannot fit '{name}'; fittable: {', '.join(FITTABLE)} or an effect parameter "
+        f"of the model ({', '.join(effect_parameter_names(specs)) or 'none'})"
+    )
 
 
 def _wrap(angle):
@@ -213,13 +239,13 @@ def _combination_text(vector: np.ndarray, free: Sequence[str]) -> str:
         if abs(coef) < 0.05:
             continue
         sym = SYMBOLS.get(name, name)
-        parts.append(sym if abs(coef - 1) < 0.025 else f"{sym}^{coef:.2f}")
-    return " * ".join(parts) if parts else "(none)"
+        parts.append(sym if abs(coef - 1) < 0.025 else f'{sym}^{coef:.2f}')
+    return ' * '.join(parts) if parts else '(none)'
 
 
 def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
                    material: MaterialParameters = PAPER_PARAMETERS,
-                   effects: tuple = ("surface_resistance",), *,
+                   effects: tuple = ('surface_resistance',), *,
                    bounds_factor: float = 1e3, sd_floor: float = 1e-6,
                    sd_threshold: float = 0.3, min_sensitivity: float = 0.01) -> FitResult:
     """Fit ``free`` parameters to the frequency points of ``groups`` (see module doc).
@@ -235,16 +261,16 @@ def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
     """
     free = tuple(free)
     if not free:
-        raise ParameterError("no parameter to fit: give at least one of " + ", ".join(FITTABLE))
+        raise ParameterError('no parameter to fit: give at least one of ' + ', '.join(FITTABLE))
     effects = parse_effects(effects)
     keys: list = []                     # material name, or (effect, parameter)
     for name in free:
         keys.append(name if name in FITTABLE else resolve_effect_parameter(name, effects))
-    free = tuple(k if isinstance(k, str) else f"{k[0]}.{k[1]}" for k in keys)
+    free = tuple(k if isinstance(k, str) else f'{k[0]}.{k[1]}' for k in keys)
     if len(set(free)) != len(free):
-        raise ParameterError(f"parameter listed twice in {list(free)}")
+        raise ParameterError(f'parameter listed twice in {list(free)}')
     if not groups or not any(g.points for g in groups):
-        raise ParameterError("no frequency points to fit")
+        raise ParameterError('no frequency points to fit')
     mat_free = tuple(k for k in keys if isinstance(k, str))
     is_log = []
     theta0, lower, upper = [], [], []
@@ -252,7 +278,7 @@ def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
         if isinstance(k, str):
             v0 = np.log(getattr(material, k) if getattr(material, k) > 0 else 1e-6)
             lo, hi = v0 - np.log(bounds_factor), v0 + np.log(bounds_factor)
-            if k == "surface_resistance_ohm" and material.surface_resistance_ohm == 0:
+            if k == 'surface_resistance_ohm' and material.surface_resistance_ohm == 0:
                 lo = np.log(1e-6)
             is_log.append(True)
         else:
@@ -289,7 +315,13 @@ def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
         out = []
         for e in effects:
             d = e.as_dict()
-            d.update({k[1]: vals[f"{k[0]}.{k[1]}"] for k in keys if not isinstance(k, str) and k[0] == e.name})
+            d.update(
+                {
+                    k[1]: vals[f'{k[0]}.{k[1]}']
+                    for k in keys
+                    if not isinstance(k, str) and k[0] == e.name
+                }
+            )
             out.append(EffectSpec(e.name, tuple(sorted(d.items()))))
         return tuple(out)
 
@@ -308,9 +340,15 @@ def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
         return np.where(np.isfinite(r), r, 1e6)
 
     theta0 = np.clip(theta0, lower + 1e-9 * (upper - lower), upper - 1e-9 * (upper - lower))
-    sol = least_squares(residual, theta0, bounds=(lower, upper), method="trf",
-                        x_scale=np.where(is_log, 1.0, np.maximum(np.abs(upper - lower) * 1e-3, 1e-30)),
-                        diff_step=1e-6, max_nfev=200 * (len(free) + 1))
+    sol = least_squares(
+        residual,
+        theta0,
+        bounds=(lower, upper),
+        method='trf',
+        x_scale=np.where(is_log, 1.0, np.maximum(np.abs(upper - lower) * 1e-3, 1e-30)),
+        diff_step=1e-6,
+        max_nfev=200 * (len(free) + 1),
+    )
     theta = sol.x
     jac = sol.jac
     r = sol.fun
@@ -320,7 +358,7 @@ def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
     s2 = max(chi2 / dof, 1.0) if dof > 0 else 1.0
     cov = s2 * np.linalg.pinv(jac.T @ jac, rcond=1e-15)
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid='ignore', divide='ignore'):
         corr = cov / np.outer(sd, sd)
     corr = np.nan_to_num(corr)
     # Structural sensitivity: derivative of the model's ln-response itself (not
@@ -330,15 +368,15 @@ def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
     combos = []
     for k in range(len(sv)):
         sd_k = float(np.sqrt(max(vt[k] @ cov @ vt[k], 0.0)))
-        combos.append({"exponents": {n: float(c) for n, c in zip(free, vt[k])},
-                       "expression": _combination_text(vt[k], free), "sd_log": sd_k,
-                       "sensitivity": float(sv[k]),
-                       "determined": bool(sd_k <= sd_threshold and sv[k] >= min_sensitivity)})
+        combos.append({'exponents': {n: float(c) for n, c in zip(free, vt[k])},
+                       'expression': _combination_text(vt[k], free), 'sd_log': sd_k,
+                       'sensitivity': float(sv[k]),
+                       'determined': bool(sd_k <= sd_threshold and sv[k] >= min_sensitivity)})
     # A parameter is not identifiable alone if its marginal sd is large or it takes
     # part in a combination the data do not determine.
     not_ident = []
     for j, (n, s_j) in enumerate(zip(free, sd)):
-        in_null = any(not c["determined"] and abs(vt[k, j]) > 0.1 * np.max(np.abs(vt[k]))
+        in_null = any(not c['determined'] and abs(vt[k, j]) > 0.1 * np.max(np.abs(vt[k]))
                       for k, c in enumerate(combos))
         if s_j > sd_threshold or in_null:
             not_ident.append(n)
@@ -350,21 +388,33 @@ def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
         fixed = [SYMBOLS[n] for n in expo if n not in free]
         sd_c = float(np.sqrt(max(vec @ cov @ vec, 0.0)))
         fitted = material_at(theta)
-        value = fitted.k_rate_per_s if cname.startswith("K") else \
+        value = fitted.k_rate_per_s if cname.startswith('K') else \
             float(np.exp(sum(expo[n] * np.log(getattr(fitted, n)) for n in expo)))
-        named.append({"name": cname + (f" (with {', '.join(fixed)} fixed)" if fixed else ""),
-                      "exponents": {n: expo[n] for n in expo if n in free}, "value": value,
-                      "sd_log": sd_c, "determined": bool(sd_c <= sd_threshold)})
+        named.append({'name': cname + (f" (with {', '.join(fixed)} fixed)" if fixed else ''),
+                      'exponents': {n: expo[n] for n in expo if n in free}, 'value': value,
+                      'sd_log': sd_c, 'determined': bool(sd_c <= sd_threshold)})
     at_bound = [n for n, v, lo, hi in zip(free, theta, lower, upper)
                 if v - lo < 1e-3 * max(1.0, hi - lo) or hi - v < 1e-3 * max(1.0, hi - lo)]
     est = values_at(theta)
-    with np.errstate(over="ignore"):
+    with np.errstate(over='ignore'):
         ci = {n: ((float(np.exp(v - 1.96 * s)), float(np.exp(v + 1.96 * s))) if lg
                   else (float(v - 1.96 * s), float(v + 1.96 * s)))
               for n, v, s, lg in zip(free, theta, sd, is_log)}
-    return FitResult(material=material_at(theta), effects=effects_at(theta), free=free, estimates=est,
-                     ci95=ci, sd_log={n: float(s) for n, s in zip(free, sd)}, correlation=corr,
-                     chi2=chi2, dof=dof, identifiability=combos, named_combinations=named,
-                     not_identifiable=not_ident,
-                     success=bool(sol.success), message=str(sol.message), at_bound=at_bound,
-                     residuals=r)
+    return FitResult(
+        material=material_at(theta),
+        effects=effects_at(theta),
+        free=free,
+        estimates=est,
+        ci95=ci,
+        sd_log={n: float(s) for n, s in zip(free, sd)},
+        correlation=corr,
+        chi2=chi2,
+        dof=dof,
+        identifiability=combos,
+        named_combinations=named,
+        not_identifiable=not_ident,
+        success=bool(sol.success),
+        message=str(sol.message),
+        at_bound=at_bound,
+        residuals=r,
+    )

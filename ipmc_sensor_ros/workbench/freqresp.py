@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Empirical frequency response from time records, with uncertainty.
 
 Two estimators:
@@ -27,7 +28,7 @@ import numpy as np
 import scipy.signal as sig
 from scipy.optimize import minimize_scalar
 
-__all__ = ["FrequencyPoint", "fundamental_response", "cross_spectral_response", "harmonic_fit"]
+__all__ = ['FrequencyPoint', 'fundamental_response', 'cross_spectral_response', 'harmonic_fit']
 
 
 @dataclass(frozen=True)
@@ -42,9 +43,9 @@ class FrequencyPoint:
     response: complex            # A m^-1
     sd_log_mag: float
     sd_phase_rad: float
-    deflection_amplitude_m: float = float("nan")
-    coherence: float = float("nan")
-    source: str = ""
+    deflection_amplitude_m: float = float('nan')
+    coherence: float = float('nan')
+    source: str = ''
     window: tuple[float, float] | None = None
     extra: dict = field(default_factory=dict)
 
@@ -107,31 +108,31 @@ def _phasor_sd(cov: np.ndarray, phasor: complex, k: int = 1) -> tuple[float, flo
 
 
 def fundamental_response(time_s, deflection_m, current_a, *, frequency_hz: float | None = None,
-                         n_harmonics: int | None = None, source: str = "",
+                         n_harmonics: int | None = None, source: str = '',
                          min_periods: int = 2) -> FrequencyPoint:
     """H at the excitation fundamental of a periodic record (see module doc)."""
     t = np.asarray(time_s, float)
     w = np.asarray(deflection_m, float)
     i = np.asarray(current_a, float)
     if not (t.size == w.size == i.size) or t.size < 16:
-        raise ValueError(f"{source}: need at least 16 samples of time, deflection and current")
+        raise ValueError(f'{source}: need at least 16 samples of time, deflection and current')
     fs = float((t.size - 1) / (t[-1] - t[0]))
     f0 = float(frequency_hz) if frequency_hz else _coarse_frequency(t, w, fs)
     if not f0 > 0:
-        raise ValueError(f"{source}: no excitation found in the deflection")
+        raise ValueError(f'{source}: no excitation found in the deflection')
     duration = t[-1] - t[0] + 1.0 / fs
     if frequency_hz is None:
         # refine f0: minimise the residual of a 3-harmonic fit of the deflection
         def cost(f):
             return float(np.sum(harmonic_fit(t, w, f, 3)[1] ** 2))
         span = 1.0 / duration
-        res = minimize_scalar(cost, bounds=(max(f0 - span, 0.5 * f0), f0 + span), method="bounded",
-                              options={"xatol": 1e-6 * f0})
+        res = minimize_scalar(cost, bounds=(max(f0 - span, 0.5 * f0), f0 + span), method='bounded',
+                              options={'xatol': 1e-6 * f0})
         f0 = float(res.x)
     periods = int(np.floor(duration * f0 + 1e-9))
     if periods < min_periods:
-        raise ValueError(f"{source}: record holds {duration * f0:.2f} periods of {f0:.4g} Hz; "
-                         f"need at least {min_periods}")
+        raise ValueError(f'{source}: record holds {duration * f0:.2f} periods of {f0:.4g} Hz; '
+                         f'need at least {min_periods}')
     n_keep = int(round(periods / f0 * fs))
     sl = slice(t.size - n_keep, t.size)
     tt, ww, ii = t[sl] - t[sl][0], w[sl], i[sl]
@@ -141,19 +142,26 @@ def fundamental_response(time_s, deflection_m, current_a, *, frequency_hz: float
     h = pi_[0] / pw[0]
     sdm_w, sdp_w = _phasor_sd(cov_w, pw[0])
     sdm_i, sdp_i = _phasor_sd(cov_i, pi_[0])
-    return FrequencyPoint(frequency_hz=f0, response=complex(h),
-                          sd_log_mag=float(np.hypot(sdm_w, sdm_i)),
-                          sd_phase_rad=float(np.hypot(sdp_w, sdp_i)),
-                          deflection_amplitude_m=float(abs(pw[0])), source=source,
-                          window=(float(t[sl][0]), float(t[sl][-1])),
-                          extra={"periods": periods, "harmonics": k_max,
-                                 "harmonic_ratio_deflection": [float(abs(p / pw[0])) for p in pw[1:4]],
-                                 "harmonic_ratio_current": [float(abs(p / pi_[0])) for p in pi_[1:4]]})
+    return FrequencyPoint(
+        frequency_hz=f0,
+        response=complex(h),
+        sd_log_mag=float(np.hypot(sdm_w, sdm_i)),
+        sd_phase_rad=float(np.hypot(sdp_w, sdp_i)),
+        deflection_amplitude_m=float(abs(pw[0])),
+        source=source,
+        window=(float(t[sl][0]), float(t[sl][-1])),
+        extra={
+            'periods': periods,
+            'harmonics': k_max,
+            'harmonic_ratio_deflection': [float(abs(p / pw[0])) for p in pw[1:4]],
+            'harmonic_ratio_current': [float(abs(p / pi_[0])) for p in pi_[1:4]],
+        },
+    )
 
 
 def cross_spectral_response(time_s, deflection_m, current_a, *, nperseg: int | None = None,
                             band_hz: tuple[float, float] | None = None, min_coherence: float = 0.5,
-                            source: str = "") -> list[FrequencyPoint]:
+                            source: str = '') -> list[FrequencyPoint]:
     """Welch H1 estimate with coherence for broadband records (see module doc).
 
     Returns points in ``band_hz`` whose coherence is at least ``min_coherence``.
@@ -174,6 +182,14 @@ def cross_spectral_response(time_s, deflection_m, current_a, *, nperseg: int | N
         if fk < lo or fk > hi or gk < min_coherence or hk == 0:
             continue
         sd = float(np.sqrt((1 - gk) / (2 * n_avg * gk)))
-        out.append(FrequencyPoint(frequency_hz=float(fk), response=complex(hk),
-                                  sd_log_mag=sd, sd_phase_rad=sd, coherence=float(gk), source=source))
+        out.append(
+            FrequencyPoint(
+                frequency_hz=float(fk),
+                response=complex(hk),
+                sd_log_mag=sd,
+                sd_phase_rad=sd,
+                coherence=float(gk),
+                source=source,
+            )
+        )
     return out

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Mains interference: line components at 50/60 Hz and harmonics that the stimulus does not explain.
 
 Procedure (:func:`find_mains_lines`)
@@ -23,6 +24,7 @@ record's current (after removing the mean), and removing it subtracts the
 fitted sinusoid (:func:`remove_mains`).  With ``mains="auto"`` both 50 and
 60 Hz are tested and the family with the larger detected power is used.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -32,7 +34,7 @@ import numpy as np
 
 from .freqresp import _coarse_frequency, harmonic_fit
 
-__all__ = ["MainsLine", "find_mains_lines", "remove_mains", "parse_mains"]
+__all__ = ['MainsLine', 'find_mains_lines', 'remove_mains', 'parse_mains']
 
 
 @dataclass(frozen=True)
@@ -45,29 +47,36 @@ class MainsLine:
     separable: bool              # False: coincides with a stimulus harmonic
 
     def to_json(self) -> dict:
-        return {"record": self.record, "frequency_hz": self.frequency_hz, "amplitude_a": self.amplitude_a,
-                "level": self.level, "z": self.z, "separable": self.separable}
+        return {
+            'record': self.record,
+            'frequency_hz': self.frequency_hz,
+            'amplitude_a': self.amplitude_a,
+            'level': self.level,
+            'z': self.z,
+            'separable': self.separable,
+        }
 
 
 def parse_mains(value) -> float | str | None:
     """``'off'``/None -> None, ``'auto'`` -> 'auto', ``50``/``60`` -> Hz; anything else is refused."""
-    if value is None or str(value).strip().lower() in ("off", "none", "0", ""):
+    if value is None or str(value).strip().lower() in ('off', 'none', '0', ''):
         return None
     text = str(value).strip().lower()
-    if text == "auto":
-        return "auto"
+    if text == 'auto':
+        return 'auto'
     try:
         f = float(text)
     except ValueError:
         f = None
     if f not in (50.0, 60.0):
-        raise ValueError(f"mains must be 50, 60, auto or off, got {value!r}")
+        raise ValueError(f'mains must be 50, 60, auto or off, got {value!r}')
     return f
 
 
 def _stimulus_harmonics(t, w, max_harmonics: int = 20):
     """Fundamental and the harmonics (at most ``max_harmonics``) carrying deflection content
-    (least-squares harmonic fit of the deflection), or ``(None, [])`` for a non-periodic stimulus."""
+    (least-squares harmonic fit of the deflection), or ``(None, [])`` for a non-periodic stimulus.
+    """
     fs = (t.size - 1) / (t[-1] - t[0])
     f0 = _coarse_frequency(t, w, fs)
     if not f0 > 0 or f0 * (t[-1] - t[0]) < 2:
@@ -96,7 +105,7 @@ def _record_lines(name, t, stimulus, y, f_mains, n_harmonics):
     for f in stim + sep:
         cols += [np.cos(2 * np.pi * f * t), np.sin(2 * np.pi * f * t)]
     a = np.column_stack(cols)
-    try:      # normal equations: the columns are nearly orthogonal sinusoids (fast, well conditioned)
+    try:  # normal equations: the columns are nearly orthogonal sinusoids (fast, well conditioned)
         coef = np.linalg.solve(a.T @ a, a.T @ y)
     except np.linalg.LinAlgError:
         coef, *_ = np.linalg.lstsq(a, y, rcond=None)
@@ -115,11 +124,11 @@ def _record_lines(name, t, stimulus, y, f_mains, n_harmonics):
             fitted += ca * np.cos(2 * np.pi * f * t) + cb * np.sin(2 * np.pi * f * t)
     for f in lines:
         if f not in sep:
-            out.append(MainsLine(name, float(f), float("nan"), float("nan"), float("nan"), False))
+            out.append(MainsLine(name, float(f), float('nan'), float('nan'), float('nan'), False))
     return out, fitted
 
 
-def find_mains_lines(records: Sequence, mains="auto", n_harmonics: int = 10):
+def find_mains_lines(records: Sequence, mains='auto', n_harmonics: int = 10):
     """Detect mains lines in every record (see module docstring).
 
     ``records``: objects with ``path``, ``time_s``, ``current_a`` and ``deflection_m``
@@ -129,10 +138,18 @@ def find_mains_lines(records: Sequence, mains="auto", n_harmonics: int = 10):
     mains = parse_mains(mains)
     if mains is None:
         return [], [np.zeros(np.asarray(r.current_a).size) for r in records]
-    families = (50.0, 60.0) if mains == "auto" else (mains,)
+    families = (50.0, 60.0) if mains == 'auto' else (mains,)
     best = None
-    stimuli = [_stimulus_harmonics(np.asarray(r.time_s, float) - r.time_s[0], np.asarray(r.deflection_m, float))
-               if r.deflection_m is not None else (None, []) for r in records]
+    stimuli = [
+        (
+            _stimulus_harmonics(
+                np.asarray(r.time_s, float) - r.time_s[0], np.asarray(r.deflection_m, float)
+            )
+            if r.deflection_m is not None
+            else (None, [])
+        )
+        for r in records
+    ]
     for f_mains in families:
         lines, fitted = [], []
         for r, stim in zip(records, stimuli):
@@ -144,12 +161,12 @@ def find_mains_lines(records: Sequence, mains="auto", n_harmonics: int = 10):
         if best is None or power > best[0]:
             best = (power, lines, fitted)
     _, lines, fitted = best
-    if mains == "auto" and not any(ln.separable for ln in lines):
+    if mains == 'auto' and not any(ln.separable for ln in lines):
         lines = []        # nothing found: do not report the untested family's blind spots
     return lines, fitted
 
 
-def remove_mains(records: Sequence, mains="auto", n_harmonics: int = 10):
+def remove_mains(records: Sequence, mains='auto', n_harmonics: int = 10):
     """``(cleaned records, lines)``: each record's current minus its detected mains lines."""
     lines, fitted = find_mains_lines(records, mains, n_harmonics)
     cleaned = [replace(r, current_a=np.asarray(r.current_a, float) - f) if np.any(f) else r
@@ -166,9 +183,9 @@ def summarize_lines(lines: Sequence[MainsLine]) -> list[dict]:
     for f in sorted(by_f):
         det = [ln for ln in by_f[f] if ln.separable]
         if det:
-            out.append({"frequency_hz": f, "level": max(ln.level for ln in det),
-                        "records": len(det), "removable": True})
+            out.append({'frequency_hz': f, 'level': max(ln.level for ln in det),
+                        'records': len(det), 'removable': True})
         else:
-            out.append({"frequency_hz": f, "level": None, "records": 0, "removable": False,
-                        "note": "coincides with a stimulus harmonic: not separable, not removed"})
+            out.append({'frequency_hz': f, 'level': None, 'records': 0, 'removable': False,
+                        'note': 'coincides with a stimulus harmonic: not separable, not removed'})
     return out

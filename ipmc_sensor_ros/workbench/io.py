@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Front door of the workbench's measurement-data input and output (no rclpy needed).
 
 Everything a verb reads goes through :func:`read_any` (one path) or
@@ -29,11 +30,11 @@ from .measurements import DataFormatError, FrequencyResponseData, PathLike, Time
 from .textread import MAX_BYTES, MAX_ROWS
 
 __all__ = [
-    "DataFormatError", "TimeSeries", "FrequencyResponseData", "TIMESERIES_FORMAT", "FRF_FORMAT",
-    "TIMESERIES_COLUMNS", "TIMESERIES_COLUMNS_NO_DEFLECTION", "FRF_COLUMNS", "GEOMETRY_KEYS",
-    "KNOWN_KEYS", "CURRENT_LABEL", "DEFLECTION_LABEL", "MULTIARRAY_TYPE", "POINT_STAMPED_TYPE",
-    "read_timeseries", "write_timeseries", "read_frf", "write_frf", "read_bag", "write_bag",
-    "read_any", "load_many", "read_records", "Records", "natural_key", "DATA_SUFFIXES",
+    'DataFormatError', 'TimeSeries', 'FrequencyResponseData', 'TIMESERIES_FORMAT', 'FRF_FORMAT',
+    'TIMESERIES_COLUMNS', 'TIMESERIES_COLUMNS_NO_DEFLECTION', 'FRF_COLUMNS', 'GEOMETRY_KEYS',
+    'KNOWN_KEYS', 'CURRENT_LABEL', 'DEFLECTION_LABEL', 'MULTIARRAY_TYPE', 'POINT_STAMPED_TYPE',
+    'read_timeseries', 'write_timeseries', 'read_frf', 'write_frf', 'read_bag', 'write_bag',
+    'read_any', 'load_many', 'read_records', 'Records', 'natural_key', 'DATA_SUFFIXES',
 ]
 _ = _typestore  # re-exported for the test corpus generator
 
@@ -42,7 +43,7 @@ _ = _typestore  # re-exported for the test corpus generator
 # Dispatch
 # ---------------------------------------------------------------------------
 #: Files of a (non-bag) directory that :func:`read_records` reads.
-DATA_SUFFIXES = (".csv", ".txt")
+DATA_SUFFIXES = ('.csv', '.txt')
 
 
 def read_any(path: PathLike, *, max_bytes: int | None = MAX_BYTES,
@@ -54,7 +55,7 @@ def read_any(path: PathLike, *, max_bytes: int | None = MAX_BYTES,
     ``# format:`` header line.
     """
     p = Path(path)
-    if p.is_dir() or p.suffix in (".mcap", ".db3"):
+    if p.is_dir() or p.suffix in ('.mcap', '.db3'):
         return read_bag(path)
     return read_text(path, max_bytes=max_bytes, max_rows=max_rows)
 
@@ -67,7 +68,7 @@ def load_many(paths: Iterable[PathLike]) -> list[TimeSeries | FrequencyResponseD
 def natural_key(path: PathLike) -> list:
     """Sort key of a file name with its numbers compared as numbers: ``short_1Hz`` <
     ``short_1.5Hz`` < ``short_2Hz`` < ``short_13Hz`` (text sorting puts 13 before 2)."""
-    parts = re.split(r"([0-9]+(?:\.[0-9]+)?)", Path(path).name.lower())
+    parts = re.split(r'([0-9]+(?:\.[0-9]+)?)', Path(path).name.lower())
     return [float(p) if k % 2 else p for k, p in enumerate(parts)] + [str(path)]
 
 
@@ -79,12 +80,12 @@ class Records(NamedTuple):
 
 
 def _is_bag_dir(p: Path) -> bool:
-    return p.is_dir() and (p / "metadata.yaml").is_file()
+    return p.is_dir() and (p / 'metadata.yaml').is_file()
 
 
 def read_records(paths: Iterable[PathLike] | PathLike, need_deflection: bool = True, *,
-                 current_topic: str = "current",
-                 deflection_topic: str | None = "deflection_truth",
+                 current_topic: str = 'current',
+                 deflection_topic: str | None = 'deflection_truth',
                  geometry: Geometry | Mapping | None = None,
                  max_bytes: int | None = MAX_BYTES, max_rows: int | None = MAX_ROWS) -> Records:
     """Read files, bags and directories of them, in natural name order within a directory.
@@ -103,14 +104,14 @@ def read_records(paths: Iterable[PathLike] | PathLike, need_deflection: bool = T
     skipped: list = []
 
     def one(p: Path, listed: bool) -> None:
-        if _is_bag_dir(p) or (p.is_file() and p.suffix in (".mcap", ".db3")):
+        if _is_bag_dir(p) or (p.is_file() and p.suffix in ('.mcap', '.db3')):
             item = read_bag(p, current_topic, deflection_topic, geometry)
         else:
             item = read_text(p, max_bytes=max_bytes, max_rows=max_rows)
         if need_deflection and isinstance(item, TimeSeries) and item.deflection_m is None:
-            reason = "no deflection column (current only)"
+            reason = 'no deflection column (current only)'
             if not listed:
-                raise DataFormatError(p, None, f"{reason}: this needs measured deflection")
+                raise DataFormatError(p, None, f'{reason}: this needs measured deflection')
             skipped.append((str(p), reason))
             return
         records.append(item)
@@ -122,14 +123,14 @@ def read_records(paths: Iterable[PathLike] | PathLike, need_deflection: bool = T
                               if (x.is_file() and x.suffix in DATA_SUFFIXES) or _is_bag_dir(x)),
                              key=natural_key)
             if not members:
-                raise DataFormatError(p, None, "directory holds no .csv/.txt files or bags and "
-                                      "is not a bag")
+                raise DataFormatError(p, None, 'directory holds no .csv/.txt files or bags and '
+                                      'is not a bag')
             for x in members:
                 one(x, True)
         else:
             one(p, False)
     if not records:
-        raise DataFormatError(", ".join(str(p) for p in paths) or "(none)", None,
-                              "no usable records" + (f" ({len(skipped)} skipped: no deflection)"
-                                                     if skipped else ""))
+        raise DataFormatError(', '.join(str(p) for p in paths) or '(none)', None,
+                              'no usable records' + (f' ({len(skipped)} skipped: no deflection)'
+                                                     if skipped else ''))
     return Records(records, skipped)

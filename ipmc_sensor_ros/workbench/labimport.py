@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Import of lab exports (DAQ, LabVIEW, spreadsheets) into ``ipmc-timeseries/1``.
 
 A lab file is free text, then one column-header line, then numeric rows::
@@ -52,19 +53,19 @@ from .textread import (MAX_BYTES, MAX_ROWS, TextSource, increasing_check, parse_
 from .units import (CURRENT_UNITS, LENGTH_UNITS, TIME_UNITS, VOLTAGE_UNITS, decimal_to_si,
                     parse_length, split_unit, to_si, unit_factor)
 
-__all__ = ["import_lab_file", "import_lab_files", "parse_columns_spec", "ROLE_NAMES"]
+__all__ = ['import_lab_file', 'import_lab_files', 'parse_columns_spec', 'ROLE_NAMES']
 
 #: Words that name each column role (matched against the words of a column stem).
 ROLE_NAMES = {
-    "time": ("time", "t", "zeit"),
-    "deflection": ("deflection", "displacement", "laser", "tip", "position"),
-    "current": ("current", "i", "strom"),
+    'time': ('time', 't', 'zeit'),
+    'deflection': ('deflection', 'displacement', 'laser', 'tip', 'position'),
+    'current': ('current', 'i', 'strom'),
 }
-_ROLE_UNITS = {"time": TIME_UNITS, "deflection": LENGTH_UNITS, "current": CURRENT_UNITS}
-_GEOMETRY_PARTS = ("length", "width", "thickness")
+_ROLE_UNITS = {'time': TIME_UNITS, 'deflection': LENGTH_UNITS, 'current': CURRENT_UNITS}
+_GEOMETRY_PARTS = ('length', 'width', 'thickness')
 #: Most lines of free text searched for the column header.
 MAX_HEADER_LINES = 500
-_DIALECTS = (("\t", "."), ("\t", ","), (";", "."), (";", ","), (",", "."))
+_DIALECTS = (('\t', '.'), ('\t', ','), (';', '.'), (';', ','), (',', '.'))
 
 
 def _is_row(line: str, delimiter: str, decimal: str) -> int:
@@ -81,9 +82,9 @@ def _find_table(path, source: TextSource):
     while True:
         line = source.next_line()
         if line is None or source.lineno > MAX_HEADER_LINES:
-            where = "the file" if line is None else f"the first {MAX_HEADER_LINES} lines"
-            raise DataFormatError(path, source.lineno or 1, f"no table found in {where}: expected "
-                                  "a column-header line followed by rows of numbers separated "
+            where = 'the file' if line is None else f'the first {MAX_HEADER_LINES} lines'
+            raise DataFormatError(path, source.lineno or 1, f'no table found in {where}: expected '
+                                  'a column-header line followed by rows of numbers separated '
                                   "by tab, ';' or ','")
         if previous and line.strip():
             head_line, head = previous[-1]
@@ -106,22 +107,22 @@ def parse_columns_spec(text: str) -> dict[str, str]:
     naming the bad item, an unknown role or a role given twice.
     """
     out: dict[str, str] = {}
-    for item in text.split(","):
-        role, sep, name = item.partition("=")
+    for item in text.split(','):
+        role, sep, name = item.partition('=')
         role, name = role.strip(), name.strip()
         if not sep or not name:
-            raise ValueError(f"columns: {item.strip()!r} is not role=column "
-                             "(e.g. time=Time [s],current=I (nA))")
+            raise ValueError(f'columns: {item.strip()!r} is not role=column '
+                             '(e.g. time=Time [s],current=I (nA))')
         if role not in ROLE_NAMES:
-            raise ValueError(f"columns: unknown role {role!r}; roles are {list(ROLE_NAMES)}")
+            raise ValueError(f'columns: unknown role {role!r}; roles are {list(ROLE_NAMES)}')
         if role in out:
-            raise ValueError(f"columns: role {role!r} given twice")
+            raise ValueError(f'columns: role {role!r} given twice')
         out[role] = name
     return out
 
 
 def _words(stem: str) -> list[str]:
-    return [w for w in re.split(r"[^a-z0-9]+", stem.lower()) if w]
+    return [w for w in re.split(r'[^a-z0-9]+', stem.lower()) if w]
 
 
 def _assign(path, cells: list[str], line: int, columns: Mapping[str, str] | None):
@@ -130,8 +131,8 @@ def _assign(path, cells: list[str], line: int, columns: Mapping[str, str] | None
     wanted = dict(columns or {})
     unknown = sorted(set(wanted) - set(ROLE_NAMES))
     if unknown:
-        raise DataFormatError(path, None, f"columns: unknown role(s) {unknown}; roles are "
-                              f"{list(ROLE_NAMES)}")
+        raise DataFormatError(path, None, f'columns: unknown role(s) {unknown}; roles are '
+                              f'{list(ROLE_NAMES)}')
     for role, name in wanted.items():
         if name in cells:
             found[role] = (cells.index(name), split_unit(name)[1])
@@ -141,22 +142,22 @@ def _assign(path, cells: list[str], line: int, columns: Mapping[str, str] | None
             file_unit = split_unit(stem)[1]
             found[role] = (cells.index(stem), unit or file_unit)
             continue
-        raise DataFormatError(path, line, f"columns: {role}={name!r} is not a column of the file "
-                              f"(columns: {cells})")
+        raise DataFormatError(path, line, f'columns: {role}={name!r} is not a column of the file '
+                              f'(columns: {cells})')
     for role, names in ROLE_NAMES.items():
         if role in found:
             continue
         hits = [k for k, c in enumerate(cells) if k not in {i for i, _ in found.values()}
                 and set(_words(split_unit(c)[0])) & set(names)]
         if len(hits) > 1:
-            raise DataFormatError(path, line, f"two columns could be the {role}: "
-                                  f"{[cells[k] for k in hits]}; choose one with "
+            raise DataFormatError(path, line, f'two columns could be the {role}: '
+                                  f'{[cells[k] for k in hits]}; choose one with '
                                   f"columns={{'{role}': ...}}")
         if hits:
             found[role] = (hits[0], split_unit(cells[hits[0]])[1])
-    for role in ("time", "current"):
+    for role in ('time', 'current'):
         if role not in found:
-            raise DataFormatError(path, line, f"no {role} column among {cells}; name it with "
+            raise DataFormatError(path, line, f'no {role} column among {cells}; name it with '
                                   f"columns={{'{role}': ...}}")
     return found
 
@@ -165,23 +166,23 @@ def _factor(path, line: int, role: str, cell: str, unit: str | None,
             gain: float | None) -> float:
     """Factor from the column's unit to SI (A for a current measured in V, via ``gain``)."""
     if unit is None:
-        raise DataFormatError(path, line, f"column {cell!r} ({role}) has no unit: write it as "
+        raise DataFormatError(path, line, f'column {cell!r} ({role}) has no unit: write it as '
                               f"'{cell} [unit]' or pass columns={{'{role}': '{cell} [unit]'}}; "
                               f"units: {', '.join(_ROLE_UNITS[role])}")
     factor = unit_factor(unit, _ROLE_UNITS[role])
-    if role == "current":
+    if role == 'current':
         volts = unit_factor(unit, VOLTAGE_UNITS)
         if volts is not None:
             if gain is None:
-                raise DataFormatError(path, line, f"column {cell!r} is a voltage: give "
-                                      "current_gain_a_per_v (amperes per volt of the current "
-                                      "amplifier) to convert it to a current")
+                raise DataFormatError(path, line, f'column {cell!r} is a voltage: give '
+                                      'current_gain_a_per_v (amperes per volt of the current '
+                                      'amplifier) to convert it to a current')
             return volts * gain
         if factor is not None and gain is not None:
-            raise DataFormatError(path, line, f"current_gain_a_per_v = {gain!r} given but column "
-                                  f"{cell!r} is already a current ({unit})")
+            raise DataFormatError(path, line, f'current_gain_a_per_v = {gain!r} given but column '
+                                  f'{cell!r} is already a current ({unit})')
     if factor is None:
-        raise DataFormatError(path, line, f"column {cell!r} ({role}): unit {unit!r} is not a "
+        raise DataFormatError(path, line, f'column {cell!r} ({role}): unit {unit!r} is not a '
                               f"unit of {role}; units: {', '.join(_ROLE_UNITS[role])}")
     return factor
 
@@ -195,71 +196,75 @@ def _read_meta(meta: PathLike) -> dict:
     try:
         st = os.stat(p)
         if not stat.S_ISREG(st.st_mode) or st.st_size > MAX_META_BYTES:
-            raise DataFormatError(meta, None, f"run metadata must be a regular file of at most "
-                                  f"{MAX_META_BYTES} bytes")
-        text = p.read_text(encoding="utf-8")
+            raise DataFormatError(meta, None, f'run metadata must be a regular file of at most '
+                                  f'{MAX_META_BYTES} bytes')
+        text = p.read_text(encoding='utf-8')
     except (OSError, UnicodeDecodeError) as exc:
-        raise DataFormatError(meta, None, f"cannot read run metadata: {exc}") from None
+        raise DataFormatError(meta, None, f'cannot read run metadata: {exc}') from None
     try:
-        if p.suffix.lower() == ".json":
+        if p.suffix.lower() == '.json':
             data = json.loads(text)
         else:
             import yaml
 
             data = yaml.safe_load(text)
     except ValueError as exc:  # json.JSONDecodeError and yaml.YAMLError are ValueErrors or not
-        raise DataFormatError(meta, getattr(exc, "lineno", None),
-                              f"run metadata is not valid JSON: {exc}") from None
+        raise DataFormatError(meta, getattr(exc, 'lineno', None),
+                              f'run metadata is not valid JSON: {exc}') from None
     except Exception as exc:  # yaml.YAMLError
-        mark = getattr(exc, "problem_mark", None)
+        mark = getattr(exc, 'problem_mark', None)
         raise DataFormatError(meta, mark.line + 1 if mark else None,
-                              f"run metadata is not valid YAML: "
+                              f'run metadata is not valid YAML: '
                               f"{getattr(exc, 'problem', None) or exc}") from None
     if not isinstance(data, dict):
-        raise DataFormatError(meta, None, "run metadata must be a mapping (JSON object)")
+        raise DataFormatError(meta, None, 'run metadata must be a mapping (JSON object)')
     return data
 
 
 def _meta_geometry(meta: PathLike, data: dict) -> dict[str, tuple[float, str]]:
     """part -> (metres, 'key: value as written') from run metadata."""
-    source = data.get("geometry", data)
+    source = data.get('geometry', data)
     if not isinstance(source, dict):
         raise DataFormatError(meta, None, "'geometry' in run metadata must be a mapping")
     out: dict[str, tuple[float, str]] = {}
     for key, value in source.items():
-        part, _, unit = str(key).partition("_")
+        part, _, unit = str(key).partition('_')
         if part not in _GEOMETRY_PARTS:
             continue
         try:
             if unit:
                 factor = unit_factor(unit, LENGTH_UNITS)
-                if factor is None or isinstance(value, bool) or not isinstance(value, (int, float)):
-                    raise ValueError(f"expected a number in {unit!r}, a length unit")
+                if (
+                    factor is None
+                    or isinstance(value, bool)
+                    or not isinstance(value, (int, float))
+                ):
+                    raise ValueError(f'expected a number in {unit!r}, a length unit')
                 metres = decimal_to_si(value, factor)
             elif isinstance(value, str):
                 metres = parse_length(value)
             else:
                 raise ValueError("give the unit: length_mm: 22 or length: '22 mm'")
         except ValueError as exc:
-            raise DataFormatError(meta, None, f"run metadata {key}: {value!r}: {exc}") from None
+            raise DataFormatError(meta, None, f'run metadata {key}: {value!r}: {exc}') from None
         if part in out:
-            raise DataFormatError(meta, None, f"run metadata gives the {part} twice "
-                                  f"({out[part][1]} and {key}: {value})")
-        out[part] = (metres, f"{key}: {value}")
+            raise DataFormatError(meta, None, f'run metadata gives the {part} twice '
+                                  f'({out[part][1]} and {key}: {value})')
+        out[part] = (metres, f'{key}: {value}')
     return out
 
 
 def _flag_geometry(geometry) -> dict[str, tuple[float, str]]:
     if isinstance(geometry, Geometry):
-        return {p: (getattr(geometry, f"{p}_m"), f"{p}_m={getattr(geometry, f'{p}_m')!r}")
+        return {p: (getattr(geometry, f'{p}_m'), f"{p}_m={getattr(geometry, f'{p}_m')!r}")
                 for p in _GEOMETRY_PARTS}
     if isinstance(geometry, Mapping):
-        return {p: (float(geometry[f"{p}_m"]), f"{p}_m={geometry[f'{p}_m']!r}")
-                for p in _GEOMETRY_PARTS if f"{p}_m" in geometry}
-    parts = [s.strip() for s in str(geometry).split(",")]
+        return {p: (float(geometry[f'{p}_m']), f"{p}_m={geometry[f'{p}_m']!r}")
+                for p in _GEOMETRY_PARTS if f'{p}_m' in geometry}
+    parts = [s.strip() for s in str(geometry).split(',')]
     if len(parts) != 3:
-        raise ValueError(f"geometry {geometry!r}: expected length,width,thickness with units, "
-                         "e.g. 22mm,7mm,360um")
+        raise ValueError(f'geometry {geometry!r}: expected length,width,thickness with units, '
+                         'e.g. 22mm,7mm,360um')
     return {p: (parse_length(v), v) for p, v in zip(_GEOMETRY_PARTS, parts)}
 
 
@@ -267,30 +272,30 @@ def _geometry(path, geometry, meta, meta_data: dict, sample: str) -> Geometry:
     try:
         flag = _flag_geometry(geometry) if geometry is not None else {}
     except (ValueError, KeyError) as exc:
-        raise DataFormatError(path, None, f"geometry argument: {exc}") from None
+        raise DataFormatError(path, None, f'geometry argument: {exc}') from None
     from_meta = _meta_geometry(meta, meta_data) if meta is not None else {}
     values = {}
     for part in _GEOMETRY_PARTS:
         a, b = flag.get(part), from_meta.get(part)
         if a and b and not math.isclose(a[0], b[0], rel_tol=1e-9):
-            raise DataFormatError(path, None, f"{part} conflict: geometry argument says {a[1]} "
-                                  f"({a[0]!r} m) but run metadata {meta} says {b[1]} "
-                                  f"({b[0]!r} m); fix one of them")
+            raise DataFormatError(path, None, f'{part} conflict: geometry argument says {a[1]} '
+                                  f'({a[0]!r} m) but run metadata {meta} says {b[1]} '
+                                  f'({b[0]!r} m); fix one of them')
         if a or b:
             values[part] = (a or b)[0]
     missing = [p for p in _GEOMETRY_PARTS if p not in values]
     if missing:
         raise DataFormatError(path, None, f"no {', '.join(missing)}: pass geometry="
                               "'22mm,7mm,360um' (length,width,thickness) or a run metadata file "
-                              "with length_mm, width_mm, thickness_um")
+                              'with length_mm, width_mm, thickness_um')
     try:
-        return Geometry(values["length"], values["width"], values["thickness"], name=sample)
+        return Geometry(values['length'], values['width'], values['thickness'], name=sample)
     except ParameterError as exc:
-        raise DataFormatError(path, None, f"geometry out of physical range: {exc}") from None
+        raise DataFormatError(path, None, f'geometry out of physical range: {exc}') from None
 
 
 def _one_line(text: Any) -> str:
-    return " ".join(str(text).split())
+    return ' '.join(str(text).split())
 
 
 def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = None,
@@ -314,59 +319,59 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
     """
     if current_gain_a_per_v is not None and not (math.isfinite(current_gain_a_per_v)
                                                  and current_gain_a_per_v > 0):
-        raise DataFormatError(path, None, f"current_gain_a_per_v must be a finite number > 0, "
-                              f"got {current_gain_a_per_v!r}")
+        raise DataFormatError(path, None, f'current_gain_a_per_v must be a finite number > 0, '
+                              f'got {current_gain_a_per_v!r}')
     meta_data = _read_meta(meta) if meta is not None else {}
-    meta_sample = meta_data.get("sample")
+    meta_sample = meta_data.get('sample')
     if sample and meta_sample and str(meta_sample) != sample:
-        raise DataFormatError(path, None, f"sample conflict: argument says {sample!r} but run "
-                              f"metadata {meta} says {meta_sample!r}")
-    name = _one_line(sample or meta_sample or "")
+        raise DataFormatError(path, None, f'sample conflict: argument says {sample!r} but run '
+                              f'metadata {meta} says {meta_sample!r}')
+    name = _one_line(sample or meta_sample or '')
     geo = _geometry(path, geometry, meta, meta_data, name)
     with TextSource(path, max_bytes=max_bytes) as source:
         notes, cells, line, delimiter, decimal = _find_table(path, source)
         roles = _assign(path, cells, line, columns)
         factors = {role: _factor(path, line, role, cells[k], unit, current_gain_a_per_v)
                    for role, (k, unit) in roles.items()}
-        t_index, t_unit = roles["time"]
-        data, _ = read_table(source, cells, increasing_check(path, cells[t_index], t_unit or "",
+        t_index, t_unit = roles['time']
+        data, _ = read_table(source, cells, increasing_check(path, cells[t_index], t_unit or '',
                                                              t_index),
                              delimiter=delimiter, decimal=decimal, max_rows=max_rows,
                              header_line=line)
     picked = {role: to_si(data[k], factors[role]) for role, (k, _) in roles.items()}
     del data
-    t = picked["time"]
+    t = picked['time']
     steps = np.diff(t)
     if np.any(steps <= 0):
         k = int(np.argmax(steps <= 0)) + 1
-        raise DataFormatError(path, line + 1 + k, f"time step below float resolution after "
-                              f"conversion to seconds at {t[k]!r} s")
-    extra: dict[str, str] = {f"note_{k + 1:02d}": _one_line(n) for k, n in enumerate(notes)}
-    extra["lab_columns"] = _one_line(", ".join(f"{role}={cells[k]}"
+        raise DataFormatError(path, line + 1 + k, f'time step below float resolution after '
+                              f'conversion to seconds at {t[k]!r} s')
+    extra: dict[str, str] = {f'note_{k + 1:02d}': _one_line(n) for k, n in enumerate(notes)}
+    extra['lab_columns'] = _one_line(', '.join(f'{role}={cells[k]}'
                                                for role, (k, _) in roles.items()))
     if current_gain_a_per_v is not None:
-        extra["current_gain_a_per_v"] = repr(float(current_gain_a_per_v))
+        extra['current_gain_a_per_v'] = repr(float(current_gain_a_per_v))
     known: dict[str, float] = {}
     for key, value in meta_data.items():
         if key in KNOWN_KEYS:
             if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise DataFormatError(meta, None, f"run metadata {key}: {value!r} must be a "
-                                      "number in SI units")
+                raise DataFormatError(meta, None, f'run metadata {key}: {value!r} must be a '
+                                      'number in SI units')
             known[key] = float(value)
-        elif key not in ("sample", "geometry") and key.partition("_")[0] not in _GEOMETRY_PARTS:
-            if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_.\-]*", str(key)):
+        elif key not in ('sample', 'geometry') and key.partition('_')[0] not in _GEOMETRY_PARTS:
+            if not re.fullmatch(r'[A-Za-z][A-Za-z0-9_.\-]*', str(key)):
                 continue
             scalar = isinstance(value, (str, int, float, bool))
-            text = _one_line(value)[:200] if scalar else "(nested value, not kept)"
+            text = _one_line(value)[:200] if scalar else '(nested value, not kept)'
             if text:
-                extra[f"meta.{key}"] = text
+                extra[f'meta.{key}'] = text
     try:
         MaterialParameters(**known)
     except (ParameterError, TypeError) as exc:
-        raise DataFormatError(meta, None, f"implausible known value: {exc}") from None
+        raise DataFormatError(meta, None, f'implausible known value: {exc}') from None
     return TimeSeries(path=str(path), sample=name, geometry=geo, known=known,
                       sample_rate_hz=1.0 / float(np.median(steps)), time_s=t,
-                      current_a=picked["current"], deflection_m=picked.get("deflection"),
+                      current_a=picked['current'], deflection_m=picked.get('deflection'),
                       extra=extra)
 
 
@@ -380,15 +385,15 @@ def import_lab_files(paths: Iterable[PathLike], out_dir: PathLike, *,
     """
     paths = [Path(p) for p in paths]
     out = Path(out_dir)
-    targets = [out / f"{p.stem}.csv" for p in paths]
+    targets = [out / f'{p.stem}.csv' for p in paths]
     seen: dict[Path, Path] = {}
     for src, dst in zip(paths, targets):
         if dst in seen:
-            raise DataFormatError(src, None, f"same output name {dst.name} as {seen[dst]}; "
-                                  "rename one of the files")
+            raise DataFormatError(src, None, f'same output name {dst.name} as {seen[dst]}; '
+                                  'rename one of the files')
         seen[dst] = src
         if dst.exists() and not overwrite:
-            raise DataFormatError(dst, None, "output exists; remove it or pass overwrite")
+            raise DataFormatError(dst, None, 'output exists; remove it or pass overwrite')
     series = [import_lab_file(p, **options) for p in paths]
     out.mkdir(parents=True, exist_ok=True)
     for ts, dst in zip(series, targets):

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Measurement data classes of the workbench and the one error they raise (no rclpy needed).
 
 :class:`TimeSeries` (current and optional tip deflection, SI units),
@@ -16,7 +17,7 @@ import numpy as np
 from ..physics.parameters import Geometry
 from ..errors import DataFormatError
 
-__all__ = ["DataFormatError", "TimeSeries", "FrequencyResponseData", "PathLike"]
+__all__ = ['DataFormatError', 'TimeSeries', 'FrequencyResponseData', 'PathLike']
 
 PathLike = Union[str, Path]
 
@@ -27,9 +28,9 @@ PathLike = Union[str, Path]
 def _vector(name: str, values: Any, n: int | None = None) -> np.ndarray:
     arr = np.array(values, dtype=float, copy=True)
     if arr.ndim != 1:
-        raise ValueError(f"{name} must be 1-D, got shape {arr.shape}")
+        raise ValueError(f'{name} must be 1-D, got shape {arr.shape}')
     if n is not None and arr.size != n:
-        raise ValueError(f"{name} has {arr.size} values, expected {n}")
+        raise ValueError(f'{name} has {arr.size} values, expected {n}')
     return arr
 
 
@@ -64,25 +65,25 @@ class TimeSeries:
 
     def __post_init__(self) -> None:
         if not isinstance(self.geometry, Geometry):
-            raise TypeError(f"geometry must be a Geometry, got {type(self.geometry).__name__}")
-        t = _vector("time_s", self.time_s)
-        object.__setattr__(self, "time_s", t)
-        object.__setattr__(self, "current_a", _vector("current_a", self.current_a, t.size))
+            raise TypeError(f'geometry must be a Geometry, got {type(self.geometry).__name__}')
+        t = _vector('time_s', self.time_s)
+        object.__setattr__(self, 'time_s', t)
+        object.__setattr__(self, 'current_a', _vector('current_a', self.current_a, t.size))
         if self.deflection_m is not None:
-            object.__setattr__(self, "deflection_m",
-                               _vector("deflection_m", self.deflection_m, t.size))
+            object.__setattr__(self, 'deflection_m',
+                               _vector('deflection_m', self.deflection_m, t.size))
             if self.deflection_alignment is None:
-                object.__setattr__(self, "deflection_alignment", "exact")
+                object.__setattr__(self, 'deflection_alignment', 'exact')
         elif self.deflection_alignment is not None:
-            raise ValueError("deflection_alignment given but deflection_m is None")
-        if self.deflection_alignment not in (None, "exact", "linear"):
+            raise ValueError('deflection_alignment given but deflection_m is None')
+        if self.deflection_alignment not in (None, 'exact', 'linear'):
             raise ValueError(f"deflection_alignment must be 'exact', 'linear' or None, "
-                             f"got {self.deflection_alignment!r}")
-        object.__setattr__(self, "sample_rate_hz", float(self.sample_rate_hz))
-        object.__setattr__(self, "known", {str(k): float(v) for k, v in self.known.items()})
-        object.__setattr__(self, "extra", dict(self.extra))
-        object.__setattr__(self, "path", str(self.path))
-        object.__setattr__(self, "sample", str(self.sample))
+                             f'got {self.deflection_alignment!r}')
+        object.__setattr__(self, 'sample_rate_hz', float(self.sample_rate_hz))
+        object.__setattr__(self, 'known', {str(k): float(v) for k, v in self.known.items()})
+        object.__setattr__(self, 'extra', dict(self.extra))
+        object.__setattr__(self, 'path', str(self.path))
+        object.__setattr__(self, 'sample', str(self.sample))
 
     @property
     def n_samples(self) -> int:
@@ -124,20 +125,20 @@ class FrequencyResponseData:
 
     def __post_init__(self) -> None:
         if not isinstance(self.geometry, Geometry):
-            raise TypeError(f"geometry must be a Geometry, got {type(self.geometry).__name__}")
-        f = _vector("frequency_hz", self.frequency_hz)
-        object.__setattr__(self, "frequency_hz", f)
-        for name in ("gain_a_per_m", "phase_deg"):
+            raise TypeError(f'geometry must be a Geometry, got {type(self.geometry).__name__}')
+        f = _vector('frequency_hz', self.frequency_hz)
+        object.__setattr__(self, 'frequency_hz', f)
+        for name in ('gain_a_per_m', 'phase_deg'):
             object.__setattr__(self, name, _vector(name, getattr(self, name), f.size))
-        for name in ("coherence", "gain_std_a_per_m", "phase_std_deg"):
+        for name in ('coherence', 'gain_std_a_per_m', 'phase_std_deg'):
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, _vector(name, getattr(self, name), f.size))
         if (self.gain_std_a_per_m is None) != (self.phase_std_deg is None):
-            raise ValueError("gain_std_a_per_m and phase_std_deg must be given together")
-        object.__setattr__(self, "known", {str(k): float(v) for k, v in self.known.items()})
-        object.__setattr__(self, "extra", dict(self.extra))
-        object.__setattr__(self, "path", str(self.path))
-        object.__setattr__(self, "sample", str(self.sample))
+            raise ValueError('gain_std_a_per_m and phase_std_deg must be given together')
+        object.__setattr__(self, 'known', {str(k): float(v) for k, v in self.known.items()})
+        object.__setattr__(self, 'extra', dict(self.extra))
+        object.__setattr__(self, 'path', str(self.path))
+        object.__setattr__(self, 'sample', str(self.sample))
 
     @property
     def gain_std(self) -> np.ndarray | None:

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Figures of merit, defined once for every verb, report and test.
 
 * :func:`fit_percent` -- MATLAB ``compare``: 100 (1 - ||y - y_hat|| / ||y - mean y||);
@@ -9,14 +10,14 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["fit_percent", "nrmse", "noise_rms"]
+__all__ = ['fit_percent', 'nrmse', 'noise_rms']
 
 
 def fit_percent(measured, predicted) -> float:
     """MATLAB ``compare`` fit: 100 (1 - ||y - y_hat|| / ||y - mean y||), percent."""
     y = np.asarray(measured, float)
     den = np.linalg.norm(y - y.mean())
-    return float(100.0 * (1.0 - np.linalg.norm(y - predicted) / den)) if den > 0 else float("nan")
+    return float(100.0 * (1.0 - np.linalg.norm(y - predicted) / den)) if den > 0 else float('nan')
 
 
 def nrmse(estimate, truth) -> float:
@@ -41,7 +42,7 @@ def noise_rms(t: np.ndarray, w: np.ndarray, y: np.ndarray, window_s: float = 4.0
     except ValueError:
         d2 = np.diff(y, 2)
         return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
-    f0, k = p.frequency_hz, p.extra.get("harmonics", 10)
+    f0, k = p.frequency_hz, p.extra.get('harmonics', 10)
     periods = max(2, int(round(window_s * f0)))
     span = periods / f0
     ss, dof = 0.0, 0

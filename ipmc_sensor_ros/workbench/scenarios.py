@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Synthetic measurement campaigns: crank-slider sweeps and long records, with any
 model (base + effects), realistic noise, seeded.
 
@@ -21,20 +22,25 @@ from ..simulation.sensor import predict_current
 from ..simulation.stimuli import CrankSlider
 from .timefit import Record
 
-__all__ = ["crank_slider_campaign", "DETECTABLE_RANGES", "random_effect_values", "hidden_effects_campaign"]
+__all__ = [
+    'crank_slider_campaign',
+    'DETECTABLE_RANGES',
+    'random_effect_values',
+    'hidden_effects_campaign',
+]
 
 #: Parameter ranges, inside each effect's plausible range, where the effect is
 #: large enough to be seen against 1 % noise in a 1-20 Hz sweep (used to draw
 #: hidden effects for tests; smaller effects are, correctly, not detected).
 DETECTABLE_RANGES = {
-    "amplifier_bandwidth": {"corner_hz": (30.0, 300.0)},
-    "time_delay": {"delay_s": (5e-4, 5e-3)},
-    "current_offset": {"offset_a": (1e-7, 5e-7), "drift_a_per_s": (-2e-8, 2e-8)},
+    'amplifier_bandwidth': {'corner_hz': (30.0, 300.0)},
+    'time_delay': {'delay_s': (5e-4, 5e-3)},
+    'current_offset': {'offset_a': (1e-7, 5e-7), 'drift_a_per_s': (-2e-8, 2e-8)},
     # the plain exponential (no equilibrium) unless a test asks for a relaxation
-    "hydration_drift": {"diffusivity_rate_per_s": (-2e-3, -5e-4), "equilibrium_ratio": (0.0, 0.0)},
-    "effective_length": {"tip_offset_m": (1.5e-3, 4e-3)},
-    "beam_inertia": {"natural_frequency_hz": (22.0, 50.0), "damping_ratio": (0.01, 0.1)},
-    "nonlinearity": {"quadratic": (0.5, 2.0), "cubic": (5.0, 20.0)},
+    'hydration_drift': {'diffusivity_rate_per_s': (-2e-3, -5e-4), 'equilibrium_ratio': (0.0, 0.0)},
+    'effective_length': {'tip_offset_m': (1.5e-3, 4e-3)},
+    'beam_inertia': {'natural_frequency_hz': (22.0, 50.0), 'damping_ratio': (0.01, 0.1)},
+    'nonlinearity': {'quadratic': (0.5, 2.0), 'cubic': (5.0, 20.0)},
 }
 
 
@@ -51,15 +57,15 @@ def random_effect_values(name: str, rng: np.random.Generator) -> dict[str, float
     return out
 
 
-def crank_slider_campaign(true_effects: Sequence = ("surface_resistance",), *,
-                          samples: Sequence[str | Geometry] = ("slim", "short"),
+def crank_slider_campaign(true_effects: Sequence = ('surface_resistance',), *,
+                          samples: Sequence[str | Geometry] = ('slim', 'short'),
                           frequencies_hz: Sequence[float] = tuple(np.geomspace(1.0, 20.0, 8)),
                           duration_s: float = 6.0, sample_rate_hz: float = 1000.0,
                           crank_radius_m: float = 2e-3, rod_length_m: float = 15e-3,
                           material: MaterialParameters = PAPER_PARAMETERS, noise_rel: float = 0.01,
-                          seed: int = 0, model_effects: Sequence = ("surface_resistance",),
-                          preroll_s: float = 1.0, fidelity: str = "model",
-                          beam_model: str = "linear", hum_rel: float = 0.0,
+                          seed: int = 0, model_effects: Sequence = ('surface_resistance',),
+                          preroll_s: float = 1.0, fidelity: str = 'model',
+                          beam_model: str = 'linear', hum_rel: float = 0.0,
                           hum_hz: float = 50.0) -> list[Record]:
     """One record per (sample, frequency); ``true_effects`` make the data,
     ``model_effects`` go into each record's (to be tested) model.  ``fidelity``:
@@ -78,10 +84,12 @@ def crank_slider_campaign(true_effects: Sequence = ("surface_resistance",), *,
             t = np.arange(int(round((duration_s + preroll_s) * sample_rate_hz))) / sample_rate_hz
             stim = CrankSlider(float(f), crank_radius_m, rod_length_m)
             w = stim.deflection(t)
-            if fidelity == "field":
+            if fidelity == 'field':
                 from ..simulation.sensor import FieldSensorSimulator
 
-                i = FieldSensorSimulator(truth, sample_rate_hz, beam_model=beam_model).run(stim, t)[1]
+                i = FieldSensorSimulator(truth, sample_rate_hz, beam_model=beam_model).run(
+                    stim, t
+                )[1]
             else:
                 i = predict_current(truth, t, w)
             keep = t >= preroll_s
@@ -92,19 +100,25 @@ def crank_slider_campaign(true_effects: Sequence = ("surface_resistance",), *,
                 for m, share in ((1, 0.8), (3, 0.2)):
                     i = i + hum_rel * scale * np.sqrt(2 * share) * np.cos(
                         2 * np.pi * m * hum_hz * t + rng.uniform(0, 2 * np.pi))
-            out.append(Record(f"{geometry.name or 'sample'}_{f:.3g}Hz", geometry.name or "sample",
+            out.append(Record(f"{geometry.name or 'sample'}_{f:.3g}Hz", geometry.name or 'sample',
                               SensorModel(geometry, material, tuple(model_effects)), t, w, i))
     return out
 
 
-def hidden_effects_campaign(hidden: Sequence[str], seed: int, **kwargs) -> tuple[list[Record], dict]:
+def hidden_effects_campaign(
+    hidden: Sequence[str], seed: int, **kwargs
+) -> tuple[list[Record], dict]:
     """Records with the ``hidden`` effects (values drawn by :func:`random_effect_values` from a
     generator seeded with ``seed``) for a diagnosis that starts from H2, or from H1 when
     ``surface_resistance`` is among the hidden effects.  Returns ``(records, truth)``,
     ``truth`` = {effect: values}."""
     rng = np.random.default_rng(10_000 + seed)
     truth = {name: random_effect_values(name, rng) for name in hidden}
-    true_effects = ["surface_resistance"] + [(n, v) for n, v in truth.items() if n != "surface_resistance"]
-    model_effects = () if "surface_resistance" in truth else ("surface_resistance",)
-    recs = crank_slider_campaign(tuple(true_effects), seed=seed, model_effects=model_effects, **kwargs)
+    true_effects = ['surface_resistance'] + [
+        (n, v) for n, v in truth.items() if n != 'surface_resistance'
+    ]
+    model_effects = () if 'surface_resistance' in truth else ('surface_resistance',)
+    recs = crank_slider_campaign(
+        tuple(true_effects), seed=seed, model_effects=model_effects, **kwargs
+    )
     return recs, truth

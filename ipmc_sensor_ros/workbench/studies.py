@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Research studies on the independent field solution (not used by the estimator or the nodes):
 mesh convergence against the closed forms, and the size of the physics the paper linearises
 away (the term dropped from eq. 9; large-deflection beam mechanics instead of eq. 21).
@@ -11,8 +12,8 @@ from ..physics.field import FieldSolver, NonlinearFieldSolver
 from ..physics.model import SensorModel
 from .freqresp import harmonic_fit
 
-__all__ = ["convergence_table", "nonlinearity_study", "large_deflection_study",
-           "amplitude_at_error"]
+__all__ = ['convergence_table', 'nonlinearity_study', 'large_deflection_study',
+           'amplitude_at_error']
 
 
 def convergence_table(model: SensorModel, band_hz=(0.1, 100.0), n_points: int = 25,
@@ -25,10 +26,10 @@ def convergence_table(model: SensorModel, band_hz=(0.1, 100.0), n_points: int = 
     for cell, growth, nz in levels:
         solver = FieldSolver(model, surface_cell=cell, growth=growth, n_length=nz)
         ratio = solver.frequency_response(f) / exact
-        rows.append({"surface_cell": cell, "growth": growth, "n_length": nz,
-                     "states": solver.n_states,
-                     "max_mag_error_db": float(np.max(np.abs(20 * np.log10(np.abs(ratio))))),
-                     "max_phase_error_deg": float(np.max(np.abs(np.degrees(np.angle(ratio)))))})
+        rows.append({'surface_cell': cell, 'growth': growth, 'n_length': nz,
+                     'states': solver.n_states,
+                     'max_mag_error_db': float(np.max(np.abs(20 * np.log10(np.abs(ratio))))),
+                     'max_phase_error_deg': float(np.max(np.abs(np.degrees(np.angle(ratio)))))})
     return rows
 
 
@@ -41,11 +42,14 @@ def _distortion_rows(simulate_exact, i_unit, t, shape, amplitudes_m, frequency_h
     for a in amplitudes_m:
         i_true = simulate_exact(a * shape)
         i_lin = a * i_unit
-        err = float(np.sqrt(np.mean((i_true[keep] - i_lin[keep]) ** 2)) / np.sqrt(np.mean(i_lin[keep] ** 2)))
+        err = float(
+            np.sqrt(np.mean((i_true[keep] - i_lin[keep]) ** 2))
+            / np.sqrt(np.mean(i_lin[keep] ** 2))
+        )
         ph, _, _ = harmonic_fit(t[keep] - t[keep][0], i_true[keep], frequency_hz, 3)
-        rows.append({"amplitude_m": float(a), "linear_model_error": err,
-                     "h2_over_h1": float(abs(ph[1]) / abs(ph[0])),
-                     "h3_over_h1": float(abs(ph[2]) / abs(ph[0]))})
+        rows.append({'amplitude_m': float(a), 'linear_model_error': err,
+                     'h2_over_h1': float(abs(ph[1]) / abs(ph[0])),
+                     'h3_over_h1': float(abs(ph[2]) / abs(ph[0]))})
     return rows
 
 
@@ -76,18 +80,18 @@ def large_deflection_study(model: SensorModel, amplitudes_m, frequency_hz: float
     rows = _distortion_rows(lambda w: elastica.simulate(t, w), i_unit, t, shape, amplitudes_m,
                             frequency_hz)
     for r in rows:
-        r["amplitude_over_length"] = r["amplitude_m"] / model.geometry.length_m
+        r['amplitude_over_length'] = r['amplitude_m'] / model.geometry.length_m
     return rows
 
 
 def amplitude_at_error(rows: list[dict], level: float = 0.01) -> float:
     """Smallest amplitude (m) at which ``linear_model_error`` reaches ``level``, by
     log-log interpolation between the study's rows (nan if never reached)."""
-    a = np.array([r["amplitude_m"] for r in rows])
-    e = np.array([r["linear_model_error"] for r in rows])
+    a = np.array([r['amplitude_m'] for r in rows])
+    e = np.array([r['linear_model_error'] for r in rows])
     above = np.flatnonzero(e >= level)
     if above.size == 0:
-        return float("nan")
+        return float('nan')
     k = int(above[0])
     if k == 0:
         return float(a[0])

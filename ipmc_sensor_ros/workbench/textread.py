@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Streaming reader of numeric text tables: regular files only, bounded size and rows.
 
 Shared by the ``ipmc-timeseries/1`` / ``ipmc-frf/1`` readers and the lab
@@ -24,7 +25,7 @@ import numpy as np
 
 from .measurements import DataFormatError, PathLike
 
-__all__ = ["MAX_BYTES", "MAX_ROWS", "CHUNK_BYTES", "TextSource", "parse_number", "read_table"]
+__all__ = ['MAX_BYTES', 'MAX_ROWS', 'CHUNK_BYTES', 'TextSource', 'parse_number', 'read_table']
 
 #: Default size limit of a text file, bytes (about 30 million 3-column rows).
 MAX_BYTES = 2 * 1024**3
@@ -35,36 +36,36 @@ CHUNK_BYTES = 1 << 22
 #: Longest accepted line, bytes.
 MAX_LINE_BYTES = 1 << 20
 
-_NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?", re.ASCII)
-_NONFINITE = {"nan", "inf", "infinity"}
-_NUMERIC_BYTES = b"0123456789+-.eE \t\r\n"
+_NUMBER = re.compile(r'[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?', re.ASCII)
+_NONFINITE = {'nan', 'inf', 'infinity'}
+_NUMERIC_BYTES = b'0123456789+-.eE \t\r\n'
 
 
-def parse_number(text: str, decimal: str = ".") -> float | None:
+def parse_number(text: str, decimal: str = '.') -> float | None:
     """Finite float of an ASCII decimal number string (``decimal`` ',' allowed), or None."""
     s = text.strip()
-    if decimal != ".":
-        if "." in s:
+    if decimal != '.':
+        if '.' in s:
             return None
-        s = s.replace(decimal, ".")
+        s = s.replace(decimal, '.')
     if not _NUMBER.fullmatch(s):
         return None
     v = float(s)
     return v if np.isfinite(v) else None
 
 
-def cell_error(path, lineno: int, cell: str, column: str, decimal: str = ".") -> DataFormatError:
+def cell_error(path, lineno: int, cell: str, column: str, decimal: str = '.') -> DataFormatError:
     """The error for a cell :func:`parse_number` refused."""
     s = cell.strip()
     if not s:
-        return DataFormatError(path, lineno, f"empty cell in column {column}")
-    if s.lower().lstrip("+-") in _NONFINITE:
-        return DataFormatError(path, lineno, f"NaN/Inf cell {s!r} in column {column} "
-                               "(every value must be a finite number)")
-    if _NUMBER.fullmatch(s.replace(decimal, ".") if decimal != "." else s):
-        return DataFormatError(path, lineno, f"NaN/Inf: cell {s!r} in column {column} "
-                               "overflows to infinity")
-    return DataFormatError(path, lineno, f"non-numeric cell {s!r} in column {column}")
+        return DataFormatError(path, lineno, f'empty cell in column {column}')
+    if s.lower().lstrip('+-') in _NONFINITE:
+        return DataFormatError(path, lineno, f'NaN/Inf cell {s!r} in column {column} '
+                               '(every value must be a finite number)')
+    if _NUMBER.fullmatch(s.replace(decimal, '.') if decimal != '.' else s):
+        return DataFormatError(path, lineno, f'NaN/Inf: cell {s!r} in column {column} '
+                               'overflows to infinity')
+    return DataFormatError(path, lineno, f'non-numeric cell {s!r} in column {column}')
 
 
 def _open_regular(path: PathLike, max_bytes: int | None):
@@ -72,31 +73,31 @@ def _open_regular(path: PathLike, max_bytes: int | None):
     try:
         fd = os.open(os.fspath(path), os.O_RDONLY | os.O_NONBLOCK)
     except FileNotFoundError:
-        raise DataFormatError(path, None, "file not found") from None
+        raise DataFormatError(path, None, 'file not found') from None
     except IsADirectoryError:
         fd = None
     except OSError as exc:
-        raise DataFormatError(path, None, f"cannot read file: {exc.strerror or exc}") from None
+        raise DataFormatError(path, None, f'cannot read file: {exc.strerror or exc}') from None
     mode = os.fstat(fd).st_mode if fd is not None else stat.S_IFDIR
     if not stat.S_ISREG(mode):
         if fd is not None:
             os.close(fd)
         if stat.S_ISDIR(mode):
-            raise DataFormatError(path, None, "is a directory, expected a text file "
-                                  "(bags are read with read_bag or read_any)")
-        kind = ("a FIFO (named pipe)" if stat.S_ISFIFO(mode) else
-                "a character device" if stat.S_ISCHR(mode) else
-                "a block device" if stat.S_ISBLK(mode) else
-                "a socket" if stat.S_ISSOCK(mode) else "not a regular file")
-        raise DataFormatError(path, None, f"not a regular file ({kind}): refusing to read it "
-                              "(copy the data into a file first)")
+            raise DataFormatError(path, None, 'is a directory, expected a text file '
+                                  '(bags are read with read_bag or read_any)')
+        kind = ('a FIFO (named pipe)' if stat.S_ISFIFO(mode) else
+                'a character device' if stat.S_ISCHR(mode) else
+                'a block device' if stat.S_ISBLK(mode) else
+                'a socket' if stat.S_ISSOCK(mode) else 'not a regular file')
+        raise DataFormatError(path, None, f'not a regular file ({kind}): refusing to read it '
+                              '(copy the data into a file first)')
     size = os.fstat(fd).st_size
     if max_bytes is not None and size > max_bytes:
         os.close(fd)
-        raise DataFormatError(path, None, f"file is {size} bytes, above the limit of "
-                              f"{max_bytes} bytes (max_bytes)")
+        raise DataFormatError(path, None, f'file is {size} bytes, above the limit of '
+                              f'{max_bytes} bytes (max_bytes)')
     os.set_blocking(fd, True)
-    return os.fdopen(fd, "rb")
+    return os.fdopen(fd, 'rb')
 
 
 class TextSource:
@@ -109,12 +110,12 @@ class TextSource:
         self.path = path
         self.max_bytes = max_bytes
         self._file = _open_regular(path, max_bytes)
-        self._buf = b""
+        self._buf = b''
         self._offset = 0  # file offset of _buf[0]
         self._eof = False
         self.lineno = 0
 
-    def __enter__(self) -> "TextSource":
+    def __enter__(self) -> 'TextSource':
         return self
 
     def __exit__(self, *exc) -> None:
@@ -129,35 +130,35 @@ class TextSource:
             return False
         read = self._offset + len(self._buf) + len(data)
         if self.max_bytes is not None and read > self.max_bytes:
-            raise DataFormatError(self.path, None, f"file grew above the limit of "
-                                  f"{self.max_bytes} bytes (max_bytes) while being read")
-        if self._offset == 0 and not self._buf and data.startswith(b"\xef\xbb\xbf"):
+            raise DataFormatError(self.path, None, f'file grew above the limit of '
+                                  f'{self.max_bytes} bytes (max_bytes) while being read')
+        if self._offset == 0 and not self._buf and data.startswith(b'\xef\xbb\xbf'):
             data, self._offset = data[3:], 3  # byte-order mark written by some editors
         self._buf += data
         return True
 
     def _check(self, raw: bytes, first_line: int) -> str:
         try:
-            text = raw.decode("utf-8")
+            text = raw.decode('utf-8')
         except UnicodeDecodeError as exc:
-            line = first_line + raw.count(b"\n", 0, exc.start)
-            raise DataFormatError(self.path, line, f"not UTF-8 text (binary file?): byte "
-                                  f"0x{raw[exc.start]:02x} at offset "
-                                  f"{self._offset + exc.start} cannot be decoded") from None
-        if "\x00" in text:
-            pos = text.index("\x00")
-            raise DataFormatError(self.path, first_line + text.count("\n", 0, pos),
-                                  "binary file: NUL byte in text")
+            line = first_line + raw.count(b'\n', 0, exc.start)
+            raise DataFormatError(self.path, line, f'not UTF-8 text (binary file?): byte '
+                                  f'0x{raw[exc.start]:02x} at offset '
+                                  f'{self._offset + exc.start} cannot be decoded') from None
+        if '\x00' in text:
+            pos = text.index('\x00')
+            raise DataFormatError(self.path, first_line + text.count('\n', 0, pos),
+                                  'binary file: NUL byte in text')
         return text
 
     def _too_long(self) -> DataFormatError:
-        return DataFormatError(self.path, self.lineno + 1, f"line longer than {MAX_LINE_BYTES} "
-                               "bytes (not a text table?)")
+        return DataFormatError(self.path, self.lineno + 1, f'line longer than {MAX_LINE_BYTES} '
+                               'bytes (not a text table?)')
 
     def next_line(self) -> str | None:
         """The next line without its line end, or None at the end of the file."""
         while True:
-            cut = self._buf.find(b"\n")
+            cut = self._buf.find(b'\n')
             if cut >= 0 or len(self._buf) > MAX_LINE_BYTES or not self._fill():
                 break
         if cut > MAX_LINE_BYTES or (cut < 0 and len(self._buf) > MAX_LINE_BYTES):
@@ -171,11 +172,11 @@ class TextSource:
         self._buf = self._buf[cut + 1:]
         self._offset += cut + 1
         self.lineno += 1
-        return text[:-1] if text.endswith("\r") else text
+        return text[:-1] if text.endswith('\r') else text
 
     def unread(self, line: str) -> None:
         """Put back the line just returned by :meth:`next_line` (read again next)."""
-        raw = (line + "\n").encode("utf-8")
+        raw = (line + '\n').encode('utf-8')
         self._buf = raw + self._buf
         self._offset -= len(raw)
         self.lineno -= 1
@@ -185,26 +186,26 @@ class TextSource:
         while True:
             if len(self._buf) < CHUNK_BYTES:
                 self._fill()
-            while b"\n" not in self._buf and not self._eof:
+            while b'\n' not in self._buf and not self._eof:
                 if len(self._buf) > MAX_LINE_BYTES:
                     raise self._too_long()
                 self._fill()
             if not self._buf:
                 return
-            cut = len(self._buf) if self._eof else self._buf.rfind(b"\n") + 1
+            cut = len(self._buf) if self._eof else self._buf.rfind(b'\n') + 1
             raw = self._buf[:cut]
-            if not raw.endswith(b"\n"):
-                raw += b"\n"
+            if not raw.endswith(b'\n'):
+                raw += b'\n'
             self._check(raw, self.lineno + 1)
             first = self.lineno + 1
             self._buf = self._buf[cut:]
             self._offset += cut
-            self.lineno += raw.count(b"\n")
+            self.lineno += raw.count(b'\n')
             yield first, raw
 
 
 #: check(block, prev_row, first_line) -> None; raises at the first bad row
-BlockCheck = Callable[[np.ndarray, "np.ndarray | None", int], None]
+BlockCheck = Callable[[np.ndarray, 'np.ndarray | None', int], None]
 
 
 def _fast_block(raw: bytes, ncol: int, delimiter: str, decimal: str) -> np.ndarray | None:
@@ -212,18 +213,18 @@ def _fast_block(raw: bytes, ncol: int, delimiter: str, decimal: str) -> np.ndarr
     allowed = _NUMERIC_BYTES + delimiter.encode() + decimal.encode()
     if raw.translate(None, allowed):  # blank lines: loadtxt skips them, the shape check sees it
         return None
-    if raw.count(b"\r") != raw.count(b"\r\n"):
+    if raw.count(b'\r') != raw.count(b'\r\n'):
         return None
-    if decimal != ".":
-        if b"." in raw:
+    if decimal != '.':
+        if b'.' in raw:
             return None
-        raw = raw.replace(decimal.encode(), b".")
+        raw = raw.replace(decimal.encode(), b'.')
     try:
         block = np.loadtxt(_io.BytesIO(raw), delimiter=delimiter, comments=None, ndmin=2,
                            dtype=float)
     except ValueError:
         return None
-    if block.shape != (raw.count(b"\n"), ncol) or not np.isfinite(block).all():
+    if block.shape != (raw.count(b'\n'), ncol) or not np.isfinite(block).all():
         return None
     return block
 
@@ -233,29 +234,30 @@ def _slow_block(path, raw: bytes, first: int, columns: Sequence[str], delimiter:
     """Rows parsed line by line up to the first error (returned, not raised)."""
     ncol = len(columns)
     rows: list[list[float]] = []
-    for k, text in enumerate(raw.decode("utf-8").split("\n")[:-1]):
+    for k, text in enumerate(raw.decode('utf-8').split('\n')[:-1]):
         lineno = first + k
-        if text.endswith("\r"):
+        if text.endswith('\r'):
             text = text[:-1]
         s = text.strip()
         if not s:
-            state.setdefault("blank", lineno)
+            state.setdefault('blank', lineno)
             continue
-        if "blank" in state:
+        if 'blank' in state:
             return _rows(rows, ncol), DataFormatError(
-                path, state["blank"], "blank line between data rows (data rows must be contiguous)")
-        if s.startswith("#"):
+                path, state['blank'], 'blank line between data rows (data rows must be contiguous)'
+            )
+        if s.startswith('#'):
             return _rows(rows, ncol), DataFormatError(
-                path, lineno, "header/comment line after the column header "
-                "(header lines must come first)")
+                path, lineno, 'header/comment line after the column header '
+                '(header lines must come first)')
         cells = text.split(delimiter)
         if len(cells) != ncol:
-            hint = ""
-            if delimiter == "," and ";" in text:
+            hint = ''
+            if delimiter == ',' and ';' in text:
                 hint = " (cells are separated by ',', not ';')"
             return _rows(rows, ncol), DataFormatError(
-                path, lineno, f"wrong number of cells: expected {ncol} "
-                f"({delimiter.join(columns)}), got {len(cells)}{hint}")
+                path, lineno, f'wrong number of cells: expected {ncol} '
+                f'({delimiter.join(columns)}), got {len(cells)}{hint}')
         row = []
         for cell, column in zip(cells, columns):
             v = parse_number(cell, decimal)
@@ -271,7 +273,7 @@ def _rows(rows: list, ncol: int) -> np.ndarray:
 
 
 def read_table(source: TextSource, columns: Sequence[str], check: BlockCheck | None = None, *,
-               delimiter: str = ",", decimal: str = ".", max_rows: int | None = MAX_ROWS,
+               delimiter: str = ',', decimal: str = '.', max_rows: int | None = MAX_ROWS,
                header_line: int | None = None) -> tuple[list[np.ndarray], int]:
     """Read the data rows left in ``source``: (one array per column, line of the first row).
 
@@ -286,7 +288,7 @@ def read_table(source: TextSource, columns: Sequence[str], check: BlockCheck | N
     first_row_line: int | None = None
     n = 0
     for first, raw in source.chunks():
-        block = None if "blank" in state else _fast_block(raw, ncol, delimiter, decimal)
+        block = None if 'blank' in state else _fast_block(raw, ncol, delimiter, decimal)
         error = None
         if block is None:
             block, error = _slow_block(source.path, raw, first, columns, delimiter, decimal, state)
@@ -298,18 +300,18 @@ def read_table(source: TextSource, columns: Sequence[str], check: BlockCheck | N
             prev = block[-1]
         n += block.shape[0]
         if max_rows is not None and n > max_rows:
-            raise DataFormatError(source.path, first_row_line + max_rows, f"more than {max_rows} "
-                                  "data rows (max_rows); split the recording")
+            raise DataFormatError(source.path, first_row_line + max_rows, f'more than {max_rows} '
+                                  'data rows (max_rows); split the recording')
         if error is not None:
             raise error
         for j in range(ncol):
             parts[j].append(np.ascontiguousarray(block[:, j]))
     if n == 0:
-        raise DataFormatError(source.path, header_line, "no data rows after the column "
-                              "header (at least 2 are needed)")
+        raise DataFormatError(source.path, header_line, 'no data rows after the column '
+                              'header (at least 2 are needed)')
     if n < 2:
-        raise DataFormatError(source.path, first_row_line, "only 1 data row; at least 2 are "
-                              "needed")
+        raise DataFormatError(source.path, first_row_line, 'only 1 data row; at least 2 are '
+                              'needed')
     out = []
     for j in range(ncol):
         out.append(np.concatenate(parts[j]))
@@ -329,10 +331,10 @@ def increasing_check(path, column: str, unit: str, index: int = 0) -> BlockCheck
         lineno = line0 + k + 1 - offset
         now, before = repr(float(t[k + 1])), repr(float(t[k]))
         if t[k + 1] == t[k]:
-            raise DataFormatError(path, lineno, f"duplicate time {now} {unit} (same as line "
-                                  f"{lineno - 1}); {column} must be strictly increasing")
-        raise DataFormatError(path, lineno, f"time decreases: {now} {unit} after {before} {unit} "
-                              f"on line {lineno - 1}; {column} must be strictly increasing")
+            raise DataFormatError(path, lineno, f'duplicate time {now} {unit} (same as line '
+                                  f'{lineno - 1}); {column} must be strictly increasing')
+        raise DataFormatError(path, lineno, f'time decreases: {now} {unit} after {before} {unit} '
+                              f'on line {lineno - 1}; {column} must be strictly increasing')
     return check
 
 

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Time-domain output-error fit of a model (material parameters + effect parameters).
 
 Used by the diagnosis: every effect, built-in or plugin, acts on the predicted
@@ -35,7 +36,7 @@ from ..physics.parameters import MaterialParameters, ParameterError
 from ..simulation.sensor import padded_record
 from .metrics import noise_rms
 
-__all__ = ["Record", "PreparedRecord", "prepare", "FitSpec", "ModelFit", "fit_model", "predict",
+__all__ = ['Record', 'PreparedRecord', 'prepare', 'FitSpec', 'ModelFit', 'fit_model', 'predict',
 ]
 
 
@@ -78,7 +79,9 @@ def prepare(records: Sequence[Record], *, settle_s: float = 0.5, max_rows_per_re
         y = np.asarray(rec.current_a, float)
         keep = t >= t[0] + settle_s
         if keep.sum() < 32:
-            raise ValueError(f"{rec.path}: fewer than 32 samples after the {settle_s} s settle time")
+            raise ValueError(
+                f'{rec.path}: fewer than 32 samples after the {settle_s} s settle time'
+            )
         idx = np.flatnonzero(keep)
         step = max(1, int(np.ceil(idx.size / max_rows_per_record)))
         rows = idx[::step]
@@ -88,8 +91,24 @@ def prepare(records: Sequence[Record], *, settle_s: float = 0.5, max_rows_per_re
         freqs = f_all[bins]
         sigma = noise_rms(t[keep], w[keep], y[keep])
         grid = np.geomspace(freqs[0], freqs[-1], n_grid)
-        out.append(PreparedRecord(rec, t, w, y, keep, rows, max(sigma, 1e-30), n, bins, freqs, x, n_pad,
-                                  np.fft.rfft(x, n)[bins], grid))
+        out.append(
+            PreparedRecord(
+                rec,
+                t,
+                w,
+                y,
+                keep,
+                rows,
+                max(sigma, 1e-30),
+                n,
+                bins,
+                freqs,
+                x,
+                n_pad,
+                np.fft.rfft(x, n)[bins],
+                grid,
+            )
+        )
     return out
 
 
@@ -109,7 +128,9 @@ def predict(p: PreparedRecord, model: SensorModel, cache: dict | None = None) ->
     return model.compiled.predict(p.t - p.t[0], p.w, linear_response)
 
 
-def _transfer_on_bins(p: PreparedRecord, model: SensorModel, cache: dict | None = None) -> np.ndarray:
+def _transfer_on_bins(
+    p: PreparedRecord, model: SensorModel, cache: dict | None = None
+) -> np.ndarray:
     """H at the record's FFT bins: min-phase part interpolated from the log grid, delay exact."""
     key = (model, p.n_fft, float(p.freqs[0]), p.freqs.size)
     if cache is not None and key in cache:
@@ -191,9 +212,15 @@ def _param(effect_name: str, param_name: str):
     raise ParameterError(f"effect '{effect_name}' has no parameter '{param_name}'")
 
 
-def fit_model(prepared: Sequence[PreparedRecord], free: FitSpec, *,
-              train: Sequence[np.ndarray] | None = None, starts: Sequence[np.ndarray] | None = None,
-              bounds_factor: float = 100.0, max_nfev: int = 60) -> ModelFit:
+def fit_model(
+    prepared: Sequence[PreparedRecord],
+    free: FitSpec,
+    *,
+    train: Sequence[np.ndarray] | None = None,
+    starts: Sequence[np.ndarray] | None = None,
+    bounds_factor: float = 100.0,
+    max_nfev: int = 60,
+) -> ModelFit:
     """Fit ``free`` to the prepared records (all rows, or ``train[r]`` row masks per record).
 
     Each record's model must already contain every effect named in ``free``.
@@ -228,7 +255,9 @@ def fit_model(prepared: Sequence[PreparedRecord], free: FitSpec, *,
         try:
             ms, _ = _apply(models, mat_names, eff_keys, x, base)
             cache: dict = {}
-            parts = [(p.y[r] - predict(p, m, cache)[r]) / p.sigma for p, m, r in zip(prepared, ms, rows)]
+            parts = [
+                (p.y[r] - predict(p, m, cache)[r]) / p.sigma for p, m, r in zip(prepared, ms, rows)
+            ]
         except (ParameterError, ValueError, FloatingPointError):
             return np.full(n_rows, 1e3)
         res = np.concatenate(parts)
@@ -244,19 +273,19 @@ def fit_model(prepared: Sequence[PreparedRecord], free: FitSpec, *,
         # screen the starts by their cost and refine only the best one
         costs = [float(np.sum(residual(c) ** 2)) for c in candidates]
         candidates = [candidates[int(np.argmin(costs))]]
-    best = least_squares(residual, candidates[0], bounds=(lo, hi), method="trf", x_scale="jac",
+    best = least_squares(residual, candidates[0], bounds=(lo, hi), method='trf', x_scale='jac',
                          diff_step=1e-4, max_nfev=max_nfev)
     ms, ev = _apply(models, mat_names, eff_keys, best.x, base)
     flags = []
     for k, (v, l, h) in enumerate(zip(best.x, lo, hi)):
-        name = mat_names[k] if k < len(mat_names) else "/".join(eff_keys[k - len(mat_names)])
+        name = mat_names[k] if k < len(mat_names) else '/'.join(eff_keys[k - len(mat_names)])
         if (v - l) < 1e-3 * (h - l) or (h - v) < 1e-3 * (h - l):
-            flags.append(f"{name} at bound")
+            flags.append(f'{name} at bound')
         if k >= len(mat_names):
             par = _param(*eff_keys[k - len(mat_names)])
             val = float(np.exp(v)) if par.log_scale else float(v)
             if not par.typical[0] <= val <= par.typical[1]:
-                flags.append(f"{name} = {val:.4g} {par.unit} outside plausible range "
-                             f"[{par.typical[0]:g}, {par.typical[1]:g}]")
+                flags.append(f'{name} = {val:.4g} {par.unit} outside plausible range '
+                             f'[{par.typical[0]:g}, {par.typical[1]:g}]')
     return ModelFit(ms, ms[0].material, ev, float(2 * best.cost), n_rows, int(best.x.size),
                     bool(best.success), flags)

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Time-varying parameter tracking over a long record (paper section 5.4, Figs. 9-10).
 
 The paper refits d minute by minute while an IPMC dries in air.  Here the
@@ -26,7 +27,7 @@ from ..physics.parameters import Geometry, MaterialParameters
 from .freqfit import FitGroup, fit_parameters
 from .freqresp import fundamental_response
 
-__all__ = ["TrackPoint", "track_parameter", "model_trajectory"]
+__all__ = ['TrackPoint', 'track_parameter', 'model_trajectory']
 
 
 @dataclass(frozen=True)
@@ -40,7 +41,9 @@ class TrackPoint:
     model_estimates: dict | None = None   # name -> the model's time-varying value (see module doc)
 
 
-def model_trajectory(model: SensorModel, elapsed_s, names: Sequence[str] = ("diffusivity_m2_per_s",)):
+def model_trajectory(
+    model: SensorModel, elapsed_s, names: Sequence[str] = ('diffusivity_m2_per_s',)
+):
     """Values of material parameters ``names`` of ``model`` at ``elapsed_s`` seconds from the
     record start, following its time-varying effect (e.g. ``hydration_drift``); None if the
     model has none."""
@@ -53,10 +56,10 @@ def model_trajectory(model: SensorModel, elapsed_s, names: Sequence[str] = ("dif
 
 
 def track_parameter(time_s, deflection_m, current_a, geometry: Geometry,
-                    material: MaterialParameters, free: Sequence[str] = ("diffusivity_m2_per_s",),
-                    effects: tuple = ("surface_resistance",), *, window_s: float = 60.0,
+                    material: MaterialParameters, free: Sequence[str] = ('diffusivity_m2_per_s',),
+                    effects: tuple = ('surface_resistance',), *, window_s: float = 60.0,
                     step_s: float | None = None, known: dict | None = None,
-                    source: str = "", model: SensorModel | None = None) -> list[TrackPoint]:
+                    source: str = '', model: SensorModel | None = None) -> list[TrackPoint]:
     """Refit ``free`` in consecutive windows; returns one :class:`TrackPoint` per window.
 
     Each window's fit starts from the previous window's estimate.
@@ -66,18 +69,20 @@ def track_parameter(time_s, deflection_m, current_a, geometry: Geometry,
     i = np.asarray(current_a, float)
     step_s = step_s or window_s
     if not (window_s > 0 and step_s > 0):
-        raise ValueError("window_s and step_s must be > 0")
+        raise ValueError('window_s and step_s must be > 0')
     if t[-1] - t[0] < window_s:
-        raise ValueError(f"{source}: record of {t[-1] - t[0]:.3g} s is shorter than one window "
-                         f"({window_s} s)")
+        raise ValueError(f'{source}: record of {t[-1] - t[0]:.3g} s is shorter than one window '
+                         f'({window_s} s)')
     out: list[TrackPoint] = []
     current = material
     start = t[0]
     dt = (t[-1] - t[0]) / max(t.size - 1, 1)
     while start + window_s <= t[-1] + dt * 1.0001:
         sel = (t >= start) & (t < start + window_s)
-        point = fundamental_response(t[sel], w[sel], i[sel], source=f"{source}@{start:.1f}s")
-        res = fit_parameters([FitGroup(geometry, [point], dict(known or {}))], free, current, effects)
+        point = fundamental_response(t[sel], w[sel], i[sel], source=f'{source}@{start:.1f}s')
+        res = fit_parameters(
+            [FitGroup(geometry, [point], dict(known or {}))], free, current, effects
+        )
         current = res.material
         centre = float(start + window_s / 2)
         traj = model_trajectory(model, centre - t[0], free) if model is not None else None

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Units in column names and geometry strings, converted to SI (no rclpy needed).
 
 One table per physical dimension maps a unit symbol to its factor to SI;
@@ -11,19 +12,19 @@ import math
 import re
 from decimal import Decimal
 
-__all__ = ["TIME_UNITS", "LENGTH_UNITS", "CURRENT_UNITS", "VOLTAGE_UNITS", "QUANTITY_UNITS",
-           "SI_SYMBOL", "unit_factor", "to_si", "decimal_to_si",
-           "column_to_si", "column_units", "split_unit", "parse_length"]
+__all__ = ['TIME_UNITS', 'LENGTH_UNITS', 'CURRENT_UNITS', 'VOLTAGE_UNITS', 'QUANTITY_UNITS',
+           'SI_SYMBOL', 'unit_factor', 'to_si', 'decimal_to_si',
+           'column_to_si', 'column_units', 'split_unit', 'parse_length']
 
-TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
-LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "nm": 1e-9}
-CURRENT_UNITS = {"A": 1.0, "mA": 1e-3, "uA": 1e-6, "nA": 1e-9, "pA": 1e-12}
-VOLTAGE_UNITS = {"V": 1.0, "mV": 1e-3}
+TIME_UNITS = {'s': 1.0, 'ms': 1e-3, 'us': 1e-6}
+LENGTH_UNITS = {'m': 1.0, 'mm': 1e-3, 'um': 1e-6, 'nm': 1e-9}
+CURRENT_UNITS = {'A': 1.0, 'mA': 1e-3, 'uA': 1e-6, 'nA': 1e-9, 'pA': 1e-12}
+VOLTAGE_UNITS = {'V': 1.0, 'mV': 1e-3}
 
 #: Unit table of each time-series quantity.
-QUANTITY_UNITS = {"time": TIME_UNITS, "deflection": LENGTH_UNITS, "current": CURRENT_UNITS}
+QUANTITY_UNITS = {'time': TIME_UNITS, 'deflection': LENGTH_UNITS, 'current': CURRENT_UNITS}
 #: SI symbol of each quantity (the canonical column is ``<quantity>_<symbol>``).
-SI_SYMBOL = {"time": "s", "deflection": "m", "current": "A"}
+SI_SYMBOL = {'time': 's', 'deflection': 'm', 'current': 'A'}
 
 def to_si(value, factor: float):
     """``value * factor``, computed as a division by the power of ten when ``factor`` is
@@ -44,7 +45,7 @@ def decimal_to_si(value: str | float, factor: float) -> float:
     return float(value) * factor
 
 
-_MICRO = str.maketrans({"\u00b5": "u", "\u03bc": "u"})
+_MICRO = str.maketrans({'\u00b5': 'u', '\u03bc': 'u'})
 
 
 def unit_factor(unit: str, table: dict) -> float | None:
@@ -56,8 +57,8 @@ def unit_factor(unit: str, table: dict) -> float | None:
     return low.get(u.lower())
 
 
-_BRACKETED = re.compile(r"^(?P<stem>.*?)\s*(?:\[(?P<b>[^\]]*)\]|\((?P<p>[^)]*)\))\s*$")
-_SUFFIX = re.compile(r"^(?P<stem>.+?)_(?P<u>[A-Za-z\u00b5\u03bc]+)$")
+_BRACKETED = re.compile(r'^(?P<stem>.*?)\s*(?:\[(?P<b>[^\]]*)\]|\((?P<p>[^)]*)\))\s*$')
+_SUFFIX = re.compile(r'^(?P<stem>.+?)_(?P<u>[A-Za-z\u00b5\u03bc]+)$')
 
 
 def split_unit(name: str) -> tuple[str, str | None]:
@@ -69,17 +70,17 @@ def split_unit(name: str) -> tuple[str, str | None]:
     s = name.strip()
     m = _BRACKETED.match(s)
     if m:
-        unit = m.group("b") if m.group("b") is not None else m.group("p")
-        return m.group("stem").strip(), unit.strip()
+        unit = m.group('b') if m.group('b') is not None else m.group('p')
+        return m.group('stem').strip(), unit.strip()
     m = _SUFFIX.match(s)
-    if m and any(unit_factor(m.group("u"), t) is not None
+    if m and any(unit_factor(m.group('u'), t) is not None
                  for t in (TIME_UNITS, LENGTH_UNITS, CURRENT_UNITS, VOLTAGE_UNITS)):
-        return m.group("stem"), m.group("u")
+        return m.group('stem'), m.group('u')
     return s, None
 
 
-_LENGTH_VALUE = re.compile(r"^\s*([+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?)"
-                           r"\s*([A-Za-z\u00b5\u03bc]+)\s*$")
+_LENGTH_VALUE = re.compile(r'^\s*([+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?)'
+                           r'\s*([A-Za-z\u00b5\u03bc]+)\s*$')
 
 
 def parse_length(text: str) -> float:
@@ -89,29 +90,29 @@ def parse_length(text: str) -> float:
     """
     m = _LENGTH_VALUE.match(text)
     if not m or not m.group(1).isascii():
-        raise ValueError(f"{text.strip()!r} is not a length with a unit (e.g. 22mm, 360um)")
+        raise ValueError(f'{text.strip()!r} is not a length with a unit (e.g. 22mm, 360um)')
     factor = unit_factor(m.group(2), LENGTH_UNITS)
     if factor is None:
-        raise ValueError(f"{text.strip()!r}: unknown length unit {m.group(2)!r} "
+        raise ValueError(f'{text.strip()!r}: unknown length unit {m.group(2)!r} '
                          f"(known: {', '.join(LENGTH_UNITS)})")
     return decimal_to_si(m.group(1), factor)
 
 
-FREQUENCY_UNITS = {"hz": 1.0, "khz": 1e3, "rad_s": 1.0 / (2.0 * math.pi)}
-PHASE_UNITS = {"deg": 1.0, "rad": 180.0 / math.pi}
+FREQUENCY_UNITS = {'hz': 1.0, 'khz': 1e3, 'rad_s': 1.0 / (2.0 * math.pi)}
+PHASE_UNITS = {'deg': 1.0, 'rad': 180.0 / math.pi}
 #: Column bases of the text formats, longest first, with their SI column names.
-_BASES = ("deflection", "frequency", "gain_std", "phase_std", "current", "phase", "gain", "time")
+_BASES = ('deflection', 'frequency', 'gain_std', 'phase_std', 'current', 'phase', 'gain', 'time')
 
 
 def column_units(base: str) -> str:
     """The units accepted after ``<base>_`` in a column name, for messages."""
     if base in QUANTITY_UNITS:
-        return ", ".join(QUANTITY_UNITS[base])
-    if base == "frequency":
-        return ", ".join(FREQUENCY_UNITS)
-    if base.startswith("phase"):
-        return ", ".join(PHASE_UNITS)
-    return "<current>_per_<length>, e.g. A_per_m, uA_per_mm"
+        return ', '.join(QUANTITY_UNITS[base])
+    if base == 'frequency':
+        return ', '.join(FREQUENCY_UNITS)
+    if base.startswith('phase'):
+        return ', '.join(PHASE_UNITS)
+    return '<current>_per_<length>, e.g. A_per_m, uA_per_mm'
 
 
 def column_to_si(name: str) -> tuple[str, float] | None:
@@ -121,22 +122,22 @@ def column_to_si(name: str) -> tuple[str, float] | None:
     ``('phase_deg', 57.29...)``, ``frequency_rad_s`` -> ``('frequency_hz', 1/2pi)``,
     ``gain_uA_per_mm`` -> ``('gain_A_per_m', 1e-3)``.
     """
-    base = next((b for b in _BASES if name.startswith(b + "_")), None)
+    base = next((b for b in _BASES if name.startswith(b + '_')), None)
     if base is None:
         return None
     unit = name[len(base) + 1:]
     if base in QUANTITY_UNITS:
         factor = unit_factor(unit, QUANTITY_UNITS[base])
-        return None if factor is None else (f"{base}_{SI_SYMBOL[base]}", factor)
-    if base == "frequency":
+        return None if factor is None else (f'{base}_{SI_SYMBOL[base]}', factor)
+    if base == 'frequency':
         factor = FREQUENCY_UNITS.get(unit.lower())
-        return None if factor is None else ("frequency_hz", factor)
-    if base.startswith("phase"):
+        return None if factor is None else ('frequency_hz', factor)
+    if base.startswith('phase'):
         factor = PHASE_UNITS.get(unit.lower())
-        return None if factor is None else (f"{base}_deg", factor)
-    current, sep, length = unit.partition("_per_")
+        return None if factor is None else (f'{base}_deg', factor)
+    current, sep, length = unit.partition('_per_')
     amps = unit_factor(current, CURRENT_UNITS) if sep else None
     metres = unit_factor(length, LENGTH_UNITS) if sep else None
     if amps is None or metres is None:
         return None
-    return f"{base}_A_per_m", amps / metres
+    return f'{base}_A_per_m', amps / metres
