@@ -2,7 +2,8 @@
 """Benchmarks of the core: estimator throughput and per-sample overhead, model evaluation.
 
 Every figure is a ratio against a baseline measured in the same process, so the
-numbers are comparable across machines.  No assertions: README "Benchmarks" lists the measured figures.
+numbers are comparable across machines.  No assertions: README "Benchmarks" lists the
+measured figures.
 """
 
 from __future__ import annotations

@@ -126,7 +126,8 @@ def main(argv=None) -> int:
     print('|---|---|---|---|---|')
     for r in rows:
         print(
-            f"| {r['combo']} | {r['ok']}/{r['n']} | {r['median_ratio']:.3f} | {r['median_s']:.1f} | "
+            f"| {r['combo']} | {r['ok']}/{r['n']} | {r['median_ratio']:.3f} | "
+            f"{r['median_s']:.1f} | "
             f"{r['max_s']:.1f} |"
         )
     if args.drying:

@@ -24,7 +24,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-PASSTHROUGH_CLASS = r'''
+PASSTHROUGH_CLASS = r"""
 import sys, rclpy
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
@@ -43,7 +43,7 @@ class PassThrough(Node):
         out.layout.dim[1].label = "time_s,deflection_m"
         out.data = msg.data
         self.pub.publish(out)
-'''
+"""
 
 PASSTHROUGH = PASSTHROUGH_CLASS + r"""
 rclpy.init()
@@ -54,12 +54,13 @@ except KeyboardInterrupt:
     pass
 """
 
-DRIVER = r'''
+DRIVER = r"""
 import sys, time, rclpy, numpy as np
 from std_msgs.msg import Float64MultiArray
 from ipmc_sensor_ros.nodes import params as P
 from ipmc_sensor_ros.nodes.messages import pack_block
-rate, n, duration, fs = float(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3]), float(sys.argv[4])
+rate, n = float(sys.argv[1]), int(sys.argv[2])
+duration, fs = float(sys.argv[3]), float(sys.argv[4])
 epoch = float(sys.argv[5])   # times are seconds since this shared epoch: float64 resolution
                              # at today's epoch (0.24 us) could not carry 1 us sample periods
 rclpy.init()
@@ -90,10 +91,10 @@ print(f"SENT {k} {k * n} {time.monotonic() - t0:.6f}", flush=True)
 time.sleep(2.0)
 node.destroy_node()
 rclpy.shutdown()
-'''
+"""
 
 
-NODE_CPU = r'''
+NODE_CPU = r"""
 import os, sys, time, random, subprocess
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -106,7 +107,8 @@ if kind == "estimator":
     from ipmc_sensor_ros.nodes.estimator_node import EstimatorNode
     node = EstimatorNode(parameter_overrides=[
         Parameter("sample_rate_hz", value=rate * n), Parameter("publish_points", value="none"),
-        Parameter("max_gap_s", value=1.0), Parameter("band_high_hz", value=min(50.0, rate * n / 4))])
+        Parameter("max_gap_s", value=1.0),
+        Parameter("band_high_hz", value=min(50.0, rate * n / 4))])
     handled = lambda: node.counters()["messages_in"]
 else:
     ns = {}
@@ -115,15 +117,16 @@ else:
     handled = lambda: node.handled
 ex = SingleThreadedExecutor()
 ex.add_node(node)
-drv = subprocess.Popen([sys.executable, "-c", DRIVER, str(rate), str(n), str(duration), str(rate * n),
-                        repr(time.time() - 100.0)], env=_env(domain), stdout=subprocess.DEVNULL)
+drv = subprocess.Popen([sys.executable, "-c", DRIVER, str(rate), str(n), str(duration),
+                        str(rate * n), repr(time.time() - 100.0)], env=_env(domain),
+                       stdout=subprocess.DEVNULL)
 while handled() == 0:
     ex.spin_once(timeout_sec=0.05)
 cpu0, m0 = time.process_time(), handled()
 while drv.poll() is None:
     ex.spin_once(timeout_sec=0.05)
 print("CPU", time.process_time() - cpu0, handled() - m0)
-'''
+"""
 
 
 def bench_node_cpu(smoke: bool = False) -> list[dict]:
@@ -354,7 +357,8 @@ def bench_nodes(smoke: bool = False) -> list[dict]:
                 f"{e['rate_msg_s']:.0f} msg/s",
                 'value': 100.0 * e.get('node_cpu_fraction', float('nan')),
                 'unit': '% of a core',
-                'baseline': f"pass-through same rate {100.0 * same.get('node_cpu_fraction', float('nan')):.0f} %",
+                'baseline': 'pass-through same rate '
+                f"{100.0 * same.get('node_cpu_fraction', float('nan')):.0f} %",
                 'ratio': e.get('node_cpu_fraction', float('nan'))
                 / same.get('node_cpu_fraction', float('nan')),
                 'target': '-',

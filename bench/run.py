@@ -22,7 +22,8 @@ def main(argv=None) -> int:
     ap.add_argument('--smoke', action='store_true')
     args = ap.parse_args(argv)
     print(
-        f"machine: {platform.machine()} {platform.processor() or ''} python {platform.python_version()}"
+        f"machine: {platform.machine()} {platform.processor() or ''} "
+        f'python {platform.python_version()}'
         f" cores={__import__('os').cpu_count()}"
     )
     print('| benchmark | value | unit | ratio | baseline | target |')

@@ -1,5 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
-"""ipmc-model estimate: accuracy at any length, named output columns, explicit geometry precedence."""
+"""
+ipmc-model estimate: accuracy at any length, named output columns, explicit geometry precedence.
+"""
 
 import json
 from pathlib import Path

@@ -137,7 +137,8 @@ def test_estimator_improves_when_its_model_gains_the_hidden_effect(monkeypatch):
             ex.spin_once(timeout_sec=0.05)
         errors = {ns: m.score(last_s=20.0)[0] for ns, m in monitors.items()}
         print(
-            f"hidden amplifier pole: NRMSE plain {errors['/plain']:.4f}, aware {errors['/aware']:.4f}"
+            f"hidden amplifier pole: NRMSE plain {errors['/plain']:.4f}, "
+            f"aware {errors['/aware']:.4f}"
         )
         # A 14 deg phase error alone is a 25 % NRMSE; knowing the pole leaves the ~1 %
         # of the leak and the reduction.  "Measurably better": at least 5x, and < 5 %.

@@ -601,7 +601,8 @@ def test_plugin_effect_is_used_by_the_estimator_node():
         assert (
             'polymer_leakage(time_constant_s=0.05)' in node.deflection_estimator.model.describe()
         )
-        # the high-pass of the leakage (zero at s = 0 in H) is in the reduced model the node inverts
+        # the high-pass of the leakage (zero at s = 0 in H) is in the reduced model the node
+        # inverts
         assert node.deflection_estimator.reduced.order == 4
         node.destroy_node()
         with pytest.raises((P.ParameterError, ParameterException), match='plugins'):

@@ -48,38 +48,48 @@ def _signal(n, start, rng):
 def _corrupt(kind: str, t, i, rng):
     """A message that must be rejected, by kind."""
     if kind == 'nan':
-        i = i.copy(); i[rng.integers(i.size)] = np.nan
+        i = i.copy()
+        i[rng.integers(i.size)] = np.nan
         return pack_block(t, i)
     if kind == 'inf':
-        i = i.copy(); i[rng.integers(i.size)] = -np.inf
+        i = i.copy()
+        i[rng.integers(i.size)] = -np.inf
         return pack_block(t, i)
     if kind == 'huge':
-        i = i.copy(); i[rng.integers(i.size)] = 1e30
+        i = i.copy()
+        i[rng.integers(i.size)] = 1e30
         return pack_block(t, i)
     if kind == 'time_nan':
-        t = t.copy(); t[rng.integers(t.size)] = np.nan
+        t = t.copy()
+        t[rng.integers(t.size)] = np.nan
         return pack_block(t, i)
     if kind == 'not_increasing':
-        t = t.copy(); t[-1] = t[0]
+        t = t.copy()
+        t[-1] = t[0]
         return pack_block(t, i)
     if kind == 'wrong_rate':
         return pack_block(t[0] + 2 * (t - t[0]), i)
     if kind == 'empty':
         return Float64MultiArray()
     if kind == 'odd':
-        m = pack_block(t, i); m.data = list(m.data) + [0.0]
+        m = pack_block(t, i)
+        m.data = list(m.data) + [0.0]
         return m
     if kind == 'wrong_label':
-        m = pack_block(t, i); m.layout.dim[1].label = 'time_s,current_mA'
+        m = pack_block(t, i)
+        m.layout.dim[1].label = 'time_s,current_mA'
         return m
     if kind == 'bad_stride':
-        m = pack_block(t, i); m.layout.dim[0].stride = 3
+        m = pack_block(t, i)
+        m.layout.dim[0].stride = 3
         return m
     if kind == 'three_dims':
-        m = pack_block(t, i); m.layout.dim.append(MultiArrayDimension(label='x', size=1, stride=1))
+        m = pack_block(t, i)
+        m.layout.dim.append(MultiArrayDimension(label='x', size=1, stride=1))
         return m
     if kind == 'bad_offset':
-        m = pack_block(t, i); m.layout.data_offset = 10 ** 6
+        m = pack_block(t, i)
+        m.layout.data_offset = 10 ** 6
         return m
     raise AssertionError(kind)
 

@@ -68,7 +68,7 @@ def test_colcon_install_layout(workspace, monkeypatch):
     ('ipmc_simulator', 'simulator.yaml', 'motor_frequency_hz:=5.0', 'motor_frequency_hz=5,'),
 ])
 def test_ros2_run_starts_and_exits_zero_on_sigint(workspace, tmp_path, monkeypatch, exe, config,
-                                                   override, echo):
+                                                  override, echo):
     from ament_index_python.packages import get_package_prefix, get_package_share_directory
 
     install = workspace / 'install' / PKG

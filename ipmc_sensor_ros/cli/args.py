@@ -32,7 +32,7 @@ from ..physics.effects import load_plugin
 from ..physics.model import model_effects, parse_effects
 from ..workbench.discovery import SYMBOL_TO_NAME
 from ..physics.parameters import (PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, MaterialParameters,
-                                 ParameterError, load_yaml)
+                                  ParameterError, load_yaml)
 
 __all__ = ['HelpFormatter', 'Progress', 'say', 'natural_key', 'fmt_time_s', 'param_names',
            'parse_geometry', 'material_from_args', 'load_material', 'effects_from_args',

@@ -133,7 +133,8 @@ def _resolve_values(data, base: dict, explicit: set[str], params: str | None, pr
                 values[key] = value
             elif prefer != 'params':
                 raise ParameterError(
-                    f'{data.path}: {key} = {value:g} in the data header but {float(values[key]):g} '
+                    f'{data.path}: {key} = {value:g} in the data header but '
+                    f'{float(values[key]):g} '
                     f'in {params}; fix one, or choose with --prefer header|params'
                 )
     if params and not explicit & set(GEOMETRY_NAMES):
@@ -198,7 +199,8 @@ def _write_estimate(path: Path, data, values: dict, model_text: str, params, res
         f'# model: {model_text}',
         f"# params: {params or 'defaults of the estimator node'}",
         f'# resets: {resets}',
-        '# deflection_estimate_m: the estimate; deflection_m: the measured deflection of the input',
+        '# deflection_estimate_m: the estimate; '
+        'deflection_m: the measured deflection of the input',
     ]
     rows = np.column_stack(arrays).tolist()     # repr: shortest text that reads back exactly
     path.write_text(
@@ -208,7 +210,11 @@ def _write_estimate(path: Path, data, values: dict, model_text: str, params, res
 
 
 def read_estimate(path) -> dict[str, np.ndarray]:
-    """Columns of an ``ipmc-estimate/1`` file by name (``time_s``, ``deflection_estimate_m``...)."""
+    """
+    Return the columns of an ``ipmc-estimate/1`` file by name.
+
+    Names: ``time_s``, ``deflection_estimate_m``...
+    """
     lines = Path(path).read_text(encoding='utf-8').splitlines()
     if not lines or lines[0] != f'# format: {ESTIMATE_FORMAT}':
         raise ParameterError(f'{path}:1: not an {ESTIMATE_FORMAT} file')
@@ -275,7 +281,8 @@ def _cmd_estimate(args) -> int:
         row = {'source': src, 'out': str(out), 'samples': int(t_out.size), 'resets': resets}
         msg = f'{src}: {t_out.size} estimates -> {out}'
         if resets:
-            msg += f"; {resets} filter reset(s) at time gaps > {values['max_gap_s']} s or backward jumps"
+            msg += (f"; {resets} filter reset(s) at time gaps > {values['max_gap_s']} s "
+                    'or backward jumps')
         if measured is not None:
             err, used, what = estimate_accuracy(
                 t_out, w, measured, estimator.inverse.leak_corner_hz, estimator.delay_s

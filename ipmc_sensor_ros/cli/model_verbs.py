@@ -81,9 +81,11 @@ def _save_params(path: Path, groups, data, res, args, effects) -> list[Path]:
         )
         sources = sorted({Path(p.source).name for p in g.points if getattr(p, 'source', '')})
         head = [
-            f'# Written by ipmc-model fit on {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC',
+            '# Written by ipmc-model fit on '
+            f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC',
             f'# sample {g.name}: geometry from the data; model {base}'
-            f"{' + ' + ', '.join(doc['/**/ipmc_estimator']['ros__parameters']['effects']) if extra else ''}",
+            + (' + ' + ', '.join(doc['/**/ipmc_estimator']['ros__parameters']['effects'])
+               if extra else ''),
             f"# fitted: {', '.join(res.free)}; chi2/dof {res.chi2:.4g}/{res.dof}",
             f"# data: {', '.join(sources[:12])}{' ...' if len(sources) > 12 else ''}",
             '# use: ros2 run ipmc_sensor_ros ipmc_estimator --ros-args --params-file THIS_FILE',

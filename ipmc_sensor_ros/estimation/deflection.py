@@ -56,7 +56,8 @@ class DeflectionEstimator:
     """Streaming estimate of tip deflection (m) from sensing current (A) for ``model``.
 
     Parameters: ``model``; ``sample_rate_hz``; ``reduction_order`` (fitted
-    poles, 1..8); ``band_hz`` of the reduction; ``leak_corner_hz`` (default 0.01 Hz leaky, 0.001 Hz kalman),
+    poles, 1..8); ``band_hz`` of the reduction; ``leak_corner_hz`` (default 0.01 Hz leaky,
+    0.001 Hz kalman),
     ``offset_corner_hz``, ``prewarp_hz`` as in :class:`InverseEstimator`;
     ``update_s``: rebuild interval for time-varying effects, s;
     ``estimator``: ``"leaky"`` (:class:`InverseEstimator`) or ``"kalman"``

@@ -70,8 +70,6 @@ SMALL_BLOCK_SAMPLES = 16
 DEFAULT_LEAK_CORNER_HZ = 0.01
 
 
-
-
 def _positive(name: str, value, allow_none: bool = False):
     if value is None and allow_none:
         return None
@@ -235,7 +233,8 @@ class InverseEstimator:
         """Filter a block of current samples, A -> deflection, m.
 
         ``current_a``: shape ``(n,)`` (one channel only) or ``(n, channels)``.
-        Pass values through :func:`~ipmc_sensor_ros.estimation.stream.validate_block` first: the filter trusts its input.
+        Pass values through :func:`~ipmc_sensor_ros.estimation.stream.validate_block` first:
+        the filter trusts its input.
         """
         x = np.asarray(current_a, dtype=float)
         squeeze = x.ndim == 1

@@ -42,7 +42,8 @@ __all__ = ['StreamEstimator', 'validate_block', 'COUNTER_NAMES', 'MAX_ABS_CURREN
 #: Largest block accepted by default (samples).
 MAX_BLOCK_SAMPLES = 1_000_000
 
-#: Largest plausible sensing current, A (IPMC currents are nA..uA; 1 A means a wiring or unit error).
+#: Largest plausible sensing current, A (IPMC currents are nA..uA; 1 A means a wiring or
+#: unit error).
 MAX_ABS_CURRENT_A = 1.0
 
 #: Largest representable stamp (``builtin_interfaces/Time.sec`` is int32), s.
@@ -59,6 +60,7 @@ GAP_PERIODS = 1.5
 COUNTER_NAMES = ('messages_in', 'samples_in', 'samples_out', 'samples_rejected',
                  'messages_rejected', 'samples_dropped', 'samples_unpublished',
                  'messages_unpublished', 'resets', 'gaps', 'gaps_bridged')
+
 
 def validate_block(values, max_samples: int = MAX_BLOCK_SAMPLES,
                    max_abs_current_a: float = MAX_ABS_CURRENT_A) -> np.ndarray:

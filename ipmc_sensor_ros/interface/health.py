@@ -45,6 +45,7 @@ __all__ = ['OK', 'WARN', 'ERROR', 'LEVEL_NAMES', 'Health', 'HealthLimits', 'Heal
 OK, WARN, ERROR = 0, 1, 2
 LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR'}
 
+
 @dataclass(frozen=True)
 class HealthLimits:
     """Thresholds of :class:`HealthMonitor` (see the module docstring; SI units)."""
@@ -225,7 +226,7 @@ class HealthMonitor:
         values['seconds_since_data'] = f'{since:.3f}'
         if not done and since > lim.stale_after_s:
             errors.append('no data for ' + (f'{since:.1f} s' if self._last_data_s is not None
-                                           else f'{since:.1f} s since start')
+                                            else f'{since:.1f} s since start')
                           + f' (stale_after_s {lim.stale_after_s:g})')
         if self._prev is not None:
             for key, text in self.WARN_COUNTERS:

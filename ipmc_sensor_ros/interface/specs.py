@@ -33,8 +33,6 @@ __all__ = ['Spec', 'ParameterError', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_
            'check_values', 'markdown_table', 'FRAME_ID_PATTERN', 'DIAGNOSTICS_SPECS']
 
 
-
-
 @dataclass(frozen=True)
 class Spec:
     """One parameter: name, default, type, description (with unit), range, read-only flag.
@@ -138,7 +136,7 @@ ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
          low=1e-4, high=1e5),
     Spec('sample_rate_hz', 1000.0, float, 'sample rate of the current the filter is designed '
          'for, Hz; blocks whose median sample period differs by more than 1 % are rejected',
-           low=1.0, high=1e6, read_only=True),
+         low=1.0, high=1e6, read_only=True),
     Spec('estimator', 'leaky', str, "'leaky': the leaky inverse of the reduced model; "
          "'kalman': offset-aware Kalman filter with a rest detector (learns the DAQ offset, "
          'holds the deflection at rest, publishes its standard deviation)',
@@ -237,8 +235,6 @@ def _model_from_file(values: Mapping[str, Any], geometry: Geometry) -> SensorMod
     return saved.sensor_model(geometry)
 
 
-
-
 def check_values(values: Mapping[str, Any], specs: Iterable[Spec] | None = None) -> None:
     """Check every value in ``values`` that has a spec (type, range, choices, pattern,
     length): the same rules as a params file and the ROS descriptors.  Raises
@@ -275,7 +271,7 @@ def build_estimator(
         raise
     except Exception as exc:  # numerics of an extreme but in-range combination
         raise ParameterError(f'these parameter values do not give a usable model: '
-                                 f'{_one_line(exc)}') from None
+                             f'{_one_line(exc)}') from None
 
 
 def _one_line(exc: BaseException, limit: int = 200) -> str:
@@ -316,20 +312,20 @@ def _check_value(spec: Spec, value: Any, where: str) -> Any:
         if isinstance(value, str) or not isinstance(value, (list, tuple)) \
                 or not all(isinstance(v, str) for v in value):
             raise ParameterError(f"{where}parameter '{spec.name}' must be a list of strings, "
-                                     f'got {shown}')
+                                 f'got {shown}')
         value = [v for v in value if v]
     if spec.low is not None and not (spec.low <= value <= spec.high):  # NaN fails too
         raise ParameterError(f"{where}parameter '{spec.name}' = {shown} is outside "
-                                 f'[{spec.low:g}, {spec.high:g}]')
+                             f'[{spec.low:g}, {spec.high:g}]')
     if spec.choices and value not in spec.choices:
         raise ParameterError(f"{where}unknown {spec.name} {shown}: parameter '{spec.name}' "
-                                 f'must be one of {list(spec.choices)}')
+                             f'must be one of {list(spec.choices)}')
     if spec.max_length is not None and len(value) > spec.max_length:
         raise ParameterError(f"{where}parameter '{spec.name}' is {len(value)} characters long, "
-                                 f'more than {spec.max_length}: {shown}')
+                             f'more than {spec.max_length}: {shown}')
     if spec.pattern and not re.fullmatch(spec.pattern, value):
         raise ParameterError(f"{where}parameter '{spec.name}' = {shown} does not match "
-                                 f'{spec.pattern} (allowed characters, not empty)')
+                             f'{spec.pattern} (allowed characters, not empty)')
     return value
 
 
@@ -365,24 +361,24 @@ def load_params_file(path: str | Path, node_name: str = 'ipmc_estimator',
         params = section['ros__parameters'] or {}
         if not isinstance(params, dict):
             raise ParameterError(f"{path}: 'ros__parameters' of section '{key}' must be a "
-                                     f'mapping, got {short_repr(params)}')
+                                 f'mapping, got {short_repr(params)}')
         for name, value in params.items():
             if name == 'use_sim_time':
                 continue
             if name not in by_name:
                 raise ParameterError(f'{path}: unknown parameter {short_repr(name)} in section '
-                                         f"'{key}' (known: {sorted(by_name)})")
+                                     f"'{key}' (known: {sorted(by_name)})")
             values[name] = _check_value(by_name[name], value, str(path))
     if not found:
         raise ParameterError(f"{path}: no section for node '{node_name}' (expected one of "
-                                 f"'/**', '/**/{node_name}', '{node_name}')")
+                             f"'/**', '/**/{node_name}', '{node_name}')")
     try:
         build_model(values)
     except ParameterError as exc:
         raise ParameterError(f'{path}: {exc}') from None
     except Exception as exc:  # numerics of an extreme but in-range combination
         raise ParameterError(f'{path}: these parameter values do not give a usable model: '
-                                 f'{_one_line(exc)}') from None
+                             f'{_one_line(exc)}') from None
     return values
 
 

@@ -72,8 +72,6 @@ _DB_SCALE = 0.1 * np.log(10.0) / 20.0   # 0.1 dB expressed as a natural-log magn
 _DEG_SCALE = np.pi / 180.0               # 1 degree in radians
 
 
-
-
 @dataclass(frozen=True)
 class ReducedModel:
     """H_n(s) = s * k * prod(s - z_i) / prod(s - p_i), A m^-1.

@@ -92,7 +92,11 @@ class DiagnosticsPublisher:
             stats.observe(current_a)
 
     def update(self, status: Mapping[str, Any]) -> DiagnosticArray:
-        """Evaluate ``status`` (``{channel: dict}`` or one dict) and publish; returns the message."""
+        """
+        Evaluate ``status`` (``{channel: dict}`` or one dict) and publish.
+
+        Returns the message.
+        """
         if not status or not all(isinstance(v, Mapping) for v in status.values()):
             status = {self.channels[0]: status}   # one dict: the first channel
         now_s = self._clock.now().nanoseconds * 1e-9

@@ -92,7 +92,8 @@ class EstimatorNode(Node):
         logger.info(
             f'ready: {estimator.model.describe()} model, order {r.order} reduction '
             f'over {r.band_hz[0]}-{r.band_hz[1]} Hz, fs = {estimator.sample_rate_hz} Hz, '
-            f'leak corner {estimator.inverse.leak_corner_hz} Hz; listening on {self._sub.topic_name}'
+            f'leak corner {estimator.inverse.leak_corner_hz} Hz; '
+            f'listening on {self._sub.topic_name}'
         )
 
     # -- public helpers -------------------------------------------------------

@@ -54,6 +54,7 @@ __all__ = [
     'point_message',
 ]
 
+
 @dataclass(frozen=True)
 class Block:
     """An unpacked block: ``times_s`` (None for a 1-D, values-only message), ``values`` (the
@@ -102,7 +103,7 @@ class BlockPacker:
             raise DataError(f"{len(cols) + 1} columns for the layout '{self.columns}'")
         if any(c.shape != t.shape for c in cols):
             raise DataError(f'times ({t.size}) and values ({[c.size for c in cols]}) differ '
-                              'in length')
+                            'in length')
         n = int(t.size)
         if n == 1:
             return self.pack_one(float(t[0]), *(float(c[0]) for c in cols))

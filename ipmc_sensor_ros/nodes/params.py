@@ -20,8 +20,8 @@ from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
 
 from ..interface.specs import (GEOMETRY_NAMES, GEOMETRY_SPECS, MATERIAL_NAMES, MATERIAL_SPECS,
-                      MODEL_SPECS, QOS_SPECS, ParameterError, Spec, check_choice,
-                      markdown_table)
+                               MODEL_SPECS, QOS_SPECS, ParameterError, Spec, check_choice,
+                               markdown_table)
 from ..interface.specs import build_model as build_sensor_model
 
 __all__ = ['ParameterError', 'Spec', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_SPECS',
@@ -152,12 +152,12 @@ def check_unknown_overrides(node, specs: Iterable[Spec], cli_args=None,
     for name in unknown:
         if name not in fatal:
             node.get_logger().warning(f"ignoring parameter '{name}' from {wildcard_only[name]}: "
-                                   f"not a parameter of {fqn} (another node's?)")
+                                      f"not a parameter of {fqn} (another node's?)")
             del node._parameter_overrides[name]
     if fatal:
         where = f" in {', '.join(files)}" if files else ''
         raise ParameterError(f'unknown parameter(s) {fatal}{where} for node '
-                                 f"'{node.get_name()}'; known: {sorted(known - {'use_sim_time'})}")
+                             f"'{node.get_name()}'; known: {sorted(known - {'use_sim_time'})}")
 
 
 #: QoS parameters of a topic are declared read-only by rclpy as
@@ -193,7 +193,7 @@ def check_qos_overrides(node) -> None:
     if stray:
         valid = sorted(n for n in declared if n.startswith('qos_overrides.'))
         raise ParameterError(f'unknown QoS override(s) {stray} for node '
-                                 f"'{node.get_name()}'; valid: {valid}")
+                             f"'{node.get_name()}'; valid: {valid}")
 
 
 def declare(node, specs: Iterable[Spec]) -> None:
@@ -232,6 +232,3 @@ def make_qos(values: Mapping[str, Any]) -> QoSProfile:
                       reliability=(ReliabilityPolicy.RELIABLE if rel == 'reliable'
                                    else ReliabilityPolicy.BEST_EFFORT),
                       durability=DurabilityPolicy.VOLATILE)
-
-
-

@@ -63,7 +63,7 @@ def executor_name() -> str:
     wanted = os.environ.get('IPMC_EXECUTOR', 'single').strip().lower()
     if wanted not in ('events', 'single'):
         raise ParameterError(f'environment variable IPMC_EXECUTOR={wanted!r}: expected '
-                                 "'events' or 'single'")
+                             "'events' or 'single'")
     return 'events' if wanted == 'events' and EventsExecutor is not None else 'single'
 
 

@@ -61,7 +61,8 @@ class AmplifierBandwidth(Effect):
         'Phase lag growing linearly with frequency (about f/f_a rad) and, near f_a, a '
         'magnitude droop; errors concentrated at the top of the band, equal for all samples.'
     )
-    reference = 'Any transimpedance-amplifier text, e.g. Horowitz & Hill, The Art of Electronics, 3rd ed., 4.3.'
+    reference = ('Any transimpedance-amplifier text, e.g. Horowitz & Hill, '
+                 'The Art of Electronics, 3rd ed., 4.3.')
 
     def factor(self, s, model, values):
         return 1.0 / (1.0 + s / (2 * math.pi * values['corner_hz']))
@@ -161,7 +162,11 @@ class HydrationDrift(Effect):
 
 
 def diffusivity_ratio_function(values):
-    """d(t)/d_0 of :class:`HydrationDrift` as a function of elapsed seconds (also used by ``track``)."""
+    """
+    Return d(t)/d_0 of :class:`HydrationDrift` as a function of elapsed seconds.
+
+    Also used by ``track``.
+    """
     rate = float(values['diffusivity_rate_per_s'])
     q = float(values.get('equilibrium_ratio', 0.0))
 

@@ -41,8 +41,8 @@ Discretisation (method of lines)
   sparse LU per step size; i = C (A x + B w) + C_w dw/dt (C_w: the surface
   node's share of m, a direct term).
 
-:func:`ipmc_sensor_ros.workbench.studies.convergence_table` shows the error against the closed forms falling with
-refinement; the tests require 0.1 dB / 0.5 deg over 0.1-100 Hz.
+:func:`ipmc_sensor_ros.workbench.studies.convergence_table` shows the error against the
+closed forms falling with refinement; the tests require 0.1 dB / 0.5 deg over 0.1-100 Hz.
 """
 
 from __future__ import annotations

@@ -223,7 +223,7 @@ class SensorModel:
 
     @functools.cached_property
     def compiled(self):
-        """The model taken apart once (:class:`~ipmc_sensor_ros.physics.pipeline.CompiledModel`)."""
+        """Return the model taken apart once (:class:`~.pipeline.CompiledModel`)."""
         from .pipeline import compile_model
 
         return compile_model(self)

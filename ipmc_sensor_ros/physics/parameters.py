@@ -41,8 +41,6 @@ __all__ = [
 ]
 
 
-
-
 def short_repr(value: Any, limit: int = 60) -> str:
     """``repr(value)`` cut to ``limit`` characters (with '...' and the full length), so an
     error message never echoes a huge value in full (a 10 MB label, an alias-bomb YAML).

@@ -208,7 +208,7 @@ def time_varying_response(elapsed_s: np.ndarray, material_at, response_for) -> n
     for k in range(1, nodes.size):
         current = response_for(material_at(nodes[k]))
         sel = (elapsed_s >= nodes[k - 1]) & ((elapsed_s < nodes[k]) if k < nodes.size - 1
-                                            else (elapsed_s <= nodes[k]))
+                                             else (elapsed_s <= nodes[k]))
         frac = (elapsed_s[sel] - nodes[k - 1]) / (nodes[k] - nodes[k - 1])
         out[sel] = (1 - frac) * previous[sel] + frac * current[sel]
         previous = current

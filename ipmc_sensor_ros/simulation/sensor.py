@@ -139,8 +139,8 @@ class SensorSimulator:
     filter every ``update_s`` seconds of simulated time; the new filter's state
     is obtained by replaying the last ``replay_s`` (1 s, many times the
     sensor's memory) of its input through it, so the switch is seamless even
-    though successive reductions place their poles differently.  Time in the effect hooks runs from the first
-    simulated sample.
+    though successive reductions place their poles differently.  Time in the effect hooks
+    runs from the first simulated sample.
 
     Parameters
     ----------
@@ -340,8 +340,8 @@ def predict_current(model: SensorModel, time_s, deflection_m, pad_s: float = 2.0
     nonlinearity), then the linear dynamics by exact FFT convolution
     (:func:`lti_response_fft`), then every ``output_transform`` (e.g. offset).
     A time-varying effect (``material_at``, e.g. ``hydration_drift``) is
-    simulated by :func:`~ipmc_sensor_ros.physics.pipeline.time_varying_response`: LTI responses at material
-    nodes, linearly interpolated in time (the drift is slow against the
+    simulated by :func:`~ipmc_sensor_ros.physics.pipeline.time_varying_response`: LTI
+    responses at material nodes, linearly interpolated in time (the drift is slow against the
     sensor's ~0.1 s memory, so the response is quasi-static in the material).
     """
     t = np.asarray(time_s, float)

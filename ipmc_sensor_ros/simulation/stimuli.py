@@ -75,21 +75,21 @@ class CrankSlider(Stimulus):
 
     def deflection(self, t):
         th = self._theta(t)
-        r, l = self.crank_radius_m, self.rod_length_m
-        return r * np.cos(th) + np.sqrt(l * l - (r * np.sin(th)) ** 2) - self.mean_position_m
+        r, rod = self.crank_radius_m, self.rod_length_m
+        return r * np.cos(th) + np.sqrt(rod * rod - (r * np.sin(th)) ** 2) - self.mean_position_m
 
     @property
     def mean_position_m(self) -> float:
         """Cycle average of the slider position sqrt(l^2 - r^2 sin^2) term, m."""
         from scipy.special import ellipe
 
-        r, l = self.crank_radius_m, self.rod_length_m
-        return 2.0 / np.pi * l * float(ellipe((r / l) ** 2))
+        r, rod = self.crank_radius_m, self.rod_length_m
+        return 2.0 / np.pi * rod * float(ellipe((r / rod) ** 2))
 
     def velocity(self, t):
         th = self._theta(t)
-        r, l = self.crank_radius_m, self.rod_length_m
-        root = np.sqrt(l * l - (r * np.sin(th)) ** 2)
+        r, rod = self.crank_radius_m, self.rod_length_m
+        root = np.sqrt(rod * rod - (r * np.sin(th)) ** 2)
         omega = 2 * np.pi * self.motor_frequency_hz
         return omega * (-r * np.sin(th) - r * r * np.sin(th) * np.cos(th) / root)
 

@@ -200,7 +200,8 @@ class Diagnosis:
                          f'{c.fit.bic - self.baseline.fit.bic:10.1f}  {params}{flags}')
         if any(not c.held_out for c in self.candidates):
             lines.append(
-                '            (* in-sample error: the BIC rule already rejects it, not cross-validated)'
+                '            (* in-sample error: the BIC rule already rejects it, '
+                'not cross-validated)'
             )
         for k, s in enumerate(self.steps, 1):
             vals = '; '.join(f'{e}: ' + ', '.join(f'{n}={v:.4g}' for n, v in vs.items())
@@ -210,7 +211,8 @@ class Diagnosis:
             )
             for t in s.ties:
                 lines.append(
-                    f"        tie: {t['effect']} (error {t['error']:.4f}, dBIC {t['delta_bic']:+.0f}"
+                    f"        tie: {t['effect']} (error {t['error']:.4f}, "
+                    f"dBIC {t['delta_bic']:+.0f}"
                     f"{', implausible' if t['flags'] else ''}): "
                     + ', '.join(f'{n}={v:.4g}' for n, v in t['params'].items())
                 )
@@ -506,7 +508,7 @@ def _diagnose(
                for c in _grid_for_spec(spec, priors, records[0].model)]
     baseline = _evaluate(prepared, spec, base_x0, folds, fold_nfev, priors=priors, max_nfev=60)
     baseline.params = {**baseline.params, **{f'{e}.{n}': baseline.fit.effect_values[e][n]
-                                            for e, n in spec.effect_params}}
+                                             for e, n in spec.effect_params}}
     nf_num = sum(p.sigma ** 2 * p.keep.sum() for p in prepared)
     nf_den = sum(float(np.sum((p.y[p.keep] - p.y[p.keep].mean()) ** 2)) for p in prepared)
     noise_floor = float(np.sqrt(nf_num / nf_den))
@@ -558,7 +560,8 @@ def _diagnose(
         items = [(n, s) for n in remaining
                  for s in SHAPES.get(n, (tuple(p.name for p in get_effect(n).parameters),))]
         say(
-            f'step {len(steps) + 1}: {len(items)} candidate fits on {min(n_jobs, len(items))} process(es)'
+            f'step {len(steps) + 1}: {len(items)} candidate fits on '
+            f'{min(n_jobs, len(items))} process(es)'
         )
         job = _Job(prepared, current.spec, current.x, folds, fold_nfev, priors)
         fitted = _map(job, items, n_jobs, say)

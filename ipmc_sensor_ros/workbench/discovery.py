@@ -46,7 +46,11 @@ def free_names(text: str) -> tuple[str, ...]:
 
 
 def effects_to_fit(text: str) -> list[str]:
-    """Effects of an ``--effects`` text given by name only (no ``(...)``): their parameters are fitted."""
+    """
+    Return the effects of an ``--effects`` text given by name only (no ``(...)``).
+
+    Their parameters are fitted.
+    """
     out, depth, cur = [], 0, ''
     for ch in (text or '') + ',':
         if ch == ',' and depth == 0:

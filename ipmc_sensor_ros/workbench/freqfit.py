@@ -136,7 +136,8 @@ class FitResult:
     def summary(self) -> str:
         lines = [
             f"fit of {', '.join(SYMBOLS.get(n, n) for n in self.free)} "
-            f"({'+'.join(('h1',) + tuple(getattr(e, 'name', e) for e in self.effects))}): chi2/dof = {self.chi2:.4g}/{self.dof} "
+            f"({'+'.join(('h1',) + tuple(getattr(e, 'name', e) for e in self.effects))}): "
+            f'chi2/dof = {self.chi2:.4g}/{self.dof} '
             f'= {self.reduced_chi2:.3g}, p = {self.p_value:.3g}'
         ]
         lines.append(f"{'parameter':<32} {'estimate':>12} {'95% CI':>27}  note")

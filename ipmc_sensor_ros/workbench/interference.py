@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Mains interference: line components at 50/60 Hz and harmonics that the stimulus does not explain.
+"""
+Mains interference: line components at 50/60 Hz and harmonics that the stimulus does not explain.
 
 Procedure (:func:`find_mains_lines`)
 ------------------------------------
@@ -58,7 +59,11 @@ class MainsLine:
 
 
 def parse_mains(value) -> float | str | None:
-    """``'off'``/None -> None, ``'auto'`` -> 'auto', ``50``/``60`` -> Hz; anything else is refused."""
+    """
+    Parse a mains setting: ``'off'``/None -> None, ``'auto'`` -> 'auto', ``50``/``60`` -> Hz.
+
+    Anything else is refused.
+    """
     if value is None or str(value).strip().lower() in ('off', 'none', '0', ''):
         return None
     text = str(value).strip().lower()

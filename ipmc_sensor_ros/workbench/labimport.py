@@ -91,7 +91,7 @@ def _find_table(path, source: TextSource):
             for delimiter, decimal in _DIALECTS:
                 n = _is_row(line, delimiter, decimal)
                 if n and len(head.split(delimiter)) == n and not _is_row(head, delimiter,
-                                                                          decimal):
+                                                                         decimal):
                     source.unread(line)
                     notes = [text.strip() for _, text in previous[:-1] if text.strip()]
                     cells = [c.strip() for c in head.split(delimiter)]

@@ -149,4 +149,3 @@ class FrequencyResponseData:
     def response(self) -> np.ndarray:
         """Complex response I/w = gain * exp(j * deg2rad(phase)), A/m."""
         return self.gain_a_per_m * np.exp(1j * np.deg2rad(self.phase_deg))
-

@@ -33,7 +33,6 @@ def convergence_table(model: SensorModel, band_hz=(0.1, 100.0), n_points: int = 
     return rows
 
 
-
 def _distortion_rows(simulate_exact, i_unit, t, shape, amplitudes_m, frequency_hz) -> list[dict]:
     """Relative RMS error of the linear prediction (amplitude x ``i_unit``) against
     ``simulate_exact(w)`` and the harmonics of the latter, over the last two periods."""

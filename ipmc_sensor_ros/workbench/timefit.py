@@ -36,8 +36,7 @@ from ..physics.parameters import MaterialParameters, ParameterError
 from ..simulation.sensor import padded_record
 from .metrics import noise_rms
 
-__all__ = ['Record', 'PreparedRecord', 'prepare', 'FitSpec', 'ModelFit', 'fit_model', 'predict',
-]
+__all__ = ['Record', 'PreparedRecord', 'prepare', 'FitSpec', 'ModelFit', 'fit_model', 'predict']
 
 
 @dataclass

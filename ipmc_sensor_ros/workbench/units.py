@@ -26,6 +26,7 @@ QUANTITY_UNITS = {'time': TIME_UNITS, 'deflection': LENGTH_UNITS, 'current': CUR
 #: SI symbol of each quantity (the canonical column is ``<quantity>_<symbol>``).
 SI_SYMBOL = {'time': 's', 'deflection': 'm', 'current': 'A'}
 
+
 def to_si(value, factor: float):
     """``value * factor``, computed as a division by the power of ten when ``factor`` is
     one (``360 * 1e-6`` gives 0.00035999999999999997; ``360 / 1e6`` gives 0.00036)."""
