@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Benchmarks of the core: estimator throughput and per-sample overhead, model evaluation.
+"""
+Benchmarks of the core: estimator throughput and per-sample overhead, model evaluation.
 
 Every figure is a ratio against a baseline measured in the same process, so the
 numbers are comparable across machines.  No assertions: README "Benchmarks" lists the

@@ -370,8 +370,11 @@ def bench_nodes(smoke: bool = False) -> list[dict]:
 
 
 def bench_simulator_rtf(smoke: bool = False) -> dict:
-    """Simulated seconds per wall second of the simulator node in fast mode at 1 kHz,
-    in process (the node's publish path, no subscriber)."""
+    """
+    Simulated seconds per wall second of the simulator node in fast mode at 1 kHz.
+
+    In process (the node's publish path, no subscriber).
+    """
     import rclpy
     from rclpy.parameter import Parameter
 

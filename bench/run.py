@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Run every benchmark and print one table: ``python -m bench.run [--smoke]``.
+"""
+Run every benchmark and print one table: ``python -m bench.run [--smoke]``.
 
 ``--smoke`` runs each benchmark on tiny inputs (what CI does): it checks that
 they run, not how fast.

@@ -1,6 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Shared test fixtures: one ROS domain per test run, ROS contexts, the estimator node driven
-synchronously, temporary workspaces."""
+"""
+Shared test fixtures: one ROS domain per test run, ROS contexts.
+
+The estimator node driven synchronously, temporary workspaces.
+"""
 from __future__ import annotations
 
 import contextlib

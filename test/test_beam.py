@@ -12,9 +12,12 @@ from ipmc_sensor_ros.physics.parameters import ParameterError
 
 
 def _first_integral_length(tip_angle: float, load: float) -> float:
-    """Arc length (in units of L) of the elastica with tip angle theta_L under load lambda,
-    from the first integral theta'^2 = 2 lambda (sin theta_L - sin theta): an independent
-    (elliptic-integral) solution, no ODE solver."""
+    """
+    Arc length (in units of L) of the elastica with tip angle theta_L under load lambda.
+
+    From the first integral theta'^2 = 2 lambda (sin theta_L - sin theta): an independent
+    (elliptic-integral) solution, no ODE solver.
+    """
     # integrable 1/sqrt singularity at the tip: quad's algebraic weight (theta_L - theta)^-1/2
     # takes it, leaving a smooth factor
     def smooth(th):
@@ -26,10 +29,13 @@ def _first_integral_length(tip_angle: float, load: float) -> float:
 
 
 def test_elastica_matches_classical_large_deflection_values():
-    """Bisshopp & Drucker (1945), tip-loaded cantilever, F L^2 / (E I) = 1:
-    vertical tip deflection 0.3017 L, horizontal shortening 0.0564 L, tip angle
-    0.4613 rad (values quoted to 4 digits; tolerance one unit of the last digit, as the
-    quoted figures may be truncated rather than rounded)."""
+    """
+    Bisshopp & Drucker (1945), tip-loaded cantilever, F L^2 / (E I) = 1.
+
+    Vertical tip deflection 0.3017 L, horizontal shortening 0.0564 L, tip angle 0.4613
+    rad (values quoted to 4 digits; tolerance one unit of the last digit, as the quoted
+    figures may be truncated rather than rounded).
+    """
     sol = elastica_solution(1.0)
     s = np.linspace(0.0, 1.0, 4001)
     theta = sol.sol(s)[0]

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Simulator -> estimator end to end: tracking accuracy and exact sample accounting.
+"""
+Simulator -> estimator end to end: tracking accuracy and exact sample accounting.
 
 1. One process, one executor: three simulator/estimator pairs (crank-slider at
    1, 5 and 20 Hz) in namespaces /f1, /f5, /f20.
@@ -111,10 +112,13 @@ def test_in_process_pairs_track_truth_and_account_exactly(monkeypatch):
 
 
 def test_estimator_improves_when_its_model_gains_the_hidden_effect(monkeypatch):
-    """Issue 'discovery': the simulator hides a 40 Hz current-amplifier pole; an estimator
-    with the plain H2 model misses its 14 deg phase lag at 10 Hz, one whose ``effects``
-    parameter names it tracks the truth.  Two identical (seeded, deterministic) simulators
-    feed the two estimators in namespaces /plain and /aware of one executor."""
+    """
+    Issue 'discovery': the simulator hides a 40 Hz current-amplifier pole.
+
+    An estimator with the plain H2 model misses its 14 deg phase lag at 10 Hz, one whose
+    ``effects`` parameter names it tracks the truth. Two identical (seeded, deterministic)
+    simulators feed the two estimators in namespaces /plain and /aware of one executor.
+    """
     ctx, ex, monitor_node = _context_with_monitor(monkeypatch)
     hidden = ['amplifier_bandwidth(corner_hz=40)']
     nodes, monitors = [], {}
@@ -170,9 +174,12 @@ def test_two_processes_over_dds_track_truth_and_account_exactly(tmp_path, monkey
 
 @pytest.mark.slow
 def test_ten_minute_live_run_accounts_exactly(tmp_path, monkeypatch):
-    """The reliability soak: 10 minutes paced in real time, two processes over DDS, exact
-    accounting; resident memory of each node flat (growth from 10 % of the run to its end
-    within 5 %)."""
+    """
+    The reliability soak: 10 minutes paced in real time, two processes over DDS, exact accounting.
+
+    Resident memory of each node flat (growth from 10 % of the run to its end within 5
+    %).
+    """
     rss = _two_process_run(tmp_path, monkeypatch, 600.0, 1.0)
     for name, (early, end) in rss.items():
         assert end <= 1.05 * early, (name, early, end)

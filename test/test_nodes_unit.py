@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Unit tests of the ROS 2 layer: message layout helpers and the nodes in-process.
+"""
+Unit tests of the ROS 2 layer: message layout helpers and the nodes in-process.
 
 Every node test runs in its own rclpy Context on a random ROS_DOMAIN_ID in
 100..200 with discovery limited to localhost, so parallel runs do not cross-talk.
@@ -91,8 +92,12 @@ def test_pack_unpack_round_trip_is_exact(n):
 
 
 def test_block_packer_reuses_one_message_and_follows_length_changes():
-    """The node's reused output message: each pack is exact, including after the
-    block length changes (1 -> 5 -> 1), and it is the same object every time."""
+    """
+    The node's reused output message.
+
+    Each pack is exact, including after the block length changes (1 -> 5 ->
+    1), and it is the same object every time.
+    """
     packer = BlockPacker(DEFLECTION_COLUMNS)
     first = None
     for n in (1, 1, 5, 1):

@@ -1,6 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Reliability: fuzzed input to the estimator node, bad configuration files, soak of the
-estimator core, and finite models across the physical parameter range."""
+"""
+Reliability: fuzzed input to the estimator node, bad configuration files.
+
+Soak of the estimator core, and finite models across the physical parameter range.
+"""
 from __future__ import annotations
 
 import os
@@ -99,9 +102,12 @@ CORRUPTIONS = ('nan', 'inf', 'huge', 'time_nan', 'not_increasing', 'wrong_rate',
 
 
 def test_one_sample_lean_path_gives_the_general_paths_results():
-    """One-sample messages take a lean scalar path (performance issue); it must publish
-    exactly what the general block path publishes and count alike, through bad messages,
-    a bridged gap, a reset gap and a backward time jump."""
+    """
+    One-sample messages take a lean scalar path (performance issue).
+
+    It must publish exactly what the general block path publishes and count alike,
+    through bad messages, a bridged gap, a reset gap and a backward time jump.
+    """
     rng = np.random.default_rng(5)
     t, i = _signal(600, 10.0, rng)
     t[300:] += 0.002          # bridged gap (3 periods)
@@ -259,8 +265,12 @@ def test_shipped_config_files_load():
 # Soak of the estimator core (CI: 10^7 samples; bench: 10^8)
 # ---------------------------------------------------------------------------
 def soak(n_samples: int, block: int = 1_000_000, offset_a: float = 2e-8, noise_a: float = 1e-8):
-    """Noisy, offset current through the inverse; returns (max |w|, documented bound,
-    traced memory growth in bytes between the first and last block)."""
+    """
+    Noisy, offset current through the inverse.
+
+    Returns (max |w|, documented bound, traced memory growth in bytes between
+    the first and last block).
+    """
     reduced = reduce_model(SensorModel(SLIM), 4)
     est = InverseEstimator(reduced, FS)
     rng = np.random.default_rng(0)

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The ``ros2 run`` contract: colcon builds the package and both executables run.
+"""
+The ``ros2 run`` contract: colcon builds the package and both executables run.
 
 There is no ``ros2`` CLI here, so the test does what ``ros2 run ipmc_sensor_ros
 <exe>`` does: resolve the package prefix through the ament index

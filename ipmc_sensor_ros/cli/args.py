@@ -1,6 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Shared pieces of the ``ipmc-model`` verbs: one flag vocabulary, argument
-parsing helpers, data loading, progress lines and JSON output.
+"""
+Shared pieces of the ``ipmc-model`` verbs.
+
+One flag vocabulary, argument parsing helpers, data loading, progress
+lines and JSON output.
 
 Flag vocabulary (the same name means the same thing in every verb)
     ``--model``      base model, h1 (eq. 31) or h2 (eq. 45)
@@ -61,7 +64,8 @@ def say(msg: str) -> None:
 
 
 class Progress:
-    """Progress lines for anything that may take over 5 s.
+    """
+    Progress lines for anything that may take over 5 s.
 
     ``step(msg)`` prints at most one line every ``interval_s`` seconds (the
     first and, via ``done``, the last always); inside ``with Progress(...)``
@@ -119,8 +123,11 @@ _NUMBER = re.compile(r'\d+(?:[.p]\d+)?')
 
 
 def natural_key(path) -> tuple:
-    """Sort key that orders embedded numbers numerically ('1Hz' < '2p5Hz' < '13Hz');
-    simulate writes decimal points as 'p' (``slim_1p53Hz``)."""
+    """
+    Sort key that orders embedded numbers numerically ('1Hz' < '2p5Hz' < '13Hz').
+
+    Simulate writes decimal points as 'p' (``slim_1p53Hz``).
+    """
     text = str(path)
     parts: list = []
     pos = 0
@@ -177,7 +184,8 @@ def parse_samples(text: str, flag: str = '--samples') -> list[str]:
 
 
 def load_material(path) -> MaterialParameters:
-    """Material from a workbench YAML (``material:``) or a ROS 2 params file.
+    """
+    Material from a workbench YAML (``material:``) or a ROS 2 params file.
 
     ROS 2 params files are read with the nodes' own loader
     (:func:`~ipmc_sensor_ros.interface.specs.load_params_file`), so section
@@ -198,8 +206,11 @@ def load_material(path) -> MaterialParameters:
 
 
 def _model_file(args):
-    """The saved model of ``--model-file`` (None without it); with ``--params`` it is refused:
-    two sources of the material, nothing chosen silently."""
+    """
+    The saved model of ``--model-file`` (None without it); with ``--params`` it is refused.
+
+    Two sources of the material, nothing chosen silently.
+    """
     path = getattr(args, 'model_file', None)
     if not path:
         return None
@@ -260,7 +271,8 @@ def _expand(paths) -> list[Path]:
 
 
 def load_data(args, *, need_deflection: bool = True) -> list:
-    """Read every input named by ``args.data`` in natural order.
+    """
+    Read every input named by ``args.data`` in natural order.
 
     Time series without a deflection column are skipped (with a line saying
     so) when ``need_deflection``; an error if nothing is left.

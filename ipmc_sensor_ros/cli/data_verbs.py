@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Verbs that make or convert data: ``simulate``, ``estimate``, ``import``.
+"""
+Verbs that make or convert data: ``simulate``, ``estimate``, ``import``.
 
 ``estimate`` writes ``ipmc-estimate/1`` text files (or bags): the estimate in
 the column ``deflection_estimate_m`` next to the measured ``deflection_m``
@@ -116,9 +117,13 @@ def _explicit_params(path) -> set[str]:
 
 
 def _resolve_values(data, base: dict, explicit: set[str], params: str | None, prefer: str) -> dict:
-    """Node parameter values for one record: the params file's, completed from the data
-    header (geometry, known material values, sample rate); a value both give
-    differently is an error unless ``prefer`` says which wins."""
+    """
+    Node parameter values for one record.
+
+    The params file's, completed from the data header (geometry, known material
+    values, sample rate); a value both give differently is an error unless
+    ``prefer`` says which wins.
+    """
     from ..interface.specs import GEOMETRY_NAMES, MATERIAL_NAMES
 
     values = dict(base)
@@ -152,8 +157,11 @@ def _resolve_values(data, base: dict, explicit: set[str], params: str | None, pr
 
 def estimate_accuracy(time_s, estimate_m, measured_m, leak_corner_hz: float,
                       delay_s: float = 0.0) -> tuple[float, float, str]:
-    """NRMSE of the estimated deflection: RMS(e - m) / RMS(m) of the estimate e and
-    the measurement m, each with its mean and linear trend removed.
+    """
+    NRMSE of the estimated deflection.
+
+    RMS(e - m) / RMS(m) of the estimate e and the measurement m, each with
+    its mean and linear trend removed.
 
     A current sensor cannot see a constant deflection: the estimator's leak
     (corner ``leak_corner_hz``) removes it, and the deflection before the

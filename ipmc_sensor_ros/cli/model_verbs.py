@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Verbs that test a model against measurements: ``fit``, ``compare``, ``track``, ``diagnose``.
+"""
+Verbs that test a model against measurements: ``fit``, ``compare``, ``track``, ``diagnose``.
 
 Each verb: parse -> call the workbench -> print a summary -> optional JSON and report.
 """
@@ -24,8 +25,12 @@ _NOT_NODE_PARAMS = ('faraday_constant_c_per_mol', 'gas_constant_j_per_mol_k',
 
 
 def _records(args, with_data: bool = False):
-    """The time records named by the arguments, each with its model (base + --effects, material)
-    (and the loaded data files, ``with_data``)."""
+    """
+    The time records named by the arguments.
+
+    Each with its model (base + --effects, material) (and the loaded data files,
+    ``with_data``).
+    """
     from ..workbench.data import records_from
 
     effects, material = effects_from_args(args), material_from_args(args)   # flags before files

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Discrete, stable inverse of a reduced sensing model: current (A) -> deflection (m).
+"""
+Discrete, stable inverse of a reduced sensing model: current (A) -> deflection (m).
 
 Continuous inverse
 ------------------
@@ -97,7 +98,8 @@ def inverse_zpk(reduced: ReducedModel, leak_corner_hz: float = DEFAULT_LEAK_CORN
 
 def leak_tradeoff(reduced: ReducedModel, leak_corner_hz: float, hold_time_s: float,
                   current_offset_a: float, offset_corner_hz: float | None = None) -> dict:
-    """Quantify the leak trade-off (see module docstring).
+    """
+    Quantify the leak trade-off (see module docstring).
 
     Returns ``held_step_relative_error`` after ``hold_time_s`` and the
     deflection error (m) caused by ``current_offset_a``: its steady value and
@@ -158,7 +160,8 @@ def _design(reduced: ReducedModel, sample_rate_hz: float, leak_corner_hz: float,
 
 
 class InverseEstimator:
-    """Streaming causal estimator of tip deflection (m) from sensing current (A).
+    """
+    Streaming causal estimator of tip deflection (m) from sensing current (A).
 
     Parameters
     ----------
@@ -230,7 +233,8 @@ class InverseEstimator:
 
     # -- streaming ----------------------------------------------------------
     def process(self, current_a) -> np.ndarray:
-        """Filter a block of current samples, A -> deflection, m.
+        """
+        Filter a block of current samples, A -> deflection, m.
 
         ``current_a``: shape ``(n,)`` (one channel only) or ``(n, channels)``.
         Pass values through :func:`~ipmc_sensor_ros.estimation.stream.validate_block` first:
@@ -253,8 +257,12 @@ class InverseEstimator:
         return y[:, 0] if squeeze else y
 
     def process_one(self, current_a: float) -> float:
-        """One sample of a single-channel estimator, as a float; identical to
-        :meth:`process` on a one-sample block, without numpy's per-call costs."""
+        """
+        One sample of a single-channel estimator, as a float.
+
+        Identical to :meth:`process` on a one-sample block, without numpy's
+        per-call costs.
+        """
         if self.channels != 1:
             raise ParameterError(
                 f'process_one needs a single-channel estimator (channels = {self.channels})'
@@ -302,7 +310,8 @@ class InverseEstimator:
         self._zi = zi.copy()
 
     def continue_from(self, old: 'InverseEstimator', recent_input=None) -> None:
-        """Set this filter's state so its output continues ``old``'s without a jump.
+        """
+        Set this filter's state so its output continues ``old``'s without a jump.
 
         With ``recent_input`` (the last samples fed to ``old``, shape (n,) or
         (n, channels); a few tenths of a second is many times the fast modes'
@@ -354,9 +363,12 @@ class InverseEstimator:
         return level, rate
 
     def _slow_part(self) -> tuple:
-        """Slow invariant subspace of the zero-input dynamics: basis Q1 (n, m), dynamics
-        T11 (m, m), output row c1 (m,), and the spectral projector onto slow coordinates
-        (m, n) along the fast modes."""
+        """
+        Slow invariant subspace of the zero-input dynamics.
+
+        Basis Q1 (n, m), dynamics T11 (m, m), output row c1 (m,), and the spectral
+        projector onto slow coordinates (m, n) along the fast modes.
+        """
         if self._slow_cache is not None:
             return self._slow_cache
         sections = self.sos.shape[0]

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Offset-aware steady-state Kalman estimator of tip deflection from sensing current.
+"""
+Offset-aware steady-state Kalman estimator of tip deflection from sensing current.
 
 Model (continuous time, designed from the same :class:`ReducedModel` that
 :class:`~ipmc_sensor_ros.estimation.inverse.InverseEstimator` inverts)
@@ -128,8 +129,11 @@ def offset_corner_hz(
 
 
 def _modal_realisation(reduced: ReducedModel):
-    """R_n(s) = k + sum_i r_i / (s - p_i) (distinct real poles) as (A, B, C, D):
-    a diagonal, well-scaled realisation (each state is a first-order lag of v)."""
+    """
+    R_n(s) = k + sum_i r_i / (s - p_i) (distinct real poles) as (A, B, C, D).
+
+    a diagonal, well-scaled realisation (each state is a first-order lag of v).
+    """
     z = np.real(np.asarray(reduced.zeros_rad_s))
     p = np.real(np.asarray(reduced.poles_rad_s))
     k = float(reduced.gain)
@@ -207,7 +211,8 @@ class _Mode:
 
 
 class KalmanEstimator:
-    """Streaming offset-aware Kalman estimate of tip deflection (m) from current (A).
+    """
+    Streaming offset-aware Kalman estimate of tip deflection (m) from current (A).
 
     Parameters
     ----------
@@ -395,8 +400,12 @@ class KalmanEstimator:
         self.last_rest = np.zeros(0, bool)
 
     def _clip_a2(self) -> float:
-        """Cap on one sample's band energy (ENERGY_CLIP times the noise's): a large pulse
-        then delays rest by at most rest_window_s * ln(ENERGY_CLIP / rest_enter) (0.35 s)."""
+        """
+        Cap on one sample's band energy (ENERGY_CLIP times the noise's).
+
+        a large pulse then delays rest by at most rest_window_s * ln(ENERGY_CLIP /
+        rest_enter) (0.35 s).
+        """
         return ENERGY_CLIP * self._sigma2 * self._bp_unit
 
     def _dc_limit_a2(self) -> float:
@@ -636,9 +645,12 @@ class KalmanEstimator:
         return np.array([self._s[self._iw] + self._w_ref])
 
     def continue_from(self, old, recent_input=None) -> None:
-        """Take over ``old``'s deflection and offset (bumpless); the fast states are
-        rebuilt by replaying ``recent_input`` (then deflection and offset are reset
-        to ``old``'s)."""
+        """
+        Take over ``old``'s deflection and offset (bumpless).
+
+        The fast states are rebuilt by replaying ``recent_input`` (then deflection
+        and offset are reset to ``old``'s).
+        """
         self.reset()
         if recent_input is not None and np.size(recent_input):
             self.process(np.asarray(recent_input, float).reshape(-1))

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The sample-block layout of ``std_msgs/Float64MultiArray`` messages, without ROS.
+"""
+The sample-block layout of ``std_msgs/Float64MultiArray`` messages, without ROS.
 
 A block of ``n`` timed samples is a 2-D array, row-major::
 

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Health of a node and of its channels, without ROS.
+"""
+Health of a node and of its channels, without ROS.
 
 :class:`HealthMonitor` turns the counters and state a node already keeps
 (``samples_in``, ``messages_rejected``, ``resets``, ``gaps``, ...) into one
@@ -89,7 +90,8 @@ def worst(items: Sequence[Health], message_ok: str = 'all channels OK') -> Healt
 
 
 class CurrentStatistics:
-    """Running estimates of a current's offset and mains line (module docstring).
+    """
+    Running estimates of a current's offset and mains line (module docstring).
 
     Parameters
     ----------
@@ -180,7 +182,8 @@ class CurrentStatistics:
 
 
 class HealthMonitor:
-    """Health of one channel from its counters (see the module docstring).
+    """
+    Health of one channel from its counters (see the module docstring).
 
     Parameters
     ----------
@@ -205,9 +208,13 @@ class HealthMonitor:
 
     def evaluate(self, status: Mapping[str, Any], now_s: float,
                  statistics: CurrentStatistics | None = None) -> Health:
-        """Health at steady-clock time ``now_s`` (s) from ``status``: counters (ints),
-        optionally ``done`` (bool, a finished source), ``estimated_offset_a`` (A) and
-        any other scalar state, all copied to the key/values."""
+        """
+        Health at steady-clock time ``now_s`` (s) from ``status``.
+
+        Counters (ints), optionally ``done`` (bool, a finished source),
+        ``estimated_offset_a`` (A) and any other scalar state, all copied to the
+        key/values.
+        """
         lim = self.limits
         if self._start_s is None:
             self._start_s = now_s

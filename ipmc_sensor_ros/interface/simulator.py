@@ -1,6 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The simulator node's parameters and stimulus building, without ROS (the node is
-:mod:`ipmc_sensor_ros.nodes.simulator_node`)."""
+"""
+The simulator node's parameters and stimulus building.
+
+Without ROS (the node is :mod:`ipmc_sensor_ros.nodes.simulator_node`).
+"""
 from __future__ import annotations
 
 import dataclasses

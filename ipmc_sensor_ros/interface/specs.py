@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Parameters of the nodes and of ``ipmc-model estimate``, without ROS.
+"""
+Parameters of the nodes and of ``ipmc-model estimate``, without ROS.
 
 One source for the parameter names, defaults, units and ranges
 (:class:`Spec`), for reading them from a ROS 2 params file
@@ -35,7 +36,8 @@ __all__ = ['Spec', 'ParameterError', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_
 
 @dataclass(frozen=True)
 class Spec:
-    """One parameter: name, default, type, description (with unit), range, read-only flag.
+    """
+    One parameter: name, default, type, description (with unit), range, read-only flag.
 
     ``kind`` is float, int, str, bool or list (list = string array; its default
     must be empty: it is declared by type, unset means empty).  Every number has a
@@ -194,7 +196,8 @@ def check_choice(name: str, value: Any, choices: Iterable[str]) -> str:
 
 
 def build_model(values: Mapping[str, Any]) -> SensorModel:
-    """SensorModel from geometry, material, ``model`` and ``effects`` parameter values.
+    """
+    SensorModel from geometry, material, ``model`` and ``effects`` parameter values.
 
     Plugins (``plugins``) are loaded on the first call only
     (:func:`~ipmc_sensor_ros.physics.effects.load_plugins`: never re-executed).
@@ -217,9 +220,13 @@ def build_model(values: Mapping[str, Any]) -> SensorModel:
 
 
 def _model_from_file(values: Mapping[str, Any], geometry: Geometry) -> SensorModel:
-    """The model of ``model_file`` for ``geometry``.  The file and the parameters are two
-    sources of the same values: a model, effect or material parameter that differs from its
-    default is refused (naming both), never silently overridden."""
+    """
+    The model of ``model_file`` for ``geometry``.
+
+    The file and the parameters are two sources of the same values: a model, effect or
+    material parameter that differs from its default is refused (naming both), never
+    silently overridden.
+    """
     from ..physics.modelfile import load_model
 
     path = values['model_file']
@@ -236,9 +243,12 @@ def _model_from_file(values: Mapping[str, Any], geometry: Geometry) -> SensorMod
 
 
 def check_values(values: Mapping[str, Any], specs: Iterable[Spec] | None = None) -> None:
-    """Check every value in ``values`` that has a spec (type, range, choices, pattern,
-    length): the same rules as a params file and the ROS descriptors.  Raises
-    :class:`ParameterError` naming the parameter."""
+    """
+    Check every value in ``values`` that has a spec (type, range, choices, pattern, length).
+
+    The same rules as a params file and the ROS descriptors. Raises
+    :class:`ParameterError` naming the parameter.
+    """
     for spec in (ESTIMATOR_SPECS if specs is None else specs):
         if spec.name in values:
             _check_value(spec, values[spec.name], '')
@@ -331,7 +341,8 @@ def _check_value(spec: Spec, value: Any, where: str) -> Any:
 
 def load_params_file(path: str | Path, node_name: str = 'ipmc_estimator',
                      specs: Sequence[Spec] | None = None) -> dict[str, Any]:
-    """Parameter values for ``node_name`` from a ROS 2 params file, on top of the defaults.
+    """
+    Parameter values for ``node_name`` from a ROS 2 params file, on top of the defaults.
 
     Sections that apply: ``/**``, ``/**/<node_name>``, ``<node_name>`` and
     ``/<node_name>`` (later ones win), each with ``ros__parameters``.  Unknown

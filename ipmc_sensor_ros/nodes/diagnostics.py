@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""``/diagnostics`` publisher: a thin ROS shell over :mod:`ipmc_sensor_ros.interface.health`.
+"""
+``/diagnostics`` publisher: a thin ROS shell over :mod:`ipmc_sensor_ros.interface.health`.
 
 One ``diagnostic_msgs/DiagnosticArray`` per period (1 s) on the absolute
 topic ``/diagnostics`` (where rqt_robot_monitor and diagnostic_aggregator
@@ -44,7 +45,8 @@ def to_status(health: Health, name: str, hardware_id: str) -> DiagnosticStatus:
 
 
 class DiagnosticsPublisher:
-    """Publishes the health of ``node``'s channels on ``/diagnostics``.
+    """
+    Publishes the health of ``node``'s channels on ``/diagnostics``.
 
     Parameters
     ----------

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Pack and unpack sample blocks in ``std_msgs/Float64MultiArray`` (pure numpy + std_msgs).
+"""
+Pack and unpack sample blocks in ``std_msgs/Float64MultiArray`` (pure numpy + std_msgs).
 
 Block layout (defined in :mod:`ipmc_sensor_ros.interface.blocks`; README "ROS 2 interface")
 ---------------------------------------------------------------------------------
@@ -57,8 +58,12 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Block:
-    """An unpacked block: ``times_s`` (None for a 1-D, values-only message), ``values`` (the
-    first value column) and ``extra`` (the further columns, shape (n, k - 2), or None)."""
+    """
+    An unpacked block: ``times_s`` (None for a 1-D, values-only message).
+
+    ``values`` (the first value column) and ``extra`` (the further columns, shape (n, k
+    - 2), or None).
+    """
 
     times_s: np.ndarray | None
     values: np.ndarray
@@ -75,13 +80,17 @@ def _to_array_d(values: np.ndarray) -> array.array:
 
 
 def pack_block(times_s, values, columns: str = CURRENT_COLUMNS, *extra) -> Float64MultiArray:
-    """Build the 2-D block message from ``times_s`` (s), ``values`` and any ``extra`` columns
-    (units per ``columns``)."""
+    """
+    Build the 2-D block message from ``times_s`` (s).
+
+    ``values`` and any ``extra`` columns (units per ``columns``).
+    """
     return BlockPacker(columns).pack(times_s, values, *extra)
 
 
 class BlockPacker:
-    """Packs blocks of one column layout into a single, reused message.
+    """
+    Packs blocks of one column layout into a single, reused message.
 
     A publisher's hot path: rclpy serialises a message inside ``publish()``, so
     the same message object can be refilled for the next block; its layout is
@@ -135,7 +144,8 @@ class BlockPacker:
 
 
 def claimed_samples(msg: Float64MultiArray) -> int:
-    """How many samples the message carries, for accounting even when it is malformed.
+    """
+    How many samples the message carries, for accounting even when it is malformed.
 
     Two or more dimensions: ceil(payload / 2) (a time and a value per sample);
     otherwise the payload length (values only).

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""ROS parameter specifications shared by the nodes, and model building from them.
+"""
+ROS parameter specifications shared by the nodes, and model building from them.
 
 Every parameter is declared with a ``ParameterDescriptor`` carrying a
 description with its unit and, where a fixed range makes sense, a
@@ -102,7 +103,8 @@ def params_file_sections(path: str) -> list[tuple[str, dict]]:
 
 def check_unknown_overrides(node, specs: Iterable[Spec], cli_args=None,
                             default_name: str | None = None) -> None:
-    """Apply the params-file rules of the nodes, then refuse unknown overrides.
+    """
+    Apply the params-file rules of the nodes, then refuse unknown overrides.
 
     * A node renamed at start-up (``-r __node:=left_ipmc``) also takes the
       sections keyed by its default name ``default_name`` (``/**/ipmc_estimator``,

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Process entry helper shared by the node executables.
+"""
+Process entry helper shared by the node executables.
 
 Executor
     ``SingleThreadedExecutor`` by default.  ``IPMC_EXECUTOR=events`` selects
@@ -128,7 +129,8 @@ def _report_configuration_error(name: str, exc: Exception) -> None:
 
 
 def run(node_factory, name: str, args=None) -> int:
-    """Init rclpy, build the node, spin until SIGINT/SIGTERM/shutdown; return the exit code.
+    """
+    Init rclpy, build the node, spin until SIGINT/SIGTERM/shutdown; return the exit code.
 
     ``node_factory()`` builds the node (a ``Node`` or a ``LifecycleNode``).
 

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Independent numerical solution of the paper's field equations (no closed-form H1/H2).
+"""
+Independent numerical solution of the paper's field equations (no closed-form H1/H2).
 
 What is solved
 --------------
@@ -96,7 +97,8 @@ def _trapezoid_weights(x: np.ndarray) -> np.ndarray:
 
 @dataclass
 class FieldSolver:
-    """Method-of-lines solver of the field equations for ``model`` (h1 or h2 base).
+    """
+    Method-of-lines solver of the field equations for ``model`` (h1 or h2 base).
 
     ``surface_cell``: first thickness cell at x = h in units of the boundary-layer
     thickness sqrt(d/K); ``growth``: cell growth ratio inland; ``n_length``:
@@ -207,8 +209,10 @@ class FieldSolver:
     def simulate(
         self, time_s, deflection_m, diffusivity_at=None, update_s: float = 0.5
     ) -> np.ndarray:
-        """Sensing current (A) for a deflection record (uniform time steps, starting from
-        rest), by Crank-Nicolson; i = C (A x + B q) + C_w dq/dt with q = beam(w).
+        """
+        Sensing current (A) for a deflection record (uniform time steps, starting from rest).
+
+        By Crank-Nicolson; i = C (A x + B q) + C_w dq/dt with q = beam(w).
 
         ``diffusivity_at(elapsed_s) -> d`` (m^2/s) makes the diffusivity change during the
         run (hydration, paper section 5.4): the system is re-assembled every ``update_s``
@@ -236,7 +240,8 @@ class FieldSolver:
 
 
 class NonlinearFieldSolver:
-    """Eq. 12 *with* the term the paper drops from eq. 9, on the full thickness.
+    """
+    Eq. 12 *with* the term the paper drops from eq. 9, on the full thickness.
 
     d rho/dt = d rho_xx - K rho - d (F (1 - C- dV) / (R T)) d(E rho)/dx,   -h < x < h,
 
@@ -287,8 +292,11 @@ class NonlinearFieldSolver:
         self.dx = np.diff(self.x)
 
     def _field(self, rho: np.ndarray) -> np.ndarray:
-        """E at all nodes (columns of rho: one per z point) with zero electrode potential
-        difference: int_{-h}^{h} E dx = 0."""
+        """
+        E at all nodes (columns of rho: one per z point) with zero electrode potential difference.
+
+        int_{-h}^{h} E dx = 0.
+        """
         cum = (
             np.vstack(
                 [
@@ -341,9 +349,12 @@ class NonlinearFieldSolver:
 
 
 class FieldStream:
-    """Streaming Crank-Nicolson integration of a :class:`FieldSolver` (state kept between
-    blocks): ``step(w_block, w_rate_block) -> current_block``.  Used by
-    :meth:`FieldSolver.simulate` and the simulator's ``fidelity = field``."""
+    """
+    Streaming Crank-Nicolson integration of a :class:`FieldSolver` (state kept between blocks).
+
+    ``step(w_block, w_rate_block) -> current_block``. Used by
+    :meth:`FieldSolver.simulate` and the simulator's ``fidelity = field``.
+    """
 
     def __init__(self, solver: FieldSolver, sample_rate_hz: float, diffusivity_at=None,
                  update_s: float = 0.5):

@@ -70,8 +70,12 @@ class CompiledModel:
         return self.transfer(s) * np.exp(s * self.delay_s)
 
     def diffusive_transfer(self, s) -> np.ndarray:
-        """H1 times the factors without an exact rational form, each without its delay: the part
-        the reduction approximates (the rational factors are not divided out numerically)."""
+        """
+        H1 times the factors without an exact rational form, each without its delay.
+
+        The part the reduction approximates (the rational factors are not divided out
+        numerically).
+        """
         s = np.asarray(s, dtype=complex)
         out = h1(s, self.model.material, self.model.geometry)
         for k, (eff, values) in enumerate(self.effects):
@@ -97,9 +101,13 @@ class CompiledModel:
         return i
 
     def predict(self, elapsed_s, deflection_m, linear_response: Callable) -> np.ndarray:
-        """Current for a deflection record: input transforms, ``linear_response(model, w)`` of
-        the LTI part (quasi-static over a drifting material, :func:`time_varying_response`),
-        output transforms.  Prediction and fitting share this order of operations."""
+        """
+        Current for a deflection record.
+
+        Input transforms, ``linear_response(model, w)`` of the LTI part (quasi-static over a
+        drifting material, :func:`time_varying_response`), output transforms. Prediction and
+        fitting share this order of operations.
+        """
         w = self.apply_input_transforms(elapsed_s, deflection_m)
         if self.material_at is None:
             i = linear_response(self.model, w)
@@ -157,7 +165,8 @@ def compile_model(model) -> CompiledModel:
 
 
 class DriftSchedule:
-    """Update times of a time-varying material: every ``update_s`` seconds of elapsed time.
+    """
+    Update times of a time-varying material: every ``update_s`` seconds of elapsed time.
 
     :meth:`slices` cuts a block of elapsed times at the update times and calls
     ``on_update(material)`` before the samples that follow each one; the estimator and the
@@ -187,9 +196,13 @@ class DriftSchedule:
 
 
 def material_nodes(elapsed_s: np.ndarray, material_at, max_step: float = 0.05) -> np.ndarray:
-    """Node times (s) at which a time-varying material is sampled: start, end, and
-    enough in between that no material parameter changes by more than
-    ``max_step`` (relative, log) between neighbours (at most 64 nodes)."""
+    """
+    Node times (s) at which a time-varying material is sampled.
+
+    Start, end, and enough in between that no material parameter changes by
+    more than ``max_step`` (relative, log) between neighbours (at most 64
+    nodes).
+    """
     t0, t1 = float(elapsed_s[0]), float(elapsed_s[-1])
     a, b = material_at(t0).to_dict(), material_at(t1).to_dict()
     span = max(abs(np.log(b[k] / a[k])) for k in a if a[k] > 0 and b[k] > 0)
@@ -198,10 +211,14 @@ def material_nodes(elapsed_s: np.ndarray, material_at, max_step: float = 0.05) -
 
 
 def time_varying_response(elapsed_s: np.ndarray, material_at, response_for) -> np.ndarray:
-    """Quasi-static response of a system whose material drifts slowly: the LTI
-    responses ``response_for(material)`` at :func:`material_nodes`, linearly
-    interpolated in time between neighbouring nodes (error ~ step^2/8 of the
-    response's curvature in the material: < 1e-3 relative for 5 % steps)."""
+    """
+    Quasi-static response of a system whose material drifts slowly.
+
+    The LTI responses ``response_for(material)`` at :func:`material_nodes`,
+    linearly interpolated in time between neighbouring nodes (error ~
+    step^2/8 of the response's curvature in the material: < 1e-3 relative
+    for 5 % steps).
+    """
     nodes = material_nodes(elapsed_s, material_at)
     out = np.zeros(elapsed_s.size)
     previous = response_for(material_at(nodes[0]))

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Realistic DAQ current for a deflection trajectory, for evaluating estimators.
+"""
+Realistic DAQ current for a deflection trajectory, for evaluating estimators.
 
 The sensing current comes from the exact model (H1/H2 with effects,
 :func:`~ipmc_sensor_ros.simulation.sensor.predict_current`: FFT convolution, no
@@ -37,8 +38,12 @@ def started(time_s, deflection_m, rest_s: float = 2.0, onset_s: float = 0.5) -> 
 
 
 def robot_motion(time_s, seed: int = 0, amplitude_m: float = 1.5e-3) -> np.ndarray:
-    """Robot-like deflection: segments of 2-6 s, each a hold, a move to a new level
-    (0.2-0.6 s raised cosine) then hold, or slow sines (0.2-2 Hz) around the current level."""
+    """
+    Robot-like deflection: segments of 2-6 s, each a hold.
+
+    a move to a new level (0.2-0.6 s raised cosine) then hold, or slow sines (0.2-2 Hz)
+    around the current level.
+    """
     rng = np.random.default_rng(seed)
     t = np.asarray(time_s, float)
     w = np.zeros_like(t)

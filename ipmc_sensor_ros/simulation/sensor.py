@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Time-domain simulation of the sensing current, and exact periodic responses.
+"""
+Time-domain simulation of the sensing current, and exact periodic responses.
 
 Two simulators:
 
@@ -46,7 +47,8 @@ __all__ = [
 
 
 def periodic_response(model: SensorModel, deflection_m, sample_rate_hz: float) -> np.ndarray:
-    """Exact steady-state current (A) for a periodic deflection record (m).
+    """
+    Exact steady-state current (A) for a periodic deflection record (m).
 
     ``deflection_m`` must hold an integer number of periods (its DFT is the
     Fourier series).  The DC term gives zero current (H(0) = 0, eq. 31).
@@ -126,7 +128,8 @@ class FieldSensorSimulator:
 
 
 class SensorSimulator:
-    """Streaming simulation of the measured sensing current, effects included.
+    """
+    Streaming simulation of the measured sensing current, effects included.
 
     Per block of sample times: the stimulus gives w and its velocity v;
     effects' ``input_transform`` T maps w -> T(w) and v -> dT/dt, computed as
@@ -213,8 +216,11 @@ class SensorSimulator:
             self.sos = self._sos_for(self.reduced)
 
     def clean_current(self, velocity_m_per_s) -> np.ndarray:
-        """Sensing current (A) of the LTI part for a block of (transformed) tip
-        velocities (m/s), delay included; no output transforms or measurement chain."""
+        """
+        Sensing current (A) of the LTI part for a block of (transformed) tip velocities (m/s).
+
+        Delay included; no output transforms or measurement chain.
+        """
         v = np.asarray(velocity_m_per_s, float)
         if v.size == 0:
             return np.empty(0)
@@ -242,7 +248,8 @@ class SensorSimulator:
         return i
 
     def run(self, stimulus: Stimulus, time_s) -> tuple[np.ndarray, np.ndarray]:
-        """Simulate at the given sample times (uniformly spaced, increasing).
+        """
+        Simulate at the given sample times (uniformly spaced, increasing).
 
         Returns (deflection_m, measured_current_a).  State carries over between
         calls, so consecutive blocks form one continuous record.
@@ -296,9 +303,13 @@ class SensorSimulator:
 
 
 def padded_record(time_s: np.ndarray, deflection_m: np.ndarray, pad_s: float):
-    """(x, n_fft, fs, n_pad): the deflection minus its first value, followed by ``pad_s``
-    seconds of a raised-cosine return to zero (no discontinuity at the circular
-    wrap-around), and the power-of-two FFT length that holds it."""
+    """
+    (x, n_fft, fs, n_pad): the deflection minus its first value.
+
+    Followed by ``pad_s`` seconds of a raised-cosine return to zero (no
+    discontinuity at the circular wrap-around), and the power-of-two FFT length
+    that holds it.
+    """
     t = np.asarray(time_s, float)
     fs = (t.size - 1) / (t[-1] - t[0])
     w0 = np.asarray(deflection_m, float) - deflection_m[0]
@@ -309,7 +320,8 @@ def padded_record(time_s: np.ndarray, deflection_m: np.ndarray, pad_s: float):
 
 
 def lti_response_fft(transfer, time_s, deflection_m, pad_s: float = 2.0) -> np.ndarray:
-    """Current (A) of any LTI model ``transfer(s)`` (A/m) for an arbitrary deflection record.
+    """
+    Current (A) of any LTI model ``transfer(s)`` (A/m) for an arbitrary deflection record.
 
     Exact linear convolution by FFT, with no reduction or discretisation error:
     the record (minus its first value, since a static deflection gives no
@@ -334,7 +346,8 @@ def lti_response_fft(transfer, time_s, deflection_m, pad_s: float = 2.0) -> np.n
 
 
 def predict_current(model: SensorModel, time_s, deflection_m, pad_s: float = 2.0) -> np.ndarray:
-    """Current (A) of a model with any effects for a deflection record (m).
+    """
+    Current (A) of a model with any effects for a deflection record (m).
 
     Order of operations: every effect's ``input_transform`` (e.g. the
     nonlinearity), then the linear dynamics by exact FFT convolution

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Tip-deflection stimuli w(t) (m) with their exact velocities dw/dt (m/s).
+"""
+Tip-deflection stimuli w(t) (m) with their exact velocities dw/dt (m/s).
 
 The sensor responds to the *rate* of deformation (H(s) = s R(s), eq. 31), so
 every stimulus provides its analytic velocity; the simulator feeds the
@@ -45,8 +46,11 @@ class Stimulus:
 
 @dataclass(frozen=True)
 class CrankSlider(Stimulus):
-    """The paper's set-up (section 5.1, Fig. 3): a motor-driven crank of radius r
-    and a connecting rod of length l push the slider that holds the IPMC tip.
+    """
+    The paper's set-up (section 5.1, Fig. 3).
+
+    a motor-driven crank of radius r and a connecting rod of length l push
+    the slider that holds the IPMC tip.
 
     Slider position x(theta) = r cos(theta) + sqrt(l^2 - r^2 sin^2 theta),
     theta = 2 pi f t + phase.  The IPMC is mounted with its rest position at the
@@ -96,8 +100,11 @@ class CrankSlider(Stimulus):
 
 @dataclass(frozen=True)
 class Sweep(Stimulus):
-    """Logarithmic sine sweep of amplitude A from f0 to f1 over ``duration_s``,
-    then repeated (period = duration)."""
+    """
+    Logarithmic sine sweep of amplitude A from f0 to f1 over ``duration_s``.
+
+    Then repeated (period = duration).
+    """
 
     amplitude_m: float = 1e-3
     start_frequency_hz: float = 0.5
@@ -200,9 +207,12 @@ class FreeVibration(Stimulus):
 
 
 class Sampled(Stimulus):
-    """User-supplied deflection samples (t_s, w_m), interpolated by a cubic
-    spline; the velocity is the spline's derivative.  Outside the record the
-    deflection is held at its end values."""
+    """
+    User-supplied deflection samples (t_s, w_m), interpolated by a cubic spline.
+
+    The velocity is the spline's derivative. Outside the record the
+    deflection is held at its end values.
+    """
 
     def __init__(self, time_s, deflection_m):
         from scipy.interpolate import CubicSpline

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Implausible magnitudes in measured records, with the likely unit factor.
+"""
+Implausible magnitudes in measured records, with the likely unit factor.
 
 A tip deflection beyond L/2 cannot be bent by the crank-slider on these
 cantilevers (the small-deflection model fails far earlier), a short-circuit

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Compare a fixed model with measurements and locate where it fails.
+"""
+Compare a fixed model with measurements and locate where it fails.
 
 Prediction
     The predicted current of each record is the exact LTI response of the

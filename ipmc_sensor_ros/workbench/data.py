@@ -63,8 +63,12 @@ def frf_points(frf: FrequencyResponseData) -> list[FrequencyPoint]:
 
 
 def groups_from(data: Sequence, min_periods: int = 2) -> list[FitGroup]:
-    """One FitGroup per sample: FRF files as they are, time series through the
-    fundamental-response extraction (paper section 5.2)."""
+    """
+    One FitGroup per sample: FRF files as they are.
+
+    Time series through the fundamental-response extraction (paper
+    section 5.2).
+    """
     groups: dict[tuple, FitGroup] = {}
     for d in data:
         key = (d.sample or d.geometry.name, d.geometry.length_m, d.geometry.width_m,

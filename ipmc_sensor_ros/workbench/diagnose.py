@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Missing-physics discovery: which effects does the model lack?
+"""
+Missing-physics discovery: which effects does the model lack?
 
 Procedure (:func:`diagnose`)
 ----------------------------
@@ -321,8 +322,12 @@ def _evaluate(
 
 
 def _held_out(prepared, c: Candidate, folds, fold_nfev) -> Candidate:
-    """Replace ``c.error`` (in-sample) by the held-out error: refit on each fold's training part
-    (warm start at the full-data fit), predict its test part, pool."""
+    """
+    Replace ``c.error`` (in-sample) by the held-out error.
+
+    Refit on each fold's training part (warm start at the full-data fit), predict its
+    test part, pool.
+    """
     prepared = _with_models(prepared, c.fit.models)
     num = den = 0.0
     per_fold = []
@@ -346,8 +351,12 @@ def _held_out(prepared, c: Candidate, folds, fold_nfev) -> Candidate:
 
 
 class _Job:
-    """Fit one (effect, shape) candidate on top of the current model (phase 1, full data), or
-    score a fitted candidate by its held-out error (phase 2); picklable across a fork."""
+    """
+    Fit one (effect, shape) candidate on top of the current model (phase 1, full data).
+
+    Or score a fitted candidate by its held-out error (phase 2); picklable across a
+    fork.
+    """
 
     def __init__(self, prepared, spec, x, folds, fold_nfev, priors):
         self.prepared, self.spec, self.x = prepared, spec, x
@@ -409,8 +418,11 @@ def _map(job, items, n_jobs, say):
 
 
 def _rank(cands: list[Candidate], tie_tol: float) -> list[Candidate]:
-    """Ties (within ``tie_tol`` of the best held-out error) first, plausible before implausible,
-    then by BIC; the rest by held-out error."""
+    """
+    Ties (within ``tie_tol`` of the best held-out error) first, plausible before implausible.
+
+    Then by BIC; the rest by held-out error.
+    """
     if not cands:
         return []
     best = min(c.error for c in cands)
@@ -479,7 +491,8 @@ def _diagnose(
     max_cv: int = 4,
     n_jobs: int | None = None,
 ) -> Diagnosis:
-    """Find the effects missing from the records' models (see module docstring).
+    """
+    Find the effects missing from the records' models (see module docstring).
 
     ``fit_effects``: effects of the given model whose parameters are fitted too
     (e.g. given by name without values); ``priors``: {(effect, parameter): value}

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Glue of the discovery loop for the command line: which names are fitted, what to run next.
+"""
+Glue of the discovery loop for the command line: which names are fitted, what to run next.
 
 * ``--effects name`` without values means *fit its parameters* (in ``fit`` and
   ``diagnose``): :func:`effects_to_fit`.
@@ -38,8 +39,12 @@ SYMBOL_TO_NAME = {'T': 'temperature_k', 'Y': 'youngs_modulus_pa', 'r0': 'surface
 
 
 def free_names(text: str) -> tuple[str, ...]:
-    """Comma list -> names: material symbols mapped to full names, effect parameters kept
-    (resolved against the model by :func:`~.fit.resolve_effect_parameter`)."""
+    """
+    Comma list -> names: material symbols mapped to full names.
+
+    Effect parameters kept (resolved against the model by
+    :func:`~.fit.resolve_effect_parameter`).
+    """
     return tuple(
         SYMBOL_TO_NAME.get(x, x) for x in (s.strip() for s in (text or '').split(',')) if x
     )
@@ -90,8 +95,11 @@ def next_command(verb: str, data: Sequence[str], model_file: str | None, extra: 
 def diagnosis_next_command(
     diag, data: Sequence[str], model_file: str | None, base: str = 'h1'
 ) -> str:
-    """What to run after a diagnosis: check the saved model on the data (compare), or, without a
-    saved model, re-run with the named effects fitted."""
+    """
+    What to run after a diagnosis: check the saved model on the data (compare), or.
+
+    Without a saved model, re-run with the named effects fitted.
+    """
     if model_file:
         return 'next: ' + next_command('compare', data, model_file)
     if diag.missing_effects:

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Parameter identification from measured frequency response (paper section 5.2, done better).
+"""
+Parameter identification from measured frequency response (paper section 5.2, done better).
 
 The paper tunes d, C-, kappa_e and alpha0 with ``fminsearch`` on one sample.
 Here:
@@ -249,7 +250,8 @@ def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
                    effects: tuple = ('surface_resistance',), *,
                    bounds_factor: float = 1e3, sd_floor: float = 1e-6,
                    sd_threshold: float = 0.3, min_sensitivity: float = 0.01) -> FitResult:
-    """Fit ``free`` parameters to the frequency points of ``groups`` (see module doc).
+    """
+    Fit ``free`` parameters to the frequency points of ``groups`` (see module doc).
 
     ``material`` supplies the initial values and the fixed parameters;
     ``bounds_factor`` bounds each free parameter to [p0/b, p0*b].

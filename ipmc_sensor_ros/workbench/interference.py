@@ -134,12 +134,14 @@ def _record_lines(name, t, stimulus, y, f_mains, n_harmonics):
 
 
 def find_mains_lines(records: Sequence, mains='auto', n_harmonics: int = 10):
-    """Detect mains lines in every record (see module docstring).
+    """
+    Detect mains lines in every record (see module docstring).
 
     ``records``: objects with ``path``, ``time_s``, ``current_a`` and ``deflection_m``
     (:class:`~.timefit.Record`).  Returns ``(lines, fitted)``: the detected (and the
     non-separable) lines, and per record the fitted line sum to subtract.  ``mains``:
-    50, 60, 'auto' or None (nothing done)."""
+    50, 60, 'auto' or None (nothing done).
+    """
     mains = parse_mains(mains)
     if mains is None:
         return [], [np.zeros(np.asarray(r.current_a).size) for r in records]

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Import of lab exports (DAQ, LabVIEW, spreadsheets) into ``ipmc-timeseries/1``.
+"""
+Import of lab exports (DAQ, LabVIEW, spreadsheets) into ``ipmc-timeseries/1``.
 
 A lab file is free text, then one column-header line, then numeric rows::
 
@@ -101,7 +102,8 @@ def _find_table(path, source: TextSource):
 
 
 def parse_columns_spec(text: str) -> dict[str, str]:
-    """``"time=Time [s],current=I (nA)"`` -> ``{"time": "Time [s]", "current": "I (nA)"}``.
+    """
+    ``"time=Time [s],current=I (nA)"`` -> ``{"time": "Time [s]", "current": "I (nA)"}``.
 
     The text form of the ``columns`` argument (a CLI flag); raises ValueError
     naming the bad item, an unknown role or a role given twice.
@@ -303,7 +305,8 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
                     current_gain_a_per_v: float | None = None, sample: str | None = None,
                     max_bytes: int | None = MAX_BYTES,
                     max_rows: int | None = MAX_ROWS) -> TimeSeries:
-    """Read a lab export into a :class:`TimeSeries` in SI units (see the module docstring).
+    """
+    Read a lab export into a :class:`TimeSeries` in SI units (see the module docstring).
 
     Parameters
     ----------
@@ -377,7 +380,8 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
 
 def import_lab_files(paths: Iterable[PathLike], out_dir: PathLike, *,
                      overwrite: bool = False, **options) -> list[Path]:
-    """Import each lab file and write it as ``<out_dir>/<stem>.csv`` (``ipmc-timeseries/1``).
+    """
+    Import each lab file and write it as ``<out_dir>/<stem>.csv`` (``ipmc-timeseries/1``).
 
     All files are read first and nothing is written if any fails; an existing
     output is refused unless ``overwrite``.  ``options`` are those of

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Reports a scientist would keep: one ``index.html`` with PNG plots (matplotlib, Agg).
+"""
+Reports a scientist would keep: one ``index.html`` with PNG plots (matplotlib, Agg).
 
 Every report opens with a summary card (model, verdict, fit %, error against
 the noise floor), then sections of text, tables and figures; nothing scrolls
@@ -69,7 +70,8 @@ def _label(source: str) -> str:
 
 def plot_bode(out_dir: Path, name: str, points_by_sample: dict, models_by_sample: dict,
               title: str = '') -> str:
-    """Measured points (with 2-sd error bars) and model curves, per sample.
+    """
+    Measured points (with 2-sd error bars) and model curves, per sample.
 
     ``points_by_sample``: sample -> list of FrequencyPoint; ``models_by_sample``:
     sample -> {label: callable f_hz -> complex response}.
@@ -120,8 +122,12 @@ def worst_first(records: Sequence) -> list:
 def plot_time_overlay(out_dir: Path, name: str, records: Sequence, max_records: int = 4,
                       span_s: float = 2.0, labels: Sequence[str] = ('measured', 'model'),
                       select_worst: bool = True) -> str:
-    """Measured (drawn on top) vs predicted current and the residual, last ``span_s`` s
-    of the ``max_records`` worst records (or the first ones, ``select_worst=False``)."""
+    """
+    Measured (drawn on top) vs predicted current and the residual.
+
+    Last ``span_s`` s of the ``max_records`` worst records (or the first ones,
+    ``select_worst=False``).
+    """
     plt = _plt()
     recs = (worst_first(records) if select_worst else list(records))[:max_records]
     fig, axes = plt.subplots(len(recs), 1, figsize=(8, 2.3 * len(recs)), squeeze=False)
@@ -152,9 +158,12 @@ def plot_time_overlay(out_dir: Path, name: str, records: Sequence, max_records: 
 
 def plot_residual_correlation(out_dir: Path, name: str, records: Sequence, max_lag: int = 25,
                               n_labelled: int = 4) -> str:
-    """MATLAB ``resid``: residual autocorrelation and residual / input-velocity
-    cross-correlation; lags in seconds; the 99 % band of a white residual.
-    The ``n_labelled`` worst records are coloured and named, the others grey."""
+    """
+    MATLAB ``resid``: residual autocorrelation and residual / input-velocity cross-correlation.
+
+    Lags in seconds; the 99 % band of a white residual. The ``n_labelled``
+    worst records are coloured and named, the others grey.
+    """
     from .compare import _xcorr_normalised as _xcorr
 
     plt = _plt()
@@ -207,9 +216,13 @@ def _residual_psd(records: Sequence, resolution_hz: float = 0.5):
 
 
 def residual_lines(records: Sequence, threshold_db: float = 10.0) -> list[tuple[float, float]]:
-    """Spectral lines of the pooled residual: local maxima of the mean Welch PSD at
-    least ``threshold_db`` above its running median (15 bins).  Returns
-    (frequency Hz, excess dB), strongest first; DC is ignored."""
+    """
+    Spectral lines of the pooled residual.
+
+    Local maxima of the mean Welch PSD at least ``threshold_db`` above its
+    running median (15 bins). Returns (frequency Hz, excess dB), strongest
+    first; DC is ignored.
+    """
     from scipy.ndimage import median_filter
     from scipy.signal import find_peaks
 

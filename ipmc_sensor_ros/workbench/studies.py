@@ -1,8 +1,11 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Research studies on the independent field solution (not used by the estimator or the nodes):
-mesh convergence against the closed forms, and the size of the physics the paper linearises
+"""
+Research studies on the independent field solution (not used by the estimator or the nodes).
+
+Mesh convergence against the closed forms, and the size of the physics the paper linearises
 away (the term dropped from eq. 9; large-deflection beam mechanics instead of eq. 21).
-README "Where the paper is wrong or thin" quotes their results."""
+README "Where the paper is wrong or thin" quotes their results.
+"""
 from __future__ import annotations
 
 import numpy as np
@@ -84,8 +87,12 @@ def large_deflection_study(model: SensorModel, amplitudes_m, frequency_hz: float
 
 
 def amplitude_at_error(rows: list[dict], level: float = 0.01) -> float:
-    """Smallest amplitude (m) at which ``linear_model_error`` reaches ``level``, by
-    log-log interpolation between the study's rows (nan if never reached)."""
+    """
+    Smallest amplitude (m) at which ``linear_model_error`` reaches ``level``.
+
+    By log-log interpolation between the study's rows (nan if never
+    reached).
+    """
     a = np.array([r['amplitude_m'] for r in rows])
     e = np.array([r['linear_model_error'] for r in rows])
     above = np.flatnonzero(e >= level)

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Streaming reader of numeric text tables: regular files only, bounded size and rows.
+"""
+Streaming reader of numeric text tables: regular files only, bounded size and rows.
 
 Shared by the ``ipmc-timeseries/1`` / ``ipmc-frf/1`` readers and the lab
 import.  A file is opened without blocking and refused unless it is a regular
@@ -101,7 +102,8 @@ def _open_regular(path: PathLike, max_bytes: int | None):
 
 
 class TextSource:
-    """A UTF-8 text file read as header lines, then chunks of whole data lines.
+    """
+    A UTF-8 text file read as header lines, then chunks of whole data lines.
 
     Use as a context manager.  ``lineno`` is the number of lines consumed.
     """
@@ -275,7 +277,8 @@ def _rows(rows: list, ncol: int) -> np.ndarray:
 def read_table(source: TextSource, columns: Sequence[str], check: BlockCheck | None = None, *,
                delimiter: str = ',', decimal: str = '.', max_rows: int | None = MAX_ROWS,
                header_line: int | None = None) -> tuple[list[np.ndarray], int]:
-    """Read the data rows left in ``source``: (one array per column, line of the first row).
+    """
+    Read the data rows left in ``source``: (one array per column, line of the first row).
 
     Rows are contiguous; empty lines are allowed only at the end.  ``check``
     sees each parsed block with the previous row, in file order, so the first
@@ -320,8 +323,11 @@ def read_table(source: TextSource, columns: Sequence[str], check: BlockCheck | N
 
 
 def increasing_check(path, column: str, unit: str, index: int = 0) -> BlockCheck:
-    """A :func:`read_table` check that column ``index`` (``column``, in ``unit``) strictly
-    increases; the error names the line, both values and the previous line."""
+    """
+    A :func:`read_table` check that column ``index`` (``column``, in ``unit``) strictly increases.
+
+    The error names the line, both values and the previous line.
+    """
     def check(block: np.ndarray, prev: np.ndarray | None, line0: int) -> None:
         t = block[:, index] if prev is None else np.concatenate(([prev[index]], block[:, index]))
         offset = 0 if prev is None else 1

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Time-varying parameter tracking over a long record (paper section 5.4, Figs. 9-10).
+"""
+Time-varying parameter tracking over a long record (paper section 5.4, Figs. 9-10).
 
 The paper refits d minute by minute while an IPMC dries in air.  Here the
 record is cut into consecutive windows (``window_s`` long, advanced by
@@ -60,7 +61,8 @@ def track_parameter(time_s, deflection_m, current_a, geometry: Geometry,
                     effects: tuple = ('surface_resistance',), *, window_s: float = 60.0,
                     step_s: float | None = None, known: dict | None = None,
                     source: str = '', model: SensorModel | None = None) -> list[TrackPoint]:
-    """Refit ``free`` in consecutive windows; returns one :class:`TrackPoint` per window.
+    """
+    Refit ``free`` in consecutive windows; returns one :class:`TrackPoint` per window.
 
     Each window's fit starts from the previous window's estimate.
     """

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Units in column names and geometry strings, converted to SI (no rclpy needed).
+"""
+Units in column names and geometry strings, converted to SI (no rclpy needed).
 
 One table per physical dimension maps a unit symbol to its factor to SI;
 ``u``, ``µ`` (U+00B5) and ``μ`` (U+03BC) all mean micro.  Lookup is exact
@@ -63,7 +64,8 @@ _SUFFIX = re.compile(r'^(?P<stem>.+?)_(?P<u>[A-Za-z\u00b5\u03bc]+)$')
 
 
 def split_unit(name: str) -> tuple[str, str | None]:
-    """(stem, unit) of a column name: ``Time [s]``, ``Laser (mm)``, ``current_uA``.
+    """
+    (stem, unit) of a column name: ``Time [s]``, ``Laser (mm)``, ``current_uA``.
 
     A ``_suffix`` counts as a unit only if it is a symbol of one of the
     tables; otherwise the whole name is the stem and the unit is None.
@@ -85,7 +87,8 @@ _LENGTH_VALUE = re.compile(r'^\s*([+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-
 
 
 def parse_length(text: str) -> float:
-    """Metres of a length with a unit: ``22mm``, ``360 um``, ``0.36 µm``, ``0.022 m``.
+    """
+    Metres of a length with a unit: ``22mm``, ``360 um``, ``0.36 µm``, ``0.022 m``.
 
     A bare number is refused (the unit must be said); raises ValueError.
     """
@@ -117,7 +120,8 @@ def column_units(base: str) -> str:
 
 
 def column_to_si(name: str) -> tuple[str, float] | None:
-    """(SI column, factor to SI) of a column named with another unit, or None.
+    """
+    (SI column, factor to SI) of a column named with another unit, or None.
 
     ``deflection_mm`` -> ``('deflection_m', 1e-3)``, ``phase_rad`` ->
     ``('phase_deg', 57.29...)``, ``frequency_rad_s`` -> ``('frequency_hz', 1/2pi)``,

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Writes the lab-export samples of this directory (run once; the outputs are committed).
+"""
+Writes the lab-export samples of this directory (run once; the outputs are committed).
 
 They imitate what real rigs export, each in a different dialect, so the
 importer is not fitted to one file: a LabVIEW "Write To Measurement File"

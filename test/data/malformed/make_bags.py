@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Generate the binary members of the malformed-input corpus (bags, non-UTF-8 files).
+"""
+Generate the binary members of the malformed-input corpus (bags, non-UTF-8 files).
 
 Binary files are not committed: ``test/test_workbench_io.py`` calls
 :func:`make_all` into a temporary directory.  Each case is named after what is
