@@ -43,7 +43,7 @@ BOUNDS: dict = {}
 
 def rest_offset_bound(model, t, w, rest_s=2.0, after_s=5.0):
     """
-    Reference NRMSE of an estimator that follows deflection ramps (no leak).
+    Return the reference NRMSE of an estimator that follows deflection ramps (no leak).
 
     When the offset can only be learned during the first ``rest_s`` of rest (not a bound for
     leaky estimators, which trade ramp following for a capped offset error): the sample mean of

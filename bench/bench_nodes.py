@@ -284,7 +284,9 @@ def _ladder(n: int) -> list[float]:
 
 
 def _ok(r: dict) -> bool:
-    """A trial passes when nothing was lost and the driver achieved the requested rate."""
+    """
+    Tell whether a trial passes when nothing was lost and the driver achieved the requested rate.
+    """
     print(f"  node trial {r['kind']:11s} {r['n']:5d}-sample msgs at {r['rate_msg_s']:8.0f} msg/s: "
           f"sent {r['sent']}, received {r['received']}, achieved {r.get('achieved_msg_s', 0):.0f} "
           f"msg/s, node CPU {r.get('node_cpu_fraction', float('nan')):.0%} "
@@ -371,7 +373,7 @@ def bench_nodes(smoke: bool = False) -> list[dict]:
 
 def bench_simulator_rtf(smoke: bool = False) -> dict:
     """
-    Simulated seconds per wall second of the simulator node in fast mode at 1 kHz.
+    Return the simulated seconds per wall second of the simulator node in fast mode at 1 kHz.
 
     In process (the node's publish path, no subscriber).
     """

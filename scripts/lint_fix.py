@@ -114,6 +114,36 @@ def _sentence_end(text: str) -> int:
     return -1
 
 
+def _trailing_parenthesis(text: str, end: int, limit: int):
+    """
+    Move a parenthesis that closes the first sentence of ``text`` into its own sentence.
+
+    ``X (Y). Rest`` becomes ``X. Y. Rest`` when ``X.`` fits in ``limit``; return the new
+    text and the index after ``X.``, or None.
+    """
+    if end < 0:
+        end = len(text)
+    sentence = text[:end].rstrip('.')
+    if not sentence.endswith(')'):
+        return None
+    depth = 0
+    for i in range(len(sentence) - 1, -1, -1):
+        if sentence[i] == ')':
+            depth += 1
+        elif sentence[i] == '(':
+            depth -= 1
+            if depth == 0:
+                break
+    head = sentence[:i].rstrip()
+    inner = sentence[i + 1:-1].strip()
+    if i <= 0 or len(head) + 1 > limit or len(head) < 20 or not inner:
+        return None
+    if inner[0].isalpha() and inner.split(' ', 1)[0].isalpha() and inner.split(' ', 1)[0].islower():
+        inner = inner[0].upper() + inner[1:]
+    new = f'{head}. {inner}.' + text[end:]
+    return new, len(head) + 1
+
+
 def _plain(line: str, indent: str) -> bool:
     """Tell whether ``line`` is plain prose at ``indent`` (safe to rewrap)."""
     s = line.strip()
@@ -147,10 +177,11 @@ def _layout(body: str, indent: str):
             if text[-1] in ',;:':
                 return None, 'one-line summary ends with ' + text[-1]
             text += '.'
-            if len(indent) + len(text) + 6 > MAX_LINE:
-                return f'\n{indent}{text}\n{indent}', ''
-            return text, ''
-        return None, ''
+        if len(indent) + len(text) + 6 > MAX_LINE:
+            # too long for one line: a summary line and a description
+            new_body, problem = _layout(f'\n{indent}{text}\n{indent}', indent)
+            return new_body or f'\n{indent}{text}\n{indent}', problem
+        return (text if text != body.strip() else None), ''
     lines = body.split('\n')
     head = lines[0].strip()
     rest = lines[1:]
@@ -176,7 +207,7 @@ def _layout(body: str, indent: str):
         after.pop(0)
     problem = ''
     split = ''
-    if n == 1:
+    if n == 1 and len(indent) + len(para[0]) <= MAX_LINE:
         summary = para[0]
         tail = []
     else:
@@ -190,11 +221,17 @@ def _layout(body: str, indent: str):
             if cut < 0:
                 cut = _clause_end(joined, MAX_LINE - len(indent) - 1, ',')
             if cut < 0:
-                return None, 'multi-line summary'
-            split = joined[cut]
-            end = cut + 1
-            joined = joined[:cut] + '.' + joined[cut + 1:]
-            problem = 'summary split at ' + repr(split)
+                moved = _trailing_parenthesis(joined, end, MAX_LINE - len(indent) - 1)
+                if moved is None:
+                    return None, 'multi-line summary'
+                joined, end = moved
+                cut = end - 1
+                problem = 'summary without its closing parenthesis'
+            else:
+                split = joined[cut]
+                end = cut + 1
+                joined = joined[:cut] + '.' + joined[cut + 1:]
+                problem = 'summary split at ' + repr(split)
         summary = joined[:end]
         remainder = joined[end:].strip()
         if split:

@@ -19,7 +19,7 @@ TEST_DOMAIN = int(os.environ.get('ROS_DOMAIN_ID') or 100 + os.getpid() % 50)
 
 
 def init_context(**kwargs):
-    """A fresh, initialised :class:`rclpy.Context` on the run's domain."""
+    """Return a fresh, initialised :class:`rclpy.Context` on the run's domain."""
     import rclpy
 
     ctx = rclpy.Context()
@@ -73,7 +73,7 @@ class DirectNode:
 
 @pytest.fixture
 def direct_node():
-    """A fresh :class:`DirectNode` with default parameters."""
+    """Return a fresh :class:`DirectNode` with default parameters."""
     d = DirectNode()
     yield d
     d.close()

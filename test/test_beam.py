@@ -1,6 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Tests of the beam mechanics (small-deflection beam of the paper, eqs. 18-21, and the
-large-deflection elastica that goes past it)."""
+"""
+Tests of the beam mechanics.
+
+small-deflection beam of the paper, eqs. 18-21, and the large-deflection elastica
+that goes past it.
+"""
 import numpy as np
 import pytest
 from scipy.integrate import quad
@@ -46,8 +50,11 @@ def test_elastica_matches_classical_large_deflection_values():
 
 @pytest.mark.parametrize('load', [0.5, 2.0, 3.0])
 def test_elastica_tip_angle_agrees_with_first_integral_solution(load):
-    """The BVP's tip angle equals the root of 'arc length = L' of the first integral
-    (1e-6 rad: the BVP tolerance is 1e-10, quad's ~1e-9)."""
+    """
+    The BVP's tip angle equals the root of 'arc length = L' of the first integral.
+
+    1e-6 rad: the BVP tolerance is 1e-10, quad's ~1e-9.
+    """
     tip_bvp = elastica_solution(load).sol(1.0)[0]
     # bracket below pi/2, where the singularity stops being integrable (tips here < 1.1 rad)
     tip_exact = brentq(lambda a: _first_integral_length(a, load) - 1.0, 1e-6, 1.4,

@@ -20,7 +20,7 @@ SLIM_PARAMS = ROOT / 'config' / 'estimator.yaml'       # the shipped file: slim 
 
 @pytest.fixture(scope='module')
 def short_run(tmp_path_factory):
-    """A 6 s short-sample record (L = 11 mm) at 5 Hz, 1 % current noise, and a 1.5 s one."""
+    """Return a 6 s short-sample record (L = 11 mm) at 5 Hz, 1 % current noise, and a 1.5 s one."""
     out = tmp_path_factory.mktemp('short')
     assert main(['simulate', '--out', str(out), '--samples', 'short', '--frequencies', '5',
                  '--duration', '6', '--seed', '4']) == 0

@@ -221,8 +221,11 @@ def test_offset_corner_above_nyquist_is_refused_like_the_leak_corner():
 
 
 def test_estimate_to_bag_with_huge_time_origin_is_one_line_and_leaves_no_bag(tmp_path, capsys):
-    """A time origin of 1e10 s overflowed the int32 stamp (OverflowError traceback, a
-    half-written bag left behind)."""
+    """
+    A time origin of 1e10 s overflowed the int32 stamp.
+
+    OverflowError traceback, a half-written bag left behind.
+    """
     from ipmc_sensor_ros.cli.main import main
     t = 1e10 + np.arange(2000) / FS
     src = tmp_path / 'in.csv'

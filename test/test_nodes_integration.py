@@ -59,7 +59,7 @@ def _sim_params(f_hz: float, duration_s: float = DURATION_S, realtime_factor: fl
 
 
 def _context_with_monitor(monkeypatch):
-    """A fresh context on a random loopback domain, its executor and a monitor node."""
+    """Return a fresh context on a random loopback domain, its executor and a monitor node."""
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=TEST_DOMAIN)
@@ -193,7 +193,9 @@ def _rss_bytes(pid: int) -> int:
 
 
 def _two_process_run(tmp_path, monkeypatch, duration_s: float, realtime_factor: float):
-    """Simulator and estimator as two processes; returns {name: (rss early, rss at end)}."""
+    """
+    Run the simulator and estimator as two processes; returns {name: (rss early, rss at end)}.
+    """
     n_samples = int(duration_s * FS)
     timeout_s = TIMEOUT_S + 1.2 * duration_s * (realtime_factor > 0)
     domain = random.randint(150, 200)

@@ -62,7 +62,7 @@ def reduced():
 
 
 def reference(reduced, **kw) -> InverseEstimator:
-    """The core estimator the node must reproduce with default parameters."""
+    """Return the core estimator the node must reproduce with default parameters."""
     return InverseEstimator(reduced, FS, **kw)
 
 

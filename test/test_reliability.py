@@ -49,7 +49,7 @@ def _signal(n, start, rng):
 
 
 def _corrupt(kind: str, t, i, rng):
-    """A message that must be rejected, by kind."""
+    """Return a message that must be rejected, by kind."""
     if kind == 'nan':
         i = i.copy()
         i[rng.integers(i.size)] = np.nan

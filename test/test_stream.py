@@ -30,7 +30,7 @@ def _values_only(values) -> Float64MultiArray:
 
 def _random_stream(rng, n_blocks: int = 120):
     """
-    (times or None, currents) blocks.
+    Return (times or None, currents) blocks.
 
     Good ones, and every kind of bad one a peer can send through a valid layout
     (values and times that break a stream rule).

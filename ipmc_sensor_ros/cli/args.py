@@ -59,7 +59,7 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
 
 
 def say(msg: str) -> None:
-    """A progress/status line on stderr (stdout keeps the results)."""
+    """Return a progress/status line on stderr (stdout keeps the results)."""
     print(f'... {msg}', file=sys.stderr, flush=True)
 
 
@@ -139,7 +139,7 @@ def natural_key(path) -> tuple:
 
 
 def fmt_time_s(t: float) -> str:
-    """A time with sensible precision: 4 significant digits, no float noise."""
+    """Return a time with sensible precision: 4 significant digits, no float noise."""
     return f'{float(t):.4g}'
 
 
@@ -207,7 +207,7 @@ def load_material(path) -> MaterialParameters:
 
 def _model_file(args):
     """
-    The saved model of ``--model-file`` (None without it); with ``--params`` it is refused.
+    Return the saved model of ``--model-file`` (None without it); with ``--params`` it is refused.
 
     Two sources of the material, nothing chosen silently.
     """
@@ -298,7 +298,7 @@ def load_data(args, *, need_deflection: bool = True) -> list:
 
 
 def renamed_flag(parser: argparse.ArgumentParser, old: str, new: str) -> None:
-    """A hidden flag kept only to say it was renamed (exit 2 with a hint)."""
+    """Return a hidden flag kept only to say it was renamed (exit 2 with a hint)."""
 
     class _Renamed(argparse.Action):
         def __call__(self, parser, namespace, values, option_string=None):

@@ -109,7 +109,7 @@ def _cmd_effects(args) -> int:
 
 
 def _cmd_example(args) -> int:
-    """The README's worked example: H1 on a two-sample sweep, see it fail, diagnose, fix."""
+    """Return the README's worked example: H1 on a two-sample sweep, see it fail, diagnose, fix."""
     import tempfile
 
     from .main import main

@@ -26,7 +26,7 @@ _NOT_NODE_PARAMS = ('faraday_constant_c_per_mol', 'gas_constant_j_per_mol_k',
 
 def _records(args, with_data: bool = False):
     """
-    The time records named by the arguments.
+    Return the time records named by the arguments.
 
     Each with its model (base + --effects, material) (and the loaded data files,
     ``with_data``).

@@ -130,8 +130,11 @@ class DeflectionEstimator:
         self._bias_zi = np.zeros(1)
 
     def _remember(self, x: np.ndarray) -> None:
-        """Append ``x`` to the ring buffer of recent input (``_history_end`` is the
-        index after the newest sample)."""
+        """
+        Append ``x`` to the ring buffer of recent input.
+
+        ``_history_end`` is the index after the newest sample.
+        """
         n = self._history.size
         m = x.size
         if m >= n:
@@ -147,7 +150,7 @@ class DeflectionEstimator:
 
     @property
     def recent_input(self) -> np.ndarray:
-        """The last inputs fed to the filter (effect-corrected current), oldest first."""
+        """Return the last inputs fed to the filter (effect-corrected current), oldest first."""
         ordered = np.roll(self._history, -self._history_end)
         return ordered[ordered.size - self._history_n:]
 
@@ -248,7 +251,7 @@ class DeflectionEstimator:
     @property
     def std_m(self) -> float:
         """
-        Standard deviation of the latest estimate.
+        Return the standard deviation of the latest estimate.
 
         m (Kalman: from the filter covariance of the current mode; leaky: NaN, the
         leaky inverse has no uncertainty model).
@@ -258,7 +261,9 @@ class DeflectionEstimator:
 
     def status(self) -> dict:
         """
-        The estimator's state for counters and diagnostics (JSON-able; None = not available).
+        Return the estimator's state for counters and diagnostics.
+
+        JSON-able; None = not available.
 
         ``estimator``, ``offset_a`` (the current offset the Kalman filter has learned),
         ``at_rest``, ``deflection_std_m`` (standard deviation of the estimate; the leaky
@@ -279,7 +284,7 @@ class DeflectionEstimator:
     @property
     def plain(self) -> bool:
         """
-        True when no effect acts around the filter (no transforms, no drift).
+        Return True when no effect acts around the filter (no transforms, no drift).
 
         Then :meth:`process_one` takes its lean path.
         """
@@ -309,7 +314,7 @@ class DeflectionEstimator:
 
     def rebuilt(self, model: SensorModel | None = None, reduced: ReducedModel | None = None,
                 **filter_changes) -> 'DeflectionEstimator':
-        """A new estimator (new model and/or filter settings) whose output continues from
+        """Return a new estimator (new model and/or filter settings) whose output continues from
         this one's without a jump; ``self`` is untouched if the new design is invalid."""
         kwargs = dict(self.filter_kwargs)
         kwargs.update(filter_changes)

@@ -216,7 +216,7 @@ class InverseEstimator:
         return sig.sos2zpk(self.sos)[1]
 
     def dc_gain_m_per_a(self) -> float:
-        """Static gain of the discrete inverse (finite thanks to the leak), m A^-1."""
+        """Return the static gain of the discrete inverse (finite thanks to the leak), m A^-1."""
         return float(np.real(self.frequency_response(np.array([0.0]))[0]))
 
     def frequency_response(self, frequency_hz) -> np.ndarray:
@@ -226,7 +226,7 @@ class InverseEstimator:
         return h
 
     def continuous_frequency_response(self, frequency_hz) -> np.ndarray:
-        """The continuous inverse 1/((s+w_c) R_n) [* s/(s+w_o)] it discretises, m A^-1."""
+        """Return the continuous inverse 1/((s+w_c) R_n) [* s/(s+w_o)] it discretises, m A^-1."""
         z, p, k = inverse_zpk(self.reduced, self.leak_corner_hz, self.offset_corner_hz)
         s = 2j * np.pi * np.atleast_1d(np.asarray(frequency_hz, dtype=float))[:, None]
         return k * np.prod(s - z, axis=1) / np.prod(s - p, axis=1)
@@ -296,7 +296,7 @@ class InverseEstimator:
         self._zi = np.zeros_like(self._zi)
 
     def get_state(self) -> dict:
-        """A copy of the filter state, restorable with :meth:`set_state`."""
+        """Return a copy of the filter state, restorable with :meth:`set_state`."""
         return {'zi': self._zi.copy(), 'sos': self.sos.copy()}
 
     def set_state(self, state: dict) -> None:
@@ -346,9 +346,13 @@ class InverseEstimator:
         self._zi = self._zi + (basis @ coef).reshape(-1, 2, self.channels)
 
     def _leak_pole(self) -> float:
-        """The discrete pole of the leak: prewarped Tustin image of -w_c (as
+        """
+        Return the discrete pole of the leak.
+
+        Prewarped Tustin image of -w_c (as
         :func:`~ipmc_sensor_ros.lti.discretize.tustin_sos` maps it); computed, not picked
-        among the eigenvalues, which are ambiguous when the two corners nearly coincide."""
+        among the eigenvalues, which are ambiguous when the two corners nearly coincide.
+        """
         w0 = 2.0 * math.pi * self.prewarp_hz
         k = w0 / math.tan(w0 / (2.0 * self.sample_rate_hz))      # 2 fs_warped
         wc = 2.0 * math.pi * self.leak_corner_hz
@@ -397,8 +401,10 @@ class InverseEstimator:
 
     def rebuilt(self, reduced: ReducedModel | None = None, recent_input=None,
                 **changes) -> 'InverseEstimator':
-        """A new estimator with changed design whose output continues from this one's
-        (:meth:`continue_from`, with ``recent_input`` if given).
+        """
+        Return a new estimator with changed design whose output continues from this one's.
+
+        :meth:`continue_from`, with ``recent_input`` if given.
 
         ``changes`` may set sample_rate_hz, leak_corner_hz, offset_corner_hz,
         prewarp_hz.  Raises :class:`ParameterError` (and leaves ``self`` intact)
@@ -414,6 +420,6 @@ class InverseEstimator:
         return new
 
     def current_output(self) -> np.ndarray:
-        """The output the filter would produce for a zero input now (per channel), m."""
+        """Return the output the filter would produce for a zero input now (per channel), m."""
         y, _ = sig.sosfilt(self.sos, np.zeros((1, self.channels)), axis=0, zi=self._zi)
         return y[0]

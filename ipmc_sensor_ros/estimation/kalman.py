@@ -368,7 +368,7 @@ class KalmanEstimator:
 
     @property
     def offset_a(self) -> float:
-        """Current offset estimate, A."""
+        """Return the current offset estimate, A."""
         return self._b_last
 
     @property

@@ -381,10 +381,13 @@ class StreamEstimator:
 
 def estimate_record(estimator: DeflectionEstimator, time_s, current_a, *, max_gap_s: float = 0.1,
                     block_samples: int = 1000, source: str = 'record'):
-    """Offline estimate of a whole record with the live stream's rules
-    (:meth:`StreamEstimator.run_record`).  Returns (output times, deflection, stream) — the
-    stream's ``counters`` say how many samples were rejected and how often it reset.  Only
-    samples with an estimate are returned: ``stream.kept`` marks them in the input."""
+    """
+    Offline estimate of a whole record with the live stream's rules.
+
+    :meth:`StreamEstimator.run_record`. Returns (output times, deflection, stream) — the
+    stream's ``counters`` say how many samples were rejected and how often it reset. Only
+    samples with an estimate are returned: ``stream.kept`` marks them in the input.
+    """
     stream = StreamEstimator(estimator, max_gap_s=max_gap_s,
                              max_block_samples=max(block_samples, 1), source=source)
     t, w, stream.kept = stream.run_record(time_s, current_a, block_samples=block_samples)

@@ -151,7 +151,7 @@ class CurrentStatistics:
         return self._mean if self._count else None
 
     def window_filled(self) -> bool:
-        """True once ``offset_window_s`` of current has been seen."""
+        """Return True once ``offset_window_s`` of current has been seen."""
         return self._count >= self.offset_window_s * self.sample_rate_hz
 
     def line(self) -> tuple[float, float, float, float] | None:

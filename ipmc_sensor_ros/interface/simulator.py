@@ -105,7 +105,7 @@ def read_stimulus_csv(path: str | Path) -> np.ndarray:
 
 
 def load_stimulus_csv(path: str | Path) -> Sampled:
-    """A :class:`Sampled` stimulus from a ``time_s,deflection_m`` CSV file (s, m)."""
+    """Return a :class:`Sampled` stimulus from a ``time_s,deflection_m`` CSV file (s, m)."""
     data = read_stimulus_csv(path)
     try:
         return Sampled(data[:, 0], data[:, 1])

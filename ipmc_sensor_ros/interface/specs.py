@@ -176,13 +176,15 @@ FILTER_KEYS = ('sample_rate_hz', 'leak_corner_hz', 'offset_corner_hz', 'estimato
 
 
 def model_key(values: Mapping[str, Any]) -> tuple:
-    """The values that decide the reduced model (equal keys: the reduction can be reused)."""
+    """
+    Return the values that decide the reduced model (equal keys: the reduction can be reused).
+    """
     return tuple((k, tuple(values[k]) if isinstance(values[k], list) else values[k])
                  for k in MODEL_KEYS)
 
 
 def filter_key(values: Mapping[str, Any]) -> tuple:
-    """The values that decide the filter on a given reduction."""
+    """Return the values that decide the filter on a given reduction."""
     return tuple(values[k] for k in FILTER_KEYS)
 
 
@@ -221,7 +223,7 @@ def build_model(values: Mapping[str, Any]) -> SensorModel:
 
 def _model_from_file(values: Mapping[str, Any], geometry: Geometry) -> SensorModel:
     """
-    The model of ``model_file`` for ``geometry``.
+    Return the model of ``model_file`` for ``geometry``.
 
     The file and the parameters are two sources of the same values: a model, effect or
     material parameter that differs from its default is refused (naming both), never
@@ -257,10 +259,13 @@ def check_values(values: Mapping[str, Any], specs: Iterable[Spec] | None = None)
 def build_estimator(
     values: Mapping[str, Any], reduced: ReducedModel | None = None
 ) -> DeflectionEstimator:
-    """The core estimator from parameter values (``reduced`` reused when the model part
-    did not change).  Raises ParameterError / ParameterError / ParameterError /
-    ParameterError naming the parameter; any other failure of the numerics (e.g. a
-    LinAlgError) becomes a one-line ParameterError."""
+    """
+    Return the core estimator from parameter values.
+
+    ``reduced`` reused when the model part did not change. Raises ParameterError /
+    ParameterError / ParameterError / ParameterError naming the parameter; any other
+    failure of the numerics (e.g. a LinAlgError) becomes a one-line ParameterError.
+    """
     check_values(values)
     try:
         model = build_model(values)
@@ -291,7 +296,7 @@ def _one_line(exc: BaseException, limit: int = 200) -> str:
 
 
 def defaults(specs: Iterable[Spec]) -> dict[str, Any]:
-    """Default values of ``specs`` (string arrays default to empty lists)."""
+    """Return the default values of ``specs`` (string arrays default to empty lists)."""
     return {s.name: (list(s.default) if s.kind is list else s.default) for s in specs}
 
 

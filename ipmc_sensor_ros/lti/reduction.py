@@ -109,8 +109,12 @@ class ReducedModel:
         return (np.concatenate([[0.0], self.zeros_rad_s]), self.poles_rad_s.copy(), self.gain)
 
     def to_control(self):
-        """H_n as a python-control ``StateSpace`` (improper models are not allowed
-        there, so this returns the proper charge model R_n; multiply by ``s``)."""
+        """
+        H_n as a python-control ``StateSpace``.
+
+        Improper models are not allowed there, so this returns the proper
+        charge model R_n; multiply by ``s``.
+        """
         import control
         import scipy.signal as sig
 
@@ -323,7 +327,7 @@ def _eq55_polynomials(model: SensorModel) -> tuple[np.ndarray, np.ndarray]:
 
 def paper_eq55(model: SensorModel):
     """
-    The paper's reduced model H-hat(s) (eq. 55) as a ``control.TransferFunction``.
+    Return the paper's reduced model H-hat(s) (eq. 55) as a ``control.TransferFunction``.
 
     Exactly as printed (second-order Taylor series of sqrt(s+K), three terms of
     each series in eq. 54).  It is improper (numerator degree 5, denominator 3)

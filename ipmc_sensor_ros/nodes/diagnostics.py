@@ -38,7 +38,7 @@ _LEVELS = {0: DiagnosticStatus.OK, 1: DiagnosticStatus.WARN, 2: DiagnosticStatus
 
 
 def to_status(health: Health, name: str, hardware_id: str) -> DiagnosticStatus:
-    """The ``DiagnosticStatus`` of one :class:`Health`."""
+    """Return the ``DiagnosticStatus`` of one :class:`Health`."""
     return DiagnosticStatus(level=_LEVELS[health.level], name=name, message=health.message,
                             hardware_id=hardware_id,
                             values=[KeyValue(key=k, value=v) for k, v in health.values.items()])

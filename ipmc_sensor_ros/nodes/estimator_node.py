@@ -119,17 +119,17 @@ class EstimatorNode(Node):
 
     @property
     def stream(self) -> StreamEstimator:
-        """The stream core (rules, counters) this node feeds."""
+        """Return the stream core (rules, counters) this node feeds."""
         return self._stream
 
     @property
     def estimator(self) -> InverseEstimator:
-        """The discrete inverse filter currently in use (replaced on parameter changes)."""
+        """Return the discrete inverse filter currently in use (replaced on parameter changes)."""
         return self._stream.estimator.inverse
 
     @property
     def deflection_estimator(self) -> DeflectionEstimator:
-        """The core model-aware estimator (filter + effects) currently in use."""
+        """Return the core model-aware estimator (filter + effects) currently in use."""
         return self._stream.estimator
 
     @property

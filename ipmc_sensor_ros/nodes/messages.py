@@ -105,7 +105,9 @@ class BlockPacker:
         self._n = -1
 
     def pack(self, times_s, *columns) -> Float64MultiArray:
-        """A block of the times and one array per value column (as many as ``columns`` names)."""
+        """
+        Return a block of the times and one array per value column (as many as ``columns`` names).
+        """
         t = np.asarray(times_s, dtype=float).ravel()
         cols = [np.asarray(c, dtype=float).ravel() for c in columns]
         if len(cols) + 1 != self.width:
@@ -126,13 +128,13 @@ class BlockPacker:
         return msg
 
     def pack_one(self, time_s: float, *values: float) -> Float64MultiArray:
-        """A one-sample block from floats (no numpy on the way)."""
+        """Return a one-sample block from floats (no numpy on the way)."""
         msg = self._with_layout(1)
         msg.data = array.array('d', (time_s, *values))
         return msg
 
     def _with_layout(self, n: int) -> Float64MultiArray:
-        """The reused message, its layout set for ``n`` samples (rebuilt only on change)."""
+        """Return the reused message, its layout set for ``n`` samples (rebuilt only on change)."""
         msg = self._msg
         if n != self._n:
             k = self.width
@@ -157,8 +159,10 @@ def claimed_samples(msg: Float64MultiArray) -> int:
 
 
 def unpack_block(msg: Float64MultiArray, columns: str = CURRENT_COLUMNS) -> Block:
-    """Decode a block message; raise :class:`DataError` if the layout is malformed
-    (:func:`ipmc_sensor_ros.interface.blocks.unpack_columns`).
+    """
+    Decode a block message; raise :class:`DataError` if the layout is malformed.
+
+    :func:`ipmc_sensor_ros.interface.blocks.unpack_columns`.
 
     Returns a :class:`Block`; ``times_s`` is None for a values-only 1-D message.
     Values are *not* checked for finiteness here (that is the estimator's job).
@@ -187,7 +191,9 @@ def one_sample(msg: Float64MultiArray):
 
 
 def point_message(time_s: float, length_m: float, deflection_m: float, frame_id: str):
-    """The tip as ``geometry_msgs/PointStamped``: (L, 0, w) in the clamp frame at ``time_s``."""
+    """
+    Return the tip as ``geometry_msgs/PointStamped``: (L, 0, w) in the clamp frame at ``time_s``.
+    """
     from geometry_msgs.msg import PointStamped
 
     sec, nsec = divmod(round(time_s * 1e9), 1_000_000_000)

@@ -59,7 +59,7 @@ class TrackingMonitor:
 
     @property
     def matched(self) -> bool:
-        """True when the data subscriptions see at least one publisher each."""
+        """Return True when the data subscriptions see at least one publisher each."""
         return all(s.get_publisher_count() > 0 for s in self.subscriptions[:2])
 
     def series(self):

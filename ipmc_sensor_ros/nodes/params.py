@@ -38,7 +38,7 @@ _TYPES = {float: ParameterType.PARAMETER_DOUBLE, int: ParameterType.PARAMETER_IN
 
 
 def descriptor(spec: Spec) -> ParameterDescriptor:
-    """The rclpy descriptor of a core parameter spec (description, range, read-only)."""
+    """Return the rclpy descriptor of a core parameter spec (description, range, read-only)."""
     d = ParameterDescriptor(name=spec.name, type=_TYPES[spec.kind],
                             description=spec.description, read_only=spec.read_only)
     if spec.choices:
@@ -53,7 +53,7 @@ def descriptor(spec: Spec) -> ParameterDescriptor:
 
 
 def params_files(cli_args: Iterable[str] | None = None) -> list[str]:
-    """The ``--params-file`` paths given to this process or node (for error messages)."""
+    """Return the ``--params-file`` paths given to this process or node (for error messages)."""
     import sys
 
     out = []
@@ -77,7 +77,7 @@ def _ros_arg_params(cli_args) -> set[str]:
 
 
 def section_matches(key: str, fqn: str) -> bool:
-    """True if a params-file section ``key`` (``/**``, ``/**/name``, ``name``, ``/ns/*``)
+    """Return True if a params-file section ``key`` (``/**``, ``/**/name``, ``name``, ``/ns/*``)
     applies to the node of fully qualified name ``fqn`` (rcl's matching rules)."""
     import re
 
@@ -168,7 +168,9 @@ QOS_OVERRIDE_POLICIES = ('history', 'depth', 'reliability', 'durability')
 
 
 def qos_overriding_options():
-    """The standard ``qos_overrides.*`` parameters (history, depth, reliability, durability)."""
+    """
+    Return the standard ``qos_overrides.*`` parameters (history, depth, reliability, durability).
+    """
     from rclpy.qos_overriding_options import QoSOverridingOptions
 
     return QoSOverridingOptions.with_default_policies()
@@ -208,7 +210,7 @@ def declare(node, specs: Iterable[Spec]) -> None:
 
 
 def read(node, specs: Iterable[Spec]) -> dict[str, Any]:
-    """Current values of ``specs`` as a dict (an unset string array reads as ``[]``)."""
+    """Return the current values of ``specs`` as a dict (an unset string array reads as ``[]``)."""
     out = {}
     for spec in specs:
         try:

@@ -69,14 +69,14 @@ def executor_name() -> str:
 
 
 def make_executor(context=None):
-    """The executor of the nodes (see the module docstring)."""
+    """Return the executor of the nodes (see the module docstring)."""
     if executor_name() == 'events':
         return EventsExecutor(context=context)
     return SingleThreadedExecutor(context=context)
 
 
 def _stopping(context=None) -> bool:
-    """True once a signal (or anyone) has shut the rclpy context down."""
+    """Return True once a signal (or anyone) has shut the rclpy context down."""
     try:
         return not rclpy.ok(context=context)
     except Exception:  # noqa: BLE001 - a destroyed context is stopping too
@@ -96,7 +96,7 @@ GUARD_PERIOD_S = 0.1
 
 
 def _shutdown_guard(node):
-    """A steady-clock timer that raises ``ExternalShutdownException`` out of ``spin``
+    """Return a steady-clock timer that raises ``ExternalShutdownException`` out of ``spin``
     once the context is shut down.
 
     rclpy wakes the executor when a signal shuts the context down, but a wake-up

@@ -272,7 +272,7 @@ def loaded_plugins() -> dict[str, tuple[str, tuple[str, ...]]]:
 
 
 def catalog_markdown() -> str:
-    """The catalog as Markdown (used in the README and `ipmc-model effects`)."""
+    """Return the catalog as Markdown (used in the README and `ipmc-model effects`)."""
     lines = []
     for eff in EFFECTS.values():
         lines.append(f'### `{eff.name}`\n\n{eff.summary}\n')

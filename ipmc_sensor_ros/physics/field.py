@@ -70,8 +70,11 @@ def _graded_nodes(h: float, first: float, growth: float) -> np.ndarray:
 
 
 def _second_derivative(x: np.ndarray) -> sp.csr_matrix:
-    """Three-point second derivative on nodes x (rows for interior nodes 1..N-1,
-    columns for all nodes 0..N)."""
+    """
+    Three-point second derivative on nodes x.
+
+    Rows for interior nodes 1..N-1, columns for all nodes 0..N.
+    """
     n = x.size
     rows, cols, vals = [], [], []
     for i in range(1, n - 1):
@@ -192,8 +195,11 @@ class FieldSolver:
         return self.A.shape[0]
 
     def frequency_response(self, frequency_hz) -> np.ndarray:
-        """i/w (A/m) at ``frequency_hz`` from the discretised equations (for a nonlinear
-        beam: its small-signal linearisation at w = 0)."""
+        """
+        i/w (A/m) at ``frequency_hz`` from the discretised equations.
+
+        For a nonlinear beam: its small-signal linearisation at w = 0.
+        """
         f = np.atleast_1d(np.asarray(frequency_hz, float))
         out = np.empty(f.size, dtype=complex)
         eye = sp.identity(self.n_states, format='csc')
@@ -229,7 +235,7 @@ class FieldSolver:
     def stream(
         self, sample_rate_hz: float, diffusivity_at=None, update_s: float = 0.5
     ) -> 'FieldStream':
-        """A streaming (block by block) Crank-Nicolson integrator of this system."""
+        """Return a streaming (block by block) Crank-Nicolson integrator of this system."""
         return FieldStream(self, sample_rate_hz, diffusivity_at, update_s)
 
     def _with_diffusivity(self, d: float) -> 'FieldSolver':

@@ -114,7 +114,7 @@ def format_effect(spec: EffectSpec) -> str:
 
 def model_effects(name: str, extra_effects: str | Iterable = ()) -> tuple[EffectSpec, ...]:
     """
-    The effects of model ``name`` (``h1``/``h2``) plus ``extra_effects``.
+    Return the effects of model ``name`` (``h1``/``h2``) plus ``extra_effects``.
 
     The one way a model description (CLI flags, node parameters, model files) becomes a list
     of effects. An extra effect that the base already contains, or one listed twice, is
@@ -256,7 +256,9 @@ class SensorModel:
         return list(self.compiled.rational_factors)
 
     def diffusive_transfer(self, s) -> np.ndarray:
-        """The diffusion-type part the reduction approximates (no rational factors, no delay)."""
+        """
+        Return the diffusion-type part the reduction approximates (no rational factors, no delay).
+        """
         return self.compiled.diffusive_transfer(s)
 
     def min_phase_transfer(self, s) -> np.ndarray:

@@ -50,8 +50,12 @@ class ModelFile:
     def sensor_model(
         self, geometry: Geometry, known: Mapping[str, float] | None = None
     ) -> SensorModel:
-        """The model for a sample of ``geometry`` (``known``: header values that override the
-        saved material, e.g. a measured temperature)."""
+        """
+        Return the model for a sample of ``geometry``.
+
+        ``known``: header values that override the saved material, e.g. a measured
+        temperature.
+        """
         mat = self.material.replace(**dict(known)) if known else self.material
         return SensorModel(geometry, mat, self.effects)
 

@@ -54,8 +54,11 @@ class CompiledModel:
 
     # -- frequency domain ----------------------------------------------------------------
     def transfer(self, s) -> np.ndarray:
-        """i(s)/w(s), A m^-1: H1 (eq. 31) times every effect's factor (non-LTI effects
-        contribute their linear part only)."""
+        """
+        i(s)/w(s), A m^-1: H1 (eq. 31) times every effect's factor.
+
+        non-LTI effects contribute their linear part only.
+        """
         s = np.asarray(s, dtype=complex)
         out = h1(s, self.model.material, self.model.geometry)
         for eff, values in self.effects:
@@ -95,14 +98,14 @@ class CompiledModel:
         return w
 
     def apply_output_transforms(self, elapsed_s, i) -> np.ndarray:
-        """The measured current from the LTI part's current."""
+        """Return the measured current from the LTI part's current."""
         for eff, values in self.output_transforms:
             i = eff.output_transform(elapsed_s, i, self.model, values)
         return i
 
     def predict(self, elapsed_s, deflection_m, linear_response: Callable) -> np.ndarray:
         """
-        Current for a deflection record.
+        Return the current for a deflection record.
 
         Input transforms, ``linear_response(model, w)`` of the LTI part (quasi-static over a
         drifting material, :func:`time_varying_response`), output transforms. Prediction and
@@ -132,11 +135,13 @@ class CompiledModel:
 
     @property
     def is_lti(self) -> bool:
-        """True when no effect acts outside the transfer function (no transforms, no drift)."""
+        """
+        Return True when no effect acts outside the transfer function (no transforms, no drift).
+        """
         return not (self.input_transforms or self.output_transforms or self.material_at)
 
     def at_material(self, material) -> 'CompiledModel':
-        """The pipeline of the same model with another material (a drift update)."""
+        """Return the pipeline of the same model with another material (a drift update)."""
         return compile_model(self.model.with_material(material))
 
 

@@ -32,7 +32,7 @@ def _ramp(u):
 
 
 def started(time_s, deflection_m, rest_s: float = 2.0, onset_s: float = 0.5) -> np.ndarray:
-    """The record held at zero for ``rest_s``, then faded in over ``onset_s``."""
+    """Return the record held at zero for ``rest_s``, then faded in over ``onset_s``."""
     t = np.asarray(time_s, float)
     return np.asarray(deflection_m, float) * _ramp((t - rest_s) / onset_s)
 

@@ -280,7 +280,11 @@ class SensorSimulator:
         return w, self.measure(clean, elapsed)
 
     def _follow_drift(self, material) -> None:
-        """New filter for the drifted ``material``; its state from replaying the recent input."""
+        """
+        Return a new filter for the drifted ``material``.
+
+        Its state from replaying the recent input.
+        """
         drifted = self.model.with_material(material)
         self.reduced, self._diffusive = reduce_model_parts(
             drifted, self.order, (0.01, 0.45 * self.sample_rate_hz), extension=3.0,
@@ -321,7 +325,7 @@ def padded_record(time_s: np.ndarray, deflection_m: np.ndarray, pad_s: float):
 
 def lti_response_fft(transfer, time_s, deflection_m, pad_s: float = 2.0) -> np.ndarray:
     """
-    Current (A) of any LTI model ``transfer(s)`` (A/m) for an arbitrary deflection record.
+    Return the current (A) of any LTI model ``transfer(s)`` (A/m) for an arbitrary deflection record.
 
     Exact linear convolution by FFT, with no reduction or discretisation error:
     the record (minus its first value, since a static deflection gives no
@@ -347,7 +351,7 @@ def lti_response_fft(transfer, time_s, deflection_m, pad_s: float = 2.0) -> np.n
 
 def predict_current(model: SensorModel, time_s, deflection_m, pad_s: float = 2.0) -> np.ndarray:
     """
-    Current (A) of a model with any effects for a deflection record (m).
+    Return the current (A) of a model with any effects for a deflection record (m).
 
     Order of operations: every effect's ``input_transform`` (e.g. the
     nonlinearity), then the linear dynamics by exact FFT convolution

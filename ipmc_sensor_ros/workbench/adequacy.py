@@ -29,7 +29,7 @@ def _factor(ratio: float) -> float:
 
 
 def magnitude_flags(records: Sequence, model_for=None) -> list[str]:
-    """Flags for records (objects with ``path``, ``time_s``, ``deflection_m``, ``current_a`` and
+    """Return flags for records (objects with ``path``, ``time_s``, ``deflection_m``, ``current_a`` and
     ``model``, :class:`~.timefit.Record`, or give ``model_for(record)``) whose magnitudes are
     implausible."""
     from .freqresp import fundamental_response

@@ -95,7 +95,7 @@ def _describe_topics(topics: Mapping[str, Any]) -> str:
 
 def _unpack_block(msg, label: str) -> tuple[np.ndarray, np.ndarray]:
     """
-    Times and values of a block message; ValueError (DataError) describing a bad layout.
+    Return the times and values of a block message; ValueError (DataError) describing a bad layout.
 
     A deflection topic may also hold the estimator's output (``ESTIMATE_COLUMNS``: the
     estimate and its standard deviation); its first value column is the deflection.

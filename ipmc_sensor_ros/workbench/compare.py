@@ -141,8 +141,11 @@ def _short(path: str) -> str:
 def compare_records(records: Sequence, model_for: Callable[[object], SensorModel], *,
                     settle_s: float = 0.5, max_lag: int = 25, n_windows: int = 8,
                     transfer_for: Callable[[object], Callable] | None = None) -> Comparison:
-    """Compare the model with each time record (objects with ``time_s``,
-    ``deflection_m``, ``current_a``, ``sample``, ``path``).
+    """
+    Compare the model with each time record.
+
+    Objects with ``time_s``, ``deflection_m``, ``current_a``,
+    ``sample``, ``path``.
 
     ``model_for(record)`` gives the model of that record's sample;
     ``transfer_for(record)`` may override the transfer function used for

@@ -43,8 +43,11 @@ def records_from(series: Sequence[TimeSeries], material: MaterialParameters,
 
 
 def frf_points(frf: FrequencyResponseData) -> list[FrequencyPoint]:
-    """Points of an ``ipmc-frf/1`` file with standard uncertainties (std columns,
-    else the coherence formula with 16 averages, else 1 %)."""
+    """
+    Points of an ``ipmc-frf/1`` file with standard uncertainties.
+
+    Std columns, else the coherence formula with 16 averages, else 1 %.
+    """
     pts = []
     for k, f in enumerate(frf.frequency_hz):
         if frf.gain_std_a_per_m is not None:

@@ -244,7 +244,7 @@ def _folds(prepared: Sequence[PreparedRecord], n_folds: int) -> tuple[list[list[
 
 
 def _grid(effect_name: str, shape: Sequence[str], priors: dict) -> list[list[float]]:
-    """Starting values (fit space) of an effect's free parameters."""
+    """Return the starting values (fit space) of an effect's free parameters."""
     eff = get_effect(effect_name)
     pars = {p.name: p for p in eff.parameters}
     grids = []
@@ -749,7 +749,9 @@ def _diagnose(
 
 
 def _grid_for_spec(spec: FitSpec, priors, model) -> list[list[float]]:
-    """Starts for the effect parameters of the baseline: current values, or the prior."""
+    """
+    Return the starts for the effect parameters of the baseline: current values, or the prior.
+    """
     from .timefit import _param
 
     x = []
@@ -775,7 +777,7 @@ def _merge_shapes(cands: list[Candidate], tie_tol: float) -> list[Candidate]:
 
 
 def _without(prepared, current: Candidate, name, folds, fold_nfev, priors) -> Candidate:
-    """The current model without effect ``name``, refitted (warm start)."""
+    """Return the current model without effect ``name``, refitted (warm start)."""
     keep = [k for k, (e, _) in enumerate(current.spec.effect_params)]
     n_mat = len(current.spec.material)
     idx = list(range(n_mat)) + [

@@ -71,14 +71,18 @@ def effects_to_fit(text: str) -> list[str]:
 
 
 def effect_free_names(effects: Sequence[str], frequency_domain: bool = False) -> tuple[str, ...]:
-    """Qualified parameter names of ``effects`` (``frequency_domain``: only of effects that act
-    on the transfer function, the only ones a frequency-response fit can see)."""
+    """
+    Qualified parameter names of ``effects``.
+
+    ``frequency_domain``: only of effects that act on the transfer function, the only
+    ones a frequency-response fit can see.
+    """
     return tuple(f'{e}.{p.name}' for e in effects for p in get_effect(e).parameters
                  if not frequency_domain or acts_on_transfer(e))
 
 
 def acts_on_transfer(name: str) -> bool:
-    """True if effect ``name`` changes H(s) (overrides ``factor``)."""
+    """Return True if effect ``name`` changes H(s) (overrides ``factor``)."""
     from ..physics.effects import Effect
 
     return type(get_effect(name)).factor is not Effect.factor
@@ -96,7 +100,7 @@ def diagnosis_next_command(
     diag, data: Sequence[str], model_file: str | None, base: str = 'h1'
 ) -> str:
     """
-    What to run after a diagnosis: check the saved model on the data (compare), or.
+    Return what to run after a diagnosis: check the saved model on the data (compare), or.
 
     Without a saved model, re-run with the named effects fitted.
     """

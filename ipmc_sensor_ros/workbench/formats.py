@@ -226,7 +226,7 @@ def _parse_header(path: PathLike, source: TextSource) -> _Header:
 
 
 def _format_of(path: PathLike, header: _Header) -> str:
-    """The header's format, checked to be a known one."""
+    """Return the header's format, checked to be a known one."""
     if 'format' not in header.values:
         line = header.column_line or header.n_lines
         raise DataFormatError(path, line, "missing '# format: ...' header line (known formats: "
@@ -372,7 +372,7 @@ def _parse_columns(path, header: _Header, layouts: Sequence[tuple[str, ...]],
 
 def _block_check(bad_rows: Callable[[np.ndarray, int], np.ndarray], row_check: Callable):
     """
-    A block check for :func:`read_table`.
+    Return a block check for :func:`read_table`.
 
     ``bad_rows(rows, n_prev)`` marks suspect rows (``rows`` starts with the previous
     row when there is one), ``row_check`` raises the message of the first of them.

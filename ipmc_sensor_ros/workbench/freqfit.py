@@ -116,8 +116,11 @@ class FitResult:
 
     @property
     def p_value(self) -> float:
-        """Probability of a chi^2 at least this large if the model were right (residuals in
-        units of their measured uncertainty)."""
+        """
+        Probability of a chi^2 at least this large if the model were right.
+
+        Residuals in units of their measured uncertainty.
+        """
         return float(chi2_dist.sf(self.chi2, max(self.dof, 1)))
 
     @property

@@ -174,7 +174,9 @@ def find_mains_lines(records: Sequence, mains='auto', n_harmonics: int = 10):
 
 
 def remove_mains(records: Sequence, mains='auto', n_harmonics: int = 10):
-    """``(cleaned records, lines)``: each record's current minus its detected mains lines."""
+    """
+    Return ``(cleaned records, lines)``: each record's current minus its detected mains lines.
+    """
     lines, fitted = find_mains_lines(records, mains, n_harmonics)
     cleaned = [replace(r, current_a=np.asarray(r.current_a, float) - f) if np.any(f) else r
                for r, f in zip(records, fitted)]

@@ -70,7 +70,7 @@ _DIALECTS = (('\t', '.'), ('\t', ','), (';', '.'), (';', ','), (',', '.'))
 
 
 def _is_row(line: str, delimiter: str, decimal: str) -> int:
-    """Number of cells if ``line`` is a row of >= 2 numbers in this dialect, else 0."""
+    """Return the number of cells if ``line`` is a row of >= 2 numbers in this dialect, else 0."""
     cells = line.split(delimiter)
     if len(cells) < 2:
         return 0
@@ -78,7 +78,9 @@ def _is_row(line: str, delimiter: str, decimal: str) -> int:
 
 
 def _find_table(path, source: TextSource):
-    """(notes, column-header cells, its line, delimiter, decimal); source at the first row."""
+    """
+    Return (notes, column-header cells, its line, delimiter, decimal); source at the first row.
+    """
     previous: list[tuple[int, str]] = []
     while True:
         line = source.next_line()

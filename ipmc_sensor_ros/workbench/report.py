@@ -115,7 +115,7 @@ def plot_bode(out_dir: Path, name: str, points_by_sample: dict, models_by_sample
 
 
 def worst_first(records: Sequence) -> list:
-    """Records ordered from the lowest fit % to the highest."""
+    """Return the records ordered from the lowest fit % to the highest."""
     return sorted(records, key=lambda r: (np.nan_to_num(r.fit_percent, nan=-np.inf)))
 
 
@@ -353,8 +353,11 @@ _CSS = ('body{font-family:sans-serif;max-width:1000px;margin:auto;padding:0 8px}
 
 
 def write_report(out_dir: Path, title: str, sections: Sequence, card: dict | None = None) -> Path:
-    """Write ``index.html``: an optional summary card (label -> value) and the
-    sections (:class:`Section` or tuples (heading, text, [png names]))."""
+    """
+    Write ``index.html``: an optional summary card (label -> value) and the sections.
+
+    :class:`Section` or tuples (heading, text, [png names]).
+    """
     out_dir = Path(out_dir)
     parts = [
         f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
@@ -419,7 +422,9 @@ def compare_verdict(cmp) -> str:
 def compare_report(
     out_dir: Path, cmp, model_text: str, bode_points: dict, bode_models: dict
 ) -> Path:
-    """The ``compare`` page: card, Bode, worst records, residual tests, spectrum, failure map."""
+    """
+    Return the ``compare`` page: card, Bode, worst records, residual tests, spectrum, failure map.
+    """
     rows = [
         [
             _label(r.source),
@@ -508,7 +513,7 @@ def fit_report(out_dir: Path, res, bode_points: dict, bode_models: dict, model_t
 
 
 def diagnose_report(out_dir: Path, diag) -> Path:
-    """The ``diagnose`` page: ranking bars with the noise floor, before/after overlays."""
+    """Return the ``diagnose`` page: ranking bars with the noise floor, before/after overlays."""
     from types import SimpleNamespace
 
     from .compare import fit_percent

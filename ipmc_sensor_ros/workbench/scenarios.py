@@ -114,7 +114,7 @@ def crank_slider_campaign(true_effects: Sequence = ('surface_resistance',), *,
 def hidden_effects_campaign(
     hidden: Sequence[str], seed: int, **kwargs
 ) -> tuple[list[Record], dict]:
-    """Records with the ``hidden`` effects (values drawn by :func:`random_effect_values` from a
+    """Return the records with the ``hidden`` effects (values drawn by :func:`random_effect_values` from a
     generator seeded with ``seed``) for a diagnosis that starts from H2, or from H1 when
     ``surface_resistance`` is among the hidden effects.  Returns ``(records, truth)``,
     ``truth`` = {effect: values}."""

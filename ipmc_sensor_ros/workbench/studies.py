@@ -21,8 +21,11 @@ __all__ = ['convergence_table', 'nonlinearity_study', 'large_deflection_study',
 
 def convergence_table(model: SensorModel, band_hz=(0.1, 100.0), n_points: int = 25,
                       levels=((0.4, 1.3, 10), (0.2, 1.15, 20), (0.1, 1.1, 40), (0.05, 1.08, 80))):
-    """Worst |magnitude| (dB) and |phase| (deg) error against the closed form per mesh level
-    (surface_cell, growth, n_length)."""
+    """
+    Worst |magnitude| (dB) and |phase| (deg) error against the closed form per mesh level.
+
+    surface_cell, growth, n_length.
+    """
     f = np.logspace(np.log10(band_hz[0]), np.log10(band_hz[1]), n_points)
     exact = model.frequency_response(f)
     rows = []
@@ -71,7 +74,7 @@ def nonlinearity_study(model: SensorModel, amplitudes_m, frequency_hz: float = 5
 
 def large_deflection_study(model: SensorModel, amplitudes_m, frequency_hz: float = 5.0,
                            sample_rate_hz: float = 1000.0, periods: int = 4) -> list[dict]:
-    """The same for the beam: field solution with the elastica stress profile
+    """Return the same for the beam: field solution with the elastica stress profile
     (:class:`~ipmc_sensor_ros.physics.beam.ElasticaBeam`) against the paper's
     small-deflection profile (eq. 21), sinusoidal tip deflection.  Rows also give the
     amplitude as a fraction of the length, ``amplitude_over_length``."""

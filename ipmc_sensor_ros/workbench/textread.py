@@ -56,7 +56,7 @@ def parse_number(text: str, decimal: str = '.') -> float | None:
 
 
 def cell_error(path, lineno: int, cell: str, column: str, decimal: str = '.') -> DataFormatError:
-    """The error for a cell :func:`parse_number` refused."""
+    """Return the error for a cell :func:`parse_number` refused."""
     s = cell.strip()
     if not s:
         return DataFormatError(path, lineno, f'empty cell in column {column}')
@@ -158,7 +158,7 @@ class TextSource:
                                'bytes (not a text table?)')
 
     def next_line(self) -> str | None:
-        """The next line without its line end, or None at the end of the file."""
+        """Return the next line without its line end, or None at the end of the file."""
         while True:
             cut = self._buf.find(b'\n')
             if cut >= 0 or len(self._buf) > MAX_LINE_BYTES or not self._fill():
@@ -324,7 +324,7 @@ def read_table(source: TextSource, columns: Sequence[str], check: BlockCheck | N
 
 def increasing_check(path, column: str, unit: str, index: int = 0) -> BlockCheck:
     """
-    A :func:`read_table` check that column ``index`` (``column``, in ``unit``) strictly increases.
+    Return a :func:`read_table` check that column ``index`` (``column``, in ``unit``) strictly increases.
 
     The error names the line, both values and the previous line.
     """

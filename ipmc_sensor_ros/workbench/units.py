@@ -29,8 +29,11 @@ SI_SYMBOL = {'time': 's', 'deflection': 'm', 'current': 'A'}
 
 
 def to_si(value, factor: float):
-    """``value * factor``, computed as a division by the power of ten when ``factor`` is
-    one (``360 * 1e-6`` gives 0.00035999999999999997; ``360 / 1e6`` gives 0.00036)."""
+    """
+    ``value * factor``, computed as a division by the power of ten when ``factor`` is one.
+
+    ``360 * 1e-6`` gives 0.00035999999999999997; ``360 / 1e6`` gives 0.00036.
+    """
     if 0.0 < factor < 1.0:
         inverse = round(1.0 / factor)
         if inverse * factor == 1.0 or abs(inverse * factor - 1.0) < 1e-12:
@@ -39,8 +42,12 @@ def to_si(value, factor: float):
 
 
 def decimal_to_si(value: str | float, factor: float) -> float:
-    """One value in SI, rounded once from its decimal form (``'0.36'`` mm -> 0.00036 m,
-    where ``0.36 / 1000`` gives 0.00035999999999999997)."""
+    """
+    One value in SI, rounded once from its decimal form.
+
+    ``'0.36'`` mm -> 0.00036 m, where ``0.36 / 1000`` gives
+    0.00035999999999999997.
+    """
     exponent = round(math.log10(factor))
     if math.isclose(10.0 ** exponent, factor, rel_tol=1e-12):
         return float(Decimal(str(value)).scaleb(exponent))
@@ -109,7 +116,7 @@ _BASES = ('deflection', 'frequency', 'gain_std', 'phase_std', 'current', 'phase'
 
 
 def column_units(base: str) -> str:
-    """The units accepted after ``<base>_`` in a column name, for messages."""
+    """Return the units accepted after ``<base>_`` in a column name, for messages."""
     if base in QUANTITY_UNITS:
         return ', '.join(QUANTITY_UNITS[base])
     if base == 'frequency':

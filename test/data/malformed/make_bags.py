@@ -34,7 +34,9 @@ def _series(n: int = 40, rate_hz: float = 1000.0) -> io.TimeSeries:
 
 
 def raw_bag(path: Path, messages, storage: str = 'sqlite3', sidecar: bool = True) -> Path:
-    """A bag with hand-made messages: ``messages`` = [(topic, msgtype, [(stamp_ns, msg)])]."""
+    """
+    Return a bag with hand-made messages: ``messages`` = [(topic, msgtype, [(stamp_ns, msg)])].
+    """
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     store = io._typestore()
@@ -72,7 +74,7 @@ def block_msg(times, values, label=io.CURRENT_LABEL, size=None, stride=None):
 
 
 def point_msg(t: float, z: float):
-    """A ``PointStamped`` deflection sample: ``z`` metres at ``t`` seconds."""
+    """Return a ``PointStamped`` deflection sample: ``z`` metres at ``t`` seconds."""
     T = io._typestore().types
     sec, nsec = divmod(int(round(t * 1e9)), 10**9)
     return T[io.POINT_STAMPED_TYPE](
