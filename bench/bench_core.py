@@ -84,7 +84,9 @@ def bench_model(smoke: bool = False) -> list[dict]:
 
 def bench_field(smoke: bool = False) -> list[dict]:
     """
-    Return the simulated seconds per wall-clock second of the field solvers at 1 kHz (slim, 5 Hz).
+    Return the simulated seconds per wall-clock second of the field solvers at 1 kHz.
+
+    Sample slim, 5 Hz.
     """
     from ipmc_sensor_ros.physics.beam import ElasticaBeam
     from ipmc_sensor_ros.physics.field import FieldSolver, NonlinearFieldSolver

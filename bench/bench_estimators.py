@@ -103,8 +103,12 @@ def scenarios(seed: int):
 
 
 def clean_crank_rows():
-    """Clean current: periodic from t=0 (the motion began before the record: the mean is
-    unknowable, only the leak removes it; evaluated after 64 s) and started from rest."""
+    """
+    Clean current: periodic from t=0 and started from rest.
+
+    Periodic from t=0: the motion began before the record: the mean is unknowable, only
+    the leak removes it; evaluated after 64 s.
+    """
     t = np.arange(int(80 * FS)) / FS
     rows = []
     m = SensorModel(PAPER_SAMPLES['slim'])

@@ -1,7 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Node benchmarks: sustained input rate without loss and added latency of the estimator
-node against a pass-through node (subscribe, copy, publish) in the same harness, and the
-simulator's real-time factor.
+"""
+Node benchmarks: the estimator node against a pass-through node, and the simulator.
+
+Sustained input rate without loss and added latency of the estimator node against a
+pass-through node (subscribe, copy, publish) in the same harness, and the simulator's
+real-time factor.
 
 Harness: three processes on one machine, an isolated ROS_DOMAIN_ID, DDS on
 loopback.  A driver process publishes ``current`` blocks (n samples per message,
@@ -130,9 +133,12 @@ print("CPU", time.process_time() - cpu0, handled() - m0)
 
 
 def bench_node_cpu(smoke: bool = False) -> list[dict]:
-    """CPU per message of each node (whole process: executor, DDS threads, callback) under
-    the same driver at a fixed rate, each in a fresh process: a steadier comparison than
-    the sustained rate, which three processes sharing two cores make noisy."""
+    """
+    CPU per message of each node under the same driver at a fixed rate.
+
+    Whole process: executor, DDS threads, callback; each node in a fresh process: a steadier
+    comparison than the sustained rate, which three processes sharing two cores make noisy.
+    """
     rows = []
     for n, rate in ((1, 4000.0), (1000, 500.0)):
         cost = {}
@@ -160,8 +166,12 @@ def _env(domain: int) -> dict:
 
 
 def _run_once(kind: str, rate: float, n: int, duration: float) -> dict:
-    """One trial in a fresh process: a long-lived process that creates and destroys many
-    DDS participants was seen to lose messages in later trials."""
+    """
+    One trial in a fresh process.
+
+    A long-lived process that creates and destroys many DDS participants was seen to lose
+    messages in later trials.
+    """
     import json
 
     code = ('import json, sys; from bench.bench_nodes import _trial; '
@@ -285,7 +295,9 @@ def _ladder(n: int) -> list[float]:
 
 def _ok(r: dict) -> bool:
     """
-    Tell whether a trial passes when nothing was lost and the driver achieved the requested rate.
+    Tell whether a trial passes.
+
+    It passes when nothing was lost and the driver achieved the requested rate.
     """
     print(f"  node trial {r['kind']:11s} {r['n']:5d}-sample msgs at {r['rate_msg_s']:8.0f} msg/s: "
           f"sent {r['sent']}, received {r['received']}, achieved {r.get('achieved_msg_s', 0):.0f} "

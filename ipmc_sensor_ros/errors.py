@@ -42,6 +42,7 @@ class DataFormatError(DataError):
 
     ``str()`` is ``"<path>:<line>: <reason>"``, ``"<path>: topic '<topic>': <reason>"`` or
     ``"<path>: <reason>"``.
+
     """
 
     def __init__(self, path, line: int | None, reason: str, *, topic: str | None = None) -> None:

@@ -138,7 +138,8 @@ def _trailing_parenthesis(text: str, end: int, limit: int):
     inner = sentence[i + 1:-1].strip()
     if i <= 0 or len(head) + 1 > limit or len(head) < 20 or not inner:
         return None
-    if inner[0].isalpha() and inner.split(' ', 1)[0].isalpha() and inner.split(' ', 1)[0].islower():
+    word = inner.split(' ', 1)[0]
+    if word.isalpha() and word.islower():
         inner = inner[0].upper() + inner[1:]
     new = f'{head}. {inner}.' + text[end:]
     return new, len(head) + 1
@@ -256,7 +257,9 @@ def _layout(body: str, indent: str):
             tail = _wrap(remainder.split(), indent, width) if remainder else []
         else:
             tail = ([indent + first_tail] if first_tail else []) + later
-    if summary[-1] not in '.?!':
+    if summary[-1] in '?!':
+        problem = 'summary ends with ' + summary[-1]
+    elif summary[-1] != '.':
         if summary[-1] in ',;:' and not problem:
             problem = 'summary ends with ' + summary[-1]
         else:
@@ -272,6 +275,8 @@ def _layout(body: str, indent: str):
         new_lines += after
     while len(new_lines) > 2 and not new_lines[-1].strip():
         new_lines.pop()
+    if content[-1].strip() == '' and len(new_lines) > 2:
+        new_lines.append('')  # a blank line after the last section (D413) stays
     new_lines.append(indent)
     new_body = '\n'.join(new_lines)
     return (new_body if new_body != body else None), problem
@@ -310,6 +315,8 @@ def fix_docstrings(source: str, where: str = '<source>'):
             continue
         prefix, quote, body = m.groups()
         if re.search(r'\\\n', body):
+            if body.startswith('\n'):
+                continue
             todo.append(f'{where}:{val.lineno}: backslash-newline in docstring')
             continue
         indent = ' ' * val.col_offset if not isinstance(node, ast.Module) else ''

@@ -29,7 +29,11 @@ def init_context(**kwargs):
 
 @contextlib.contextmanager
 def ros_context(**kwargs):
-    """``with ros_context() as ctx:`` -- initialised, shut down on exit."""
+    """
+    Yield an initialised context, shut down on exit.
+
+    Use: ``with ros_context() as ctx:``.
+    """
     import rclpy
 
     ctx = init_context(**kwargs)
@@ -41,8 +45,11 @@ def ros_context(**kwargs):
 
 
 class DirectNode:
-    """The estimator node driven synchronously through its subscription callback
-    (the full message path minus DDS), capturing what it publishes."""
+    """
+    The estimator node driven synchronously through its subscription callback.
+
+    The full message path minus DDS, capturing what it publishes.
+    """
 
     def __init__(self, **overrides):
         from rclpy.parameter import Parameter

@@ -1,6 +1,8 @@
 # SPDX-License-Identifier: Apache-2.0
 """
-ipmc-model estimate: accuracy at any length, named output columns, explicit geometry precedence.
+ipmc-model estimate: accuracy at any length, named output columns, geometry precedence.
+
+The geometry precedence is explicit.
 """
 
 import json

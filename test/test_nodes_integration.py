@@ -194,7 +194,9 @@ def _rss_bytes(pid: int) -> int:
 
 def _two_process_run(tmp_path, monkeypatch, duration_s: float, realtime_factor: float):
     """
-    Run the simulator and estimator as two processes; returns {name: (rss early, rss at end)}.
+    Run the simulator and estimator as two processes.
+
+    Returns {name: (rss early, rss at end)}.
     """
     n_samples = int(duration_s * FS)
     timeout_s = TIMEOUT_S + 1.2 * duration_s * (realtime_factor > 0)

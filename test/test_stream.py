@@ -166,8 +166,12 @@ def _fresh_stream():
 
 
 def test_one_sample_messages_faster_than_the_sample_rate_are_refused():
-    """Issue #18 defect 4: 500 one-sample messages stamped at 2 kHz into a 1 kHz estimator
-    were all accepted; 10-sample blocks of the same data were all rejected.  One rule now."""
+    """
+    Issue #18 defect 4: one rule now for one-sample messages and blocks.
+
+    500 one-sample messages stamped at 2 kHz into a 1 kHz estimator were all accepted;
+    10-sample blocks of the same data were all rejected.  One rule now.
+    """
     t = 100.0 + np.arange(500) / (2 * FS)
     i = np.full(500, 1e-7)
     node = DirectNode(publish_points='none')

@@ -314,8 +314,12 @@ class DeflectionEstimator:
 
     def rebuilt(self, model: SensorModel | None = None, reduced: ReducedModel | None = None,
                 **filter_changes) -> 'DeflectionEstimator':
-        """Return a new estimator (new model and/or filter settings) whose output continues from
-        this one's without a jump; ``self`` is untouched if the new design is invalid."""
+        """
+        Return a new estimator (new model and/or filter settings).
+
+        Its output continues from this one's without a jump; ``self`` is untouched if the new
+        design is invalid.
+        """
         kwargs = dict(self.filter_kwargs)
         kwargs.update(filter_changes)
         fs = kwargs.pop('sample_rate_hz')

@@ -171,6 +171,7 @@ class InverseEstimator:
     offset_corner_hz : corner of the optional current-offset tracker, Hz, or None.
     prewarp_hz : Tustin prewarping frequency, Hz (default min(band high, fs/20)).
     channels : number of independent channels filtered together.
+
     """
 
     def __init__(self, reduced: ReducedModel, sample_rate_hz: float,
@@ -212,7 +213,7 @@ class InverseEstimator:
         return self._design.prewarp_hz
 
     def poles(self) -> np.ndarray:
-        """Discrete poles (all strictly inside the unit circle)."""
+        """Discrete poles, all strictly inside the unit circle."""
         return sig.sos2zpk(self.sos)[1]
 
     def dc_gain_m_per_a(self) -> float:
@@ -270,11 +271,14 @@ class InverseEstimator:
         return self._process_small([float(current_a)])[0]
 
     def _process_small(self, values: list) -> list:
-        """Single-channel DF-II-transposed recursion in plain Python floats for
-        blocks of at most :data:`SMALL_BLOCK_SAMPLES` samples.  Same operations in
+        """
+        Run the single-channel DF-II-transposed recursion in plain Python floats.
+
+        For blocks of at most :data:`SMALL_BLOCK_SAMPLES` samples.  Same operations in
         the same order as :func:`scipy.signal.sosfilt`, so the output is identical
         (tested); it avoids sosfilt's fixed per-call cost (~40 us of argument
-        handling), which dominates one-sample messages."""
+        handling), which dominates one-sample messages.
+        """
         state = self._zi[:, :, 0].tolist()
         out = []
         for x_cur in values:

@@ -227,6 +227,7 @@ class KalmanEstimator:
     rest_window_s : averaging time of the rest detector, s.
     rest_enter, rest_leave : rest-detector thresholds (multiples of the noise energy in band).
     rest_detection : switch the rest detector (and gain scheduling) on or off.
+
     """
 
     def __init__(self, reduced: ReducedModel, sample_rate_hz: float, *,
@@ -409,10 +410,14 @@ class KalmanEstimator:
         return ENERGY_CLIP * self._sigma2 * self._bp_unit
 
     def _dc_limit_a2(self) -> float:
-        """Largest squared departure of the low-passed current from the offset estimate
-        that still counts as rest: (4 sigma)^2 of that difference, sigma^2 = the mean's
-        noise sigma^2/(2 fs rest_window_s) + the offset's variance P_b (+ 2 nA for the
-        reduction/drift).  A deflection ramp of v m/s gives R0 v of steady current."""
+        """
+        Largest squared departure of the low-passed current that still counts as rest.
+
+        The departure is from the offset estimate; the limit is (4 sigma)^2 of that
+        difference, sigma^2 = the mean's noise sigma^2/(2 fs rest_window_s) + the offset's
+        variance P_b (+ 2 nA for the reduction/drift).  A deflection ramp of v m/s gives
+        R0 v of steady current.
+        """
         return 16.0 * (
             self._sigma2 / (2 * self._fs * self.rest_window_s) + self._offset_var + 4e-18
         )
@@ -503,11 +508,14 @@ class KalmanEstimator:
         return out, np.full(y.size, self.last_std)
 
     def _run_rest(self, y: np.ndarray) -> np.ndarray:
-        """Rest: deflection held, velocity and charge states zero (the detector has seen
-        quiet current for ~rest_window_s, many times the sensor's memory), offset = running
-        mean of the current, weighted by its prior variance
+        """
+        Rest: deflection held, velocity and charge states zero.
+
+        The detector has seen quiet current for ~rest_window_s, many times the sensor's
+        memory.  Offset = running mean of the current, weighted by its prior variance
         (n0 = sigma^2 / P_b equivalent samples), then an exponential average over
-        at most ``rest_offset_time_s`` (drift)."""
+        at most ``rest_offset_time_s`` (drift).
+        """
         s_end = self._s.copy()
         s_end[self._motion_idx] = 0.0       # at rest nothing moves: no predicted motion current
         w = np.full(y.size, s_end[self._iw])
@@ -537,8 +545,12 @@ class KalmanEstimator:
         return w
 
     def process_one(self, current_a: float) -> float:
-        """One sample, as a float: the same recursion as :meth:`process` written for a
-        single sample (no per-call lfilter costs); equal to it to rounding (tested)."""
+        """
+        One sample, as a float.
+
+        The same recursion as :meth:`process` written for a single sample (no per-call
+        lfilter costs); equal to it to rounding (tested).
+        """
         y = float(current_a)
         x = y
         b0, b1, b2, _, a1, a2 = self._bp_list

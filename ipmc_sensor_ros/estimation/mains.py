@@ -43,8 +43,11 @@ def mains_sos(mains_hz: float, sample_rate_hz: float, quality: float = 30.0,
 def line_level(
     current_a, sample_rate_hz: float, mains_hz: float = 50.0, quality: float = 30.0
 ) -> float:
-    """RMS of the line component (fundamental and harmonics) over the RMS of the
-    current with its mean removed (0 .. 1)."""
+    """
+    RMS of the line component over the RMS of the current (0 .. 1).
+
+    Line component: fundamental and harmonics; the current has its mean removed.
+    """
     x = np.asarray(current_a, float) - np.mean(current_a)
     sos = mains_sos(mains_hz, sample_rate_hz, quality)
     if sos.shape[0] == 0 or not np.any(x):

@@ -115,6 +115,7 @@ class StreamEstimator:
         Time of a block without sample times when nothing came before (the node's clock).
     warn : callable, optional
         Receives the text of every reset, dropped block and rejection (the node logs it).
+
     """
 
     def __init__(self, estimator: DeflectionEstimator, *, max_gap_s: float = 0.1,
@@ -279,6 +280,7 @@ class StreamEstimator:
         -------
         (time_s, deflection_m) arrays, or ``None`` when the block was rejected or dropped
         (counted, with ``last_rejection`` / ``last_warning`` saying why).
+
         """
         try:
             current = validate_block(currents, max_samples=self.max_block_samples)

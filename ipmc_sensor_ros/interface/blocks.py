@@ -49,8 +49,10 @@ def _data(msg) -> np.ndarray:
 
 
 def unpack_columns(msg, columns: str, *, values_only_ok: bool = True):
-    """(times_s or None, table) of a block message whose ``dim[1]`` label is ``columns``
-    (``"time_s,<value>[,<more>...]"``, k names): ``table`` has shape (n, k - 1).
+    """
+    Return (times_s or None, table) of a block message whose ``dim[1]`` label is ``columns``.
+
+    ``columns``: ``"time_s,<value>[,<more>...]"``, k names; ``table`` has shape (n, k - 1).
     :class:`DataError` if malformed.  ``values_only_ok``: accept a 1-D values-only message
     (times None, table of shape (n, 1)).  Values are not checked for finiteness here.
     """

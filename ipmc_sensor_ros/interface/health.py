@@ -99,6 +99,7 @@ class CurrentStatistics:
     offset_window_s : averaging window of the offset (a first-order mean with
         this time constant), s.
     line_frequencies_hz : mains frequencies looked at, Hz.
+
     """
 
     def __init__(self, sample_rate_hz: float, offset_window_s: float = 10.0,
@@ -155,8 +156,11 @@ class CurrentStatistics:
         return self._count >= self.offset_window_s * self.sample_rate_hz
 
     def line(self) -> tuple[float, float, float, float] | None:
-        """(frequency Hz, amplitude A, RMS of the AC current A, local noise floor A) of
-        the strongest mains line in the last second; None with less than 0.2 s of data.
+        """
+        Return the strongest mains line in the last second.
+
+        As (frequency Hz, amplitude A, RMS of the AC current A, local noise floor A); None
+        with less than 0.2 s of data.
 
         Amplitudes are read off a Hann-windowed spectrum (``2 |X| / sum(w)``, exact for
         a tone on a bin); the noise floor is the median amplitude of the bins 3-10 Hz
@@ -191,6 +195,7 @@ class HealthMonitor:
     limits : thresholds.
     samples_key : counter that counts data (``samples_in`` for a consumer,
         ``samples_published`` for a source).
+
     """
 
     WARN_COUNTERS = (('messages_rejected', 'message(s) rejected'), ('resets', 'filter reset(s)'),

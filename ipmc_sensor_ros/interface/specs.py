@@ -177,7 +177,9 @@ FILTER_KEYS = ('sample_rate_hz', 'leak_corner_hz', 'offset_corner_hz', 'estimato
 
 def model_key(values: Mapping[str, Any]) -> tuple:
     """
-    Return the values that decide the reduced model (equal keys: the reduction can be reused).
+    Return the values that decide the reduced model.
+
+    Equal keys: the reduction can be reused.
     """
     return tuple((k, tuple(values[k]) if isinstance(values[k], list) else values[k])
                  for k in MODEL_KEYS)
@@ -199,7 +201,7 @@ def check_choice(name: str, value: Any, choices: Iterable[str]) -> str:
 
 def build_model(values: Mapping[str, Any]) -> SensorModel:
     """
-    SensorModel from geometry, material, ``model`` and ``effects`` parameter values.
+    Build a SensorModel from geometry, material, ``model`` and ``effects`` parameter values.
 
     Plugins (``plugins``) are loaded on the first call only
     (:func:`~ipmc_sensor_ros.physics.effects.load_plugins`: never re-executed).

@@ -270,8 +270,11 @@ def append_rational(reduced: ReducedModel, factors) -> ReducedModel:
 
 def reduction_error(reduced, model: SensorModel, band_hz: Sequence[float] = (0.1, 50.0),
                     n_points: int = 400) -> tuple[float, float]:
-    """Worst |magnitude error| (dB) and |phase error| (deg) of ``reduced`` against
-    ``model`` over ``band_hz``.  ``reduced`` is anything with ``frequency_response``."""
+    """
+    Worst |magnitude error| (dB) and |phase error| (deg) of ``reduced`` against ``model``.
+
+    Over ``band_hz``.  ``reduced`` is anything with ``frequency_response``.
+    """
     lo, hi = _check_band(band_hz)
     f = np.logspace(np.log10(lo), np.log10(hi), n_points)
     ratio = reduced.frequency_response(f) / model.min_phase_transfer(2j * np.pi * f)

@@ -60,6 +60,7 @@ class DiagnosticsPublisher:
         steady-clock timer of ``period_s`` publishes by itself.
     expected_rate_hz : samples per second of steady-clock time expected (default:
         ``sample_rate_hz``; a simulator in fast mode passes None: no rate check).
+
     """
 
     def __init__(self, node, values: Mapping[str, Any], channels: Sequence[str] = ('data',),

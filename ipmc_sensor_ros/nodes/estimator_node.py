@@ -103,13 +103,20 @@ class EstimatorNode(Node):
 
     # -- public helpers -------------------------------------------------------
     def counters(self) -> dict[str, int]:
-        """Copy of the stream counters (invariant: :mod:`ipmc_sensor_ros.estimation.stream`)."""
+        """
+        Return a copy of the stream counters.
+
+        Invariant: :mod:`ipmc_sensor_ros.estimation.stream`.
+        """
         with self._lock:
             return dict(self._stream.counters)
 
     def _status(self) -> dict:
-        """Counters and estimator state (offset, rest, std, mains line) for the counters topic
-        and /diagnostics."""
+        """
+        Counters and estimator state (offset, rest, std, mains line).
+
+        For the counters topic and /diagnostics.
+        """
         with self._lock:
             out = dict(self._stream.counters)
             out.update(self._stream.estimator.status())

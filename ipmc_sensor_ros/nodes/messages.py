@@ -106,7 +106,9 @@ class BlockPacker:
 
     def pack(self, times_s, *columns) -> Float64MultiArray:
         """
-        Return a block of the times and one array per value column (as many as ``columns`` names).
+        Return a block of the times and one array per value column.
+
+        As many value columns as ``columns`` names.
         """
         t = np.asarray(times_s, dtype=float).ravel()
         cols = [np.asarray(c, dtype=float).ravel() for c in columns]
@@ -173,9 +175,13 @@ def unpack_block(msg: Float64MultiArray, columns: str = CURRENT_COLUMNS) -> Bloc
 
 
 def one_sample(msg: Float64MultiArray):
-    """``(time, current)`` of a well-formed one-sample timed current message (the layout the
-    simulator and DAQ drivers publish), as floats without numpy; ``None`` for any other
-    message, which then takes the general path and gets its precise layout check."""
+    """
+    Return ``(time, current)`` of a well-formed one-sample timed current message.
+
+    The message has the layout the simulator and DAQ drivers publish; the values come as
+    floats without numpy.  ``None`` for any other message, which then takes the general
+    path and gets its precise layout check.
+    """
     layout = msg.layout
     dims = layout.dim
     if len(dims) != 2 or layout.data_offset != 0:
@@ -192,7 +198,9 @@ def one_sample(msg: Float64MultiArray):
 
 def point_message(time_s: float, length_m: float, deflection_m: float, frame_id: str):
     """
-    Return the tip as ``geometry_msgs/PointStamped``: (L, 0, w) in the clamp frame at ``time_s``.
+    Return the tip as ``geometry_msgs/PointStamped``.
+
+    (L, 0, w) in the clamp frame at ``time_s``.
     """
     from geometry_msgs.msg import PointStamped
 

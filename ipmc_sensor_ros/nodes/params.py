@@ -77,8 +77,12 @@ def _ros_arg_params(cli_args) -> set[str]:
 
 
 def section_matches(key: str, fqn: str) -> bool:
-    """Return True if a params-file section ``key`` (``/**``, ``/**/name``, ``name``, ``/ns/*``)
-    applies to the node of fully qualified name ``fqn`` (rcl's matching rules)."""
+    """
+    Return True if a params-file section ``key`` applies to the node ``fqn``.
+
+    ``key``: ``/**``, ``/**/name``, ``name``, ``/ns/*``; ``fqn``: the node's fully qualified
+    name; rcl's matching rules.
+    """
     import re
 
     key = key if key.startswith('/') else '/' + key
@@ -169,7 +173,9 @@ QOS_OVERRIDE_POLICIES = ('history', 'depth', 'reliability', 'durability')
 
 def qos_overriding_options():
     """
-    Return the standard ``qos_overrides.*`` parameters (history, depth, reliability, durability).
+    Return the standard ``qos_overrides.*`` parameters.
+
+    History, depth, reliability, durability.
     """
     from rclpy.qos_overriding_options import QoSOverridingOptions
 
@@ -189,8 +195,11 @@ def create_subscription(node, msg_type, topic: str, callback, qos: QoSProfile):
 
 
 def check_qos_overrides(node) -> None:
-    """Refuse ``qos_overrides.*`` overrides naming no topic of the node (call after
-    creating the topics): a misspelt topic would otherwise be ignored silently."""
+    """
+    Refuse ``qos_overrides.*`` overrides naming no topic of the node.
+
+    Call after creating the topics: a misspelt topic would otherwise be ignored silently.
+    """
     declared = set(node._parameters)
     stray = sorted(n for n in node._parameter_overrides
                    if n.startswith('qos_overrides.') and n not in declared)

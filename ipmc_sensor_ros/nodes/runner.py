@@ -96,8 +96,10 @@ GUARD_PERIOD_S = 0.1
 
 
 def _shutdown_guard(node):
-    """Return a steady-clock timer that raises ``ExternalShutdownException`` out of ``spin``
-    once the context is shut down.
+    """
+    Return a steady-clock timer that ends ``spin`` once the context is shut down.
+
+    The timer raises ``ExternalShutdownException`` out of ``spin``.
 
     rclpy wakes the executor when a signal shuts the context down, but a wake-up
     that comes before ``spin`` has started is lost by ``EventsExecutor`` (measured:

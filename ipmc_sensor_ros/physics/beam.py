@@ -198,8 +198,11 @@ def check_fidelity(fidelity: str, beam_model: str = 'linear') -> bool:
 
 
 def require_field_fidelity(beam_model: str, field: bool) -> None:
-    """Refuse a large-deflection beam where the closed form (small-deflection beam,
-    eq. 21) is used instead of the field solution; ParameterError naming the parameter."""
+    """
+    Refuse a large-deflection beam where the closed form is used instead of the field solution.
+
+    The closed form: small-deflection beam, eq. 21.  Raises ParameterError naming the parameter.
+    """
     if beam_model != 'linear' and not field:
         raise ParameterError(f"parameter 'beam_model' = {beam_model!r} needs fidelity 'field' "
                              '(the closed form assumes the small-deflection beam, eq. 21)')

@@ -184,8 +184,11 @@ _FREE_CANTILEVER_X1 = 1.8751040687
 
 
 def clamped_pinned_slope_ratio(x4: np.ndarray) -> np.ndarray:
-    """Tip-slope ratio R = w'(L) 2L / (3 w(L)) of a clamped beam whose tip displacement is
-    prescribed (pinned, zero moment), as a function of x^4 = (kL)^4, k^4 = rho A w^2 / (E I).
+    """
+    Tip-slope ratio R = w'(L) 2L / (3 w(L)) of a clamped beam with a prescribed tip.
+
+    The tip displacement is prescribed (pinned, zero moment); R is a function of
+    x^4 = (kL)^4, k^4 = rho A w^2 / (E I).
 
     R = (2x/3) sinh x sin x / (sin x cosh x - sinh x cos x) (Euler-Bernoulli), even in x,
     = 1 - 2 x^4 / 315 + O(x^8) for small x (series used below |x^4| = 1e-3, where the

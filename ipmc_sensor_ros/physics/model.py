@@ -154,6 +154,7 @@ class SensorModel:
     effects : ordered effects added to the base H1 (eq. 31): names, specs, or
         ``(name, {param: value})`` pairs.  ``("surface_resistance",)`` (the
         default) is the paper's H2 (eq. 45).
+
     """
 
     geometry: Geometry
@@ -225,8 +226,12 @@ class SensorModel:
 
     # -- evaluation (physics/pipeline.py holds the rules) -------------------------
     def __getstate__(self):
-        """Pickle the description only; the compiled pipeline (which may hold closures, e.g. a
-        drift's ``material_at``) is rebuilt on first use after unpickling."""
+        """
+        Pickle the description only.
+
+        The compiled pipeline (which may hold closures, e.g. a drift's ``material_at``) is
+        rebuilt on first use after unpickling.
+        """
         state = dict(self.__dict__)
         state.pop('compiled', None)
         return state
@@ -257,7 +262,9 @@ class SensorModel:
 
     def diffusive_transfer(self, s) -> np.ndarray:
         """
-        Return the diffusion-type part the reduction approximates (no rational factors, no delay).
+        Return the diffusion-type part the reduction approximates.
+
+        No rational factors, no delay.
         """
         return self.compiled.diffusive_transfer(s)
 

@@ -167,6 +167,7 @@ class MaterialParameters:
     charge_stress_coupling_j_per_c : alpha0, eq. 16, J C^-1 (Table 2: 104).
     one_minus_anion_volume_fraction : 1 - C- dV, dimensionless (paper section
         5.2 takes it as 1 since |C- dV| << 1).
+
     """
 
     faraday_constant_c_per_mol: float = 96487.0

@@ -1,6 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""One compiled model pipeline: a :class:`SensorModel` taken apart once into the pieces every
-user needs (prediction, fitting, simulation, reduction, estimation).
+"""
+One compiled model pipeline per :class:`SensorModel`.
+
+A :class:`SensorModel` taken apart once into the pieces every user needs (prediction,
+fitting, simulation, reduction, estimation).
 
 A sensor model is H1 (eq. 31) times the factors of its effects (surface resistance, eq. 45;
 amplifier, delay, beam modes, ...), wrapped in the effects' transforms.  In signal order::
@@ -136,7 +139,9 @@ class CompiledModel:
     @property
     def is_lti(self) -> bool:
         """
-        Return True when no effect acts outside the transfer function (no transforms, no drift).
+        Return True when no effect acts outside the transfer function.
+
+        No transforms, no drift.
         """
         return not (self.input_transforms or self.output_transforms or self.material_at)
 

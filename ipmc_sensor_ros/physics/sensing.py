@@ -51,7 +51,7 @@ def _as_complex(s) -> np.ndarray:
 
 
 def beta(s, material: MaterialParameters) -> np.ndarray:
-    """beta(s) = sqrt((s + K)/d), m^-1 (definition after eq. 14), principal branch."""
+    """Return beta of s: sqrt((s + K)/d), m^-1 (definition after eq. 14), principal branch."""
     s = _as_complex(s)
     return np.sqrt((s + material.k_rate_per_s) / material.diffusivity_m2_per_s)
 

@@ -71,9 +71,12 @@ def robot_motion(time_s, seed: int = 0, amplitude_m: float = 1.5e-3) -> np.ndarr
 
 def intermittent_motion(time_s, seed: int = 0, amplitude_m: float = 1.5e-3,
                         move_every_s: float = 60.0) -> np.ndarray:
-    """Long holds with a 10 s robot-like burst (:func:`robot_motion`, a new seed each
-    time) every ``move_every_s`` seconds; each burst blends in from the held level over
-    0.5 s and its last value is held, so levels stay within +-``amplitude_m``."""
+    """
+    Long holds with a 10 s robot-like burst every ``move_every_s`` seconds.
+
+    Each burst is :func:`robot_motion` with a new seed each time; it blends in from the held
+    level over 0.5 s and its last value is held, so levels stay within +-``amplitude_m``.
+    """
     t = np.asarray(time_s, float)
     dt = t[1] - t[0]
     tb = np.arange(0, 10.0, dt)

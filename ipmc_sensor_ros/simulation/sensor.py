@@ -66,8 +66,11 @@ def periodic_response(model: SensorModel, deflection_m, sample_rate_hz: float) -
 @functools.lru_cache(maxsize=64)
 def forward_reduction(model: SensorModel, sample_rate_hz: float, order: int = 8,
                       low_hz: float = 0.01) -> ReducedModel:
-    """Wide-band reduction of the model's minimum-phase LTI part used by the
-    simulator (cached per model and rate); any pure delay is applied separately."""
+    """
+    Wide-band reduction of the model's minimum-phase LTI part used by the simulator.
+
+    Cached per model and rate; any pure delay is applied separately.
+    """
     high = 0.45 * sample_rate_hz
     if high <= low_hz * 10:
         raise ParameterError(f'sample_rate_hz={sample_rate_hz} is too low to simulate')
@@ -75,8 +78,10 @@ def forward_reduction(model: SensorModel, sample_rate_hz: float, order: int = 8,
 
 
 class FieldSensorSimulator:
-    """``fidelity = field``: the streaming simulator on the independent field solution
-    (:class:`~ipmc_sensor_ros.physics.field.FieldSolver`, Crank-Nicolson) instead of a
+    """
+    ``fidelity = field``: the streaming simulator on the independent field solution.
+
+    It runs :class:`~ipmc_sensor_ros.physics.field.FieldSolver` (Crank-Nicolson) instead of a
     reduction of the closed form.  Supports the base model (h1/h2) and
     ``hydration_drift`` (a diffusivity changing during the run); other effects are
     refused by name.  ``beam_model``: ``linear`` (the paper's small-deflection stress
@@ -155,6 +160,7 @@ class SensorSimulator:
     seed : seed of the noise generator.
     order : order of the internal reduction of R(s).
     update_s : coefficient update interval for time-varying effects, s.
+
     """
 
     def __init__(self, model: SensorModel, sample_rate_hz: float, *, current_gain: float = 1.0,
@@ -293,10 +299,12 @@ class SensorSimulator:
         _, self._zi = sig.sosfilt(self.sos, self._replay, zi=np.zeros((self.sos.shape[0], 2)))
 
     def accuracy(self, band_hz=(0.5, 50.0), n_points: int = 200) -> tuple[float, float]:
-        """Worst magnitude (dB) and phase (deg) error of the discrete simulator
-        against the full model over ``band_hz`` (velocity input is exact, so
-        the simulator's response is ``j w * R_discrete(e^{j w T})``, times the
-        delay line's response)."""
+        """
+        Worst magnitude (dB) and phase (deg) error of the discrete simulator.
+
+        Against the full model over ``band_hz`` (velocity input is exact, so the simulator's
+        response is ``j w * R_discrete(e^{j w T})``, times the delay line's response).
+        """
         f = np.logspace(np.log10(band_hz[0]), np.log10(band_hz[1]), n_points)
         _, hd = sig.sosfreqz(self.sos, worN=f, fs=self.sample_rate_hz)
         z = np.exp(-2j * np.pi * f / self.sample_rate_hz)
@@ -325,7 +333,7 @@ def padded_record(time_s: np.ndarray, deflection_m: np.ndarray, pad_s: float):
 
 def lti_response_fft(transfer, time_s, deflection_m, pad_s: float = 2.0) -> np.ndarray:
     """
-    Return the current (A) of any LTI model ``transfer(s)`` (A/m) for an arbitrary deflection record.
+    Return the current (A) of any LTI model ``transfer(s)`` (A/m) for any deflection record.
 
     Exact linear convolution by FFT, with no reduction or discretisation error:
     the record (minus its first value, since a static deflection gives no

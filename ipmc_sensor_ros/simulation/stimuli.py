@@ -139,8 +139,11 @@ def _smoothstep(u):
 
 @dataclass(frozen=True)
 class Step(Stimulus):
-    """Tip pushed to ``amplitude_m`` at ``start_s`` with a raised-cosine rise of
-    ``rise_time_s`` (a real actuator has finite speed), then held (paper Fig. 8)."""
+    """
+    Tip pushed to ``amplitude_m`` at ``start_s``, then held (paper Fig. 8).
+
+    The rise is a raised cosine of ``rise_time_s`` (a real actuator has finite speed).
+    """
 
     amplitude_m: float = 2e-3
     start_s: float = 0.5
@@ -164,9 +167,12 @@ class Step(Stimulus):
 
 @dataclass(frozen=True)
 class FreeVibration(Stimulus):
-    """Tip pulled to ``amplitude_m`` (raised-cosine ramp of ``ramp_s`` ending at
-    ``release_s``) and released: w = A e^{-zeta wn tau} (cos wd tau + zeta wn/wd sin wd tau),
-    tau = t - release_s (paper Fig. 7, natural frequency about 30 Hz)."""
+    """
+    Tip pulled to ``amplitude_m`` and released (paper Fig. 7, natural frequency about 30 Hz).
+
+    The pull is a raised-cosine ramp of ``ramp_s`` ending at ``release_s``; after it
+    w = A e^{-zeta wn tau} (cos wd tau + zeta wn/wd sin wd tau), tau = t - release_s.
+    """
 
     amplitude_m: float = 2e-3
     natural_frequency_hz: float = 30.0

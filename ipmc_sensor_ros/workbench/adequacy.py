@@ -29,9 +29,12 @@ def _factor(ratio: float) -> float:
 
 
 def magnitude_flags(records: Sequence, model_for=None) -> list[str]:
-    """Return flags for records (objects with ``path``, ``time_s``, ``deflection_m``, ``current_a`` and
-    ``model``, :class:`~.timefit.Record`, or give ``model_for(record)``) whose magnitudes are
-    implausible."""
+    """
+    Return flags for records whose magnitudes are implausible.
+
+    Records: objects with ``path``, ``time_s``, ``deflection_m``, ``current_a`` and
+    ``model``, :class:`~.timefit.Record`, or give ``model_for(record)``.
+    """
     from .freqresp import fundamental_response
 
     out = []

@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
 """
-Missing-physics discovery: which effects does the model lack?
+Missing-physics discovery: finding which effects the model lacks.
 
 Procedure (:func:`diagnose`)
 ----------------------------
@@ -462,9 +462,13 @@ def _offset_test(prepared, models) -> dict:
 
 
 def diagnose(records: Sequence[Record], **kwargs) -> Diagnosis:
-    """Find the effects missing from the records' models (see module docstring and
-    :func:`_diagnose` for the keyword arguments); runs with single-threaded BLAS
-    (:mod:`.blas`: the fits' small products only lose time to BLAS threads)."""
+    """
+    Find the effects missing from the records' models.
+
+    See the module docstring and :func:`_diagnose` for the keyword arguments; runs with
+    single-threaded BLAS (:mod:`.blas`: the fits' small products only lose time to BLAS
+    threads).
+    """
     with single_threaded_blas():
         return _diagnose(records, **kwargs)
 
@@ -750,7 +754,9 @@ def _diagnose(
 
 def _grid_for_spec(spec: FitSpec, priors, model) -> list[list[float]]:
     """
-    Return the starts for the effect parameters of the baseline: current values, or the prior.
+    Return the starts for the effect parameters of the baseline.
+
+    Current values, or the prior.
     """
     from .timefit import _param
 

@@ -127,8 +127,11 @@ PRIOR_KEYS = {'amplifier_bandwidth_hz': ('amplifier_bandwidth', 'corner_hz'),
 
 
 def priors_from_headers(series: Sequence) -> dict[tuple[str, str], float]:
-    """Effect-parameter priors from data headers (``extra`` keys of :data:`PRIOR_KEYS`
-    or ``effect.parameter``); the first file giving a key wins."""
+    """
+    Effect-parameter priors from data headers; the first file giving a key wins.
+
+    Keys: ``extra`` keys of :data:`PRIOR_KEYS` or ``effect.parameter``.
+    """
     out: dict[tuple[str, str], float] = {}
     for ts in series:
         for key, raw in getattr(ts, 'extra', {}).items():

@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: Apache-2.0
-"""
+r"""
 The workbench's text formats ``ipmc-timeseries/1`` and ``ipmc-frf/1`` (no rclpy needed).
 
 Every problem with an input raises :class:`DataFormatError` (a
@@ -13,7 +13,7 @@ unknown column, a NaN is an error, never a skipped line.
 Text formats
 ============
 
-Both text formats are UTF-8, ``\\n`` or ``\\r\\n`` line ends, and share one
+Both text formats are UTF-8, ``\n`` or ``\r\n`` line ends, and share one
 layout: header lines, then one column-header line, then numeric rows::
 
     # format: ipmc-timeseries/1

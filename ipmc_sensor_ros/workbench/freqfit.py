@@ -200,8 +200,12 @@ def effect_parameter_names(effects) -> list[str]:
 
 
 def resolve_effect_parameter(name: str, effects) -> tuple[str, str]:
-    """``delay_s`` or ``time_delay.delay_s`` -> ``("time_delay", "delay_s")`` for a model with
-    ``effects``; a clear error when unknown, ambiguous or its effect is not in the model."""
+    """
+    Resolve ``delay_s`` or ``time_delay.delay_s`` to ``("time_delay", "delay_s")``.
+
+    For a model with ``effects``; a clear error when unknown, ambiguous or its effect is not
+    in the model.
+    """
     specs = parse_effects(effects)
     in_model = [e.name for e in specs]
     if '.' in name:

@@ -99,7 +99,7 @@ def harmonic_fit(t: np.ndarray, x: np.ndarray, f0: float, n_harmonics: int):
 
 
 def _phasor_sd(cov: np.ndarray, phasor: complex, k: int = 1) -> tuple[float, float]:
-    """sd of ln|X| and arg X for harmonic k from the coefficient covariance."""
+    """Return the sd of ln|X| and arg X for harmonic k from the coefficient covariance."""
     ia, ib = 2 * k - 1, 2 * k
     a, b = phasor.real, -phasor.imag
     mag2 = a * a + b * b

@@ -79,8 +79,11 @@ def parse_mains(value) -> float | str | None:
 
 
 def _stimulus_harmonics(t, w, max_harmonics: int = 20):
-    """Fundamental and the harmonics (at most ``max_harmonics``) carrying deflection content
-    (least-squares harmonic fit of the deflection), or ``(None, [])`` for a non-periodic stimulus.
+    """
+    Fundamental and the harmonics (at most ``max_harmonics``) carrying deflection content.
+
+    From a least-squares harmonic fit of the deflection; ``(None, [])`` for a non-periodic
+    stimulus.
     """
     fs = (t.size - 1) / (t[-1] - t[0])
     f0 = _coarse_frequency(t, w, fs)
@@ -175,7 +178,9 @@ def find_mains_lines(records: Sequence, mains='auto', n_harmonics: int = 10):
 
 def remove_mains(records: Sequence, mains='auto', n_harmonics: int = 10):
     """
-    Return ``(cleaned records, lines)``: each record's current minus its detected mains lines.
+    Return ``(cleaned records, lines)``.
+
+    Cleaned records: each record's current minus its detected mains lines.
     """
     lines, fitted = find_mains_lines(records, mains, n_harmonics)
     cleaned = [replace(r, current_a=np.asarray(r.current_a, float) - f) if np.any(f) else r

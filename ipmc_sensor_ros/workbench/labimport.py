@@ -79,7 +79,9 @@ def _is_row(line: str, delimiter: str, decimal: str) -> int:
 
 def _find_table(path, source: TextSource):
     """
-    Return (notes, column-header cells, its line, delimiter, decimal); source at the first row.
+    Return (notes, column-header cells, its line, delimiter, decimal).
+
+    Source at the first row.
     """
     previous: list[tuple[int, str]] = []
     while True:
@@ -130,7 +132,7 @@ def _words(stem: str) -> list[str]:
 
 
 def _assign(path, cells: list[str], line: int, columns: Mapping[str, str] | None):
-    """role -> (index, unit) of the file's columns."""
+    """Map role -> (index, unit) of the file's columns."""
     found: dict[str, tuple[int, str | None]] = {}
     wanted = dict(columns or {})
     unknown = sorted(set(wanted) - set(ROLE_NAMES))
@@ -226,7 +228,7 @@ def _read_meta(meta: PathLike) -> dict:
 
 
 def _meta_geometry(meta: PathLike, data: dict) -> dict[str, tuple[float, str]]:
-    """part -> (metres, 'key: value as written') from run metadata."""
+    """Map part -> (metres, 'key: value as written') from run metadata."""
     source = data.get('geometry', data)
     if not isinstance(source, dict):
         raise DataFormatError(meta, None, "'geometry' in run metadata must be a mapping")
@@ -312,15 +314,23 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
 
     Parameters
     ----------
-    path : the lab file (CSV, TSV or ';'-separated text with a free header).
-    geometry : ``"22mm,7mm,360um"`` (length, width, total thickness), a
+    path
+        The lab file (CSV, TSV or ';'-separated text with a free header).
+    geometry
+        ``"22mm,7mm,360um"`` (length, width, total thickness), a
         :class:`Geometry` or a mapping with ``length_m``, ``width_m``, ``thickness_m``.
-    meta : run-metadata JSON/YAML (geometry in any length unit, ``sample``,
+    meta
+        Run-metadata JSON/YAML (geometry in any length unit, ``sample``,
         known values such as ``temperature_k``, anything else kept in ``extra``).
-    columns : role -> column name (``time``, ``deflection``, ``current``).
-    current_gain_a_per_v : transimpedance gain, A/V, for a current column in V.
-    sample : sample name (else the metadata's ``sample``); a conflict is refused.
-    max_bytes, max_rows : limits of the file (see :mod:`.textread`).
+    columns
+        Role -> column name (``time``, ``deflection``, ``current``).
+    current_gain_a_per_v
+        Transimpedance gain, A/V, for a current column in V.
+    sample
+        Sample name (else the metadata's ``sample``); a conflict is refused.
+    max_bytes, max_rows
+        Limits of the file (see :mod:`.textread`).
+
     """
     if current_gain_a_per_v is not None and not (math.isfinite(current_gain_a_per_v)
                                                  and current_gain_a_per_v > 0):

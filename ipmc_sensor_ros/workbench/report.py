@@ -40,6 +40,7 @@ BOUND99 = 2.576  # two-sided 99 % quantile of N(0, 1): band of a white residual'
 @dataclass
 class Section:
     """One report section: heading, wrapped text, tables (caption, columns, rows), PNG names."""
+
     heading: str
     text: str = ''
     images: list = field(default_factory=list)
@@ -423,7 +424,9 @@ def compare_report(
     out_dir: Path, cmp, model_text: str, bode_points: dict, bode_models: dict
 ) -> Path:
     """
-    Return the ``compare`` page: card, Bode, worst records, residual tests, spectrum, failure map.
+    Return the ``compare`` page.
+
+    Card, Bode, worst records, residual tests, spectrum, failure map.
     """
     rows = [
         [

@@ -114,10 +114,13 @@ def crank_slider_campaign(true_effects: Sequence = ('surface_resistance',), *,
 def hidden_effects_campaign(
     hidden: Sequence[str], seed: int, **kwargs
 ) -> tuple[list[Record], dict]:
-    """Return the records with the ``hidden`` effects (values drawn by :func:`random_effect_values` from a
-    generator seeded with ``seed``) for a diagnosis that starts from H2, or from H1 when
-    ``surface_resistance`` is among the hidden effects.  Returns ``(records, truth)``,
-    ``truth`` = {effect: values}."""
+    """
+    Return the records with the ``hidden`` effects and the truth.
+
+    Effect values are drawn by :func:`random_effect_values` from a generator seeded with
+    ``seed``, for a diagnosis that starts from H2, or from H1 when ``surface_resistance``
+    is among the hidden effects.  Returns ``(records, truth)``, ``truth`` = {effect: values}.
+    """
     rng = np.random.default_rng(10_000 + seed)
     truth = {name: random_effect_values(name, rng) for name in hidden}
     true_effects = ['surface_resistance'] + [

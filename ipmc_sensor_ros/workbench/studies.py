@@ -40,8 +40,12 @@ def convergence_table(model: SensorModel, band_hz=(0.1, 100.0), n_points: int = 
 
 
 def _distortion_rows(simulate_exact, i_unit, t, shape, amplitudes_m, frequency_hz) -> list[dict]:
-    """Relative RMS error of the linear prediction (amplitude x ``i_unit``) against
-    ``simulate_exact(w)`` and the harmonics of the latter, over the last two periods."""
+    """
+    Relative RMS error of the linear prediction against ``simulate_exact(w)``.
+
+    The linear prediction is amplitude x ``i_unit``; also the harmonics of the latter, over
+    the last two periods.
+    """
     keep = t >= t[-1] - 2 / frequency_hz
     rows = []
     for a in amplitudes_m:
@@ -60,9 +64,12 @@ def _distortion_rows(simulate_exact, i_unit, t, shape, amplitudes_m, frequency_h
 
 def nonlinearity_study(model: SensorModel, amplitudes_m, frequency_hz: float = 5.0,
                        sample_rate_hz: float = 2000.0, periods: int = 6) -> list[dict]:
-    """Relative error of the linear model and harmonic content of the current versus the
-    tip-deflection amplitude (sinusoidal drive), from the nonlinear field solution
-    (the eq. 9 term; r0 = 0)."""
+    """
+    Relative error of the linear model and harmonic content of the current vs amplitude.
+
+    Versus the tip-deflection amplitude (sinusoidal drive), from the nonlinear field solution
+    (the eq. 9 term; r0 = 0).
+    """
     t = np.arange(int(round(periods / frequency_hz * sample_rate_hz))) / sample_rate_hz
     lin = NonlinearFieldSolver(model, linear=True)
     nonlin = NonlinearFieldSolver(model)
@@ -74,10 +81,14 @@ def nonlinearity_study(model: SensorModel, amplitudes_m, frequency_hz: float = 5
 
 def large_deflection_study(model: SensorModel, amplitudes_m, frequency_hz: float = 5.0,
                            sample_rate_hz: float = 1000.0, periods: int = 4) -> list[dict]:
-    """Return the same for the beam: field solution with the elastica stress profile
+    """
+    Return the same for the beam: elastica against small-deflection stress profile.
+
+    Field solution with the elastica stress profile
     (:class:`~ipmc_sensor_ros.physics.beam.ElasticaBeam`) against the paper's
     small-deflection profile (eq. 21), sinusoidal tip deflection.  Rows also give the
-    amplitude as a fraction of the length, ``amplitude_over_length``."""
+    amplitude as a fraction of the length, ``amplitude_over_length``.
+    """
     t = np.arange(int(round(periods / frequency_hz * sample_rate_hz))) / sample_rate_hz
     shape = np.sin(2 * np.pi * frequency_hz * t)
     i_unit = FieldSolver(model).simulate(t, shape)

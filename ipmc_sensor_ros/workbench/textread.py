@@ -184,7 +184,7 @@ class TextSource:
         self.lineno -= 1
 
     def chunks(self) -> Iterator[tuple[int, bytes]]:
-        """(1-based line of the first line, bytes of whole lines each ending in '\\n')."""
+        r"""(1-based line of the first line, bytes of whole lines each ending in '\n')."""
         while True:
             if len(self._buf) < CHUNK_BYTES:
                 self._fill()
@@ -324,7 +324,9 @@ def read_table(source: TextSource, columns: Sequence[str], check: BlockCheck | N
 
 def increasing_check(path, column: str, unit: str, index: int = 0) -> BlockCheck:
     """
-    Return a :func:`read_table` check that column ``index`` (``column``, in ``unit``) strictly increases.
+    Return a :func:`read_table` check that column ``index`` strictly increases.
+
+    ``column`` names it, in ``unit``.
 
     The error names the line, both values and the previous line.
     """

@@ -45,9 +45,12 @@ class TrackPoint:
 def model_trajectory(
     model: SensorModel, elapsed_s, names: Sequence[str] = ('diffusivity_m2_per_s',)
 ):
-    """Values of material parameters ``names`` of ``model`` at ``elapsed_s`` seconds from the
-    record start, following its time-varying effect (e.g. ``hydration_drift``); None if the
-    model has none."""
+    """
+    Values of material parameters ``names`` of ``model`` at ``elapsed_s`` seconds.
+
+    Seconds from the record start, following its time-varying effect (e.g.
+    ``hydration_drift``); None if the model has none.
+    """
     for spec in model.effects:
         mat_at = get_effect(spec.name).material_at(model, spec.as_dict())
         if mat_at is not None:

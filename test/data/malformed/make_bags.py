@@ -35,7 +35,9 @@ def _series(n: int = 40, rate_hz: float = 1000.0) -> io.TimeSeries:
 
 def raw_bag(path: Path, messages, storage: str = 'sqlite3', sidecar: bool = True) -> Path:
     """
-    Return a bag with hand-made messages: ``messages`` = [(topic, msgtype, [(stamp_ns, msg)])].
+    Return a bag with hand-made messages.
+
+    ``messages`` = [(topic, msgtype, [(stamp_ns, msg)])].
     """
     from rosbags.rosbag2 import StoragePlugin, Writer
 
