@@ -91,6 +91,12 @@ class DiagnosticsPublisher:
         if stats is not None:
             stats.observe(current_a)
 
+    def observe_one(self, current_a: float, channel: str | None = None) -> None:
+        """:meth:`observe` for one sample (the one-sample message path)."""
+        stats = self._stats.get(channel or self.channels[0])
+        if stats is not None:
+            stats.observe_one(current_a)
+
     def update(self, status: Mapping[str, Any]) -> DiagnosticArray:
         """Evaluate ``status`` (``{channel: dict}`` or one dict) and publish; returns the message."""
         if not status or not all(isinstance(v, Mapping) for v in status.values()):

@@ -145,7 +145,7 @@ class EstimatorNode(Node):
             if one:
                 out = self._stream.feed_one(*one)
                 if out is not False:
-                    self._diagnostics.observe((one[1],))
+                    self._diagnostics.observe_one(one[1])
                     if out is not None:
                         std = self._stream.estimator.std_m
                         self._publish(
