@@ -281,8 +281,8 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
 
 def _ladder(n: int) -> list[float]:
     if n == 1:
-        return [500.0, 1000.0, 2000.0, 3000.0, 4000.0, 5000.0, 6000.0, 7000.0, 8000.0, 10000.0,
-                12000.0, 16000.0]
+        return [1000.0, 2000.0, 4000.0, 6000.0, 8000.0, 10000.0, 12000.0, 16000.0, 20000.0,
+                24000.0, 28000.0, 32000.0]
     # 1000 msg/s x 1000 samples = 1 MHz, the top of the estimator's sample_rate_hz range
     # (float64 stamps cannot carry shorter periods); the pass-through is held to the same ladder
     return [20.0, 50.0, 100.0, 200.0, 500.0, 1000.0]
