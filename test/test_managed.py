@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
 """
-Managed nodes (``ipmc_estimator_managed``, ``ipmc_simulator_managed``) through the lifecycle services.
+Managed nodes (``ipmc_estimator_managed``, ``ipmc_simulator_managed``) via lifecycle services.
 
 The transitions are requested as a ROS user does, with the ``lifecycle_msgs`` services
 ``/<node>/change_state`` and ``/<node>/get_state`` called from a separate client node:

@@ -120,7 +120,8 @@ class DiagnosticsPublisher:
         return msg
 
     def announce(self, message: str, level: int = 0) -> DiagnosticArray:
-        """Publish ``message`` at ``level`` (0 OK) as the status of every channel.
+        """
+        Publish ``message`` at ``level`` (0 OK) as the status of every channel.
 
         For states no health rule describes, e.g. a managed node being deactivated.
         """

@@ -61,7 +61,8 @@ class EstimatorNode(Node):
 
     # -- construction, in the steps a managed node takes one by one --------------
     def _configure(self) -> None:
-        """Read the parameters, build the model, the filter and the stream core.
+        """
+        Read the parameters, build the model, the filter and the stream core.
 
         ParameterError naming the parameter if they make no estimator.  No topic is created.
         """
