@@ -355,3 +355,29 @@ def test_managed_executable_over_dds_and_sigint_exits_zero(tmp_path, monkeypatch
     assert code == 0, text
     assert 'Traceback' not in text
     assert text.count('configure failed') == 1 and 'band_low_hz' in text
+
+
+@pytest.mark.parametrize('entry', ['main_simulator', 'main_estimator'])
+def test_sigterm_on_the_first_line_exits_zero_without_traceback(entry, tmp_path):
+    env = dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(random.randint(150, 200)),
+               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_LOG_DIR=str(tmp_path))
+    proc = subprocess.Popen(
+        [sys.executable, '-c', f'import sys; from ipmc_sensor_ros.nodes.managed import {entry}; '
+         f'sys.exit({entry}())'],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, text=True)
+    lines = []
+    for line in proc.stdout:
+        lines.append(line)
+        if 'unconfigured' in line:
+            break
+    proc.send_signal(signal.SIGTERM)            # on the first line: the racy moment
+    try:
+        out, _ = proc.communicate(timeout=20.0)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, _ = proc.communicate()
+        pytest.fail('no exit within 20 s of SIGTERM:\n' + ''.join(lines) + out)
+    text = ''.join(lines) + out
+    assert 'unconfigured' in text
+    assert proc.returncode == 0, text
+    assert 'Traceback' not in text and 'Error' not in text, text
