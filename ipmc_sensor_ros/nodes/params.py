@@ -17,6 +17,9 @@ from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescr
                                 ParameterType)
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
+from rclpy.subscription import Subscription
+from rclpy.timer import Timer
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
 
 from ..interface.specs import (GEOMETRY_NAMES, GEOMETRY_SPECS, MATERIAL_NAMES, MATERIAL_SPECS,
@@ -188,17 +191,18 @@ def destroy_io(node, names: Iterable[str]) -> None:
 
     Timers, publishers and subscriptions are destroyed through the node, anything else
     (a :class:`~ipmc_sensor_ros.nodes.diagnostics.DiagnosticsPublisher`) by its
-    ``destroy()``; each attribute becomes None, and None attributes are skipped.
+    ``destroy()``, lists and tuples item by item; each attribute becomes None, and None
+    attributes are skipped.
     """
-    from rclpy.publisher import Publisher
-    from rclpy.subscription import Subscription
-    from rclpy.timer import Timer
-
     for name in names:
-        entity = getattr(node, name, None)
+        held = getattr(node, name, None)
         setattr(node, name, None)
-        if entity is None:
-            continue
+        for entity in held if isinstance(held, (list, tuple)) else (held,):
+            _destroy(node, entity)
+
+
+def _destroy(node, entity) -> None:
+    if entity is not None:
         if isinstance(entity, Timer):
             node.destroy_timer(entity)
         elif isinstance(entity, Publisher):
