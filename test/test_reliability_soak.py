@@ -109,7 +109,7 @@ MODEL_SPECS = [s for s in C.ESTIMATOR_SPECS
 
 
 def _hostile_value(spec, rng):
-    """An extreme or invalid value for a float model parameter (must be refused)."""
+    """Draw an extreme or invalid value for a float model parameter (must be refused)."""
     choices = [math.nan, math.inf, -math.inf, -1.0, 0.0, 5e-324, 1e-296, 1e304, -1e304]
     if spec.low is not None:
         choices += [spec.low * 0.5 if spec.low > 0 else spec.low - 1.0, spec.high * 2.0]
@@ -120,7 +120,7 @@ def _hostile_value(spec, rng):
 
 
 def _valid_value(spec, rng):
-    """The default perturbed by up to +-10 %, inside the range."""
+    """Draw the default perturbed by up to +-10 %, inside the range."""
     value = spec.default * (1.0 + rng.uniform(-0.1, 0.1))
     if spec.low is not None:
         value = min(max(value, spec.low), spec.high)
