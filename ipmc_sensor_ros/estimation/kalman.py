@@ -17,8 +17,8 @@ with white noises of intensities ``q_v = 2 a sigma_v^2`` (velocity RMS sigma_v =
 ``motion_velocity_m_s``, flat up to ``motion_bandwidth_hz``), ``q_b =
 offset_drift_a_per_s^2 * 60 s`` (moves by ``offset_drift_a_per_s * 60 s`` RMS per
 minute), measurement noise RMS ``current_noise_a`` per sample.  The leak ``w_l``
-makes w detectable (an unmeasured integrator has no steady-state gain): 0.01 Hz
-(the leaky inverse's) until the first rest, when the level is unknown, then
+makes w detectable (an unmeasured integrator has no steady-state gain): 0.02 Hz
+(``START_LEAK_CORNER_HZ``) until the first rest, when the level is unknown, then
 0.001 Hz towards the last held level (``KALMAN_LEAK_CORNER_HZ``).  Exact
 discretisation (Van Loan, expm), gain from :func:`scipy.linalg.solve_discrete_are`.
 
@@ -101,8 +101,16 @@ DEFAULT_OFFSET_DRIFT_A_PER_S = 1e-9 / 60.0
 #: Default deflection leak while moving after a rest, Hz (time constant 160 s): each move
 #: loses 0.6 %/s of its excursion from the held level; an offset error db adds db t / R0.
 KALMAN_LEAK_CORNER_HZ = 0.001
-#: Deflection leak before the first rest (level unknown), Hz: the leaky inverse's corner.
-START_LEAK_CORNER_HZ = 0.01
+#: Deflection leak before the first rest (level unknown, offset not yet learned), Hz: twice the
+#: leaky inverse's corner.  An unlearned offset b then costs b / (2 pi f R0) (half the leaky's);
+#: a sinusoid at f sees a phase lead of about f / f_motion (2 % at 1 Hz).  Measured (bench, 1 %
+#: noise + 10 nA, moving from t=0): 0.01 Hz 23 / 12 %, 0.02 Hz 15-17 / 8-11 %, 0.05 Hz 6-8 %
+#: (slim / short) but 5 % on a clean 1 Hz crank (leaky 2.1 %), so 0.02 Hz.
+START_LEAK_CORNER_HZ = 0.02
+#: Offset uncertainty (RMS, A) below which the slow leak is used after a rest: 1 nA ramps the
+#: slim sample's deflection by 3 um/s (R0 = 3.2e-4 A s/m), 50 um in a 16 s move.  A 2 s rest
+#: with noise sigma learns the offset to sigma / sqrt(2000): 1 nA for sigma = 45 nA.
+OFFSET_TRUSTED_A = 1e-9
 #: Prior RMS of the current offset before any rest, A (DAQ offsets: tens of nA).
 OFFSET_PRIOR_A = 100e-9
 #: Cap on one sample's band-passed energy in the rest detector, in units of the noise's.
@@ -299,7 +307,7 @@ class KalmanEstimator:
         self._c_list = c.tolist()
         self._moving = self._moving_mode(ac, qc, c, scale, wl, dt)
         # until the first rest the deflection's level is unknown (the motion may have begun
-        # before the record): leak at the leaky inverse's corner, as it does
+        # before the record) and the offset is not learned: leak at START_LEAK_CORNER_HZ
         self._moving_start = self._moving_mode(
             ac, qc, c, scale, 2 * math.pi * START_LEAK_CORNER_HZ, dt
         )
@@ -483,14 +491,26 @@ class KalmanEstimator:
                 if was_rest:                              # leaving rest: leak towards this level
                     self._w_ref = float(self._s[self._iw])
                     self._s[self._iw] = 0.0
-                mode = self._moving if self._seen_rest else self._moving_start
+                mode = self._mode()
                 out[lo:hi], self._b_last, self._s = mode.run(y[lo:hi], self._s)
                 out[lo:hi] += self._w_ref
                 self._offset_var += self._q_b_step * (hi - lo)
             was_rest = bool(flags[lo])
         self.at_rest = bool(flags[-1])
-        self.last_std = (self._moving if self._seen_rest else self._moving_start).std_m
+        self.last_std = self._mode().std_m
         return out, np.full(y.size, self.last_std)
+
+    def _noise_var(self) -> float:
+        """White-noise variance per sample: the measured one, never below current_noise_a^2."""
+        return max(self.current_noise_a ** 2, self._sigma2)
+
+    def _mode(self) -> '_Mode':
+        """Moving-mode predictor: the slow leak (KALMAN_LEAK_CORNER_HZ) only while the offset
+        is known to OFFSET_TRUSTED_A RMS (learned at rest, its variance growing by the drift
+        during motion); else the start leak (an offset error db ramps w by db / R0 per second)."""
+        if self._seen_rest and self._offset_var < OFFSET_TRUSTED_A ** 2:
+            return self._moving
+        return self._moving_start
 
     def _run_rest(self, y: np.ndarray) -> np.ndarray:
         """Rest: deflection held, velocity and charge states zero (the detector has seen
@@ -503,7 +523,7 @@ class KalmanEstimator:
         w = np.full(y.size, s_end[self._iw])
         u = y
         b0 = self._s[self._ib]
-        n0 = self.current_noise_a ** 2 / self._offset_var
+        n0 = self._noise_var() / self._offset_var
         counts = n0 + np.arange(1, y.size + 1)
         if counts[-1] <= self._n_max:
             b = (n0 * b0 + float(np.sum(u))) / counts[-1]
@@ -518,7 +538,7 @@ class KalmanEstimator:
         s_end[self._ib] = b
         self._s = s_end
         self._b_last = b
-        self._offset_var = self.current_noise_a ** 2 / n_end
+        self._offset_var = self._noise_var() / n_end
         return w
 
     def process(self, current_a) -> np.ndarray:
@@ -576,7 +596,7 @@ class KalmanEstimator:
             self._seen_rest = True
             for j in self._motion_idx.tolist():
                 st[j] = 0.0
-            n0 = self.current_noise_a ** 2 / self._offset_var
+            n0 = self._noise_var() / self._offset_var
             n1 = min(n0 + 1.0, self._n_max)
             g = 1.0 / (n1 if n0 + 1.0 <= self._n_max else self._n_max + 1.0)
             b = st[ib] + g * (y - st[ib])
@@ -584,9 +604,9 @@ class KalmanEstimator:
             new = st
             new[ib] = b
             self._b_last = b
-            self._offset_var = self.current_noise_a ** 2 / n1
+            self._offset_var = self._noise_var() / n1
         else:
-            mode = self._moving if self._seen_rest else self._moving_start
+            mode = self._mode()
             innov = y - sum(map(mul, self._c_list, st))
             w = st[iw] + mode.k_w * innov + self._w_ref
             self._b_last = st[ib] + mode.k_b * innov
