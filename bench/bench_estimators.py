@@ -43,9 +43,10 @@ BOUNDS: dict = {}
 def rest_offset_bound(model, t, w, rest_s=2.0, after_s=5.0):
     """Reference NRMSE of an estimator that follows deflection ramps (no leak), when the
     offset can only be learned during the first ``rest_s`` of rest (not a bound for leaky
-    estimators, which trade ramp following for a capped offset error): the sample mean of fs*rest_s samples
-    (optimal for a constant in white noise) leaves db ~ sigma/sqrt(fs rest_s); in motion db is
-    a constant velocity db/R0 (H(0) = 0), so the error grows as db (t - rest_s)/R0."""
+    estimators, which trade ramp following for a capped offset error): the sample mean of
+    fs*rest_s samples (optimal for a constant in white noise) leaves db ~ sigma/sqrt(fs rest_s);
+    in motion db is a constant velocity db/R0
+    (H(0) = 0), so the error grows as db (t - rest_s)/R0."""
     from ipmc_sensor_ros.simulation.sensor import predict_current
     clean = predict_current(model, t, w)
     sigma = 0.01 * np.sqrt(np.mean(clean ** 2))
@@ -170,7 +171,8 @@ def main():
             )
     print(f"{'row':52s} {'sample':6s} {'leaky NRMSE %':>18s} {'kalman NRMSE %':>18s}")
     for (name, sample), d in table.items():
-        fmt = lambda v: f'{100 * np.mean(v):6.1f} (max {100 * np.max(v):5.1f})'
+        def fmt(v):
+            return f'{100 * np.mean(v):6.1f} (max {100 * np.max(v):5.1f})'
         bound = (
             f'  ramp-ref {100 * BOUNDS[(name, sample)]:5.1f}' if (name, sample) in BOUNDS else ''
         )

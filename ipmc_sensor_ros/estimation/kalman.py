@@ -9,7 +9,8 @@ Model (continuous time, designed from the same :class:`ReducedModel` that
 
     x_R' = A_R x_R + B_R v                (R_n, diagonal realisation)
     w'   = v - w_l w                      (deflection; w_l = 2 pi leak_corner_hz)
-    v'   = -a v + xi_v                    (velocity: Ornstein-Uhlenbeck, a = 2 pi motion_bandwidth_hz)
+    v'   = -a v + xi_v                    (velocity: Ornstein-Uhlenbeck,
+                                           a = 2 pi motion_bandwidth_hz)
     b'   = xi_b                           (current offset: constant + random-walk drift)
     i    = C_R x_R + D_R v + b + n        (measured current, A)
 
@@ -188,7 +189,7 @@ class _Mode:
         self.partner = np.array(
             [int(np.argmin(np.abs(self.lam - np.conj(lam[j])))) for j in self.dropped], dtype=int
         )
-        self.a_list = [np.array([1.0, -l]) for l in self.lam]
+        self.a_list = [np.array([1.0, -pole]) for pole in self.lam]
         self.b_list = [np.array([0.0, gg]) for gg in self.g]
 
     def run(self, y: np.ndarray, s0: np.ndarray):
