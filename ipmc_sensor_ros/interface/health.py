@@ -112,6 +112,19 @@ class CurrentStatistics:
         self._mean = 0.0
         self._count = 0
 
+    def observe_one(self, current_a: float) -> None:
+        """Feed one sample (A): :meth:`observe` without numpy (the one-sample message path)."""
+        x = float(current_a)
+        if self._count + 1 <= self.offset_window_s * self.sample_rate_hz:
+            self._mean += (x - self._mean) / (self._count + 1)
+        else:
+            self._mean += self._alpha * (x - self._mean)
+        self._count += 1
+        self._ring[self._end] = x
+        self._end = (self._end + 1) % self._ring.size
+        if self._n < self._ring.size:
+            self._n += 1
+
     def observe(self, current_a) -> None:
         """Feed new samples (A), oldest first."""
         x = np.asarray(current_a, dtype=float).ravel()

@@ -91,6 +91,12 @@ class DiagnosticsPublisher:
         if stats is not None:
             stats.observe(current_a)
 
+    def observe_one(self, current_a: float, channel: str | None = None) -> None:
+        """:meth:`observe` for one sample (the one-sample message path)."""
+        stats = self._stats.get(channel or self.channels[0])
+        if stats is not None:
+            stats.observe_one(current_a)
+
     def update(self, status: Mapping[str, Any]) -> DiagnosticArray:
         """Evaluate ``status`` (``{channel: dict}`` or one dict) and publish; returns the message."""
         if not status or not all(isinstance(v, Mapping) for v in status.values()):
@@ -110,6 +116,23 @@ class DiagnosticsPublisher:
         for channel, health in results.items():
             msg.status.append(to_status(health, f'{node_name}: {channel}', self.hardware_id))
         self.last = results
+        self._pub.publish(msg)
+        return msg
+
+    def announce(self, message: str, level: int = 0) -> DiagnosticArray:
+        """
+        Publish ``message`` at ``level`` (0 OK) as the status of every channel.
+
+        For states no health rule describes, e.g. a managed node being deactivated.
+        """
+        msg = DiagnosticArray()
+        msg.header.stamp = self._node.get_clock().now().to_msg()
+        node_name = self._node.get_fully_qualified_name()
+        health = Health(level, message)
+        if len(self.channels) > 1:
+            msg.status.append(to_status(health, node_name, self.hardware_id))
+        for channel in self.channels:
+            msg.status.append(to_status(health, f'{node_name}: {channel}', self.hardware_id))
         self._pub.publish(msg)
         return msg
 

@@ -53,6 +53,19 @@ class EstimatorNode(Node):
         P.check_unknown_overrides(self, ESTIMATOR_SPECS, kwargs.get('cli_args'),
                                   default_name='ipmc_estimator')
         P.declare(self, ESTIMATOR_SPECS)
+        self._configure()
+        self._open_io()
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.add_post_set_parameters_callback(self._on_parameters_set)
+        self.get_logger().info(self._ready_text())
+
+    # -- construction, in the steps a managed node takes one by one --------------
+    def _configure(self) -> None:
+        """
+        Read the parameters, build the model, the filter and the stream core.
+
+        ParameterError naming the parameter if they make no estimator.  No topic is created.
+        """
         self._values = P.read(self, ESTIMATOR_SPECS)
         try:
             estimator = C.build_estimator(self._values)
@@ -65,7 +78,16 @@ class EstimatorNode(Node):
         self._model_key = C.model_key(self._values)
         self._pending: tuple | None = None
         self._ticks = 0
+        logger = self.get_logger()
+        self._stream = StreamEstimator(
+            estimator, max_gap_s=float(self._values['max_gap_s']),
+            max_block_samples=int(self._values['max_block_samples']),
+            source=self.resolve_topic_name('current'),
+            now_s=lambda: self.get_clock().now().nanoseconds * 1e-9,
+            warn=lambda text: logger.warning(text, throttle_duration_sec=1.0))
 
+    def _open_io(self) -> None:
+        """Create the subscription, the publishers, the timer and /diagnostics."""
         qos = P.make_qos(self._values)
         self._sub = P.create_subscription(
             self, Float64MultiArray, 'current', self._on_current, qos
@@ -75,25 +97,23 @@ class EstimatorNode(Node):
         self._pub_point = P.create_publisher(self, PointMsg, 'deflection', qos)
         P.check_qos_overrides(self)
         self._pub_counters = self.create_publisher(String, 'estimator/counters', P.COUNTERS_QOS)
-        logger = self.get_logger()
-        self._stream = StreamEstimator(
-            estimator, max_gap_s=float(self._values['max_gap_s']),
-            max_block_samples=int(self._values['max_block_samples']),
-            source=self._sub.topic_name, now_s=lambda: self.get_clock().now().nanoseconds * 1e-9,
-            warn=lambda text: logger.warning(text, throttle_duration_sec=1.0))
         self._diagnostics = DiagnosticsPublisher(
             self, self._values, channels=(self._sub.topic_name,),
-            sample_rate_hz=estimator.sample_rate_hz, source=self._status)
+            sample_rate_hz=self._stream.estimator.sample_rate_hz, source=self._status)
         self._timer = self.create_timer(1.0, self._on_timer,  # steady: runs before /clock
                                         clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.add_post_set_parameters_callback(self._on_parameters_set)
-        r = self._reduced
-        logger.info(
-            f'ready: {estimator.model.describe()} model, order {r.order} reduction '
-            f'over {r.band_hz[0]}-{r.band_hz[1]} Hz, fs = {estimator.sample_rate_hz} Hz, '
-            f'leak corner {estimator.inverse.leak_corner_hz} Hz; listening on {self._sub.topic_name}'
-        )
+
+    def _close_io(self) -> None:
+        """Destroy what :meth:`_open_io` created (the stream core and its counters stay)."""
+        P.destroy_io(self, ('_timer', '_diagnostics', '_sub', '_pub_block', '_pub_point',
+                            '_pub_counters'))
+
+    def _ready_text(self) -> str:
+        r, estimator = self._reduced, self._stream.estimator
+        return (f'ready: {estimator.model.describe()} model, order {r.order} reduction '
+                f'over {r.band_hz[0]}-{r.band_hz[1]} Hz, fs = {estimator.sample_rate_hz} Hz, '
+                f'leak corner {estimator.inverse.leak_corner_hz} Hz; '
+                f"listening on {self.resolve_topic_name('current')}")
 
     # -- public helpers -------------------------------------------------------
     def counters(self) -> dict[str, int]:
@@ -128,7 +148,7 @@ class EstimatorNode(Node):
 
     @property
     def input_topic(self) -> str:
-        return self._sub.topic_name
+        return self._stream.source
 
     @property
     def last_rejection(self) -> str:
@@ -145,7 +165,7 @@ class EstimatorNode(Node):
             if one:
                 out = self._stream.feed_one(*one)
                 if out is not False:
-                    self._diagnostics.observe((one[1],))
+                    self._diagnostics.observe_one(one[1])
                     if out is not None:
                         std = self._stream.estimator.std_m
                         self._publish(
