@@ -68,8 +68,8 @@ previous estimate (P_b grows by q_b per second of motion) and, once it has
 Leaving rest, the last ``REST_REWIND_WINDOWS`` rest windows are re-run in the moving
 mode from the offset learned before them (the detector's lag), and the leak pulls
 towards the held level (not zero): at ``leak_corner_hz`` while the offset is known
-to ``OFFSET_TRUSTED_A``, else at ``START_LEAK_CORNER_HZ``.  The moving mode is an LTI filter run over each
-run of moving samples in modal coordinates (one first-order
+to ``OFFSET_TRUSTED_A``, else at ``START_LEAK_CORNER_HZ``.  The moving mode is an
+LTI filter run over each run of moving samples in modal coordinates (one first-order
 :func:`scipy.signal.lfilter` per eigenvalue of the closed-loop matrix, conjugate
 pairs once), so blocks are vectorised and the state passes exactly between modes.
 
