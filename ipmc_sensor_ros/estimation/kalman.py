@@ -520,9 +520,13 @@ class KalmanEstimator:
         return max(self.current_noise_a ** 2, self._sigma2)
 
     def _mode(self) -> '_Mode':
-        """Moving-mode predictor: the slow leak (KALMAN_LEAK_CORNER_HZ) only while the offset
-        is known to OFFSET_TRUSTED_A RMS (learned at rest, its variance growing by the drift
-        during motion); else the start leak (an offset error db ramps w by db / R0 per second)."""
+        """
+        Moving-mode predictor for the present offset uncertainty.
+
+        The slow leak (KALMAN_LEAK_CORNER_HZ) only while the offset is known to
+        OFFSET_TRUSTED_A RMS (learned at rest, its variance growing by the drift during
+        motion); else the start leak (an offset error db ramps w by db / R0 per second).
+        """
         if self._seen_rest and self._offset_var < OFFSET_TRUSTED_A ** 2:
             return self._moving
         return self._moving_start
@@ -576,8 +580,12 @@ class KalmanEstimator:
         self._rest_b.extend(b_before.tolist())
 
     def _rewind(self) -> None:
-        """Leaving rest (state already re-referenced): restore the offset learned before
-        the remembered rest samples and re-run them in the moving mode."""
+        """
+        Re-run the last rest samples in the moving mode on leaving rest.
+
+        The state is already re-referenced; the offset is restored to its value before
+        the remembered samples.
+        """
         if not self._rest_y:
             return
         b_start = self._rest_b[0]
