@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""ROS 2 node ``ipmc_estimator``: sensing current (A) in, tip deflection (m) out.
+"""
+ROS 2 node ``ipmc_estimator``: sensing current (A) in, tip deflection (m) out.
 
 Unpack -> :class:`~ipmc_sensor_ros.estimation.stream.StreamEstimator` (every rule of the
 stream: values, times, gaps, resets, counters) -> publish: ``deflection/block``
@@ -44,8 +45,12 @@ _ERRORS = (IpmcError,)  # every deliberate error of the package names the parame
 
 
 class EstimatorNode(Node):
-    """The estimator node (module docstring); ``kwargs`` go to :class:`rclpy.node.Node`, so
-    several nodes can share a process.  ParameterError if the parameters make no estimator."""
+    """
+    The estimator node (module docstring).
+
+    ``kwargs`` go to :class:`rclpy.node.Node`, so several nodes can share a process.
+    ParameterError if the parameters make no estimator.
+    """
 
     def __init__(self, node_name: str = 'ipmc_estimator', **kwargs: Any):
         super().__init__(node_name, **kwargs)
@@ -117,13 +122,20 @@ class EstimatorNode(Node):
 
     # -- public helpers -------------------------------------------------------
     def counters(self) -> dict[str, int]:
-        """Copy of the stream counters (invariant: :mod:`ipmc_sensor_ros.estimation.stream`)."""
+        """
+        Return a copy of the stream counters.
+
+        Invariant: :mod:`ipmc_sensor_ros.estimation.stream`.
+        """
         with self._lock:
             return dict(self._stream.counters)
 
     def _status(self) -> dict:
-        """Counters and estimator state (offset, rest, std, mains line) for the counters topic
-        and /diagnostics."""
+        """
+        Counters and estimator state (offset, rest, std, mains line).
+
+        For the counters topic and /diagnostics.
+        """
         with self._lock:
             out = dict(self._stream.counters)
             out.update(self._stream.estimator.status())
@@ -133,17 +145,17 @@ class EstimatorNode(Node):
 
     @property
     def stream(self) -> StreamEstimator:
-        """The stream core (rules, counters) this node feeds."""
+        """Return the stream core (rules, counters) this node feeds."""
         return self._stream
 
     @property
     def estimator(self) -> InverseEstimator:
-        """The discrete inverse filter currently in use (replaced on parameter changes)."""
+        """Return the discrete inverse filter currently in use (replaced on parameter changes)."""
         return self._stream.estimator.inverse
 
     @property
     def deflection_estimator(self) -> DeflectionEstimator:
-        """The core model-aware estimator (filter + effects) currently in use."""
+        """Return the core model-aware estimator (filter + effects) currently in use."""
         return self._stream.estimator
 
     @property
@@ -185,8 +197,12 @@ class EstimatorNode(Node):
                 self._publish(self._packer.pack(t, w, std), t, w, t.size)
 
     def _publish(self, block_msg: Float64MultiArray, times, deflections, n: int) -> None:
-        """Publish a block and its points; a publish that cannot complete (e.g. a stalled
-        reliable subscriber) is counted by the stream core, never fatal, never a reset."""
+        """
+        Publish a block and its points.
+
+        a publish that cannot complete (e.g. a stalled reliable subscriber) is counted
+        by the stream core, never fatal, never a reset.
+        """
         try:
             self._pub_block.publish(block_msg)
         except Exception as exc:  # rclpy raises RCLError and others: back-pressure, not a bug
@@ -225,8 +241,12 @@ class EstimatorNode(Node):
 
     # -- parameters -------------------------------------------------------------
     def _on_set_parameters(self, parameters) -> SetParametersResult:
-        """Validate a change by building the new design; nothing is applied here.  Any
-        failure to build, whatever the exception, refuses the change (one-line reason)."""
+        """
+        Validate a change by building the new design; nothing is applied here.
+
+        Any failure to build, whatever the exception, refuses the change (one-line
+        reason).
+        """
         with self._lock:
             self._pending = None
             values = dict(self._values)
