@@ -55,7 +55,7 @@ def rest_offset_bound(model, t, w, rest_s=2.0, after_s=5.0):
     clean = predict_current(model, t, w)
     sigma = 0.01 * np.sqrt(np.mean(clean ** 2))
     db = sigma / np.sqrt(FS * rest_s)
-    r0 = model.charge_gain_dc()
+    r0 = abs(complex(model.transfer(np.array([1e-4j]))[0]) / 1e-4j)   # R(0) = lim H(s)/s
     sel = t >= after_s
     return float(
         db * np.sqrt(np.mean((t[sel] - rest_s) ** 2)) / abs(r0) / np.sqrt(np.mean(w[sel] ** 2))

@@ -229,3 +229,44 @@ def test_drifting_offset_with_intermittent_motion_stays_bounded():
     )
     assert np.max(np.abs(w_hat - w)[t > 5]) < 0.2e-3
     assert est.inverse.offset_a == pytest.approx(20e-9, abs=2e-9)   # 10 nA + 10 min * 1 nA/min
+
+
+def test_leaving_rest_keeps_motion_current_out_of_the_offset():
+    # Clean current (exact H2, no offset, no noise): the rest detector notices a gentle start
+    # (started(): amplitude ramps in) only after its averaging window.  Leaving rest re-runs
+    # the last 2 windows in the moving mode from the offset learned before them, so the
+    # offset stays at 0: without the rewind it took 0.26 nA of motion current (a ramp of
+    # 0.8 um/s on slim).  Bound 0.1 nA; and the error does not ramp: its mean over the last
+    # 3 s is within 3 um of that over s 5-8 (0.26 nA would give 8 um in 10 s).
+    t = np.arange(int(15 * FS)) / FS
+    w = started(t, CrankSlider(5.0, 2e-3, 20e-3).deflection(t))
+    i = daq_current(SLIM, t, w)
+    est = DeflectionEstimator(SLIM, FS, estimator='kalman')
+    w_hat = np.concatenate(
+        [est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
+    )
+    assert abs(est.inverse.offset_a) < 0.1e-9
+    err = w_hat - w
+    assert abs(np.mean(err[t >= 12]) - np.mean(err[(t >= 5) & (t < 8)])) < 3e-6
+    assert nrmse(w_hat[t >= 5], w[t >= 5]) < 0.015     # leaky: 0.7 %, reduction error ~1 %
+
+
+@pytest.mark.parametrize('sample', ['slim', 'short'])
+def test_moving_from_start_offset_error_below_leaky(sample):
+    # Crank 5 Hz moving from t=0 (no rest: the offset is never learned), 1 % noise + 10 nA.
+    # Before the first rest the deflection leaks at START_LEAK_CORNER_HZ = 0.02 Hz, twice the
+    # leaky inverse's corner, so the offset's error b / (2 pi f R0) is half the leaky's; the
+    # phase lead at 5 Hz (0.4 %) and the noise keep the ratio above 0.5 (measured 0.65):
+    # bound 0.8.  Not the 3 % target: see README (offset not observable without rest).
+    model = SensorModel(PAPER_SAMPLES[sample])
+    t = np.arange(int(20 * FS)) / FS
+    w = CrankSlider(5.0, 2e-3, 20e-3, phase_rad=1.1).deflection(t) * np.clip(t / 0.5, 0, 1)
+    i = daq_current(model, t, w, offset_a=10e-9, noise_fraction=0.01, seed=23)
+    out = {}
+    for name in ('leaky', 'kalman'):
+        est = DeflectionEstimator(model, FS, estimator=name)
+        out[name] = np.concatenate(
+            [est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
+        )
+    sel = t >= 5
+    assert nrmse(out['kalman'][sel], w[sel]) < 0.8 * nrmse(out['leaky'][sel], w[sel])

@@ -19,8 +19,8 @@ with white noises of intensities ``q_v = 2 a sigma_v^2`` (velocity RMS sigma_v =
 ``motion_velocity_m_s``, flat up to ``motion_bandwidth_hz``), ``q_b =
 offset_drift_a_per_s^2 * 60 s`` (moves by ``offset_drift_a_per_s * 60 s`` RMS per
 minute), measurement noise RMS ``current_noise_a`` per sample.  The leak ``w_l``
-makes w detectable (an unmeasured integrator has no steady-state gain): 0.01 Hz
-(the leaky inverse's) until the first rest, when the level is unknown, then
+makes w detectable (an unmeasured integrator has no steady-state gain): 0.02 Hz
+(``START_LEAK_CORNER_HZ``) until the first rest, when the level is unknown, then
 0.001 Hz towards the last held level (``KALMAN_LEAK_CORNER_HZ``).  Exact
 discretisation (Van Loan, expm), gain from :func:`scipy.linalg.solve_discrete_are`.
 
@@ -65,9 +65,12 @@ learned at standstill), the charge and velocity states are zeroed and the offset
 is the running mean of the current, started with the weight sigma^2/P_b of its
 previous estimate (P_b grows by q_b per second of motion) and, once it has
 ``fs * rest_offset_time_s`` samples, an exponential average that follows drift
-(lag 0.17 nA at 1 nA/min with the default 10 s).  Leaving rest, the leak pulls
-towards the held level (not zero).  The moving mode is an LTI filter run over each
-run of moving samples in modal coordinates (one first-order
+(lag 0.17 nA at 1 nA/min with the default 10 s); sigma is the *measured* noise.
+Leaving rest, the last ``REST_REWIND_WINDOWS`` rest windows are re-run in the moving
+mode from the offset learned before them (the detector's lag), and the leak pulls
+towards the held level (not zero): at ``leak_corner_hz`` while the offset is known
+to ``OFFSET_TRUSTED_A``, else at ``START_LEAK_CORNER_HZ``.  The moving mode is an
+LTI filter run over each run of moving samples in modal coordinates (one first-order
 :func:`scipy.signal.lfilter` per eigenvalue of the closed-loop matrix, conjugate
 pairs once), so blocks are vectorised and the state passes exactly between modes.
 
@@ -83,6 +86,7 @@ steady-state posterior covariance (held at rest); it excludes reduction error.
 from __future__ import annotations
 
 import math
+from collections import deque
 from operator import mul
 
 import numpy as np
@@ -103,8 +107,21 @@ DEFAULT_OFFSET_DRIFT_A_PER_S = 1e-9 / 60.0
 #: Default deflection leak while moving after a rest, Hz (time constant 160 s): each move
 #: loses 0.6 %/s of its excursion from the held level; an offset error db adds db t / R0.
 KALMAN_LEAK_CORNER_HZ = 0.001
-#: Deflection leak before the first rest (level unknown), Hz: the leaky inverse's corner.
-START_LEAK_CORNER_HZ = 0.01
+#: Deflection leak before the first rest (level unknown, offset not yet learned), Hz: twice the
+#: leaky inverse's corner.  An unlearned offset b then costs b / (2 pi f R0) (half the leaky's);
+#: a sinusoid at f sees a phase lead of about f / f_motion (2 % at 1 Hz).  Measured (bench, 1 %
+#: noise + 10 nA, moving from t=0): 0.01 Hz 23 / 12 %, 0.02 Hz 15-17 / 8-11 %, 0.05 Hz 6-8 %
+#: (slim / short) but 5 % on a clean 1 Hz crank (leaky 2.1 %), so 0.02 Hz.
+START_LEAK_CORNER_HZ = 0.02
+#: Offset uncertainty (RMS, A) below which the slow leak is used after a rest: 1 nA ramps the
+#: slim sample's deflection by 3 um/s (R0 = 3.2e-4 A s/m), 50 um in a 16 s move.  A 2 s rest
+#: with noise sigma learns the offset to sigma / sqrt(2000): 1 nA for sigma = 45 nA.
+OFFSET_TRUSTED_A = 1e-9
+#: Leaving rest, the last REST_REWIND_WINDOWS * rest_window_s of 'rest' samples are re-run in
+#: the moving mode from the offset learned before them: the detector notices a gentle start
+#: only after its averaging window, and those first motion samples must neither feed the
+#: offset (0.26 nA on a clean 5 Hz crank, a 0.8 um/s ramp on slim) nor be lost from w.
+REST_REWIND_WINDOWS = 2.0
 #: Prior RMS of the current offset before any rest, A (DAQ offsets: tens of nA).
 OFFSET_PRIOR_A = 100e-9
 #: Cap on one sample's band-passed energy in the rest detector, in units of the noise's.
@@ -306,12 +323,13 @@ class KalmanEstimator:
         self._c_list = c.tolist()
         self._moving = self._moving_mode(ac, qc, c, scale, wl, dt)
         # until the first rest the deflection's level is unknown (the motion may have begun
-        # before the record): leak at the leaky inverse's corner, as it does
+        # before the record) and the offset is not learned: leak at START_LEAK_CORNER_HZ
         self._moving_start = self._moving_mode(
             ac, qc, c, scale, 2 * math.pi * START_LEAK_CORNER_HZ, dt
         )
         self.std_moving_m = self._moving.std_m
         self._n_max = fs * self.rest_offset_time_s
+        self._rewind_n = max(1, int(round(REST_REWIND_WINDOWS * self.rest_window_s * fs)))
         self._q_b_step = self.offset_drift_a_per_s ** 2 * 60.0 * dt
         # detector: band-pass and one-pole energy average
         hi = min(50.0, fs / 4)
@@ -399,6 +417,9 @@ class KalmanEstimator:
         self._b_last = 0.0
         self.last_std = self._moving_start.std_m
         self.last_rest = np.zeros(0, bool)
+        # the last rest samples and the offset before each (see _rewind)
+        self._rest_y = deque(maxlen=self._rewind_n)
+        self._rest_b = deque(maxlen=self._rewind_n)
 
     def _clip_a2(self) -> float:
         """
@@ -498,14 +519,31 @@ class KalmanEstimator:
                 if was_rest:                              # leaving rest: leak towards this level
                     self._w_ref = float(self._s[self._iw])
                     self._s[self._iw] = 0.0
-                mode = self._moving if self._seen_rest else self._moving_start
+                    self._rewind()
+                mode = self._mode()
                 out[lo:hi], self._b_last, self._s = mode.run(y[lo:hi], self._s)
                 out[lo:hi] += self._w_ref
                 self._offset_var += self._q_b_step * (hi - lo)
             was_rest = bool(flags[lo])
         self.at_rest = bool(flags[-1])
-        self.last_std = (self._moving if self._seen_rest else self._moving_start).std_m
+        self.last_std = self._mode().std_m
         return out, np.full(y.size, self.last_std)
+
+    def _noise_var(self) -> float:
+        """White-noise variance per sample: the measured one, never below current_noise_a^2."""
+        return max(self.current_noise_a ** 2, self._sigma2)
+
+    def _mode(self) -> '_Mode':
+        """
+        Moving-mode predictor for the present offset uncertainty.
+
+        The slow leak (KALMAN_LEAK_CORNER_HZ) only while the offset is known to
+        OFFSET_TRUSTED_A RMS (learned at rest, its variance growing by the drift during
+        motion); else the start leak (an offset error db ramps w by db / R0 per second).
+        """
+        if self._seen_rest and self._offset_var < OFFSET_TRUSTED_A ** 2:
+            return self._moving
+        return self._moving_start
 
     def _run_rest(self, y: np.ndarray) -> np.ndarray:
         """
@@ -521,7 +559,7 @@ class KalmanEstimator:
         w = np.full(y.size, s_end[self._iw])
         u = y
         b0 = self._s[self._ib]
-        n0 = self.current_noise_a ** 2 / self._offset_var
+        n0 = self._noise_var() / self._offset_var
         counts = n0 + np.arange(1, y.size + 1)
         if counts[-1] <= self._n_max:
             b = (n0 * b0 + float(np.sum(u))) / counts[-1]
@@ -534,10 +572,47 @@ class KalmanEstimator:
             b = float(b_seq[-1])
             n_end = self._n_max
         s_end[self._ib] = b
+        self._remember_rest(y, b0, n0)
         self._s = s_end
         self._b_last = b
-        self._offset_var = self.current_noise_a ** 2 / n_end
+        self._offset_var = self._noise_var() / n_end
         return w
+
+    def _remember_rest(self, y: np.ndarray, b0: float, n0: float) -> None:
+        """Keep the last rest samples and the offset estimate before each of them."""
+        m = min(y.size, self._rewind_n)
+        lo = y.size - m
+        # offset before sample k: the running mean of the samples before k (weight n0 on b0);
+        # past n_max samples the exponential average's lag is ignored (rewinds are short)
+        counts = np.minimum(n0 + np.arange(lo, y.size), self._n_max)
+        csum = np.concatenate([[0.0], np.cumsum(y)])[lo:y.size]
+        b_before = np.where(
+            n0 + np.arange(lo, y.size) <= self._n_max,
+            (n0 * b0 + csum) / np.maximum(counts, 1e-300),
+            np.nan,
+        )
+        if np.any(np.isnan(b_before)):
+            b_before = np.full(m, np.nan)         # long rest: rewind to the start value below
+        self._rest_y.extend(y[lo:].tolist())
+        self._rest_b.extend(b_before.tolist())
+
+    def _rewind(self) -> None:
+        """
+        Re-run the last rest samples in the moving mode on leaving rest.
+
+        The state is already re-referenced; the offset is restored to its value before
+        the remembered samples.
+        """
+        if not self._rest_y:
+            return
+        b_start = self._rest_b[0]
+        ys = np.array(self._rest_y)
+        self._rest_y.clear()
+        self._rest_b.clear()
+        if not math.isfinite(b_start):
+            return
+        self._s[self._ib] = b_start
+        _, _, self._s = self._mode().run(ys, self._s)
 
     def process(self, current_a) -> np.ndarray:
         """Deflection, m, for a block of current samples (A); see :meth:`process_with_std`."""
@@ -594,11 +669,16 @@ class KalmanEstimator:
         elif was_rest and not self.at_rest:
             self._w_ref = st[iw]
             st[iw] = 0.0
+            self._s[:] = st
+            self._rewind()
+            st = self._s.tolist()
         if self.at_rest:
             self._seen_rest = True
             for j in self._motion_idx.tolist():
                 st[j] = 0.0
-            n0 = self.current_noise_a ** 2 / self._offset_var
+            n0 = self._noise_var() / self._offset_var
+            self._rest_y.append(y)
+            self._rest_b.append(st[ib] if n0 + 1.0 <= self._n_max else math.nan)
             n1 = min(n0 + 1.0, self._n_max)
             g = 1.0 / (n1 if n0 + 1.0 <= self._n_max else self._n_max + 1.0)
             b = st[ib] + g * (y - st[ib])
@@ -606,9 +686,9 @@ class KalmanEstimator:
             new = st
             new[ib] = b
             self._b_last = b
-            self._offset_var = self.current_noise_a ** 2 / n1
+            self._offset_var = self._noise_var() / n1
         else:
-            mode = self._moving if self._seen_rest else self._moving_start
+            mode = self._mode()
             innov = y - sum(map(mul, self._c_list, st))
             w = st[iw] + mode.k_w * innov + self._w_ref
             self._b_last = st[ib] + mode.k_b * innov
