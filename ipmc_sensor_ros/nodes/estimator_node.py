@@ -25,10 +25,12 @@ from std_msgs.msg import Float64MultiArray, String
 from ..interface import specs as C
 from ..estimation.deflection import DeflectionEstimator
 from ..estimation.inverse import InverseEstimator
+from ..estimation.array import ArrayStream, check_array_estimators
 from ..estimation.stream import COUNTER_NAMES, StreamEstimator
 from ..errors import DataError, IpmcError
 from ..physics.parameters import short_repr
 from . import params as P
+from ..interface.blocks import current_columns, estimate_columns, unpack_columns
 from .messages import (CURRENT_COLUMNS, ESTIMATE_COLUMNS, BlockPacker, claimed_samples,
                        one_sample, point_message, unpack_block)
 from .diagnostics import DiagnosticsPublisher
@@ -54,9 +56,17 @@ class EstimatorNode(Node):
                                   default_name='ipmc_estimator')
         P.declare(self, ESTIMATOR_SPECS)
         self._values = P.read(self, ESTIMATOR_SPECS)
+        self._channels = int(self._values['channels'])
         try:
-            estimator = C.build_estimator(self._values)
-            self._reduced = estimator.reduced
+            if self._channels == 1 and self._values['model_files']:
+                raise P.ParameterError("parameter 'model_files' is for channels > 1; with one "
+                                       "channel use 'model_file'")
+            estimators = C.build_channel_estimators(self._values)
+            estimator = estimators[0]
+            self._reduced = ({C.model_key(C.channel_values(self._values, c)): e.reduced
+                              for c, e in enumerate(estimators)} if self._channels > 1
+                             else estimator.reduced)
+            check_array_estimators(estimators)
         except _ERRORS as exc:
             raise P.ParameterError(str(exc)) from None
         for path, (digest, names) in C.load_plugins(self._values['plugins']).items():
@@ -72,17 +82,32 @@ class EstimatorNode(Node):
         )
         self._pub_block = P.create_publisher(self, Float64MultiArray, 'deflection/block', qos)
         self._packer = BlockPacker(ESTIMATE_COLUMNS)
-        self._pub_point = P.create_publisher(self, PointMsg, 'deflection', qos)
+        self._pub_points = [P.create_publisher(self, PointMsg, 'deflection', qos)
+                            if self._channels == 1 else
+                            P.create_publisher(self, PointMsg, f'ch{c}/deflection', qos)
+                            for c in range(self._channels)]
+        self._pub_point = self._pub_points[0]
         P.check_qos_overrides(self)
         self._pub_counters = self.create_publisher(String, 'estimator/counters', P.COUNTERS_QOS)
         logger = self.get_logger()
-        self._stream = StreamEstimator(
-            estimator, max_gap_s=float(self._values['max_gap_s']),
-            max_block_samples=int(self._values['max_block_samples']),
-            source=self._sub.topic_name, now_s=lambda: self.get_clock().now().nanoseconds * 1e-9,
-            warn=lambda text: logger.warning(text, throttle_duration_sec=1.0))
+        rules = dict(max_gap_s=float(self._values['max_gap_s']),
+                     max_block_samples=int(self._values['max_block_samples']),
+                     source=self._sub.topic_name,
+                     now_s=lambda: self.get_clock().now().nanoseconds * 1e-9,
+                     warn=lambda text: logger.warning(text, throttle_duration_sec=1.0))
+        self._array = None
+        if self._channels == 1:
+            self._stream = StreamEstimator(estimator, **rules)
+        else:   # a sensor array: one stream per channel, the same rules
+            self._array = ArrayStream(estimators, **rules)
+            self._stream = self._array.channels[0]
+            self._in_columns = current_columns(self._channels)
+            self._packer = BlockPacker(estimate_columns(self._channels))
+        self._channel_names = ((self._sub.topic_name,) if self._array is None else
+                               tuple(f'{self._sub.topic_name} ch{c}'
+                                     for c in range(self._channels)))
         self._diagnostics = DiagnosticsPublisher(
-            self, self._values, channels=(self._sub.topic_name,),
+            self, self._values, channels=self._channel_names,
             sample_rate_hz=estimator.sample_rate_hz, source=self._status)
         self._timer = self.create_timer(1.0, self._on_timer,  # steady: runs before /clock
                                         clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -92,21 +117,47 @@ class EstimatorNode(Node):
         logger.info(
             f'ready: {estimator.model.describe()} model, order {r.order} reduction '
             f'over {r.band_hz[0]}-{r.band_hz[1]} Hz, fs = {estimator.sample_rate_hz} Hz, '
-            f'leak corner {estimator.inverse.leak_corner_hz} Hz; listening on {self._sub.topic_name}'
+            f'leak corner {estimator.inverse.leak_corner_hz} Hz; listening on '
+            f'{self._sub.topic_name}' + (f' ({self._channels} channels)' if self._array else '')
         )
 
     # -- public helpers -------------------------------------------------------
     def counters(self) -> dict[str, int]:
-        """Copy of the stream counters (invariant: :mod:`ipmc_sensor_ros.estimation.stream`)."""
+        """
+        Copy of the stream counters (invariant: :mod:`ipmc_sensor_ros.estimation.stream`).
+
+        A sensor array: the sums over the channels (:meth:`channel_counters` per channel).
+        """
         with self._lock:
+            if self._array is not None:
+                return self._array.totals()
             return dict(self._stream.counters)
 
-    def _status(self) -> dict:
-        """Counters and estimator state (offset, rest, std, mains line) for the counters topic
-        and /diagnostics."""
+    def channel_counters(self) -> list[dict[str, int]]:
+        """Copies of the counters of every channel (one for a single sensor)."""
         with self._lock:
-            out = dict(self._stream.counters)
-            out.update(self._stream.estimator.status())
+            if self._array is not None:
+                return self._array.counters()
+            return [dict(self._stream.counters)]
+
+    @property
+    def array(self) -> ArrayStream | None:
+        """The sensor-array core when ``channels`` > 1, else None."""
+        return self._array
+
+    def _status(self, stream: StreamEstimator | None = None) -> dict:
+        """
+        Counters and estimator state (offset, rest, std, mains line) of a stream.
+
+        For the counters topic and /diagnostics; a sensor array: ``{channel name: status}``.
+        """
+        if stream is None and self._array is not None:
+            return {name: self._status(ch)
+                    for name, ch in zip(self._channel_names, self._array.channels)}
+        stream = stream or self._stream
+        with self._lock:
+            out = dict(stream.counters)
+            out.update(stream.estimator.status())
         if out['offset_a'] is not None:
             out['estimated_offset_a'] = out['offset_a']   # the filter's own offset (kalman)
         return out
@@ -140,6 +191,8 @@ class EstimatorNode(Node):
 
     # -- data path: unpack -> stream core -> publish ----------------------------
     def _on_current(self, msg: Float64MultiArray) -> None:
+        if self._array is not None:
+            return self._on_current_array(msg)
         with self._lock:
             one = one_sample(msg)
             if one:
@@ -190,14 +243,51 @@ class EstimatorNode(Node):
                 throttle_duration_sec=1.0,
             )
 
-    def _publish_point(self, time_s: float, deflection_m: float) -> None:
-        self._pub_point.publish(point_message(time_s, float(self._values['length_m']),
-                                              deflection_m, self._values['frame_id']))
+    def _publish_point(self, time_s: float, deflection_m: float, channel: int = 0) -> None:
+        self._pub_points[channel].publish(point_message(
+            time_s, float(self._values['length_m']), deflection_m, self._values['frame_id']))
+
+    def _on_current_array(self, msg: Float64MultiArray) -> None:
+        """A sensor array's block: unpack N columns -> :class:`ArrayStream` -> publish."""
+        with self._lock:
+            array = self._array
+            try:
+                times, table = unpack_columns(msg, self._in_columns, values_only_ok=False)
+            except DataError as exc:
+                array.reject(claimed_samples(msg, self._channels + 1), str(exc))
+                return
+            out = array.feed(times, table)
+            if out is None:
+                return
+            t, w, std, has = out
+            for c in np.flatnonzero(has):
+                self._diagnostics.observe(table[:, c], channel=self._channel_names[c])
+            cols = [a for c in range(self._channels) for a in (w[:, c], std[:, c])]
+            try:
+                self._pub_block.publish(self._packer.pack(t, *cols))
+            except Exception as exc:  # back-pressure: counted per channel, never a reset
+                array.unpublished(t.size, short_repr(str(exc)), has)
+                return
+            mode = self._values['publish_points']
+            if mode == 'none':
+                return
+            rows = range(t.size) if mode == 'per_sample' else (t.size - 1,)
+            try:
+                for c in np.flatnonzero(has):
+                    for k in rows:
+                        self._publish_point(float(t[k]), float(w[k, c]), int(c))
+            except Exception as exc:  # the block went out; points are a convenience view
+                self._stream.counters['messages_unpublished'] += 1
+                self.get_logger().warning(
+                    f'could not publish deflection points: {short_repr(str(exc))}',
+                    throttle_duration_sec=1.0)
 
     # -- periodic -------------------------------------------------------------
     def _on_timer(self) -> None:
         self._ticks += 1
         counters = self._status()
+        if self._array is not None:
+            counters = dict(self._array.totals(), channels=list(counters.values()))
         if counters['samples_in'] == 0 and self._ticks % 5 == 1:
             self.get_logger().info(f'waiting for data on {self._sub.topic_name}')
         counters['node'] = self.get_fully_qualified_name()
@@ -219,8 +309,15 @@ class EstimatorNode(Node):
                 values[p.name] = list(p.value) if isinstance(values[p.name], list) else p.value
             try:
                 key = C.model_key(values)
-                new = C.build_estimator(values, self._reduced if key == self._model_key else None)
-                reduced = new.reduced
+                if self._array is None:
+                    new = C.build_estimator(values,
+                                            self._reduced if key == self._model_key else None)
+                    reduced = new.reduced
+                else:
+                    new = C.build_channel_estimators(values, self._reduced)
+                    check_array_estimators(new)
+                    reduced = {C.model_key(C.channel_values(values, c)): e.reduced
+                               for c, e in enumerate(new)}
             except Exception as exc:  # a remote call must never kill the node
                 text = ' '.join(str(exc).split())
                 text = text if len(text) <= 300 else text[:300] + '...'
@@ -239,9 +336,13 @@ class EstimatorNode(Node):
             self._pending = None
             old = self._values
             self._values = values
-            self._stream.max_gap_s = float(values['max_gap_s'])
+            core = self._stream if self._array is None else self._array
+            core.max_gap_s = float(values['max_gap_s'])
             if key != self._model_key or C.filter_key(values) != C.filter_key(old):
-                self._stream.replace_estimator(new)
+                if self._array is None:
+                    self._stream.replace_estimator(new)
+                else:
+                    self._array.replace_estimators(new)
                 self._reduced, self._model_key = reduced, key
                 self.get_logger().info('parameters changed: filter rebuilt ('
                                        + ', '.join(p.name for p in parameters) + ')')
