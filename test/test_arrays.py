@@ -62,8 +62,10 @@ def test_array_equals_single_channel_runs_bit_for_bit():
     times[1700:] += 0.05              # a bridged gap (50 ms < max_gap_s)
     times[2500:] += 1.0               # a gap beyond max_gap_s: a reset
     table = _currents(n, channels)
-    array = ArrayStream(C.build_channel_estimators(_values(channels=channels)))
-    singles = [StreamEstimator(C.build_estimator(_values())) for _ in range(channels)]
+    ests = C.build_channel_estimators(_values(channels=channels))
+    array = ArrayStream(ests)
+    singles = [StreamEstimator(C.build_estimator(_values(), ests[0].reduced))
+               for _ in range(channels)]
     cuts = [0, 1, 7, 250, 251, 900, 1700, 2222, 2500, 2999, n]   # one-sample blocks included
     for a, b in zip(cuts[:-1], cuts[1:]):
         if b - a == 1:
@@ -86,7 +88,8 @@ def test_array_equals_single_channel_runs_bit_for_bit():
 
 def test_bad_value_in_one_channel_is_accounted_there_only():
     channels = 3
-    array = ArrayStream(C.build_channel_estimators(_values(channels=channels)))
+    ests = C.build_channel_estimators(_values(channels=channels))
+    array = ArrayStream(ests)
     t = np.arange(150) / FS
     table = _currents(150, channels)
     table[110, 1] = np.nan            # in the second block, channel 1 only
@@ -102,7 +105,7 @@ def test_bad_value_in_one_channel_is_accounted_there_only():
     assert array.totals()['samples_in'] == 3 * 150
     assert array.check_invariant()
     # the other channels ran on as if channel 1 did not exist
-    single = StreamEstimator(C.build_estimator(_values()))
+    single = StreamEstimator(C.build_estimator(_values(), ests[0].reduced))
     single.feed(t[:100], table[:100, 2])
     np.testing.assert_array_equal(w[:, 2], single.feed(t[100:], table[100:, 2])[1])
 
@@ -125,7 +128,7 @@ def test_model_files_per_channel(tmp_path):
     v = _values(channels=3, model_files=['', str(path), ''])
     ests = C.build_channel_estimators(v)
     ref_soft = C.build_estimator(_values(model_file=str(path)))
-    ref_node = C.build_estimator(_values())
+    ref_node = C.build_estimator(_values(), ests[0].reduced)
     t = np.arange(500) / FS
     i = _currents(500, 1)[:, 0]
     outs = [e.process(t, i)[1] for e in ests]
@@ -145,3 +148,111 @@ def test_column_labels():
     assert deflection_columns(2) == 'time_s,deflection_ch0_m,deflection_ch1_m'
     assert estimate_columns(2) == ('time_s,deflection_ch0_m,deflection_std_ch0_m,'
                                    'deflection_ch1_m,deflection_std_ch1_m')
+
+
+# -- 2. the node in process ---------------------------------------------------------------------
+class _ArrayNode:
+    """The :class:`DirectNode` harness with N-column output capture."""
+
+    def __init__(self, channels, **overrides):
+        from conftest import DirectNode
+
+        self.d = DirectNode(channels=channels, **overrides)
+        self.node = self.d.node
+        self.blocks = []
+        cols = estimate_columns(channels)
+        self.node._pub_block.publish = lambda m: self.blocks.append(unpack_columns(m, cols))
+        self.counters_json = []
+        self.node._pub_counters.publish = lambda m: self.counters_json.append(json.loads(m.data))
+        self.packer_columns = current_columns(channels)
+
+    def send(self, times, table):
+        from ipmc_sensor_ros.nodes.messages import pack_block
+
+        cols = [table[:, c] for c in range(table.shape[1])]
+        self.d.send(pack_block(times, cols[0], self.packer_columns, *cols[1:]))
+
+
+@pytest.fixture
+def array_node():
+    made = []
+
+    def make(channels, **overrides):
+        made.append(_ArrayNode(channels, **overrides))
+        return made[-1]
+    yield make
+    for a in made:
+        a.d.close()
+
+
+def test_node_array_blocks_match_the_core(array_node):
+    from ipmc_sensor_ros.nodes.messages import pack_block
+
+    channels = 3
+    a = array_node(channels)
+    n = 1200
+    t = 50.0 + np.arange(n) / FS
+    table = _currents(n, channels)
+    table[650, 2] = np.inf            # channel 2 of the block 600..800 is rejected there only
+    for k in range(0, n, 200):
+        a.send(t[k:k + 200], table[k:k + 200])
+    a.send(t[:1], table[:1])          # time jumps back: a reset in every channel (not a rule)
+    # one-sample message of an array, then a 1-D (values only) and a wrong-label message
+    a.send(t[1:2], table[1:2])
+    a.d.send(pack_block(t[2:4], table[2:4, 0]))          # 'time_s,current_A': wrong layout
+    assert len(a.blocks) == 8
+    ref = ArrayStream([C.build_estimator(_values(), a.node.deflection_estimator.reduced)
+                       for _ in range(channels)])
+    for k, (times, out) in zip(range(0, n, 200), a.blocks):
+        r_t, r_w, r_std, r_has = ref.feed(t[k:k + 200], table[k:k + 200])
+        np.testing.assert_array_equal(times, r_t)
+        np.testing.assert_array_equal(out[:, 0::2], r_w)     # deflection columns
+        assert np.isnan(out[:, 1::2]).all()                   # leaky: no std model
+    assert np.isnan(a.blocks[3][1][:, 4]).all() and np.isfinite(a.blocks[3][1][:, 0]).all()
+    per = a.node.channel_counters()
+    # the wrong-layout message is counted as the rows of this array its payload fills:
+    # ceil(4 values / 4 columns) = 1
+    assert [p['samples_rejected'] for p in per] == [1, 1, 201]
+    assert [p['messages_rejected'] for p in per] == [1, 1, 2]
+    assert [p['samples_out'] for p in per] == [n + 2, n + 2, n - 198]
+    # every channel resets on the jump back; channel 2 also after its rejected block (its
+    # filter missed 200 ms > max_gap_s of current), as a single sensor would
+    assert [p['resets'] for p in per] == [1, 1, 2], per
+    assert a.node.array.check_invariant()
+    assert a.node.counters()['samples_in'] == 3 * (n + 3)
+    # counters topic: totals plus one entry per channel
+    a.node._on_timer()
+    msg = a.counters_json[-1]
+    assert msg['samples_in'] == 3 * (n + 3) and len(msg['channels']) == channels
+    assert msg['channels'][2]['samples_rejected'] == 201
+    # /diagnostics: the node's aggregate plus one status per channel
+    diag = a.node._diagnostics.update(a.node._status())
+    names = [s.name for s in diag.status]
+    node_name = a.node.get_fully_qualified_name()
+    assert names == [node_name] + [f'{node_name}: {a.node.input_topic} ch{c}'
+                                   for c in range(channels)]
+    values = {kv.key: kv.value for kv in diag.status[3].values}
+    assert values['samples_rejected'] == '201'
+
+
+def test_node_array_parameter_change_reaches_every_channel(array_node):
+    from rclpy.parameter import Parameter
+
+    a = array_node(2)
+    t = np.arange(100) / FS
+    a.send(t, _currents(100, 2))
+    result = a.node.set_parameters([Parameter('leak_corner_hz', value=0.05)])[0]
+    assert result.successful, result.reason
+    assert [ch.estimator.inverse.leak_corner_hz for ch in a.node.array.channels] == [0.05, 0.05]
+    refused = a.node.set_parameters([Parameter('channels', value=3)])[0]
+    assert not refused.successful       # read-only: the array is fixed at start-up
+
+
+def test_node_array_start_up_errors(tmp_path):
+    from conftest import DirectNode
+    from ipmc_sensor_ros.nodes.params import ParameterError as NodeParameterError
+
+    with pytest.raises(NodeParameterError, match="'model_files' is for channels > 1"):
+        DirectNode(model_files=[str(tmp_path / 'x.yaml')])
+    with pytest.raises(NodeParameterError, match="'model_files' has 1 entries for channels = 2"):
+        DirectNode(channels=2, model_files=[''])

@@ -113,7 +113,7 @@ class EstimatorNode(Node):
                                         clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._on_parameters_set)
-        r = self._reduced
+        r = estimator.reduced
         logger.info(
             f'ready: {estimator.model.describe()} model, order {r.order} reduction '
             f'over {r.band_hz[0]}-{r.band_hz[1]} Hz, fs = {estimator.sample_rate_hz} Hz, '
