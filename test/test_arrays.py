@@ -38,7 +38,7 @@ FS = 1000.0
 
 
 def _currents(n: int, channels: int, seed: int = 3) -> np.ndarray:
-    """Realistic DAQ currents: a 1 Hz sensing current of ~1 uA, 30 nA offset, 2 % noise, 50 Hz hum."""
+    """DAQ-like currents: 1 Hz sensing current of 1 uA, 30 nA offset, 2 % noise, 50 Hz hum."""
     rng = np.random.default_rng(seed)
     t = np.arange(n) / FS
     out = np.empty((n, channels))
