@@ -54,7 +54,8 @@ def test_colcon_install_layout(workspace, monkeypatch):
     monkeypatch.setenv('AMENT_PREFIX_PATH', str(workspace / 'install' / PKG))
     prefix = Path(get_package_prefix(PKG))
     assert prefix == workspace / 'install' / PKG
-    for exe in ('ipmc_estimator', 'ipmc_simulator'):
+    for exe in ('ipmc_estimator', 'ipmc_simulator', 'ipmc_estimator_managed',
+                'ipmc_simulator_managed'):
         path = prefix / 'lib' / PKG / exe
         assert path.is_file() and os.access(path, os.X_OK), path
     share = Path(get_package_share_directory(PKG))

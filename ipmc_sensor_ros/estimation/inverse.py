@@ -268,7 +268,9 @@ class InverseEstimator:
         the same order as :func:`scipy.signal.sosfilt`, so the output is identical
         (tested); it avoids sosfilt's fixed per-call cost (~40 us of argument
         handling), which dominates one-sample messages."""
-        state = self._zi[:, :, 0].tolist()
+        state = self._zi_list
+        if state is None:   # the numpy state changed since the last small block
+            state = self._zi_list = self._zi_array[:, :, 0].tolist()
         out = []
         for x_cur in values:
             for (b0, b1, b2, a1, a2), zs in zip(self._coefficients, state):
@@ -277,8 +279,25 @@ class InverseEstimator:
                 zs[1] = b2 * x_cur - a2 * x_new
                 x_cur = x_new
             out.append(x_cur)
-        self._zi[:, :, 0] = state
-        return out
+        return out   # the state stays in the list until a numpy path reads _zi
+
+    @property
+    def _zi(self) -> np.ndarray:
+        """Filter state, shape (sections, 2, channels): the numpy view of it.
+
+        The one-sample path keeps channel 0's state as a list of floats between calls
+        (copying it to and from numpy cost 8 us per sample); reading ``_zi`` writes the
+        list back first, and setting it drops the list.
+        """
+        if self._zi_list is not None:
+            self._zi_array[:, :, 0] = self._zi_list
+            self._zi_list = None
+        return self._zi_array
+
+    @_zi.setter
+    def _zi(self, value: np.ndarray) -> None:
+        self._zi_list = None
+        self._zi_array = value
 
     def process_sample(self, current_a: float) -> float:
         """One sample of a single-channel estimator (alias of :meth:`process_one`)."""

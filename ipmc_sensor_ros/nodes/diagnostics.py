@@ -119,6 +119,23 @@ class DiagnosticsPublisher:
         self._pub.publish(msg)
         return msg
 
+    def announce(self, message: str, level: int = 0) -> DiagnosticArray:
+        """
+        Publish ``message`` at ``level`` (0 OK) as the status of every channel.
+
+        For states no health rule describes, e.g. a managed node being deactivated.
+        """
+        msg = DiagnosticArray()
+        msg.header.stamp = self._node.get_clock().now().to_msg()
+        node_name = self._node.get_fully_qualified_name()
+        health = Health(level, message)
+        if len(self.channels) > 1:
+            msg.status.append(to_status(health, node_name, self.hardware_id))
+        for channel in self.channels:
+            msg.status.append(to_status(health, f'{node_name}: {channel}', self.hardware_id))
+        self._pub.publish(msg)
+        return msg
+
     def _on_timer(self) -> None:
         self.update(self._source())
 

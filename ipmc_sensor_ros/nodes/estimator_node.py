@@ -31,7 +31,7 @@ from ..errors import DataError, IpmcError
 from ..physics.parameters import short_repr
 from . import params as P
 from ..interface.blocks import current_columns, estimate_columns, unpack_columns
-from .messages import (CURRENT_COLUMNS, ESTIMATE_COLUMNS, BlockPacker, claimed_samples,
+from .messages import (CURRENT_COLUMNS, BlockPacker, claimed_samples,
                        one_sample, point_message, unpack_block)
 from .diagnostics import DiagnosticsPublisher
 from .runner import run
@@ -55,6 +55,19 @@ class EstimatorNode(Node):
         P.check_unknown_overrides(self, ESTIMATOR_SPECS, kwargs.get('cli_args'),
                                   default_name='ipmc_estimator')
         P.declare(self, ESTIMATOR_SPECS)
+        self._configure()
+        self._open_io()
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.add_post_set_parameters_callback(self._on_parameters_set)
+        self.get_logger().info(self._ready_text())
+
+    # -- construction, in the steps a managed node takes one by one --------------
+    def _configure(self) -> None:
+        """
+        Read the parameters, build the model, the filter and the stream core.
+
+        ParameterError naming the parameter if they make no estimator.  No topic is created.
+        """
         self._values = P.read(self, ESTIMATOR_SPECS)
         self._channels = int(self._values['channels'])
         try:
@@ -75,24 +88,10 @@ class EstimatorNode(Node):
         self._model_key = C.model_key(self._values)
         self._pending: tuple | None = None
         self._ticks = 0
-
-        qos = P.make_qos(self._values)
-        self._sub = P.create_subscription(
-            self, Float64MultiArray, 'current', self._on_current, qos
-        )
-        self._pub_block = P.create_publisher(self, Float64MultiArray, 'deflection/block', qos)
-        self._packer = BlockPacker(ESTIMATE_COLUMNS)
-        self._pub_points = [P.create_publisher(self, PointMsg, 'deflection', qos)
-                            if self._channels == 1 else
-                            P.create_publisher(self, PointMsg, f'ch{c}/deflection', qos)
-                            for c in range(self._channels)]
-        self._pub_point = self._pub_points[0]
-        P.check_qos_overrides(self)
-        self._pub_counters = self.create_publisher(String, 'estimator/counters', P.COUNTERS_QOS)
         logger = self.get_logger()
+        topic = self.resolve_topic_name('current')
         rules = dict(max_gap_s=float(self._values['max_gap_s']),
-                     max_block_samples=int(self._values['max_block_samples']),
-                     source=self._sub.topic_name,
+                     max_block_samples=int(self._values['max_block_samples']), source=topic,
                      now_s=lambda: self.get_clock().now().nanoseconds * 1e-9,
                      warn=lambda text: logger.warning(text, throttle_duration_sec=1.0))
         self._array = None
@@ -102,24 +101,44 @@ class EstimatorNode(Node):
             self._array = ArrayStream(estimators, **rules)
             self._stream = self._array.channels[0]
             self._in_columns = current_columns(self._channels)
-            self._packer = BlockPacker(estimate_columns(self._channels))
-        self._channel_names = ((self._sub.topic_name,) if self._array is None else
-                               tuple(f'{self._sub.topic_name} ch{c}'
-                                     for c in range(self._channels)))
+        self._channel_names = ((topic,) if self._array is None else
+                               tuple(f'{topic} ch{c}' for c in range(self._channels)))
+
+    def _open_io(self) -> None:
+        """Create the subscription, the publishers, the timer and /diagnostics."""
+        qos = P.make_qos(self._values)
+        self._sub = P.create_subscription(
+            self, Float64MultiArray, 'current', self._on_current, qos
+        )
+        self._pub_block = P.create_publisher(self, Float64MultiArray, 'deflection/block', qos)
+        self._packer = BlockPacker(estimate_columns(self._channels))
+        self._pub_points = [P.create_publisher(self, PointMsg, 'deflection', qos)
+                            if self._channels == 1 else
+                            P.create_publisher(self, PointMsg, f'ch{c}/deflection', qos)
+                            for c in range(self._channels)]
+        self._pub_point = self._pub_points[0]
+        P.check_qos_overrides(self)
+        self._pub_counters = self.create_publisher(String, 'estimator/counters', P.COUNTERS_QOS)
         self._diagnostics = DiagnosticsPublisher(
             self, self._values, channels=self._channel_names,
-            sample_rate_hz=estimator.sample_rate_hz, source=self._status)
+            sample_rate_hz=self._stream.estimator.sample_rate_hz, source=self._status)
         self._timer = self.create_timer(1.0, self._on_timer,  # steady: runs before /clock
                                         clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.add_post_set_parameters_callback(self._on_parameters_set)
+
+    def _close_io(self) -> None:
+        """Destroy what :meth:`_open_io` created (the stream core and its counters stay)."""
+        P.destroy_io(self, ('_timer', '_diagnostics', '_sub', '_pub_block', '_pub_points',
+                            '_pub_counters'))
+        self._pub_point = None
+
+    def _ready_text(self) -> str:
+        estimator = self._stream.estimator
         r = estimator.reduced
-        logger.info(
-            f'ready: {estimator.model.describe()} model, order {r.order} reduction '
-            f'over {r.band_hz[0]}-{r.band_hz[1]} Hz, fs = {estimator.sample_rate_hz} Hz, '
-            f'leak corner {estimator.inverse.leak_corner_hz} Hz; listening on '
-            f'{self._sub.topic_name}' + (f' ({self._channels} channels)' if self._array else '')
-        )
+        return (f'ready: {estimator.model.describe()} model, order {r.order} reduction '
+                f'over {r.band_hz[0]}-{r.band_hz[1]} Hz, fs = {estimator.sample_rate_hz} Hz, '
+                f'leak corner {estimator.inverse.leak_corner_hz} Hz; '
+                f"listening on {self.resolve_topic_name('current')}"
+                + (f' ({self._channels} channels)' if self._array is not None else ''))
 
     # -- public helpers -------------------------------------------------------
     def counters(self) -> dict[str, int]:
@@ -179,7 +198,7 @@ class EstimatorNode(Node):
 
     @property
     def input_topic(self) -> str:
-        return self._sub.topic_name
+        return self._stream.source
 
     @property
     def last_rejection(self) -> str:

@@ -17,6 +17,9 @@ from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescr
                                 ParameterType)
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
+from rclpy.subscription import Subscription
+from rclpy.timer import Timer
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
 
 from ..interface.specs import (GEOMETRY_NAMES, GEOMETRY_SPECS, MATERIAL_NAMES, MATERIAL_SPECS,
@@ -29,7 +32,7 @@ __all__ = ['ParameterError', 'Spec', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_
            'check_choice', 'ParameterError', 'MATERIAL_NAMES', 'GEOMETRY_NAMES', 'markdown_table',
            'params_files', 'check_unknown_overrides', 'section_matches', 'params_file_sections',
            'create_publisher', 'create_subscription', 'check_qos_overrides',
-           'qos_overriding_options']
+           'qos_overriding_options', 'destroy_io']
 
 _TYPES = {float: ParameterType.PARAMETER_DOUBLE, int: ParameterType.PARAMETER_INTEGER,
           str: ParameterType.PARAMETER_STRING, bool: ParameterType.PARAMETER_BOOL,
@@ -173,9 +176,41 @@ def qos_overriding_options():
 
 
 def create_publisher(node, msg_type, topic: str, qos: QoSProfile):
-    """``node.create_publisher`` with the standard QoS override parameters."""
-    return node.create_publisher(msg_type, topic, qos,
-                                 qos_overriding_options=qos_overriding_options())
+    """
+    Create a publisher with the standard QoS override parameters.
+
+    A lifecycle node gets a lifecycle publisher (enabled by its ``on_activate``).
+    """
+    create = getattr(node, 'create_lifecycle_publisher', node.create_publisher)
+    return create(msg_type, topic, qos, qos_overriding_options=qos_overriding_options())
+
+
+def destroy_io(node, names: Iterable[str]) -> None:
+    """
+    Destroy the entities held by the attributes ``names`` of ``node``.
+
+    Timers, publishers and subscriptions are destroyed through the node, anything else
+    (a :class:`~ipmc_sensor_ros.nodes.diagnostics.DiagnosticsPublisher`) by its
+    ``destroy()``, lists and tuples item by item; each attribute becomes None, and None
+    attributes are skipped.
+    """
+    for name in names:
+        held = getattr(node, name, None)
+        setattr(node, name, None)
+        for entity in held if isinstance(held, (list, tuple)) else (held,):
+            _destroy(node, entity)
+
+
+def _destroy(node, entity) -> None:
+    if entity is not None:
+        if isinstance(entity, Timer):
+            node.destroy_timer(entity)
+        elif isinstance(entity, Publisher):
+            node.destroy_publisher(entity)
+        elif isinstance(entity, Subscription):
+            node.destroy_subscription(entity)
+        else:
+            entity.destroy()
 
 
 def create_subscription(node, msg_type, topic: str, callback, qos: QoSProfile):

@@ -67,9 +67,16 @@ class SimulatorNode(Node):
         P.check_unknown_overrides(self, SIMULATOR_SPECS, kwargs.get('cli_args'),
                                   default_name='ipmc_simulator')
         P.declare(self, SIMULATOR_SPECS)
+        self._configure()
+        self._open_io()
+        self.get_logger().info(self._ready_text())
+
+    # -- construction, in the steps a managed node takes one by one --------------
+    def _configure(self) -> None:
+        """Read the parameters and build the simulated sensor (ParameterError); no topic."""
         v = self._values = P.read(self, SIMULATOR_SPECS)
         try:
-            model = P.build_sensor_model(v)
+            self._model = P.build_sensor_model(v)
             self._stimulus, self._stim_t0 = build_stimulus(v)
             self._channels = int(v['channels'])
             field = check_fidelity(v['fidelity'], v['beam_model'])
@@ -79,9 +86,9 @@ class SimulatorNode(Node):
                              current_offset_a=v['current_offset_a'],
                              noise_rms_a=v['noise_rms_a'], seed=v['seed'] + c)
                 self._sims.append(
-                    FieldSensorSimulator(model, v['sample_rate_hz'], beam_model=v['beam_model'],
-                                         **chain) if field
-                    else SensorSimulator(model, v['sample_rate_hz'], **chain))
+                    FieldSensorSimulator(self._model, v['sample_rate_hz'],
+                                         beam_model=v['beam_model'], **chain) if field
+                    else SensorSimulator(self._model, v['sample_rate_hz'], **chain))
             self._sim = self._sims[0]
         except (ParameterError, ParameterError) as exc:
             raise P.ParameterError(str(exc)) from None
@@ -94,6 +101,9 @@ class SimulatorNode(Node):
         self._t_start_ns: int | None = None
         self._done = False
 
+    def _open_io(self) -> None:
+        """Create the publishers, the timers and /diagnostics."""
+        v = self._values
         qos = P.make_qos(v)
         self._pub_current = P.create_publisher(self, Float64MultiArray, 'current', qos)
         self._pub_truth = P.create_publisher(self, Float64MultiArray, 'deflection_truth', qos)
@@ -116,13 +126,20 @@ class SimulatorNode(Node):
             sample_rate_hz=self._fs,
             expected_rate_hz=self._fs * self._rtf if self._rtf > 0.0 else None,
             samples_key='samples_published', source=self._health)
-        self.get_logger().info(
-            f'ready: {model.describe()} model, stimulus '
-            f'{describe_stimulus(self._stimulus, v)}, {self._fs} Hz in blocks of '
-            f'{self._block}, realtime_factor {self._rtf}'
-            + (f', {self._channels} channels' if self._channels > 1 else '')
-            + (f", duration {v['duration_s']} s" if self._total else ', no end')
-            + f'; publishing {self._pub_current.topic_name}')
+
+    def _close_io(self) -> None:
+        """Destroy what :meth:`_open_io` created (the simulation state stays)."""
+        P.destroy_io(self, ('_timer', '_counter_timer', '_diagnostics', '_pub_current',
+                            '_pub_truth', '_pub_counters'))
+
+    def _ready_text(self) -> str:
+        v = self._values
+        return (f'ready: {self._model.describe()} model, stimulus '
+                f'{describe_stimulus(self._stimulus, v)}, {self._fs} Hz in blocks of '
+                f'{self._block}, realtime_factor {self._rtf}'
+                + (f', {self._channels} channels' if self._channels > 1 else '')
+                + (f", duration {v['duration_s']} s" if self._total else ', no end')
+                + f"; publishing {self.resolve_topic_name('current')}")
 
     # -- public helpers -----------------------------------------------------------
     def counters(self) -> dict[str, Any]:
@@ -131,7 +148,7 @@ class SimulatorNode(Node):
                 'done': self._done}
 
     def _channel_names(self) -> tuple[str, ...]:
-        topic = self._pub_current.topic_name
+        topic = self.resolve_topic_name('current')
         if self._channels == 1:
             return (topic,)
         return tuple(f'{topic} ch{c}' for c in range(self._channels))
