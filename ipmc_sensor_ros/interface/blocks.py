@@ -27,8 +27,8 @@ from ..errors import DataError
 from ..physics.parameters import short_repr
 
 __all__ = ['DataError', 'SAMPLE_LABEL', 'CURRENT_COLUMNS', 'DEFLECTION_COLUMNS',
-           'ESTIMATE_COLUMNS', 'current_columns', 'deflection_columns', 'estimate_columns', 'unpack_columns',
-           'unpack_pairs']
+           'ESTIMATE_COLUMNS', 'current_columns', 'deflection_columns', 'estimate_columns',
+           'unpack_columns', 'unpack_pairs']
 
 #: Label of the row dimension.
 SAMPLE_LABEL = 'sample'

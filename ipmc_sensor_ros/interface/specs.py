@@ -295,7 +295,7 @@ def build_estimator(
 
 def channel_values(values: Mapping[str, Any], channel: int) -> dict[str, Any]:
     """
-    The parameter values of one channel of a sensor array.
+    Return the parameter values of one channel of a sensor array.
 
     The node's values, with ``model_file`` replaced by the channel's entry of ``model_files``
     when that entry is not empty.  Raises :class:`ParameterError` when ``model_files`` has

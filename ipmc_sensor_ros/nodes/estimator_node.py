@@ -143,7 +143,7 @@ class EstimatorNode(Node):
     # -- public helpers -------------------------------------------------------
     def counters(self) -> dict[str, int]:
         """
-        Copy of the stream counters (invariant: :mod:`ipmc_sensor_ros.estimation.stream`).
+        Return a copy of the stream counters (invariant: module :mod:`..estimation.stream`).
 
         A sensor array: the sums over the channels (:meth:`channel_counters` per channel).
         """
@@ -153,7 +153,7 @@ class EstimatorNode(Node):
             return dict(self._stream.counters)
 
     def channel_counters(self) -> list[dict[str, int]]:
-        """Copies of the counters of every channel (one for a single sensor)."""
+        """Return copies of the counters of every channel (one for a single sensor)."""
         with self._lock:
             if self._array is not None:
                 return self._array.counters()
@@ -267,7 +267,7 @@ class EstimatorNode(Node):
             time_s, float(self._values['length_m']), deflection_m, self._values['frame_id']))
 
     def _on_current_array(self, msg: Float64MultiArray) -> None:
-        """A sensor array's block: unpack N columns -> :class:`ArrayStream` -> publish."""
+        """Estimate a sensor array's block: unpack N columns, :class:`ArrayStream`, publish."""
         with self._lock:
             array = self._array
             try:
