@@ -198,7 +198,7 @@ class EstimatorNode(Node):
 
     @property
     def input_topic(self) -> str:
-        return self._stream.source
+        return self._stream.source if self._array is None else self._array.source
 
     @property
     def last_rejection(self) -> str:
