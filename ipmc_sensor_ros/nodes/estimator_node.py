@@ -7,6 +7,10 @@ stream: values, times, gaps, resets, counters) -> publish: ``deflection/block``
 (``PointStamped`` (L, 0, w) in the clamp frame: per sample / last of block / none),
 ``estimator/counters`` (JSON, 1 Hz) and ``/diagnostics``.  Parameter changes are validated by
 building the new estimator and applied without an output jump.  README "ROS 2 interface".
+
+``channels`` > 1 (a sensor array): N-column blocks through
+:class:`~ipmc_sensor_ros.estimation.array.ArrayStream` (one stream core per channel), points on
+``ch<c>/deflection``, one /diagnostics status per channel; README "Sensor arrays".
 """
 from __future__ import annotations
 
