@@ -1,7 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Node benchmarks: sustained input rate without loss and added latency of the estimator
-node against a pass-through node (subscribe, copy, publish) in the same harness, and the
-simulator's real-time factor.
+"""
+Node benchmarks: the estimator node against a pass-through node, and the simulator.
+
+Sustained input rate without loss and added latency of the estimator node against a
+pass-through node (subscribe, copy, publish) in the same harness, and the simulator's
+real-time factor.
 
 Harness: three processes on one machine, an isolated ROS_DOMAIN_ID, DDS on
 loopback.  A driver process publishes ``current`` blocks (n samples per message,
@@ -24,7 +27,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-PASSTHROUGH_CLASS = r'''
+PASSTHROUGH_CLASS = r"""
 import sys, rclpy
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
@@ -43,7 +46,7 @@ class PassThrough(Node):
         out.layout.dim[1].label = "time_s,deflection_m"
         out.data = msg.data
         self.pub.publish(out)
-'''
+"""
 
 PASSTHROUGH = PASSTHROUGH_CLASS + r"""
 from ipmc_sensor_ros.nodes.runner import make_executor, spin_until_signalled
@@ -57,12 +60,13 @@ except KeyboardInterrupt:
     pass
 """
 
-DRIVER = r'''
+DRIVER = r"""
 import sys, time, rclpy, numpy as np
 from std_msgs.msg import Float64MultiArray
 from ipmc_sensor_ros.nodes import params as P
 from ipmc_sensor_ros.nodes.messages import pack_block
-rate, n, duration, fs = float(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3]), float(sys.argv[4])
+rate, n = float(sys.argv[1]), int(sys.argv[2])
+duration, fs = float(sys.argv[3]), float(sys.argv[4])
 epoch = float(sys.argv[5])   # times are seconds since this shared epoch: float64 resolution
                              # at today's epoch (0.24 us) could not carry 1 us sample periods
 rclpy.init()
@@ -97,10 +101,10 @@ print(f"SENT {k} {k * n} {time.monotonic() - t0:.6f}", flush=True)
 time.sleep(2.0)
 node.destroy_node()
 rclpy.shutdown()
-'''
+"""
 
 
-NODE_CPU = r'''
+NODE_CPU = r"""
 import os, sys, time, random, subprocess
 import rclpy
 from rclpy.parameter import Parameter
@@ -113,7 +117,8 @@ if kind == "estimator":
     from ipmc_sensor_ros.nodes.estimator_node import EstimatorNode
     node = EstimatorNode(parameter_overrides=[
         Parameter("sample_rate_hz", value=rate * n), Parameter("publish_points", value="none"),
-        Parameter("max_gap_s", value=1.0), Parameter("band_high_hz", value=min(50.0, rate * n / 4))])
+        Parameter("max_gap_s", value=1.0),
+        Parameter("band_high_hz", value=min(50.0, rate * n / 4))])
     handled = lambda: node.counters()["messages_in"]
 else:
     ns = {}
@@ -122,21 +127,25 @@ else:
     handled = lambda: node.handled
 ex = make_executor()
 ex.add_node(node)
-drv = subprocess.Popen([sys.executable, "-c", DRIVER, str(rate), str(n), str(duration), str(rate * n),
-                        repr(time.time() - 100.0)], env=_env(domain), stdout=subprocess.DEVNULL)
+drv = subprocess.Popen([sys.executable, "-c", DRIVER, str(rate), str(n), str(duration),
+                        str(rate * n), repr(time.time() - 100.0)], env=_env(domain),
+                       stdout=subprocess.DEVNULL)
 while handled() == 0:
     ex.spin_once(timeout_sec=0.05)
 cpu0, m0 = time.process_time(), handled()
 while drv.poll() is None:
     ex.spin_once(timeout_sec=0.05)
 print("CPU", time.process_time() - cpu0, handled() - m0)
-'''
+"""
 
 
 def bench_node_cpu(smoke: bool = False) -> list[dict]:
-    """CPU per message of each node (whole process: executor, DDS threads, callback) under
-    the same driver at a fixed rate, each in a fresh process: a steadier comparison than
-    the sustained rate, which three processes sharing two cores make noisy."""
+    """
+    CPU per message of each node under the same driver at a fixed rate.
+
+    Whole process: executor, DDS threads, callback; each node in a fresh process: a steadier
+    comparison than the sustained rate, which three processes sharing two cores make noisy.
+    """
     rows = []
     for n, rate in ((1, 4000.0), (1000, 500.0)):
         cost = {}
@@ -164,8 +173,12 @@ def _env(domain: int) -> dict:
 
 
 def _run_once(kind: str, rate: float, n: int, duration: float) -> dict:
-    """One trial in a fresh process: a long-lived process that creates and destroys many
-    DDS participants was seen to lose messages in later trials."""
+    """
+    One trial in a fresh process.
+
+    A long-lived process that creates and destroys many DDS participants was seen to lose
+    messages in later trials.
+    """
     import json
 
     code = ('import json, sys; from bench.bench_nodes import _trial; '
@@ -289,7 +302,11 @@ def _ladder(n: int) -> list[float]:
 
 
 def _ok(r: dict) -> bool:
-    """A trial passes when nothing was lost and the driver achieved the requested rate."""
+    """
+    Tell whether a trial passes.
+
+    It passes when nothing was lost and the driver achieved the requested rate.
+    """
     print(f"  node trial {r['kind']:11s} {r['n']:5d}-sample msgs at {r['rate_msg_s']:8.0f} msg/s: "
           f"sent {r['sent']}, received {r['received']}, achieved {r.get('achieved_msg_s', 0):.0f} "
           f"msg/s, node CPU {r.get('node_cpu_fraction', float('nan')):.0%} "
@@ -368,7 +385,8 @@ def bench_nodes(smoke: bool = False, sizes=(1, 1000), extras: bool = True) -> li
                 f"{e['rate_msg_s']:.0f} msg/s",
                 'value': 100.0 * e.get('node_cpu_fraction', float('nan')),
                 'unit': '% of a core',
-                'baseline': f"pass-through same rate {100.0 * same.get('node_cpu_fraction', float('nan')):.0f} %",
+                'baseline': 'pass-through same rate '
+                f"{100.0 * same.get('node_cpu_fraction', float('nan')):.0f} %",
                 'ratio': e.get('node_cpu_fraction', float('nan'))
                 / same.get('node_cpu_fraction', float('nan')),
                 'target': '-',
@@ -381,8 +399,11 @@ def bench_nodes(smoke: bool = False, sizes=(1, 1000), extras: bool = True) -> li
 
 
 def bench_simulator_rtf(smoke: bool = False) -> dict:
-    """Simulated seconds per wall second of the simulator node in fast mode at 1 kHz,
-    in process (the node's publish path, no subscriber)."""
+    """
+    Return the simulated seconds per wall second of the simulator node in fast mode at 1 kHz.
+
+    In process (the node's publish path, no subscriber).
+    """
     import rclpy
     from rclpy.parameter import Parameter
 

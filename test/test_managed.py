@@ -48,7 +48,11 @@ QOS = P.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'})
 
 
 def crank_messages(seconds: float, t0: float = 1000.0, block: int = 100) -> list:
-    """Current blocks of the default sensor (node defaults) driven by a 5 Hz crank-slider."""
+    """
+    Return the current blocks of the default sensor (node defaults).
+
+    The sensor is driven by a 5 Hz crank-slider.
+    """
     model = SensorModel.named('h2', Geometry(0.022, 0.007, 0.00036))
     k = np.arange(int(round(seconds * FS)))
     _, i = SensorSimulator(model, FS).run(CrankSlider(5.0), k / FS)
@@ -120,7 +124,7 @@ class Client:
 
 
 def plain_estimates(messages) -> np.ndarray:
-    """What the plain ``ipmc_estimator`` publishes for ``messages`` (default parameters)."""
+    """Return what the plain ``ipmc_estimator`` publishes for ``messages`` (default parameters)."""
     direct = DirectNode()
     try:
         for msg in messages:

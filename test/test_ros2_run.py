@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The ``ros2 run`` contract: colcon builds the package and both executables run.
+"""
+The ``ros2 run`` contract: colcon builds the package and both executables run.
 
 There is no ``ros2`` CLI here, so the test does what ``ros2 run ipmc_sensor_ros
 <exe>`` does: resolve the package prefix through the ament index
@@ -69,7 +70,7 @@ def test_colcon_install_layout(workspace, monkeypatch):
     ('ipmc_simulator', 'simulator.yaml', 'motor_frequency_hz:=5.0', 'motor_frequency_hz=5,'),
 ])
 def test_ros2_run_starts_and_exits_zero_on_sigint(workspace, tmp_path, monkeypatch, exe, config,
-                                                   override, echo):
+                                                  override, echo):
     from ament_index_python.packages import get_package_prefix, get_package_share_directory
 
     install = workspace / 'install' / PKG

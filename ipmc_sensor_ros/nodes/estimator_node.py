@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""ROS 2 node ``ipmc_estimator``: sensing current (A) in, tip deflection (m) out.
+"""
+ROS 2 node ``ipmc_estimator``: sensing current (A) in, tip deflection (m) out.
 
 Unpack -> :class:`~ipmc_sensor_ros.estimation.stream.StreamEstimator` (every rule of the
 stream: values, times, gaps, resets, counters) -> publish: ``deflection/block``
@@ -50,8 +51,12 @@ _ERRORS = (IpmcError,)  # every deliberate error of the package names the parame
 
 
 class EstimatorNode(Node):
-    """The estimator node (module docstring); ``kwargs`` go to :class:`rclpy.node.Node`, so
-    several nodes can share a process.  ParameterError if the parameters make no estimator."""
+    """
+    The estimator node (module docstring).
+
+    ``kwargs`` go to :class:`rclpy.node.Node`, so several nodes can share a process.
+    ParameterError if the parameters make no estimator.
+    """
 
     def __init__(self, node_name: str = 'ipmc_estimator', **kwargs: Any):
         super().__init__(node_name, **kwargs)
@@ -147,9 +152,10 @@ class EstimatorNode(Node):
     # -- public helpers -------------------------------------------------------
     def counters(self) -> dict[str, int]:
         """
-        Return a copy of the stream counters (invariant: module :mod:`..estimation.stream`).
+        Return a copy of the stream counters.
 
-        A sensor array: the sums over the channels (:meth:`channel_counters` per channel).
+        Invariant: :mod:`ipmc_sensor_ros.estimation.stream`.  A sensor array: the sums over the
+        channels (:meth:`channel_counters` per channel).
         """
         with self._lock:
             if self._array is not None:
@@ -187,17 +193,17 @@ class EstimatorNode(Node):
 
     @property
     def stream(self) -> StreamEstimator:
-        """The stream core (rules, counters) this node feeds."""
+        """Return the stream core (rules, counters) this node feeds."""
         return self._stream
 
     @property
     def estimator(self) -> InverseEstimator:
-        """The discrete inverse filter currently in use (replaced on parameter changes)."""
+        """Return the discrete inverse filter currently in use (replaced on parameter changes)."""
         return self._stream.estimator.inverse
 
     @property
     def deflection_estimator(self) -> DeflectionEstimator:
-        """The core model-aware estimator (filter + effects) currently in use."""
+        """Return the core model-aware estimator (filter + effects) currently in use."""
         return self._stream.estimator
 
     @property
@@ -241,8 +247,12 @@ class EstimatorNode(Node):
                 self._publish(self._packer.pack(t, w, std), t, w, t.size)
 
     def _publish(self, block_msg: Float64MultiArray, times, deflections, n: int) -> None:
-        """Publish a block and its points; a publish that cannot complete (e.g. a stalled
-        reliable subscriber) is counted by the stream core, never fatal, never a reset."""
+        """
+        Publish a block and its points.
+
+        a publish that cannot complete (e.g. a stalled reliable subscriber) is counted
+        by the stream core, never fatal, never a reset.
+        """
         try:
             self._pub_block.publish(block_msg)
         except Exception as exc:  # rclpy raises RCLError and others: back-pressure, not a bug
@@ -322,8 +332,12 @@ class EstimatorNode(Node):
 
     # -- parameters -------------------------------------------------------------
     def _on_set_parameters(self, parameters) -> SetParametersResult:
-        """Validate a change by building the new design; nothing is applied here.  Any
-        failure to build, whatever the exception, refuses the change (one-line reason)."""
+        """
+        Validate a change by building the new design; nothing is applied here.
+
+        Any failure to build, whatever the exception, refuses the change (one-line
+        reason).
+        """
         with self._lock:
             self._pending = None
             values = dict(self._values)

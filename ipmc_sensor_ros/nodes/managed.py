@@ -83,7 +83,7 @@ class ManagedMixin:
 
     @property
     def configured(self) -> bool:
-        """True in the inactive and active states (model and filter built)."""
+        """Return True in the inactive and active states (model and filter built)."""
         return self._configured
 
     # -- transitions ------------------------------------------------------------------

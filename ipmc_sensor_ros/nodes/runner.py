@@ -66,19 +66,19 @@ def executor_name() -> str:
     wanted = os.environ.get('IPMC_EXECUTOR', default).strip().lower()
     if wanted not in ('events', 'single'):
         raise ParameterError(f'environment variable IPMC_EXECUTOR={wanted!r}: expected '
-                                 "'events' or 'single'")
+                             "'events' or 'single'")
     return 'events' if wanted == 'events' and EventsExecutor is not None else 'single'
 
 
 def make_executor(context=None):
-    """The executor of the nodes (see the module docstring)."""
+    """Return the executor of the nodes (see the module docstring)."""
     if executor_name() == 'events':
         return EventsExecutor(context=context)
     return SingleThreadedExecutor(context=context)
 
 
 def _stopping(context=None) -> bool:
-    """True once a signal (or anyone) has shut the rclpy context down."""
+    """Return True once a signal (or anyone) has shut the rclpy context down."""
     try:
         return not rclpy.ok(context=context)
     except Exception:  # noqa: BLE001 - a destroyed context is stopping too
@@ -123,7 +123,8 @@ def _report_configuration_error(name: str, exc: Exception) -> None:
 
 
 def run(node_factory, name: str, args=None) -> int:
-    """Init rclpy, build the node, spin until SIGINT/SIGTERM/shutdown; return the exit code.
+    """
+    Init rclpy, build the node, spin until SIGINT/SIGTERM/shutdown; return the exit code.
 
     ``node_factory()`` builds the node (a ``Node`` or a ``LifecycleNode``).
 

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""ROS 2 node ``ipmc_simulator``: a simulated IPMC sensor and its DAQ.
+"""
+ROS 2 node ``ipmc_simulator``: a simulated IPMC sensor and its DAQ.
 
 Publishes the measured sensing current on ``current`` (``time_s,current_A``
 blocks, the estimator's input layout) and the ground-truth tip deflection on
@@ -56,7 +57,8 @@ MIN_TICK_S = 1e-3
 
 
 class SimulatorNode(Node):
-    """Simulated sensor + DAQ node; see the module docstring and README "ROS 2 interface".
+    """
+    Simulated sensor + DAQ node; see the module docstring and README "ROS 2 interface".
 
     ``kwargs`` go to :class:`rclpy.node.Node`.  Raises
     :class:`~ipmc_sensor_ros.nodes.params.ParameterError` on invalid parameters.
