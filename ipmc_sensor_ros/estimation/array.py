@@ -58,6 +58,7 @@ class ArrayStream:
         As for :class:`StreamEstimator` (shared by the channels).
     source : str
         Topic or file; channel ``c`` is named ``"<source> ch<c>"`` in its messages.
+
     """
 
     def __init__(self, estimators: Sequence[DeflectionEstimator], *, max_gap_s: float = 0.1,
@@ -149,6 +150,7 @@ class ArrayStream:
         ``(time_s, deflection_m, std_m, has_estimate)``: arrays of shape (n,), (n, channels),
         (n, channels) and (channels,) bool — a channel without an estimate (its samples
         rejected or dropped, counted in that channel) is NaN; ``None`` when no channel has one.
+
         """
         table = np.asarray(currents, dtype=float)
         if table.ndim != 2 or table.shape[1] != len(self.channels):

@@ -171,7 +171,7 @@ class EstimatorNode(Node):
 
     @property
     def array(self) -> ArrayStream | None:
-        """The sensor-array core when ``channels`` > 1, else None."""
+        """Return the sensor-array core when ``channels`` > 1, else None."""
         return self._array
 
     def _status(self, stream: StreamEstimator | None = None) -> dict:
