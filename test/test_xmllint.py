@@ -22,7 +22,7 @@ def test_package_xml_format_3():
     assert re.fullmatch(r'\d+\.\d+\.\d+', root.findtext('version'))
     assert root.find('maintainer').get('email')
     assert root.find('export/build_type').text == 'ament_python'
-    version = re.search(r'version="([\d.]+)"', (ROOT / 'setup.py').read_text()).group(1)
+    version = re.search(r'version=[\'"]([\d.]+)[\'"]', (ROOT / 'setup.py').read_text()).group(1)
     assert version == root.findtext('version')
 
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import sys
 import threading
+import time
 from typing import Any
 
 import numpy as np
@@ -25,6 +26,7 @@ from rcl_interfaces.msg import SetParametersResult
 from geometry_msgs.msg import PointStamped as PointMsg
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray, String
 
 from ..interface import specs as C
@@ -46,6 +48,9 @@ __all__ = ['EstimatorNode', 'ESTIMATOR_SPECS', 'COUNTER_NAMES', 'PUBLISH_POINTS'
 PUBLISH_POINTS = C.PUBLISH_POINTS
 
 ESTIMATOR_SPECS = C.ESTIMATOR_SPECS
+
+#: A model rebuild starts once no parameter change arrived for this long, s (coalescing).
+REBUILD_QUIET_S = 0.1
 
 _ERRORS = (IpmcError,)  # every deliberate error of the package names the parameter
 
@@ -96,6 +101,12 @@ class EstimatorNode(Node):
                                    'loaded once, not re-read')
         self._model_key = C.model_key(self._values)
         self._pending: tuple | None = None
+        self._built_values = self._values      # the values the running filter was built from
+        self._wanted: dict | None = None       # accepted values awaiting a rebuild
+        self._rebuilt: tuple | None = None     # (values, estimator) built, not yet swapped in
+        self._builder: threading.Thread | None = None
+        self._changed: set[str] = set()
+        self.rebuilds = 0                      #: filters swapped in after parameter changes
         self._ticks = 0
         logger = self.get_logger()
         topic = self.resolve_topic_name('current')
@@ -199,11 +210,13 @@ class EstimatorNode(Node):
     @property
     def estimator(self) -> InverseEstimator:
         """Return the discrete inverse filter currently in use (replaced on parameter changes)."""
+        self.settle()
         return self._stream.estimator.inverse
 
     @property
     def deflection_estimator(self) -> DeflectionEstimator:
         """Return the core model-aware estimator (filter + effects) currently in use."""
+        self.settle()
         return self._stream.estimator
 
     @property
@@ -223,6 +236,8 @@ class EstimatorNode(Node):
         if self._array is not None:
             return self._on_current_array(msg)
         with self._lock:
+            if self._rebuilt is not None:
+                self._apply_rebuilt()
             one = one_sample(msg)
             if one:
                 out = self._stream.feed_one(*one)
@@ -283,6 +298,8 @@ class EstimatorNode(Node):
     def _on_current_array(self, msg: Float64MultiArray) -> None:
         """Estimate a sensor array's block: unpack N columns, :class:`ArrayStream`, publish."""
         with self._lock:
+            if self._rebuilt is not None:
+                self._apply_rebuilt()
             array = self._array
             try:
                 times, table = unpack_columns(msg, self._in_columns, values_only_ok=False)
@@ -333,10 +350,12 @@ class EstimatorNode(Node):
     # -- parameters -------------------------------------------------------------
     def _on_set_parameters(self, parameters) -> SetParametersResult:
         """
-        Validate a change by building the new design; nothing is applied here.
+        Validate a change; nothing is applied here.
 
-        Any failure to build, whatever the exception, refuses the change (one-line
-        reason).
+        Every value is checked and the estimator is built on the current reduction (cheap);
+        a model change must also give a finite, non-zero response over the band.  Any failure,
+        whatever the exception, refuses the change with a one-line reason.  The new reduction
+        itself is built later, off the data path (:meth:`_rebuild_worker`).
         """
         with self._lock:
             self._pending = None
@@ -350,43 +369,136 @@ class EstimatorNode(Node):
                 values[p.name] = list(p.value) if isinstance(values[p.name], list) else p.value
             try:
                 key = C.model_key(values)
-                if self._array is None:
-                    new = C.build_estimator(values,
-                                            self._reduced if key == self._model_key else None)
-                    reduced = new.reduced
-                else:
-                    new = C.build_channel_estimators(values, self._reduced)
-                    check_array_estimators(new)
-                    reduced = {C.model_key(C.channel_values(values, c)): e.reduced
-                               for c, e in enumerate(new)}
+                new = self._build(values, validate=True)
+                if key != self._model_key:
+                    band = np.geomspace(values['band_low_hz'], values['band_high_hz'], 64)
+                    h = np.array([e.model.frequency_response(band)
+                                  for e in (new if isinstance(new, list) else [new])])
+                    if not np.all(np.isfinite(h)) or not np.all(np.abs(h) > 0):
+                        raise P.ParameterError('these parameter values give a non-finite or '
+                                               'zero sensor response over the band')
             except Exception as exc:  # a remote call must never kill the node
                 text = ' '.join(str(exc).split())
                 text = text if len(text) <= 300 else text[:300] + '...'
                 if not isinstance(exc, _ERRORS):
                     text = f'{type(exc).__name__}: {text}'
                 return SetParametersResult(successful=False, reason=text)
-            self._pending = (values, key, reduced, new)
+            self._pending = (values, key, new)
             return SetParametersResult(successful=True)
 
     def _on_parameters_set(self, parameters) -> None:
-        """Apply the validated change: swap the filter, output continues without a jump."""
+        """Apply a validated change: a filter change at once, a model change once rebuilt."""
         with self._lock:
             if self._pending is None:
                 return
-            values, key, reduced, new = self._pending
+            values, key, new = self._pending
             self._pending = None
             old = self._values
             self._values = values
-            core = self._stream if self._array is None else self._array
-            core.max_gap_s = float(values['max_gap_s'])
-            if key != self._model_key or C.filter_key(values) != C.filter_key(old):
-                if self._array is None:
-                    self._stream.replace_estimator(new)
-                else:
-                    self._array.replace_estimators(new)
-                self._reduced, self._model_key = reduced, key
-                self.get_logger().info('parameters changed: filter rebuilt ('
-                                       + ', '.join(p.name for p in parameters) + ')')
+            (self._stream if self._array is None else self._array).max_gap_s = float(
+                values['max_gap_s'])
+            self._changed.update(p.name for p in parameters)
+            if (key != self._model_key or self._wanted is not None or self._builder is not None
+                    or self._rebuilt is not None):
+                self._wanted = values        # coalesced: only the latest values are built
+                if self._builder is None:
+                    self._builder = threading.Thread(target=self._rebuild_worker, daemon=True)
+                    self._builder.start()
+            elif C.filter_key(values) != C.filter_key(old):
+                self._swap(new)
+                self._built_values = values
+                self._log_rebuilt()
+
+    def _rebuild_worker(self) -> None:
+        """
+        Build the reduction of the latest accepted values off the executor thread.
+
+        Changes arriving within :data:`REBUILD_QUIET_S` of each other are built once; the data
+        path keeps the old filter meanwhile (no input is lost to a long build) and swaps at its
+        next message (:meth:`_apply_rebuilt`).  A build that fails despite validation reverts
+        the parameters to the last built values, with an error naming the failure.
+        """
+        while True:
+            while True:
+                with self._lock:
+                    seen = self._wanted
+                time.sleep(REBUILD_QUIET_S)
+                with self._lock:
+                    if self._wanted is seen:
+                        self._wanted = None
+                        break
+            if seen is None:
+                with self._lock:
+                    self._builder = None
+                return
+            try:
+                new, error = self._build(seen), None
+            except Exception as exc:  # noqa: B902 - reverted below, never fatal
+                new, error = None, exc
+            with self._lock:
+                if self._wanted is not None:
+                    continue                   # superseded while building
+                if new is not None:
+                    self._rebuilt = (seen, new)
+                    self._builder = None
+                    return
+                self._builder = None
+                old = self._built_values
+                self._rebuilt = None
+            self.get_logger().error(
+                f'parameter change could not be built, reverted: {short_repr(str(error))}')
+            self.set_parameters([Parameter(k, value=old[k]) for k in C.MODEL_KEYS
+                                 if old[k] != seen[k]])
+            return
+
+    def _build(self, values, validate: bool = False):
+        """
+        Build the estimator of ``values``: one, or a list for a sensor array.
+
+        ``validate``: reuse the running reductions (a cheap check of the values; the new
+        reduction is built later, off the data path).
+        """
+        if self._array is None:
+            return C.build_estimator(values, self._reduced if validate else None)
+        reduced = ({C.model_key(C.channel_values(values, c)): ch.estimator.reduced
+                    for c, ch in enumerate(self._array.channels)} if validate else None)
+        new = C.build_channel_estimators(values, reduced)
+        check_array_estimators(new)
+        return new
+
+    def _swap(self, new) -> None:
+        """Swap in ``new`` (:meth:`_build`), continuing each channel's output."""
+        if self._array is None:
+            self._stream.replace_estimator(new)
+        else:
+            self._array.replace_estimators(new)
+
+    def _apply_rebuilt(self) -> None:
+        """Swap in a filter the worker has built (caller holds the lock)."""
+        values, new = self._rebuilt
+        self._rebuilt = None
+        self._swap(new)
+        self._reduced = (new.reduced if self._array is None else
+                         {C.model_key(C.channel_values(values, c)): e.reduced
+                          for c, e in enumerate(new)})
+        self._model_key = C.model_key(values)
+        self._built_values = values
+        self._log_rebuilt()
+
+    def _log_rebuilt(self) -> None:
+        self.rebuilds += 1
+        self.get_logger().info('parameters changed: filter rebuilt ('
+                               + ', '.join(sorted(self._changed)) + ')')
+        self._changed.clear()
+
+    def settle(self, timeout_s: float = 60.0) -> None:
+        """Wait for a pending model rebuild and apply it (in-process use and tests)."""
+        builder = self._builder
+        if builder is not None:
+            builder.join(timeout_s)
+        with self._lock:
+            if self._rebuilt is not None:
+                self._apply_rebuilt()
 
 
 def main(args=None) -> int:
