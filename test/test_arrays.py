@@ -244,6 +244,13 @@ def test_node_array_parameter_change_reaches_every_channel(array_node):
     result = a.node.set_parameters([Parameter('leak_corner_hz', value=0.05)])[0]
     assert result.successful, result.reason
     assert [ch.estimator.inverse.leak_corner_hz for ch in a.node.array.channels] == [0.05, 0.05]
+    # a model change is rebuilt off the data path, then swapped into every channel
+    result = a.node.set_parameters([Parameter('length_m', value=0.03)])[0]
+    assert result.successful, result.reason
+    a.node.settle()
+    assert [ch.estimator.model.geometry.length_m for ch in a.node.array.channels] == [0.03, 0.03]
+    a.send(0.1 + t, _currents(100, 2))
+    assert a.node.array.check_invariant() and len(a.blocks) == 2
     refused = a.node.set_parameters([Parameter('channels', value=3)])[0]
     assert not refused.successful       # read-only: the array is fixed at start-up
 
