@@ -28,7 +28,8 @@ from ..errors import DataError
 from ..physics.parameters import short_repr
 
 __all__ = ['DataError', 'SAMPLE_LABEL', 'CURRENT_COLUMNS', 'DEFLECTION_COLUMNS',
-           'ESTIMATE_COLUMNS', 'unpack_columns', 'unpack_pairs']
+           'ESTIMATE_COLUMNS', 'current_columns', 'deflection_columns', 'estimate_columns',
+           'unpack_columns', 'unpack_pairs']
 
 #: Label of the row dimension.
 SAMPLE_LABEL = 'sample'
@@ -39,6 +40,43 @@ DEFLECTION_COLUMNS = 'time_s,deflection_m'
 #: Column label of the estimator's output blocks: seconds, metres, and the standard deviation
 #: of each estimate, metres.
 ESTIMATE_COLUMNS = 'time_s,deflection_m,deflection_std_m'
+
+
+def current_columns(channels: int = 1) -> str:
+    """
+    Column label of current blocks of a sensor array of ``channels`` sensors.
+
+    One channel: :data:`CURRENT_COLUMNS`; several: ``time_s,current_ch0_A,current_ch1_A,...``
+    (one current column per channel, amperes, sharing the sample times).
+    """
+    if channels == 1:
+        return CURRENT_COLUMNS
+    return 'time_s,' + ','.join(f'current_ch{c}_A' for c in range(channels))
+
+
+def deflection_columns(channels: int = 1) -> str:
+    """
+    Column label of deflection blocks (e.g. the simulator's truth) of ``channels`` sensors.
+
+    One channel: :data:`DEFLECTION_COLUMNS`; several: ``time_s,deflection_ch0_m,...``.
+    """
+    if channels == 1:
+        return DEFLECTION_COLUMNS
+    return 'time_s,' + ','.join(f'deflection_ch{c}_m' for c in range(channels))
+
+
+def estimate_columns(channels: int = 1) -> str:
+    """
+    Column label of the estimator's output blocks for ``channels`` sensors.
+
+    One channel: :data:`ESTIMATE_COLUMNS`; several: ``time_s,deflection_ch0_m,
+    deflection_std_ch0_m,deflection_ch1_m,...`` (a deflection and its standard deviation per
+    channel, metres; NaN where that channel has no estimate for the block).
+    """
+    if channels == 1:
+        return ESTIMATE_COLUMNS
+    return 'time_s,' + ','.join(f'deflection_ch{c}_m,deflection_std_ch{c}_m'
+                                for c in range(channels))
 
 
 def _data(msg) -> np.ndarray:

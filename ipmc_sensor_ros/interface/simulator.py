@@ -66,6 +66,11 @@ SIMULATOR_OWN_SPECS = (
     Spec('noise_rms_a', 0.0, float, 'measurement chain: white Gaussian noise RMS, A',
          low=0.0, high=1.0),
     Spec('seed', 0, int, 'seed of the noise generator', low=0, high=2 ** 31 - 1),
+    Spec('channels', 1, int, "sensors in the array: 'current' and 'deflection_truth' blocks "
+         "carry one column per channel ('time_s,current_ch0_A,...' when > 1); each channel is "
+         'its own sensor with its own noise (seed + channel)', low=1, high=256),
+    Spec('channel_time_offset_s', 0.0, float, 'channel c sees the stimulus at t + c x this '
+         'offset (a wave travelling along the array), s', low=-1e3, high=1e3),
     Spec('wait_for_subscribers', 0, int, "start only when 'current' and 'deflection_truth' "
          'each have at least this many matched subscriptions (0 = start at once)',
          low=0, high=1000),

@@ -30,6 +30,7 @@ from ..lti.reduction import MAX_ORDER, ReducedModel
 
 __all__ = ['Spec', 'ParameterError', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_SPECS',
            'QOS_SPECS', 'ESTIMATOR_SPECS', 'PUBLISH_POINTS', 'MATERIAL_NAMES', 'GEOMETRY_NAMES',
+           'ARRAY_SPECS', 'MAX_CHANNELS', 'channel_values', 'build_channel_estimators',
            'defaults', 'load_params_file', 'build_model', 'build_estimator', 'check_choice',
            'check_values', 'markdown_table', 'FRAME_ID_PATTERN', 'DIAGNOSTICS_SPECS']
 
@@ -166,6 +167,20 @@ ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
          low=1, high=MAX_BLOCK_SAMPLES, read_only=True),
 ) + QOS_SPECS + DIAGNOSTICS_SPECS
 
+#: Largest sensor array one node handles.
+MAX_CHANNELS = 256
+
+#: Sensor-array parameters of the estimator (README "Sensor arrays").
+ARRAY_SPECS = (
+    Spec('channels', 1, int, 'sensors in the array: input blocks carry one current column per '
+         "channel ('time_s,current_ch0_A,...' when > 1), outputs one deflection column per "
+         'channel', low=1, high=MAX_CHANNELS, read_only=True),
+    Spec('model_files', [], list, "one saved model per channel (as 'model_file'; '' = the "
+         "node's model for that channel); empty = every channel uses the node's model",
+         read_only=True),
+)
+ESTIMATOR_SPECS = ESTIMATOR_SPECS + ARRAY_SPECS
+
 
 #: Parameters whose change needs a new reduction (the sensor model changes).
 MODEL_KEYS = GEOMETRY_NAMES + MATERIAL_NAMES + ('model', 'effects', 'model_file',
@@ -289,6 +304,50 @@ def build_estimator(
     except Exception as exc:  # numerics of an extreme but in-range combination
         raise ParameterError(f'these parameter values do not give a usable model: '
                              f'{_one_line(exc)}') from None
+
+
+def channel_values(values: Mapping[str, Any], channel: int) -> dict[str, Any]:
+    """
+    Return the parameter values of one channel of a sensor array.
+
+    The node's values, with ``model_file`` replaced by the channel's entry of ``model_files``
+    when that entry is not empty.  Raises :class:`ParameterError` when ``model_files`` has
+    neither zero nor ``channels`` entries.
+    """
+    files = list(values.get('model_files') or ())
+    n = int(values.get('channels', 1))
+    if files and len(files) != n:
+        raise ParameterError(f"parameter 'model_files' has {len(files)} entries for channels = "
+                             f"{n}: give one per channel ('' = the node's model) or none")
+    out = dict(values)
+    if files and files[channel]:
+        out['model_file'] = files[channel]
+    return out
+
+
+def build_channel_estimators(values: Mapping[str, Any],
+                             reduced: Mapping[tuple, ReducedModel] | None = None
+                             ) -> list[DeflectionEstimator]:
+    """
+    One estimator per channel of a sensor array (:func:`channel_values`).
+
+    ``reduced`` maps :func:`model_key` to a reduction to reuse; channels with equal model keys
+    share one reduction.  Errors name the channel's model file.
+    """
+    cache = dict(reduced or {})
+    out = []
+    for c in range(int(values.get('channels', 1))):
+        v = channel_values(values, c)
+        key = model_key(v)
+        try:
+            est = build_estimator(v, cache.get(key))
+        except ParameterError as exc:
+            if v['model_file'] == values.get('model_file'):
+                raise
+            raise ParameterError(f"parameter 'model_files' entry {c}: {exc}") from None
+        cache[key] = est.reduced
+        out.append(est)
+    return out
 
 
 def _one_line(exc: BaseException, limit: int = 200) -> str:

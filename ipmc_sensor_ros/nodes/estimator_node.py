@@ -8,6 +8,10 @@ stream: values, times, gaps, resets, counters) -> publish: ``deflection/block``
 (``PointStamped`` (L, 0, w) in the clamp frame: per sample / last of block / none),
 ``estimator/counters`` (JSON, 1 Hz) and ``/diagnostics``.  Parameter changes are validated by
 building the new estimator and applied without an output jump.  README "ROS 2 interface".
+
+``channels`` > 1 (a sensor array): N-column blocks through
+:class:`~ipmc_sensor_ros.estimation.array.ArrayStream` (one stream core per channel), points on
+``ch<c>/deflection``, one /diagnostics status per channel; README "Sensor arrays".
 """
 from __future__ import annotations
 
@@ -28,11 +32,13 @@ from std_msgs.msg import Float64MultiArray, String
 from ..interface import specs as C
 from ..estimation.deflection import DeflectionEstimator
 from ..estimation.inverse import InverseEstimator
+from ..estimation.array import ArrayStream, check_array_estimators
 from ..estimation.stream import COUNTER_NAMES, StreamEstimator
 from ..errors import DataError, IpmcError
 from ..physics.parameters import short_repr
 from . import params as P
-from .messages import (CURRENT_COLUMNS, ESTIMATE_COLUMNS, BlockPacker, claimed_samples,
+from ..interface.blocks import current_columns, estimate_columns, unpack_columns
+from .messages import (CURRENT_COLUMNS, BlockPacker, claimed_samples,
                        one_sample, point_message, unpack_block)
 from .diagnostics import DiagnosticsPublisher
 from .runner import run
@@ -77,9 +83,17 @@ class EstimatorNode(Node):
         ParameterError naming the parameter if they make no estimator.  No topic is created.
         """
         self._values = P.read(self, ESTIMATOR_SPECS)
+        self._channels = int(self._values['channels'])
         try:
-            estimator = C.build_estimator(self._values)
-            self._reduced = estimator.reduced
+            if self._channels == 1 and self._values['model_files']:
+                raise P.ParameterError("parameter 'model_files' is for channels > 1; with one "
+                                       "channel use 'model_file'")
+            estimators = C.build_channel_estimators(self._values)
+            estimator = estimators[0]
+            self._reduced = ({C.model_key(C.channel_values(self._values, c)): e.reduced
+                              for c, e in enumerate(estimators)} if self._channels > 1
+                             else estimator.reduced)
+            check_array_estimators(estimators)
         except _ERRORS as exc:
             raise P.ParameterError(str(exc)) from None
         for path, (digest, names) in C.load_plugins(self._values['plugins']).items():
@@ -95,12 +109,20 @@ class EstimatorNode(Node):
         self.rebuilds = 0                      #: filters swapped in after parameter changes
         self._ticks = 0
         logger = self.get_logger()
-        self._stream = StreamEstimator(
-            estimator, max_gap_s=float(self._values['max_gap_s']),
-            max_block_samples=int(self._values['max_block_samples']),
-            source=self.resolve_topic_name('current'),
-            now_s=lambda: self.get_clock().now().nanoseconds * 1e-9,
-            warn=lambda text: logger.warning(text, throttle_duration_sec=1.0))
+        topic = self.resolve_topic_name('current')
+        rules = dict(max_gap_s=float(self._values['max_gap_s']),
+                     max_block_samples=int(self._values['max_block_samples']), source=topic,
+                     now_s=lambda: self.get_clock().now().nanoseconds * 1e-9,
+                     warn=lambda text: logger.warning(text, throttle_duration_sec=1.0))
+        self._array = None
+        if self._channels == 1:
+            self._stream = StreamEstimator(estimator, **rules)
+        else:   # a sensor array: one stream per channel, the same rules
+            self._array = ArrayStream(estimators, **rules)
+            self._stream = self._array.channels[0]
+            self._in_columns = current_columns(self._channels)
+        self._channel_names = ((topic,) if self._array is None else
+                               tuple(f'{topic} ch{c}' for c in range(self._channels)))
 
     def _open_io(self) -> None:
         """Create the subscription, the publishers, the timer and /diagnostics."""
@@ -109,47 +131,73 @@ class EstimatorNode(Node):
             self, Float64MultiArray, 'current', self._on_current, qos
         )
         self._pub_block = P.create_publisher(self, Float64MultiArray, 'deflection/block', qos)
-        self._packer = BlockPacker(ESTIMATE_COLUMNS)
-        self._pub_point = P.create_publisher(self, PointMsg, 'deflection', qos)
+        self._packer = BlockPacker(estimate_columns(self._channels))
+        self._pub_points = [P.create_publisher(self, PointMsg, 'deflection', qos)
+                            if self._channels == 1 else
+                            P.create_publisher(self, PointMsg, f'ch{c}/deflection', qos)
+                            for c in range(self._channels)]
+        self._pub_point = self._pub_points[0]
         P.check_qos_overrides(self)
         self._pub_counters = self.create_publisher(String, 'estimator/counters', P.COUNTERS_QOS)
         self._diagnostics = DiagnosticsPublisher(
-            self, self._values, channels=(self._sub.topic_name,),
+            self, self._values, channels=self._channel_names,
             sample_rate_hz=self._stream.estimator.sample_rate_hz, source=self._status)
         self._timer = self.create_timer(1.0, self._on_timer,  # steady: runs before /clock
                                         clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def _close_io(self) -> None:
         """Destroy what :meth:`_open_io` created (the stream core and its counters stay)."""
-        P.destroy_io(self, ('_timer', '_diagnostics', '_sub', '_pub_block', '_pub_point',
+        P.destroy_io(self, ('_timer', '_diagnostics', '_sub', '_pub_block', '_pub_points',
                             '_pub_counters'))
+        self._pub_point = None
 
     def _ready_text(self) -> str:
-        r, estimator = self._reduced, self._stream.estimator
+        estimator = self._stream.estimator
+        r = estimator.reduced
         return (f'ready: {estimator.model.describe()} model, order {r.order} reduction '
                 f'over {r.band_hz[0]}-{r.band_hz[1]} Hz, fs = {estimator.sample_rate_hz} Hz, '
                 f'leak corner {estimator.inverse.leak_corner_hz} Hz; '
-                f"listening on {self.resolve_topic_name('current')}")
+                f"listening on {self.resolve_topic_name('current')}"
+                + (f' ({self._channels} channels)' if self._array is not None else ''))
 
     # -- public helpers -------------------------------------------------------
     def counters(self) -> dict[str, int]:
         """
         Return a copy of the stream counters.
 
-        Invariant: :mod:`ipmc_sensor_ros.estimation.stream`.
+        Invariant: :mod:`ipmc_sensor_ros.estimation.stream`.  A sensor array: the sums over the
+        channels (:meth:`channel_counters` per channel).
         """
         with self._lock:
+            if self._array is not None:
+                return self._array.totals()
             return dict(self._stream.counters)
 
-    def _status(self) -> dict:
-        """
-        Counters and estimator state (offset, rest, std, mains line).
-
-        For the counters topic and /diagnostics.
-        """
+    def channel_counters(self) -> list[dict[str, int]]:
+        """Return copies of the counters of every channel (one for a single sensor)."""
         with self._lock:
-            out = dict(self._stream.counters)
-            out.update(self._stream.estimator.status())
+            if self._array is not None:
+                return self._array.counters()
+            return [dict(self._stream.counters)]
+
+    @property
+    def array(self) -> ArrayStream | None:
+        """Return the sensor-array core when ``channels`` > 1, else None."""
+        return self._array
+
+    def _status(self, stream: StreamEstimator | None = None) -> dict:
+        """
+        Counters and estimator state (offset, rest, std, mains line) of a stream.
+
+        For the counters topic and /diagnostics; a sensor array: ``{channel name: status}``.
+        """
+        if stream is None and self._array is not None:
+            return {name: self._status(ch)
+                    for name, ch in zip(self._channel_names, self._array.channels)}
+        stream = stream or self._stream
+        with self._lock:
+            out = dict(stream.counters)
+            out.update(stream.estimator.status())
         if out['offset_a'] is not None:
             out['estimated_offset_a'] = out['offset_a']   # the filter's own offset (kalman)
         return out
@@ -173,7 +221,7 @@ class EstimatorNode(Node):
 
     @property
     def input_topic(self) -> str:
-        return self._stream.source
+        return self._stream.source if self._array is None else self._array.source
 
     @property
     def last_rejection(self) -> str:
@@ -185,6 +233,8 @@ class EstimatorNode(Node):
 
     # -- data path: unpack -> stream core -> publish ----------------------------
     def _on_current(self, msg: Float64MultiArray) -> None:
+        if self._array is not None:
+            return self._on_current_array(msg)
         with self._lock:
             if self._rebuilt is not None:
                 self._apply_rebuilt()
@@ -241,14 +291,57 @@ class EstimatorNode(Node):
                 throttle_duration_sec=1.0,
             )
 
-    def _publish_point(self, time_s: float, deflection_m: float) -> None:
-        self._pub_point.publish(point_message(time_s, float(self._values['length_m']),
-                                              deflection_m, self._values['frame_id']))
+    def _publish_point(self, time_s: float, deflection_m: float, channel: int = 0) -> None:
+        self._pub_points[channel].publish(point_message(
+            time_s, float(self._values['length_m']), deflection_m, self._values['frame_id']))
+
+    def _on_current_array(self, msg: Float64MultiArray) -> None:
+        """Estimate a sensor array's block: unpack N columns, :class:`ArrayStream`, publish."""
+        with self._lock:
+            if self._rebuilt is not None:
+                self._apply_rebuilt()
+            array = self._array
+            try:
+                times, table = unpack_columns(msg, self._in_columns, values_only_ok=False)
+            except DataError as exc:
+                array.reject(claimed_samples(msg, self._channels + 1), str(exc))
+                return
+            out = array.feed(times, table)
+            if out is None:
+                return
+            t, w, std, has = out
+            one = t.size == 1   # observe_one: no numpy per sample (40 -> 6 us)
+            for c in np.flatnonzero(has).tolist():
+                if one:
+                    self._diagnostics.observe_one(float(table[0, c]), self._channel_names[c])
+                else:
+                    self._diagnostics.observe(table[:, c], channel=self._channel_names[c])
+            cols = [a for c in range(self._channels) for a in (w[:, c], std[:, c])]
+            try:
+                self._pub_block.publish(self._packer.pack(t, *cols))
+            except Exception as exc:  # back-pressure: counted per channel, never a reset
+                array.unpublished(t.size, short_repr(str(exc)), has)
+                return
+            mode = self._values['publish_points']
+            if mode == 'none':
+                return
+            rows = range(t.size) if mode == 'per_sample' else (t.size - 1,)
+            try:
+                for c in np.flatnonzero(has).tolist():
+                    for k in rows:
+                        self._publish_point(float(t[k]), float(w[k, c]), c)
+            except Exception as exc:  # the block went out; points are a convenience view
+                self._stream.counters['messages_unpublished'] += 1
+                self.get_logger().warning(
+                    f'could not publish deflection points: {short_repr(str(exc))}',
+                    throttle_duration_sec=1.0)
 
     # -- periodic -------------------------------------------------------------
     def _on_timer(self) -> None:
         self._ticks += 1
         counters = self._status()
+        if self._array is not None:
+            counters = dict(self._array.totals(), channels=list(counters.values()))
         if counters['samples_in'] == 0 and self._ticks % 5 == 1:
             self.get_logger().info(f'waiting for data on {self._sub.topic_name}')
         counters['node'] = self.get_fully_qualified_name()
@@ -276,10 +369,11 @@ class EstimatorNode(Node):
                 values[p.name] = list(p.value) if isinstance(values[p.name], list) else p.value
             try:
                 key = C.model_key(values)
-                new = C.build_estimator(values, self._reduced)
+                new = self._build(values, validate=True)
                 if key != self._model_key:
                     band = np.geomspace(values['band_low_hz'], values['band_high_hz'], 64)
-                    h = new.model.frequency_response(band)
+                    h = np.array([e.model.frequency_response(band)
+                                  for e in (new if isinstance(new, list) else [new])])
                     if not np.all(np.isfinite(h)) or not np.all(np.abs(h) > 0):
                         raise P.ParameterError('these parameter values give a non-finite or '
                                                'zero sensor response over the band')
@@ -301,7 +395,8 @@ class EstimatorNode(Node):
             self._pending = None
             old = self._values
             self._values = values
-            self._stream.max_gap_s = float(values['max_gap_s'])
+            (self._stream if self._array is None else self._array).max_gap_s = float(
+                values['max_gap_s'])
             self._changed.update(p.name for p in parameters)
             if (key != self._model_key or self._wanted is not None or self._builder is not None
                     or self._rebuilt is not None):
@@ -310,7 +405,7 @@ class EstimatorNode(Node):
                     self._builder = threading.Thread(target=self._rebuild_worker, daemon=True)
                     self._builder.start()
             elif C.filter_key(values) != C.filter_key(old):
-                self._stream.replace_estimator(new)
+                self._swap(new)
                 self._built_values = values
                 self._log_rebuilt()
 
@@ -337,7 +432,7 @@ class EstimatorNode(Node):
                     self._builder = None
                 return
             try:
-                new, error = C.build_estimator(seen), None
+                new, error = self._build(seen), None
             except Exception as exc:  # noqa: B902 - reverted below, never fatal
                 new, error = None, exc
             with self._lock:
@@ -356,12 +451,37 @@ class EstimatorNode(Node):
                                  if old[k] != seen[k]])
             return
 
+    def _build(self, values, validate: bool = False):
+        """
+        Build the estimator of ``values``: one, or a list for a sensor array.
+
+        ``validate``: reuse the running reductions (a cheap check of the values; the new
+        reduction is built later, off the data path).
+        """
+        if self._array is None:
+            return C.build_estimator(values, self._reduced if validate else None)
+        reduced = ({C.model_key(C.channel_values(values, c)): ch.estimator.reduced
+                    for c, ch in enumerate(self._array.channels)} if validate else None)
+        new = C.build_channel_estimators(values, reduced)
+        check_array_estimators(new)
+        return new
+
+    def _swap(self, new) -> None:
+        """Swap in ``new`` (:meth:`_build`), continuing each channel's output."""
+        if self._array is None:
+            self._stream.replace_estimator(new)
+        else:
+            self._array.replace_estimators(new)
+
     def _apply_rebuilt(self) -> None:
         """Swap in a filter the worker has built (caller holds the lock)."""
         values, new = self._rebuilt
         self._rebuilt = None
-        self._stream.replace_estimator(new)
-        self._reduced, self._model_key = new.reduced, C.model_key(values)
+        self._swap(new)
+        self._reduced = (new.reduced if self._array is None else
+                         {C.model_key(C.channel_values(values, c)): e.reduced
+                          for c, e in enumerate(new)})
+        self._model_key = C.model_key(values)
         self._built_values = values
         self._log_rebuilt()
 

@@ -168,7 +168,7 @@ class ManagedEstimatorNode(ManagedMixin, EstimatorNode, LifecycleNode):
 
     _SPECS = ESTIMATOR_SPECS
     _DEFAULT_NAME = 'ipmc_estimator'
-    _BUILT = ('_stream', '_reduced', '_model_key', '_pending')
+    _BUILT = ('_stream', '_array', '_reduced', '_model_key', '_pending')
 
     def __init__(self, node_name: str = 'ipmc_estimator', **kwargs: Any):
         super().__init__(node_name, **kwargs)
@@ -191,7 +191,7 @@ class ManagedSimulatorNode(ManagedMixin, SimulatorNode, LifecycleNode):
 
     _SPECS = SIMULATOR_SPECS
     _DEFAULT_NAME = 'ipmc_simulator'
-    _BUILT = ('_sim', '_model', '_stimulus')
+    _BUILT = ('_sim', '_sims', '_model', '_stimulus')
 
     def __init__(self, node_name: str = 'ipmc_simulator', **kwargs: Any):
         self._paused_ns: int | None = None

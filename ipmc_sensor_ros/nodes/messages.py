@@ -147,17 +147,18 @@ class BlockPacker:
         return msg
 
 
-def claimed_samples(msg: Float64MultiArray) -> int:
+def claimed_samples(msg: Float64MultiArray, width: int = 2) -> int:
     """
     How many samples the message carries, for accounting even when it is malformed.
 
-    Two or more dimensions: ceil(payload / 2) (a time and a value per sample);
-    otherwise the payload length (values only).
+    Two or more dimensions: ceil(payload / width) (a time and ``width - 1`` values per
+    sample); otherwise ceil(payload / (width - 1)) (values only; with one channel, the
+    payload length).
     """
     payload = max(len(msg.data) - int(msg.layout.data_offset), 0)
     if len(msg.layout.dim) >= 2:
-        return (payload + 1) // 2
-    return payload
+        return (payload + width - 1) // width
+    return (payload + width - 2) // (width - 1)
 
 
 def unpack_block(msg: Float64MultiArray, columns: str = CURRENT_COLUMNS) -> Block:

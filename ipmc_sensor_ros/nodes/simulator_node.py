@@ -45,7 +45,8 @@ from ..interface.simulator import (SIMULATOR_OWN_SPECS as _OWN_SPECS,  # noqa: F
                                    read_stimulus_csv)
 from . import params as P
 from .diagnostics import DiagnosticsPublisher
-from .messages import CURRENT_COLUMNS, DEFLECTION_COLUMNS, BlockPacker
+from ..interface.blocks import current_columns, deflection_columns
+from .messages import BlockPacker
 from .runner import run
 
 __all__ = ['SimulatorNode', 'SIMULATOR_SPECS', 'STIMULI', 'load_stimulus_csv',
@@ -79,13 +80,18 @@ class SimulatorNode(Node):
         try:
             self._model = P.build_sensor_model(v)
             self._stimulus, self._stim_t0 = build_stimulus(v)
-            chain = dict(current_gain=v['current_gain'], current_offset_a=v['current_offset_a'],
-                         noise_rms_a=v['noise_rms_a'], seed=v['seed'])
-            if check_fidelity(v['fidelity'], v['beam_model']):
-                self._sim = FieldSensorSimulator(self._model, v['sample_rate_hz'],
-                                                 beam_model=v['beam_model'], **chain)
-            else:
-                self._sim = SensorSimulator(self._model, v['sample_rate_hz'], **chain)
+            self._channels = int(v['channels'])
+            field = check_fidelity(v['fidelity'], v['beam_model'])
+            self._sims = []
+            for c in range(self._channels):   # each channel its own sensor and noise
+                chain = dict(current_gain=v['current_gain'],
+                             current_offset_a=v['current_offset_a'],
+                             noise_rms_a=v['noise_rms_a'], seed=v['seed'] + c)
+                self._sims.append(
+                    FieldSensorSimulator(self._model, v['sample_rate_hz'],
+                                         beam_model=v['beam_model'], **chain) if field
+                    else SensorSimulator(self._model, v['sample_rate_hz'], **chain))
+            self._sim = self._sims[0]
         except (ParameterError, ParameterError) as exc:
             raise P.ParameterError(str(exc)) from None
         self._fs = float(v['sample_rate_hz'])
@@ -104,8 +110,9 @@ class SimulatorNode(Node):
         self._pub_current = P.create_publisher(self, Float64MultiArray, 'current', qos)
         self._pub_truth = P.create_publisher(self, Float64MultiArray, 'deflection_truth', qos)
         P.check_qos_overrides(self)
-        self._pack_current = BlockPacker(CURRENT_COLUMNS)
-        self._pack_truth = BlockPacker(DEFLECTION_COLUMNS)
+        self._pack_current = BlockPacker(current_columns(self._channels))
+        self._pack_truth = BlockPacker(deflection_columns(self._channels))
+        self._offset_s = float(v['channel_time_offset_s'])
         self._pub_counters = self.create_publisher(String, 'simulator/counters', P.COUNTERS_QOS)
         if self._rtf > 0.0:
             period = max(self._block / self._fs / self._rtf, MIN_TICK_S)
@@ -117,10 +124,10 @@ class SimulatorNode(Node):
                                                 clock=Clock(clock_type=ClockType.STEADY_TIME))
         # /diagnostics: expected rate = realtime_factor x sample_rate_hz (no check in fast mode)
         self._diagnostics = DiagnosticsPublisher(
-            self, v, channels=(self._pub_current.topic_name,),
+            self, v, channels=self._channel_names(),
             sample_rate_hz=self._fs,
             expected_rate_hz=self._fs * self._rtf if self._rtf > 0.0 else None,
-            samples_key='samples_published', source=self.counters)
+            samples_key='samples_published', source=self._health)
 
     def _close_io(self) -> None:
         """Destroy what :meth:`_open_io` created (the simulation state stays)."""
@@ -132,6 +139,7 @@ class SimulatorNode(Node):
         return (f'ready: {self._model.describe()} model, stimulus '
                 f'{describe_stimulus(self._stimulus, v)}, {self._fs} Hz in blocks of '
                 f'{self._block}, realtime_factor {self._rtf}'
+                + (f', {self._channels} channels' if self._channels > 1 else '')
                 + (f", duration {v['duration_s']} s" if self._total else ', no end')
                 + f"; publishing {self.resolve_topic_name('current')}")
 
@@ -140,6 +148,16 @@ class SimulatorNode(Node):
         """``samples_published``, ``blocks_published`` (ints) and ``done`` (bool)."""
         return {'samples_published': self._k, 'blocks_published': self._blocks,
                 'done': self._done}
+
+    def _channel_names(self) -> tuple[str, ...]:
+        topic = self.resolve_topic_name('current')
+        if self._channels == 1:
+            return (topic,)
+        return tuple(f'{topic} ch{c}' for c in range(self._channels))
+
+    def _health(self) -> dict:
+        """:meth:`counters` for each channel's /diagnostics status (the channels share them)."""
+        return {name: self.counters() for name in self._channel_names()}
 
     @property
     def done(self) -> bool:
@@ -191,10 +209,12 @@ class SimulatorNode(Node):
             return False
         k = np.arange(k0, k1)
         times = self._t_start_ns * 1e-9 + k / self._fs
-        deflection, current = self._sim.run(self._stimulus, self._stim_t0 + k / self._fs)
-        self._pub_current.publish(self._pack_current.pack(times, current))
-        self._diagnostics.observe(current)
-        self._pub_truth.publish(self._pack_truth.pack(times, deflection))
+        runs = [sim.run(self._stimulus, self._stim_t0 + c * self._offset_s + k / self._fs)
+                for c, sim in enumerate(self._sims)]
+        self._pub_current.publish(self._pack_current.pack(times, *(r[1] for r in runs)))
+        for name, r in zip(self._channel_names(), runs):
+            self._diagnostics.observe(r[1], channel=name)
+        self._pub_truth.publish(self._pack_truth.pack(times, *(r[0] for r in runs)))
         self._k = k1
         self._blocks += 1
         if self._total is not None and self._k >= self._total:
