@@ -79,7 +79,7 @@ def run(groups, seeds, null_seeds, out):
 
 
 def table(path):
-    """Markdown table (one row per combination) from a study TSV."""
+    """Return the markdown summary (one row per combination) of a study TSV."""
     rows = {}
     with open(path) as fh:
         for ln in fh:

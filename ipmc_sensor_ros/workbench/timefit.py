@@ -115,14 +115,16 @@ def prepare(records: Sequence[Record], *, settle_s: float = 0.5, max_rows_per_re
 
 def predict(p: PreparedRecord, model: SensorModel, cache: dict | None = None,
             rows: np.ndarray | None = None) -> np.ndarray:
-    """Predicted current of a prepared record under ``model``: the same operations as
-    :func:`~ipmc_sensor_ros.simulation.sensor.predict_current`, on the kept bins.
+    """
+    Predict the current of a prepared record under ``model``.
 
-    ``cache`` (a dict shared across the records of one evaluation) reuses the
+    The same operations as :func:`~ipmc_sensor_ros.simulation.sensor.predict_current`,
+    on the kept bins.  ``cache`` (a dict shared across the records of one evaluation) reuses the
     transfer function between records of the same sample and FFT grid.  ``rows``
     (a subset of ``p.rows``): return the current at these samples only; without input
     transforms it is computed there directly (:func:`_rows_from_spectrum`, exact), not
-    by a full inverse FFT."""
+    by a full inverse FFT.
+    """
     if rows is not None and model.compiled.input_transforms:
         return predict(p, model, cache)[rows]
     if rows is not None:
@@ -162,10 +164,14 @@ def _interpolated_transfer(p: PreparedRecord, model: SensorModel) -> np.ndarray:
 
 
 def _rows_from_spectrum(p: PreparedRecord, y_bins: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """``irfft(y)[rows]`` for rows on the progression ``p.rows[0] + j g`` (g = the largest
-    power of two dividing both the row step and ``n_fft``): the spectrum, shifted to start at
-    ``p.rows[0]``, is folded (aliased) onto ``n_fft / g`` bins, whose inverse FFT is exactly
-    the g-decimated sequence (DFT decimation identity); g-fold fewer FFT points."""
+    """
+    Return ``irfft(y)[rows]`` without the full inverse FFT.
+
+    Rows lie on the progression ``p.rows[0] + j g`` (g = the largest power of two dividing
+    both the row step and ``n_fft``): the spectrum, shifted to start at ``p.rows[0]``, is
+    folded (aliased) onto ``n_fft / g`` bins, whose inverse FFT is exactly the g-decimated
+    sequence (DFT decimation identity); g-fold fewer FFT points.
+    """
     n, k0 = p.n_fft, int(p.rows[0])
     step = int(p.rows[1] - p.rows[0]) if p.rows.size > 1 else 1
     g = 1
