@@ -24,6 +24,8 @@ from __future__ import annotations
 import argparse
 import time
 
+from bench.seed_study import _cpu_s
+
 import numpy as np
 
 from ipmc_sensor_ros.physics.effects import Effect, EFFECTS, register_effect
@@ -97,14 +99,15 @@ def run_drying(duration_s=1800.0, rate_hz=100.0):
         )
     finally:
         EFFECTS.pop('bench_drying_truth', None)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _cpu_s()
     d = diagnose(recs, progress=lambda m: print('   ', m, flush=True))
-    dt = time.perf_counter() - t0
+    dt, cpu = time.perf_counter() - t0, _cpu_s() - c0
     print(d.summary())
     return {
         'explained': d.explained,
         'error_over_floor': d.final.error / d.noise_floor,
         'seconds': dt,
+        'cpu_seconds': cpu,
         'named': d.missing_effects,
     }
 
@@ -126,8 +129,8 @@ def main(argv=None) -> int:
     print('|---|---|---|---|---|')
     for r in rows:
         print(
-            f"| {r['combo']} | {r['ok']}/{r['n']} | {r['median_ratio']:.3f} | {r['median_s']:.1f} | "
-            f"{r['max_s']:.1f} |"
+            f"| {r['combo']} | {r['ok']}/{r['n']} | {r['median_ratio']:.3f} | "
+            f"{r['median_s']:.1f} | {r['max_s']:.1f} |"
         )
     if args.drying:
         print(run_drying())
