@@ -18,6 +18,12 @@ SR+amp+offset 4/4, SR+delay+beam 3/4, amp+offset+beam 4/4; every final error wit
 amplifier_bandwidth at the floor (1.003x).  Time per 16-record diagnosis 8-42 s for two
 effects, 29-70 s for three (target 20 s not met under this load).  30-min 100 Hz
 hyperbolic drying (``--drying``): explained, 1.057x floor, 185 s (nice 5, loaded).
+
+After the fit speed-up (one model per sample per evaluation, residual rows from the folded
+spectrum; one 16-record fit 14.6 -> 3.6 s, same chi2), 2026-11-23: a two-effect 16-record
+diagnosis 9-20 CPU s (worker pool included), three effects 17 CPU s; drying 163 CPU s
+(508 s wall at load 10-18), explained, 1.058x floor: the 20 s target for it is not met.
+The many-seed study with a table is ``bench/seed_study.py``.
 """
 from __future__ import annotations
 
