@@ -30,6 +30,8 @@ setup(
         'console_scripts': [
             'ipmc_estimator = ipmc_sensor_ros.nodes.estimator_node:main',
             'ipmc_simulator = ipmc_sensor_ros.nodes.simulator_node:main',
+            'ipmc_estimator_managed = ipmc_sensor_ros.nodes.managed:main_estimator',
+            'ipmc_simulator_managed = ipmc_sensor_ros.nodes.managed:main_simulator',
             'ipmc-model = ipmc_sensor_ros.cli.main:main',
         ],
     },

@@ -1,8 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Benchmarks of the core: estimator throughput and per-sample overhead, model evaluation.
+"""
+Benchmarks of the core: estimator throughput and per-sample overhead, model evaluation.
 
 Every figure is a ratio against a baseline measured in the same process, so the
-numbers are comparable across machines.  No assertions: README "Benchmarks" lists the measured figures.
+numbers are comparable across machines.  No assertions: README "Benchmarks" lists the
+measured figures.
 """
 
 from __future__ import annotations
@@ -81,7 +83,11 @@ def bench_model(smoke: bool = False) -> list[dict]:
 
 
 def bench_field(smoke: bool = False) -> list[dict]:
-    """Simulated seconds per wall-clock second of the field solvers at 1 kHz (slim, 5 Hz)."""
+    """
+    Return the simulated seconds per wall-clock second of the field solvers at 1 kHz.
+
+    Sample slim, 5 Hz.
+    """
     from ipmc_sensor_ros.physics.beam import ElasticaBeam
     from ipmc_sensor_ros.physics.field import FieldSolver, NonlinearFieldSolver
 

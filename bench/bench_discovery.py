@@ -1,6 +1,8 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Discovery bench (issue 15): seeds x combinations of hidden effects, the look-alike case,
-exponential drying, speed.
+"""
+Discovery bench (issue 15): seeds x combinations of hidden effects, the look-alike case.
+
+Exponential drying, speed.
 
 ``python -m bench.bench_discovery [--seeds N] [--combos i,j] [--drying] [--smoke]``
 
@@ -79,8 +81,12 @@ def run_combo(hidden, seeds, smoke=False):
 
 
 class _DryingTruth(Effect):
-    """Test truth outside the catalog's family: d(t) = d0 (0.4 + 0.6 / (1 + t / 600 s))
-    (hyperbolic drying), so the relaxation shape must approximate it, not reproduce it."""
+    """
+    Test truth outside the catalog's family.
+
+    d(t) = d0 (0.4 + 0.6 / (1 + t / 600 s)) (hyperbolic drying), so the relaxation
+    shape must approximate it, not reproduce it.
+    """
 
     name = 'bench_drying_truth'
     lti = False

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Leaky vs Kalman deflection estimators on the issue-14 target rows (DAQ-like current).
+"""
+Leaky vs Kalman deflection estimators on the issue-14 target rows (DAQ-like current).
 
 Current from the exact model (simulation/daq.py: FFT convolution of H2, no reduction),
 offset, white noise as a fraction of the signal RMS, mains hum; both estimators run
@@ -41,11 +42,15 @@ BOUNDS: dict = {}
 
 
 def rest_offset_bound(model, t, w, rest_s=2.0, after_s=5.0):
-    """Reference NRMSE of an estimator that follows deflection ramps (no leak), when the
-    offset can only be learned during the first ``rest_s`` of rest (not a bound for leaky
-    estimators, which trade ramp following for a capped offset error): the sample mean of fs*rest_s samples
-    (optimal for a constant in white noise) leaves db ~ sigma/sqrt(fs rest_s); in motion db is
-    a constant velocity db/R0 (H(0) = 0), so the error grows as db (t - rest_s)/R0."""
+    """
+    Return the reference NRMSE of an estimator that follows deflection ramps (no leak).
+
+    When the offset can only be learned during the first ``rest_s`` of rest (not a bound for
+    leaky estimators, which trade ramp following for a capped offset error): the sample mean of
+    fs*rest_s samples (optimal for a constant in white noise) leaves db ~ sigma/sqrt(fs rest_s);
+    in motion db is a constant velocity db/R0 (H(0) = 0), so the error grows as db (t -
+    rest_s)/R0.
+    """
     from ipmc_sensor_ros.simulation.sensor import predict_current
     clean = predict_current(model, t, w)
     sigma = 0.01 * np.sqrt(np.mean(clean ** 2))
@@ -98,8 +103,12 @@ def scenarios(seed: int):
 
 
 def clean_crank_rows():
-    """Clean current: periodic from t=0 (the motion began before the record: the mean is
-    unknowable, only the leak removes it; evaluated after 64 s) and started from rest."""
+    """
+    Clean current: periodic from t=0 and started from rest.
+
+    Periodic from t=0: the motion began before the record: the mean is unknowable, only
+    the leak removes it; evaluated after 64 s.
+    """
     t = np.arange(int(80 * FS)) / FS
     rows = []
     m = SensorModel(PAPER_SAMPLES['slim'])
@@ -170,7 +179,9 @@ def main():
             )
     print(f"{'row':52s} {'sample':6s} {'leaky NRMSE %':>18s} {'kalman NRMSE %':>18s}")
     for (name, sample), d in table.items():
-        fmt = lambda v: f'{100 * np.mean(v):6.1f} (max {100 * np.max(v):5.1f})'
+        def fmt(v):
+            return f'{100 * np.mean(v):6.1f} (max {100 * np.max(v):5.1f})'
+
         bound = (
             f'  ramp-ref {100 * BOUNDS[(name, sample)]:5.1f}' if (name, sample) in BOUNDS else ''
         )

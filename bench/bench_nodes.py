@@ -1,7 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Node benchmarks: sustained input rate without loss and added latency of the estimator
-node against a pass-through node (subscribe, copy, publish) in the same harness, and the
-simulator's real-time factor.
+"""
+Node benchmarks: the estimator node against a pass-through node, and the simulator.
+
+Sustained input rate without loss and added latency of the estimator node against a
+pass-through node (subscribe, copy, publish) in the same harness, and the simulator's
+real-time factor.
 
 Harness: three processes on one machine, an isolated ROS_DOMAIN_ID, DDS on
 loopback.  A driver process publishes ``current`` blocks (n samples per message,
@@ -24,7 +27,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-PASSTHROUGH_CLASS = r'''
+PASSTHROUGH_CLASS = r"""
 import sys, rclpy
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
@@ -43,23 +46,27 @@ class PassThrough(Node):
         out.layout.dim[1].label = "time_s,deflection_m"
         out.data = msg.data
         self.pub.publish(out)
-'''
+"""
 
 PASSTHROUGH = PASSTHROUGH_CLASS + r"""
+from ipmc_sensor_ros.nodes.runner import make_executor, spin_until_signalled
 rclpy.init()
 node = PassThrough()
+executor = make_executor()   # the nodes' executor (EventsExecutor where rclpy has it)
+executor.add_node(node)
 try:
-    rclpy.spin(node)
+    spin_until_signalled(executor)
 except KeyboardInterrupt:
     pass
 """
 
-DRIVER = r'''
+DRIVER = r"""
 import sys, time, rclpy, numpy as np
 from std_msgs.msg import Float64MultiArray
 from ipmc_sensor_ros.nodes import params as P
 from ipmc_sensor_ros.nodes.messages import pack_block
-rate, n, duration, fs = float(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3]), float(sys.argv[4])
+rate, n = float(sys.argv[1]), int(sys.argv[2])
+duration, fs = float(sys.argv[3]), float(sys.argv[4])
 epoch = float(sys.argv[5])   # times are seconds since this shared epoch: float64 resolution
                              # at today's epoch (0.24 us) could not carry 1 us sample periods
 rclpy.init()
@@ -76,6 +83,9 @@ total = int(rate * duration)
 offsets = np.arange(n) / fs
 signal = 1e-6 * np.sin(2 * np.pi * 5.0 * offsets)
 start = time.time() - epoch
+back = offsets[::-1].copy()
+msg = pack_block(start - back, signal)
+times = np.frombuffer(msg.data, dtype=float).reshape(n, 2)[:, 0]   # a view of the message
 while k < total:
     # a DAQ's steady sample clock: message k ends at start + k / rate (contiguous samples, no
     # jitter in the stamps); it is published when due, and after a stall the backlog goes out
@@ -84,21 +94,22 @@ while k < total:
     now = time.monotonic()
     if due > now:
         time.sleep(due - now)
-    pub.publish(pack_block(start + k / rate - offsets[::-1], signal))
+    times[:] = start + k / rate - back   # in place: a new message per send (45 us) would
+    pub.publish(msg)                      # cap the driver below the rates under test
     k += 1
 print(f"SENT {k} {k * n} {time.monotonic() - t0:.6f}", flush=True)
 time.sleep(2.0)
 node.destroy_node()
 rclpy.shutdown()
-'''
+"""
 
 
-NODE_CPU = r'''
+NODE_CPU = r"""
 import os, sys, time, random, subprocess
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from bench.bench_nodes import DRIVER, PASSTHROUGH_CLASS, _env
+from ipmc_sensor_ros.nodes.runner import make_executor
 kind, rate, n, duration = sys.argv[1], float(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4])
 domain = random.randint(201, 232)
 rclpy.init(domain_id=domain)
@@ -106,30 +117,35 @@ if kind == "estimator":
     from ipmc_sensor_ros.nodes.estimator_node import EstimatorNode
     node = EstimatorNode(parameter_overrides=[
         Parameter("sample_rate_hz", value=rate * n), Parameter("publish_points", value="none"),
-        Parameter("max_gap_s", value=1.0), Parameter("band_high_hz", value=min(50.0, rate * n / 4))])
+        Parameter("max_gap_s", value=1.0),
+        Parameter("band_high_hz", value=min(50.0, rate * n / 4))])
     handled = lambda: node.counters()["messages_in"]
 else:
     ns = {}
     exec(PASSTHROUGH_CLASS, ns)
     node = ns["PassThrough"]()
     handled = lambda: node.handled
-ex = SingleThreadedExecutor()
+ex = make_executor()
 ex.add_node(node)
-drv = subprocess.Popen([sys.executable, "-c", DRIVER, str(rate), str(n), str(duration), str(rate * n),
-                        repr(time.time() - 100.0)], env=_env(domain), stdout=subprocess.DEVNULL)
+drv = subprocess.Popen([sys.executable, "-c", DRIVER, str(rate), str(n), str(duration),
+                        str(rate * n), repr(time.time() - 100.0)], env=_env(domain),
+                       stdout=subprocess.DEVNULL)
 while handled() == 0:
     ex.spin_once(timeout_sec=0.05)
 cpu0, m0 = time.process_time(), handled()
 while drv.poll() is None:
     ex.spin_once(timeout_sec=0.05)
 print("CPU", time.process_time() - cpu0, handled() - m0)
-'''
+"""
 
 
 def bench_node_cpu(smoke: bool = False) -> list[dict]:
-    """CPU per message of each node (whole process: executor, DDS threads, callback) under
-    the same driver at a fixed rate, each in a fresh process: a steadier comparison than
-    the sustained rate, which three processes sharing two cores make noisy."""
+    """
+    CPU per message of each node under the same driver at a fixed rate.
+
+    Whole process: executor, DDS threads, callback; each node in a fresh process: a steadier
+    comparison than the sustained rate, which three processes sharing two cores make noisy.
+    """
     rows = []
     for n, rate in ((1, 4000.0), (1000, 500.0)):
         cost = {}
@@ -157,8 +173,12 @@ def _env(domain: int) -> dict:
 
 
 def _run_once(kind: str, rate: float, n: int, duration: float) -> dict:
-    """One trial in a fresh process: a long-lived process that creates and destroys many
-    DDS participants was seen to lose messages in later trials."""
+    """
+    One trial in a fresh process.
+
+    A long-lived process that creates and destroys many DDS participants was seen to lose
+    messages in later trials.
+    """
     import json
 
     code = ('import json, sys; from bench.bench_nodes import _trial; '
@@ -193,7 +213,7 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
     from std_msgs.msg import Float64MultiArray
 
     from ipmc_sensor_ros.nodes import params as P
-    from ipmc_sensor_ros.nodes.messages import ESTIMATE_COLUMNS, unpack_block
+    from ipmc_sensor_ros.interface.blocks import unpack_columns
 
     fs = rate * n
     domain = random.randint(201, 232)
@@ -218,14 +238,15 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
 
     def on_block(msg):
         now = time.time() - epoch
-        b = unpack_block(msg, ESTIMATE_COLUMNS)
-        received[0] += len(b.values)
-        latencies.append(now - float(b.times_s[-1]))
+        # the estimator sends ESTIMATE_COLUMNS, the pass-through its input's two columns
+        times, _ = unpack_columns(msg, msg.layout.dim[1].label)
+        received[0] += len(times)
+        latencies.append(now - float(times[-1]))
 
     sub = sink.create_subscription(Float64MultiArray, 'deflection/block', on_block, qos)
-    from rclpy.executors import SingleThreadedExecutor
+    from ipmc_sensor_ros.nodes.runner import make_executor
 
-    ex = SingleThreadedExecutor(context=ctx)
+    ex = make_executor(context=ctx)   # the sink must not be the bottleneck of one-sample trials
     ex.add_node(sink)
     # start the driver only once the node's output is matched: data published before the
     # match would be lost (volatile QoS) and counted against the node
@@ -273,15 +294,19 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
 
 def _ladder(n: int) -> list[float]:
     if n == 1:
-        return [500.0, 1000.0, 2000.0, 3000.0, 4000.0, 5000.0, 6000.0, 7000.0, 8000.0, 10000.0,
-                12000.0, 16000.0]
+        return [1000.0, 2000.0, 4000.0, 6000.0, 8000.0, 10000.0, 12000.0, 16000.0, 20000.0,
+                24000.0, 28000.0, 32000.0]
     # 1000 msg/s x 1000 samples = 1 MHz, the top of the estimator's sample_rate_hz range
     # (float64 stamps cannot carry shorter periods); the pass-through is held to the same ladder
     return [20.0, 50.0, 100.0, 200.0, 500.0, 1000.0]
 
 
 def _ok(r: dict) -> bool:
-    """A trial passes when nothing was lost and the driver achieved the requested rate."""
+    """
+    Tell whether a trial passes.
+
+    It passes when nothing was lost and the driver achieved the requested rate.
+    """
     print(f"  node trial {r['kind']:11s} {r['n']:5d}-sample msgs at {r['rate_msg_s']:8.0f} msg/s: "
           f"sent {r['sent']}, received {r['received']}, achieved {r.get('achieved_msg_s', 0):.0f} "
           f"msg/s, node CPU {r.get('node_cpu_fraction', float('nan')):.0%} "
@@ -290,9 +315,15 @@ def _ok(r: dict) -> bool:
     return bool(r['lossless'] and r.get('driver_kept_up'))
 
 
-def bench_nodes(smoke: bool = False) -> list[dict]:
+def bench_nodes(smoke: bool = False, sizes=(1, 1000), extras: bool = True) -> list[dict]:
+    """
+    Sustained lossless rate, latency and CPU of the estimator node against a pass-through.
+
+    ``sizes``: samples per message to bench; ``extras``: also the CPU-per-message rows and
+    the simulator's real-time factor.
+    """
     rows = []
-    for n in (1, 1000):
+    for n in sizes:
         results = {}
         for kind in ('passthrough', 'estimator'):
             if smoke:
@@ -354,20 +385,25 @@ def bench_nodes(smoke: bool = False) -> list[dict]:
                 f"{e['rate_msg_s']:.0f} msg/s",
                 'value': 100.0 * e.get('node_cpu_fraction', float('nan')),
                 'unit': '% of a core',
-                'baseline': f"pass-through same rate {100.0 * same.get('node_cpu_fraction', float('nan')):.0f} %",
+                'baseline': 'pass-through same rate '
+                f"{100.0 * same.get('node_cpu_fraction', float('nan')):.0f} %",
                 'ratio': e.get('node_cpu_fraction', float('nan'))
                 / same.get('node_cpu_fraction', float('nan')),
                 'target': '-',
             }
         )
-    rows.extend(bench_node_cpu(smoke))
-    rows.append(bench_simulator_rtf(smoke))
+    if extras:
+        rows.extend(bench_node_cpu(smoke))
+        rows.append(bench_simulator_rtf(smoke))
     return rows
 
 
 def bench_simulator_rtf(smoke: bool = False) -> dict:
-    """Simulated seconds per wall second of the simulator node in fast mode at 1 kHz,
-    in process (the node's publish path, no subscriber)."""
+    """
+    Return the simulated seconds per wall second of the simulator node in fast mode at 1 kHz.
+
+    In process (the node's publish path, no subscriber).
+    """
     import rclpy
     from rclpy.parameter import Parameter
 
@@ -393,3 +429,15 @@ def bench_simulator_rtf(smoke: bool = False) -> dict:
     return {'benchmark': 'simulator node real-time factor at 1 kHz (fast mode)',
             'value': duration / wall, 'unit': 'x real time', 'baseline': 'wall clock',
             'ratio': duration / wall, 'target': '>= 100'}
+
+
+if __name__ == '__main__':   # python -m bench.bench_nodes [--one-sample]: the node rows only
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument('--one-sample', action='store_true', help='only 1-sample messages')
+    ap.add_argument('--smoke', action='store_true')
+    a = ap.parse_args()
+    for row in bench_nodes(a.smoke, sizes=(1,) if a.one_sample else (1, 1000),
+                           extras=not a.one_sample):
+        print(row, flush=True)

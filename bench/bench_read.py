@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Time and peak memory of reading (and writing) a large ipmc-timeseries/1 file.
+"""
+Time and peak memory of reading (and writing) a large ipmc-timeseries/1 file.
 
 Issue #18 (defect 11): a 5e6-row file took 65 s and 3.1 GB.  Usage:
 ``python -m bench.bench_read [ROWS] [--write]`` (default 5e6 rows: 1 kHz, three

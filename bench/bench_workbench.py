@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Benchmarks of the workbench: fit, compare and diagnose on the standard sweep.
+"""
+Benchmarks of the workbench: fit, compare and diagnose on the standard sweep.
 
 The standard sweep: slim + short samples, 8 crank-slider frequencies 1-20 Hz,
 6 s at 1 kHz each (16 files), 1 % noise.  Baseline for the ratios: one

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Run every benchmark and print one table: ``python -m bench.run [--smoke]``.
+"""
+Run every benchmark and print one table: ``python -m bench.run [--smoke]``.
 
 ``--smoke`` runs each benchmark on tiny inputs (what CI does): it checks that
 they run, not how fast.
@@ -22,7 +23,8 @@ def main(argv=None) -> int:
     ap.add_argument('--smoke', action='store_true')
     args = ap.parse_args(argv)
     print(
-        f"machine: {platform.machine()} {platform.processor() or ''} python {platform.python_version()}"
+        f"machine: {platform.machine()} {platform.processor() or ''} "
+        f'python {platform.python_version()}'
         f" cores={__import__('os').cpu_count()}"
     )
     print('| benchmark | value | unit | ratio | baseline | target |')

@@ -5,7 +5,8 @@ from ipmc_sensor_ros.physics.effects import Effect, EffectParameter
 
 class PolymerLeakage(Effect):
     name = 'polymer_leakage'
-    summary = 'The electrode capacitance discharges through the ionomer: the current is high-passed.'
+    summary = ('The electrode capacitance discharges through the ionomer: '
+               'the current is high-passed.')
     physics = 'A finite bulk resistance R in parallel with the double-layer capacitance C.'
     equation = 'H -> H s tau / (1 + s tau), tau = R C'
     signature = 'Gain loss and phase lead at low frequency, the same for every sample.'

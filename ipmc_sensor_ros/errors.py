@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The package's errors: one base class, a subclass per kind of fault.
+"""
+The package's errors: one base class, a subclass per kind of fault.
 
 Every error the package raises on purpose is an :class:`IpmcError` (a ``ValueError``), whose
 text names the thing and the place (parameter, file:line, topic); command lines and nodes turn
@@ -29,7 +30,8 @@ class DataError(IpmcError):
 
 
 class DataFormatError(DataError):
-    """An input file or bag that cannot be read as valid measurement data.
+    """
+    An input file or bag that cannot be read as valid measurement data.
 
     Attributes
     ----------
@@ -40,6 +42,7 @@ class DataFormatError(DataError):
 
     ``str()`` is ``"<path>:<line>: <reason>"``, ``"<path>: topic '<topic>': <reason>"`` or
     ``"<path>: <reason>"``.
+
     """
 
     def __init__(self, path, line: int | None, reason: str, *, topic: str | None = None) -> None:

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Simulator -> estimator pipeline in one namespace.
+"""
+Simulator -> estimator pipeline in one namespace.
 
 ros2 launch ipmc_sensor_ros ipmc_pipeline.launch.py namespace:=left \
     estimator_params:=/path/estimator.yaml simulator_params:=/path/simulator.yaml

@@ -1,6 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Shared test fixtures: one ROS domain per test run, ROS contexts, the estimator node driven
-synchronously, temporary workspaces."""
+"""
+Shared test fixtures: one ROS domain per test run, ROS contexts.
+
+The estimator node driven synchronously, temporary workspaces.
+"""
 from __future__ import annotations
 
 import contextlib
@@ -16,7 +19,7 @@ TEST_DOMAIN = int(os.environ.get('ROS_DOMAIN_ID') or 100 + os.getpid() % 50)
 
 
 def init_context(**kwargs):
-    """A fresh, initialised :class:`rclpy.Context` on the run's domain."""
+    """Return a fresh, initialised :class:`rclpy.Context` on the run's domain."""
     import rclpy
 
     ctx = rclpy.Context()
@@ -26,7 +29,11 @@ def init_context(**kwargs):
 
 @contextlib.contextmanager
 def ros_context(**kwargs):
-    """``with ros_context() as ctx:`` -- initialised, shut down on exit."""
+    """
+    Yield an initialised context, shut down on exit.
+
+    Use: ``with ros_context() as ctx:``.
+    """
     import rclpy
 
     ctx = init_context(**kwargs)
@@ -38,8 +45,11 @@ def ros_context(**kwargs):
 
 
 class DirectNode:
-    """The estimator node driven synchronously through its subscription callback
-    (the full message path minus DDS), capturing what it publishes."""
+    """
+    The estimator node driven synchronously through its subscription callback.
+
+    The full message path minus DDS, capturing what it publishes.
+    """
 
     def __init__(self, **overrides):
         from rclpy.parameter import Parameter
@@ -70,7 +80,7 @@ class DirectNode:
 
 @pytest.fixture
 def direct_node():
-    """A fresh :class:`DirectNode` with default parameters."""
+    """Return a fresh :class:`DirectNode` with default parameters."""
     d = DirectNode()
     yield d
     d.close()

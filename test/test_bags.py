@@ -1,6 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
-"""rosbag2 workflows: written bags are what rclpy expects, offline estimation equals a live
-replay into the node (as `ros2 bag play --clock` does), and a looping replay resets cleanly."""
+"""
+rosbag2 workflows: written bags are what rclpy expects.
+
+Offline estimation equals a live replay into the node (as `ros2 bag play --clock` does), and
+a looping replay resets cleanly.
+"""
 from __future__ import annotations
 
 import time

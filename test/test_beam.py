@@ -1,6 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Tests of the beam mechanics (small-deflection beam of the paper, eqs. 18-21, and the
-large-deflection elastica that goes past it)."""
+"""
+Tests of the beam mechanics.
+
+small-deflection beam of the paper, eqs. 18-21, and the large-deflection elastica
+that goes past it.
+"""
 import numpy as np
 import pytest
 from scipy.integrate import quad
@@ -12,9 +16,12 @@ from ipmc_sensor_ros.physics.parameters import ParameterError
 
 
 def _first_integral_length(tip_angle: float, load: float) -> float:
-    """Arc length (in units of L) of the elastica with tip angle theta_L under load lambda,
-    from the first integral theta'^2 = 2 lambda (sin theta_L - sin theta): an independent
-    (elliptic-integral) solution, no ODE solver."""
+    """
+    Arc length (in units of L) of the elastica with tip angle theta_L under load lambda.
+
+    From the first integral theta'^2 = 2 lambda (sin theta_L - sin theta): an independent
+    (elliptic-integral) solution, no ODE solver.
+    """
     # integrable 1/sqrt singularity at the tip: quad's algebraic weight (theta_L - theta)^-1/2
     # takes it, leaving a smooth factor
     def smooth(th):
@@ -26,10 +33,13 @@ def _first_integral_length(tip_angle: float, load: float) -> float:
 
 
 def test_elastica_matches_classical_large_deflection_values():
-    """Bisshopp & Drucker (1945), tip-loaded cantilever, F L^2 / (E I) = 1:
-    vertical tip deflection 0.3017 L, horizontal shortening 0.0564 L, tip angle
-    0.4613 rad (values quoted to 4 digits; tolerance one unit of the last digit, as the
-    quoted figures may be truncated rather than rounded)."""
+    """
+    Bisshopp & Drucker (1945), tip-loaded cantilever, F L^2 / (E I) = 1.
+
+    Vertical tip deflection 0.3017 L, horizontal shortening 0.0564 L, tip angle 0.4613
+    rad (values quoted to 4 digits; tolerance one unit of the last digit, as the quoted
+    figures may be truncated rather than rounded).
+    """
     sol = elastica_solution(1.0)
     s = np.linspace(0.0, 1.0, 4001)
     theta = sol.sol(s)[0]
@@ -40,8 +50,11 @@ def test_elastica_matches_classical_large_deflection_values():
 
 @pytest.mark.parametrize('load', [0.5, 2.0, 3.0])
 def test_elastica_tip_angle_agrees_with_first_integral_solution(load):
-    """The BVP's tip angle equals the root of 'arc length = L' of the first integral
-    (1e-6 rad: the BVP tolerance is 1e-10, quad's ~1e-9)."""
+    """
+    The BVP's tip angle equals the root of 'arc length = L' of the first integral.
+
+    1e-6 rad: the BVP tolerance is 1e-10, quad's ~1e-9.
+    """
     tip_bvp = elastica_solution(load).sol(1.0)[0]
     # bracket below pi/2, where the singularity stops being integrable (tips here < 1.1 rad)
     tip_exact = brentq(lambda a: _first_integral_length(a, load) - 1.0, 1e-6, 1.4,

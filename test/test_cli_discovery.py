@@ -1,7 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
-"""CLI of the discovery loop: diagnose saves the whole model, compare/track read it, the
-verdict ends with the exact next command; fit frees effect parameters and saves the model.
-Small campaign (slim + short at 2 and 10 Hz, 3 s) to keep it short."""
+"""
+CLI of the discovery loop: diagnose saves the whole model, compare/track read it.
+
+The verdict ends with the exact next command; fit frees effect parameters and saves the
+model. Small campaign (slim + short at 2 and 10 Hz, 3 s) to keep it short.
+"""
 import json
 import shlex
 

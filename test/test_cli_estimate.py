@@ -1,5 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""ipmc-model estimate: accuracy at any length, named output columns, explicit geometry precedence."""
+"""
+ipmc-model estimate: accuracy at any length, named output columns, geometry precedence.
+
+The geometry precedence is explicit.
+"""
 
 import json
 from pathlib import Path
@@ -18,7 +22,7 @@ SLIM_PARAMS = ROOT / 'config' / 'estimator.yaml'       # the shipped file: slim 
 
 @pytest.fixture(scope='module')
 def short_run(tmp_path_factory):
-    """A 6 s short-sample record (L = 11 mm) at 5 Hz, 1 % current noise, and a 1.5 s one."""
+    """Return a 6 s short-sample record (L = 11 mm) at 5 Hz, 1 % current noise, and a 1.5 s one."""
     out = tmp_path_factory.mktemp('short')
     assert main(['simulate', '--out', str(out), '--samples', 'short', '--frequencies', '5',
                  '--duration', '6', '--seed', '4']) == 0

@@ -1,6 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The eight-step import of a lab export (issue #16) is one command, and every verb reads the
-result: four dialects of the same recording import to the same SI record."""
+"""
+The eight-step import of a lab export (issue #16) is one command, and every verb reads the result.
+
+Four dialects of the same recording import to the same SI record.
+"""
 from pathlib import Path
 
 import numpy as np

@@ -134,8 +134,12 @@ def test_nothing_written_unless_asked():
 
 
 def test_import_verb_passes_everything_to_the_library(monkeypatch, tmp_path, capsys):
-    """The verb is a thin shell over workbench.labimport.import_lab_files (stubbed here, so
-    this tests the CLI side only: parsing of --geometry units, --columns, --current-gain)."""
+    """
+    The verb is a thin shell over workbench.labimport.import_lab_files.
+
+    Stubbed here, so this tests the CLI side only: parsing of --geometry units, --columns,
+    --current-gain.
+    """
     import sys
     import types
 

@@ -35,7 +35,7 @@ def test_compare_json_and_report(sweep, tmp_path):
     assert right['fit_percent'] > 97.0   # 1 % noise
     assert (rep / 'index.html').exists()
     assert {p.name for p in rep.glob('*.png')} == {'bode.png', 'time_worst.png', 'residuals.png',
-                                                 'residual_spectrum.png', 'failure_map.png'}
+                                                   'residual_spectrum.png', 'failure_map.png'}
     assert main(['compare', str(sweep), '--model', 'h1', '--json', str(js)]) == 0
     wrong = json.loads(js.read_text())
     assert wrong['error'] > 3 * right['error']

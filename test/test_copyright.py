@@ -1,6 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Every Python source carries an ``SPDX-License-Identifier: Apache-2.0`` header line
-(ament_copyright is not on PyPI; this is the same check for SPDX headers)."""
+"""
+Every Python source carries an ``SPDX-License-Identifier: Apache-2.0`` header line.
+
+ament_copyright is not on PyPI; this is the same check for SPDX headers.
+"""
 from pathlib import Path
 
 import pytest

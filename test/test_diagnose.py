@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Hidden-effect tests of the missing-physics discovery (issue: discovery).
+"""
+Hidden-effect tests of the missing-physics discovery (issue: discovery).
 
 Each test simulates a crank-slider sweep (slim and short samples, 8 frequencies
 1-20 Hz, 6 s each, 1 % noise) or long records from H2 plus one hidden effect with

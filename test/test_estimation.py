@@ -64,8 +64,11 @@ def test_rebuilt_continues_without_jump():
 
 
 def test_recent_input_is_the_last_inputs_in_order_for_any_block_sizes():
-    """The replay history (a ring buffer) holds exactly the last history_s of input,
-    oldest first, whatever the block sizes (1 sample up to more than the buffer)."""
+    """
+    The replay history (a ring buffer) holds exactly the last history_s of input, oldest first.
+
+    Whatever the block sizes (1 sample up to more than the buffer).
+    """
     est = DeflectionEstimator(SensorModel(PAPER_SAMPLES['slim']), 1000.0, history_s=0.05)
     size = est._history.size
     rng = np.random.default_rng(3)

@@ -130,9 +130,12 @@ def test_blocks_and_single_samples_identical_and_state_restore(reduced_slim):
 
 @pytest.mark.parametrize('offset_corner_hz', [None, 0.05])
 def test_small_block_path_equals_sosfilt_bit_for_bit(reduced_slim, offset_corner_hz):
-    """Blocks up to SMALL_BLOCK_SAMPLES run a plain-Python recursion (the one-sample
-    fast path of the node); it must give exactly sosfilt's numbers, whatever the mix
-    of block sizes around the threshold."""
+    """
+    Blocks up to SMALL_BLOCK_SAMPLES run a plain-Python recursion equal to sosfilt.
+
+    The recursion is the one-sample fast path of the node; it must give exactly sosfilt's
+    numbers, whatever the mix of block sizes around the threshold.
+    """
     from ipmc_sensor_ros.estimation.inverse import SMALL_BLOCK_SAMPLES
     rng = np.random.default_rng(7)
     x = rng.normal(0, 1e-6, 3000)

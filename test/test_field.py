@@ -53,10 +53,13 @@ def test_time_domain_crank_nicolson_matches_exact_response():
 
 
 def test_drifting_diffusivity_field_solution_agrees_with_quasi_static_effect():
-    """Ground truth for `hydration_drift`: the field solver with d(t) changing during the run
-    against the catalog effect's quasi-static prediction.  The 1 % bound covers the field
-    mesh (0.2 deg), the 0.5 s update steps (d moves 0.25 % per step) and the quasi-static
-    approximation itself."""
+    """
+    Ground truth for `hydration_drift`.
+
+    The field solver with d(t) changing during the run against the catalog effect's
+    quasi-static prediction. The 1 % bound covers the field mesh (0.2 deg), the 0.5 s
+    update steps (d moves 0.25 % per step) and the quasi-static approximation itself.
+    """
     from ipmc_sensor_ros.simulation.sensor import predict_current
 
     rate = -0.005
@@ -78,10 +81,14 @@ def test_drifting_diffusivity_field_solution_agrees_with_quasi_static_effect():
 
 
 def test_term_dropped_from_eq9_is_negligible_at_physical_amplitudes():
-    """Past the paper: the nonlinear field solution.  The term grows linearly with the
-    amplitude (a second harmonic); at the paper's 2 mm it changes the current by ~2e-5,
-    so the linear model only errs by 1 % near 1 m of tip deflection -- impossible for a
-    22 mm beam.  The linear variant reproduces H1 (0.14 % waveform error at 2 kHz)."""
+    """
+    Past the paper: the nonlinear field solution.
+
+    The term grows linearly with the amplitude (a second harmonic); at the paper's 2 mm
+    it changes the current by ~2e-5, so the linear model only errs by 1 % near 1 m of
+    tip deflection -- impossible for a 22 mm beam. The linear variant reproduces H1
+    (0.14 % waveform error at 2 kHz).
+    """
     from ipmc_sensor_ros.physics.field import NonlinearFieldSolver
     from ipmc_sensor_ros.workbench.studies import nonlinearity_study
 
@@ -103,8 +110,12 @@ def test_term_dropped_from_eq9_is_negligible_at_physical_amplitudes():
 
 @pytest.mark.parametrize('effects', [(), ('surface_resistance',)])
 def test_elastica_beam_small_signal_response_is_the_papers(effects):
-    """With the large-deflection beam, the linearisation at w = 0 is still H1/H2 (the
-    elastica is the paper's beam at first order): same 0.1 dB / 0.5 deg as the linear beam."""
+    """
+    With the large-deflection beam.
+
+    The linearisation at w = 0 is still H1/H2 (the elastica is the paper's beam at first
+    order): same 0.1 dB / 0.5 deg as the linear beam.
+    """
     from ipmc_sensor_ros.physics.beam import ElasticaBeam
 
     model = SensorModel(PAPER_SAMPLES['short'], effects=effects)
@@ -117,10 +128,14 @@ def test_elastica_beam_small_signal_response_is_the_papers(effects):
 
 
 def test_large_deflection_error_of_the_linear_model_and_its_harmonics():
-    """Past the paper (its section 2 ignores 'the nonlinearity of stress profile'): the
-    elastica's current differs from eq. 21's by an odd, cubic distortion.  The error
-    grows as the amplitude squared, the third harmonic dominates the second, and the
-    linear model's error reaches 1 % at a deflection of about a fifth of the length."""
+    """
+    Past the paper (its section 2 ignores 'the nonlinearity of stress profile').
+
+    The elastica's current differs from eq. 21's by an odd, cubic distortion. The
+    error grows as the amplitude squared, the third harmonic dominates the second,
+    and the linear model's error reaches 1 % at a deflection of about a fifth of the
+    length.
+    """
     from ipmc_sensor_ros.workbench.studies import amplitude_at_error, large_deflection_study
 
     model = SensorModel(PAPER_SAMPLES['short'])

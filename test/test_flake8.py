@@ -1,8 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
-"""ament_flake8 (line length 99) over the package, as `ros2 pkg create` tests carry it.
+"""
+ament_flake8 (line length 99) over the package, as `ros2 pkg create` tests carry it.
 
-Marked ``linter``: deselected by default until scripts/lint_fix.py has been run over the
-code base (scripts/lint_fix.py); run with ``pytest -m linter``.
+Marked ``linter``: runs with the default selection; ``pytest -m linter`` runs the linters
+alone.  ``python scripts/lint_fix.py`` fixes what it can (quotes, SPDX headers, docstring
+layout) and lists what needs a human.
 """
 import pytest
 

@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
 """Health evaluator behind /diagnostics (ROS-free)."""
 import numpy as np
+import pytest
 
 from ipmc_sensor_ros.interface.health import (ERROR, OK, WARN, CurrentStatistics, HealthLimits,
                                               HealthMonitor, worst)
@@ -104,3 +105,17 @@ def test_worst_aggregates_channels():
     b = mon_b.evaluate(_counters(0), 1.0)
     agg = worst([a, b])
     assert agg.level == ERROR and agg.message == b.message
+
+
+def test_one_sample_path_equals_block_path():
+    # observe_one is the one-sample message path's shortcut of observe fed one-sample
+    # blocks: same mean (float rounding of the two forms: 1e-9 relative) and the same ring
+    rng = np.random.default_rng(11)
+    i = 1e-6 * rng.standard_normal(int(13.5 * FS)) + 40e-9   # past the 10 s window
+    blocks, single = CurrentStatistics(FS), CurrentStatistics(FS)
+    for x in i:
+        blocks.observe(np.array([x]))
+        single.observe_one(x)
+    assert single.samples == blocks.samples == i.size
+    assert single.offset_a() == pytest.approx(blocks.offset_a(), rel=1e-9, abs=1e-18)
+    assert single.line() == pytest.approx(blocks.line(), rel=1e-9)

@@ -1,6 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Reliability from the outside (issue 18), ROS part: the estimator node runs in a second
-process; this test process is the hostile peer (remote set_parameters with extreme floats)."""
+"""
+Reliability from the outside (issue 18), ROS part: the estimator node runs in a second process.
+
+This test process is the hostile peer (remote set_parameters with extreme floats).
+"""
 import os
 import random
 import subprocess

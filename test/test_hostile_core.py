@@ -1,8 +1,11 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Reliability from the outside (issue 18), ROS-free part: hostile parameter values,
-params files, plugins and YAML reach the core through the same functions the node
-and ``ipmc-model`` use; each must give a refusal naming the thing, or a correct
-result, never a NaN or a traceback."""
+"""
+Reliability from the outside (issue 18), ROS-free part.
+
+Hostile parameter values, params files, plugins and YAML reach the core through
+the same functions the node and ``ipmc-model`` use; each must give a refusal
+naming the thing, or a correct result, never a NaN or a traceback.
+"""
 import numpy as np
 import pytest
 
@@ -25,9 +28,12 @@ SLIM = PAPER_SAMPLES['slim']
     ({'offset_corner_hz': 0.01}, {'leak_corner_hz': 0.0101}, True),  # nearly equal corners
 ])
 def test_rebuild_with_offset_tracker_continues_without_jump_or_nan(before, after, keeps_reference):
-    """continue_from divided by the DC gain, which is exactly 0 with the tracker on
-    (zero at s = 0): NaN after every such rebuild.  Now: no jump, and the new filter
-    keeps the old one's deflection and offset estimate."""
+    """
+    continue_from divided by the DC gain, which is exactly 0 with the tracker on (zero at s = 0).
+
+    NaN after every such rebuild. Now: no jump, and the new filter keeps the old
+    one's deflection and offset estimate.
+    """
     model = SensorModel.named('h2', SLIM)
     t = np.arange(int(130 * FS)) / FS
     w = CrankSlider(2.0, 2e-3, 15e-3).deflection(t)
@@ -55,8 +61,11 @@ def test_rebuild_with_offset_tracker_continues_without_jump_or_nan(before, after
 
 
 def test_hydration_drift_with_offset_tracker_gives_no_nan():
-    """hydration_drift rebuilds the filter every update_s (5 s): with the tracker on every
-    rebuild gave NaN (15,000 of 20,000 outputs)."""
+    """
+    hydration_drift rebuilds the filter every update_s (5 s).
+
+    With the tracker on every rebuild gave NaN (15,000 of 20,000 outputs).
+    """
     model = SensorModel.named(
         'h2', SLIM, extra_effects='hydration_drift(diffusivity_rate_per_s=-1e-3)'
     )
@@ -118,8 +127,12 @@ def test_frame_id_is_bounded_in_length_and_characters():
 
 
 def test_alias_bomb_yaml_gives_a_short_error_fast(tmp_path):
-    """safe_load keeps aliases shared; the error message used to expand the value with
-    !r (40 s, 2.9 GB, MemoryError)."""
+    """
+    safe_load keeps aliases shared.
+
+    The error message used to expand the value with !r (40 s, 2.9 GB,
+    MemoryError).
+    """
     lines = ['a0: &a0 [x, x, x, x, x, x, x, x, x]']
     for k in range(1, 10):
         lines.append(f'a{k}: &a{k} [' + ', '.join([f'*a{k - 1}'] * 9) + ']')
@@ -208,8 +221,11 @@ def test_offset_corner_above_nyquist_is_refused_like_the_leak_corner():
 
 
 def test_estimate_to_bag_with_huge_time_origin_is_one_line_and_leaves_no_bag(tmp_path, capsys):
-    """A time origin of 1e10 s overflowed the int32 stamp (OverflowError traceback, a
-    half-written bag left behind)."""
+    """
+    A time origin of 1e10 s overflowed the int32 stamp.
+
+    OverflowError traceback, a half-written bag left behind.
+    """
     from ipmc_sensor_ros.cli.main import main
     t = 1e10 + np.arange(2000) / FS
     src = tmp_path / 'in.csv'

@@ -117,11 +117,11 @@ def test_crank_with_offset_after_rest(sample, f):
     i = daq_current(model, t, w, offset_a=10e-9, noise_fraction=0.01, seed=21)
     est = DeflectionEstimator(model, FS, estimator='kalman')
     w_hat = np.concatenate(
-        [est.process(t[k : k + 1000], i[k : k + 1000])[1] for k in range(0, t.size, 1000)]
+        [est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
     )
     leaky = DeflectionEstimator(model, FS)
     w_leaky = np.concatenate(
-        [leaky.process(t[k : k + 1000], i[k : k + 1000])[1] for k in range(0, t.size, 1000)]
+        [leaky.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
     )
     sel = t >= 5
     assert nrmse(w_hat[sel], w[sel]) < 0.04
@@ -137,7 +137,7 @@ def test_step_held_with_offset_big():
     i = daq_current(BIG, t, w, offset_a=10e-9, noise_fraction=0.01, seed=22)
     est = DeflectionEstimator(BIG, FS, estimator='kalman')
     w_hat = np.concatenate(
-        [est.process(t[k : k + 1000], i[k : k + 1000])[1] for k in range(0, t.size, 1000)]
+        [est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
     )
     sel = t >= 5
     # target 3 %; tolerance 1 % for the offset learned in 2 s (see the crank test)
@@ -200,11 +200,11 @@ def test_robot_motion_with_hum_beats_leaky():
     )
     est = DeflectionEstimator(SLIM, FS, estimator='kalman', mains_hz=50)
     w_hat = np.concatenate(
-        [est.process(t[k : k + 1000], i[k : k + 1000])[1] for k in range(0, t.size, 1000)]
+        [est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
     )
     leaky = DeflectionEstimator(SLIM, FS)
     w_l = np.concatenate(
-        [leaky.process(t[k : k + 1000], i[k : k + 1000])[1] for k in range(0, t.size, 1000)]
+        [leaky.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
     )
     sel = t >= 5
     assert est.mains.line_present is False or est.mains.line_ratio > 0
@@ -225,7 +225,7 @@ def test_drifting_offset_with_intermittent_motion_stays_bounded():
     i = daq_current(SLIM, t, w, offset_a=10e-9, drift_a_per_min=1e-9, noise_fraction=0.01, seed=41)
     est = DeflectionEstimator(SLIM, fs, estimator='kalman')
     w_hat = np.concatenate(
-        [est.process(t[k : k + 5000], i[k : k + 5000])[1] for k in range(0, t.size, 5000)]
+        [est.process(t[k:k + 5000], i[k:k + 5000])[1] for k in range(0, t.size, 5000)]
     )
     assert np.max(np.abs(w_hat - w)[t > 5]) < 0.2e-3
     assert est.inverse.offset_a == pytest.approx(20e-9, abs=2e-9)   # 10 nA + 10 min * 1 nA/min

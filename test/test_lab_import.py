@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Tests of workbench.labimport: lab exports in several dialects into ipmc-timeseries/1.
+"""
+Tests of workbench.labimport: lab exports in several dialects into ipmc-timeseries/1.
 
 The samples in test/data/lab/ are written by make_lab.py in five different dialects
 (LabVIEW text export, DAQ TSV in ms/um/nA with CRLF, European ';' + decimal comma with

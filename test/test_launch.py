@@ -13,13 +13,14 @@ LAUNCH = ROOT / 'launch'
 
 def _entry_points():
     text = (ROOT / 'setup.py').read_text()
-    return set(re.findall(r'"(\w[\w-]*) = ipmc_sensor_ros', text))
+    return set(re.findall(r'[\'"](\w[\w-]*) = ipmc_sensor_ros', text))
 
 
 def test_launch_files_are_installed():
     text = (ROOT / 'setup.py').read_text()
-    assert '"/launch"' in text and 'glob("launch/*.launch.py")' in text \
-        and 'glob("launch/*.launch.xml")' in text
+    text = text.replace('"', "'")   # whatever quote style setup.py is written in
+    assert "'/launch'" in text and "glob('launch/*.launch.py')" in text \
+        and "glob('launch/*.launch.xml')" in text
 
 
 def test_python_launch_names_existing_executables_and_files():

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Simulator -> estimator end to end: tracking accuracy and exact sample accounting.
+"""
+Simulator -> estimator end to end: tracking accuracy and exact sample accounting.
 
 1. One process, one executor: three simulator/estimator pairs (crank-slider at
    1, 5 and 20 Hz) in namespaces /f1, /f5, /f20.
@@ -58,7 +59,7 @@ def _sim_params(f_hz: float, duration_s: float = DURATION_S, realtime_factor: fl
 
 
 def _context_with_monitor(monkeypatch):
-    """A fresh context on a random loopback domain, its executor and a monitor node."""
+    """Return a fresh context on a random loopback domain, its executor and a monitor node."""
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=TEST_DOMAIN)
@@ -111,10 +112,13 @@ def test_in_process_pairs_track_truth_and_account_exactly(monkeypatch):
 
 
 def test_estimator_improves_when_its_model_gains_the_hidden_effect(monkeypatch):
-    """Issue 'discovery': the simulator hides a 40 Hz current-amplifier pole; an estimator
-    with the plain H2 model misses its 14 deg phase lag at 10 Hz, one whose ``effects``
-    parameter names it tracks the truth.  Two identical (seeded, deterministic) simulators
-    feed the two estimators in namespaces /plain and /aware of one executor."""
+    """
+    Issue 'discovery': the simulator hides a 40 Hz current-amplifier pole.
+
+    An estimator with the plain H2 model misses its 14 deg phase lag at 10 Hz, one whose
+    ``effects`` parameter names it tracks the truth. Two identical (seeded, deterministic)
+    simulators feed the two estimators in namespaces /plain and /aware of one executor.
+    """
     ctx, ex, monitor_node = _context_with_monitor(monkeypatch)
     hidden = ['amplifier_bandwidth(corner_hz=40)']
     nodes, monitors = [], {}
@@ -137,7 +141,8 @@ def test_estimator_improves_when_its_model_gains_the_hidden_effect(monkeypatch):
             ex.spin_once(timeout_sec=0.05)
         errors = {ns: m.score(last_s=20.0)[0] for ns, m in monitors.items()}
         print(
-            f"hidden amplifier pole: NRMSE plain {errors['/plain']:.4f}, aware {errors['/aware']:.4f}"
+            f"hidden amplifier pole: NRMSE plain {errors['/plain']:.4f}, "
+            f"aware {errors['/aware']:.4f}"
         )
         # A 14 deg phase error alone is a 25 % NRMSE; knowing the pole leaves the ~1 %
         # of the leak and the reduction.  "Measurably better": at least 5x, and < 5 %.
@@ -169,9 +174,12 @@ def test_two_processes_over_dds_track_truth_and_account_exactly(tmp_path, monkey
 
 @pytest.mark.slow
 def test_ten_minute_live_run_accounts_exactly(tmp_path, monkeypatch):
-    """The reliability soak: 10 minutes paced in real time, two processes over DDS, exact
-    accounting; resident memory of each node flat (growth from 10 % of the run to its end
-    within 5 %)."""
+    """
+    The reliability soak: 10 minutes paced in real time, two processes over DDS, exact accounting.
+
+    Resident memory of each node flat (growth from 10 % of the run to its end within 5
+    %).
+    """
     rss = _two_process_run(tmp_path, monkeypatch, 600.0, 1.0)
     for name, (early, end) in rss.items():
         assert end <= 1.05 * early, (name, early, end)
@@ -185,7 +193,11 @@ def _rss_bytes(pid: int) -> int:
 
 
 def _two_process_run(tmp_path, monkeypatch, duration_s: float, realtime_factor: float):
-    """Simulator and estimator as two processes; returns {name: (rss early, rss at end)}."""
+    """
+    Run the simulator and estimator as two processes.
+
+    Returns {name: (rss early, rss at end)}.
+    """
     n_samples = int(duration_s * FS)
     timeout_s = TIMEOUT_S + 1.2 * duration_s * (realtime_factor > 0)
     domain = random.randint(150, 200)

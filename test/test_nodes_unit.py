@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Unit tests of the ROS 2 layer: message layout helpers and the nodes in-process.
+"""
+Unit tests of the ROS 2 layer: message layout helpers and the nodes in-process.
 
 Every node test runs in its own rclpy Context on a random ROS_DOMAIN_ID in
 100..200 with discovery limited to localhost, so parallel runs do not cross-talk.
@@ -61,7 +62,7 @@ def reduced():
 
 
 def reference(reduced, **kw) -> InverseEstimator:
-    """The core estimator the node must reproduce with default parameters."""
+    """Return the core estimator the node must reproduce with default parameters."""
     return InverseEstimator(reduced, FS, **kw)
 
 
@@ -91,8 +92,12 @@ def test_pack_unpack_round_trip_is_exact(n):
 
 
 def test_block_packer_reuses_one_message_and_follows_length_changes():
-    """The node's reused output message: each pack is exact, including after the
-    block length changes (1 -> 5 -> 1), and it is the same object every time."""
+    """
+    The node's reused output message.
+
+    Each pack is exact, including after the block length changes (1 -> 5 ->
+    1), and it is the same object every time.
+    """
     packer = BlockPacker(DEFLECTION_COLUMNS)
     first = None
     for n in (1, 1, 5, 1):
@@ -601,7 +606,8 @@ def test_plugin_effect_is_used_by_the_estimator_node():
         assert (
             'polymer_leakage(time_constant_s=0.05)' in node.deflection_estimator.model.describe()
         )
-        # the high-pass of the leakage (zero at s = 0 in H) is in the reduced model the node inverts
+        # the high-pass of the leakage (zero at s = 0 in H) is in the reduced model the node
+        # inverts
         assert node.deflection_estimator.reduced.order == 4
         node.destroy_node()
         with pytest.raises((P.ParameterError, ParameterException), match='plugins'):

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_PARAMETERS, PAPER_SAMPLES, Geometry
 from ipmc_sensor_ros.lti.reduction import (ParameterError, eq55_poles_zeros, paper_eq55,
-                                       reduce_model, reduction_error, reduction_error_table)
+                                           reduce_model, reduction_error, reduction_error_table)
 
 MODELS = {name: SensorModel(g) for name, g in PAPER_SAMPLES.items()}
 

@@ -1,6 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Reliability: fuzzed input to the estimator node, bad configuration files, soak of the
-estimator core, and finite models across the physical parameter range."""
+"""
+Reliability: fuzzed input to the estimator node, bad configuration files.
+
+Soak of the estimator core, and finite models across the physical parameter range.
+"""
 from __future__ import annotations
 
 import os
@@ -46,40 +49,50 @@ def _signal(n, start, rng):
 
 
 def _corrupt(kind: str, t, i, rng):
-    """A message that must be rejected, by kind."""
+    """Return a message that must be rejected, by kind."""
     if kind == 'nan':
-        i = i.copy(); i[rng.integers(i.size)] = np.nan
+        i = i.copy()
+        i[rng.integers(i.size)] = np.nan
         return pack_block(t, i)
     if kind == 'inf':
-        i = i.copy(); i[rng.integers(i.size)] = -np.inf
+        i = i.copy()
+        i[rng.integers(i.size)] = -np.inf
         return pack_block(t, i)
     if kind == 'huge':
-        i = i.copy(); i[rng.integers(i.size)] = 1e30
+        i = i.copy()
+        i[rng.integers(i.size)] = 1e30
         return pack_block(t, i)
     if kind == 'time_nan':
-        t = t.copy(); t[rng.integers(t.size)] = np.nan
+        t = t.copy()
+        t[rng.integers(t.size)] = np.nan
         return pack_block(t, i)
     if kind == 'not_increasing':
-        t = t.copy(); t[-1] = t[0]
+        t = t.copy()
+        t[-1] = t[0]
         return pack_block(t, i)
     if kind == 'wrong_rate':
         return pack_block(t[0] + 2 * (t - t[0]), i)
     if kind == 'empty':
         return Float64MultiArray()
     if kind == 'odd':
-        m = pack_block(t, i); m.data = list(m.data) + [0.0]
+        m = pack_block(t, i)
+        m.data = list(m.data) + [0.0]
         return m
     if kind == 'wrong_label':
-        m = pack_block(t, i); m.layout.dim[1].label = 'time_s,current_mA'
+        m = pack_block(t, i)
+        m.layout.dim[1].label = 'time_s,current_mA'
         return m
     if kind == 'bad_stride':
-        m = pack_block(t, i); m.layout.dim[0].stride = 3
+        m = pack_block(t, i)
+        m.layout.dim[0].stride = 3
         return m
     if kind == 'three_dims':
-        m = pack_block(t, i); m.layout.dim.append(MultiArrayDimension(label='x', size=1, stride=1))
+        m = pack_block(t, i)
+        m.layout.dim.append(MultiArrayDimension(label='x', size=1, stride=1))
         return m
     if kind == 'bad_offset':
-        m = pack_block(t, i); m.layout.data_offset = 10 ** 6
+        m = pack_block(t, i)
+        m.layout.data_offset = 10 ** 6
         return m
     raise AssertionError(kind)
 
@@ -89,9 +102,12 @@ CORRUPTIONS = ('nan', 'inf', 'huge', 'time_nan', 'not_increasing', 'wrong_rate',
 
 
 def test_one_sample_lean_path_gives_the_general_paths_results():
-    """One-sample messages take a lean scalar path (performance issue); it must publish
-    exactly what the general block path publishes and count alike, through bad messages,
-    a bridged gap, a reset gap and a backward time jump."""
+    """
+    One-sample messages take a lean scalar path (performance issue).
+
+    It must publish exactly what the general block path publishes and count alike,
+    through bad messages, a bridged gap, a reset gap and a backward time jump.
+    """
     rng = np.random.default_rng(5)
     t, i = _signal(600, 10.0, rng)
     t[300:] += 0.002          # bridged gap (3 periods)
@@ -249,8 +265,12 @@ def test_shipped_config_files_load():
 # Soak of the estimator core (CI: 10^7 samples; bench: 10^8)
 # ---------------------------------------------------------------------------
 def soak(n_samples: int, block: int = 1_000_000, offset_a: float = 2e-8, noise_a: float = 1e-8):
-    """Noisy, offset current through the inverse; returns (max |w|, documented bound,
-    traced memory growth in bytes between the first and last block)."""
+    """
+    Noisy, offset current through the inverse.
+
+    Returns (max |w|, documented bound, traced memory growth in bytes between
+    the first and last block).
+    """
     reduced = reduce_model(SensorModel(SLIM), 4)
     est = InverseEstimator(reduced, FS)
     rng = np.random.default_rng(0)

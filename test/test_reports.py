@@ -29,7 +29,7 @@ def _check_images(out: Path, images: list[str]) -> None:
 
 @pytest.fixture(scope='module')
 def h1_records():
-    """Data from H2 judged by H1 (a wrong model: its worst records are clearly worse)."""
+    """Return data from H2 judged by H1 (a wrong model: its worst records are clearly worse)."""
     recs = crank_slider_campaign(samples=('slim',), frequencies_hz=(13.0, 1.0, 4.0, 2.0),
                                  duration_s=3.0, seed=2, model_effects=())
     return recs

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The ``ros2 run`` contract: colcon builds the package and both executables run.
+"""
+The ``ros2 run`` contract: colcon builds the package and both executables run.
 
 There is no ``ros2`` CLI here, so the test does what ``ros2 run ipmc_sensor_ros
 <exe>`` does: resolve the package prefix through the ament index
@@ -54,7 +55,8 @@ def test_colcon_install_layout(workspace, monkeypatch):
     monkeypatch.setenv('AMENT_PREFIX_PATH', str(workspace / 'install' / PKG))
     prefix = Path(get_package_prefix(PKG))
     assert prefix == workspace / 'install' / PKG
-    for exe in ('ipmc_estimator', 'ipmc_simulator'):
+    for exe in ('ipmc_estimator', 'ipmc_simulator', 'ipmc_estimator_managed',
+                'ipmc_simulator_managed'):
         path = prefix / 'lib' / PKG / exe
         assert path.is_file() and os.access(path, os.X_OK), path
     share = Path(get_package_share_directory(PKG))
@@ -68,7 +70,7 @@ def test_colcon_install_layout(workspace, monkeypatch):
     ('ipmc_simulator', 'simulator.yaml', 'motor_frequency_hz:=5.0', 'motor_frequency_hz=5,'),
 ])
 def test_ros2_run_starts_and_exits_zero_on_sigint(workspace, tmp_path, monkeypatch, exe, config,
-                                                   override, echo):
+                                                  override, echo):
     from ament_index_python.packages import get_package_prefix, get_package_share_directory
 
     install = workspace / 'install' / PKG

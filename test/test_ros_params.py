@@ -41,7 +41,7 @@ def test_renamed_node_takes_its_default_name_section(context, tmp_path):
 
 
 def test_other_nodes_keys_in_wildcard_section_warn_but_typo_for_this_node_fails(context,
-                                                                              tmp_path):
+                                                                                tmp_path):
     node, args = _node(context, tmp_path, '/**:\n  ros__parameters:\n    block_size: 10\n')
     P.check_unknown_overrides(node, SPECS, args, default_name='ipmc_estimator')  # no raise
     assert 'block_size' not in node._parameter_overrides

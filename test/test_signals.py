@@ -13,8 +13,10 @@ pytest.importorskip('rclpy')
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _start_and_signal(sig, domain):
+def _start_and_signal(sig, domain, executor=None):
     env = dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(domain))
+    if executor is not None:
+        env['IPMC_EXECUTOR'] = executor
     proc = subprocess.Popen([sys.executable, '-m', 'ipmc_sensor_ros.nodes.simulator_node'],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, text=True)
     lines = []
@@ -25,7 +27,7 @@ def _start_and_signal(sig, domain):
             break
     proc.send_signal(sig)                     # on the "ready" line: the racy moment
     try:
-        out, _ = proc.communicate(timeout=20.0)   # the guard timer acts within 0.1 s
+        out, _ = proc.communicate(timeout=20.0)   # the spin loop sees it within 0.1 s
     except subprocess.TimeoutExpired:
         proc.kill()
         out, _ = proc.communicate()
@@ -34,9 +36,28 @@ def _start_and_signal(sig, domain):
 
 
 @pytest.mark.ros
-@pytest.mark.parametrize('sig', [signal.SIGTERM, signal.SIGTERM, signal.SIGTERM, signal.SIGINT])
-def test_signal_after_ready_exits_zero_without_traceback(sig):
-    code, text = _start_and_signal(sig, 150 + os.getpid() % 50)
+@pytest.mark.parametrize('sig,executor', [(signal.SIGTERM, None), (signal.SIGTERM, None),
+                                          (signal.SIGINT, None), (signal.SIGTERM, 'single'),
+                                          (signal.SIGINT, 'single')])
+def test_signal_after_ready_exits_zero_without_traceback(sig, executor):
+    code, text = _start_and_signal(sig, 150 + os.getpid() % 50, executor)
     assert 'ready' in text
     assert code == 0, text
     assert 'Traceback' not in text and 'Error' not in text, text
+
+
+@pytest.mark.ros
+def test_events_executor_is_the_default_where_rclpy_has_it(monkeypatch):
+    from ipmc_sensor_ros.nodes import runner
+
+    monkeypatch.delenv('IPMC_EXECUTOR', raising=False)
+    experimental = pytest.importorskip('rclpy.experimental')
+    assert runner.executor_name() == 'events'
+    # rclpy.experimental.EventsExecutor is a factory function; the class is in _rclpy_pybind11
+    assert type(runner.make_executor()).__name__ == 'EventsExecutor'
+    assert callable(experimental.EventsExecutor)
+    monkeypatch.setenv('IPMC_EXECUTOR', 'single')
+    assert runner.executor_name() == 'single'
+    monkeypatch.setenv('IPMC_EXECUTOR', 'multi')
+    with pytest.raises(runner.ParameterError, match='IPMC_EXECUTOR'):
+        runner.executor_name()

@@ -97,9 +97,12 @@ def test_sampled_stimulus_and_errors():
     ],
 )
 def test_streaming_simulator_with_effects_matches_exact_prediction(effects):
-    """The streaming simulator (blocks of 100 samples) against the exact FFT prediction of the
-    same model; 1 % bounds the simulator's 0.05 dB / 0.2 deg discretisation error plus the
-    delay line's interpolation and the piecewise-constant drift."""
+    """
+    The streaming simulator (blocks of 100 samples) against the exact FFT prediction.
+
+    Same model; 1 % bounds the simulator's 0.05 dB / 0.2 deg discretisation error plus the
+    delay line's interpolation and the piecewise-constant drift.
+    """
     fs = 1000.0
     model = SensorModel.named('h2', PAPER_SAMPLES['slim'], extra_effects=effects)
     t = np.arange(int(20 * fs)) / fs
@@ -108,8 +111,11 @@ def test_streaming_simulator_with_effects_matches_exact_prediction(effects):
 
 
 def _streaming_error(sim, model, stim, t, block: int) -> float:
-    """Relative RMS error of a streaming simulator (blocks of ``block`` samples) against the
-    exact FFT prediction of ``model``, after a 1 s settle."""
+    """
+    Relative RMS error of a streaming simulator against the exact FFT prediction.
+
+    Blocks of ``block`` samples; the prediction of ``model``; after a 1 s settle.
+    """
     from ipmc_sensor_ros.simulation.sensor import predict_current
 
     i = np.concatenate([sim.run(stim, t[k:k + block])[1] for k in range(0, t.size, block)])

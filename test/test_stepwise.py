@@ -1,6 +1,8 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Stepwise discovery (issue 15): several missing effects at once, the offset, mains hum,
-effect parameters in ``fit``, the model file and implausible magnitudes.
+"""
+Stepwise discovery (issue 15): several missing effects at once, the offset, mains hum.
+
+Effect parameters in ``fit``, the model file and implausible magnitudes.
 
 The campaigns are smaller than the bench's (slim + short, 5 frequencies 1-20 Hz, 4 s each,
 1 % noise) to keep CI short; each multi-effect combination is run for ONE seed here

@@ -1,6 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The stream core owns every rule of a live stream: the node, the core fed directly and the
-offline path must give identical outputs and counters on the same input, bad blocks included."""
+"""
+The stream core owns every rule of a live stream.
+
+The node, the core fed directly and the offline path must give identical outputs and counters
+on the same input, bad blocks included.
+"""
 from __future__ import annotations
 
 import numpy as np
@@ -25,8 +29,12 @@ def _values_only(values) -> Float64MultiArray:
 
 
 def _random_stream(rng, n_blocks: int = 120):
-    """(times or None, currents) blocks: good ones, and every kind of bad one a peer can send
-    through a valid layout (values and times that break a stream rule)."""
+    """
+    Return (times or None, currents) blocks.
+
+    Good ones, and every kind of bad one a peer can send through a valid layout
+    (values and times that break a stream rule).
+    """
     blocks, t0 = [], 50.0
     kinds = ('ok',) * 6 + ('nan', 'huge', 'time_nan', 'not_increasing', 'wrong_rate',
                            'backward_inside', 'too_fast', 'gap_bridged', 'gap_reset',
@@ -109,8 +117,12 @@ def test_node_and_stream_core_give_identical_outputs_and_counters():
 
 
 def test_offline_record_equals_the_stream_fed_block_by_block():
-    """``estimate_record`` (``ipmc-model estimate``, bag replay) applies the live rules: a
-    record of concatenated runs with gaps gives what a live stream of the same blocks gives."""
+    """
+    ``estimate_record`` (``ipmc-model estimate``, bag replay) applies the live rules.
+
+    a record of concatenated runs with gaps gives what a live stream of the same blocks
+    gives.
+    """
     rng = np.random.default_rng(3)
     parts, t0 = [], 10.0
     for k in range(4):
@@ -154,8 +166,12 @@ def _fresh_stream():
 
 
 def test_one_sample_messages_faster_than_the_sample_rate_are_refused():
-    """Issue #18 defect 4: 500 one-sample messages stamped at 2 kHz into a 1 kHz estimator
-    were all accepted; 10-sample blocks of the same data were all rejected.  One rule now."""
+    """
+    Issue #18 defect 4: one rule now for one-sample messages and blocks.
+
+    500 one-sample messages stamped at 2 kHz into a 1 kHz estimator were all accepted;
+    10-sample blocks of the same data were all rejected.  One rule now.
+    """
     t = 100.0 + np.arange(500) / (2 * FS)
     i = np.full(500, 1e-7)
     node = DirectNode(publish_points='none')
@@ -185,8 +201,12 @@ def test_values_only_messages_obey_the_time_range():
 
 
 def test_unpublished_output_is_counted_once_and_never_resets():
-    """Issue #18 defect 1 (core part): a publish that cannot complete moves the block from
-    samples_out to samples_unpublished; the filter runs on, no reset."""
+    """
+    Issue #18 defect 1 (core part).
+
+    a publish that cannot complete moves the block from samples_out to
+    samples_unpublished; the filter runs on, no reset.
+    """
     node = DirectNode(publish_points='per_sample')
     try:
         def refuse(_msg):
@@ -213,10 +233,13 @@ def test_counter_names_are_the_documented_ones():
 
 
 def test_kalman_node_learns_the_offset_at_rest_and_publishes_its_uncertainty():
-    """Issue #14 through the node: estimator 'kalman' on a DAQ current with a 15 nA offset, a
-    3 % 50 Hz hum and a hold: the block output carries a finite standard deviation, the
+    """
+    Issue #14 through the node: estimator 'kalman' on a DAQ current with a 15 nA offset.
+
+    a 3 % 50 Hz hum and a hold: the block output carries a finite standard deviation, the
     counters topic the learned offset and the rest state, and the held deflection does not
-    drift with the offset (the leaky inverse ramps by offset/R0 per leak time)."""
+    drift with the offset (the leaky inverse ramps by offset/R0 per leak time).
+    """
     from ipmc_sensor_ros.interface.blocks import ESTIMATE_COLUMNS
     from ipmc_sensor_ros.nodes.messages import unpack_block
 

@@ -118,8 +118,11 @@ def test_identifiability_flags_d_alpha0_degeneracy():
 
 
 def test_h1_model_on_h2_data_fails_where_expected():
-    """Paper section 5.3: H1 fitted on slim, predicted for short: the failure is located in
-    the phase at high frequency and on the short sample."""
+    """
+    Paper section 5.3: H1 fitted on slim, predicted for short.
+
+    The failure is located in the phase at high frequency and on the short sample.
+    """
     recs = {s: [record(SensorModel(PAPER_SAMPLES[s]), f, seed=k) for k, f in enumerate(FREQS)]
             for s in ('slim', 'short')}
     free = (
@@ -186,8 +189,12 @@ def test_track_follows_drifting_diffusivity():
     ],
 )
 def test_fast_fit_prediction_matches_exact_prediction(effects):
-    """The diagnosis fits with an interpolated transfer function; it must equal the exact
-    FFT prediction to far below the noise (1e-5 relative; 5e-4 near a beam resonance)."""
+    """
+    The diagnosis fits with an interpolated transfer function.
+
+    It must equal the exact FFT prediction to far below the noise (1e-5 relative; 5e-4
+    near a beam resonance).
+    """
     from ipmc_sensor_ros.simulation.sensor import predict_current
     from ipmc_sensor_ros.workbench.timefit import Record, predict, prepare
 

@@ -1,6 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Reading limits and conveniences of the workbench text formats: units in column names,
-streaming in chunks, regular-file check, size/row limits, natural order, read_records."""
+"""
+Reading limits and conveniences of the workbench text formats.
+
+Units in column names, streaming in chunks, regular-file check, size/row limits,
+natural order, read_records.
+"""
 from __future__ import annotations
 
 import os

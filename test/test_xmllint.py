@@ -1,6 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""package.xml against the essentials of the package format 3 schema (ament_xmllint is
-not on PyPI), and every import of the ROS packages declared as a dependency."""
+"""
+package.xml against the essentials of the package format 3 schema (ament_xmllint is not on PyPI).
+
+And every import of the ROS packages declared as a dependency.
+"""
 import re
 import xml.etree.ElementTree as ET
 from pathlib import Path

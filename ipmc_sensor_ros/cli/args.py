@@ -1,6 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Shared pieces of the ``ipmc-model`` verbs: one flag vocabulary, argument
-parsing helpers, data loading, progress lines and JSON output.
+"""
+Shared pieces of the ``ipmc-model`` verbs.
+
+One flag vocabulary, argument parsing helpers, data loading, progress
+lines and JSON output.
 
 Flag vocabulary (the same name means the same thing in every verb)
     ``--model``      base model, h1 (eq. 31) or h2 (eq. 45)
@@ -32,7 +35,7 @@ from ..physics.effects import load_plugin
 from ..physics.model import model_effects, parse_effects
 from ..workbench.discovery import SYMBOL_TO_NAME
 from ..physics.parameters import (PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, MaterialParameters,
-                                 ParameterError, load_yaml)
+                                  ParameterError, load_yaml)
 
 __all__ = ['HelpFormatter', 'Progress', 'say', 'natural_key', 'fmt_time_s', 'param_names',
            'parse_geometry', 'material_from_args', 'load_material', 'effects_from_args',
@@ -56,12 +59,13 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
 
 
 def say(msg: str) -> None:
-    """A progress/status line on stderr (stdout keeps the results)."""
+    """Return a progress/status line on stderr (stdout keeps the results)."""
     print(f'... {msg}', file=sys.stderr, flush=True)
 
 
 class Progress:
-    """Progress lines for anything that may take over 5 s.
+    """
+    Progress lines for anything that may take over 5 s.
 
     ``step(msg)`` prints at most one line every ``interval_s`` seconds (the
     first and, via ``done``, the last always); inside ``with Progress(...)``
@@ -119,8 +123,11 @@ _NUMBER = re.compile(r'\d+(?:[.p]\d+)?')
 
 
 def natural_key(path) -> tuple:
-    """Sort key that orders embedded numbers numerically ('1Hz' < '2p5Hz' < '13Hz');
-    simulate writes decimal points as 'p' (``slim_1p53Hz``)."""
+    """
+    Sort key that orders embedded numbers numerically ('1Hz' < '2p5Hz' < '13Hz').
+
+    Simulate writes decimal points as 'p' (``slim_1p53Hz``).
+    """
     text = str(path)
     parts: list = []
     pos = 0
@@ -132,7 +139,7 @@ def natural_key(path) -> tuple:
 
 
 def fmt_time_s(t: float) -> str:
-    """A time with sensible precision: 4 significant digits, no float noise."""
+    """Return a time with sensible precision: 4 significant digits, no float noise."""
     return f'{float(t):.4g}'
 
 
@@ -177,7 +184,8 @@ def parse_samples(text: str, flag: str = '--samples') -> list[str]:
 
 
 def load_material(path) -> MaterialParameters:
-    """Material from a workbench YAML (``material:``) or a ROS 2 params file.
+    """
+    Material from a workbench YAML (``material:``) or a ROS 2 params file.
 
     ROS 2 params files are read with the nodes' own loader
     (:func:`~ipmc_sensor_ros.interface.specs.load_params_file`), so section
@@ -198,8 +206,11 @@ def load_material(path) -> MaterialParameters:
 
 
 def _model_file(args):
-    """The saved model of ``--model-file`` (None without it); with ``--params`` it is refused:
-    two sources of the material, nothing chosen silently."""
+    """
+    Return the saved model of ``--model-file`` (None without it); with ``--params`` it is refused.
+
+    Two sources of the material, nothing chosen silently.
+    """
     path = getattr(args, 'model_file', None)
     if not path:
         return None
@@ -260,7 +271,8 @@ def _expand(paths) -> list[Path]:
 
 
 def load_data(args, *, need_deflection: bool = True) -> list:
-    """Read every input named by ``args.data`` in natural order.
+    """
+    Read every input named by ``args.data`` in natural order.
 
     Time series without a deflection column are skipped (with a line saying
     so) when ``need_deflection``; an error if nothing is left.
@@ -286,7 +298,7 @@ def load_data(args, *, need_deflection: bool = True) -> list:
 
 
 def renamed_flag(parser: argparse.ArgumentParser, old: str, new: str) -> None:
-    """A hidden flag kept only to say it was renamed (exit 2 with a hint)."""
+    """Return a hidden flag kept only to say it was renamed (exit 2 with a hint)."""
 
     class _Renamed(argparse.Action):
         def __call__(self, parser, namespace, values, option_string=None):

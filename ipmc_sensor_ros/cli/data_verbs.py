@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Verbs that make or convert data: ``simulate``, ``estimate``, ``import``.
+"""
+Verbs that make or convert data: ``simulate``, ``estimate``, ``import``.
 
 ``estimate`` writes ``ipmc-estimate/1`` text files (or bags): the estimate in
 the column ``deflection_estimate_m`` next to the measured ``deflection_m``
@@ -116,9 +117,13 @@ def _explicit_params(path) -> set[str]:
 
 
 def _resolve_values(data, base: dict, explicit: set[str], params: str | None, prefer: str) -> dict:
-    """Node parameter values for one record: the params file's, completed from the data
-    header (geometry, known material values, sample rate); a value both give
-    differently is an error unless ``prefer`` says which wins."""
+    """
+    Node parameter values for one record.
+
+    The params file's, completed from the data header (geometry, known material
+    values, sample rate); a value both give differently is an error unless
+    ``prefer`` says which wins.
+    """
     from ..interface.specs import GEOMETRY_NAMES, MATERIAL_NAMES
 
     values = dict(base)
@@ -133,7 +138,8 @@ def _resolve_values(data, base: dict, explicit: set[str], params: str | None, pr
                 values[key] = value
             elif prefer != 'params':
                 raise ParameterError(
-                    f'{data.path}: {key} = {value:g} in the data header but {float(values[key]):g} '
+                    f'{data.path}: {key} = {value:g} in the data header but '
+                    f'{float(values[key]):g} '
                     f'in {params}; fix one, or choose with --prefer header|params'
                 )
     if params and not explicit & set(GEOMETRY_NAMES):
@@ -151,8 +157,11 @@ def _resolve_values(data, base: dict, explicit: set[str], params: str | None, pr
 
 def estimate_accuracy(time_s, estimate_m, measured_m, leak_corner_hz: float,
                       delay_s: float = 0.0) -> tuple[float, float, str]:
-    """NRMSE of the estimated deflection: RMS(e - m) / RMS(m) of the estimate e and
-    the measurement m, each with its mean and linear trend removed.
+    """
+    NRMSE of the estimated deflection.
+
+    RMS(e - m) / RMS(m) of the estimate e and the measurement m, each with
+    its mean and linear trend removed.
 
     A current sensor cannot see a constant deflection: the estimator's leak
     (corner ``leak_corner_hz``) removes it, and the deflection before the
@@ -198,7 +207,8 @@ def _write_estimate(path: Path, data, values: dict, model_text: str, params, res
         f'# model: {model_text}',
         f"# params: {params or 'defaults of the estimator node'}",
         f'# resets: {resets}',
-        '# deflection_estimate_m: the estimate; deflection_m: the measured deflection of the input',
+        '# deflection_estimate_m: the estimate; '
+        'deflection_m: the measured deflection of the input',
     ]
     rows = np.column_stack(arrays).tolist()     # repr: shortest text that reads back exactly
     path.write_text(
@@ -208,7 +218,11 @@ def _write_estimate(path: Path, data, values: dict, model_text: str, params, res
 
 
 def read_estimate(path) -> dict[str, np.ndarray]:
-    """Columns of an ``ipmc-estimate/1`` file by name (``time_s``, ``deflection_estimate_m``...)."""
+    """
+    Return the columns of an ``ipmc-estimate/1`` file by name.
+
+    Names: ``time_s``, ``deflection_estimate_m``...
+    """
     lines = Path(path).read_text(encoding='utf-8').splitlines()
     if not lines or lines[0] != f'# format: {ESTIMATE_FORMAT}':
         raise ParameterError(f'{path}:1: not an {ESTIMATE_FORMAT} file')
@@ -275,7 +289,8 @@ def _cmd_estimate(args) -> int:
         row = {'source': src, 'out': str(out), 'samples': int(t_out.size), 'resets': resets}
         msg = f'{src}: {t_out.size} estimates -> {out}'
         if resets:
-            msg += f"; {resets} filter reset(s) at time gaps > {values['max_gap_s']} s or backward jumps"
+            msg += (f"; {resets} filter reset(s) at time gaps > {values['max_gap_s']} s "
+                    'or backward jumps')
         if measured is not None:
             err, used, what = estimate_accuracy(
                 t_out, w, measured, estimator.inverse.leak_corner_hz, estimator.delay_s

@@ -83,7 +83,8 @@ def _cmd_eq55(args) -> int:
         verdict = (
             'stable'
             if rep['inverse_stable']
-            else f"UNSTABLE (right-half-plane zero(s) at {', '.join(f'{z.real:.5g}' for z in rep['rhp_zeros'])} rad/s)"
+            else 'UNSTABLE (right-half-plane zero(s) at '
+            f"{', '.join(f'{z.real:.5g}' for z in rep['rhp_zeros'])} rad/s)"
         )
         print(f'{name}: literal inverse of eq. 55 is {verdict}')
         out[name] = rep
@@ -108,7 +109,7 @@ def _cmd_effects(args) -> int:
 
 
 def _cmd_example(args) -> int:
-    """The README's worked example: H1 on a two-sample sweep, see it fail, diagnose, fix."""
+    """Return the README's worked example: H1 on a two-sample sweep, see it fail, diagnose, fix."""
     import tempfile
 
     from .main import main
@@ -164,7 +165,8 @@ def _cmd_example(args) -> int:
     before = json.loads((work / 'h1.json').read_text())
     after = json.loads((work / 'fixed.json').read_text())
     print(
-        f"\nerror of the predicted current: H1 {before['error']:.4f} (fit {before['fit_percent']:.1f} %)"
+        f"\nerror of the predicted current: H1 {before['error']:.4f} "
+        f"(fit {before['fit_percent']:.1f} %)"
         f" -> H1 + {missing} {after['error']:.4f} (fit {after['fit_percent']:.1f} %): "
         f"{before['error'] / after['error']:.1f}x lower; noise floor {after['noise_floor']:.4f} "
         '(the error a perfect model would have)'

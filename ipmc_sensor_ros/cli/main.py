@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""``ipmc-model``: the model workbench on the command line (parser assembly and dispatch).
+"""
+``ipmc-model``: the model workbench on the command line (parser assembly and dispatch).
 
 The verbs live in three modules: :mod:`.data_verbs` (simulate, estimate,
 import), :mod:`.model_verbs` (fit, compare, track, diagnose) and

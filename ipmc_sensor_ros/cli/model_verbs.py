@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Verbs that test a model against measurements: ``fit``, ``compare``, ``track``, ``diagnose``.
+"""
+Verbs that test a model against measurements: ``fit``, ``compare``, ``track``, ``diagnose``.
 
 Each verb: parse -> call the workbench -> print a summary -> optional JSON and report.
 """
@@ -24,8 +25,12 @@ _NOT_NODE_PARAMS = ('faraday_constant_c_per_mol', 'gas_constant_j_per_mol_k',
 
 
 def _records(args, with_data: bool = False):
-    """The time records named by the arguments, each with its model (base + --effects, material)
-    (and the loaded data files, ``with_data``)."""
+    """
+    Return the time records named by the arguments.
+
+    Each with its model (base + --effects, material) (and the loaded data files,
+    ``with_data``).
+    """
     from ..workbench.data import records_from
 
     effects, material = effects_from_args(args), material_from_args(args)   # flags before files
@@ -81,9 +86,11 @@ def _save_params(path: Path, groups, data, res, args, effects) -> list[Path]:
         )
         sources = sorted({Path(p.source).name for p in g.points if getattr(p, 'source', '')})
         head = [
-            f'# Written by ipmc-model fit on {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC',
+            '# Written by ipmc-model fit on '
+            f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC',
             f'# sample {g.name}: geometry from the data; model {base}'
-            f"{' + ' + ', '.join(doc['/**/ipmc_estimator']['ros__parameters']['effects']) if extra else ''}",
+            + (' + ' + ', '.join(doc['/**/ipmc_estimator']['ros__parameters']['effects'])
+               if extra else ''),
             f"# fitted: {', '.join(res.free)}; chi2/dof {res.chi2:.4g}/{res.dof}",
             f"# data: {', '.join(sources[:12])}{' ...' if len(sources) > 12 else ''}",
             '# use: ros2 run ipmc_sensor_ros ipmc_estimator --ros-args --params-file THIS_FILE',

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Model-aware streaming deflection estimator: a :class:`SensorModel` in, deflection out.
+"""
+Model-aware streaming deflection estimator: a :class:`SensorModel` in, deflection out.
 
 :class:`DeflectionEstimator` is what the estimator node and ``ipmc-model
 estimate`` run (one code path).  It reduces the model
@@ -53,10 +54,12 @@ ESTIMATORS = ('leaky', 'kalman')
 
 
 class DeflectionEstimator:
-    """Streaming estimate of tip deflection (m) from sensing current (A) for ``model``.
+    """
+    Streaming estimate of tip deflection (m) from sensing current (A) for ``model``.
 
     Parameters: ``model``; ``sample_rate_hz``; ``reduction_order`` (fitted
-    poles, 1..8); ``band_hz`` of the reduction; ``leak_corner_hz`` (default 0.01 Hz leaky, 0.001 Hz kalman),
+    poles, 1..8); ``band_hz`` of the reduction; ``leak_corner_hz`` (default 0.01 Hz leaky,
+    0.001 Hz kalman),
     ``offset_corner_hz``, ``prewarp_hz`` as in :class:`InverseEstimator`;
     ``update_s``: rebuild interval for time-varying effects, s;
     ``estimator``: ``"leaky"`` (:class:`InverseEstimator`) or ``"kalman"``
@@ -127,8 +130,11 @@ class DeflectionEstimator:
         self._bias_zi = np.zeros(1)
 
     def _remember(self, x: np.ndarray) -> None:
-        """Append ``x`` to the ring buffer of recent input (``_history_end`` is the
-        index after the newest sample)."""
+        """
+        Append ``x`` to the ring buffer of recent input.
+
+        ``_history_end`` is the index after the newest sample.
+        """
         n = self._history.size
         m = x.size
         if m >= n:
@@ -144,7 +150,7 @@ class DeflectionEstimator:
 
     @property
     def recent_input(self) -> np.ndarray:
-        """The last inputs fed to the filter (effect-corrected current), oldest first."""
+        """Return the last inputs fed to the filter (effect-corrected current), oldest first."""
         ordered = np.roll(self._history, -self._history_end)
         return ordered[ordered.size - self._history_n:]
 
@@ -190,14 +196,21 @@ class DeflectionEstimator:
         return InverseEstimator(reduced, **self._filter_args())
 
     def process_with_std(self, time_s, current_a) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(output times, deflection, its standard deviation) for one block, m; the
-        leaky estimator has no uncertainty model (NaN)."""
+        """
+        (output times, deflection, its standard deviation) for one block, m.
+
+        The leaky estimator has no uncertainty model (NaN).
+        """
         t_out, w = self.process(time_s, current_a)
         return t_out, w, self.last_std_m
 
     def process(self, time_s, current_a) -> tuple[np.ndarray, np.ndarray]:
-        """Filter one block; returns (output times, deflection).  Pass validated values
-        (:func:`~ipmc_sensor_ros.estimation.stream.validate_block`)."""
+        """
+        Filter one block; returns (output times, deflection).
+
+        Pass validated values
+        (:func:`~ipmc_sensor_ros.estimation.stream.validate_block`).
+        """
         t = np.asarray(time_s, float)
         i = np.asarray(current_a, float)
         if t.size == 0:
@@ -237,18 +250,27 @@ class DeflectionEstimator:
 
     @property
     def std_m(self) -> float:
-        """Standard deviation of the latest estimate, m (Kalman: from the filter covariance of
-        the current mode; leaky: NaN, the leaky inverse has no uncertainty model)."""
+        """
+        Return the standard deviation of the latest estimate.
+
+        m (Kalman: from the filter covariance of the current mode; leaky: NaN, the
+        leaky inverse has no uncertainty model).
+        """
         std = getattr(self.inverse, 'last_std', None)
         return float('nan') if std is None else float(std)
 
     def status(self) -> dict:
-        """The estimator's state for counters and diagnostics (JSON-able; None = not available):
+        """
+        Return the estimator's state for counters and diagnostics.
+
+        JSON-able; None = not available.
+
         ``estimator``, ``offset_a`` (the current offset the Kalman filter has learned),
         ``at_rest``, ``deflection_std_m`` (standard deviation of the estimate; the leaky
         inverse has none), and the mains line found in the last ``history_s`` of input
         (``mains_line_hz`` 0/50/60, ``mains_line_level`` relative to the current's RMS; after
-        the notch when ``mains_hz`` is set)."""
+        the notch when ``mains_hz`` is set).
+        """
         inv = self.inverse
         std = getattr(inv, 'last_std', None)
         offset = getattr(inv, 'offset_a', None)
@@ -261,15 +283,22 @@ class DeflectionEstimator:
 
     @property
     def plain(self) -> bool:
-        """True when no effect acts around the filter (no transforms, no drift): then
-        :meth:`process_one` takes its lean path."""
+        """
+        Return True when no effect acts around the filter (no transforms, no drift).
+
+        Then :meth:`process_one` takes its lean path.
+        """
         return not (self._current_inv or self._deflection_inv or self._material_at is not None
                     or self.mains.sos.shape[0])
 
     def process_one(self, time_s: float, current_a: float) -> tuple[float, float]:
-        """One sample, as floats (output time, deflection); identical to :meth:`process`
-        on a one-sample block (tested), without numpy's per-call costs when
-        :attr:`plain` (the node's one-sample-message path)."""
+        """
+        One sample, as floats (output time, deflection).
+
+        Identical to :meth:`process` on a one-sample block (tested), without
+        numpy's per-call costs when :attr:`plain` (the node's
+        one-sample-message path).
+        """
         if not self.plain:
             t_out, w = self.process(np.array([time_s], float), np.array([current_a], float))
             return float(t_out[0]), float(w[0])
@@ -285,8 +314,12 @@ class DeflectionEstimator:
 
     def rebuilt(self, model: SensorModel | None = None, reduced: ReducedModel | None = None,
                 **filter_changes) -> 'DeflectionEstimator':
-        """A new estimator (new model and/or filter settings) whose output continues from
-        this one's without a jump; ``self`` is untouched if the new design is invalid."""
+        """
+        Return a new estimator (new model and/or filter settings).
+
+        Its output continues from this one's without a jump; ``self`` is untouched if the new
+        design is invalid.
+        """
         kwargs = dict(self.filter_kwargs)
         kwargs.update(filter_changes)
         fs = kwargs.pop('sample_rate_hz')

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Discrete, stable inverse of a reduced sensing model: current (A) -> deflection (m).
+"""
+Discrete, stable inverse of a reduced sensing model: current (A) -> deflection (m).
 
 Continuous inverse
 ------------------
@@ -70,8 +71,6 @@ SMALL_BLOCK_SAMPLES = 16
 DEFAULT_LEAK_CORNER_HZ = 0.01
 
 
-
-
 def _positive(name: str, value, allow_none: bool = False):
     if value is None and allow_none:
         return None
@@ -99,7 +98,8 @@ def inverse_zpk(reduced: ReducedModel, leak_corner_hz: float = DEFAULT_LEAK_CORN
 
 def leak_tradeoff(reduced: ReducedModel, leak_corner_hz: float, hold_time_s: float,
                   current_offset_a: float, offset_corner_hz: float | None = None) -> dict:
-    """Quantify the leak trade-off (see module docstring).
+    """
+    Quantify the leak trade-off (see module docstring).
 
     Returns ``held_step_relative_error`` after ``hold_time_s`` and the
     deflection error (m) caused by ``current_offset_a``: its steady value and
@@ -160,7 +160,8 @@ def _design(reduced: ReducedModel, sample_rate_hz: float, leak_corner_hz: float,
 
 
 class InverseEstimator:
-    """Streaming causal estimator of tip deflection (m) from sensing current (A).
+    """
+    Streaming causal estimator of tip deflection (m) from sensing current (A).
 
     Parameters
     ----------
@@ -170,6 +171,7 @@ class InverseEstimator:
     offset_corner_hz : corner of the optional current-offset tracker, Hz, or None.
     prewarp_hz : Tustin prewarping frequency, Hz (default min(band high, fs/20)).
     channels : number of independent channels filtered together.
+
     """
 
     def __init__(self, reduced: ReducedModel, sample_rate_hz: float,
@@ -211,11 +213,11 @@ class InverseEstimator:
         return self._design.prewarp_hz
 
     def poles(self) -> np.ndarray:
-        """Discrete poles (all strictly inside the unit circle)."""
+        """Discrete poles, all strictly inside the unit circle."""
         return sig.sos2zpk(self.sos)[1]
 
     def dc_gain_m_per_a(self) -> float:
-        """Static gain of the discrete inverse (finite thanks to the leak), m A^-1."""
+        """Return the static gain of the discrete inverse (finite thanks to the leak), m A^-1."""
         return float(np.real(self.frequency_response(np.array([0.0]))[0]))
 
     def frequency_response(self, frequency_hz) -> np.ndarray:
@@ -225,17 +227,19 @@ class InverseEstimator:
         return h
 
     def continuous_frequency_response(self, frequency_hz) -> np.ndarray:
-        """The continuous inverse 1/((s+w_c) R_n) [* s/(s+w_o)] it discretises, m A^-1."""
+        """Return the continuous inverse 1/((s+w_c) R_n) [* s/(s+w_o)] it discretises, m A^-1."""
         z, p, k = inverse_zpk(self.reduced, self.leak_corner_hz, self.offset_corner_hz)
         s = 2j * np.pi * np.atleast_1d(np.asarray(frequency_hz, dtype=float))[:, None]
         return k * np.prod(s - z, axis=1) / np.prod(s - p, axis=1)
 
     # -- streaming ----------------------------------------------------------
     def process(self, current_a) -> np.ndarray:
-        """Filter a block of current samples, A -> deflection, m.
+        """
+        Filter a block of current samples, A -> deflection, m.
 
         ``current_a``: shape ``(n,)`` (one channel only) or ``(n, channels)``.
-        Pass values through :func:`~ipmc_sensor_ros.estimation.stream.validate_block` first: the filter trusts its input.
+        Pass values through :func:`~ipmc_sensor_ros.estimation.stream.validate_block` first:
+        the filter trusts its input.
         """
         x = np.asarray(current_a, dtype=float)
         squeeze = x.ndim == 1
@@ -254,8 +258,12 @@ class InverseEstimator:
         return y[:, 0] if squeeze else y
 
     def process_one(self, current_a: float) -> float:
-        """One sample of a single-channel estimator, as a float; identical to
-        :meth:`process` on a one-sample block, without numpy's per-call costs."""
+        """
+        One sample of a single-channel estimator, as a float.
+
+        Identical to :meth:`process` on a one-sample block, without numpy's
+        per-call costs.
+        """
         if self.channels != 1:
             raise ParameterError(
                 f'process_one needs a single-channel estimator (channels = {self.channels})'
@@ -263,12 +271,17 @@ class InverseEstimator:
         return self._process_small([float(current_a)])[0]
 
     def _process_small(self, values: list) -> list:
-        """Single-channel DF-II-transposed recursion in plain Python floats for
-        blocks of at most :data:`SMALL_BLOCK_SAMPLES` samples.  Same operations in
+        """
+        Run the single-channel DF-II-transposed recursion in plain Python floats.
+
+        For blocks of at most :data:`SMALL_BLOCK_SAMPLES` samples.  Same operations in
         the same order as :func:`scipy.signal.sosfilt`, so the output is identical
         (tested); it avoids sosfilt's fixed per-call cost (~40 us of argument
-        handling), which dominates one-sample messages."""
-        state = self._zi[:, :, 0].tolist()
+        handling), which dominates one-sample messages.
+        """
+        state = self._zi_list
+        if state is None:   # the numpy state changed since the last small block
+            state = self._zi_list = self._zi_array[:, :, 0].tolist()
         out = []
         for x_cur in values:
             for (b0, b1, b2, a1, a2), zs in zip(self._coefficients, state):
@@ -277,8 +290,26 @@ class InverseEstimator:
                 zs[1] = b2 * x_cur - a2 * x_new
                 x_cur = x_new
             out.append(x_cur)
-        self._zi[:, :, 0] = state
-        return out
+        return out   # the state stays in the list until a numpy path reads _zi
+
+    @property
+    def _zi(self) -> np.ndarray:
+        """
+        Filter state, shape (sections, 2, channels): the numpy view of it.
+
+        The one-sample path keeps channel 0's state as a list of floats between calls
+        (copying it to and from numpy cost 8 us per sample); reading ``_zi`` writes the
+        list back first, and setting it drops the list.
+        """
+        if self._zi_list is not None:
+            self._zi_array[:, :, 0] = self._zi_list
+            self._zi_list = None
+        return self._zi_array
+
+    @_zi.setter
+    def _zi(self, value: np.ndarray) -> None:
+        self._zi_list = None
+        self._zi_array = value
 
     def process_sample(self, current_a: float) -> float:
         """One sample of a single-channel estimator (alias of :meth:`process_one`)."""
@@ -289,7 +320,7 @@ class InverseEstimator:
         self._zi = np.zeros_like(self._zi)
 
     def get_state(self) -> dict:
-        """A copy of the filter state, restorable with :meth:`set_state`."""
+        """Return a copy of the filter state, restorable with :meth:`set_state`."""
         return {'zi': self._zi.copy(), 'sos': self.sos.copy()}
 
     def set_state(self, state: dict) -> None:
@@ -303,7 +334,8 @@ class InverseEstimator:
         self._zi = zi.copy()
 
     def continue_from(self, old: 'InverseEstimator', recent_input=None) -> None:
-        """Set this filter's state so its output continues ``old``'s without a jump.
+        """
+        Set this filter's state so its output continues ``old``'s without a jump.
 
         With ``recent_input`` (the last samples fed to ``old``, shape (n,) or
         (n, channels); a few tenths of a second is many times the fast modes'
@@ -338,9 +370,13 @@ class InverseEstimator:
         self._zi = self._zi + (basis @ coef).reshape(-1, 2, self.channels)
 
     def _leak_pole(self) -> float:
-        """The discrete pole of the leak: prewarped Tustin image of -w_c (as
+        """
+        Return the discrete pole of the leak.
+
+        Prewarped Tustin image of -w_c (as
         :func:`~ipmc_sensor_ros.lti.discretize.tustin_sos` maps it); computed, not picked
-        among the eigenvalues, which are ambiguous when the two corners nearly coincide."""
+        among the eigenvalues, which are ambiguous when the two corners nearly coincide.
+        """
         w0 = 2.0 * math.pi * self.prewarp_hz
         k = w0 / math.tan(w0 / (2.0 * self.sample_rate_hz))      # 2 fs_warped
         wc = 2.0 * math.pi * self.leak_corner_hz
@@ -355,9 +391,12 @@ class InverseEstimator:
         return level, rate
 
     def _slow_part(self) -> tuple:
-        """Slow invariant subspace of the zero-input dynamics: basis Q1 (n, m), dynamics
-        T11 (m, m), output row c1 (m,), and the spectral projector onto slow coordinates
-        (m, n) along the fast modes."""
+        """
+        Slow invariant subspace of the zero-input dynamics.
+
+        Basis Q1 (n, m), dynamics T11 (m, m), output row c1 (m,), and the spectral
+        projector onto slow coordinates (m, n) along the fast modes.
+        """
         if self._slow_cache is not None:
             return self._slow_cache
         sections = self.sos.shape[0]
@@ -386,8 +425,10 @@ class InverseEstimator:
 
     def rebuilt(self, reduced: ReducedModel | None = None, recent_input=None,
                 **changes) -> 'InverseEstimator':
-        """A new estimator with changed design whose output continues from this one's
-        (:meth:`continue_from`, with ``recent_input`` if given).
+        """
+        Return a new estimator with changed design whose output continues from this one's.
+
+        :meth:`continue_from`, with ``recent_input`` if given.
 
         ``changes`` may set sample_rate_hz, leak_corner_hz, offset_corner_hz,
         prewarp_hz.  Raises :class:`ParameterError` (and leaves ``self`` intact)
@@ -403,6 +444,6 @@ class InverseEstimator:
         return new
 
     def current_output(self) -> np.ndarray:
-        """The output the filter would produce for a zero input now (per channel), m."""
+        """Return the output the filter would produce for a zero input now (per channel), m."""
         y, _ = sig.sosfilt(self.sos, np.zeros((1, self.channels)), axis=0, zi=self._zi)
         return y[0]

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Offset-aware steady-state Kalman estimator of tip deflection from sensing current.
+"""
+Offset-aware steady-state Kalman estimator of tip deflection from sensing current.
 
 Model (continuous time, designed from the same :class:`ReducedModel` that
 :class:`~ipmc_sensor_ros.estimation.inverse.InverseEstimator` inverts)
@@ -9,7 +10,8 @@ Model (continuous time, designed from the same :class:`ReducedModel` that
 
     x_R' = A_R x_R + B_R v                (R_n, diagonal realisation)
     w'   = v - w_l w                      (deflection; w_l = 2 pi leak_corner_hz)
-    v'   = -a v + xi_v                    (velocity: Ornstein-Uhlenbeck, a = 2 pi motion_bandwidth_hz)
+    v'   = -a v + xi_v                    (velocity: Ornstein-Uhlenbeck,
+                                           a = 2 pi motion_bandwidth_hz)
     b'   = xi_b                           (current offset: constant + random-walk drift)
     i    = C_R x_R + D_R v + b + n        (measured current, A)
 
@@ -127,8 +129,11 @@ def offset_corner_hz(
 
 
 def _modal_realisation(reduced: ReducedModel):
-    """R_n(s) = k + sum_i r_i / (s - p_i) (distinct real poles) as (A, B, C, D):
-    a diagonal, well-scaled realisation (each state is a first-order lag of v)."""
+    """
+    R_n(s) = k + sum_i r_i / (s - p_i) (distinct real poles) as (A, B, C, D).
+
+    a diagonal, well-scaled realisation (each state is a first-order lag of v).
+    """
     z = np.real(np.asarray(reduced.zeros_rad_s))
     p = np.real(np.asarray(reduced.poles_rad_s))
     k = float(reduced.gain)
@@ -180,7 +185,7 @@ class _Mode:
         self.partner = np.array(
             [int(np.argmin(np.abs(self.lam - np.conj(lam[j])))) for j in self.dropped], dtype=int
         )
-        self.a_list = [np.array([1.0, -l]) for l in self.lam]
+        self.a_list = [np.array([1.0, -pole]) for pole in self.lam]
         self.b_list = [np.array([0.0, gg]) for gg in self.g]
 
     def run(self, y: np.ndarray, s0: np.ndarray):
@@ -206,7 +211,8 @@ class _Mode:
 
 
 class KalmanEstimator:
-    """Streaming offset-aware Kalman estimate of tip deflection (m) from current (A).
+    """
+    Streaming offset-aware Kalman estimate of tip deflection (m) from current (A).
 
     Parameters
     ----------
@@ -221,6 +227,7 @@ class KalmanEstimator:
     rest_window_s : averaging time of the rest detector, s.
     rest_enter, rest_leave : rest-detector thresholds (multiples of the noise energy in band).
     rest_detection : switch the rest detector (and gain scheduling) on or off.
+
     """
 
     def __init__(self, reduced: ReducedModel, sample_rate_hz: float, *,
@@ -362,7 +369,7 @@ class KalmanEstimator:
 
     @property
     def offset_a(self) -> float:
-        """Current offset estimate, A."""
+        """Return the current offset estimate, A."""
         return self._b_last
 
     @property
@@ -394,15 +401,23 @@ class KalmanEstimator:
         self.last_rest = np.zeros(0, bool)
 
     def _clip_a2(self) -> float:
-        """Cap on one sample's band energy (ENERGY_CLIP times the noise's): a large pulse
-        then delays rest by at most rest_window_s * ln(ENERGY_CLIP / rest_enter) (0.35 s)."""
+        """
+        Cap on one sample's band energy (ENERGY_CLIP times the noise's).
+
+        a large pulse then delays rest by at most rest_window_s * ln(ENERGY_CLIP /
+        rest_enter) (0.35 s).
+        """
         return ENERGY_CLIP * self._sigma2 * self._bp_unit
 
     def _dc_limit_a2(self) -> float:
-        """Largest squared departure of the low-passed current from the offset estimate
-        that still counts as rest: (4 sigma)^2 of that difference, sigma^2 = the mean's
-        noise sigma^2/(2 fs rest_window_s) + the offset's variance P_b (+ 2 nA for the
-        reduction/drift).  A deflection ramp of v m/s gives R0 v of steady current."""
+        """
+        Largest squared departure of the low-passed current that still counts as rest.
+
+        The departure is from the offset estimate; the limit is (4 sigma)^2 of that
+        difference, sigma^2 = the mean's noise sigma^2/(2 fs rest_window_s) + the offset's
+        variance P_b (+ 2 nA for the reduction/drift).  A deflection ramp of v m/s gives
+        R0 v of steady current.
+        """
         return 16.0 * (
             self._sigma2 / (2 * self._fs * self.rest_window_s) + self._offset_var + 4e-18
         )
@@ -493,11 +508,14 @@ class KalmanEstimator:
         return out, np.full(y.size, self.last_std)
 
     def _run_rest(self, y: np.ndarray) -> np.ndarray:
-        """Rest: deflection held, velocity and charge states zero (the detector has seen
-        quiet current for ~rest_window_s, many times the sensor's memory), offset = running
-        mean of the current, weighted by its prior variance
+        """
+        Rest: deflection held, velocity and charge states zero.
+
+        The detector has seen quiet current for ~rest_window_s, many times the sensor's
+        memory.  Offset = running mean of the current, weighted by its prior variance
         (n0 = sigma^2 / P_b equivalent samples), then an exponential average over
-        at most ``rest_offset_time_s`` (drift)."""
+        at most ``rest_offset_time_s`` (drift).
+        """
         s_end = self._s.copy()
         s_end[self._motion_idx] = 0.0       # at rest nothing moves: no predicted motion current
         w = np.full(y.size, s_end[self._iw])
@@ -527,8 +545,12 @@ class KalmanEstimator:
         return w
 
     def process_one(self, current_a: float) -> float:
-        """One sample, as a float: the same recursion as :meth:`process` written for a
-        single sample (no per-call lfilter costs); equal to it to rounding (tested)."""
+        """
+        One sample, as a float.
+
+        The same recursion as :meth:`process` written for a single sample (no per-call
+        lfilter costs); equal to it to rounding (tested).
+        """
         y = float(current_a)
         x = y
         b0, b1, b2, _, a1, a2 = self._bp_list
@@ -635,9 +657,12 @@ class KalmanEstimator:
         return np.array([self._s[self._iw] + self._w_ref])
 
     def continue_from(self, old, recent_input=None) -> None:
-        """Take over ``old``'s deflection and offset (bumpless); the fast states are
-        rebuilt by replaying ``recent_input`` (then deflection and offset are reset
-        to ``old``'s)."""
+        """
+        Take over ``old``'s deflection and offset (bumpless).
+
+        The fast states are rebuilt by replaying ``recent_input`` (then deflection
+        and offset are reset to ``old``'s).
+        """
         self.reset()
         if recent_input is not None and np.size(recent_input):
             self.process(np.asarray(recent_input, float).reshape(-1))

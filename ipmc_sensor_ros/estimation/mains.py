@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Mains interference: streaming notch at 50 or 60 Hz and harmonics, and a line detector.
+"""
+Mains interference: streaming notch at 50 or 60 Hz and harmonics, and a line detector.
 
 A DAQ near mains wiring picks up the line frequency and its odd/even harmonics.
 :class:`MainsFilter` removes them with one :func:`scipy.signal.iirnotch` second-order
@@ -42,8 +43,11 @@ def mains_sos(mains_hz: float, sample_rate_hz: float, quality: float = 30.0,
 def line_level(
     current_a, sample_rate_hz: float, mains_hz: float = 50.0, quality: float = 30.0
 ) -> float:
-    """RMS of the line component (fundamental and harmonics) over the RMS of the
-    current with its mean removed (0 .. 1)."""
+    """
+    RMS of the line component over the RMS of the current (0 .. 1).
+
+    Line component: fundamental and harmonics; the current has its mean removed.
+    """
     x = np.asarray(current_a, float) - np.mean(current_a)
     sos = mains_sos(mains_hz, sample_rate_hz, quality)
     if sos.shape[0] == 0 or not np.any(x):
@@ -53,7 +57,8 @@ def line_level(
 
 
 class MainsFilter:
-    """Streaming mains notch (``mains_hz`` 0, 50 or 60) with a line detector.
+    """
+    Streaming mains notch (``mains_hz`` 0, 50 or 60) with a line detector.
 
     ``process(block)`` returns the filtered current; ``line_ratio`` is the RMS of
     the removed component over the RMS of the block's input (its mean removed),
@@ -88,7 +93,8 @@ class MainsFilter:
 
 def detect_lines(current_a, sample_rate_hz: float, families=(50.0, 60.0), n_harmonics: int = 5,
                  threshold: float = 20.0) -> dict:
-    """Mains lines in a stretch of current: which family (50 or 60 Hz) is present and how large.
+    """
+    Mains lines in a stretch of current: which family (50 or 60 Hz) is present and how large.
 
     Each harmonic's power is a single-bin DFT (lock-in) at exactly k f_mains over the record,
     compared with the mean power at 6 neighbouring frequencies 3..8 bins away (the local

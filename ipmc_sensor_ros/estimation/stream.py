@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The stream core: sample blocks in, deflection blocks out, with every rule of a live stream.
+"""
+The stream core: sample blocks in, deflection blocks out, with every rule of a live stream.
 
 :class:`StreamEstimator` is what the estimator node, ``ipmc-model estimate`` and bag replay
 run; the node only unpacks messages, calls :meth:`StreamEstimator.feed` and publishes.  It owns
@@ -42,7 +43,8 @@ __all__ = ['StreamEstimator', 'validate_block', 'COUNTER_NAMES', 'MAX_ABS_CURREN
 #: Largest block accepted by default (samples).
 MAX_BLOCK_SAMPLES = 1_000_000
 
-#: Largest plausible sensing current, A (IPMC currents are nA..uA; 1 A means a wiring or unit error).
+#: Largest plausible sensing current, A (IPMC currents are nA..uA; 1 A means a wiring or
+#: unit error).
 MAX_ABS_CURRENT_A = 1.0
 
 #: Largest representable stamp (``builtin_interfaces/Time.sec`` is int32), s.
@@ -60,9 +62,11 @@ COUNTER_NAMES = ('messages_in', 'samples_in', 'samples_out', 'samples_rejected',
                  'messages_rejected', 'samples_dropped', 'samples_unpublished',
                  'messages_unpublished', 'resets', 'gaps', 'gaps_bridged')
 
+
 def validate_block(values, max_samples: int = MAX_BLOCK_SAMPLES,
                    max_abs_current_a: float = MAX_ABS_CURRENT_A) -> np.ndarray:
-    """Check a block of current samples before it touches filter state.
+    """
+    Check a block of current samples before it touches filter state.
 
     Returns a float64 1-D array, or raises :class:`~ipmc_sensor_ros.errors.DataError` saying why
     (empty, too long, non-finite or implausibly large values).  Rejecting the whole block, rather
@@ -94,7 +98,8 @@ def _no_log(text: str) -> None:
 
 
 class StreamEstimator:
-    """Stream rules and accounting around a :class:`DeflectionEstimator` (module docstring).
+    """
+    Stream rules and accounting around a :class:`DeflectionEstimator` (module docstring).
 
     Parameters
     ----------
@@ -110,6 +115,7 @@ class StreamEstimator:
         Time of a block without sample times when nothing came before (the node's clock).
     warn : callable, optional
         Receives the text of every reset, dropped block and rejection (the node logs it).
+
     """
 
     def __init__(self, estimator: DeflectionEstimator, *, max_gap_s: float = 0.1,
@@ -137,8 +143,12 @@ class StreamEstimator:
         return self._fs
 
     def replace_estimator(self, new: DeflectionEstimator) -> None:
-        """Swap in ``new`` (parameter change); its output continues from the old one's.  Should
-        the hand-over itself fail, ``new`` starts afresh and that is counted as a reset."""
+        """
+        Swap in ``new`` (parameter change); its output continues from the old one's.
+
+        Should the hand-over itself fail, ``new`` starts afresh and that is counted as a
+        reset.
+        """
         try:
             new.continue_from(self.estimator)
         except Exception as exc:  # never lose the stream over a hand-over
@@ -150,8 +160,12 @@ class StreamEstimator:
         self._fs = float(new.sample_rate_hz)
 
     def restart(self) -> None:
-        """Begin a new stream: filter reset, previous sample times forgotten (not counted as a
-        reset; e.g. a managed node activated again)."""
+        """
+        Begin a new stream: filter reset.
+
+        Previous sample times forgotten (not counted as a reset; e.g. a managed
+        node activated again).
+        """
         self.estimator.reset()
         self.last_time_s = self._last_valid_s = None
 
@@ -176,8 +190,11 @@ class StreamEstimator:
         self._say(f'rejected message on {self.source} ({n_samples} sample(s)): {reason}')
 
     def unpublished(self, n_samples: int, reason: str) -> None:
-        """Move ``n_samples`` just counted as ``samples_out`` to ``samples_unpublished``: the
-        estimate exists (the filter ran) but could not be delivered.  No reset."""
+        """
+        Move ``n_samples`` just counted as ``samples_out`` to ``samples_unpublished``.
+
+        The estimate exists (the filter ran) but could not be delivered. No reset.
+        """
         c = self.counters
         c['samples_out'] -= n_samples
         c['samples_unpublished'] += n_samples
@@ -191,7 +208,8 @@ class StreamEstimator:
 
     # -- rules --------------------------------------------------------------------------
     def check_times(self, times: np.ndarray | None, n: int) -> np.ndarray:
-        """Sample times of a block of ``n`` samples, checked (or inferred when ``None``).
+        """
+        Sample times of a block of ``n`` samples, checked (or inferred when ``None``).
 
         Raises :class:`~ipmc_sensor_ros.errors.DataError` naming the rule broken.
         """
@@ -245,7 +263,8 @@ class StreamEstimator:
 
     # -- data path ----------------------------------------------------------------------
     def feed(self, times, currents, claimed: int | None = None):
-        """Estimate one block.
+        """
+        Estimate one block.
 
         Parameters
         ----------
@@ -261,6 +280,7 @@ class StreamEstimator:
         -------
         (time_s, deflection_m) arrays, or ``None`` when the block was rejected or dropped
         (counted, with ``last_rejection`` / ``last_warning`` saying why).
+
         """
         try:
             current = validate_block(currents, max_samples=self.max_block_samples)
@@ -297,11 +317,14 @@ class StreamEstimator:
         return t_out, w
 
     def feed_one(self, time_s: float, current_a: float):
-        """One timed sample on the lean path: ``(time_out, deflection)`` as floats; ``None`` if
-        the estimate was non-finite (dropped and counted, as :meth:`feed` does); ``False`` —
-        having touched nothing — when the sample needs the general path (:meth:`feed`: a rule
-        to enforce, a reset, a gap, or effects around the filter).  Identical results and
-        counters to :meth:`feed` (tested)."""
+        """
+        One timed sample on the lean path: ``(time_out, deflection)`` as floats.
+
+        ``None`` if the estimate was non-finite (dropped and counted, as :meth:`feed` does);
+        ``False`` — having touched nothing — when the sample needs the general path
+        (:meth:`feed`: a rule to enforce, a reset, a gap, or effects around the filter).
+        Identical results and counters to :meth:`feed` (tested).
+        """
         t, i = time_s, current_a
         # NaN fails every comparison, so non-finite values leave through the general path
         if not (0.0 <= t <= MAX_STAMP_S and -MAX_ABS_CURRENT_A <= i <= MAX_ABS_CURRENT_A):
@@ -331,11 +354,14 @@ class StreamEstimator:
         return t_out, w
 
     def run_record(self, time_s, current_a, block_samples: int = 1000):
-        """Feed a whole record (offline) in blocks of ``block_samples``, cut also where time
-        does not increase (a record may hold several concatenated runs: each is a new run, as a
-        bag loop is live).  Returns (output times, deflection, kept): ``kept`` marks the input
-        samples that have an estimate (rejected or dropped blocks have none; see
-        :attr:`counters`)."""
+        """
+        Feed a whole record (offline) in blocks of ``block_samples``.
+
+        Cut also where time does not increase (a record may hold several concatenated runs:
+        each is a new run, as a bag loop is live). Returns (output times, deflection, kept):
+        ``kept`` marks the input samples that have an estimate (rejected or dropped blocks have
+        none; see :attr:`counters`).
+        """
         t = np.asarray(time_s, float)
         i = np.asarray(current_a, float)
         kept = np.zeros(t.size, dtype=bool)
@@ -357,10 +383,13 @@ class StreamEstimator:
 
 def estimate_record(estimator: DeflectionEstimator, time_s, current_a, *, max_gap_s: float = 0.1,
                     block_samples: int = 1000, source: str = 'record'):
-    """Offline estimate of a whole record with the live stream's rules
-    (:meth:`StreamEstimator.run_record`).  Returns (output times, deflection, stream) — the
-    stream's ``counters`` say how many samples were rejected and how often it reset.  Only
-    samples with an estimate are returned: ``stream.kept`` marks them in the input."""
+    """
+    Offline estimate of a whole record with the live stream's rules.
+
+    :meth:`StreamEstimator.run_record`. Returns (output times, deflection, stream) — the
+    stream's ``counters`` say how many samples were rejected and how often it reset. Only
+    samples with an estimate are returned: ``stream.kept`` marks them in the input.
+    """
     stream = StreamEstimator(estimator, max_gap_s=max_gap_s,
                              max_block_samples=max(block_samples, 1), source=source)
     t, w, stream.kept = stream.run_record(time_s, current_a, block_samples=block_samples)

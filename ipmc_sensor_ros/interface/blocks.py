@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The sample-block layout of ``std_msgs/Float64MultiArray`` messages, without ROS.
+"""
+The sample-block layout of ``std_msgs/Float64MultiArray`` messages, without ROS.
 
 A block of ``n`` timed samples is a 2-D array, row-major::
 
@@ -40,7 +41,6 @@ DEFLECTION_COLUMNS = 'time_s,deflection_m'
 ESTIMATE_COLUMNS = 'time_s,deflection_m,deflection_std_m'
 
 
-
 def _data(msg) -> np.ndarray:
     data = msg.data
     if isinstance(data, array.array) and data.typecode == 'd':
@@ -49,8 +49,10 @@ def _data(msg) -> np.ndarray:
 
 
 def unpack_columns(msg, columns: str, *, values_only_ok: bool = True):
-    """(times_s or None, table) of a block message whose ``dim[1]`` label is ``columns``
-    (``"time_s,<value>[,<more>...]"``, k names): ``table`` has shape (n, k - 1).
+    """
+    Return (times_s or None, table) of a block message whose ``dim[1]`` label is ``columns``.
+
+    ``columns``: ``"time_s,<value>[,<more>...]"``, k names; ``table`` has shape (n, k - 1).
     :class:`DataError` if malformed.  ``values_only_ok``: accept a 1-D values-only message
     (times None, table of shape (n, 1)).  Values are not checked for finiteness here.
     """
@@ -64,12 +66,12 @@ def unpack_columns(msg, columns: str, *, values_only_ok: bool = True):
     if len(dims) <= 1 and values_only_ok:
         if dims and dims[0].size != data.size:
             raise DataError(f'1-D layout: dim[0].size = {dims[0].size} but the data holds '
-                              f'{data.size} value(s)')
+                            f'{data.size} value(s)')
         return None, data[:, None]
     if len(dims) != 2:
         note = ' (values only, no sample times)' if len(dims) < 2 else ''
         raise DataError(f"expected 2 dimensions (dim[0] '{SAMPLE_LABEL}', dim[1] '{columns}'), "
-                          f'got {len(dims)}{note}')
+                        f'got {len(dims)}{note}')
     d0, d1 = dims
     if d0.label != SAMPLE_LABEL:
         raise DataError(f"dim[0].label is {short_repr(d0.label)}, expected '{SAMPLE_LABEL}'")
@@ -80,7 +82,7 @@ def unpack_columns(msg, columns: str, *, values_only_ok: bool = True):
         )
     if d1.size != k or d1.stride != k:
         raise DataError(f'dim[1] must have size {k} and stride {k}, got size {d1.size}, '
-                          f'stride {d1.stride}')
+                        f'stride {d1.stride}')
     if data.size % k:
         what = 'is odd: samples are (time, value) pairs' if k == 2 else \
             f'is not a multiple of {k}: samples are ({columns}) rows'
@@ -88,7 +90,7 @@ def unpack_columns(msg, columns: str, *, values_only_ok: bool = True):
     n = data.size // k
     if d0.size != n or d0.stride != k * n:
         raise DataError(f'dim[0] is (size {d0.size}, stride {d0.stride}) but the data holds {n} '
-                          f'row(s) of {k}: expected dim[0].size = {n}, dim[0].stride = {k * n}')
+                        f'row(s) of {k}: expected dim[0].size = {n}, dim[0].stride = {k * n}')
     rows = data.reshape(n, k)
     return rows[:, 0].copy(), rows[:, 1:].copy()
 

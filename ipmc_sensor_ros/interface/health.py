@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Health of a node and of its channels, without ROS.
+"""
+Health of a node and of its channels, without ROS.
 
 :class:`HealthMonitor` turns the counters and state a node already keeps
 (``samples_in``, ``messages_rejected``, ``resets``, ``gaps``, ...) into one
@@ -45,6 +46,7 @@ __all__ = ['OK', 'WARN', 'ERROR', 'LEVEL_NAMES', 'Health', 'HealthLimits', 'Heal
 OK, WARN, ERROR = 0, 1, 2
 LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR'}
 
+
 @dataclass(frozen=True)
 class HealthLimits:
     """Thresholds of :class:`HealthMonitor` (see the module docstring; SI units)."""
@@ -88,7 +90,8 @@ def worst(items: Sequence[Health], message_ok: str = 'all channels OK') -> Healt
 
 
 class CurrentStatistics:
-    """Running estimates of a current's offset and mains line (module docstring).
+    """
+    Running estimates of a current's offset and mains line (module docstring).
 
     Parameters
     ----------
@@ -96,6 +99,7 @@ class CurrentStatistics:
     offset_window_s : averaging window of the offset (a first-order mean with
         this time constant), s.
     line_frequencies_hz : mains frequencies looked at, Hz.
+
     """
 
     def __init__(self, sample_rate_hz: float, offset_window_s: float = 10.0,
@@ -111,6 +115,19 @@ class CurrentStatistics:
         self._alpha = min(1.0, 1.0 / (self.offset_window_s * self.sample_rate_hz))
         self._mean = 0.0
         self._count = 0
+
+    def observe_one(self, current_a: float) -> None:
+        """Feed one sample (A): :meth:`observe` without numpy (the one-sample message path)."""
+        x = float(current_a)
+        if self._count + 1 <= self.offset_window_s * self.sample_rate_hz:
+            self._mean += (x - self._mean) / (self._count + 1)
+        else:
+            self._mean += self._alpha * (x - self._mean)
+        self._count += 1
+        self._ring[self._end] = x
+        self._end = (self._end + 1) % self._ring.size
+        if self._n < self._ring.size:
+            self._n += 1
 
     def observe(self, current_a) -> None:
         """Feed new samples (A), oldest first."""
@@ -148,12 +165,15 @@ class CurrentStatistics:
         return self._mean if self._count else None
 
     def window_filled(self) -> bool:
-        """True once ``offset_window_s`` of current has been seen."""
+        """Return True once ``offset_window_s`` of current has been seen."""
         return self._count >= self.offset_window_s * self.sample_rate_hz
 
     def line(self) -> tuple[float, float, float, float] | None:
-        """(frequency Hz, amplitude A, RMS of the AC current A, local noise floor A) of
-        the strongest mains line in the last second; None with less than 0.2 s of data.
+        """
+        Return the strongest mains line in the last second.
+
+        As (frequency Hz, amplitude A, RMS of the AC current A, local noise floor A); None
+        with less than 0.2 s of data.
 
         Amplitudes are read off a Hann-windowed spectrum (``2 |X| / sum(w)``, exact for
         a tone on a bin); the noise floor is the median amplitude of the bins 3-10 Hz
@@ -179,7 +199,8 @@ class CurrentStatistics:
 
 
 class HealthMonitor:
-    """Health of one channel from its counters (see the module docstring).
+    """
+    Health of one channel from its counters (see the module docstring).
 
     Parameters
     ----------
@@ -187,6 +208,7 @@ class HealthMonitor:
     limits : thresholds.
     samples_key : counter that counts data (``samples_in`` for a consumer,
         ``samples_published`` for a source).
+
     """
 
     WARN_COUNTERS = (('messages_rejected', 'message(s) rejected'), ('resets', 'filter reset(s)'),
@@ -204,9 +226,13 @@ class HealthMonitor:
 
     def evaluate(self, status: Mapping[str, Any], now_s: float,
                  statistics: CurrentStatistics | None = None) -> Health:
-        """Health at steady-clock time ``now_s`` (s) from ``status``: counters (ints),
-        optionally ``done`` (bool, a finished source), ``estimated_offset_a`` (A) and
-        any other scalar state, all copied to the key/values."""
+        """
+        Health at steady-clock time ``now_s`` (s) from ``status``.
+
+        Counters (ints), optionally ``done`` (bool, a finished source),
+        ``estimated_offset_a`` (A) and any other scalar state, all copied to the
+        key/values.
+        """
         lim = self.limits
         if self._start_s is None:
             self._start_s = now_s
@@ -225,7 +251,7 @@ class HealthMonitor:
         values['seconds_since_data'] = f'{since:.3f}'
         if not done and since > lim.stale_after_s:
             errors.append('no data for ' + (f'{since:.1f} s' if self._last_data_s is not None
-                                           else f'{since:.1f} s since start')
+                                            else f'{since:.1f} s since start')
                           + f' (stale_after_s {lim.stale_after_s:g})')
         if self._prev is not None:
             for key, text in self.WARN_COUNTERS:

@@ -1,6 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The simulator node's parameters and stimulus building, without ROS (the node is
-:mod:`ipmc_sensor_ros.nodes.simulator_node`)."""
+"""
+The simulator node's parameters and stimulus building.
+
+Without ROS (the node is :mod:`ipmc_sensor_ros.nodes.simulator_node`).
+"""
 from __future__ import annotations
 
 import dataclasses
@@ -21,51 +24,51 @@ STIMULI = tuple(sorted(STIMULUS_KINDS)) + ('file',)
 
 SIMULATOR_OWN_SPECS = (
     Spec('fidelity', 'model', str, "sensor physics: 'model' (the closed-form model with every "
-           "effect, as an order-8 reduction) or 'field' (independent solution of the field "
-           'equations; base model and hydration_drift only; ~50x real time)', read_only=True,
-           choices=FIDELITIES),
+         "effect, as an order-8 reduction) or 'field' (independent solution of the field "
+         'equations; base model and hydration_drift only; ~50x real time)', read_only=True,
+         choices=FIDELITIES),
     Spec('beam_model', 'linear', str, "fidelity 'field' only: stress profile from the tip "
-           "deflection, 'linear' (the paper's small-deflection beam, eq. 21) or 'elastica' "
-           "(large deflection: the physical source of the 'nonlinearity' effect)", read_only=True,
-           choices=('linear', 'elastica')),
+         "deflection, 'linear' (the paper's small-deflection beam, eq. 21) or 'elastica' "
+         "(large deflection: the physical source of the 'nonlinearity' effect)", read_only=True,
+         choices=('linear', 'elastica')),
     Spec('stimulus', 'crank_slider', str, 'tip-deflection stimulus: crank_slider, sweep, '
-           'free_vibration, step or file', choices=STIMULI),
+         'free_vibration, step or file', choices=STIMULI),
     Spec('motor_frequency_hz', 1.0, float, 'crank_slider: motor (drive) frequency, Hz',
-           low=1e-3, high=1e3),
+         low=1e-3, high=1e3),
     Spec('crank_radius_m', 0.002, float, 'crank_slider: crank radius r (half the '
-           'peak-to-peak deflection), m', low=1e-6, high=1.0),
+         'peak-to-peak deflection), m', low=1e-6, high=1.0),
     Spec('rod_length_m', 0.02, float, 'crank_slider: connecting-rod length l (> r), m',
-           low=1e-6, high=10.0),
+         low=1e-6, high=10.0),
     Spec('sweep_start_hz', 0.5, float, 'sweep: start frequency, Hz', low=1e-3, high=1e4),
     Spec('sweep_stop_hz', 50.0, float, 'sweep: stop frequency, Hz', low=1e-3, high=1e4),
     Spec('sweep_duration_s', 20.0, float, 'sweep: duration of one sweep (then repeated), s',
-           low=1e-3, high=1e6),
+         low=1e-3, high=1e6),
     Spec('amplitude_m', 0.001, float, 'sweep, step and free_vibration: tip amplitude, m',
-           low=-1.0, high=1.0),
+         low=-1.0, high=1.0),
     Spec('natural_frequency_hz', 30.0, float, 'free_vibration: natural frequency, Hz',
-           low=1e-3, high=1e4),
+         low=1e-3, high=1e4),
     Spec('damping_ratio', 0.05, float, 'free_vibration: damping ratio (dimensionless, < 1)',
-           low=0.0, high=0.999999),
+         low=0.0, high=0.999999),
     Spec('step_start_s', 0.5, float, 'step: time of the step after the start, s',
-           low=0.0, high=1e6),
+         low=0.0, high=1e6),
     Spec('stimulus_file', '', str, "file: CSV with columns time_s,deflection_m ('#' comment "
-           'lines and one header line allowed), interpolated by a cubic spline'),
+         'lines and one header line allowed), interpolated by a cubic spline'),
     Spec('sample_rate_hz', 1000.0, float, 'DAQ sample rate, Hz', low=1.0, high=1e6),
     Spec('block_size', 10, int, 'samples per published message', low=1, high=100000),
     Spec('realtime_factor', 1.0, float, 'simulated seconds per node-clock second; 0 = fast '
-           'mode (one block per 1 ms tick)', low=0.0, high=1e6),
+         'mode (one block per 1 ms tick)', low=0.0, high=1e6),
     Spec('duration_s', 0.0, float, 'simulated duration, s (0 = forever); then it logs '
-           "'done' and stops publishing", low=0.0, high=1e9),
+         "'done' and stops publishing", low=0.0, high=1e9),
     Spec('current_gain', 1.0, float, 'measurement chain: amplifier gain error '
-           '(dimensionless, 1 = ideal)', low=-1e6, high=1e6),
+         '(dimensionless, 1 = ideal)', low=-1e6, high=1e6),
     Spec('current_offset_a', 0.0, float, 'measurement chain: constant current offset, A',
-           low=-1.0, high=1.0),
+         low=-1.0, high=1.0),
     Spec('noise_rms_a', 0.0, float, 'measurement chain: white Gaussian noise RMS, A',
-           low=0.0, high=1.0),
+         low=0.0, high=1.0),
     Spec('seed', 0, int, 'seed of the noise generator', low=0, high=2 ** 31 - 1),
     Spec('wait_for_subscribers', 0, int, "start only when 'current' and 'deflection_truth' "
-           'each have at least this many matched subscriptions (0 = start at once)',
-           low=0, high=1000),
+         'each have at least this many matched subscriptions (0 = start at once)',
+         low=0, high=1000),
 )
 
 SIMULATOR_SPECS = tuple(dataclasses.replace(s, read_only=True) for s in
@@ -102,7 +105,7 @@ def read_stimulus_csv(path: str | Path) -> np.ndarray:
 
 
 def load_stimulus_csv(path: str | Path) -> Sampled:
-    """A :class:`Sampled` stimulus from a ``time_s,deflection_m`` CSV file (s, m)."""
+    """Return a :class:`Sampled` stimulus from a ``time_s,deflection_m`` CSV file (s, m)."""
     data = read_stimulus_csv(path)
     try:
         return Sampled(data[:, 0], data[:, 1])

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Parameters of the nodes and of ``ipmc-model estimate``, without ROS.
+"""
+Parameters of the nodes and of ``ipmc-model estimate``, without ROS.
 
 One source for the parameter names, defaults, units and ranges
 (:class:`Spec`), for reading them from a ROS 2 params file
@@ -33,11 +34,10 @@ __all__ = ['Spec', 'ParameterError', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_
            'check_values', 'markdown_table', 'FRAME_ID_PATTERN', 'DIAGNOSTICS_SPECS']
 
 
-
-
 @dataclass(frozen=True)
 class Spec:
-    """One parameter: name, default, type, description (with unit), range, read-only flag.
+    """
+    One parameter: name, default, type, description (with unit), range, read-only flag.
 
     ``kind`` is float, int, str, bool or list (list = string array; its default
     must be empty: it is declared by type, unset means empty).  Every number has a
@@ -138,7 +138,7 @@ ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
          low=1e-4, high=1e5),
     Spec('sample_rate_hz', 1000.0, float, 'sample rate of the current the filter is designed '
          'for, Hz; blocks whose median sample period differs by more than 1 % are rejected',
-           low=1.0, high=1e6, read_only=True),
+         low=1.0, high=1e6, read_only=True),
     Spec('estimator', 'leaky', str, "'leaky': the leaky inverse of the reduced model; "
          "'kalman': offset-aware Kalman filter with a rest detector (learns the DAQ offset, "
          'holds the deflection at rest, publishes its standard deviation)',
@@ -176,13 +176,17 @@ FILTER_KEYS = ('sample_rate_hz', 'leak_corner_hz', 'offset_corner_hz', 'estimato
 
 
 def model_key(values: Mapping[str, Any]) -> tuple:
-    """The values that decide the reduced model (equal keys: the reduction can be reused)."""
+    """
+    Return the values that decide the reduced model.
+
+    Equal keys: the reduction can be reused.
+    """
     return tuple((k, tuple(values[k]) if isinstance(values[k], list) else values[k])
                  for k in MODEL_KEYS)
 
 
 def filter_key(values: Mapping[str, Any]) -> tuple:
-    """The values that decide the filter on a given reduction."""
+    """Return the values that decide the filter on a given reduction."""
     return tuple(values[k] for k in FILTER_KEYS)
 
 
@@ -196,7 +200,8 @@ def check_choice(name: str, value: Any, choices: Iterable[str]) -> str:
 
 
 def build_model(values: Mapping[str, Any]) -> SensorModel:
-    """SensorModel from geometry, material, ``model`` and ``effects`` parameter values.
+    """
+    Build a SensorModel from geometry, material, ``model`` and ``effects`` parameter values.
 
     Plugins (``plugins``) are loaded on the first call only
     (:func:`~ipmc_sensor_ros.physics.effects.load_plugins`: never re-executed).
@@ -219,9 +224,13 @@ def build_model(values: Mapping[str, Any]) -> SensorModel:
 
 
 def _model_from_file(values: Mapping[str, Any], geometry: Geometry) -> SensorModel:
-    """The model of ``model_file`` for ``geometry``.  The file and the parameters are two
-    sources of the same values: a model, effect or material parameter that differs from its
-    default is refused (naming both), never silently overridden."""
+    """
+    Return the model of ``model_file`` for ``geometry``.
+
+    The file and the parameters are two sources of the same values: a model, effect or
+    material parameter that differs from its default is refused (naming both), never
+    silently overridden.
+    """
     from ..physics.modelfile import load_model
 
     path = values['model_file']
@@ -237,12 +246,13 @@ def _model_from_file(values: Mapping[str, Any], geometry: Geometry) -> SensorMod
     return saved.sensor_model(geometry)
 
 
-
-
 def check_values(values: Mapping[str, Any], specs: Iterable[Spec] | None = None) -> None:
-    """Check every value in ``values`` that has a spec (type, range, choices, pattern,
-    length): the same rules as a params file and the ROS descriptors.  Raises
-    :class:`ParameterError` naming the parameter."""
+    """
+    Check every value in ``values`` that has a spec (type, range, choices, pattern, length).
+
+    The same rules as a params file and the ROS descriptors. Raises
+    :class:`ParameterError` naming the parameter.
+    """
     for spec in (ESTIMATOR_SPECS if specs is None else specs):
         if spec.name in values:
             _check_value(spec, values[spec.name], '')
@@ -251,10 +261,13 @@ def check_values(values: Mapping[str, Any], specs: Iterable[Spec] | None = None)
 def build_estimator(
     values: Mapping[str, Any], reduced: ReducedModel | None = None
 ) -> DeflectionEstimator:
-    """The core estimator from parameter values (``reduced`` reused when the model part
-    did not change).  Raises ParameterError / ParameterError / ParameterError /
-    ParameterError naming the parameter; any other failure of the numerics (e.g. a
-    LinAlgError) becomes a one-line ParameterError."""
+    """
+    Return the core estimator from parameter values.
+
+    ``reduced`` reused when the model part did not change. Raises ParameterError /
+    ParameterError / ParameterError / ParameterError naming the parameter; any other
+    failure of the numerics (e.g. a LinAlgError) becomes a one-line ParameterError.
+    """
     check_values(values)
     try:
         model = build_model(values)
@@ -275,7 +288,7 @@ def build_estimator(
         raise
     except Exception as exc:  # numerics of an extreme but in-range combination
         raise ParameterError(f'these parameter values do not give a usable model: '
-                                 f'{_one_line(exc)}') from None
+                             f'{_one_line(exc)}') from None
 
 
 def _one_line(exc: BaseException, limit: int = 200) -> str:
@@ -285,7 +298,7 @@ def _one_line(exc: BaseException, limit: int = 200) -> str:
 
 
 def defaults(specs: Iterable[Spec]) -> dict[str, Any]:
-    """Default values of ``specs`` (string arrays default to empty lists)."""
+    """Return the default values of ``specs`` (string arrays default to empty lists)."""
     return {s.name: (list(s.default) if s.kind is list else s.default) for s in specs}
 
 
@@ -316,26 +329,27 @@ def _check_value(spec: Spec, value: Any, where: str) -> Any:
         if isinstance(value, str) or not isinstance(value, (list, tuple)) \
                 or not all(isinstance(v, str) for v in value):
             raise ParameterError(f"{where}parameter '{spec.name}' must be a list of strings, "
-                                     f'got {shown}')
+                                 f'got {shown}')
         value = [v for v in value if v]
     if spec.low is not None and not (spec.low <= value <= spec.high):  # NaN fails too
         raise ParameterError(f"{where}parameter '{spec.name}' = {shown} is outside "
-                                 f'[{spec.low:g}, {spec.high:g}]')
+                             f'[{spec.low:g}, {spec.high:g}]')
     if spec.choices and value not in spec.choices:
         raise ParameterError(f"{where}unknown {spec.name} {shown}: parameter '{spec.name}' "
-                                 f'must be one of {list(spec.choices)}')
+                             f'must be one of {list(spec.choices)}')
     if spec.max_length is not None and len(value) > spec.max_length:
         raise ParameterError(f"{where}parameter '{spec.name}' is {len(value)} characters long, "
-                                 f'more than {spec.max_length}: {shown}')
+                             f'more than {spec.max_length}: {shown}')
     if spec.pattern and not re.fullmatch(spec.pattern, value):
         raise ParameterError(f"{where}parameter '{spec.name}' = {shown} does not match "
-                                 f'{spec.pattern} (allowed characters, not empty)')
+                             f'{spec.pattern} (allowed characters, not empty)')
     return value
 
 
 def load_params_file(path: str | Path, node_name: str = 'ipmc_estimator',
                      specs: Sequence[Spec] | None = None) -> dict[str, Any]:
-    """Parameter values for ``node_name`` from a ROS 2 params file, on top of the defaults.
+    """
+    Parameter values for ``node_name`` from a ROS 2 params file, on top of the defaults.
 
     Sections that apply: ``/**``, ``/**/<node_name>``, ``<node_name>`` and
     ``/<node_name>`` (later ones win), each with ``ros__parameters``.  Unknown
@@ -365,24 +379,24 @@ def load_params_file(path: str | Path, node_name: str = 'ipmc_estimator',
         params = section['ros__parameters'] or {}
         if not isinstance(params, dict):
             raise ParameterError(f"{path}: 'ros__parameters' of section '{key}' must be a "
-                                     f'mapping, got {short_repr(params)}')
+                                 f'mapping, got {short_repr(params)}')
         for name, value in params.items():
             if name == 'use_sim_time':
                 continue
             if name not in by_name:
                 raise ParameterError(f'{path}: unknown parameter {short_repr(name)} in section '
-                                         f"'{key}' (known: {sorted(by_name)})")
+                                     f"'{key}' (known: {sorted(by_name)})")
             values[name] = _check_value(by_name[name], value, str(path))
     if not found:
         raise ParameterError(f"{path}: no section for node '{node_name}' (expected one of "
-                                 f"'/**', '/**/{node_name}', '{node_name}')")
+                             f"'/**', '/**/{node_name}', '{node_name}')")
     try:
         build_model(values)
     except ParameterError as exc:
         raise ParameterError(f'{path}: {exc}') from None
     except Exception as exc:  # numerics of an extreme but in-range combination
         raise ParameterError(f'{path}: these parameter values do not give a usable model: '
-                                 f'{_one_line(exc)}') from None
+                             f'{_one_line(exc)}') from None
     return values
 
 

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Tustin (bilinear) discretisation with prewarping, in zpk form.
+"""
+Tustin (bilinear) discretisation with prewarping, in zpk form.
 
 Used by the estimator (inverse model) and the simulator (forward model), so the
 two share one documented mapping
@@ -43,8 +44,11 @@ def _maybe_real(values) -> np.ndarray:
 
 
 def van_loan(ac: np.ndarray, qc: np.ndarray, dt: float):
-    """Exact zero-order-hold discretisation of x' = A x + w (white, intensity Qc):
-    (A_d, Q_d) over dt s (Van Loan 1978), used by the Kalman estimator."""
+    """
+    Exact zero-order-hold discretisation of x' = A x + w (white, intensity Qc).
+
+    (A_d, Q_d) over dt s (Van Loan 1978), used by the Kalman estimator.
+    """
     import scipy.linalg as la
 
     n = ac.shape[0]

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Finite-order models of the IPMC sensing dynamics.
+"""
+Finite-order models of the IPMC sensing dynamics.
 
 Two things live here:
 
@@ -72,11 +73,10 @@ _DB_SCALE = 0.1 * np.log(10.0) / 20.0   # 0.1 dB expressed as a natural-log magn
 _DEG_SCALE = np.pi / 180.0               # 1 degree in radians
 
 
-
-
 @dataclass(frozen=True)
 class ReducedModel:
-    """H_n(s) = s * k * prod(s - z_i) / prod(s - p_i), A m^-1.
+    """
+    H_n(s) = s * k * prod(s - z_i) / prod(s - p_i), A m^-1.
 
     ``zeros_rad_s`` and ``poles_rad_s`` are those of R_n = H_n / s (all real and
     negative, rad s^-1); ``gain`` is k (A s m^-1 at high frequency).
@@ -109,8 +109,12 @@ class ReducedModel:
         return (np.concatenate([[0.0], self.zeros_rad_s]), self.poles_rad_s.copy(), self.gain)
 
     def to_control(self):
-        """H_n as a python-control ``StateSpace`` (improper models are not allowed
-        there, so this returns the proper charge model R_n; multiply by ``s``)."""
+        """
+        H_n as a python-control ``StateSpace``.
+
+        Improper models are not allowed there, so this returns the proper
+        charge model R_n; multiply by ``s``.
+        """
         import control
         import scipy.signal as sig
 
@@ -136,7 +140,8 @@ def _check_band(band_hz: Sequence[float]) -> tuple[float, float]:
 def reduce_response(response: Callable[[np.ndarray], np.ndarray], order: int,
                     band_hz: Sequence[float] = (0.1, 50.0), *, extension: float = 10.0,
                     n_points: int = 160, initial: ReducedModel | None = None) -> ReducedModel:
-    """Stable, minimum-phase order-``order`` fit of ``response(s) = H(s)``.
+    """
+    Stable, minimum-phase order-``order`` fit of ``response(s) = H(s)``.
 
     ``response`` must behave like ``s R(s)`` with ``R(0)`` finite and non-zero
     (a charge sensor).  See the module docstring for the method.  ``initial``
@@ -226,7 +231,8 @@ def reduce_response_all(
 
 def reduce_model(model: SensorModel, order: int = 4, band_hz: Sequence[float] = (0.1, 50.0),
                  **kwargs) -> ReducedModel:
-    """Stable minimum-phase reduction of ``model`` (see module docstring).
+    """
+    Stable minimum-phase reduction of ``model`` (see module docstring).
 
     A pure delay in the model (``time_delay`` effect) is not part of the
     reduction: no causal inverse can undo it; see ``SensorModel.delay_s``.
@@ -240,10 +246,14 @@ def reduce_model(model: SensorModel, order: int = 4, band_hz: Sequence[float] = 
 
 def reduce_model_parts(model: SensorModel, order: int = 4, band_hz: Sequence[float] = (0.1, 50.0),
                        **kwargs) -> tuple[ReducedModel, ReducedModel]:
-    """(full reduction, fit of the diffusive part alone): the one place where the diffusive part
+    """
+    (full reduction, fit of the diffusive part alone).
+
+    The one place where the diffusive part
     (:meth:`~ipmc_sensor_ros.physics.pipeline.CompiledModel.diffusive_transfer`) is reduced and
-    the exact rational factors are appended.  The diffusive fit warm-starts the next reduction
-    of a drifting material (``initial=``)."""
+    the exact rational factors are appended. The diffusive fit warm-starts the next reduction
+    of a drifting material (``initial=``).
+    """
     diffusive = reduce_response(model.diffusive_transfer, order, band_hz, **kwargs)
     return append_rational(diffusive, model.rational_factors()), diffusive
 
@@ -260,8 +270,11 @@ def append_rational(reduced: ReducedModel, factors) -> ReducedModel:
 
 def reduction_error(reduced, model: SensorModel, band_hz: Sequence[float] = (0.1, 50.0),
                     n_points: int = 400) -> tuple[float, float]:
-    """Worst |magnitude error| (dB) and |phase error| (deg) of ``reduced`` against
-    ``model`` over ``band_hz``.  ``reduced`` is anything with ``frequency_response``."""
+    """
+    Worst |magnitude error| (dB) and |phase error| (deg) of ``reduced`` against ``model``.
+
+    Over ``band_hz``.  ``reduced`` is anything with ``frequency_response``.
+    """
     lo, hi = _check_band(band_hz)
     f = np.logspace(np.log10(lo), np.log10(hi), n_points)
     ratio = reduced.frequency_response(f) / model.min_phase_transfer(2j * np.pi * f)
@@ -289,7 +302,8 @@ def reduction_error_table(models: dict[str, SensorModel], orders: Sequence[int] 
 # The paper's eq. 55
 # ---------------------------------------------------------------------------
 def _eq55_polynomials(model: SensorModel) -> tuple[np.ndarray, np.ndarray]:
-    """Numerator and denominator of eq. 55 (highest power first).
+    """
+    Numerator and denominator of eq. 55 (highest power first).
 
     The factor B(s) = s kappa_e r0 / h that multiplies both the numerator and the
     denominator of the g-part (eqs. 53-54) is cancelled exactly; leaving it would
@@ -315,7 +329,8 @@ def _eq55_polynomials(model: SensorModel) -> tuple[np.ndarray, np.ndarray]:
 
 
 def paper_eq55(model: SensorModel):
-    """The paper's reduced model H-hat(s) (eq. 55) as a ``control.TransferFunction``.
+    """
+    Return the paper's reduced model H-hat(s) (eq. 55) as a ``control.TransferFunction``.
 
     Exactly as printed (second-order Taylor series of sqrt(s+K), three terms of
     each series in eq. 54).  It is improper (numerator degree 5, denominator 3)
@@ -329,7 +344,8 @@ def paper_eq55(model: SensorModel):
 
 
 def eq55_poles_zeros(model: SensorModel) -> dict:
-    """Poles and zeros of eq. 55 and whether its inverse (eq. 48) is stable.
+    """
+    Poles and zeros of eq. 55 and whether its inverse (eq. 48) is stable.
 
     Returns ``{"poles", "zeros", "rhp_zeros", "inverse_stable"}`` (rad s^-1).
     """

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Live demo: simulator -> estimator as two ROS 2 processes over DDS, tracking error table.
+"""
+Live demo: simulator -> estimator as two ROS 2 processes over DDS, tracking error table.
 
 ``python -m ipmc_sensor_ros.nodes.demo`` (or ``bash scripts/demo.sh``).  For each
 crank-slider drive frequency (default 1, 5 and 20 Hz) it starts

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""``/diagnostics`` publisher: a thin ROS shell over :mod:`ipmc_sensor_ros.interface.health`.
+"""
+``/diagnostics`` publisher: a thin ROS shell over :mod:`ipmc_sensor_ros.interface.health`.
 
 One ``diagnostic_msgs/DiagnosticArray`` per period (1 s) on the absolute
 topic ``/diagnostics`` (where rqt_robot_monitor and diagnostic_aggregator
@@ -37,14 +38,15 @@ _LEVELS = {0: DiagnosticStatus.OK, 1: DiagnosticStatus.WARN, 2: DiagnosticStatus
 
 
 def to_status(health: Health, name: str, hardware_id: str) -> DiagnosticStatus:
-    """The ``DiagnosticStatus`` of one :class:`Health`."""
+    """Return the ``DiagnosticStatus`` of one :class:`Health`."""
     return DiagnosticStatus(level=_LEVELS[health.level], name=name, message=health.message,
                             hardware_id=hardware_id,
                             values=[KeyValue(key=k, value=v) for k, v in health.values.items()])
 
 
 class DiagnosticsPublisher:
-    """Publishes the health of ``node``'s channels on ``/diagnostics``.
+    """
+    Publishes the health of ``node``'s channels on ``/diagnostics``.
 
     Parameters
     ----------
@@ -58,6 +60,7 @@ class DiagnosticsPublisher:
         steady-clock timer of ``period_s`` publishes by itself.
     expected_rate_hz : samples per second of steady-clock time expected (default:
         ``sample_rate_hz``; a simulator in fast mode passes None: no rate check).
+
     """
 
     def __init__(self, node, values: Mapping[str, Any], channels: Sequence[str] = ('data',),
@@ -91,8 +94,18 @@ class DiagnosticsPublisher:
         if stats is not None:
             stats.observe(current_a)
 
+    def observe_one(self, current_a: float, channel: str | None = None) -> None:
+        """:meth:`observe` for one sample (the one-sample message path)."""
+        stats = self._stats.get(channel or self.channels[0])
+        if stats is not None:
+            stats.observe_one(current_a)
+
     def update(self, status: Mapping[str, Any]) -> DiagnosticArray:
-        """Evaluate ``status`` (``{channel: dict}`` or one dict) and publish; returns the message."""
+        """
+        Evaluate ``status`` (``{channel: dict}`` or one dict) and publish.
+
+        Returns the message.
+        """
         if not status or not all(isinstance(v, Mapping) for v in status.values()):
             status = {self.channels[0]: status}   # one dict: the first channel
         now_s = self._clock.now().nanoseconds * 1e-9
@@ -110,6 +123,23 @@ class DiagnosticsPublisher:
         for channel, health in results.items():
             msg.status.append(to_status(health, f'{node_name}: {channel}', self.hardware_id))
         self.last = results
+        self._pub.publish(msg)
+        return msg
+
+    def announce(self, message: str, level: int = 0) -> DiagnosticArray:
+        """
+        Publish ``message`` at ``level`` (0 OK) as the status of every channel.
+
+        For states no health rule describes, e.g. a managed node being deactivated.
+        """
+        msg = DiagnosticArray()
+        msg.header.stamp = self._node.get_clock().now().to_msg()
+        node_name = self._node.get_fully_qualified_name()
+        health = Health(level, message)
+        if len(self.channels) > 1:
+            msg.status.append(to_status(health, node_name, self.hardware_id))
+        for channel in self.channels:
+            msg.status.append(to_status(health, f'{node_name}: {channel}', self.hardware_id))
         self._pub.publish(msg)
         return msg
 

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""ROS 2 node ``ipmc_estimator``: sensing current (A) in, tip deflection (m) out.
+"""
+ROS 2 node ``ipmc_estimator``: sensing current (A) in, tip deflection (m) out.
 
 Unpack -> :class:`~ipmc_sensor_ros.estimation.stream.StreamEstimator` (every rule of the
 stream: values, times, gaps, resets, counters) -> publish: ``deflection/block``
@@ -44,8 +45,12 @@ _ERRORS = (IpmcError,)  # every deliberate error of the package names the parame
 
 
 class EstimatorNode(Node):
-    """The estimator node (module docstring); ``kwargs`` go to :class:`rclpy.node.Node`, so
-    several nodes can share a process.  ParameterError if the parameters make no estimator."""
+    """
+    The estimator node (module docstring).
+
+    ``kwargs`` go to :class:`rclpy.node.Node`, so several nodes can share a process.
+    ParameterError if the parameters make no estimator.
+    """
 
     def __init__(self, node_name: str = 'ipmc_estimator', **kwargs: Any):
         super().__init__(node_name, **kwargs)
@@ -53,6 +58,19 @@ class EstimatorNode(Node):
         P.check_unknown_overrides(self, ESTIMATOR_SPECS, kwargs.get('cli_args'),
                                   default_name='ipmc_estimator')
         P.declare(self, ESTIMATOR_SPECS)
+        self._configure()
+        self._open_io()
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.add_post_set_parameters_callback(self._on_parameters_set)
+        self.get_logger().info(self._ready_text())
+
+    # -- construction, in the steps a managed node takes one by one --------------
+    def _configure(self) -> None:
+        """
+        Read the parameters, build the model, the filter and the stream core.
+
+        ParameterError naming the parameter if they make no estimator.  No topic is created.
+        """
         self._values = P.read(self, ESTIMATOR_SPECS)
         try:
             estimator = C.build_estimator(self._values)
@@ -65,7 +83,16 @@ class EstimatorNode(Node):
         self._model_key = C.model_key(self._values)
         self._pending: tuple | None = None
         self._ticks = 0
+        logger = self.get_logger()
+        self._stream = StreamEstimator(
+            estimator, max_gap_s=float(self._values['max_gap_s']),
+            max_block_samples=int(self._values['max_block_samples']),
+            source=self.resolve_topic_name('current'),
+            now_s=lambda: self.get_clock().now().nanoseconds * 1e-9,
+            warn=lambda text: logger.warning(text, throttle_duration_sec=1.0))
 
+    def _open_io(self) -> None:
+        """Create the subscription, the publishers, the timer and /diagnostics."""
         qos = P.make_qos(self._values)
         self._sub = P.create_subscription(
             self, Float64MultiArray, 'current', self._on_current, qos
@@ -75,35 +102,40 @@ class EstimatorNode(Node):
         self._pub_point = P.create_publisher(self, PointMsg, 'deflection', qos)
         P.check_qos_overrides(self)
         self._pub_counters = self.create_publisher(String, 'estimator/counters', P.COUNTERS_QOS)
-        logger = self.get_logger()
-        self._stream = StreamEstimator(
-            estimator, max_gap_s=float(self._values['max_gap_s']),
-            max_block_samples=int(self._values['max_block_samples']),
-            source=self._sub.topic_name, now_s=lambda: self.get_clock().now().nanoseconds * 1e-9,
-            warn=lambda text: logger.warning(text, throttle_duration_sec=1.0))
         self._diagnostics = DiagnosticsPublisher(
             self, self._values, channels=(self._sub.topic_name,),
-            sample_rate_hz=estimator.sample_rate_hz, source=self._status)
+            sample_rate_hz=self._stream.estimator.sample_rate_hz, source=self._status)
         self._timer = self.create_timer(1.0, self._on_timer,  # steady: runs before /clock
                                         clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.add_post_set_parameters_callback(self._on_parameters_set)
-        r = self._reduced
-        logger.info(
-            f'ready: {estimator.model.describe()} model, order {r.order} reduction '
-            f'over {r.band_hz[0]}-{r.band_hz[1]} Hz, fs = {estimator.sample_rate_hz} Hz, '
-            f'leak corner {estimator.inverse.leak_corner_hz} Hz; listening on {self._sub.topic_name}'
-        )
+
+    def _close_io(self) -> None:
+        """Destroy what :meth:`_open_io` created (the stream core and its counters stay)."""
+        P.destroy_io(self, ('_timer', '_diagnostics', '_sub', '_pub_block', '_pub_point',
+                            '_pub_counters'))
+
+    def _ready_text(self) -> str:
+        r, estimator = self._reduced, self._stream.estimator
+        return (f'ready: {estimator.model.describe()} model, order {r.order} reduction '
+                f'over {r.band_hz[0]}-{r.band_hz[1]} Hz, fs = {estimator.sample_rate_hz} Hz, '
+                f'leak corner {estimator.inverse.leak_corner_hz} Hz; '
+                f"listening on {self.resolve_topic_name('current')}")
 
     # -- public helpers -------------------------------------------------------
     def counters(self) -> dict[str, int]:
-        """Copy of the stream counters (invariant: :mod:`ipmc_sensor_ros.estimation.stream`)."""
+        """
+        Return a copy of the stream counters.
+
+        Invariant: :mod:`ipmc_sensor_ros.estimation.stream`.
+        """
         with self._lock:
             return dict(self._stream.counters)
 
     def _status(self) -> dict:
-        """Counters and estimator state (offset, rest, std, mains line) for the counters topic
-        and /diagnostics."""
+        """
+        Counters and estimator state (offset, rest, std, mains line).
+
+        For the counters topic and /diagnostics.
+        """
         with self._lock:
             out = dict(self._stream.counters)
             out.update(self._stream.estimator.status())
@@ -113,22 +145,22 @@ class EstimatorNode(Node):
 
     @property
     def stream(self) -> StreamEstimator:
-        """The stream core (rules, counters) this node feeds."""
+        """Return the stream core (rules, counters) this node feeds."""
         return self._stream
 
     @property
     def estimator(self) -> InverseEstimator:
-        """The discrete inverse filter currently in use (replaced on parameter changes)."""
+        """Return the discrete inverse filter currently in use (replaced on parameter changes)."""
         return self._stream.estimator.inverse
 
     @property
     def deflection_estimator(self) -> DeflectionEstimator:
-        """The core model-aware estimator (filter + effects) currently in use."""
+        """Return the core model-aware estimator (filter + effects) currently in use."""
         return self._stream.estimator
 
     @property
     def input_topic(self) -> str:
-        return self._sub.topic_name
+        return self._stream.source
 
     @property
     def last_rejection(self) -> str:
@@ -145,7 +177,7 @@ class EstimatorNode(Node):
             if one:
                 out = self._stream.feed_one(*one)
                 if out is not False:
-                    self._diagnostics.observe((one[1],))
+                    self._diagnostics.observe_one(one[1])
                     if out is not None:
                         std = self._stream.estimator.std_m
                         self._publish(
@@ -165,8 +197,12 @@ class EstimatorNode(Node):
                 self._publish(self._packer.pack(t, w, std), t, w, t.size)
 
     def _publish(self, block_msg: Float64MultiArray, times, deflections, n: int) -> None:
-        """Publish a block and its points; a publish that cannot complete (e.g. a stalled
-        reliable subscriber) is counted by the stream core, never fatal, never a reset."""
+        """
+        Publish a block and its points.
+
+        a publish that cannot complete (e.g. a stalled reliable subscriber) is counted
+        by the stream core, never fatal, never a reset.
+        """
         try:
             self._pub_block.publish(block_msg)
         except Exception as exc:  # rclpy raises RCLError and others: back-pressure, not a bug
@@ -205,8 +241,12 @@ class EstimatorNode(Node):
 
     # -- parameters -------------------------------------------------------------
     def _on_set_parameters(self, parameters) -> SetParametersResult:
-        """Validate a change by building the new design; nothing is applied here.  Any
-        failure to build, whatever the exception, refuses the change (one-line reason)."""
+        """
+        Validate a change by building the new design; nothing is applied here.
+
+        Any failure to build, whatever the exception, refuses the change (one-line
+        reason).
+        """
         with self._lock:
             self._pending = None
             values = dict(self._values)

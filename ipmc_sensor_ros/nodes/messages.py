@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Pack and unpack sample blocks in ``std_msgs/Float64MultiArray`` (pure numpy + std_msgs).
+"""
+Pack and unpack sample blocks in ``std_msgs/Float64MultiArray`` (pure numpy + std_msgs).
 
 Block layout (defined in :mod:`ipmc_sensor_ros.interface.blocks`; README "ROS 2 interface")
 ---------------------------------------------------------------------------------
@@ -54,10 +55,15 @@ __all__ = [
     'point_message',
 ]
 
+
 @dataclass(frozen=True)
 class Block:
-    """An unpacked block: ``times_s`` (None for a 1-D, values-only message), ``values`` (the
-    first value column) and ``extra`` (the further columns, shape (n, k - 2), or None)."""
+    """
+    An unpacked block: ``times_s`` (None for a 1-D, values-only message).
+
+    ``values`` (the first value column) and ``extra`` (the further columns, shape (n, k
+    - 2), or None).
+    """
 
     times_s: np.ndarray | None
     values: np.ndarray
@@ -74,13 +80,17 @@ def _to_array_d(values: np.ndarray) -> array.array:
 
 
 def pack_block(times_s, values, columns: str = CURRENT_COLUMNS, *extra) -> Float64MultiArray:
-    """Build the 2-D block message from ``times_s`` (s), ``values`` and any ``extra`` columns
-    (units per ``columns``)."""
+    """
+    Build the 2-D block message from ``times_s`` (s).
+
+    ``values`` and any ``extra`` columns (units per ``columns``).
+    """
     return BlockPacker(columns).pack(times_s, values, *extra)
 
 
 class BlockPacker:
-    """Packs blocks of one column layout into a single, reused message.
+    """
+    Packs blocks of one column layout into a single, reused message.
 
     A publisher's hot path: rclpy serialises a message inside ``publish()``, so
     the same message object can be refilled for the next block; its layout is
@@ -95,14 +105,18 @@ class BlockPacker:
         self._n = -1
 
     def pack(self, times_s, *columns) -> Float64MultiArray:
-        """A block of the times and one array per value column (as many as ``columns`` names)."""
+        """
+        Return a block of the times and one array per value column.
+
+        As many value columns as ``columns`` names.
+        """
         t = np.asarray(times_s, dtype=float).ravel()
         cols = [np.asarray(c, dtype=float).ravel() for c in columns]
         if len(cols) + 1 != self.width:
             raise DataError(f"{len(cols) + 1} columns for the layout '{self.columns}'")
         if any(c.shape != t.shape for c in cols):
             raise DataError(f'times ({t.size}) and values ({[c.size for c in cols]}) differ '
-                              'in length')
+                            'in length')
         n = int(t.size)
         if n == 1:
             return self.pack_one(float(t[0]), *(float(c[0]) for c in cols))
@@ -116,13 +130,13 @@ class BlockPacker:
         return msg
 
     def pack_one(self, time_s: float, *values: float) -> Float64MultiArray:
-        """A one-sample block from floats (no numpy on the way)."""
+        """Return a one-sample block from floats (no numpy on the way)."""
         msg = self._with_layout(1)
         msg.data = array.array('d', (time_s, *values))
         return msg
 
     def _with_layout(self, n: int) -> Float64MultiArray:
-        """The reused message, its layout set for ``n`` samples (rebuilt only on change)."""
+        """Return the reused message, its layout set for ``n`` samples (rebuilt only on change)."""
         msg = self._msg
         if n != self._n:
             k = self.width
@@ -134,7 +148,8 @@ class BlockPacker:
 
 
 def claimed_samples(msg: Float64MultiArray) -> int:
-    """How many samples the message carries, for accounting even when it is malformed.
+    """
+    How many samples the message carries, for accounting even when it is malformed.
 
     Two or more dimensions: ceil(payload / 2) (a time and a value per sample);
     otherwise the payload length (values only).
@@ -146,8 +161,10 @@ def claimed_samples(msg: Float64MultiArray) -> int:
 
 
 def unpack_block(msg: Float64MultiArray, columns: str = CURRENT_COLUMNS) -> Block:
-    """Decode a block message; raise :class:`DataError` if the layout is malformed
-    (:func:`ipmc_sensor_ros.interface.blocks.unpack_columns`).
+    """
+    Decode a block message; raise :class:`DataError` if the layout is malformed.
+
+    :func:`ipmc_sensor_ros.interface.blocks.unpack_columns`.
 
     Returns a :class:`Block`; ``times_s`` is None for a values-only 1-D message.
     Values are *not* checked for finiteness here (that is the estimator's job).
@@ -158,9 +175,13 @@ def unpack_block(msg: Float64MultiArray, columns: str = CURRENT_COLUMNS) -> Bloc
 
 
 def one_sample(msg: Float64MultiArray):
-    """``(time, current)`` of a well-formed one-sample timed current message (the layout the
-    simulator and DAQ drivers publish), as floats without numpy; ``None`` for any other
-    message, which then takes the general path and gets its precise layout check."""
+    """
+    Return ``(time, current)`` of a well-formed one-sample timed current message.
+
+    The message has the layout the simulator and DAQ drivers publish; the values come as
+    floats without numpy.  ``None`` for any other message, which then takes the general
+    path and gets its precise layout check.
+    """
     layout = msg.layout
     dims = layout.dim
     if len(dims) != 2 or layout.data_offset != 0:
@@ -176,7 +197,11 @@ def one_sample(msg: Float64MultiArray):
 
 
 def point_message(time_s: float, length_m: float, deflection_m: float, frame_id: str):
-    """The tip as ``geometry_msgs/PointStamped``: (L, 0, w) in the clamp frame at ``time_s``."""
+    """
+    Return the tip as ``geometry_msgs/PointStamped``.
+
+    (L, 0, w) in the clamp frame at ``time_s``.
+    """
     from geometry_msgs.msg import PointStamped
 
     sec, nsec = divmod(round(time_s * 1e9), 1_000_000_000)

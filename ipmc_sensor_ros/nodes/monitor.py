@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Tracking monitor: collect estimate and ground truth, align them by time, score.
+"""
+Tracking monitor: collect estimate and ground truth, align them by time, score.
 
 Used by the demo (``python -m ipmc_sensor_ros.nodes.demo``) and the integration
 tests.  It subscribes, inside ``namespace``, to ``deflection/block``
@@ -22,7 +23,8 @@ __all__ = ['TrackingMonitor', 'nrmse']
 
 
 class TrackingMonitor:
-    """Subscriptions of one estimator/simulator pair on ``node``.
+    """
+    Subscriptions of one estimator/simulator pair on ``node``.
 
     ``namespace``: prefix of the pair's topics (e.g. ``/demo_f5``; ``""`` = the
     node's own namespace, relative names).
@@ -57,7 +59,7 @@ class TrackingMonitor:
 
     @property
     def matched(self) -> bool:
-        """True when the data subscriptions see at least one publisher each."""
+        """Return True when the data subscriptions see at least one publisher each."""
         return all(s.get_publisher_count() > 0 for s in self.subscriptions[:2])
 
     def series(self):

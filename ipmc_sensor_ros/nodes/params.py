@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""ROS parameter specifications shared by the nodes, and model building from them.
+"""
+ROS parameter specifications shared by the nodes, and model building from them.
 
 Every parameter is declared with a ``ParameterDescriptor`` carrying a
 description with its unit and, where a fixed range makes sense, a
@@ -17,11 +18,14 @@ from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescr
                                 ParameterType)
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
+from rclpy.subscription import Subscription
+from rclpy.timer import Timer
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
 
 from ..interface.specs import (GEOMETRY_NAMES, GEOMETRY_SPECS, MATERIAL_NAMES, MATERIAL_SPECS,
-                      MODEL_SPECS, QOS_SPECS, ParameterError, Spec, check_choice,
-                      markdown_table)
+                               MODEL_SPECS, QOS_SPECS, ParameterError, Spec, check_choice,
+                               markdown_table)
 from ..interface.specs import build_model as build_sensor_model
 
 __all__ = ['ParameterError', 'Spec', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_SPECS',
@@ -29,7 +33,7 @@ __all__ = ['ParameterError', 'Spec', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_
            'check_choice', 'ParameterError', 'MATERIAL_NAMES', 'GEOMETRY_NAMES', 'markdown_table',
            'params_files', 'check_unknown_overrides', 'section_matches', 'params_file_sections',
            'create_publisher', 'create_subscription', 'check_qos_overrides',
-           'qos_overriding_options']
+           'qos_overriding_options', 'destroy_io']
 
 _TYPES = {float: ParameterType.PARAMETER_DOUBLE, int: ParameterType.PARAMETER_INTEGER,
           str: ParameterType.PARAMETER_STRING, bool: ParameterType.PARAMETER_BOOL,
@@ -37,7 +41,7 @@ _TYPES = {float: ParameterType.PARAMETER_DOUBLE, int: ParameterType.PARAMETER_IN
 
 
 def descriptor(spec: Spec) -> ParameterDescriptor:
-    """The rclpy descriptor of a core parameter spec (description, range, read-only)."""
+    """Return the rclpy descriptor of a core parameter spec (description, range, read-only)."""
     d = ParameterDescriptor(name=spec.name, type=_TYPES[spec.kind],
                             description=spec.description, read_only=spec.read_only)
     if spec.choices:
@@ -52,7 +56,7 @@ def descriptor(spec: Spec) -> ParameterDescriptor:
 
 
 def params_files(cli_args: Iterable[str] | None = None) -> list[str]:
-    """The ``--params-file`` paths given to this process or node (for error messages)."""
+    """Return the ``--params-file`` paths given to this process or node (for error messages)."""
     import sys
 
     out = []
@@ -76,8 +80,12 @@ def _ros_arg_params(cli_args) -> set[str]:
 
 
 def section_matches(key: str, fqn: str) -> bool:
-    """True if a params-file section ``key`` (``/**``, ``/**/name``, ``name``, ``/ns/*``)
-    applies to the node of fully qualified name ``fqn`` (rcl's matching rules)."""
+    """
+    Return True if a params-file section ``key`` applies to the node ``fqn``.
+
+    ``key``: ``/**``, ``/**/name``, ``name``, ``/ns/*``; ``fqn``: the node's fully qualified
+    name; rcl's matching rules.
+    """
     import re
 
     key = key if key.startswith('/') else '/' + key
@@ -102,7 +110,8 @@ def params_file_sections(path: str) -> list[tuple[str, dict]]:
 
 def check_unknown_overrides(node, specs: Iterable[Spec], cli_args=None,
                             default_name: str | None = None) -> None:
-    """Apply the params-file rules of the nodes, then refuse unknown overrides.
+    """
+    Apply the params-file rules of the nodes, then refuse unknown overrides.
 
     * A node renamed at start-up (``-r __node:=left_ipmc``) also takes the
       sections keyed by its default name ``default_name`` (``/**/ipmc_estimator``,
@@ -152,12 +161,12 @@ def check_unknown_overrides(node, specs: Iterable[Spec], cli_args=None,
     for name in unknown:
         if name not in fatal:
             node.get_logger().warning(f"ignoring parameter '{name}' from {wildcard_only[name]}: "
-                                   f"not a parameter of {fqn} (another node's?)")
+                                      f"not a parameter of {fqn} (another node's?)")
             del node._parameter_overrides[name]
     if fatal:
         where = f" in {', '.join(files)}" if files else ''
         raise ParameterError(f'unknown parameter(s) {fatal}{where} for node '
-                                 f"'{node.get_name()}'; known: {sorted(known - {'use_sim_time'})}")
+                             f"'{node.get_name()}'; known: {sorted(known - {'use_sim_time'})}")
 
 
 #: QoS parameters of a topic are declared read-only by rclpy as
@@ -166,16 +175,52 @@ QOS_OVERRIDE_POLICIES = ('history', 'depth', 'reliability', 'durability')
 
 
 def qos_overriding_options():
-    """The standard ``qos_overrides.*`` parameters (history, depth, reliability, durability)."""
+    """
+    Return the standard ``qos_overrides.*`` parameters.
+
+    History, depth, reliability, durability.
+    """
     from rclpy.qos_overriding_options import QoSOverridingOptions
 
     return QoSOverridingOptions.with_default_policies()
 
 
 def create_publisher(node, msg_type, topic: str, qos: QoSProfile):
-    """``node.create_publisher`` with the standard QoS override parameters."""
-    return node.create_publisher(msg_type, topic, qos,
-                                 qos_overriding_options=qos_overriding_options())
+    """
+    Create a publisher with the standard QoS override parameters.
+
+    A lifecycle node gets a lifecycle publisher (enabled by its ``on_activate``).
+    """
+    create = getattr(node, 'create_lifecycle_publisher', node.create_publisher)
+    return create(msg_type, topic, qos, qos_overriding_options=qos_overriding_options())
+
+
+def destroy_io(node, names: Iterable[str]) -> None:
+    """
+    Destroy the entities held by the attributes ``names`` of ``node``.
+
+    Timers, publishers and subscriptions are destroyed through the node, anything else
+    (a :class:`~ipmc_sensor_ros.nodes.diagnostics.DiagnosticsPublisher`) by its
+    ``destroy()``, lists and tuples item by item; each attribute becomes None, and None
+    attributes are skipped.
+    """
+    for name in names:
+        held = getattr(node, name, None)
+        setattr(node, name, None)
+        for entity in held if isinstance(held, (list, tuple)) else (held,):
+            _destroy(node, entity)
+
+
+def _destroy(node, entity) -> None:
+    if entity is not None:
+        if isinstance(entity, Timer):
+            node.destroy_timer(entity)
+        elif isinstance(entity, Publisher):
+            node.destroy_publisher(entity)
+        elif isinstance(entity, Subscription):
+            node.destroy_subscription(entity)
+        else:
+            entity.destroy()
 
 
 def create_subscription(node, msg_type, topic: str, callback, qos: QoSProfile):
@@ -185,15 +230,18 @@ def create_subscription(node, msg_type, topic: str, callback, qos: QoSProfile):
 
 
 def check_qos_overrides(node) -> None:
-    """Refuse ``qos_overrides.*`` overrides naming no topic of the node (call after
-    creating the topics): a misspelt topic would otherwise be ignored silently."""
+    """
+    Refuse ``qos_overrides.*`` overrides naming no topic of the node.
+
+    Call after creating the topics: a misspelt topic would otherwise be ignored silently.
+    """
     declared = set(node._parameters)
     stray = sorted(n for n in node._parameter_overrides
                    if n.startswith('qos_overrides.') and n not in declared)
     if stray:
         valid = sorted(n for n in declared if n.startswith('qos_overrides.'))
         raise ParameterError(f'unknown QoS override(s) {stray} for node '
-                                 f"'{node.get_name()}'; valid: {valid}")
+                             f"'{node.get_name()}'; valid: {valid}")
 
 
 def declare(node, specs: Iterable[Spec]) -> None:
@@ -206,7 +254,7 @@ def declare(node, specs: Iterable[Spec]) -> None:
 
 
 def read(node, specs: Iterable[Spec]) -> dict[str, Any]:
-    """Current values of ``specs`` as a dict (an unset string array reads as ``[]``)."""
+    """Return the current values of ``specs`` as a dict (an unset string array reads as ``[]``)."""
     out = {}
     for spec in specs:
         try:
@@ -232,6 +280,3 @@ def make_qos(values: Mapping[str, Any]) -> QoSProfile:
                       reliability=(ReliabilityPolicy.RELIABLE if rel == 'reliable'
                                    else ReliabilityPolicy.BEST_EFFORT),
                       durability=DurabilityPolicy.VOLATILE)
-
-
-

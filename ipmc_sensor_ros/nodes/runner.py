@@ -1,31 +1,33 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Process entry helper shared by the node executables.
+"""
+Process entry helper shared by the node executables.
 
 Executor
-    ``SingleThreadedExecutor`` by default.  ``IPMC_EXECUTOR=events`` selects
-    ``rclpy.experimental.EventsExecutor`` (rclpy >= 9) but it is NOT the default:
-    with these wheels (ros-rclpy 9.1.2) a node on it whose steady-clock timer
-    raises (or whose process got SIGTERM) kept spinning forever, the timer
-    callback never ran (README "ROS 2 interface": executor), so the
-    shutdown guard below cannot work on it.
+    ``rclpy.experimental.EventsExecutor`` where rclpy has it (rclpy >= 9), else
+    ``SingleThreadedExecutor``; ``IPMC_EXECUTOR=single`` selects the latter.  On this
+    machine the events executor handled one-sample messages at 80-90 us of CPU each
+    against 360-400 us for the single-threaded one (README "ROS 2 interface").
+    With ros-rclpy 9.1.2 the events executor's ``spin()`` never returns: an exception
+    raised in a callback is logged and swallowed, and neither ``shutdown()`` from
+    another thread nor a completed future ends it.  ``spin_once`` does return (and
+    re-raises a callback's exception), so the nodes are spun by :func:`spin_until_signalled`,
+    a ``spin_once`` loop with a 0.1 s timeout that checks the signal flag between calls.
 
 Signals
     The process handles SIGINT and SIGTERM itself (rclpy's handlers are not
-    installed, ``SignalHandlerOptions.NO``): the Python handler only records
-    the signal, and a 0.1 s steady-clock guard timer on the node turns it into
-    ``ExternalShutdownException`` out of ``spin``; a signal during start-up is
-    seen right after the node is built.  So a signal at any moment exits 0
-    without a traceback, never in the middle of rcl calls.  Why not rclpy's
-    handlers: with them, a SIGTERM sent on the "ready" line left the process
-    spinning forever in 4 of 5 runs (EventsExecutor; also seen with
-    SingleThreadedExecutor), the context never shut down, and in 10 of 12
-    runs on main it raised ``RCLError`` ("the given context is not valid")
-    out of the executor's wait-set set-up.
+    installed, ``SignalHandlerOptions.NO``): the Python handler only records the
+    signal, and the spin loop ends within ``SPIN_PERIOD_S`` once it is set, never in
+    the middle of rcl calls.  So a signal at any moment exits 0 without a traceback.
+    Why not rclpy's handlers: with them, a SIGTERM sent on the "ready" line left the
+    process spinning forever in 4 of 5 runs (EventsExecutor; also seen with
+    SingleThreadedExecutor), the context never shut down, and in 10 of 12 runs it
+    raised ``RCLError`` ("the given context is not valid") out of the executor's
+    wait-set set-up.
 
 Teardown
-    executor, node, context are destroyed in that order; there is no
-    ``os._exit`` (the SIGSEGV seen once at exit under load with rclpy's own signal
-    handlers has not been seen since they are no longer installed).
+    executor, node, context are destroyed in that order; there is no ``os._exit``
+    (the SIGSEGV seen once at exit under load with rclpy's own signal handlers has
+    not been seen since they are no longer installed).
 """
 from __future__ import annotations
 
@@ -42,7 +44,7 @@ from rclpy.signals import SignalHandlerOptions
 from ..physics.parameters import read_yaml
 from .params import ParameterError, params_files
 
-__all__ = ['run', 'make_executor', 'executor_name']
+__all__ = ['run', 'make_executor', 'executor_name', 'spin_until_signalled']
 
 try:  # rclpy >= 9
     from rclpy.experimental import EventsExecutor
@@ -60,22 +62,23 @@ _SHUTDOWN = (KeyboardInterrupt, ExternalShutdownException)
 
 def executor_name() -> str:
     """``events`` or ``single``: the executor :func:`make_executor` builds here."""
-    wanted = os.environ.get('IPMC_EXECUTOR', 'single').strip().lower()
+    default = 'single' if EventsExecutor is None else 'events'
+    wanted = os.environ.get('IPMC_EXECUTOR', default).strip().lower()
     if wanted not in ('events', 'single'):
         raise ParameterError(f'environment variable IPMC_EXECUTOR={wanted!r}: expected '
-                                 "'events' or 'single'")
+                             "'events' or 'single'")
     return 'events' if wanted == 'events' and EventsExecutor is not None else 'single'
 
 
 def make_executor(context=None):
-    """The executor of the nodes (see the module docstring)."""
+    """Return the executor of the nodes (see the module docstring)."""
     if executor_name() == 'events':
         return EventsExecutor(context=context)
     return SingleThreadedExecutor(context=context)
 
 
 def _stopping(context=None) -> bool:
-    """True once a signal (or anyone) has shut the rclpy context down."""
+    """Return True once a signal (or anyone) has shut the rclpy context down."""
     try:
         return not rclpy.ok(context=context)
     except Exception:  # noqa: BLE001 - a destroyed context is stopping too
@@ -90,27 +93,19 @@ def _on_signal(signum, frame) -> None:
     _SIGNALLED.add(signum)
 
 
-#: Period of the shutdown guard timer, s.
-GUARD_PERIOD_S = 0.1
+#: Longest wait of one ``spin_once`` call, s: the bound on the exit delay after a signal.
+SPIN_PERIOD_S = 0.1
 
 
-def _shutdown_guard(node):
-    """A steady-clock timer that raises ``ExternalShutdownException`` out of ``spin``
-    once the context is shut down.
-
-    rclpy wakes the executor when a signal shuts the context down, but a wake-up
-    that comes before ``spin`` has started is lost by ``EventsExecutor`` (measured:
-    4 of 5 SIGTERMs sent on the "ready" line left the process spinning forever),
-    and the single-threaded executor can miss it the same way.  The guard
-    bounds the exit delay to ``GUARD_PERIOD_S`` whatever the timing.
+def spin_until_signalled(executor, context=None) -> None:
     """
-    from rclpy.clock import Clock, ClockType
+    Spin ``executor`` until SIGINT/SIGTERM was received or the context shut down.
 
-    def check():
-        if _SIGNALLED or _stopping(node.context):
-            raise ExternalShutdownException()
-
-    return node.create_timer(GUARD_PERIOD_S, check, clock=Clock(clock_type=ClockType.STEADY_TIME))
+    A loop of ``spin_once`` (see the module docstring for why not ``spin``); an
+    exception raised by a callback propagates out of it.
+    """
+    while not _SIGNALLED and not _stopping(context):
+        executor.spin_once(timeout_sec=SPIN_PERIOD_S)
 
 
 def _report_configuration_error(name: str, exc: Exception) -> None:
@@ -128,7 +123,8 @@ def _report_configuration_error(name: str, exc: Exception) -> None:
 
 
 def run(node_factory, name: str, args=None) -> int:
-    """Init rclpy, build the node, spin until SIGINT/SIGTERM/shutdown; return the exit code.
+    """
+    Init rclpy, build the node, spin until SIGINT/SIGTERM/shutdown; return the exit code.
 
     ``node_factory()`` builds the node (a ``Node`` or a ``LifecycleNode``).
 
@@ -167,10 +163,8 @@ def _run(node_factory, name: str, args) -> int:
         executor = make_executor()
         node = node_factory()
         node.get_logger().debug(f'executor: {type(executor).__name__}')
-        _guard = _shutdown_guard(node)  # noqa: F841 (kept alive; before add_node)
         executor.add_node(node)
-        if not _SIGNALLED:
-            executor.spin()
+        spin_until_signalled(executor, node.context)
     except _SHUTDOWN:
         pass
     except (ParameterError, ParameterException) as exc:

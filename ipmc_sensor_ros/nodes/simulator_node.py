@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""ROS 2 node ``ipmc_simulator``: a simulated IPMC sensor and its DAQ.
+"""
+ROS 2 node ``ipmc_simulator``: a simulated IPMC sensor and its DAQ.
 
 Publishes the measured sensing current on ``current`` (``time_s,current_A``
 blocks, the estimator's input layout) and the ground-truth tip deflection on
@@ -55,7 +56,8 @@ MIN_TICK_S = 1e-3
 
 
 class SimulatorNode(Node):
-    """Simulated sensor + DAQ node; see the module docstring and README "ROS 2 interface".
+    """
+    Simulated sensor + DAQ node; see the module docstring and README "ROS 2 interface".
 
     ``kwargs`` go to :class:`rclpy.node.Node`.  Raises
     :class:`~ipmc_sensor_ros.nodes.params.ParameterError` on invalid parameters.
@@ -66,17 +68,24 @@ class SimulatorNode(Node):
         P.check_unknown_overrides(self, SIMULATOR_SPECS, kwargs.get('cli_args'),
                                   default_name='ipmc_simulator')
         P.declare(self, SIMULATOR_SPECS)
+        self._configure()
+        self._open_io()
+        self.get_logger().info(self._ready_text())
+
+    # -- construction, in the steps a managed node takes one by one --------------
+    def _configure(self) -> None:
+        """Read the parameters and build the simulated sensor (ParameterError); no topic."""
         v = self._values = P.read(self, SIMULATOR_SPECS)
         try:
-            model = P.build_sensor_model(v)
+            self._model = P.build_sensor_model(v)
             self._stimulus, self._stim_t0 = build_stimulus(v)
             chain = dict(current_gain=v['current_gain'], current_offset_a=v['current_offset_a'],
                          noise_rms_a=v['noise_rms_a'], seed=v['seed'])
             if check_fidelity(v['fidelity'], v['beam_model']):
-                self._sim = FieldSensorSimulator(model, v['sample_rate_hz'],
+                self._sim = FieldSensorSimulator(self._model, v['sample_rate_hz'],
                                                  beam_model=v['beam_model'], **chain)
             else:
-                self._sim = SensorSimulator(model, v['sample_rate_hz'], **chain)
+                self._sim = SensorSimulator(self._model, v['sample_rate_hz'], **chain)
         except (ParameterError, ParameterError) as exc:
             raise P.ParameterError(str(exc)) from None
         self._fs = float(v['sample_rate_hz'])
@@ -88,6 +97,9 @@ class SimulatorNode(Node):
         self._t_start_ns: int | None = None
         self._done = False
 
+    def _open_io(self) -> None:
+        """Create the publishers, the timers and /diagnostics."""
+        v = self._values
         qos = P.make_qos(v)
         self._pub_current = P.create_publisher(self, Float64MultiArray, 'current', qos)
         self._pub_truth = P.create_publisher(self, Float64MultiArray, 'deflection_truth', qos)
@@ -109,12 +121,19 @@ class SimulatorNode(Node):
             sample_rate_hz=self._fs,
             expected_rate_hz=self._fs * self._rtf if self._rtf > 0.0 else None,
             samples_key='samples_published', source=self.counters)
-        self.get_logger().info(
-            f'ready: {model.describe()} model, stimulus '
-            f'{describe_stimulus(self._stimulus, v)}, {self._fs} Hz in blocks of '
-            f'{self._block}, realtime_factor {self._rtf}'
-            + (f", duration {v['duration_s']} s" if self._total else ', no end')
-            + f'; publishing {self._pub_current.topic_name}')
+
+    def _close_io(self) -> None:
+        """Destroy what :meth:`_open_io` created (the simulation state stays)."""
+        P.destroy_io(self, ('_timer', '_counter_timer', '_diagnostics', '_pub_current',
+                            '_pub_truth', '_pub_counters'))
+
+    def _ready_text(self) -> str:
+        v = self._values
+        return (f'ready: {self._model.describe()} model, stimulus '
+                f'{describe_stimulus(self._stimulus, v)}, {self._fs} Hz in blocks of '
+                f'{self._block}, realtime_factor {self._rtf}'
+                + (f", duration {v['duration_s']} s" if self._total else ', no end')
+                + f"; publishing {self.resolve_topic_name('current')}")
 
     # -- public helpers -----------------------------------------------------------
     def counters(self) -> dict[str, Any]:

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Beam mechanics that turn a tip deflection into the surface-stress profile sigma(h, z).
+"""
+Beam mechanics that turn a tip deflection into the surface-stress profile sigma(h, z).
 
 The paper uses small-deflection Euler-Bernoulli theory (eqs. 18-21):
 M(z) = F (L - z), w = L^3 F / (3 Y I), hence sigma(h, z) = 3 Y h (L - z) w / L^3
@@ -76,8 +77,10 @@ class LinearBeam:
 
 
 def elastica_solution(tip_load: float, n_nodes: int = 201, guess=None):
-    """Dimensionless elastica theta'' = -lambda cos theta, theta(0) = 0, theta'(1) = 0,
-    for lambda = ``tip_load`` = F L^2 / (Y I) >= 0.
+    """
+    Dimensionless elastica theta'' = -lambda cos theta, theta(0) = 0, theta'(1) = 0.
+
+    For lambda = ``tip_load`` = F L^2 / (Y I) >= 0.
 
     Returns the :func:`scipy.integrate.solve_bvp` solution (y = [theta, theta'], over
     s/L in [0, 1]); w/L = int sin theta, kappa L = theta'.  ``guess``: a previous
@@ -120,8 +123,11 @@ def _elastica_table(n_shapes: int, n_loads: int = 161) -> tuple:
 
 
 class ElasticaBeam:
-    """Large-deflection (elastica) cantilever under a vertical tip force; see the module
-    docstring.  ``n_shapes`` polynomial shapes (1..6)."""
+    """
+    Large-deflection (elastica) cantilever under a vertical tip force; see the module docstring.
+
+    ``n_shapes`` polynomial shapes (1..6).
+    """
 
     name = 'elastica'
 
@@ -175,10 +181,12 @@ FIDELITIES = ('model', 'field')
 
 
 def check_fidelity(fidelity: str, beam_model: str = 'linear') -> bool:
-    """Validate ``fidelity`` and ``beam_model`` together; True for the field solution.
+    """
+    Validate ``fidelity`` and ``beam_model`` together; True for the field solution.
 
     A large-deflection beam needs the field solution (the closed form assumes the
-    small-deflection beam, eq. 21).  Raises ParameterError naming the parameter."""
+    small-deflection beam, eq. 21).  Raises ParameterError naming the parameter.
+    """
     if fidelity not in FIDELITIES:
         hint = (
             " ('reduced' and 'exact' are now 'model')" if fidelity in ('reduced', 'exact') else ''
@@ -190,8 +198,11 @@ def check_fidelity(fidelity: str, beam_model: str = 'linear') -> bool:
 
 
 def require_field_fidelity(beam_model: str, field: bool) -> None:
-    """Refuse a large-deflection beam where the closed form (small-deflection beam,
-    eq. 21) is used instead of the field solution; ParameterError naming the parameter."""
+    """
+    Refuse a large-deflection beam where the closed form is used instead of the field solution.
+
+    The closed form: small-deflection beam, eq. 21.  Raises ParameterError naming the parameter.
+    """
     if beam_model != 'linear' and not field:
         raise ParameterError(f"parameter 'beam_model' = {beam_model!r} needs fidelity 'field' "
                              '(the closed form assumes the small-deflection beam, eq. 21)')

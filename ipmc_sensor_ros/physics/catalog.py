@@ -61,7 +61,8 @@ class AmplifierBandwidth(Effect):
         'Phase lag growing linearly with frequency (about f/f_a rad) and, near f_a, a '
         'magnitude droop; errors concentrated at the top of the band, equal for all samples.'
     )
-    reference = 'Any transimpedance-amplifier text, e.g. Horowitz & Hill, The Art of Electronics, 3rd ed., 4.3.'
+    reference = ('Any transimpedance-amplifier text, e.g. Horowitz & Hill, '
+                 'The Art of Electronics, 3rd ed., 4.3.')
 
     def factor(self, s, model, values):
         return 1.0 / (1.0 + s / (2 * math.pi * values['corner_hz']))
@@ -161,7 +162,11 @@ class HydrationDrift(Effect):
 
 
 def diffusivity_ratio_function(values):
-    """d(t)/d_0 of :class:`HydrationDrift` as a function of elapsed seconds (also used by ``track``)."""
+    """
+    Return d(t)/d_0 of :class:`HydrationDrift` as a function of elapsed seconds.
+
+    Also used by ``track``.
+    """
     rate = float(values['diffusivity_rate_per_s'])
     q = float(values.get('equilibrium_ratio', 0.0))
 
@@ -179,8 +184,11 @@ _FREE_CANTILEVER_X1 = 1.8751040687
 
 
 def clamped_pinned_slope_ratio(x4: np.ndarray) -> np.ndarray:
-    """Tip-slope ratio R = w'(L) 2L / (3 w(L)) of a clamped beam whose tip displacement is
-    prescribed (pinned, zero moment), as a function of x^4 = (kL)^4, k^4 = rho A w^2 / (E I).
+    """
+    Tip-slope ratio R = w'(L) 2L / (3 w(L)) of a clamped beam with a prescribed tip.
+
+    The tip displacement is prescribed (pinned, zero moment); R is a function of
+    x^4 = (kL)^4, k^4 = rho A w^2 / (E I).
 
     R = (2x/3) sinh x sin x / (sin x cosh x - sinh x cos x) (Euler-Bernoulli), even in x,
     = 1 - 2 x^4 / 315 + O(x^8) for small x (series used below |x^4| = 1e-3, where the

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Physical effects that can be added to the base model H1 (eq. 31).
+"""
+Physical effects that can be added to the base model H1 (eq. 31).
 
 A model is ``h1`` plus an ordered list of effects; the paper's H2 (eq. 45) is
 exactly ``h1 + surface_resistance``.  Each effect is documented here, in one
@@ -55,7 +56,8 @@ __all__ = [
 
 @dataclass(frozen=True)
 class EffectParameter:
-    """One parameter of an effect.
+    """
+    One parameter of an effect.
 
     ``lower``/``upper`` are hard bounds used by fits; ``typical`` is the
     plausible physical range (a fitted value outside it is flagged).
@@ -126,10 +128,13 @@ class Effect:
         return 0.0
 
     def rational(self, model, values: dict):
-        """Exact rational form of ``factor`` as continuous (zeros, poles, gain) in
-        rad/s, if it has one (e.g. resonances, filters); None otherwise.  The
+        """
+        Exact rational form of ``factor`` as continuous (zeros, poles, gain) in rad/s.
+
+        If it has one (e.g. resonances, filters); None otherwise. The
         reduction keeps such factors exactly instead of approximating them by
-        real poles and zeros."""
+        real poles and zeros.
+        """
         return None
 
     # Times ``t`` given to the hooks are seconds since the start of the record
@@ -166,10 +171,12 @@ _PLUGIN_CLASSES: dict[str, list[type]] = {}
 
 
 def register_effect(cls, source: str = 'built-in'):
-    """Class decorator / function: register an :class:`Effect` subclass by its ``name``.
+    """
+    Class decorator / function: register an :class:`Effect` subclass by its ``name``.
 
     A name already registered from another source (a built-in effect, another plugin)
-    is refused: a plugin cannot silently replace an effect."""
+    is refused: a plugin cannot silently replace an effect.
+    """
     if not (isinstance(cls, type) and issubclass(cls, Effect)) or not cls.name:
         raise ParameterError(f'{short_repr(cls)} is not an Effect subclass with a name')
     if not isinstance(cls.name, str) or not cls.name.isidentifier():
@@ -193,7 +200,8 @@ def get_effect(name: str) -> Effect:
 
 
 def load_plugin(path: str | Path) -> list[str]:
-    """Execute a Python file once and register every Effect subclass it defines.
+    """
+    Execute a Python file once and register every Effect subclass it defines.
 
     Returns the names registered.  A file already loaded (same resolved path) is not
     executed again: its names are returned, whatever the file holds now.  Errors
@@ -245,8 +253,11 @@ def load_plugin(path: str | Path) -> list[str]:
 
 
 def load_plugins(paths) -> dict[str, tuple[str, tuple[str, ...]]]:
-    """Load each plugin file once (:func:`load_plugin`); returns ``{path: (sha256, names)}``
-    of these files."""
+    """
+    Load each plugin file once (:func:`load_plugin`).
+
+    Returns ``{path: (sha256, names)}`` of these files.
+    """
     out = {}
     for path in paths:
         if path:
@@ -261,7 +272,7 @@ def loaded_plugins() -> dict[str, tuple[str, tuple[str, ...]]]:
 
 
 def catalog_markdown() -> str:
-    """The catalog as Markdown (used in the README and `ipmc-model effects`)."""
+    """Return the catalog as Markdown (used in the README and `ipmc-model effects`)."""
     lines = []
     for eff in EFFECTS.values():
         lines.append(f'### `{eff.name}`\n\n{eff.summary}\n')

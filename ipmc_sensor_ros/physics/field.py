@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Independent numerical solution of the paper's field equations (no closed-form H1/H2).
+"""
+Independent numerical solution of the paper's field equations (no closed-form H1/H2).
 
 What is solved
 --------------
@@ -41,8 +42,8 @@ Discretisation (method of lines)
   sparse LU per step size; i = C (A x + B w) + C_w dw/dt (C_w: the surface
   node's share of m, a direct term).
 
-:func:`ipmc_sensor_ros.workbench.studies.convergence_table` shows the error against the closed forms falling with
-refinement; the tests require 0.1 dB / 0.5 deg over 0.1-100 Hz.
+:func:`ipmc_sensor_ros.workbench.studies.convergence_table` shows the error against the
+closed forms falling with refinement; the tests require 0.1 dB / 0.5 deg over 0.1-100 Hz.
 """
 
 from __future__ import annotations
@@ -69,8 +70,11 @@ def _graded_nodes(h: float, first: float, growth: float) -> np.ndarray:
 
 
 def _second_derivative(x: np.ndarray) -> sp.csr_matrix:
-    """Three-point second derivative on nodes x (rows for interior nodes 1..N-1,
-    columns for all nodes 0..N)."""
+    """
+    Three-point second derivative on nodes x.
+
+    Rows for interior nodes 1..N-1, columns for all nodes 0..N.
+    """
     n = x.size
     rows, cols, vals = [], [], []
     for i in range(1, n - 1):
@@ -96,7 +100,8 @@ def _trapezoid_weights(x: np.ndarray) -> np.ndarray:
 
 @dataclass
 class FieldSolver:
-    """Method-of-lines solver of the field equations for ``model`` (h1 or h2 base).
+    """
+    Method-of-lines solver of the field equations for ``model`` (h1 or h2 base).
 
     ``surface_cell``: first thickness cell at x = h in units of the boundary-layer
     thickness sqrt(d/K); ``growth``: cell growth ratio inland; ``n_length``:
@@ -190,8 +195,11 @@ class FieldSolver:
         return self.A.shape[0]
 
     def frequency_response(self, frequency_hz) -> np.ndarray:
-        """i/w (A/m) at ``frequency_hz`` from the discretised equations (for a nonlinear
-        beam: its small-signal linearisation at w = 0)."""
+        """
+        i/w (A/m) at ``frequency_hz`` from the discretised equations.
+
+        For a nonlinear beam: its small-signal linearisation at w = 0.
+        """
         f = np.atleast_1d(np.asarray(frequency_hz, float))
         out = np.empty(f.size, dtype=complex)
         eye = sp.identity(self.n_states, format='csc')
@@ -207,8 +215,10 @@ class FieldSolver:
     def simulate(
         self, time_s, deflection_m, diffusivity_at=None, update_s: float = 0.5
     ) -> np.ndarray:
-        """Sensing current (A) for a deflection record (uniform time steps, starting from
-        rest), by Crank-Nicolson; i = C (A x + B q) + C_w dq/dt with q = beam(w).
+        """
+        Sensing current (A) for a deflection record (uniform time steps, starting from rest).
+
+        By Crank-Nicolson; i = C (A x + B q) + C_w dq/dt with q = beam(w).
 
         ``diffusivity_at(elapsed_s) -> d`` (m^2/s) makes the diffusivity change during the
         run (hydration, paper section 5.4): the system is re-assembled every ``update_s``
@@ -225,7 +235,7 @@ class FieldSolver:
     def stream(
         self, sample_rate_hz: float, diffusivity_at=None, update_s: float = 0.5
     ) -> 'FieldStream':
-        """A streaming (block by block) Crank-Nicolson integrator of this system."""
+        """Return a streaming (block by block) Crank-Nicolson integrator of this system."""
         return FieldStream(self, sample_rate_hz, diffusivity_at, update_s)
 
     def _with_diffusivity(self, d: float) -> 'FieldSolver':
@@ -236,7 +246,8 @@ class FieldSolver:
 
 
 class NonlinearFieldSolver:
-    """Eq. 12 *with* the term the paper drops from eq. 9, on the full thickness.
+    """
+    Eq. 12 *with* the term the paper drops from eq. 9, on the full thickness.
 
     d rho/dt = d rho_xx - K rho - d (F (1 - C- dV) / (R T)) d(E rho)/dx,   -h < x < h,
 
@@ -287,8 +298,11 @@ class NonlinearFieldSolver:
         self.dx = np.diff(self.x)
 
     def _field(self, rho: np.ndarray) -> np.ndarray:
-        """E at all nodes (columns of rho: one per z point) with zero electrode potential
-        difference: int_{-h}^{h} E dx = 0."""
+        """
+        E at all nodes (columns of rho: one per z point) with zero electrode potential difference.
+
+        int_{-h}^{h} E dx = 0.
+        """
         cum = (
             np.vstack(
                 [
@@ -341,9 +355,12 @@ class NonlinearFieldSolver:
 
 
 class FieldStream:
-    """Streaming Crank-Nicolson integration of a :class:`FieldSolver` (state kept between
-    blocks): ``step(w_block, w_rate_block) -> current_block``.  Used by
-    :meth:`FieldSolver.simulate` and the simulator's ``fidelity = field``."""
+    """
+    Streaming Crank-Nicolson integration of a :class:`FieldSolver` (state kept between blocks).
+
+    ``step(w_block, w_rate_block) -> current_block``. Used by
+    :meth:`FieldSolver.simulate` and the simulator's ``fidelity = field``.
+    """
 
     def __init__(self, solver: FieldSolver, sample_rate_hz: float, diffusivity_at=None,
                  update_s: float = 0.5):

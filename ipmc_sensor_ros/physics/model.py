@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""A sensing model: material + geometry + base transfer function + effects.
+"""
+A sensing model: material + geometry + base transfer function + effects.
 
 ``SensorModel`` is the one description that fitting, comparison, reduction,
 the estimator and the simulator all take.  The base is the paper's H1
@@ -112,9 +113,13 @@ def format_effect(spec: EffectSpec) -> str:
 
 
 def model_effects(name: str, extra_effects: str | Iterable = ()) -> tuple[EffectSpec, ...]:
-    """The effects of model ``name`` (``h1``/``h2``) plus ``extra_effects``: the one way a model
-    description (CLI flags, node parameters, model files) becomes a list of effects.  An extra
-    effect that the base already contains, or one listed twice, is refused."""
+    """
+    Return the effects of model ``name`` (``h1``/``h2``) plus ``extra_effects``.
+
+    The one way a model description (CLI flags, node parameters, model files) becomes a list
+    of effects. An extra effect that the base already contains, or one listed twice, is
+    refused.
+    """
     _, base = parse_model_name(name)
     extra = parse_effects(extra_effects)
     names = [e.name for e in extra]
@@ -139,7 +144,8 @@ def parse_model_name(name: str) -> tuple[str, tuple[str, ...]]:
 
 @dataclass(frozen=True)
 class SensorModel:
-    """Deflection-to-current model of one sample.
+    """
+    Deflection-to-current model of one sample.
 
     Parameters
     ----------
@@ -148,6 +154,7 @@ class SensorModel:
     effects : ordered effects added to the base H1 (eq. 31): names, specs, or
         ``(name, {param: value})`` pairs.  ``("surface_resistance",)`` (the
         default) is the paper's H2 (eq. 45).
+
     """
 
     geometry: Geometry
@@ -165,8 +172,12 @@ class SensorModel:
     @classmethod
     def named(cls, name: str, geometry: Geometry, material: MaterialParameters = PAPER_PARAMETERS,
               extra_effects: str | Iterable = ()) -> 'SensorModel':
-        """``h1`` or ``h2`` (the paper's models) for ``geometry``, plus ``extra_effects``
-        (:func:`model_effects`: an effect already in the base is refused, not ignored)."""
+        """
+        ``h1`` or ``h2`` (the paper's models) for ``geometry``.
+
+        Plus ``extra_effects`` (:func:`model_effects`: an effect already in the base is
+        refused, not ignored).
+        """
         return cls(geometry=geometry, material=material,
                    effects=model_effects(name, extra_effects))
 
@@ -215,22 +226,30 @@ class SensorModel:
 
     # -- evaluation (physics/pipeline.py holds the rules) -------------------------
     def __getstate__(self):
-        """Pickle the description only; the compiled pipeline (which may hold closures, e.g. a
-        drift's ``material_at``) is rebuilt on first use after unpickling."""
+        """
+        Pickle the description only.
+
+        The compiled pipeline (which may hold closures, e.g. a drift's ``material_at``) is
+        rebuilt on first use after unpickling.
+        """
         state = dict(self.__dict__)
         state.pop('compiled', None)
         return state
 
     @functools.cached_property
     def compiled(self):
-        """The model taken apart once (:class:`~ipmc_sensor_ros.physics.pipeline.CompiledModel`)."""
+        """Return the model taken apart once (:class:`~.pipeline.CompiledModel`)."""
         from .pipeline import compile_model
 
         return compile_model(self)
 
     def transfer(self, s) -> np.ndarray:
-        """i(s)/w(s) in A m^-1 at complex frequencies ``s`` (rad s^-1): H1 (eq. 31) times every
-        effect's factor (non-LTI effects contribute their linear part only)."""
+        """
+        i(s)/w(s) in A m^-1 at complex frequencies ``s`` (rad s^-1).
+
+        H1 (eq. 31) times every effect's factor (non-LTI effects contribute their
+        linear part only).
+        """
         return self.compiled.transfer(s)
 
     def delay_s(self) -> float:
@@ -242,7 +261,11 @@ class SensorModel:
         return list(self.compiled.rational_factors)
 
     def diffusive_transfer(self, s) -> np.ndarray:
-        """The diffusion-type part the reduction approximates (no rational factors, no delay)."""
+        """
+        Return the diffusion-type part the reduction approximates.
+
+        No rational factors, no delay.
+        """
         return self.compiled.diffusive_transfer(s)
 
     def min_phase_transfer(self, s) -> np.ndarray:

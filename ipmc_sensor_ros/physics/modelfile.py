@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The whole fitted model in one YAML file (``ipmc-model/1``).
+"""
+The whole fitted model in one YAML file (``ipmc-model/1``).
 
 Written by ``ipmc-model diagnose --save-model`` and ``fit --save-model``; read
 by ``compare``, ``estimate``, ``simulate`` and the nodes (``model_file``).  The
@@ -49,8 +50,12 @@ class ModelFile:
     def sensor_model(
         self, geometry: Geometry, known: Mapping[str, float] | None = None
     ) -> SensorModel:
-        """The model for a sample of ``geometry`` (``known``: header values that override the
-        saved material, e.g. a measured temperature)."""
+        """
+        Return the model for a sample of ``geometry``.
+
+        ``known``: header values that override the saved material, e.g. a measured
+        temperature.
+        """
         mat = self.material.replace(**dict(known)) if known else self.material
         return SensorModel(geometry, mat, self.effects)
 
@@ -77,8 +82,12 @@ def save_model(path, model: SensorModel | None = None, *, effects: Sequence = ()
                data_files: Sequence[str] = (), error: Mapping[str, float] | None = None,
                ci95: Mapping[str, Sequence[float]] | None = None,
                extra: Mapping[str, Any] | None = None) -> Path:
-    """Write a model file (see module docstring); ``model`` gives effects and material, or give
-    ``effects`` and ``material`` directly.  Returns the path."""
+    """
+    Write a model file (see module docstring).
+
+    ``model`` gives effects and material, or give ``effects`` and ``material`` directly.
+    Returns the path.
+    """
     import yaml
 
     if model is not None:

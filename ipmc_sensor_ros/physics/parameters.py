@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Material parameters and sample geometry of an IPMC sensor, in SI units.
+"""
+Material parameters and sample geometry of an IPMC sensor, in SI units.
 
 Reference: Z. Chen, X. Tan, A. Will, C. Ziel, "A dynamic model for ionic
 polymer-metal composite sensors", Smart Mater. Struct. 16 (2007) 1477-1488
@@ -41,12 +42,13 @@ __all__ = [
 ]
 
 
-
-
 def short_repr(value: Any, limit: int = 60) -> str:
-    """``repr(value)`` cut to ``limit`` characters (with '...' and the full length), so an
-    error message never echoes a huge value in full (a 10 MB label, an alias-bomb YAML).
-    Containers are summarised before ``repr`` expands them."""
+    """
+    ``repr(value)`` cut to ``limit`` characters (with '...' and the full length).
+
+    So an error message never echoes a huge value in full (a 10 MB label, an alias-bomb
+    YAML). Containers are summarised before ``repr`` expands them.
+    """
     if isinstance(value, (list, tuple, dict, set)) and len(value) > 8:
         kind = type(value).__name__
         return f'<{kind} of {len(value)} items>'
@@ -67,8 +69,11 @@ def short_repr(value: Any, limit: int = 60) -> str:
 
 
 def _check_keys(cls, data: Any, where: str, what: str, noun: str) -> str:
-    """Refuse a ``data`` that is not a mapping or has keys ``cls`` does not know; returns the
-    ``"<where>: "`` prefix of messages about it."""
+    """
+    Refuse a ``data`` that is not a mapping or has keys ``cls`` does not know.
+
+    Returns the ``"<where>: "`` prefix of messages about it.
+    """
     names = {f.name for f in fields(cls)}
     prefix = f'{where}: ' if where else ''
     if not isinstance(data, Mapping):
@@ -82,9 +87,12 @@ def _check_keys(cls, data: Any, where: str, what: str, noun: str) -> str:
 
 
 def parse_number(value: Any) -> float:
-    """``float(value)``, but a string must be plain ASCII: Python's ``float`` also reads
-    Unicode digits ('\u0661\u0662' -> 12.0) and full-width forms, which no instrument or
-    file of this project writes (raises ValueError)."""
+    """
+    ``float(value)``, but a string must be plain ASCII.
+
+    Python's ``float`` also reads Unicode digits ('\u0661\u0662' -> 12.0) and full-width
+    forms, which no instrument or file of this project writes (raises ValueError).
+    """
     if isinstance(value, bool):
         raise TypeError('a boolean is not a number')
     if isinstance(value, str) and not value.isascii():
@@ -140,7 +148,8 @@ def _check(name: str, value: Any, *, positive: bool = True, allow_zero: bool = F
 
 @dataclass(frozen=True)
 class MaterialParameters:
-    """Physical parameters of an IPMC material (paper Tables 1-2), SI units.
+    """
+    Physical parameters of an IPMC material (paper Tables 1-2), SI units.
 
     Attributes
     ----------
@@ -158,6 +167,7 @@ class MaterialParameters:
     charge_stress_coupling_j_per_c : alpha0, eq. 16, J C^-1 (Table 2: 104).
     one_minus_anion_volume_fraction : 1 - C- dV, dimensionless (paper section
         5.2 takes it as 1 since |C- dV| << 1).
+
     """
 
     faraday_constant_c_per_mol: float = 96487.0
@@ -215,7 +225,8 @@ GEOMETRY_LIMITS_M = {
 
 @dataclass(frozen=True)
 class Geometry:
-    """Cantilever geometry of one sample (paper Fig. 1, Table 3), metres.
+    """
+    Cantilever geometry of one sample (paper Fig. 1, Table 3), metres.
 
     length_m : L, free (bending) length from the clamp to the tip.
     width_m : W.
@@ -279,10 +290,14 @@ MAX_YAML_BYTES = 1_000_000
 
 
 def read_yaml(path: str | Path, what: str = 'YAML file') -> Any:
-    """Parse a small YAML file with ``yaml.safe_load``; every failure is one
-    :class:`ParameterError` line naming the file (and the line for syntax errors):
-    missing, not a regular file (a FIFO would block), too large, not text (UTF-8,
-    or UTF-16 with a byte-order mark, as rcl reads), invalid YAML, a ``!!python`` tag."""
+    """
+    Parse a small YAML file with ``yaml.safe_load``.
+
+    Every failure is one :class:`ParameterError` line naming the file (and the line
+    for syntax errors): missing, not a regular file (a FIFO would block), too large,
+    not text (UTF-8, or UTF-16 with a byte-order mark, as rcl reads), invalid YAML, a
+    ``!!python`` tag.
+    """
     import yaml
 
     path = Path(path)
@@ -317,7 +332,8 @@ def read_yaml(path: str | Path, what: str = 'YAML file') -> Any:
 
 
 def load_yaml(path: str | Path) -> tuple[MaterialParameters, Geometry | None]:
-    """Load ``material:`` (and optional ``geometry:``) from a YAML file.
+    """
+    Load ``material:`` (and optional ``geometry:``) from a YAML file.
 
     Missing material keys take the paper's defaults.  Errors name the file.
     """

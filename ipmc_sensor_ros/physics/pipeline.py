@@ -1,6 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""One compiled model pipeline: a :class:`SensorModel` taken apart once into the pieces every
-user needs (prediction, fitting, simulation, reduction, estimation).
+"""
+One compiled model pipeline per :class:`SensorModel`.
+
+A :class:`SensorModel` taken apart once into the pieces every user needs (prediction,
+fitting, simulation, reduction, estimation).
 
 A sensor model is H1 (eq. 31) times the factors of its effects (surface resistance, eq. 45;
 amplifier, delay, beam modes, ...), wrapped in the effects' transforms.  In signal order::
@@ -54,8 +57,11 @@ class CompiledModel:
 
     # -- frequency domain ----------------------------------------------------------------
     def transfer(self, s) -> np.ndarray:
-        """i(s)/w(s), A m^-1: H1 (eq. 31) times every effect's factor (non-LTI effects
-        contribute their linear part only)."""
+        """
+        i(s)/w(s), A m^-1: H1 (eq. 31) times every effect's factor.
+
+        non-LTI effects contribute their linear part only.
+        """
         s = np.asarray(s, dtype=complex)
         out = h1(s, self.model.material, self.model.geometry)
         for eff, values in self.effects:
@@ -70,8 +76,12 @@ class CompiledModel:
         return self.transfer(s) * np.exp(s * self.delay_s)
 
     def diffusive_transfer(self, s) -> np.ndarray:
-        """H1 times the factors without an exact rational form, each without its delay: the part
-        the reduction approximates (the rational factors are not divided out numerically)."""
+        """
+        H1 times the factors without an exact rational form, each without its delay.
+
+        The part the reduction approximates (the rational factors are not divided out
+        numerically).
+        """
         s = np.asarray(s, dtype=complex)
         out = h1(s, self.model.material, self.model.geometry)
         for k, (eff, values) in enumerate(self.effects):
@@ -91,15 +101,19 @@ class CompiledModel:
         return w
 
     def apply_output_transforms(self, elapsed_s, i) -> np.ndarray:
-        """The measured current from the LTI part's current."""
+        """Return the measured current from the LTI part's current."""
         for eff, values in self.output_transforms:
             i = eff.output_transform(elapsed_s, i, self.model, values)
         return i
 
     def predict(self, elapsed_s, deflection_m, linear_response: Callable) -> np.ndarray:
-        """Current for a deflection record: input transforms, ``linear_response(model, w)`` of
-        the LTI part (quasi-static over a drifting material, :func:`time_varying_response`),
-        output transforms.  Prediction and fitting share this order of operations."""
+        """
+        Return the current for a deflection record.
+
+        Input transforms, ``linear_response(model, w)`` of the LTI part (quasi-static over a
+        drifting material, :func:`time_varying_response`), output transforms. Prediction and
+        fitting share this order of operations.
+        """
         w = self.apply_input_transforms(elapsed_s, deflection_m)
         if self.material_at is None:
             i = linear_response(self.model, w)
@@ -124,11 +138,15 @@ class CompiledModel:
 
     @property
     def is_lti(self) -> bool:
-        """True when no effect acts outside the transfer function (no transforms, no drift)."""
+        """
+        Return True when no effect acts outside the transfer function.
+
+        No transforms, no drift.
+        """
         return not (self.input_transforms or self.output_transforms or self.material_at)
 
     def at_material(self, material) -> 'CompiledModel':
-        """The pipeline of the same model with another material (a drift update)."""
+        """Return the pipeline of the same model with another material (a drift update)."""
         return compile_model(self.model.with_material(material))
 
 
@@ -157,7 +175,8 @@ def compile_model(model) -> CompiledModel:
 
 
 class DriftSchedule:
-    """Update times of a time-varying material: every ``update_s`` seconds of elapsed time.
+    """
+    Update times of a time-varying material: every ``update_s`` seconds of elapsed time.
 
     :meth:`slices` cuts a block of elapsed times at the update times and calls
     ``on_update(material)`` before the samples that follow each one; the estimator and the
@@ -187,9 +206,13 @@ class DriftSchedule:
 
 
 def material_nodes(elapsed_s: np.ndarray, material_at, max_step: float = 0.05) -> np.ndarray:
-    """Node times (s) at which a time-varying material is sampled: start, end, and
-    enough in between that no material parameter changes by more than
-    ``max_step`` (relative, log) between neighbours (at most 64 nodes)."""
+    """
+    Node times (s) at which a time-varying material is sampled.
+
+    Start, end, and enough in between that no material parameter changes by
+    more than ``max_step`` (relative, log) between neighbours (at most 64
+    nodes).
+    """
     t0, t1 = float(elapsed_s[0]), float(elapsed_s[-1])
     a, b = material_at(t0).to_dict(), material_at(t1).to_dict()
     span = max(abs(np.log(b[k] / a[k])) for k in a if a[k] > 0 and b[k] > 0)
@@ -198,17 +221,21 @@ def material_nodes(elapsed_s: np.ndarray, material_at, max_step: float = 0.05) -
 
 
 def time_varying_response(elapsed_s: np.ndarray, material_at, response_for) -> np.ndarray:
-    """Quasi-static response of a system whose material drifts slowly: the LTI
-    responses ``response_for(material)`` at :func:`material_nodes`, linearly
-    interpolated in time between neighbouring nodes (error ~ step^2/8 of the
-    response's curvature in the material: < 1e-3 relative for 5 % steps)."""
+    """
+    Quasi-static response of a system whose material drifts slowly.
+
+    The LTI responses ``response_for(material)`` at :func:`material_nodes`,
+    linearly interpolated in time between neighbouring nodes (error ~
+    step^2/8 of the response's curvature in the material: < 1e-3 relative
+    for 5 % steps).
+    """
     nodes = material_nodes(elapsed_s, material_at)
     out = np.zeros(elapsed_s.size)
     previous = response_for(material_at(nodes[0]))
     for k in range(1, nodes.size):
         current = response_for(material_at(nodes[k]))
         sel = (elapsed_s >= nodes[k - 1]) & ((elapsed_s < nodes[k]) if k < nodes.size - 1
-                                            else (elapsed_s <= nodes[k]))
+                                             else (elapsed_s <= nodes[k]))
         frac = (elapsed_s[sel] - nodes[k - 1]) / (nodes[k] - nodes[k - 1])
         out[sel] = (1 - frac) * previous[sel] + frac * current[sel]
         previous = current

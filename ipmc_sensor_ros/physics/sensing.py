@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Infinite-dimensional sensing transfer functions H1 (eq. 31) and H2 (eq. 45).
+"""
+Infinite-dimensional sensing transfer functions H1 (eq. 31) and H2 (eq. 45).
 
 Both map tip deflection w(s) (metres) to short-circuit sensing current i(s)
 (amperes); units of H are A m^-1.  Equation numbers refer to Chen, Tan, Will,
@@ -50,7 +51,7 @@ def _as_complex(s) -> np.ndarray:
 
 
 def beta(s, material: MaterialParameters) -> np.ndarray:
-    """beta(s) = sqrt((s + K)/d), m^-1 (definition after eq. 14), principal branch."""
+    """Return beta of s: sqrt((s + K)/d), m^-1 (definition after eq. 14), principal branch."""
     s = _as_complex(s)
     return np.sqrt((s + material.k_rate_per_s) / material.diffusivity_m2_per_s)
 
@@ -76,7 +77,8 @@ def thickness_function(z) -> np.ndarray:
 
 
 def h1(s, material: MaterialParameters, geometry: Geometry) -> np.ndarray:
-    """H1(s) = i(s)/w(s), perfectly conducting electrodes (eq. 31), A m^-1.
+    """
+    H1(s) = i(s)/w(s), perfectly conducting electrodes (eq. 31), A m^-1.
 
     H1(s) = 3 s Y W (beta h coth(beta h) - 1) / (2 alpha0 L beta^2)
           = 3 s Y W h^2 phi(beta h) / (2 alpha0 L).
@@ -91,7 +93,8 @@ def h1(s, material: MaterialParameters, geometry: Geometry) -> np.ndarray:
 
 
 def surface_resistance_time_constant_s(material: MaterialParameters, geometry: Geometry) -> float:
-    """tau_r = kappa_e r0 L^2 / h, s, so that a(s)^2 = B(s) L^2 = s tau_r (eq. 42).
+    """
+    tau_r = kappa_e r0 L^2 / h, s, so that a(s)^2 = B(s) L^2 = s tau_r (eq. 42).
 
     The distributed RC line of paper Fig. 2 has its poles at
     s = -(n - 1/2)^2 pi^2 / tau_r (zeros of cosh a in eq. 45).
@@ -101,7 +104,8 @@ def surface_resistance_time_constant_s(material: MaterialParameters, geometry: G
 
 
 def surface_resistance_factor(s, material: MaterialParameters, geometry: Geometry) -> np.ndarray:
-    """2 G(a): the factor by which H2 (eq. 45) differs from H1 (eq. 31), dimensionless.
+    """
+    2 G(a): the factor by which H2 (eq. 45) differs from H1 (eq. 31), dimensionless.
 
     G(a) = (1 - cosh a + a sinh a)/(a^2 cosh a), a = L sqrt(s kappa_e r0 / h);
     2 G -> 1 as r0 -> 0 (eq. 46).
@@ -118,7 +122,8 @@ def surface_resistance_factor(s, material: MaterialParameters, geometry: Geometr
 
 
 def h2(s, material: MaterialParameters, geometry: Geometry) -> np.ndarray:
-    """H2(s) = i(s)/w(s) with distributed surface resistance (eq. 45), A m^-1.
+    """
+    H2(s) = i(s)/w(s) with distributed surface resistance (eq. 45), A m^-1.
 
     H2 = H1 * 2 G(a) (the identity printed just before eq. 46).
     """

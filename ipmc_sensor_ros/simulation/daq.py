@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Realistic DAQ current for a deflection trajectory, for evaluating estimators.
+"""
+Realistic DAQ current for a deflection trajectory, for evaluating estimators.
 
 The sensing current comes from the exact model (H1/H2 with effects,
 :func:`~ipmc_sensor_ros.simulation.sensor.predict_current`: FFT convolution, no
@@ -31,14 +32,18 @@ def _ramp(u):
 
 
 def started(time_s, deflection_m, rest_s: float = 2.0, onset_s: float = 0.5) -> np.ndarray:
-    """The record held at zero for ``rest_s``, then faded in over ``onset_s``."""
+    """Return the record held at zero for ``rest_s``, then faded in over ``onset_s``."""
     t = np.asarray(time_s, float)
     return np.asarray(deflection_m, float) * _ramp((t - rest_s) / onset_s)
 
 
 def robot_motion(time_s, seed: int = 0, amplitude_m: float = 1.5e-3) -> np.ndarray:
-    """Robot-like deflection: segments of 2-6 s, each a hold, a move to a new level
-    (0.2-0.6 s raised cosine) then hold, or slow sines (0.2-2 Hz) around the current level."""
+    """
+    Robot-like deflection: segments of 2-6 s, each a hold.
+
+    a move to a new level (0.2-0.6 s raised cosine) then hold, or slow sines (0.2-2 Hz)
+    around the current level.
+    """
     rng = np.random.default_rng(seed)
     t = np.asarray(time_s, float)
     w = np.zeros_like(t)
@@ -66,9 +71,12 @@ def robot_motion(time_s, seed: int = 0, amplitude_m: float = 1.5e-3) -> np.ndarr
 
 def intermittent_motion(time_s, seed: int = 0, amplitude_m: float = 1.5e-3,
                         move_every_s: float = 60.0) -> np.ndarray:
-    """Long holds with a 10 s robot-like burst (:func:`robot_motion`, a new seed each
-    time) every ``move_every_s`` seconds; each burst blends in from the held level over
-    0.5 s and its last value is held, so levels stay within +-``amplitude_m``."""
+    """
+    Long holds with a 10 s robot-like burst every ``move_every_s`` seconds.
+
+    Each burst is :func:`robot_motion` with a new seed each time; it blends in from the held
+    level over 0.5 s and its last value is held, so levels stay within +-``amplitude_m``.
+    """
     t = np.asarray(time_s, float)
     dt = t[1] - t[0]
     tb = np.arange(0, 10.0, dt)

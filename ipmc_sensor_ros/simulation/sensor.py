@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Time-domain simulation of the sensing current, and exact periodic responses.
+"""
+Time-domain simulation of the sensing current, and exact periodic responses.
 
 Two simulators:
 
@@ -46,7 +47,8 @@ __all__ = [
 
 
 def periodic_response(model: SensorModel, deflection_m, sample_rate_hz: float) -> np.ndarray:
-    """Exact steady-state current (A) for a periodic deflection record (m).
+    """
+    Exact steady-state current (A) for a periodic deflection record (m).
 
     ``deflection_m`` must hold an integer number of periods (its DFT is the
     Fourier series).  The DC term gives zero current (H(0) = 0, eq. 31).
@@ -64,8 +66,11 @@ def periodic_response(model: SensorModel, deflection_m, sample_rate_hz: float) -
 @functools.lru_cache(maxsize=64)
 def forward_reduction(model: SensorModel, sample_rate_hz: float, order: int = 8,
                       low_hz: float = 0.01) -> ReducedModel:
-    """Wide-band reduction of the model's minimum-phase LTI part used by the
-    simulator (cached per model and rate); any pure delay is applied separately."""
+    """
+    Wide-band reduction of the model's minimum-phase LTI part used by the simulator.
+
+    Cached per model and rate; any pure delay is applied separately.
+    """
     high = 0.45 * sample_rate_hz
     if high <= low_hz * 10:
         raise ParameterError(f'sample_rate_hz={sample_rate_hz} is too low to simulate')
@@ -73,8 +78,10 @@ def forward_reduction(model: SensorModel, sample_rate_hz: float, order: int = 8,
 
 
 class FieldSensorSimulator:
-    """``fidelity = field``: the streaming simulator on the independent field solution
-    (:class:`~ipmc_sensor_ros.physics.field.FieldSolver`, Crank-Nicolson) instead of a
+    """
+    ``fidelity = field``: the streaming simulator on the independent field solution.
+
+    It runs :class:`~ipmc_sensor_ros.physics.field.FieldSolver` (Crank-Nicolson) instead of a
     reduction of the closed form.  Supports the base model (h1/h2) and
     ``hydration_drift`` (a diffusivity changing during the run); other effects are
     refused by name.  ``beam_model``: ``linear`` (the paper's small-deflection stress
@@ -126,7 +133,8 @@ class FieldSensorSimulator:
 
 
 class SensorSimulator:
-    """Streaming simulation of the measured sensing current, effects included.
+    """
+    Streaming simulation of the measured sensing current, effects included.
 
     Per block of sample times: the stimulus gives w and its velocity v;
     effects' ``input_transform`` T maps w -> T(w) and v -> dT/dt, computed as
@@ -139,8 +147,8 @@ class SensorSimulator:
     filter every ``update_s`` seconds of simulated time; the new filter's state
     is obtained by replaying the last ``replay_s`` (1 s, many times the
     sensor's memory) of its input through it, so the switch is seamless even
-    though successive reductions place their poles differently.  Time in the effect hooks runs from the first
-    simulated sample.
+    though successive reductions place their poles differently.  Time in the effect hooks
+    runs from the first simulated sample.
 
     Parameters
     ----------
@@ -152,6 +160,7 @@ class SensorSimulator:
     seed : seed of the noise generator.
     order : order of the internal reduction of R(s).
     update_s : coefficient update interval for time-varying effects, s.
+
     """
 
     def __init__(self, model: SensorModel, sample_rate_hz: float, *, current_gain: float = 1.0,
@@ -213,8 +222,11 @@ class SensorSimulator:
             self.sos = self._sos_for(self.reduced)
 
     def clean_current(self, velocity_m_per_s) -> np.ndarray:
-        """Sensing current (A) of the LTI part for a block of (transformed) tip
-        velocities (m/s), delay included; no output transforms or measurement chain."""
+        """
+        Sensing current (A) of the LTI part for a block of (transformed) tip velocities (m/s).
+
+        Delay included; no output transforms or measurement chain.
+        """
         v = np.asarray(velocity_m_per_s, float)
         if v.size == 0:
             return np.empty(0)
@@ -242,7 +254,8 @@ class SensorSimulator:
         return i
 
     def run(self, stimulus: Stimulus, time_s) -> tuple[np.ndarray, np.ndarray]:
-        """Simulate at the given sample times (uniformly spaced, increasing).
+        """
+        Simulate at the given sample times (uniformly spaced, increasing).
 
         Returns (deflection_m, measured_current_a).  State carries over between
         calls, so consecutive blocks form one continuous record.
@@ -273,7 +286,11 @@ class SensorSimulator:
         return w, self.measure(clean, elapsed)
 
     def _follow_drift(self, material) -> None:
-        """New filter for the drifted ``material``; its state from replaying the recent input."""
+        """
+        Return a new filter for the drifted ``material``.
+
+        Its state from replaying the recent input.
+        """
         drifted = self.model.with_material(material)
         self.reduced, self._diffusive = reduce_model_parts(
             drifted, self.order, (0.01, 0.45 * self.sample_rate_hz), extension=3.0,
@@ -282,10 +299,12 @@ class SensorSimulator:
         _, self._zi = sig.sosfilt(self.sos, self._replay, zi=np.zeros((self.sos.shape[0], 2)))
 
     def accuracy(self, band_hz=(0.5, 50.0), n_points: int = 200) -> tuple[float, float]:
-        """Worst magnitude (dB) and phase (deg) error of the discrete simulator
-        against the full model over ``band_hz`` (velocity input is exact, so
-        the simulator's response is ``j w * R_discrete(e^{j w T})``, times the
-        delay line's response)."""
+        """
+        Worst magnitude (dB) and phase (deg) error of the discrete simulator.
+
+        Against the full model over ``band_hz`` (velocity input is exact, so the simulator's
+        response is ``j w * R_discrete(e^{j w T})``, times the delay line's response).
+        """
         f = np.logspace(np.log10(band_hz[0]), np.log10(band_hz[1]), n_points)
         _, hd = sig.sosfreqz(self.sos, worN=f, fs=self.sample_rate_hz)
         z = np.exp(-2j * np.pi * f / self.sample_rate_hz)
@@ -296,9 +315,13 @@ class SensorSimulator:
 
 
 def padded_record(time_s: np.ndarray, deflection_m: np.ndarray, pad_s: float):
-    """(x, n_fft, fs, n_pad): the deflection minus its first value, followed by ``pad_s``
-    seconds of a raised-cosine return to zero (no discontinuity at the circular
-    wrap-around), and the power-of-two FFT length that holds it."""
+    """
+    (x, n_fft, fs, n_pad): the deflection minus its first value.
+
+    Followed by ``pad_s`` seconds of a raised-cosine return to zero (no
+    discontinuity at the circular wrap-around), and the power-of-two FFT length
+    that holds it.
+    """
     t = np.asarray(time_s, float)
     fs = (t.size - 1) / (t[-1] - t[0])
     w0 = np.asarray(deflection_m, float) - deflection_m[0]
@@ -309,7 +332,8 @@ def padded_record(time_s: np.ndarray, deflection_m: np.ndarray, pad_s: float):
 
 
 def lti_response_fft(transfer, time_s, deflection_m, pad_s: float = 2.0) -> np.ndarray:
-    """Current (A) of any LTI model ``transfer(s)`` (A/m) for an arbitrary deflection record.
+    """
+    Return the current (A) of any LTI model ``transfer(s)`` (A/m) for any deflection record.
 
     Exact linear convolution by FFT, with no reduction or discretisation error:
     the record (minus its first value, since a static deflection gives no
@@ -334,14 +358,15 @@ def lti_response_fft(transfer, time_s, deflection_m, pad_s: float = 2.0) -> np.n
 
 
 def predict_current(model: SensorModel, time_s, deflection_m, pad_s: float = 2.0) -> np.ndarray:
-    """Current (A) of a model with any effects for a deflection record (m).
+    """
+    Return the current (A) of a model with any effects for a deflection record (m).
 
     Order of operations: every effect's ``input_transform`` (e.g. the
     nonlinearity), then the linear dynamics by exact FFT convolution
     (:func:`lti_response_fft`), then every ``output_transform`` (e.g. offset).
     A time-varying effect (``material_at``, e.g. ``hydration_drift``) is
-    simulated by :func:`~ipmc_sensor_ros.physics.pipeline.time_varying_response`: LTI responses at material
-    nodes, linearly interpolated in time (the drift is slow against the
+    simulated by :func:`~ipmc_sensor_ros.physics.pipeline.time_varying_response`: LTI
+    responses at material nodes, linearly interpolated in time (the drift is slow against the
     sensor's ~0.1 s memory, so the response is quasi-static in the material).
     """
     t = np.asarray(time_s, float)

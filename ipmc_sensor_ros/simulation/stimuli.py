@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Tip-deflection stimuli w(t) (m) with their exact velocities dw/dt (m/s).
+"""
+Tip-deflection stimuli w(t) (m) with their exact velocities dw/dt (m/s).
 
 The sensor responds to the *rate* of deformation (H(s) = s R(s), eq. 31), so
 every stimulus provides its analytic velocity; the simulator feeds the
@@ -45,8 +46,11 @@ class Stimulus:
 
 @dataclass(frozen=True)
 class CrankSlider(Stimulus):
-    """The paper's set-up (section 5.1, Fig. 3): a motor-driven crank of radius r
-    and a connecting rod of length l push the slider that holds the IPMC tip.
+    """
+    The paper's set-up (section 5.1, Fig. 3).
+
+    a motor-driven crank of radius r and a connecting rod of length l push
+    the slider that holds the IPMC tip.
 
     Slider position x(theta) = r cos(theta) + sqrt(l^2 - r^2 sin^2 theta),
     theta = 2 pi f t + phase.  The IPMC is mounted with its rest position at the
@@ -75,29 +79,32 @@ class CrankSlider(Stimulus):
 
     def deflection(self, t):
         th = self._theta(t)
-        r, l = self.crank_radius_m, self.rod_length_m
-        return r * np.cos(th) + np.sqrt(l * l - (r * np.sin(th)) ** 2) - self.mean_position_m
+        r, rod = self.crank_radius_m, self.rod_length_m
+        return r * np.cos(th) + np.sqrt(rod * rod - (r * np.sin(th)) ** 2) - self.mean_position_m
 
     @property
     def mean_position_m(self) -> float:
         """Cycle average of the slider position sqrt(l^2 - r^2 sin^2) term, m."""
         from scipy.special import ellipe
 
-        r, l = self.crank_radius_m, self.rod_length_m
-        return 2.0 / np.pi * l * float(ellipe((r / l) ** 2))
+        r, rod = self.crank_radius_m, self.rod_length_m
+        return 2.0 / np.pi * rod * float(ellipe((r / rod) ** 2))
 
     def velocity(self, t):
         th = self._theta(t)
-        r, l = self.crank_radius_m, self.rod_length_m
-        root = np.sqrt(l * l - (r * np.sin(th)) ** 2)
+        r, rod = self.crank_radius_m, self.rod_length_m
+        root = np.sqrt(rod * rod - (r * np.sin(th)) ** 2)
         omega = 2 * np.pi * self.motor_frequency_hz
         return omega * (-r * np.sin(th) - r * r * np.sin(th) * np.cos(th) / root)
 
 
 @dataclass(frozen=True)
 class Sweep(Stimulus):
-    """Logarithmic sine sweep of amplitude A from f0 to f1 over ``duration_s``,
-    then repeated (period = duration)."""
+    """
+    Logarithmic sine sweep of amplitude A from f0 to f1 over ``duration_s``.
+
+    Then repeated (period = duration).
+    """
 
     amplitude_m: float = 1e-3
     start_frequency_hz: float = 0.5
@@ -132,8 +139,11 @@ def _smoothstep(u):
 
 @dataclass(frozen=True)
 class Step(Stimulus):
-    """Tip pushed to ``amplitude_m`` at ``start_s`` with a raised-cosine rise of
-    ``rise_time_s`` (a real actuator has finite speed), then held (paper Fig. 8)."""
+    """
+    Tip pushed to ``amplitude_m`` at ``start_s``, then held (paper Fig. 8).
+
+    The rise is a raised cosine of ``rise_time_s`` (a real actuator has finite speed).
+    """
 
     amplitude_m: float = 2e-3
     start_s: float = 0.5
@@ -157,9 +167,12 @@ class Step(Stimulus):
 
 @dataclass(frozen=True)
 class FreeVibration(Stimulus):
-    """Tip pulled to ``amplitude_m`` (raised-cosine ramp of ``ramp_s`` ending at
-    ``release_s``) and released: w = A e^{-zeta wn tau} (cos wd tau + zeta wn/wd sin wd tau),
-    tau = t - release_s (paper Fig. 7, natural frequency about 30 Hz)."""
+    """
+    Tip pulled to ``amplitude_m`` and released (paper Fig. 7, natural frequency about 30 Hz).
+
+    The pull is a raised-cosine ramp of ``ramp_s`` ending at ``release_s``; after it
+    w = A e^{-zeta wn tau} (cos wd tau + zeta wn/wd sin wd tau), tau = t - release_s.
+    """
 
     amplitude_m: float = 2e-3
     natural_frequency_hz: float = 30.0
@@ -200,9 +213,12 @@ class FreeVibration(Stimulus):
 
 
 class Sampled(Stimulus):
-    """User-supplied deflection samples (t_s, w_m), interpolated by a cubic
-    spline; the velocity is the spline's derivative.  Outside the record the
-    deflection is held at its end values."""
+    """
+    User-supplied deflection samples (t_s, w_m), interpolated by a cubic spline.
+
+    The velocity is the spline's derivative. Outside the record the
+    deflection is held at its end values.
+    """
 
     def __init__(self, time_s, deflection_m):
         from scipy.interpolate import CubicSpline

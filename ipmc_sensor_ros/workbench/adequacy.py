@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Implausible magnitudes in measured records, with the likely unit factor.
+"""
+Implausible magnitudes in measured records, with the likely unit factor.
 
 A tip deflection beyond L/2 cannot be bent by the crank-slider on these
 cantilevers (the small-deflection model fails far earlier), a short-circuit
@@ -28,9 +29,12 @@ def _factor(ratio: float) -> float:
 
 
 def magnitude_flags(records: Sequence, model_for=None) -> list[str]:
-    """Flags for records (objects with ``path``, ``time_s``, ``deflection_m``, ``current_a`` and
-    ``model``, :class:`~.timefit.Record`, or give ``model_for(record)``) whose magnitudes are
-    implausible."""
+    """
+    Return flags for records whose magnitudes are implausible.
+
+    Records: objects with ``path``, ``time_s``, ``deflection_m``, ``current_a`` and
+    ``model``, :class:`~.timefit.Record`, or give ``model_for(record)``.
+    """
     from .freqresp import fundamental_response
 
     out = []
@@ -50,7 +54,8 @@ def magnitude_flags(records: Sequence, model_for=None) -> list[str]:
             f = _factor(imax / 1e-7)
             out.append(
                 f'{r.path}: current up to {imax:.4g} A (> {MAX_CURRENT_A:g} A for these '
-                f"geometries): likely stored in {_UNIT.get(f, f'x{f:g}')}amperes; multiply by {f:g}"
+                f"geometries): likely stored in {_UNIT.get(f, f'x{f:g}')}amperes; "
+                f'multiply by {f:g}'
             )
             continue
         if w is None:
@@ -64,7 +69,8 @@ def magnitude_flags(records: Sequence, model_for=None) -> list[str]:
         if np.isfinite(ratio) and ratio > 0 and abs(20 * np.log10(ratio)) > MAX_GAIN_DB:
             f = _factor(ratio)
             out.append(
-                f'{r.path}: gain at {p.frequency_hz:.3g} Hz is {20 * np.log10(ratio):+.0f} dB off the '
+                f'{r.path}: gain at {p.frequency_hz:.3g} Hz is '
+                f'{20 * np.log10(ratio):+.0f} dB off the '
                 f'model (> {MAX_GAIN_DB:g} dB): a unit error of current or deflection; the '
                 f'current x {f:g} (or the deflection / {f:g}) would fit'
             )

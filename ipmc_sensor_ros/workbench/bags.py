@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""rosbag2 bags in and out of the workbench (read with ``rosbags``; no rclpy needed).
+"""
+rosbag2 bags in and out of the workbench (read with ``rosbags``; no rclpy needed).
 
 Bags (rosbag2, read with ``rosbags``)
 =====================================
@@ -29,7 +30,6 @@ leading ``/``.
       geometry: {length_m: 0.022, width_m: 0.007, thickness_m: 0.00036, name: slim}
       material: {temperature_k: 300.0}     # optional, partial; -> known
       extra: {operator: jd}                # optional -> extra
-
 """
 from __future__ import annotations
 
@@ -94,9 +94,12 @@ def _describe_topics(topics: Mapping[str, Any]) -> str:
 
 
 def _unpack_block(msg, label: str) -> tuple[np.ndarray, np.ndarray]:
-    """Times and values of a block message; ValueError (DataError) describing a bad layout.
+    """
+    Return the times and values of a block message; ValueError (DataError) describing a bad layout.
+
     A deflection topic may also hold the estimator's output (``ESTIMATE_COLUMNS``: the
-    estimate and its standard deviation); its first value column is the deflection."""
+    estimate and its standard deviation); its first value column is the deflection.
+    """
     if label == DEFLECTION_LABEL and msg.layout.dim and len(msg.layout.dim) == 2 \
             and msg.layout.dim[1].label == ESTIMATE_COLUMNS:
         label = ESTIMATE_COLUMNS
@@ -284,7 +287,8 @@ def read_bag(path: PathLike, current_topic: str = 'current',
              deflection_topic: str | None = 'deflection_truth',
              geometry: Geometry | Mapping[str, Any] | None = None,
              sidecar: PathLike | None = None, *, require_deflection: bool = False) -> TimeSeries:
-    """Read a rosbag2 bag (directory, ``.mcap`` or ``.db3``) into a :class:`TimeSeries`.
+    """
+    Read a rosbag2 bag (directory, ``.mcap`` or ``.db3``) into a :class:`TimeSeries`.
 
     ``current_topic`` must hold ``Float64MultiArray`` current blocks.
     ``deflection_topic`` (None: ignore) may hold deflection blocks or
@@ -381,7 +385,8 @@ def write_bag(path: PathLike, timeseries: TimeSeries, storage: str = 'sqlite3',
               current_topic: str = 'current', deflection_topic: str = 'deflection_truth',
               block_size: int = 100, *, deflection_msgtype: str = MULTIARRAY_TYPE,
               sidecar: bool = True) -> None:
-    """Write ``timeseries`` as a rosbag2 bag (format version 8) readable by :func:`read_bag`.
+    """
+    Write ``timeseries`` as a rosbag2 bag (format version 8) readable by :func:`read_bag`.
 
     Current (and deflection, if any) go out as ``Float64MultiArray`` blocks of
     up to ``block_size`` samples, each stamped with its last sample time;

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Single-threaded BLAS for the fits (:func:`single_threaded_blas`).
+"""
+Single-threaded BLAS for the fits (:func:`single_threaded_blas`).
 
 The fits here do many small matrix products (thousands of rows x tens of
 columns); a multi-threaded OpenBLAS spins its threads on every one of them, and

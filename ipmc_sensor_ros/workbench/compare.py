@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Compare a fixed model with measurements and locate where it fails.
+"""
+Compare a fixed model with measurements and locate where it fails.
 
 Prediction
     The predicted current of each record is the exact LTI response of the
@@ -140,8 +141,11 @@ def _short(path: str) -> str:
 def compare_records(records: Sequence, model_for: Callable[[object], SensorModel], *,
                     settle_s: float = 0.5, max_lag: int = 25, n_windows: int = 8,
                     transfer_for: Callable[[object], Callable] | None = None) -> Comparison:
-    """Compare the model with each time record (objects with ``time_s``,
-    ``deflection_m``, ``current_a``, ``sample``, ``path``).
+    """
+    Compare the model with each time record.
+
+    Objects with ``time_s``, ``deflection_m``, ``current_a``,
+    ``sample``, ``path``.
 
     ``model_for(record)`` gives the model of that record's sample;
     ``transfer_for(record)`` may override the transfer function used for

@@ -43,8 +43,11 @@ def records_from(series: Sequence[TimeSeries], material: MaterialParameters,
 
 
 def frf_points(frf: FrequencyResponseData) -> list[FrequencyPoint]:
-    """Points of an ``ipmc-frf/1`` file with standard uncertainties (std columns,
-    else the coherence formula with 16 averages, else 1 %)."""
+    """
+    Points of an ``ipmc-frf/1`` file with standard uncertainties.
+
+    Std columns, else the coherence formula with 16 averages, else 1 %.
+    """
     pts = []
     for k, f in enumerate(frf.frequency_hz):
         if frf.gain_std_a_per_m is not None:
@@ -63,8 +66,12 @@ def frf_points(frf: FrequencyResponseData) -> list[FrequencyPoint]:
 
 
 def groups_from(data: Sequence, min_periods: int = 2) -> list[FitGroup]:
-    """One FitGroup per sample: FRF files as they are, time series through the
-    fundamental-response extraction (paper section 5.2)."""
+    """
+    One FitGroup per sample: FRF files as they are.
+
+    Time series through the fundamental-response extraction (paper
+    section 5.2).
+    """
     groups: dict[tuple, FitGroup] = {}
     for d in data:
         key = (d.sample or d.geometry.name, d.geometry.length_m, d.geometry.width_m,

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Missing-physics discovery: which effects does the model lack?
+"""
+Missing-physics discovery: finding which effects the model lacks.
 
 Procedure (:func:`diagnose`)
 ----------------------------
@@ -200,7 +201,8 @@ class Diagnosis:
                          f'{c.fit.bic - self.baseline.fit.bic:10.1f}  {params}{flags}')
         if any(not c.held_out for c in self.candidates):
             lines.append(
-                '            (* in-sample error: the BIC rule already rejects it, not cross-validated)'
+                '            (* in-sample error: the BIC rule already rejects it, '
+                'not cross-validated)'
             )
         for k, s in enumerate(self.steps, 1):
             vals = '; '.join(f'{e}: ' + ', '.join(f'{n}={v:.4g}' for n, v in vs.items())
@@ -210,7 +212,8 @@ class Diagnosis:
             )
             for t in s.ties:
                 lines.append(
-                    f"        tie: {t['effect']} (error {t['error']:.4f}, dBIC {t['delta_bic']:+.0f}"
+                    f"        tie: {t['effect']} (error {t['error']:.4f}, "
+                    f"dBIC {t['delta_bic']:+.0f}"
                     f"{', implausible' if t['flags'] else ''}): "
                     + ', '.join(f'{n}={v:.4g}' for n, v in t['params'].items())
                 )
@@ -241,7 +244,7 @@ def _folds(prepared: Sequence[PreparedRecord], n_folds: int) -> tuple[list[list[
 
 
 def _grid(effect_name: str, shape: Sequence[str], priors: dict) -> list[list[float]]:
-    """Starting values (fit space) of an effect's free parameters."""
+    """Return the starting values (fit space) of an effect's free parameters."""
     eff = get_effect(effect_name)
     pars = {p.name: p for p in eff.parameters}
     grids = []
@@ -319,8 +322,12 @@ def _evaluate(
 
 
 def _held_out(prepared, c: Candidate, folds, fold_nfev) -> Candidate:
-    """Replace ``c.error`` (in-sample) by the held-out error: refit on each fold's training part
-    (warm start at the full-data fit), predict its test part, pool."""
+    """
+    Replace ``c.error`` (in-sample) by the held-out error.
+
+    Refit on each fold's training part (warm start at the full-data fit), predict its
+    test part, pool.
+    """
     prepared = _with_models(prepared, c.fit.models)
     num = den = 0.0
     per_fold = []
@@ -344,8 +351,12 @@ def _held_out(prepared, c: Candidate, folds, fold_nfev) -> Candidate:
 
 
 class _Job:
-    """Fit one (effect, shape) candidate on top of the current model (phase 1, full data), or
-    score a fitted candidate by its held-out error (phase 2); picklable across a fork."""
+    """
+    Fit one (effect, shape) candidate on top of the current model (phase 1, full data).
+
+    Or score a fitted candidate by its held-out error (phase 2); picklable across a
+    fork.
+    """
 
     def __init__(self, prepared, spec, x, folds, fold_nfev, priors):
         self.prepared, self.spec, self.x = prepared, spec, x
@@ -407,8 +418,11 @@ def _map(job, items, n_jobs, say):
 
 
 def _rank(cands: list[Candidate], tie_tol: float) -> list[Candidate]:
-    """Ties (within ``tie_tol`` of the best held-out error) first, plausible before implausible,
-    then by BIC; the rest by held-out error."""
+    """
+    Ties (within ``tie_tol`` of the best held-out error) first, plausible before implausible.
+
+    Then by BIC; the rest by held-out error.
+    """
     if not cands:
         return []
     best = min(c.error for c in cands)
@@ -448,9 +462,13 @@ def _offset_test(prepared, models) -> dict:
 
 
 def diagnose(records: Sequence[Record], **kwargs) -> Diagnosis:
-    """Find the effects missing from the records' models (see module docstring and
-    :func:`_diagnose` for the keyword arguments); runs with single-threaded BLAS
-    (:mod:`.blas`: the fits' small products only lose time to BLAS threads)."""
+    """
+    Find the effects missing from the records' models.
+
+    See the module docstring and :func:`_diagnose` for the keyword arguments; runs with
+    single-threaded BLAS (:mod:`.blas`: the fits' small products only lose time to BLAS
+    threads).
+    """
     with single_threaded_blas():
         return _diagnose(records, **kwargs)
 
@@ -477,7 +495,8 @@ def _diagnose(
     max_cv: int = 4,
     n_jobs: int | None = None,
 ) -> Diagnosis:
-    """Find the effects missing from the records' models (see module docstring).
+    """
+    Find the effects missing from the records' models (see module docstring).
 
     ``fit_effects``: effects of the given model whose parameters are fitted too
     (e.g. given by name without values); ``priors``: {(effect, parameter): value}
@@ -506,7 +525,7 @@ def _diagnose(
                for c in _grid_for_spec(spec, priors, records[0].model)]
     baseline = _evaluate(prepared, spec, base_x0, folds, fold_nfev, priors=priors, max_nfev=60)
     baseline.params = {**baseline.params, **{f'{e}.{n}': baseline.fit.effect_values[e][n]
-                                            for e, n in spec.effect_params}}
+                                             for e, n in spec.effect_params}}
     nf_num = sum(p.sigma ** 2 * p.keep.sum() for p in prepared)
     nf_den = sum(float(np.sum((p.y[p.keep] - p.y[p.keep].mean()) ** 2)) for p in prepared)
     noise_floor = float(np.sqrt(nf_num / nf_den))
@@ -558,7 +577,8 @@ def _diagnose(
         items = [(n, s) for n in remaining
                  for s in SHAPES.get(n, (tuple(p.name for p in get_effect(n).parameters),))]
         say(
-            f'step {len(steps) + 1}: {len(items)} candidate fits on {min(n_jobs, len(items))} process(es)'
+            f'step {len(steps) + 1}: {len(items)} candidate fits on '
+            f'{min(n_jobs, len(items))} process(es)'
         )
         job = _Job(prepared, current.spec, current.x, folds, fold_nfev, priors)
         fitted = _map(job, items, n_jobs, say)
@@ -733,7 +753,11 @@ def _diagnose(
 
 
 def _grid_for_spec(spec: FitSpec, priors, model) -> list[list[float]]:
-    """Starts for the effect parameters of the baseline: current values, or the prior."""
+    """
+    Return the starts for the effect parameters of the baseline.
+
+    Current values, or the prior.
+    """
     from .timefit import _param
 
     x = []
@@ -759,7 +783,7 @@ def _merge_shapes(cands: list[Candidate], tie_tol: float) -> list[Candidate]:
 
 
 def _without(prepared, current: Candidate, name, folds, fold_nfev, priors) -> Candidate:
-    """The current model without effect ``name``, refitted (warm start)."""
+    """Return the current model without effect ``name``, refitted (warm start)."""
     keep = [k for k, (e, _) in enumerate(current.spec.effect_params)]
     n_mat = len(current.spec.material)
     idx = list(range(n_mat)) + [

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Glue of the discovery loop for the command line: which names are fitted, what to run next.
+"""
+Glue of the discovery loop for the command line: which names are fitted, what to run next.
 
 * ``--effects name`` without values means *fit its parameters* (in ``fit`` and
   ``diagnose``): :func:`effects_to_fit`.
@@ -38,15 +39,23 @@ SYMBOL_TO_NAME = {'T': 'temperature_k', 'Y': 'youngs_modulus_pa', 'r0': 'surface
 
 
 def free_names(text: str) -> tuple[str, ...]:
-    """Comma list -> names: material symbols mapped to full names, effect parameters kept
-    (resolved against the model by :func:`~.fit.resolve_effect_parameter`)."""
+    """
+    Comma list -> names: material symbols mapped to full names.
+
+    Effect parameters kept (resolved against the model by
+    :func:`~.fit.resolve_effect_parameter`).
+    """
     return tuple(
         SYMBOL_TO_NAME.get(x, x) for x in (s.strip() for s in (text or '').split(',')) if x
     )
 
 
 def effects_to_fit(text: str) -> list[str]:
-    """Effects of an ``--effects`` text given by name only (no ``(...)``): their parameters are fitted."""
+    """
+    Return the effects of an ``--effects`` text given by name only (no ``(...)``).
+
+    Their parameters are fitted.
+    """
     out, depth, cur = [], 0, ''
     for ch in (text or '') + ',':
         if ch == ',' and depth == 0:
@@ -62,14 +71,18 @@ def effects_to_fit(text: str) -> list[str]:
 
 
 def effect_free_names(effects: Sequence[str], frequency_domain: bool = False) -> tuple[str, ...]:
-    """Qualified parameter names of ``effects`` (``frequency_domain``: only of effects that act
-    on the transfer function, the only ones a frequency-response fit can see)."""
+    """
+    Qualified parameter names of ``effects``.
+
+    ``frequency_domain``: only of effects that act on the transfer function, the only
+    ones a frequency-response fit can see.
+    """
     return tuple(f'{e}.{p.name}' for e in effects for p in get_effect(e).parameters
                  if not frequency_domain or acts_on_transfer(e))
 
 
 def acts_on_transfer(name: str) -> bool:
-    """True if effect ``name`` changes H(s) (overrides ``factor``)."""
+    """Return True if effect ``name`` changes H(s) (overrides ``factor``)."""
     from ..physics.effects import Effect
 
     return type(get_effect(name)).factor is not Effect.factor
@@ -86,8 +99,11 @@ def next_command(verb: str, data: Sequence[str], model_file: str | None, extra: 
 def diagnosis_next_command(
     diag, data: Sequence[str], model_file: str | None, base: str = 'h1'
 ) -> str:
-    """What to run after a diagnosis: check the saved model on the data (compare), or, without a
-    saved model, re-run with the named effects fitted."""
+    """
+    Return what to run after a diagnosis: check the saved model on the data (compare), or.
+
+    Without a saved model, re-run with the named effects fitted.
+    """
     if model_file:
         return 'next: ' + next_command('compare', data, model_file)
     if diag.missing_effects:
@@ -111,8 +127,11 @@ PRIOR_KEYS = {'amplifier_bandwidth_hz': ('amplifier_bandwidth', 'corner_hz'),
 
 
 def priors_from_headers(series: Sequence) -> dict[tuple[str, str], float]:
-    """Effect-parameter priors from data headers (``extra`` keys of :data:`PRIOR_KEYS`
-    or ``effect.parameter``); the first file giving a key wins."""
+    """
+    Effect-parameter priors from data headers; the first file giving a key wins.
+
+    Keys: ``extra`` keys of :data:`PRIOR_KEYS` or ``effect.parameter``.
+    """
     out: dict[tuple[str, str], float] = {}
     for ts in series:
         for key, raw in getattr(ts, 'extra', {}).items():

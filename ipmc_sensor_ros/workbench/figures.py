@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Reproduce the paper's Figs. 4-6 on synthetic data (``ipmc-model figures``).
+"""
+Reproduce the paper's Figs. 4-6 on synthetic data (``ipmc-model figures``).
 
 * Fig. 4: H1 and H2, each fitted to the slim sample's frequency response
   (section 5.3.1): both match the magnitude; only H2 matches the phase.

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The workbench's text formats ``ipmc-timeseries/1`` and ``ipmc-frf/1`` (no rclpy needed).
+r"""
+The workbench's text formats ``ipmc-timeseries/1`` and ``ipmc-frf/1`` (no rclpy needed).
 
 Every problem with an input raises :class:`DataFormatError` (a
 :class:`ValueError`) naming the file and the 1-based line where that applies::
@@ -12,7 +13,7 @@ unknown column, a NaN is an error, never a skipped line.
 Text formats
 ============
 
-Both text formats are UTF-8, ``\\n`` or ``\\r\\n`` line ends, and share one
+Both text formats are UTF-8, ``\n`` or ``\r\n`` line ends, and share one
 layout: header lines, then one column-header line, then numeric rows::
 
     # format: ipmc-timeseries/1
@@ -225,7 +226,7 @@ def _parse_header(path: PathLike, source: TextSource) -> _Header:
 
 
 def _format_of(path: PathLike, header: _Header) -> str:
-    """The header's format, checked to be a known one."""
+    """Return the header's format, checked to be a known one."""
     if 'format' not in header.values:
         line = header.column_line or header.n_lines
         raise DataFormatError(path, line, "missing '# format: ...' header line (known formats: "
@@ -370,9 +371,12 @@ def _parse_columns(path, header: _Header, layouts: Sequence[tuple[str, ...]],
 
 
 def _block_check(bad_rows: Callable[[np.ndarray, int], np.ndarray], row_check: Callable):
-    """A block check for :func:`read_table`: ``bad_rows(rows, n_prev)`` marks suspect rows
-    (``rows`` starts with the previous row when there is one), ``row_check`` raises the
-    message of the first of them."""
+    """
+    Return a block check for :func:`read_table`.
+
+    ``bad_rows(rows, n_prev)`` marks suspect rows (``rows`` starts with the previous
+    row when there is one), ``row_check`` raises the message of the first of them.
+    """
     def check(block: np.ndarray, prev: np.ndarray | None, line0: int) -> None:
         rows = block if prev is None else np.vstack([prev, block])
         offset = 0 if prev is None else 1
@@ -473,8 +477,12 @@ def _header_text(fmt: str, sample: str, geometry: Geometry, numbers: Sequence[tu
 
 def _write_checked(path, lines: Sequence[str], rows: Iterator[str], read: Callable,
                    what: str) -> None:
-    """Write header ``lines`` and row chunks to a temporary file beside ``path``, read it
-    back with ``read`` and move it into place: only readable files are ever written."""
+    """
+    Write header ``lines`` and row chunks to a temporary file beside ``path``.
+
+    Read it back with ``read`` and move it into place: only readable files are ever
+    written.
+    """
     target = Path(path)
     tmp = target.with_name(f'.{target.name}.{os.getpid()}.tmp')
     try:
@@ -503,7 +511,8 @@ def _row_chunks(columns: Sequence[np.ndarray], size: int = 100_000) -> Iterator[
 
 
 def write_timeseries(path: PathLike, ts: TimeSeries) -> None:
-    """Write ``ts`` as ``ipmc-timeseries/1``; floats in repr precision (exact round trip).
+    """
+    Write ``ts`` as ``ipmc-timeseries/1``; floats in repr precision (exact round trip).
 
     The file is read back before it is put in place: an invalid series
     (non-increasing time, NaN, ...) raises :class:`DataFormatError` and

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Parameter identification from measured frequency response (paper section 5.2, done better).
+"""
+Parameter identification from measured frequency response (paper section 5.2, done better).
 
 The paper tunes d, C-, kappa_e and alpha0 with ``fminsearch`` on one sample.
 Here:
@@ -115,8 +116,11 @@ class FitResult:
 
     @property
     def p_value(self) -> float:
-        """Probability of a chi^2 at least this large if the model were right (residuals in
-        units of their measured uncertainty)."""
+        """
+        Probability of a chi^2 at least this large if the model were right.
+
+        Residuals in units of their measured uncertainty.
+        """
         return float(chi2_dist.sf(self.chi2, max(self.dof, 1)))
 
     @property
@@ -136,7 +140,8 @@ class FitResult:
     def summary(self) -> str:
         lines = [
             f"fit of {', '.join(SYMBOLS.get(n, n) for n in self.free)} "
-            f"({'+'.join(('h1',) + tuple(getattr(e, 'name', e) for e in self.effects))}): chi2/dof = {self.chi2:.4g}/{self.dof} "
+            f"({'+'.join(('h1',) + tuple(getattr(e, 'name', e) for e in self.effects))}): "
+            f'chi2/dof = {self.chi2:.4g}/{self.dof} '
             f'= {self.reduced_chi2:.3g}, p = {self.p_value:.3g}'
         ]
         lines.append(f"{'parameter':<32} {'estimate':>12} {'95% CI':>27}  note")
@@ -195,8 +200,12 @@ def effect_parameter_names(effects) -> list[str]:
 
 
 def resolve_effect_parameter(name: str, effects) -> tuple[str, str]:
-    """``delay_s`` or ``time_delay.delay_s`` -> ``("time_delay", "delay_s")`` for a model with
-    ``effects``; a clear error when unknown, ambiguous or its effect is not in the model."""
+    """
+    Resolve ``delay_s`` or ``time_delay.delay_s`` to ``("time_delay", "delay_s")``.
+
+    For a model with ``effects``; a clear error when unknown, ambiguous or its effect is not
+    in the model.
+    """
     specs = parse_effects(effects)
     in_model = [e.name for e in specs]
     if '.' in name:
@@ -248,7 +257,8 @@ def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
                    effects: tuple = ('surface_resistance',), *,
                    bounds_factor: float = 1e3, sd_floor: float = 1e-6,
                    sd_threshold: float = 0.3, min_sensitivity: float = 0.01) -> FitResult:
-    """Fit ``free`` parameters to the frequency points of ``groups`` (see module doc).
+    """
+    Fit ``free`` parameters to the frequency points of ``groups`` (see module doc).
 
     ``material`` supplies the initial values and the fixed parameters;
     ``bounds_factor`` bounds each free parameter to [p0/b, p0*b].

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Empirical frequency response from time records, with uncertainty.
+"""
+Empirical frequency response from time records, with uncertainty.
 
 Two estimators:
 
@@ -33,7 +34,8 @@ __all__ = ['FrequencyPoint', 'fundamental_response', 'cross_spectral_response', 
 
 @dataclass(frozen=True)
 class FrequencyPoint:
-    """Measured H(j 2 pi f) = i/w at one frequency, with standard uncertainties.
+    """
+    Measured H(j 2 pi f) = i/w at one frequency, with standard uncertainties.
 
     ``sd_log_mag`` is the standard uncertainty of ln|H| (so the relative
     uncertainty of the gain); ``sd_phase_rad`` that of the phase.
@@ -71,7 +73,8 @@ def _coarse_frequency(t: np.ndarray, x: np.ndarray, fs: float) -> float:
 
 
 def harmonic_fit(t: np.ndarray, x: np.ndarray, f0: float, n_harmonics: int):
-    """Least-squares fit of x(t) by a mean and ``n_harmonics`` harmonics of f0.
+    """
+    Least-squares fit of x(t) by a mean and ``n_harmonics`` harmonics of f0.
 
     Returns (phasors (complex, amplitude and phase of cos), residual, covariance
     of the real coefficients [mean, a1, b1, a2, b2, ...]).  Phasor convention:
@@ -96,7 +99,7 @@ def harmonic_fit(t: np.ndarray, x: np.ndarray, f0: float, n_harmonics: int):
 
 
 def _phasor_sd(cov: np.ndarray, phasor: complex, k: int = 1) -> tuple[float, float]:
-    """sd of ln|X| and arg X for harmonic k from the coefficient covariance."""
+    """Return the sd of ln|X| and arg X for harmonic k from the coefficient covariance."""
     ia, ib = 2 * k - 1, 2 * k
     a, b = phasor.real, -phasor.imag
     mag2 = a * a + b * b
@@ -162,7 +165,8 @@ def fundamental_response(time_s, deflection_m, current_a, *, frequency_hz: float
 def cross_spectral_response(time_s, deflection_m, current_a, *, nperseg: int | None = None,
                             band_hz: tuple[float, float] | None = None, min_coherence: float = 0.5,
                             source: str = '') -> list[FrequencyPoint]:
-    """Welch H1 estimate with coherence for broadband records (see module doc).
+    """
+    Welch H1 estimate with coherence for broadband records (see module doc).
 
     Returns points in ``band_hz`` whose coherence is at least ``min_coherence``.
     """

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Mains interference: line components at 50/60 Hz and harmonics that the stimulus does not explain.
+"""
+Mains interference: line components at 50/60 Hz and harmonics that the stimulus does not explain.
 
 Procedure (:func:`find_mains_lines`)
 ------------------------------------
@@ -58,7 +59,11 @@ class MainsLine:
 
 
 def parse_mains(value) -> float | str | None:
-    """``'off'``/None -> None, ``'auto'`` -> 'auto', ``50``/``60`` -> Hz; anything else is refused."""
+    """
+    Parse a mains setting: ``'off'``/None -> None, ``'auto'`` -> 'auto', ``50``/``60`` -> Hz.
+
+    Anything else is refused.
+    """
     if value is None or str(value).strip().lower() in ('off', 'none', '0', ''):
         return None
     text = str(value).strip().lower()
@@ -74,8 +79,11 @@ def parse_mains(value) -> float | str | None:
 
 
 def _stimulus_harmonics(t, w, max_harmonics: int = 20):
-    """Fundamental and the harmonics (at most ``max_harmonics``) carrying deflection content
-    (least-squares harmonic fit of the deflection), or ``(None, [])`` for a non-periodic stimulus.
+    """
+    Fundamental and the harmonics (at most ``max_harmonics``) carrying deflection content.
+
+    From a least-squares harmonic fit of the deflection; ``(None, [])`` for a non-periodic
+    stimulus.
     """
     fs = (t.size - 1) / (t[-1] - t[0])
     f0 = _coarse_frequency(t, w, fs)
@@ -129,12 +137,14 @@ def _record_lines(name, t, stimulus, y, f_mains, n_harmonics):
 
 
 def find_mains_lines(records: Sequence, mains='auto', n_harmonics: int = 10):
-    """Detect mains lines in every record (see module docstring).
+    """
+    Detect mains lines in every record (see module docstring).
 
     ``records``: objects with ``path``, ``time_s``, ``current_a`` and ``deflection_m``
     (:class:`~.timefit.Record`).  Returns ``(lines, fitted)``: the detected (and the
     non-separable) lines, and per record the fitted line sum to subtract.  ``mains``:
-    50, 60, 'auto' or None (nothing done)."""
+    50, 60, 'auto' or None (nothing done).
+    """
     mains = parse_mains(mains)
     if mains is None:
         return [], [np.zeros(np.asarray(r.current_a).size) for r in records]
@@ -167,7 +177,11 @@ def find_mains_lines(records: Sequence, mains='auto', n_harmonics: int = 10):
 
 
 def remove_mains(records: Sequence, mains='auto', n_harmonics: int = 10):
-    """``(cleaned records, lines)``: each record's current minus its detected mains lines."""
+    """
+    Return ``(cleaned records, lines)``.
+
+    Cleaned records: each record's current minus its detected mains lines.
+    """
     lines, fitted = find_mains_lines(records, mains, n_harmonics)
     cleaned = [replace(r, current_a=np.asarray(r.current_a, float) - f) if np.any(f) else r
                for r, f in zip(records, fitted)]

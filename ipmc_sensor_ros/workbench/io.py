@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Front door of the workbench's measurement-data input and output (no rclpy needed).
+"""
+Front door of the workbench's measurement-data input and output (no rclpy needed).
 
 Everything a verb reads goes through :func:`read_any` (one path) or
 :func:`read_records` (paths and directories).  The formats live in their own
@@ -48,7 +49,8 @@ DATA_SUFFIXES = ('.csv', '.txt')
 
 def read_any(path: PathLike, *, max_bytes: int | None = MAX_BYTES,
              max_rows: int | None = MAX_ROWS) -> TimeSeries | FrequencyResponseData:
-    """Read any supported input.
+    """
+    Read any supported input.
 
     A directory or a ``.mcap``/``.db3`` file is read with :func:`read_bag`
     (default topics, sidecar geometry); a text file is dispatched on its
@@ -66,8 +68,12 @@ def load_many(paths: Iterable[PathLike]) -> list[TimeSeries | FrequencyResponseD
 
 
 def natural_key(path: PathLike) -> list:
-    """Sort key of a file name with its numbers compared as numbers: ``short_1Hz`` <
-    ``short_1.5Hz`` < ``short_2Hz`` < ``short_13Hz`` (text sorting puts 13 before 2)."""
+    """
+    Sort key of a file name with its numbers compared as numbers.
+
+    ``short_1Hz`` < ``short_1.5Hz`` < ``short_2Hz`` < ``short_13Hz`` (text sorting
+    puts 13 before 2).
+    """
     parts = re.split(r'([0-9]+(?:\.[0-9]+)?)', Path(path).name.lower())
     return [float(p) if k % 2 else p for k, p in enumerate(parts)] + [str(path)]
 
@@ -88,7 +94,8 @@ def read_records(paths: Iterable[PathLike] | PathLike, need_deflection: bool = T
                  deflection_topic: str | None = 'deflection_truth',
                  geometry: Geometry | Mapping | None = None,
                  max_bytes: int | None = MAX_BYTES, max_rows: int | None = MAX_ROWS) -> Records:
-    """Read files, bags and directories of them, in natural name order within a directory.
+    """
+    Read files, bags and directories of them, in natural name order within a directory.
 
     A directory that is not a bag contributes its ``.csv``/``.txt`` files and
     its bag subdirectories, sorted by :func:`natural_key`.  With

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Import of lab exports (DAQ, LabVIEW, spreadsheets) into ``ipmc-timeseries/1``.
+"""
+Import of lab exports (DAQ, LabVIEW, spreadsheets) into ``ipmc-timeseries/1``.
 
 A lab file is free text, then one column-header line, then numeric rows::
 
@@ -69,7 +70,7 @@ _DIALECTS = (('\t', '.'), ('\t', ','), (';', '.'), (';', ','), (',', '.'))
 
 
 def _is_row(line: str, delimiter: str, decimal: str) -> int:
-    """Number of cells if ``line`` is a row of >= 2 numbers in this dialect, else 0."""
+    """Return the number of cells if ``line`` is a row of >= 2 numbers in this dialect, else 0."""
     cells = line.split(delimiter)
     if len(cells) < 2:
         return 0
@@ -77,7 +78,11 @@ def _is_row(line: str, delimiter: str, decimal: str) -> int:
 
 
 def _find_table(path, source: TextSource):
-    """(notes, column-header cells, its line, delimiter, decimal); source at the first row."""
+    """
+    Return (notes, column-header cells, its line, delimiter, decimal).
+
+    Source at the first row.
+    """
     previous: list[tuple[int, str]] = []
     while True:
         line = source.next_line()
@@ -91,7 +96,7 @@ def _find_table(path, source: TextSource):
             for delimiter, decimal in _DIALECTS:
                 n = _is_row(line, delimiter, decimal)
                 if n and len(head.split(delimiter)) == n and not _is_row(head, delimiter,
-                                                                          decimal):
+                                                                         decimal):
                     source.unread(line)
                     notes = [text.strip() for _, text in previous[:-1] if text.strip()]
                     cells = [c.strip() for c in head.split(delimiter)]
@@ -101,7 +106,8 @@ def _find_table(path, source: TextSource):
 
 
 def parse_columns_spec(text: str) -> dict[str, str]:
-    """``"time=Time [s],current=I (nA)"`` -> ``{"time": "Time [s]", "current": "I (nA)"}``.
+    """
+    ``"time=Time [s],current=I (nA)"`` -> ``{"time": "Time [s]", "current": "I (nA)"}``.
 
     The text form of the ``columns`` argument (a CLI flag); raises ValueError
     naming the bad item, an unknown role or a role given twice.
@@ -126,7 +132,7 @@ def _words(stem: str) -> list[str]:
 
 
 def _assign(path, cells: list[str], line: int, columns: Mapping[str, str] | None):
-    """role -> (index, unit) of the file's columns."""
+    """Map role -> (index, unit) of the file's columns."""
     found: dict[str, tuple[int, str | None]] = {}
     wanted = dict(columns or {})
     unknown = sorted(set(wanted) - set(ROLE_NAMES))
@@ -222,7 +228,7 @@ def _read_meta(meta: PathLike) -> dict:
 
 
 def _meta_geometry(meta: PathLike, data: dict) -> dict[str, tuple[float, str]]:
-    """part -> (metres, 'key: value as written') from run metadata."""
+    """Map part -> (metres, 'key: value as written') from run metadata."""
     source = data.get('geometry', data)
     if not isinstance(source, dict):
         raise DataFormatError(meta, None, "'geometry' in run metadata must be a mapping")
@@ -303,19 +309,28 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
                     current_gain_a_per_v: float | None = None, sample: str | None = None,
                     max_bytes: int | None = MAX_BYTES,
                     max_rows: int | None = MAX_ROWS) -> TimeSeries:
-    """Read a lab export into a :class:`TimeSeries` in SI units (see the module docstring).
+    """
+    Read a lab export into a :class:`TimeSeries` in SI units (see the module docstring).
 
     Parameters
     ----------
-    path : the lab file (CSV, TSV or ';'-separated text with a free header).
-    geometry : ``"22mm,7mm,360um"`` (length, width, total thickness), a
+    path
+        The lab file (CSV, TSV or ';'-separated text with a free header).
+    geometry
+        ``"22mm,7mm,360um"`` (length, width, total thickness), a
         :class:`Geometry` or a mapping with ``length_m``, ``width_m``, ``thickness_m``.
-    meta : run-metadata JSON/YAML (geometry in any length unit, ``sample``,
+    meta
+        Run-metadata JSON/YAML (geometry in any length unit, ``sample``,
         known values such as ``temperature_k``, anything else kept in ``extra``).
-    columns : role -> column name (``time``, ``deflection``, ``current``).
-    current_gain_a_per_v : transimpedance gain, A/V, for a current column in V.
-    sample : sample name (else the metadata's ``sample``); a conflict is refused.
-    max_bytes, max_rows : limits of the file (see :mod:`.textread`).
+    columns
+        Role -> column name (``time``, ``deflection``, ``current``).
+    current_gain_a_per_v
+        Transimpedance gain, A/V, for a current column in V.
+    sample
+        Sample name (else the metadata's ``sample``); a conflict is refused.
+    max_bytes, max_rows
+        Limits of the file (see :mod:`.textread`).
+
     """
     if current_gain_a_per_v is not None and not (math.isfinite(current_gain_a_per_v)
                                                  and current_gain_a_per_v > 0):
@@ -377,7 +392,8 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
 
 def import_lab_files(paths: Iterable[PathLike], out_dir: PathLike, *,
                      overwrite: bool = False, **options) -> list[Path]:
-    """Import each lab file and write it as ``<out_dir>/<stem>.csv`` (``ipmc-timeseries/1``).
+    """
+    Import each lab file and write it as ``<out_dir>/<stem>.csv`` (``ipmc-timeseries/1``).
 
     All files are read first and nothing is written if any fails; an existing
     output is refused unless ``overwrite``.  ``options`` are those of

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Measurement data classes of the workbench and the one error they raise (no rclpy needed).
+"""
+Measurement data classes of the workbench and the one error they raise (no rclpy needed).
 
 :class:`TimeSeries` (current and optional tip deflection, SI units),
 :class:`FrequencyResponseData` (a measured I/w) and :class:`DataFormatError`,
@@ -36,7 +37,8 @@ def _vector(name: str, values: Any, n: int | None = None) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class TimeSeries:
-    """Synchronous samples of sensing current and (optionally) tip deflection, SI units.
+    """
+    Synchronous samples of sensing current and (optionally) tip deflection, SI units.
 
     path : source file or bag ('' if built in memory).
     sample : sample name ('' if unknown).
@@ -100,7 +102,8 @@ class TimeSeries:
 
 @dataclass(frozen=True, eq=False)
 class FrequencyResponseData:
-    """A measured frequency response I/w of one sample, SI units.
+    """
+    A measured frequency response I/w of one sample, SI units.
 
     frequency_hz : Hz, > 0, strictly increasing.
     gain_a_per_m : |I/w|, A/m, > 0.
@@ -149,4 +152,3 @@ class FrequencyResponseData:
     def response(self) -> np.ndarray:
         """Complex response I/w = gain * exp(j * deg2rad(phase)), A/m."""
         return self.gain_a_per_m * np.exp(1j * np.deg2rad(self.phase_deg))
-

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Figures of merit, defined once for every verb, report and test.
+"""
+Figures of merit, defined once for every verb, report and test.
 
 * :func:`fit_percent` -- MATLAB ``compare``: 100 (1 - ||y - y_hat|| / ||y - mean y||);
 * :func:`nrmse` -- RMS(estimate - truth) / RMS(truth) (deflection estimates);
@@ -28,7 +29,8 @@ def nrmse(estimate, truth) -> float:
 
 
 def noise_rms(t: np.ndarray, w: np.ndarray, y: np.ndarray, window_s: float = 4.0) -> float:
-    """Measurement-noise RMS of the current (A).
+    """
+    Measurement-noise RMS of the current (A).
 
     Periodic records: residual of harmonic fits (mean + harmonics of the
     excitation fundamental) in consecutive windows of about ``window_s``

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Reports a scientist would keep: one ``index.html`` with PNG plots (matplotlib, Agg).
+"""
+Reports a scientist would keep: one ``index.html`` with PNG plots (matplotlib, Agg).
 
 Every report opens with a summary card (model, verdict, fit %, error against
 the noise floor), then sections of text, tables and figures; nothing scrolls
@@ -39,6 +40,7 @@ BOUND99 = 2.576  # two-sided 99 % quantile of N(0, 1): band of a white residual'
 @dataclass
 class Section:
     """One report section: heading, wrapped text, tables (caption, columns, rows), PNG names."""
+
     heading: str
     text: str = ''
     images: list = field(default_factory=list)
@@ -69,7 +71,8 @@ def _label(source: str) -> str:
 
 def plot_bode(out_dir: Path, name: str, points_by_sample: dict, models_by_sample: dict,
               title: str = '') -> str:
-    """Measured points (with 2-sd error bars) and model curves, per sample.
+    """
+    Measured points (with 2-sd error bars) and model curves, per sample.
 
     ``points_by_sample``: sample -> list of FrequencyPoint; ``models_by_sample``:
     sample -> {label: callable f_hz -> complex response}.
@@ -113,15 +116,19 @@ def plot_bode(out_dir: Path, name: str, points_by_sample: dict, models_by_sample
 
 
 def worst_first(records: Sequence) -> list:
-    """Records ordered from the lowest fit % to the highest."""
+    """Return the records ordered from the lowest fit % to the highest."""
     return sorted(records, key=lambda r: (np.nan_to_num(r.fit_percent, nan=-np.inf)))
 
 
 def plot_time_overlay(out_dir: Path, name: str, records: Sequence, max_records: int = 4,
                       span_s: float = 2.0, labels: Sequence[str] = ('measured', 'model'),
                       select_worst: bool = True) -> str:
-    """Measured (drawn on top) vs predicted current and the residual, last ``span_s`` s
-    of the ``max_records`` worst records (or the first ones, ``select_worst=False``)."""
+    """
+    Measured (drawn on top) vs predicted current and the residual.
+
+    Last ``span_s`` s of the ``max_records`` worst records (or the first ones,
+    ``select_worst=False``).
+    """
     plt = _plt()
     recs = (worst_first(records) if select_worst else list(records))[:max_records]
     fig, axes = plt.subplots(len(recs), 1, figsize=(8, 2.3 * len(recs)), squeeze=False)
@@ -152,9 +159,12 @@ def plot_time_overlay(out_dir: Path, name: str, records: Sequence, max_records: 
 
 def plot_residual_correlation(out_dir: Path, name: str, records: Sequence, max_lag: int = 25,
                               n_labelled: int = 4) -> str:
-    """MATLAB ``resid``: residual autocorrelation and residual / input-velocity
-    cross-correlation; lags in seconds; the 99 % band of a white residual.
-    The ``n_labelled`` worst records are coloured and named, the others grey."""
+    """
+    MATLAB ``resid``: residual autocorrelation and residual / input-velocity cross-correlation.
+
+    Lags in seconds; the 99 % band of a white residual. The ``n_labelled``
+    worst records are coloured and named, the others grey.
+    """
     from .compare import _xcorr_normalised as _xcorr
 
     plt = _plt()
@@ -207,9 +217,13 @@ def _residual_psd(records: Sequence, resolution_hz: float = 0.5):
 
 
 def residual_lines(records: Sequence, threshold_db: float = 10.0) -> list[tuple[float, float]]:
-    """Spectral lines of the pooled residual: local maxima of the mean Welch PSD at
-    least ``threshold_db`` above its running median (15 bins).  Returns
-    (frequency Hz, excess dB), strongest first; DC is ignored."""
+    """
+    Spectral lines of the pooled residual.
+
+    Local maxima of the mean Welch PSD at least ``threshold_db`` above its
+    running median (15 bins). Returns (frequency Hz, excess dB), strongest
+    first; DC is ignored.
+    """
     from scipy.ndimage import median_filter
     from scipy.signal import find_peaks
 
@@ -340,8 +354,11 @@ _CSS = ('body{font-family:sans-serif;max-width:1000px;margin:auto;padding:0 8px}
 
 
 def write_report(out_dir: Path, title: str, sections: Sequence, card: dict | None = None) -> Path:
-    """Write ``index.html``: an optional summary card (label -> value) and the
-    sections (:class:`Section` or tuples (heading, text, [png names]))."""
+    """
+    Write ``index.html``: an optional summary card (label -> value) and the sections.
+
+    :class:`Section` or tuples (heading, text, [png names]).
+    """
     out_dir = Path(out_dir)
     parts = [
         f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
@@ -406,7 +423,11 @@ def compare_verdict(cmp) -> str:
 def compare_report(
     out_dir: Path, cmp, model_text: str, bode_points: dict, bode_models: dict
 ) -> Path:
-    """The ``compare`` page: card, Bode, worst records, residual tests, spectrum, failure map."""
+    """
+    Return the ``compare`` page.
+
+    Card, Bode, worst records, residual tests, spectrum, failure map.
+    """
     rows = [
         [
             _label(r.source),
@@ -495,7 +516,7 @@ def fit_report(out_dir: Path, res, bode_points: dict, bode_models: dict, model_t
 
 
 def diagnose_report(out_dir: Path, diag) -> Path:
-    """The ``diagnose`` page: ranking bars with the noise floor, before/after overlays."""
+    """Return the ``diagnose`` page: ranking bars with the noise floor, before/after overlays."""
     from types import SimpleNamespace
 
     from .compare import fit_percent

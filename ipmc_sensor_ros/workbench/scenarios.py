@@ -1,6 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Synthetic measurement campaigns: crank-slider sweeps and long records, with any
-model (base + effects), realistic noise, seeded.
+"""
+Synthetic measurement campaigns.
+
+crank-slider sweeps and long records, with any model (base + effects),
+realistic noise, seeded.
 
 Used by ``ipmc-model simulate``, the hidden-effect tests and the worked
 example.  The current is the exact prediction of the model
@@ -67,13 +70,16 @@ def crank_slider_campaign(true_effects: Sequence = ('surface_resistance',), *,
                           preroll_s: float = 1.0, fidelity: str = 'model',
                           beam_model: str = 'linear', hum_rel: float = 0.0,
                           hum_hz: float = 50.0) -> list[Record]:
-    """One record per (sample, frequency); ``true_effects`` make the data,
-    ``model_effects`` go into each record's (to be tested) model.  ``fidelity``:
-    ``model`` (FFT prediction of the closed form with its effects) or ``field`` (the
+    """
+    One record per (sample, frequency).
+
+    ``true_effects`` make the data, ``model_effects`` go into each record's (to be tested) model.
+    ``fidelity``: ``model`` (FFT prediction of the closed form with its effects) or ``field`` (the
     independent field solution, :class:`~ipmc_sensor_ros.simulation.sensor.FieldSensorSimulator`),
-    whose ``beam_model`` may be ``elastica`` (large-deflection stress profile).
-    ``hum_rel``: mains interference of RMS ``hum_rel`` x the clean current's RMS at
-    ``hum_hz`` (80 % of its power) and its third harmonic (20 %), random phases per record."""
+    whose ``beam_model`` may be ``elastica`` (large-deflection stress profile). ``hum_rel``: mains
+    interference of RMS ``hum_rel`` x the clean current's RMS at ``hum_hz`` (80 % of its power)
+    and its third harmonic (20 %), random phases per record.
+    """
     check_fidelity(fidelity, beam_model)
     rng = np.random.default_rng(seed)
     out = []
@@ -108,10 +114,13 @@ def crank_slider_campaign(true_effects: Sequence = ('surface_resistance',), *,
 def hidden_effects_campaign(
     hidden: Sequence[str], seed: int, **kwargs
 ) -> tuple[list[Record], dict]:
-    """Records with the ``hidden`` effects (values drawn by :func:`random_effect_values` from a
-    generator seeded with ``seed``) for a diagnosis that starts from H2, or from H1 when
-    ``surface_resistance`` is among the hidden effects.  Returns ``(records, truth)``,
-    ``truth`` = {effect: values}."""
+    """
+    Return the records with the ``hidden`` effects and the truth.
+
+    Effect values are drawn by :func:`random_effect_values` from a generator seeded with
+    ``seed``, for a diagnosis that starts from H2, or from H1 when ``surface_resistance``
+    is among the hidden effects.  Returns ``(records, truth)``, ``truth`` = {effect: values}.
+    """
     rng = np.random.default_rng(10_000 + seed)
     truth = {name: random_effect_values(name, rng) for name in hidden}
     true_effects = ['surface_resistance'] + [

@@ -1,8 +1,11 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Research studies on the independent field solution (not used by the estimator or the nodes):
-mesh convergence against the closed forms, and the size of the physics the paper linearises
+"""
+Research studies on the independent field solution (not used by the estimator or the nodes).
+
+Mesh convergence against the closed forms, and the size of the physics the paper linearises
 away (the term dropped from eq. 9; large-deflection beam mechanics instead of eq. 21).
-README "Where the paper is wrong or thin" quotes their results."""
+README "Where the paper is wrong or thin" quotes their results.
+"""
 from __future__ import annotations
 
 import numpy as np
@@ -18,8 +21,11 @@ __all__ = ['convergence_table', 'nonlinearity_study', 'large_deflection_study',
 
 def convergence_table(model: SensorModel, band_hz=(0.1, 100.0), n_points: int = 25,
                       levels=((0.4, 1.3, 10), (0.2, 1.15, 20), (0.1, 1.1, 40), (0.05, 1.08, 80))):
-    """Worst |magnitude| (dB) and |phase| (deg) error against the closed form per mesh level
-    (surface_cell, growth, n_length)."""
+    """
+    Worst |magnitude| (dB) and |phase| (deg) error against the closed form per mesh level.
+
+    surface_cell, growth, n_length.
+    """
     f = np.logspace(np.log10(band_hz[0]), np.log10(band_hz[1]), n_points)
     exact = model.frequency_response(f)
     rows = []
@@ -33,10 +39,13 @@ def convergence_table(model: SensorModel, band_hz=(0.1, 100.0), n_points: int = 
     return rows
 
 
-
 def _distortion_rows(simulate_exact, i_unit, t, shape, amplitudes_m, frequency_hz) -> list[dict]:
-    """Relative RMS error of the linear prediction (amplitude x ``i_unit``) against
-    ``simulate_exact(w)`` and the harmonics of the latter, over the last two periods."""
+    """
+    Relative RMS error of the linear prediction against ``simulate_exact(w)``.
+
+    The linear prediction is amplitude x ``i_unit``; also the harmonics of the latter, over
+    the last two periods.
+    """
     keep = t >= t[-1] - 2 / frequency_hz
     rows = []
     for a in amplitudes_m:
@@ -55,9 +64,12 @@ def _distortion_rows(simulate_exact, i_unit, t, shape, amplitudes_m, frequency_h
 
 def nonlinearity_study(model: SensorModel, amplitudes_m, frequency_hz: float = 5.0,
                        sample_rate_hz: float = 2000.0, periods: int = 6) -> list[dict]:
-    """Relative error of the linear model and harmonic content of the current versus the
-    tip-deflection amplitude (sinusoidal drive), from the nonlinear field solution
-    (the eq. 9 term; r0 = 0)."""
+    """
+    Relative error of the linear model and harmonic content of the current vs amplitude.
+
+    Versus the tip-deflection amplitude (sinusoidal drive), from the nonlinear field solution
+    (the eq. 9 term; r0 = 0).
+    """
     t = np.arange(int(round(periods / frequency_hz * sample_rate_hz))) / sample_rate_hz
     lin = NonlinearFieldSolver(model, linear=True)
     nonlin = NonlinearFieldSolver(model)
@@ -69,10 +81,14 @@ def nonlinearity_study(model: SensorModel, amplitudes_m, frequency_hz: float = 5
 
 def large_deflection_study(model: SensorModel, amplitudes_m, frequency_hz: float = 5.0,
                            sample_rate_hz: float = 1000.0, periods: int = 4) -> list[dict]:
-    """The same for the beam: field solution with the elastica stress profile
+    """
+    Return the same for the beam: elastica against small-deflection stress profile.
+
+    Field solution with the elastica stress profile
     (:class:`~ipmc_sensor_ros.physics.beam.ElasticaBeam`) against the paper's
     small-deflection profile (eq. 21), sinusoidal tip deflection.  Rows also give the
-    amplitude as a fraction of the length, ``amplitude_over_length``."""
+    amplitude as a fraction of the length, ``amplitude_over_length``.
+    """
     t = np.arange(int(round(periods / frequency_hz * sample_rate_hz))) / sample_rate_hz
     shape = np.sin(2 * np.pi * frequency_hz * t)
     i_unit = FieldSolver(model).simulate(t, shape)
@@ -85,8 +101,12 @@ def large_deflection_study(model: SensorModel, amplitudes_m, frequency_hz: float
 
 
 def amplitude_at_error(rows: list[dict], level: float = 0.01) -> float:
-    """Smallest amplitude (m) at which ``linear_model_error`` reaches ``level``, by
-    log-log interpolation between the study's rows (nan if never reached)."""
+    """
+    Smallest amplitude (m) at which ``linear_model_error`` reaches ``level``.
+
+    By log-log interpolation between the study's rows (nan if never
+    reached).
+    """
     a = np.array([r['amplitude_m'] for r in rows])
     e = np.array([r['linear_model_error'] for r in rows])
     above = np.flatnonzero(e >= level)

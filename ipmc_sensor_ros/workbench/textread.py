@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Streaming reader of numeric text tables: regular files only, bounded size and rows.
+"""
+Streaming reader of numeric text tables: regular files only, bounded size and rows.
 
 Shared by the ``ipmc-timeseries/1`` / ``ipmc-frf/1`` readers and the lab
 import.  A file is opened without blocking and refused unless it is a regular
@@ -55,7 +56,7 @@ def parse_number(text: str, decimal: str = '.') -> float | None:
 
 
 def cell_error(path, lineno: int, cell: str, column: str, decimal: str = '.') -> DataFormatError:
-    """The error for a cell :func:`parse_number` refused."""
+    """Return the error for a cell :func:`parse_number` refused."""
     s = cell.strip()
     if not s:
         return DataFormatError(path, lineno, f'empty cell in column {column}')
@@ -101,7 +102,8 @@ def _open_regular(path: PathLike, max_bytes: int | None):
 
 
 class TextSource:
-    """A UTF-8 text file read as header lines, then chunks of whole data lines.
+    """
+    A UTF-8 text file read as header lines, then chunks of whole data lines.
 
     Use as a context manager.  ``lineno`` is the number of lines consumed.
     """
@@ -156,7 +158,7 @@ class TextSource:
                                'bytes (not a text table?)')
 
     def next_line(self) -> str | None:
-        """The next line without its line end, or None at the end of the file."""
+        """Return the next line without its line end, or None at the end of the file."""
         while True:
             cut = self._buf.find(b'\n')
             if cut >= 0 or len(self._buf) > MAX_LINE_BYTES or not self._fill():
@@ -182,7 +184,7 @@ class TextSource:
         self.lineno -= 1
 
     def chunks(self) -> Iterator[tuple[int, bytes]]:
-        """(1-based line of the first line, bytes of whole lines each ending in '\\n')."""
+        r"""(1-based line of the first line, bytes of whole lines each ending in '\n')."""
         while True:
             if len(self._buf) < CHUNK_BYTES:
                 self._fill()
@@ -275,7 +277,8 @@ def _rows(rows: list, ncol: int) -> np.ndarray:
 def read_table(source: TextSource, columns: Sequence[str], check: BlockCheck | None = None, *,
                delimiter: str = ',', decimal: str = '.', max_rows: int | None = MAX_ROWS,
                header_line: int | None = None) -> tuple[list[np.ndarray], int]:
-    """Read the data rows left in ``source``: (one array per column, line of the first row).
+    """
+    Read the data rows left in ``source``: (one array per column, line of the first row).
 
     Rows are contiguous; empty lines are allowed only at the end.  ``check``
     sees each parsed block with the previous row, in file order, so the first
@@ -320,8 +323,13 @@ def read_table(source: TextSource, columns: Sequence[str], check: BlockCheck | N
 
 
 def increasing_check(path, column: str, unit: str, index: int = 0) -> BlockCheck:
-    """A :func:`read_table` check that column ``index`` (``column``, in ``unit``) strictly
-    increases; the error names the line, both values and the previous line."""
+    """
+    Return a :func:`read_table` check that column ``index`` strictly increases.
+
+    ``column`` names it, in ``unit``.
+
+    The error names the line, both values and the previous line.
+    """
     def check(block: np.ndarray, prev: np.ndarray | None, line0: int) -> None:
         t = block[:, index] if prev is None else np.concatenate(([prev[index]], block[:, index]))
         offset = 0 if prev is None else 1

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Time-domain output-error fit of a model (material parameters + effect parameters).
+"""
+Time-domain output-error fit of a model (material parameters + effect parameters).
 
 Used by the diagnosis: every effect, built-in or plugin, acts on the predicted
 current through :func:`~ipmc_sensor_ros.simulation.sensor.predict_current`,
@@ -36,8 +37,7 @@ from ..physics.parameters import MaterialParameters, ParameterError
 from ..simulation.sensor import padded_record
 from .metrics import noise_rms
 
-__all__ = ['Record', 'PreparedRecord', 'prepare', 'FitSpec', 'ModelFit', 'fit_model', 'predict',
-]
+__all__ = ['Record', 'PreparedRecord', 'prepare', 'FitSpec', 'ModelFit', 'fit_model', 'predict']
 
 
 @dataclass
@@ -265,7 +265,8 @@ def fit_model(
     bounds_factor: float = 100.0,
     max_nfev: int = 60,
 ) -> ModelFit:
-    """Fit ``free`` to the prepared records (all rows, or ``train[r]`` row masks per record).
+    """
+    Fit ``free`` to the prepared records (all rows, or ``train[r]`` row masks per record).
 
     Each record's model must already contain every effect named in ``free``.
     ``starts``: optional list of starting vectors (fit space); the best result is kept.

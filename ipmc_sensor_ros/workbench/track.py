@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Time-varying parameter tracking over a long record (paper section 5.4, Figs. 9-10).
+"""
+Time-varying parameter tracking over a long record (paper section 5.4, Figs. 9-10).
 
 The paper refits d minute by minute while an IPMC dries in air.  Here the
 record is cut into consecutive windows (``window_s`` long, advanced by
@@ -44,9 +45,12 @@ class TrackPoint:
 def model_trajectory(
     model: SensorModel, elapsed_s, names: Sequence[str] = ('diffusivity_m2_per_s',)
 ):
-    """Values of material parameters ``names`` of ``model`` at ``elapsed_s`` seconds from the
-    record start, following its time-varying effect (e.g. ``hydration_drift``); None if the
-    model has none."""
+    """
+    Values of material parameters ``names`` of ``model`` at ``elapsed_s`` seconds.
+
+    Seconds from the record start, following its time-varying effect (e.g.
+    ``hydration_drift``); None if the model has none.
+    """
     for spec in model.effects:
         mat_at = get_effect(spec.name).material_at(model, spec.as_dict())
         if mat_at is not None:
@@ -60,7 +64,8 @@ def track_parameter(time_s, deflection_m, current_a, geometry: Geometry,
                     effects: tuple = ('surface_resistance',), *, window_s: float = 60.0,
                     step_s: float | None = None, known: dict | None = None,
                     source: str = '', model: SensorModel | None = None) -> list[TrackPoint]:
-    """Refit ``free`` in consecutive windows; returns one :class:`TrackPoint` per window.
+    """
+    Refit ``free`` in consecutive windows; returns one :class:`TrackPoint` per window.
 
     Each window's fit starts from the previous window's estimate.
     """

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Units in column names and geometry strings, converted to SI (no rclpy needed).
+"""
+Units in column names and geometry strings, converted to SI (no rclpy needed).
 
 One table per physical dimension maps a unit symbol to its factor to SI;
 ``u``, ``µ`` (U+00B5) and ``μ`` (U+03BC) all mean micro.  Lookup is exact
@@ -26,9 +27,13 @@ QUANTITY_UNITS = {'time': TIME_UNITS, 'deflection': LENGTH_UNITS, 'current': CUR
 #: SI symbol of each quantity (the canonical column is ``<quantity>_<symbol>``).
 SI_SYMBOL = {'time': 's', 'deflection': 'm', 'current': 'A'}
 
+
 def to_si(value, factor: float):
-    """``value * factor``, computed as a division by the power of ten when ``factor`` is
-    one (``360 * 1e-6`` gives 0.00035999999999999997; ``360 / 1e6`` gives 0.00036)."""
+    """
+    ``value * factor``, computed as a division by the power of ten when ``factor`` is one.
+
+    ``360 * 1e-6`` gives 0.00035999999999999997; ``360 / 1e6`` gives 0.00036.
+    """
     if 0.0 < factor < 1.0:
         inverse = round(1.0 / factor)
         if inverse * factor == 1.0 or abs(inverse * factor - 1.0) < 1e-12:
@@ -37,8 +42,12 @@ def to_si(value, factor: float):
 
 
 def decimal_to_si(value: str | float, factor: float) -> float:
-    """One value in SI, rounded once from its decimal form (``'0.36'`` mm -> 0.00036 m,
-    where ``0.36 / 1000`` gives 0.00035999999999999997)."""
+    """
+    One value in SI, rounded once from its decimal form.
+
+    ``'0.36'`` mm -> 0.00036 m, where ``0.36 / 1000`` gives
+    0.00035999999999999997.
+    """
     exponent = round(math.log10(factor))
     if math.isclose(10.0 ** exponent, factor, rel_tol=1e-12):
         return float(Decimal(str(value)).scaleb(exponent))
@@ -62,7 +71,8 @@ _SUFFIX = re.compile(r'^(?P<stem>.+?)_(?P<u>[A-Za-z\u00b5\u03bc]+)$')
 
 
 def split_unit(name: str) -> tuple[str, str | None]:
-    """(stem, unit) of a column name: ``Time [s]``, ``Laser (mm)``, ``current_uA``.
+    """
+    (stem, unit) of a column name: ``Time [s]``, ``Laser (mm)``, ``current_uA``.
 
     A ``_suffix`` counts as a unit only if it is a symbol of one of the
     tables; otherwise the whole name is the stem and the unit is None.
@@ -84,7 +94,8 @@ _LENGTH_VALUE = re.compile(r'^\s*([+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-
 
 
 def parse_length(text: str) -> float:
-    """Metres of a length with a unit: ``22mm``, ``360 um``, ``0.36 µm``, ``0.022 m``.
+    """
+    Metres of a length with a unit: ``22mm``, ``360 um``, ``0.36 µm``, ``0.022 m``.
 
     A bare number is refused (the unit must be said); raises ValueError.
     """
@@ -105,7 +116,7 @@ _BASES = ('deflection', 'frequency', 'gain_std', 'phase_std', 'current', 'phase'
 
 
 def column_units(base: str) -> str:
-    """The units accepted after ``<base>_`` in a column name, for messages."""
+    """Return the units accepted after ``<base>_`` in a column name, for messages."""
     if base in QUANTITY_UNITS:
         return ', '.join(QUANTITY_UNITS[base])
     if base == 'frequency':
@@ -116,7 +127,8 @@ def column_units(base: str) -> str:
 
 
 def column_to_si(name: str) -> tuple[str, float] | None:
-    """(SI column, factor to SI) of a column named with another unit, or None.
+    """
+    (SI column, factor to SI) of a column named with another unit, or None.
 
     ``deflection_mm`` -> ``('deflection_m', 1e-3)``, ``phase_rad`` ->
     ``('phase_deg', 57.29...)``, ``frequency_rad_s`` -> ``('frequency_hz', 1/2pi)``,

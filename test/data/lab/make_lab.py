@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Writes the lab-export samples of this directory (run once; the outputs are committed).
+"""
+Writes the lab-export samples of this directory (run once; the outputs are committed).
 
 They imitate what real rigs export, each in a different dialect, so the
 importer is not fitted to one file: a LabVIEW "Write To Measurement File"
@@ -25,7 +26,7 @@ labview = ['LabVIEW Measurement', 'Writer_Version\t2', 'Reader_Version\t2',
            'Channels\t3', '***End_of_Header***']
 rows = [f'{a:.3f},{b * 1e3:.6f},{c * 1e6:.5f}' for a, b, c in zip(t, w, i)]
 (HERE / 'labview_slim_5Hz.csv').write_text('\n'.join(labview + ['Time [s],Laser [mm],Current [uA]']
-                                                   + rows) + '\n')
+                                                     + rows) + '\n')
 
 rows = [f'{a * 1e3:.1f}\t{b * 1e6:.2f}\t{c * 1e9:.2f}' for a, b, c in zip(t, w, i)]
 (HERE / 'daq_slim_5Hz.tsv').write_text(

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Generate the binary members of the malformed-input corpus (bags, non-UTF-8 files).
+"""
+Generate the binary members of the malformed-input corpus (bags, non-UTF-8 files).
 
 Binary files are not committed: ``test/test_workbench_io.py`` calls
 :func:`make_all` into a temporary directory.  Each case is named after what is
@@ -33,7 +34,11 @@ def _series(n: int = 40, rate_hz: float = 1000.0) -> io.TimeSeries:
 
 
 def raw_bag(path: Path, messages, storage: str = 'sqlite3', sidecar: bool = True) -> Path:
-    """A bag with hand-made messages: ``messages`` = [(topic, msgtype, [(stamp_ns, msg)])]."""
+    """
+    Return a bag with hand-made messages.
+
+    ``messages`` = [(topic, msgtype, [(stamp_ns, msg)])].
+    """
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     store = io._typestore()
@@ -71,7 +76,7 @@ def block_msg(times, values, label=io.CURRENT_LABEL, size=None, stride=None):
 
 
 def point_msg(t: float, z: float):
-    """A ``PointStamped`` deflection sample: ``z`` metres at ``t`` seconds."""
+    """Return a ``PointStamped`` deflection sample: ``z`` metres at ``t`` seconds."""
     T = io._typestore().types
     sec, nsec = divmod(int(round(t * 1e9)), 10**9)
     return T[io.POINT_STAMPED_TYPE](
@@ -117,13 +122,13 @@ def make_all(outdir: str | Path) -> dict[str, Path]:
 
     p = out / 'bag_current_wrong_type'
     raw_bag(p, [('/current', 'std_msgs/msg/String',
-                  [(1000, T['std_msgs/msg/String'](data='0.0,1e-7'))])])
+                 [(1000, T['std_msgs/msg/String'](data='0.0,1e-7'))])])
     cases[p.name] = p
 
     p = out / 'bag_deflection_wrong_type'
     raw_bag(p, [('/current', io.MULTIARRAY_TYPE, [(1000, block_msg([0.0, 0.001], [0.0, 1e-7]))]),
-                 ('/deflection_truth', 'std_msgs/msg/Float64',
-                  [(1000, T['std_msgs/msg/Float64'](data=1e-3))])])
+                ('/deflection_truth', 'std_msgs/msg/Float64',
+                 [(1000, T['std_msgs/msg/Float64'](data=1e-3))])])
     cases[p.name] = p
 
     p = out / 'bag_truncated_mcap'
@@ -187,12 +192,12 @@ def make_all(outdir: str | Path) -> dict[str, Path]:
     # -- bags: message content ----------------------------------------------------
     p = out / 'bag_current_wrong_label'
     raw_bag(p, [('/current', io.MULTIARRAY_TYPE,
-                  [(1000, block_msg([0.0, 0.001], [0.0, 1e-7], label='time_s,current_uA'))])])
+                 [(1000, block_msg([0.0, 0.001], [0.0, 1e-7], label='time_s,current_uA'))])])
     cases[p.name] = p
 
     p = out / 'bag_current_layout_mismatch'
     raw_bag(p, [('/current', io.MULTIARRAY_TYPE,
-                  [(1000, block_msg([0.0, 0.001, 0.002], [0.0, 1e-7, 2e-7], size=4))])])
+                 [(1000, block_msg([0.0, 0.001, 0.002], [0.0, 1e-7, 2e-7], size=4))])])
     cases[p.name] = p
 
     p = out / 'bag_current_values_only'
@@ -203,13 +208,13 @@ def make_all(outdir: str | Path) -> dict[str, Path]:
 
     p = out / 'bag_current_time_backwards'
     raw_bag(p, [('/current', io.MULTIARRAY_TYPE,
-                  [(1000, block_msg([0.010, 0.011], [0.0, 1e-7])),
-                   (2000, block_msg([0.005, 0.006], [0.0, 1e-7]))])])
+                 [(1000, block_msg([0.010, 0.011], [0.0, 1e-7])),
+                  (2000, block_msg([0.005, 0.006], [0.0, 1e-7]))])])
     cases[p.name] = p
 
     p = out / 'bag_current_nan'
     raw_bag(p, [('/current', io.MULTIARRAY_TYPE,
-                  [(1000, block_msg([0.0, 0.001, 0.002], [0.0, np.nan, 1e-7]))])])
+                 [(1000, block_msg([0.0, 0.001, 0.002], [0.0, np.nan, 1e-7]))])])
     cases[p.name] = p
 
     p = out / 'bag_current_empty_topic'
@@ -218,15 +223,15 @@ def make_all(outdir: str | Path) -> dict[str, Path]:
 
     p = out / 'bag_deflection_wrong_label'
     raw_bag(p, [('/current', io.MULTIARRAY_TYPE, [(1000, block_msg([0.0, 0.001], [0.0, 1e-7]))]),
-                 ('/deflection_truth', io.MULTIARRAY_TYPE,
-                  [(1000, block_msg([0.0, 0.001], [0.0, 1e-7], label=io.CURRENT_LABEL))])])
+                ('/deflection_truth', io.MULTIARRAY_TYPE,
+                 [(1000, block_msg([0.0, 0.001], [0.0, 1e-7], label=io.CURRENT_LABEL))])])
     cases[p.name] = p
 
     p = out / 'bag_deflection_not_covering'  # truth starts late: would need extrapolation
     pts = [(int(round(t * 1e9)), point_msg(t, 1e-3)) for t in (0.0015, 0.0025, 0.0035)]
     raw_bag(p, [('/current', io.MULTIARRAY_TYPE,
-                  [(1000, block_msg([0.0, 0.001, 0.002, 0.003], [0.0, 1e-7, 2e-7, 3e-7]))]),
-                 ('/deflection_truth', io.POINT_STAMPED_TYPE, pts)])
+                 [(1000, block_msg([0.0, 0.001, 0.002, 0.003], [0.0, 1e-7, 2e-7, 3e-7]))]),
+                ('/deflection_truth', io.POINT_STAMPED_TYPE, pts)])
     cases[p.name] = p
     return cases
 

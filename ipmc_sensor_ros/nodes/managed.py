@@ -1,0 +1,230 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+Managed (lifecycle) variants of the nodes: ``ipmc_estimator_managed``, ``ipmc_simulator_managed``.
+
+Same names, parameters, topics and messages as ``ipmc_estimator`` / ``ipmc_simulator``; the
+construction steps of those classes (``_configure``, ``_open_io``, ``_close_io``) are run by
+the standard lifecycle transitions (``lifecycle_msgs`` services ``<node>/change_state``,
+``<node>/get_state``; ``ros2 lifecycle set /ipmc_estimator configure``):
+
+========================  ===================================================================
+state / transition        what the node does
+========================  ===================================================================
+unconfigured              parameters declared (same descriptors); nothing built, no topics;
+                          parameter changes are taken as they are and checked by configure
+configure                 builds the model and the filter from the parameters; on bad ones
+                          it logs one line naming the parameter and the reason and fails
+                          (back to unconfigured)
+inactive                  built, no topics; parameter changes validated and applied as in
+                          the plain node (two phases)
+activate                  creates the subscription, the (lifecycle) publishers, the timers
+                          and /diagnostics
+deactivate                publishes a last /diagnostics status "inactive" and destroys the
+                          topics and timers; the stream core (counters, filter state) stays
+cleanup / shutdown /      destroy the topics and release the model and the filter
+error processing
+========================  ===================================================================
+
+The simulator pauses on deactivate: on activate it continues with the next sample, its
+times shifted by the pause (a gap the estimator sees as one).  Signals and exit codes are
+those of :func:`~ipmc_sensor_ros.nodes.runner.run`.
+"""
+from __future__ import annotations
+
+import sys
+import threading
+from typing import Any
+
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+
+from . import params as P
+from .estimator_node import ESTIMATOR_SPECS, EstimatorNode
+from .runner import run
+from .simulator_node import SIMULATOR_SPECS, SimulatorNode
+
+__all__ = ['ManagedEstimatorNode', 'ManagedSimulatorNode', 'main_estimator', 'main_simulator']
+
+SUCCESS = TransitionCallbackReturn.SUCCESS
+FAILURE = TransitionCallbackReturn.FAILURE
+
+
+def _one_line(exc: BaseException) -> str:
+    text = ' '.join(str(exc).split())
+    text = text if len(text) <= 300 else text[:300] + '...'
+    return text if isinstance(exc, P.ParameterError) else f'{type(exc).__name__}: {text}'
+
+
+class ManagedMixin:
+    """
+    Lifecycle transitions over a node class's construction steps.
+
+    Put first in the bases, before the node class and :class:`rclpy.lifecycle.LifecycleNode`;
+    the class attributes name the specs, the default node name and the attributes that
+    hold what configure built (released by cleanup).
+    """
+
+    _SPECS: tuple = ()
+    _DEFAULT_NAME = ''
+    _BUILT: tuple[str, ...] = ()
+
+    def __init__(self, node_name: str | None = None, **kwargs: Any):
+        LifecycleNode.__init__(self, node_name or self._DEFAULT_NAME, **kwargs)
+        self._lock = threading.RLock()
+        self._configured = False
+        for name in self._BUILT:
+            setattr(self, name, None)
+        P.check_unknown_overrides(self, self._SPECS, kwargs.get('cli_args'),
+                                  default_name=self._DEFAULT_NAME)
+        P.declare(self, self._SPECS)
+        self.get_logger().info(
+            f'unconfigured (managed node): ros2 lifecycle set {self.get_fully_qualified_name()}'
+            ' configure, then activate')
+
+    @property
+    def configured(self) -> bool:
+        """Return True in the inactive and active states (model and filter built)."""
+        return self._configured
+
+    # -- transitions ------------------------------------------------------------------
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Build the model and the filter; FAILURE (one-line reason logged) on bad parameters."""
+        try:
+            self._configure()
+        except Exception as exc:  # any failure to build refuses the transition, never a crash
+            self._release()
+            self.get_logger().error(f'configure failed: {_one_line(exc)}')
+            return FAILURE
+        self._configured = True
+        self.get_logger().info('configured (inactive): ' + self._ready_text())
+        return SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Create the topics, timers and /diagnostics; FAILURE (reason logged) if they fail."""
+        try:
+            self._open_io()
+        except Exception as exc:  # e.g. an unknown qos_overrides.* parameter
+            self._close_io()
+            self.get_logger().error(f'activate failed: {_one_line(exc)}')
+            return FAILURE
+        self._on_activated()
+        super().on_activate(state)        # enables the lifecycle publishers
+        self.get_logger().info('active')
+        return SUCCESS
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Say "inactive" on /diagnostics, then destroy the topics and timers."""
+        super().on_deactivate(state)
+        diagnostics = getattr(self, '_diagnostics', None)
+        if diagnostics is not None:
+            diagnostics.announce('inactive (lifecycle): no input taken, nothing published')
+        self._on_deactivated()
+        self._close_io()
+        self.get_logger().info('inactive')
+        return SUCCESS
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Release the model and the filter (back to unconfigured)."""
+        self._close_io()
+        self._release()
+        self.get_logger().info('cleaned up (unconfigured)')
+        return SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Release everything (finalized)."""
+        return self.on_cleanup(state)
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Release everything; SUCCESS takes the node back to unconfigured."""
+        return self.on_cleanup(state)
+
+    # -- helpers ----------------------------------------------------------------------
+    def _release(self) -> None:
+        with self._lock:
+            self._configured = False
+            for name in self._BUILT:
+                setattr(self, name, None)
+
+    def _on_activated(self) -> None:
+        """Run after the topics are open (subclass hook)."""
+
+    def _on_deactivated(self) -> None:
+        """Run before the topics are closed (subclass hook)."""
+
+    def destroy_publisher(self, publisher) -> bool:
+        """Destroy a publisher, lifecycle or not (it leaves the managed entities)."""
+        self._managed_entities.discard(publisher)
+        return super().destroy_publisher(publisher)
+
+    def destroy_node(self) -> None:
+        """Release the topics and the model, then destroy the node."""
+        self._close_io()
+        self._release()
+        super().destroy_node()
+
+
+class ManagedEstimatorNode(ManagedMixin, EstimatorNode, LifecycleNode):
+    """The estimator node (:class:`EstimatorNode`) as a managed node (module docstring)."""
+
+    _SPECS = ESTIMATOR_SPECS
+    _DEFAULT_NAME = 'ipmc_estimator'
+    _BUILT = ('_stream', '_reduced', '_model_key', '_pending')
+
+    def __init__(self, node_name: str = 'ipmc_estimator', **kwargs: Any):
+        super().__init__(node_name, **kwargs)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.add_post_set_parameters_callback(self._on_parameters_set)
+
+    def _on_set_parameters(self, parameters) -> SetParametersResult:
+        """Unconfigured: accept (configure checks); else the plain node's validation."""
+        if not self._configured:
+            return SetParametersResult(successful=True)
+        return super()._on_set_parameters(parameters)
+
+    def _on_parameters_set(self, parameters) -> None:
+        if self._configured:
+            super()._on_parameters_set(parameters)
+
+
+class ManagedSimulatorNode(ManagedMixin, SimulatorNode, LifecycleNode):
+    """The simulator node (:class:`SimulatorNode`) as a managed node (module docstring)."""
+
+    _SPECS = SIMULATOR_SPECS
+    _DEFAULT_NAME = 'ipmc_simulator'
+    _BUILT = ('_sim', '_model', '_stimulus')
+
+    def __init__(self, node_name: str = 'ipmc_simulator', **kwargs: Any):
+        self._paused_ns: int | None = None
+        super().__init__(node_name, **kwargs)
+
+    def counters(self) -> dict[str, Any]:
+        """As :meth:`SimulatorNode.counters`; zeros when unconfigured."""
+        if not self._configured:
+            return {'samples_published': 0, 'blocks_published': 0, 'done': False}
+        return super().counters()
+
+    def _on_deactivated(self) -> None:
+        self._paused_ns = self.get_clock().now().nanoseconds
+
+    def _on_activated(self) -> None:
+        if self._paused_ns is not None and self._t_start_ns is not None:
+            self._t_start_ns += self.get_clock().now().nanoseconds - self._paused_ns
+        self._paused_ns = None
+
+    def _configure(self) -> None:
+        self._paused_ns = None
+        super()._configure()
+
+
+def main_estimator(args=None) -> int:
+    """Entry point of ``ros2 run ipmc_sensor_ros ipmc_estimator_managed``."""
+    return run(ManagedEstimatorNode, 'ipmc_estimator_managed', args)
+
+
+def main_simulator(args=None) -> int:
+    """Entry point of ``ros2 run ipmc_sensor_ros ipmc_simulator_managed``."""
+    return run(ManagedSimulatorNode, 'ipmc_simulator_managed', args)
+
+
+if __name__ == '__main__':
+    sys.exit(main_estimator())

@@ -1,0 +1,387 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+Managed nodes (``ipmc_estimator_managed``, ``ipmc_simulator_managed``) via lifecycle services.
+
+The transitions are requested as a ROS user does, with the ``lifecycle_msgs`` services
+``/<node>/change_state`` and ``/<node>/get_state`` called from a separate client node:
+in-process (one context on the run's domain, ``conftest.TEST_DOMAIN``) and once with the
+real executable in a child process (domain 150-200).  Nothing asserts on timing: waits poll
+a condition with a generous timeout.
+"""
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState, GetState
+from rcl_interfaces.srv import SetParameters
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from std_msgs.msg import Float64MultiArray
+
+from conftest import TEST_DOMAIN, DirectNode
+from ipmc_sensor_ros.nodes import params as P
+from ipmc_sensor_ros.nodes.managed import ManagedEstimatorNode, ManagedSimulatorNode
+from ipmc_sensor_ros.nodes.messages import (CURRENT_COLUMNS, ESTIMATE_COLUMNS, pack_block,
+                                            unpack_block)
+from ipmc_sensor_ros.physics.model import SensorModel
+from ipmc_sensor_ros.physics.parameters import Geometry
+from ipmc_sensor_ros.simulation.sensor import SensorSimulator
+from ipmc_sensor_ros.simulation.stimuli import CrankSlider
+
+pytestmark = pytest.mark.ros
+
+ROOT = Path(__file__).resolve().parents[1]
+FS = 1000.0
+TIMEOUT_S = 30.0
+QOS = P.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'})
+
+
+def crank_messages(seconds: float, t0: float = 1000.0, block: int = 100) -> list:
+    """
+    Return the current blocks of the default sensor (node defaults).
+
+    The sensor is driven by a 5 Hz crank-slider.
+    """
+    model = SensorModel.named('h2', Geometry(0.022, 0.007, 0.00036))
+    k = np.arange(int(round(seconds * FS)))
+    _, i = SensorSimulator(model, FS).run(CrankSlider(5.0), k / FS)
+    t = t0 + k / FS
+    return [pack_block(t[a:a + block], i[a:a + block]) for a in range(0, k.size, block)]
+
+
+class Client:
+    """A tester node: lifecycle service clients, a ``current`` publisher, output recorders."""
+
+    def __init__(self, ctx, managed, target: str, record_current: bool = False):
+        self.node = rclpy.create_node('lifecycle_tester', context=ctx)
+        self.ex = SingleThreadedExecutor(context=ctx)
+        self.ex.add_node(self.node)
+        if managed is not None:
+            self.ex.add_node(managed)
+        self.change = self.node.create_client(ChangeState, f'{target}/change_state')
+        self.get = self.node.create_client(GetState, f'{target}/get_state')
+        self.pub = self.node.create_publisher(Float64MultiArray, 'current', QOS)
+        self.blocks: list = []
+        self.currents: list = []
+        self.diagnostics: list[DiagnosticArray] = []
+        self.node.create_subscription(
+            Float64MultiArray, 'deflection/block',
+            lambda m: self.blocks.append(unpack_block(m, ESTIMATE_COLUMNS)), QOS)
+        if record_current:
+            self.node.create_subscription(
+                Float64MultiArray, 'current',
+                lambda m: self.currents.append(unpack_block(m, CURRENT_COLUMNS)), QOS)
+        self.node.create_subscription(DiagnosticArray, '/diagnostics',
+                                      self.diagnostics.append, 10)
+
+    def spin_until(self, predicate, what: str, timeout: float = TIMEOUT_S, check=None) -> None:
+        end = time.monotonic() + timeout
+        while not predicate():
+            if check is not None:
+                check()
+            assert time.monotonic() < end, f'timed out waiting for {what}'
+            self.ex.spin_once(timeout_sec=0.05)
+
+    def spin_for(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.ex.spin_once(timeout_sec=0.05)
+
+    def _call(self, client, request):
+        self.spin_until(lambda: client.service_is_ready(), f'service {client.srv_name}')
+        future = client.call_async(request)
+        self.spin_until(future.done, f'the answer of {client.srv_name}')
+        return future.result()
+
+    def transition(self, transition_id: int) -> bool:
+        request = ChangeState.Request()
+        request.transition.id = transition_id
+        return self._call(self.change, request).success
+
+    def state(self) -> str:
+        return self._call(self.get, GetState.Request()).current_state.label
+
+    def publishers(self, topic: str) -> int:
+        return len(self.node.get_publishers_info_by_topic(topic))
+
+    def estimates(self) -> np.ndarray:
+        return np.concatenate([b.values for b in self.blocks]) if self.blocks else np.empty(0)
+
+    def close(self) -> None:
+        self.ex.shutdown()
+        self.node.destroy_node()
+
+
+def plain_estimates(messages) -> np.ndarray:
+    """Return what the plain ``ipmc_estimator`` publishes for ``messages`` (default parameters)."""
+    direct = DirectNode()
+    try:
+        for msg in messages:
+            direct.send(msg)
+        return np.concatenate([b.values for b in direct.published])
+    finally:
+        direct.close()
+
+
+@pytest.fixture
+def managed_estimator():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=TEST_DOMAIN)
+    made = []
+
+    def make(**overrides):
+        params = [Parameter(k, value=v) for k, v in overrides.items()]
+        node = ManagedEstimatorNode(context=ctx, parameter_overrides=params)
+        client = Client(ctx, node, '/ipmc_estimator')
+        made.append((client, node))
+        return client, node
+
+    yield make
+    for client, node in made:
+        client.close()
+        node.destroy_node()
+    rclpy.shutdown(context=ctx)
+
+
+def _send_all(client, node, messages) -> None:
+    """Publish ``messages`` one by one; return once the node took each and its output arrived."""
+    client.spin_until(lambda: client.pub.get_subscription_count() > 0, 'the subscription')
+    for msg in messages:
+        n_in = node.counters()['messages_in']
+        client.pub.publish(msg)
+        client.spin_until(lambda: node.counters()['messages_in'] == n_in + 1, 'the input')
+    client.spin_until(lambda: client.estimates().size == node.counters()['samples_out'],
+                      'the estimates')
+
+
+def test_lifecycle_opens_and_closes_the_topics_and_estimates_as_the_plain_node(
+        managed_estimator):
+    messages = crank_messages(1.0)
+    plain = plain_estimates(messages)     # before: DirectNode is an ipmc_estimator too
+    client, node = managed_estimator()
+    assert client.state() == 'unconfigured'
+    # The node is discovered (its lifecycle transition_event publisher is seen) but has
+    # neither output publisher nor input subscription.
+    client.spin_until(lambda: client.publishers('/ipmc_estimator/transition_event') == 1,
+                      'the lifecycle node')
+    assert client.publishers('/deflection') == 0 and client.publishers('/deflection/block') == 0
+    assert client.pub.get_subscription_count() == 0
+
+    assert client.transition(Transition.TRANSITION_CONFIGURE)
+    assert client.state() == 'inactive' and node.configured
+    client.spin_for(0.3)
+    assert client.publishers('/deflection') == 0 and client.pub.get_subscription_count() == 0
+
+    assert client.transition(Transition.TRANSITION_ACTIVATE)
+    assert client.state() == 'active'
+    client.spin_until(lambda: client.publishers('/deflection') == 1
+                      and client.publishers('/deflection/block') == 1, 'the output publishers')
+    _send_all(client, node, messages)
+    # Same parameters, same core, same messages: the managed node's estimates are the plain
+    # node's bit for bit (no tolerance needed: the arithmetic is the same sequence).
+    assert plain.size == 1000
+    np.testing.assert_array_equal(client.estimates(), plain)
+
+    assert client.transition(Transition.TRANSITION_DEACTIVATE)
+    assert client.state() == 'inactive'
+    client.spin_until(lambda: client.publishers('/deflection') == 0
+                      and client.publishers('/deflection/block') == 0
+                      and client.pub.get_subscription_count() == 0, 'the topics to close')
+    client.spin_until(lambda: any('inactive' in s.message for d in client.diagnostics
+                                  for s in d.status if 'ipmc_estimator' in s.name),
+                      'the "inactive" /diagnostics status')
+    counted = node.counters()
+    n_blocks = len(client.blocks)
+    for msg in crank_messages(0.3, t0=1001.0):
+        client.pub.publish(msg)
+    client.spin_for(0.5)
+    assert node.counters() == counted and len(client.blocks) == n_blocks   # nothing taken
+
+    # cleanup releases the filter; configure -> activate builds it again and data flows.
+    assert client.transition(Transition.TRANSITION_CLEANUP)
+    assert client.state() == 'unconfigured' and not node.configured and node._stream is None
+    assert client.transition(Transition.TRANSITION_CONFIGURE)
+    assert client.transition(Transition.TRANSITION_ACTIVATE)
+    client.blocks.clear()
+    _send_all(client, node, messages)
+    np.testing.assert_array_equal(client.estimates(), plain)   # fresh filter, same input
+
+    assert client.transition(Transition.TRANSITION_ACTIVE_SHUTDOWN)
+    assert client.state() == 'finalized'
+    client.spin_until(lambda: client.publishers('/deflection/block') == 0, 'the release')
+
+
+def test_configure_with_a_bad_parameter_fails_naming_it_and_stays_unconfigured(
+        managed_estimator, capfd):
+    client, node = managed_estimator(band_low_hz=80.0)
+    assert client.state() == 'unconfigured'    # a managed node builds nothing at start-up
+    assert not client.transition(Transition.TRANSITION_CONFIGURE)
+    assert client.state() == 'unconfigured' and not node.configured
+    client.spin_for(0.2)
+    err = capfd.readouterr().err
+    failures = [line for line in err.splitlines() if 'configure failed' in line]
+    assert len(failures) == 1 and 'band_low_hz' in failures[0], err
+    assert 'Traceback' not in err
+    assert client.publishers('/deflection') == 0
+
+    # unconfigured: changes are taken (configure checks them); then configure succeeds
+    assert node.set_parameters([Parameter('band_low_hz', value=0.1)])[0].successful
+    assert client.transition(Transition.TRANSITION_CONFIGURE)
+    assert client.state() == 'inactive'
+    # configured: the plain node's two-phase validation refuses a bad change with the reason
+    result = node.set_parameters([Parameter('youngs_modulus_pa', value=-5.0)])[0]
+    assert not result.successful and 'youngs_modulus_pa' in result.reason
+    before = node.estimator
+    assert node.set_parameters([Parameter('leak_corner_hz', value=0.02)])[0].successful
+    assert node.estimator is not before and node.estimator.leak_corner_hz == 0.02
+    assert client.transition(Transition.TRANSITION_ACTIVATE)
+    # an active node takes a valid change too and keeps estimating
+    assert node.set_parameters([Parameter('leak_corner_hz', value=0.03)])[0].successful
+    _send_all(client, node, crank_messages(0.2))
+    assert client.estimates().size == 200
+
+
+def test_managed_simulator_pauses_on_deactivate_and_resumes_after_a_gap():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=TEST_DOMAIN)
+    node = ManagedSimulatorNode(context=ctx, parameter_overrides=[
+        Parameter('realtime_factor', value=1.0), Parameter('block_size', value=10)])
+    client = Client(ctx, node, '/ipmc_simulator', record_current=True)
+    try:
+        client.spin_until(lambda: client.publishers('/ipmc_simulator/transition_event') == 1,
+                          'the lifecycle node')
+        assert client.publishers('/current') == 1       # the tester's own publisher only
+        assert client.transition(Transition.TRANSITION_CONFIGURE)
+        assert client.publishers('/current') == 1
+        assert client.transition(Transition.TRANSITION_ACTIVATE)
+        client.spin_until(lambda: len(client.currents) >= 20, '20 blocks')
+        assert client.transition(Transition.TRANSITION_DEACTIVATE)
+        client.spin_until(lambda: client.publishers('/current') == 1, 'the publisher to close')
+        n = len(client.currents)
+        published = node.counters()['samples_published']
+        client.spin_for(0.5)
+        assert len(client.currents) == n and node.counters()['samples_published'] == published
+        pause_s = 0.5
+        assert client.transition(Transition.TRANSITION_ACTIVATE)
+        client.spin_until(lambda: len(client.currents) >= n + 5, 'the resumed stream')
+        assert client.transition(Transition.TRANSITION_DEACTIVATE)
+        # the samples are contiguous: the simulated sensor was paused, not skipped
+        client.spin_until(lambda: sum(len(b) for b in client.currents)
+                          == node.counters()['samples_published'], 'every published sample')
+        t = np.concatenate([b.times_s for b in client.currents])
+        steps = np.diff(t)
+        # one gap of at least the pause, every other step one sample period (float time
+        # stamps: 1e-9 s relative tolerance of ~1e3 s values)
+        big = np.flatnonzero(steps > 1.5 / FS)
+        assert big.size == 1 and steps[big[0]] >= pause_s, steps[big]
+        np.testing.assert_allclose(np.delete(steps, big), 1 / FS, atol=1e-6)
+        assert client.transition(Transition.TRANSITION_CLEANUP)
+        assert client.state() == 'unconfigured' and node._sim is None
+    finally:
+        client.close()
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
+
+
+def test_managed_executable_over_dds_and_sigint_exits_zero(tmp_path, monkeypatch):
+    domain = random.randint(150, 200)
+    env = dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(domain),
+               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_LOG_DIR=str(tmp_path))
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    log = tmp_path / 'estimator.log'
+    messages = crank_messages(0.5)
+    plain = plain_estimates(messages)
+    proc = subprocess.Popen(
+        [sys.executable, '-c', 'import sys; from ipmc_sensor_ros.nodes.managed import '
+         'main_estimator; sys.exit(main_estimator())', '--ros-args',
+         '-r', '__ns:=/rig', '-p', 'band_low_hz:=80.0'],
+        env=env, stdout=log.open('w'), stderr=subprocess.STDOUT)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    client = Client(ctx, None, '/rig/ipmc_estimator')
+    rig = rclpy.create_node('rig_tester', namespace='/rig', context=ctx)
+    client.ex.add_node(rig)
+    blocks: list = []
+    rig.create_subscription(Float64MultiArray, 'deflection/block',
+                            lambda m: blocks.append(unpack_block(m, ESTIMATE_COLUMNS)), QOS)
+    pub = rig.create_publisher(Float64MultiArray, 'current', QOS)
+
+    def alive():
+        assert proc.poll() is None, f'the node exited early:\n{log.read_text()}'
+
+    try:
+        client.spin_until(lambda: client.change.service_is_ready(), 'the lifecycle services',
+                          check=alive)
+        client.spin_until(lambda: client.publishers('/rig/ipmc_estimator/transition_event')
+                          == 1, 'the node', check=alive)
+        assert client.state() == 'unconfigured'
+        assert client.publishers('/rig/deflection') == 0
+        assert not client.transition(Transition.TRANSITION_CONFIGURE)    # bad band_low_hz
+        assert client.state() == 'unconfigured'
+        param = rig.create_client(SetParameters, '/rig/ipmc_estimator/set_parameters')
+        request = SetParameters.Request(
+            parameters=[Parameter('band_low_hz', value=0.1).to_parameter_msg()])
+        assert client._call(param, request).results[0].successful
+        assert client.transition(Transition.TRANSITION_CONFIGURE)
+        assert client.publishers('/rig/deflection') == 0
+        assert client.transition(Transition.TRANSITION_ACTIVATE)
+        client.spin_until(lambda: pub.get_subscription_count() == 1, 'the subscription',
+                          check=alive)
+        for msg in messages:
+            pub.publish(msg)
+        client.spin_until(lambda: sum(len(b) for b in blocks) == 500, 'the estimates',
+                          check=alive)
+        # Reliable, depth 1000: every sample arrives; same as the plain node bit for bit.
+        np.testing.assert_array_equal(np.concatenate([b.values for b in blocks]),
+                                      plain)
+        assert client.transition(Transition.TRANSITION_DEACTIVATE)
+        client.spin_until(lambda: client.publishers('/rig/deflection/block') == 0,
+                          'the publisher to close', check=alive)
+    finally:
+        client.close()
+        rig.destroy_node()
+        rclpy.shutdown(context=ctx)
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+        code = proc.wait(timeout=30)
+    text = log.read_text()
+    assert code == 0, text
+    assert 'Traceback' not in text
+    assert text.count('configure failed') == 1 and 'band_low_hz' in text
+
+
+@pytest.mark.parametrize('entry', ['main_simulator', 'main_estimator'])
+def test_sigterm_on_the_first_line_exits_zero_without_traceback(entry, tmp_path):
+    env = dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(random.randint(150, 200)),
+               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_LOG_DIR=str(tmp_path))
+    proc = subprocess.Popen(
+        [sys.executable, '-c', f'import sys; from ipmc_sensor_ros.nodes.managed import {entry}; '
+         f'sys.exit({entry}())'],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, text=True)
+    lines = []
+    for line in proc.stdout:
+        lines.append(line)
+        if 'unconfigured' in line:
+            break
+    proc.send_signal(signal.SIGTERM)            # on the first line: the racy moment
+    try:
+        out, _ = proc.communicate(timeout=20.0)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, _ = proc.communicate()
+        pytest.fail('no exit within 20 s of SIGTERM:\n' + ''.join(lines) + out)
+    text = ''.join(lines) + out
+    assert 'unconfigured' in text
+    assert proc.returncode == 0, text
+    assert 'Traceback' not in text and 'Error' not in text, text
