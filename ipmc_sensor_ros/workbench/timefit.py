@@ -125,6 +125,8 @@ def predict(p: PreparedRecord, model: SensorModel, cache: dict | None = None,
     transforms it is computed there directly (:func:`_rows_from_spectrum`, exact), not
     by a full inverse FFT.
     """
+    if rows is not None and rows.size == 0:
+        return np.zeros(0)              # a record wholly in a held-out part
     if rows is not None and model.compiled.input_transforms:
         return predict(p, model, cache)[rows]
     if rows is not None:
