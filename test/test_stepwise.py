@@ -205,3 +205,30 @@ def test_effect_given_without_values_is_fitted_in_the_baseline():
     assert diag.missing_effects == [] and diag.explained, diag.summary()
     # 1 % noise pins a 25 Hz corner to well under 5 % (its phase lag at 20 Hz is 0.7 rad)
     assert diag.baseline.params['amplifier_bandwidth.corner_hz'] == pytest.approx(25.0, rel=0.05)
+
+
+def _study_cases():
+    from bench.seed_study import LOOKALIKE, PAIRS, TRIPLES
+
+    return ([('null', (), 20)] + [('pairs', h, 10) for h in PAIRS]
+            + [('triples', h, 10) for h in TRIPLES] + [('lookalike', h, 10) for h in LOOKALIKE])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('group,hidden,n_seeds', _study_cases())
+def test_seed_study_hit_rate(group, hidden, n_seeds):
+    """
+    Issue 15 targets on the full campaign (16 records, 1 % noise), 10 seeds per combination.
+
+    Nothing missing: nothing named in 20/20; otherwise the target (right set within 1.2x the
+    floor, or for look-alikes the true one or a tie) in >= 9 of 10 seeds.  Minutes per
+    combination: run with ``-m slow`` (``bench/seed_study.py`` writes the same as a table).
+    """
+    from bench.seed_study import judge
+
+    ok = []
+    for seed in range(n_seeds):
+        recs, _ = hidden_effects_campaign(hidden, seed)
+        ok.append(judge(group, hidden, diagnose(recs)))
+    need = n_seeds if group == 'null' else n_seeds - 1
+    assert sum(ok) >= need, (group, hidden, ok)

@@ -68,6 +68,7 @@ class PreparedRecord:
     pad: int
     x_bins: np.ndarray = None   # FFT of x_pad at ``bins``
     grid_hz: np.ndarray = None  # interpolation grid of the transfer function
+    fold: np.ndarray = None     # per-bin weight and shift to p.rows[0] (_rows_from_spectrum)
 
 
 def prepare(records: Sequence[Record], *, settle_s: float = 0.5, max_rows_per_record: int = 1500,
@@ -112,16 +113,27 @@ def prepare(records: Sequence[Record], *, settle_s: float = 0.5, max_rows_per_re
     return out
 
 
-def predict(p: PreparedRecord, model: SensorModel, cache: dict | None = None) -> np.ndarray:
+def predict(p: PreparedRecord, model: SensorModel, cache: dict | None = None,
+            rows: np.ndarray | None = None) -> np.ndarray:
     """
-    Predicted current of a prepared record under ``model``.
+    Predict the current of a prepared record under ``model``.
 
-    The same operations as
-    :func:`~ipmc_sensor_ros.simulation.sensor.predict_current`, on the kept bins.
-
-    ``cache`` (a dict shared across the records of one evaluation) reuses the
-    transfer function between records of the same sample and FFT grid.
+    The same operations as :func:`~ipmc_sensor_ros.simulation.sensor.predict_current`,
+    on the kept bins.  ``cache`` (a dict shared across the records of one evaluation) reuses the
+    transfer function between records of the same sample and FFT grid.  ``rows``
+    (a subset of ``p.rows``): return the current at these samples only; without input
+    transforms it is computed there directly (:func:`_rows_from_spectrum`, exact), not
+    by a full inverse FFT.
     """
+    if rows is not None and rows.size == 0:
+        return np.zeros(0)              # a record wholly in a held-out part
+    if rows is not None and model.compiled.input_transforms:
+        return predict(p, model, cache)[rows]
+    if rows is not None:
+        def rows_response(m: SensorModel, w: np.ndarray) -> np.ndarray:
+            return _rows_from_spectrum(p, p.x_bins * _transfer_on_bins(p, m, cache), rows)
+
+        return model.compiled.predict(p.t[rows] - p.t[0], p.w[rows], rows_response)
     spec = np.zeros(p.n_fft // 2 + 1, dtype=complex)
 
     def linear_response(m: SensorModel, w: np.ndarray) -> np.ndarray:
@@ -151,6 +163,31 @@ def _interpolated_transfer(p: PreparedRecord, model: SensorModel) -> np.ndarray:
     mag = np.interp(lf, lg, np.log(np.abs(hg)))
     phase = np.interp(lf, lg, np.unwrap(np.angle(hg)))
     return np.exp(mag + 1j * (phase - 2 * np.pi * p.freqs * model.delay_s()))
+
+
+def _rows_from_spectrum(p: PreparedRecord, y_bins: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """
+    Return ``irfft(y)[rows]`` without the full inverse FFT.
+
+    Rows lie on the progression ``p.rows[0] + j g`` (g = the largest power of two dividing
+    both the row step and ``n_fft``): the spectrum, shifted to start at ``p.rows[0]``, is
+    folded (aliased) onto ``n_fft / g`` bins, whose inverse FFT is exactly the g-decimated
+    sequence (DFT decimation identity); g-fold fewer FFT points.
+    """
+    n, k0 = p.n_fft, int(p.rows[0])
+    step = int(p.rows[1] - p.rows[0]) if p.rows.size > 1 else 1
+    g = 1
+    while step % (2 * g) == 0 and n % (2 * g) == 0:
+        g *= 2
+    if p.fold is None:
+        k = p.bins
+        weight = np.where(k == n // 2, 1.0, 2.0)          # rfft half: conjugate pairs count twice
+        p.fold = weight * np.exp(2j * np.pi * k * k0 / n)
+    m_len = n // g
+    z = np.zeros(-(-(n // 2 + 1) // m_len) * m_len, dtype=complex)
+    z[p.bins] = y_bins * p.fold
+    seq = np.fft.ifft(z.reshape(-1, m_len).sum(axis=0)).real * (m_len / n)
+    return seq[(rows - k0) // g]
 
 
 def _repad(p: PreparedRecord, w: np.ndarray) -> np.ndarray:
@@ -193,8 +230,12 @@ def _apply(models: Sequence[SensorModel], material_names, effect_keys, x, base_m
     for (eff_name, par_name), v, log in zip(effect_keys, x[len(material_names):],
                                             [_param(e, p).log_scale for e, p in effect_keys]):
         ev.setdefault(eff_name, {})[par_name] = float(np.exp(v)) if log else float(v)
-    out = []
+    out, built = [], {}
     for m in models:
+        # records of one sample share their base model: build (and compile) it once
+        if m in built:
+            out.append(built[m])
+            continue
         mat = m.material.replace(**mat_changes) if mat_changes else m.material
         effects = []
         for spec in m.effects:
@@ -204,7 +245,8 @@ def _apply(models: Sequence[SensorModel], material_names, effect_keys, x, base_m
                 effects.append(EffectSpec(spec.name, tuple(sorted(vals.items()))))
             else:
                 effects.append(spec)
-        out.append(SensorModel(m.geometry, mat, tuple(effects)))
+        built[m] = SensorModel(m.geometry, mat, tuple(effects))
+        out.append(built[m])
     return out, ev
 
 
@@ -261,7 +303,7 @@ def fit_model(
             ms, _ = _apply(models, mat_names, eff_keys, x, base)
             cache: dict = {}
             parts = [
-                (p.y[r] - predict(p, m, cache)[r]) / p.sigma for p, m, r in zip(prepared, ms, rows)
+                (p.y[r] - predict(p, m, cache, r)) / p.sigma for p, m, r in zip(prepared, ms, rows)
             ]
         except (ParameterError, ValueError, FloatingPointError):
             return np.full(n_rows, 1e3)
