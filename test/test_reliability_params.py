@@ -82,3 +82,36 @@ def test_filter_only_change_is_applied_at_once(nodes):
     assert d.node.set_parameters([Parameter('leak_corner_hz', value=0.02)])[0].successful
     assert d.node._builder is None and d.node.rebuilds == 1
     assert d.node.stream.estimator.inverse.leak_corner_hz == 0.02
+
+
+def test_changes_faster_than_a_build_still_land(nodes, monkeypatch):
+    # a peer that changes a model parameter more often than a build takes must not starve
+    # every rebuild: each finished build is swapped in, then the newest values are built
+    import threading
+    import time
+
+    from ipmc_sensor_ros.nodes import estimator_node as E
+
+    direct = nodes()
+    node = direct.node
+    real_build = node._build
+    slow = threading.Event()
+
+    def slow_build(values, validate=False):
+        if not validate:
+            slow.set()
+            time.sleep(0.5)     # a build 2.5x longer than the 0.2 s between changes below
+        return real_build(values, validate)
+
+    monkeypatch.setattr(node, '_build', slow_build)
+    lengths = [0.030 + 0.0005 * k for k in range(12)]
+    for length in lengths:      # 12 changes over 2.4 s: never 0.5 s without a change
+        assert node.set_parameters([Parameter('length_m', value=length)])[0].successful
+        time.sleep(0.2)
+        with node._lock:
+            if node._rebuilt is not None:
+                node._apply_rebuilt()
+    assert slow.is_set() and node.rebuilds >= 2, node.rebuilds   # builds landed meanwhile
+    node.settle()
+    assert node._built_values['length_m'] == lengths[-1]
+    assert E.REBUILD_QUIET_S < 0.2      # the premise of the timing above

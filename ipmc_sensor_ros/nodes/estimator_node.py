@@ -436,12 +436,16 @@ class EstimatorNode(Node):
             except Exception as exc:  # noqa: B902 - reverted below, never fatal
                 new, error = None, exc
             with self._lock:
-                if self._wanted is not None:
-                    continue                   # superseded while building
                 if new is not None:
+                    # swapped in even when newer values arrived meanwhile: a peer changing
+                    # parameters faster than a build takes must not starve every rebuild
                     self._rebuilt = (seen, new)
+                    if self._wanted is not None:
+                        continue               # then build the newer values
                     self._builder = None
                     return
+                if self._wanted is not None:
+                    continue                   # a failed build superseded by newer values
                 self._builder = None
                 old = self._built_values
                 self._rebuilt = None
