@@ -173,20 +173,30 @@ def estimate_accuracy(time_s, estimate_m, measured_m, leak_corner_hz: float,
     estimate of a model with a time delay lags by it).
     Returns (nrmse, seconds used, which part was used).
     """
-    from scipy.signal import detrend
+    from ..workbench.metrics import detrended_nrmse
 
     t = np.asarray(time_s, float)
-    truth = np.interp(t - delay_s, t, np.asarray(measured_m, float)) if delay_s else measured_m
     transient = 5.0 / (2 * np.pi * leak_corner_hz)
     sel = t >= t[0] + transient + delay_s
-    if sel.sum() >= 10:
+    if np.count_nonzero(sel) >= 10:
         what = f'after the {fmt_time_s(transient)} s leak transient'
     else:
         sel = t >= t[0] + delay_s
         what = 'whole record'
-    e, m = detrend(np.asarray(estimate_m, float)[sel]), detrend(np.asarray(truth, float)[sel])
-    err = float(np.sqrt(np.mean((e - m) ** 2) / np.mean(m ** 2)))
-    return err, float(t[sel][-1] - t[sel][0]), what
+    # increasing times (any record read from a file): the part used is a slice, so only
+    # views are taken; the metric runs on bounded pieces (memory independent of the record)
+    n_sel = int(np.count_nonzero(sel))
+    first = int(np.argmax(sel))
+    if sel[first:first + n_sel].all():
+        sel = slice(first, first + n_sel)
+    t_sel = t[sel]
+    estimate = np.asarray(estimate_m, float)[sel]
+    if delay_s:      # the measurement delayed by delay_s, at the used times only
+        truth = np.interp(t_sel - delay_s, t, np.asarray(measured_m, float))
+    else:
+        truth = np.asarray(measured_m, float)[sel]
+    err = detrended_nrmse(estimate, truth)
+    return err, float(t_sel[-1] - t_sel[0]), what
 
 
 #: Rows formatted at a time when writing an ipmc-estimate/1 file.
@@ -280,7 +290,9 @@ def _cmd_estimate(args) -> int:
             say(f'{src}: {int((~stream.kept).sum())} sample(s) rejected by the stream rules '
                 f'(no estimate written for them): {stream.last_rejection}')
             current = current[stream.kept]
-        measured = None if data.deflection_m is None else data.deflection_m[stream.kept]
+        measured = data.deflection_m
+        if measured is not None and not stream.kept.all():
+            measured = measured[stream.kept]
         stem = Path(src).name.removesuffix('.csv').removesuffix('.txt')
         if args.format == 'bag':
             out = out_dir / f'{stem}_estimate'

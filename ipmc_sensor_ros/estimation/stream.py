@@ -366,19 +366,24 @@ class StreamEstimator:
         i = np.asarray(current_a, float)
         kept = np.zeros(t.size, dtype=bool)
         cuts = list(np.flatnonzero(~(np.diff(t) > 0.0)) + 1) + [t.size]
-        out_t, out_w, start = [], [], 0
+        # estimates go straight into record-length arrays (a list of per-block arrays
+        # joined at the end held them twice)
+        out_t, out_w = np.empty(t.size), np.empty(t.size)
+        n_out, start = 0, 0
         for stop in cuts:
             for k in range(start, stop, block_samples):
                 end = min(k + block_samples, stop)
                 res = self.feed(t[k:end], i[k:end])
                 if res is not None:
-                    out_t.append(res[0])
-                    out_w.append(res[1])
+                    m = res[0].size
+                    out_t[n_out:n_out + m] = res[0]
+                    out_w[n_out:n_out + m] = res[1]
+                    n_out += m
                     kept[k:end] = True
             start = stop
-        if not out_t:
+        if n_out == 0:
             return np.zeros(0), np.zeros(0), kept
-        return np.concatenate(out_t), np.concatenate(out_w), kept
+        return out_t[:n_out], out_w[:n_out], kept
 
 
 def estimate_record(estimator: DeflectionEstimator, time_s, current_a, *, max_gap_s: float = 0.1,

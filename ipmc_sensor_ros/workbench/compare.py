@@ -38,6 +38,7 @@ import numpy as np
 from ..physics.model import SensorModel
 from ..simulation.sensor import lti_response_fft
 from .adequacy import magnitude_flags
+from .blas import single_threaded_blas
 from .freqresp import FrequencyPoint, fundamental_response
 from .metrics import fit_percent, noise_rms
 
@@ -47,9 +48,45 @@ FREQUENCY_BANDS_HZ = ((0.0, 2.0), (2.0, 5.0), (5.0, 10.0), (10.0, 20.0), (20.0, 
 _BOUND99 = 2.576
 
 
+#: Samples per piece when the velocity is differentiated piecewise (:func:`_gradient`).
+GRADIENT_CHUNK = 65_536
+
+
+def _gradient(w: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """
+    ``np.gradient(w, t)`` (edge order 1) computed in pieces of ``GRADIENT_CHUNK`` samples.
+
+    The same arithmetic, hence the same numbers: second-order central differences on
+    the non-uniform grid inside, one-sided differences at the two ends, and numpy's
+    uniform-grid form when every step equals the first (decided on the whole record,
+    as np.gradient does); without np.gradient's record-length temporaries (~60 B per
+    sample).
+    """
+    n = w.size
+    d0 = t[1] - t[0]
+    pieces = [(a, min(a + GRADIENT_CHUNK, n)) for a in range(0, n, GRADIENT_CHUNK)]
+    uniform = all(bool(np.all(np.diff(t[a:b + 1]) == d0)) for a, b in pieces)
+    out = np.empty(n)
+    out[0] = (w[1] - w[0]) / d0
+    out[-1] = (w[-1] - w[-2]) / (d0 if uniform else t[-1] - t[-2])
+    for a, b in pieces:
+        lo, hi = max(a, 1) - 1, min(b, n - 1) + 1    # interior points a..b-1 and neighbours
+        if hi - lo < 3:
+            continue
+        f = w[lo:hi]
+        if uniform:
+            out[lo + 1:hi - 1] = (f[2:] - f[:-2]) / (2. * d0)
+        else:
+            dx = np.diff(t[lo:hi])
+            dx1, dx2 = dx[:-1], dx[1:]
+            out[lo + 1:hi - 1] = (-(dx2) / (dx1 * (dx1 + dx2)) * f[:-2]
+                                  + (dx2 - dx1) / (dx1 * dx2) * f[1:-1]
+                                  + dx1 / (dx2 * (dx1 + dx2)) * f[2:])
+    return out
+
+
 def _xcorr_normalised(a: np.ndarray, b: np.ndarray, lags: np.ndarray) -> np.ndarray:
-    a = a - a.mean()
-    b = b - b.mean()
+    """Normalised cross-correlation at ``lags`` of ``a`` and ``b``, means removed beforehand."""
     den = np.sqrt(np.sum(a * a) * np.sum(b * b))
     out = []
     for lag in lags:
@@ -151,6 +188,11 @@ def compare_records(records: Sequence, model_for: Callable[[object], SensorModel
     ``transfer_for(record)`` may override the transfer function used for
     prediction (e.g. a model with extra effects).
     """
+    with single_threaded_blas():    # the fits' thin products only lose time to BLAS threads
+        return _compare_records(records, model_for, settle_s, max_lag, n_windows, transfer_for)
+
+
+def _compare_records(records, model_for, settle_s, max_lag, n_windows, transfer_for):
     out: list[RecordComparison] = []
     for rec in records:
         if rec.deflection_m is None:
@@ -160,11 +202,16 @@ def compare_records(records: Sequence, model_for: Callable[[object], SensorModel
         t, w, y = np.asarray(rec.time_s), np.asarray(rec.deflection_m), np.asarray(rec.current_a)
         y_hat_full = lti_response_fft(transfer, t, w)
         keep = t >= t[0] + settle_s
-        if keep.sum() < 16:
+        n_keep = int(np.count_nonzero(keep))
+        if n_keep < 16:
             raise ValueError(
                 f'{rec.path}: record shorter than settle time {settle_s} s + 16 samples'
             )
+        first = t.size - n_keep
+        if keep[first:].all():    # increasing times: views of the record, not copies
+            keep = slice(first, None)
         tt, yy, yh, ww = t[keep], y[keep], y_hat_full[keep], w[keep]
+        del y_hat_full, keep
         try:
             point = fundamental_response(tt, ww, yy, source=rec.path)
         except ValueError:
@@ -173,11 +220,14 @@ def compare_records(records: Sequence, model_for: Callable[[object], SensorModel
         den = np.linalg.norm(yy - yy.mean())
         noise = noise_rms(tt, ww, yy) * np.sqrt(yy.size) / den if den > 0 else float('nan')
         resid = yy - yh
+        centred = resid - resid.mean()
         lags = np.arange(1, max_lag + 1)
-        acf = _xcorr_normalised(resid, resid, lags)
-        vel = np.gradient(ww, tt)
+        acf = _xcorr_normalised(centred, centred, lags)
+        vel = _gradient(ww, tt)
+        vel -= vel.mean()
         xl = np.arange(-max_lag, max_lag + 1)
-        ccf = _xcorr_normalised(resid, vel, xl)
+        ccf = _xcorr_normalised(centred, vel, xl)
+        del centred, vel
         bound = _BOUND99 / np.sqrt(resid.size)
         mag_err = ph_err = mag_sd = ph_sd = None
         hm = None
@@ -215,8 +265,12 @@ def compare_records(records: Sequence, model_for: Callable[[object], SensorModel
                                'fraction_outside': float(np.mean(np.abs(ccf) > bound)),
                                'passed': bool(np.mean(np.abs(ccf) > bound) <= 0.05)},
             windows=windows))
-    y_all = np.concatenate([r.measured_a for r in out])
-    yh_all = np.concatenate([r.predicted_a for r in out])
+        del resid
+    if len(out) == 1:    # the same numbers without a copy of the record
+        y_all, yh_all = out[0].measured_a, out[0].predicted_a
+    else:
+        y_all = np.concatenate([r.measured_a for r in out])
+        yh_all = np.concatenate([r.predicted_a for r in out])
     fp_all = fit_percent(y_all, yh_all)
     den_all = np.linalg.norm(y_all - y_all.mean())
     noise_all = (

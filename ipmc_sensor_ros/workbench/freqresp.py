@@ -62,14 +62,33 @@ class FrequencyPoint:
 
 def _coarse_frequency(t: np.ndarray, x: np.ndarray, fs: float) -> float:
     n = x.size
-    win = np.hanning(n)
-    spec = np.abs(np.fft.rfft((x - x.mean()) * win))
+    windowed = x - x.mean()
+    windowed *= np.hanning(n)    # in place: one record-length copy, not three
+    spec = np.abs(np.fft.rfft(windowed))
+    del windowed
     spec[0] = 0.0
     k = int(np.argmax(spec))
     if 1 <= k < spec.size - 1:
         a, b, c = np.log(spec[k - 1:k + 2] + 1e-300)
         k = k + 0.5 * (a - c) / (a - 2 * b + c) if (a - 2 * b + c) != 0 else k
     return float(k * fs / n)
+
+
+#: Rows of the regression matrix of :func:`harmonic_fit` built at a time: the fit holds a
+#: few MB whatever the record length (the whole matrix with its complex powers took ~400 B
+#: per row, 2 GB for 5e6 rows).
+FIT_CHUNK_ROWS = 32_768
+
+
+def _harmonic_columns(t: np.ndarray, w0: float, n_harmonics: int) -> np.ndarray:
+    """Regressors [1, cos(w0 t), sin(w0 t), cos(2 w0 t), ...] of the times ``t``."""
+    # cos(k w0 t), sin(k w0 t) from powers of exp(j w0 t) (one exp instead of 2K trig)
+    powers = np.cumprod(np.broadcast_to(np.exp(1j * w0 * t), (n_harmonics, t.size)), axis=0)
+    a = np.empty((t.size, 2 * n_harmonics + 1))
+    a[:, 0] = 1.0
+    a[:, 1::2] = powers.real.T
+    a[:, 2::2] = powers.imag.T
+    return a
 
 
 def harmonic_fit(t: np.ndarray, x: np.ndarray, f0: float, n_harmonics: int):
@@ -79,19 +98,27 @@ def harmonic_fit(t: np.ndarray, x: np.ndarray, f0: float, n_harmonics: int):
     Returns (phasors (complex, amplitude and phase of cos), residual, covariance
     of the real coefficients [mean, a1, b1, a2, b2, ...]).  Phasor convention:
     x = Re(X_k exp(j k w0 t)), i.e. X_k = a_k - j b_k for a_k cos + b_k sin.
+    The normal equations are accumulated over ``FIT_CHUNK_ROWS`` rows at a time
+    (memory independent of the record length; a record of one chunk gives the
+    same numbers as the whole matrix at once).
     """
     w0 = 2 * np.pi * f0
-    # columns cos(k w0 t), sin(k w0 t) from powers of exp(j w0 t) (one exp instead of 2K trig)
-    powers = np.cumprod(np.broadcast_to(np.exp(1j * w0 * t), (n_harmonics, t.size)), axis=0)
-    a = np.empty((t.size, 2 * n_harmonics + 1))
-    a[:, 0] = 1.0
-    a[:, 1::2] = powers.real.T
-    a[:, 2::2] = powers.imag.T
-    gram = a.T @ a
+    t = np.asarray(t, float)
+    x = np.asarray(x, float)
+    m = 2 * n_harmonics + 1
+    gram = np.zeros((m, m))
+    atx = np.zeros(m)
+    chunks = [slice(k, k + FIT_CHUNK_ROWS) for k in range(0, t.size, FIT_CHUNK_ROWS)]
+    for sl in chunks:
+        a = _harmonic_columns(t[sl], w0, n_harmonics)
+        gram += a.T @ a
+        atx += a.T @ x[sl]
     gram_inv = np.linalg.pinv(gram)
-    coef = gram_inv @ (a.T @ x)
-    resid = x - a @ coef
-    dof = max(t.size - a.shape[1], 1)
+    coef = gram_inv @ atx
+    resid = np.empty(t.size)
+    for sl in chunks:
+        resid[sl] = x[sl] - _harmonic_columns(t[sl], w0, n_harmonics) @ coef
+    dof = max(t.size - m, 1)
     sigma2 = float(resid @ resid) / dof
     cov = sigma2 * gram_inv
     phasors = coef[1::2] - 1j * coef[2::2]
