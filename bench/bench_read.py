@@ -8,10 +8,13 @@ columns).  Each step runs in its own process and reports its wall time and its
 peak resident memory (``VmHWM``, which unlike ``ru_maxrss`` is not inherited
 from the parent).  Without ``--write`` the file is made with ``numpy.savetxt``
 (``%.17g``); with it, by :func:`write_timeseries` (shortest repr, read back
-before it is moved in place).  With ``--verbs`` the whole ``ipmc-model estimate`` and
-``ipmc-model compare`` run on the file too (measured on a 2-core machine at load 8, nice 19:
-estimate 1e6 rows 231 MB peak (605 MB before chunked writing), 5e6 rows 698 MB, 11.5 min;
-compare 1e6 rows 651 MB, 10.2 min).  Target: peak <= 500 MB, time linear in ROWS.
+before it is moved in place).
+
+``python -m bench.bench_read --verbs [ROWS,ROWS,...]`` runs the whole ``ipmc-model estimate``
+and ``ipmc-model compare`` on files of 1e6, 2e6 and 5e6 rows (or the rows given), one process
+at a time, and prints each one's seconds and peak RSS (MiB) with the time per row relative to
+the smallest file (1.00 = linear).  Target (issue 18): peak <= 500 MB at 5e6 rows, time
+linear in the rows.  Measured figures: README, "Memory of ``estimate`` / ``compare``".
 """
 from __future__ import annotations
 
@@ -54,30 +57,67 @@ ts = read_any(sys.argv[1])
 print(f'read {ts.n_samples} rows: {time.perf_counter() - t0:.1f} s, peak RSS {peak():.0f} MB '
       f'(after imports {base:.0f} MB)')
 """
+
 VERB = PEAK + """
-import sys, time
+import contextlib, io, sys, time
 from ipmc_sensor_ros.cli.main import main
 base = peak()
 t0 = time.perf_counter()
-code = main(sys.argv[1:])
-print(f'ipmc-model {sys.argv[1]}: exit {code}, {time.perf_counter() - t0:.1f} s, '
-      f'peak RSS {peak():.0f} MB (after imports {base:.0f} MB)')
+with contextlib.redirect_stdout(io.StringIO()):
+    code = main(sys.argv[1:])
+print(f'RESULT {code} {time.perf_counter() - t0:.3f} {peak():.1f} {base:.1f}')
 """
 
 
+def _make(rows: int, path: Path, write: bool = False) -> None:
+    subprocess.run([sys.executable, '-c', MAKE, str(rows), str(path), '1' if write else '0'],
+                   check=True)
+
+
+def _verb(verb: str, path: Path, tmp: str) -> tuple[float, float, float]:
+    """Return (seconds, peak RSS MiB, RSS after imports MiB) of one ``ipmc-model`` run."""
+    extra = ['--out', tmp] if verb == 'estimate' else []
+    res = subprocess.run([sys.executable, '-c', VERB, verb, str(path), *extra],
+                         check=True, capture_output=True, text=True)
+    line = next(x for x in res.stdout.splitlines() if x.startswith('RESULT '))
+    code, seconds, peak, base = line.split()[1:]
+    if code != '0':
+        raise SystemExit(f'ipmc-model {verb} {path}: exit {code}\n{res.stderr}')
+    return float(seconds), float(peak), float(base)
+
+
+def verbs(rows_list: list[int]) -> None:
+    """Print seconds and peak RSS of ``estimate`` and ``compare`` for each file length."""
+    results = {}
+    for rows in rows_list:
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / 'big.csv'
+            _make(rows, path)
+            for verb in ('estimate', 'compare'):
+                results[verb, rows] = _verb(verb, path, tmp)
+                seconds, peak, base = results[verb, rows]
+                print(f'{verb:8s} {rows:>9d} rows: {seconds:7.1f} s, peak RSS {peak:5.0f} MiB '
+                      f'(after imports {base:.0f} MiB)', flush=True)
+    first = rows_list[0]
+    for verb in ('estimate', 'compare'):
+        per_row = [results[verb, r][0] / r for r in rows_list]
+        ratios = ', '.join(f'{r:g}: {p / per_row[0]:.2f}' for r, p in zip(rows_list, per_row))
+        print(f'{verb}: time per row relative to {first:g} rows (1.00 = linear): {ratios}')
+
+
 def main(argv: list[str]) -> None:
+    if '--verbs' in argv:
+        given = [a for a in argv if not a.startswith('-')]
+        verbs([int(float(r)) for r in given[0].split(',')] if given
+              else [1_000_000, 2_000_000, 5_000_000])
+        return
     rows = int(float(argv[0])) if argv and not argv[0].startswith('-') else 5_000_000
     write = '--write' in argv
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / 'big.csv'
-        subprocess.run([sys.executable, '-c', MAKE, str(rows), str(path), '1' if write else '0'],
-                       check=True)
+        _make(rows, path, write)
         print(f'file {path.stat().st_size / 1e6:.0f} MB')
         subprocess.run([sys.executable, '-c', READ, str(path)], check=True)
-        if '--verbs' in argv:
-            subprocess.run([sys.executable, '-c', VERB, 'estimate', str(path), '--out', tmp],
-                           check=True)
-            subprocess.run([sys.executable, '-c', VERB, 'compare', str(path)], check=True)
 
 
 if __name__ == '__main__':

@@ -26,7 +26,6 @@ import functools
 import math
 
 import numpy as np
-import scipy.fft
 import scipy.signal as sig
 
 from ..lti.discretize import default_prewarp_hz, tustin_sos
@@ -367,10 +366,7 @@ def lti_response_fft(transfer, time_s, deflection_m, pad_s: float = 2.0) -> np.n
             h[-1] = h[-1].real
         spectrum[a:a + TRANSFER_CHUNK] *= h
     del f
-    # scipy's inverse real FFT: the same pocketfft arithmetic as numpy's (tested bit-identical)
-    # with half its working memory (~8 instead of ~16 B per FFT point: 5e6 samples at the
-    # 2**23 FFT length peaked 64 MB lower)
-    y = scipy.fft.irfft(spectrum, n)
+    y = np.fft.irfft(spectrum, n)    # (scipy.fft's keeps a cached plan of 16 B per point)
     del spectrum
     return y[: t.size].copy()    # not a view holding the FFT length (up to 2x the record)
 
