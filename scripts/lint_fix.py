@@ -85,17 +85,12 @@ _ABBREV = ('e.g.', 'i.e.', 'eq.', 'eqs.', 'Eq.', 'Eqs.', 'cf.', 'vs.', 'Fig.', '
 _SECTION_RULE = re.compile(r'^\s*-{3,}\s*$')
 
 
-def _sentence_end(text: str) -> int:
-    """
-    Return the index just after the first sentence of ``text``, or -1.
-
-    A sentence ends at '.', '?' or '!' followed by white space or the end, outside
-    parentheses, brackets and inline literals, and not after a known abbreviation.
-    """
+def _top_level(text: str, limit: int):
+    """Yield ``(index, character)`` of ``text[:limit]`` outside brackets and inline literals."""
     depth = 0
     literal = False
     i = 0
-    while i < len(text):
+    while i < min(len(text), limit):
         if text.startswith('``', i):
             literal = not literal
             i += 2
@@ -106,11 +101,23 @@ def _sentence_end(text: str) -> int:
                 depth += 1
             elif c in ')]}':
                 depth = max(0, depth - 1)
-            elif c in '.?!' and depth == 0 and (i + 1 == len(text) or text[i + 1] == ' '):
-                word = text[:i + 1].rsplit(' ', 1)[-1]
-                if word not in _ABBREV and not re.fullmatch(r'[A-Za-z]\.', word):
-                    return i + 1
+            elif depth == 0:
+                yield i, c
         i += 1
+
+
+def _sentence_end(text: str) -> int:
+    """
+    Return the index just after the first sentence of ``text``, or -1.
+
+    A sentence ends at '.', '?' or '!' followed by white space or the end, outside
+    parentheses, brackets and inline literals, and not after a known abbreviation.
+    """
+    for i, c in _top_level(text, len(text)):
+        if c in '.?!' and (i + 1 == len(text) or text[i + 1] == ' '):
+            word = text[:i + 1].rsplit(' ', 1)[-1]
+            if word not in _ABBREV and not re.fullmatch(r'[A-Za-z]\.', word):
+                return i + 1
     return -1
 
 
@@ -336,24 +343,10 @@ def fix_docstrings(source: str, where: str = '<source>'):
 
 def _clause_end(text: str, limit: int, marks: str) -> int:
     """Return the index of the last of ``marks`` + ' ' at depth 0 before ``limit``, or -1."""
-    depth = 0
-    literal = False
     best = -1
-    i = 0
-    while i < min(len(text), limit):
-        if text.startswith('``', i):
-            literal = not literal
-            i += 2
-            continue
-        c = text[i]
-        if not literal:
-            if c in '([{':
-                depth += 1
-            elif c in ')]}':
-                depth = max(0, depth - 1)
-            elif c in marks and depth == 0 and text[i + 1:i + 2] == ' ' and i >= 30:
-                best = i
-        i += 1
+    for i, c in _top_level(text, limit):
+        if c in marks and text[i + 1:i + 2] == ' ' and i >= 30:
+            best = i
     return best
 
 

@@ -14,13 +14,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
-import random
-import signal
-import subprocess
-import sys
-import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -33,7 +26,6 @@ from ipmc_sensor_ros.interface.blocks import (current_columns, deflection_column
                                               estimate_columns, unpack_columns)
 from ipmc_sensor_ros.physics.modelfile import save_model
 
-ROOT = Path(__file__).resolve().parents[1]
 FS = 1000.0
 
 
@@ -266,14 +258,6 @@ def test_node_array_start_up_errors(tmp_path):
 
 
 # -- 3. two processes over DDS -------------------------------------------------------------------
-def _start(module: str, params: dict, env: dict, log: Path):
-    cmd = [sys.executable, '-m', f'ipmc_sensor_ros.nodes.{module}', '--ros-args',
-           '-r', '__ns:=/array']
-    for k, v in params.items():
-        cmd += ['-p', f'{k}:={v}']
-    return subprocess.Popen(cmd, env=env, stdout=log.open('w'), stderr=subprocess.STDOUT)
-
-
 @pytest.mark.ros
 def test_simulator_array_to_estimator_array_over_dds(tmp_path, monkeypatch):
     """
@@ -283,76 +267,45 @@ def test_simulator_array_to_estimator_array_over_dds(tmp_path, monkeypatch):
     be lost, see test_nodes_integration).  Every channel tracks its own truth column within the
     5 % NRMSE of the single-sensor test (same physics, same leak decay by the scored last 20 s).
     """
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import Float64MultiArray, String
 
     from ipmc_sensor_ros.nodes import params as P
     from ipmc_sensor_ros.workbench.metrics import nrmse
+    from process_graph import ProcessGraph
 
     channels, duration_s = 4, 120.0
     n_samples = int(duration_s * FS)
-    domain = random.randint(150, 200)
-    env = dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(domain),
-               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_LOG_DIR=str(tmp_path))
-    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    node = rclpy.create_node('monitor', context=ctx)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
+    graph = ProcessGraph(tmp_path, monkeypatch)
     qos = P.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'})
     est, truth, counters = [], [], {}
     subs = [
-        node.create_subscription(
+        graph.node.create_subscription(
             Float64MultiArray, '/array/deflection/block',
             lambda m: est.append(unpack_columns(m, estimate_columns(channels))), qos),
-        node.create_subscription(
+        graph.node.create_subscription(
             Float64MultiArray, '/array/deflection_truth',
             lambda m: truth.append(unpack_columns(m, deflection_columns(channels))), qos),
-        node.create_subscription(
+        graph.node.create_subscription(
             String, '/array/estimator/counters',
             lambda m: counters.update(json.loads(m.data)), P.COUNTERS_QOS),
     ]
-    procs, logs = {}, {'estimator': tmp_path / 'est.log', 'simulator': tmp_path / 'sim.log'}
-
-    def spin_until(predicate, what, timeout_s=180.0):
-        end = time.monotonic() + timeout_s
-        while not predicate():
-            for name, p in procs.items():
-                assert p.poll() is None, f'{name} exited early:\n{logs[name].read_text()}'
-            assert time.monotonic() < end, f'timed out waiting for {what}'
-            ex.spin_once(timeout_sec=0.05)
 
     def rows(blocks):
         return sum(b[0].size for b in blocks)
 
     try:
-        procs['estimator'] = _start('estimator_node', {'channels': channels,
-                                                       'publish_points': 'none'},
-                                    env, logs['estimator'])
-        spin_until(lambda: subs[0].get_publisher_count() > 0, 'the estimator')
-        procs['simulator'] = _start(
-            'simulator_node', {'channels': channels, 'channel_time_offset_s': 0.1,
-                               'realtime_factor': 0.0, 'block_size': 200,
-                               'duration_s': duration_s, 'noise_rms_a': 1e-9,
-                               'wait_for_subscribers': 1}, env, logs['simulator'])
-        spin_until(lambda: rows(est) == n_samples and rows(truth) == n_samples
-                   and counters.get('samples_out') == channels * n_samples, 'the run')
+        graph.start('estimator', 'estimator_node',
+                    {'channels': channels, 'publish_points': 'none'}, '/array')
+        graph.spin_until(lambda: subs[0].get_publisher_count() > 0, 'the estimator', 180.0)
+        graph.start('simulator', 'simulator_node',
+                    {'channels': channels, 'channel_time_offset_s': 0.1,
+                     'realtime_factor': 0.0, 'block_size': 200, 'duration_s': duration_s,
+                     'noise_rms_a': 1e-9, 'wait_for_subscribers': 1}, '/array')
+        graph.spin_until(lambda: rows(est) == n_samples and rows(truth) == n_samples
+                         and counters.get('samples_out') == channels * n_samples, 'the run',
+                         180.0)
     finally:
-        for p in procs.values():
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-        codes = {}
-        for name, p in procs.items():
-            try:
-                codes[name] = p.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                codes[name] = p.wait()
-        ex.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=ctx)
+        codes = graph.close()
     for c in counters['channels']:
         assert c['samples_in'] == c['samples_out'] == n_samples, c
         assert c['samples_rejected'] == c['samples_dropped'] == c['resets'] == 0, c
@@ -367,4 +320,4 @@ def test_simulator_array_to_estimator_array_over_dds(tmp_path, monkeypatch):
     assert max(errors) < 0.05, errors
     # the channels are different signals (0.1 s apart on a 1 Hz crank): a swapped column fails
     assert nrmse(w_e[last, 0], w_t[last, 1]) > 0.3
-    assert codes == {'estimator': 0, 'simulator': 0}, {k: v.read_text() for k, v in logs.items()}
+    assert codes == {'estimator': 0, 'simulator': 0}, graph.log_texts()

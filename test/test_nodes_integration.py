@@ -22,11 +22,6 @@ and the order-4 reduction (< 0.01 dB): measured NRMSE 1.3 %, 0.9 %, 0.7 % at
 """
 from __future__ import annotations
 
-import os
-import random
-import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -39,10 +34,10 @@ from ipmc_sensor_ros.nodes.estimator_node import EstimatorNode
 from ipmc_sensor_ros.nodes.monitor import TrackingMonitor
 from ipmc_sensor_ros.nodes.simulator_node import SimulatorNode
 from conftest import TEST_DOMAIN
+from process_graph import ProcessGraph
 
 pytestmark = pytest.mark.ros
 
-ROOT = Path(__file__).resolve().parents[1]
 DURATION_S = 120.0
 FS = 1000.0
 N_SAMPLES = int(DURATION_S * FS)
@@ -156,18 +151,6 @@ def test_estimator_improves_when_its_model_gains_the_hidden_effect(monkeypatch):
         rclpy.shutdown(context=ctx)
 
 
-def _ros_args(params: dict, namespace: str) -> list[str]:
-    args = ['--ros-args', '-r', f'__ns:={namespace}']
-    for k, v in params.items():
-        args += ['-p', f'{k}:={v}']
-    return args
-
-
-def _start(module: str, params: dict, namespace: str, env: dict, log: Path):
-    cmd = [sys.executable, '-m', f'ipmc_sensor_ros.nodes.{module}'] + _ros_args(params, namespace)
-    return subprocess.Popen(cmd, env=env, stdout=log.open('w'), stderr=subprocess.STDOUT)
-
-
 def test_two_processes_over_dds_track_truth_and_account_exactly(tmp_path, monkeypatch):
     _two_process_run(tmp_path, monkeypatch, DURATION_S, 0.0)
 
@@ -200,63 +183,28 @@ def _two_process_run(tmp_path, monkeypatch, duration_s: float, realtime_factor: 
     """
     n_samples = int(duration_s * FS)
     timeout_s = TIMEOUT_S + 1.2 * duration_s * (realtime_factor > 0)
-    domain = random.randint(150, 200)
-    env = dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(domain),
-               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_LOG_DIR=str(tmp_path))
-    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    node = rclpy.create_node('monitor', context=ctx)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
-    monitor = TrackingMonitor(node, '/rig')
-    procs = {}
-    logs = {'estimator': tmp_path / 'estimator.log', 'simulator': tmp_path / 'simulator.log'}
-
-    def spin_until(predicate, what):
-        end = time.monotonic() + timeout_s
-        while not predicate():
-            for name, p in procs.items():
-                assert p.poll() is None, f'{name} exited early:\n{logs[name].read_text()}'
-            assert time.monotonic() < end, f'timed out waiting for {what}'
-            ex.spin_once(timeout_sec=0.05)
-
+    graph = ProcessGraph(tmp_path, monkeypatch)
+    monitor = TrackingMonitor(graph.node, '/rig')
     try:
-        procs['estimator'] = _start('estimator_node', {'publish_points': 'last_of_block'},
-                                    '/rig', env, logs['estimator'])
+        graph.start('estimator', 'estimator_node', {'publish_points': 'last_of_block'}, '/rig')
         # Start the simulator only once the monitor is matched with the estimator's
         # output; the simulator itself waits for its subscribers (wait_for_subscribers).
-        spin_until(lambda: monitor.subscriptions[0].get_publisher_count() > 0,
-                   "the estimator's deflection/block publisher")
-        procs['simulator'] = _start(
-            'simulator_node',
-            _sim_params(5.0, duration_s, realtime_factor),
-            '/rig',
-            env,
-            logs['simulator'],
-        )
-        spin_until(lambda: monitor.estimate_samples >= n_samples // 10, '10 % of the run')
-        rss_early = {name: _rss_bytes(p.pid) for name, p in procs.items()}
-        spin_until(lambda: monitor.simulator_counters.get('done')
-                   and monitor.estimator_counters.get('samples_out') == n_samples
-                   and monitor.estimate_samples == n_samples
-                   and monitor.truth_samples == n_samples, 'the run to complete')
+        graph.spin_until(lambda: monitor.subscriptions[0].get_publisher_count() > 0,
+                         "the estimator's deflection/block publisher", timeout_s)
+        graph.start('simulator', 'simulator_node', _sim_params(5.0, duration_s, realtime_factor),
+                    '/rig')
+        graph.spin_until(lambda: monitor.estimate_samples >= n_samples // 10, '10 % of the run',
+                         timeout_s)
+        rss_early = {name: _rss_bytes(p.pid) for name, p in graph.procs.items()}
+        graph.spin_until(lambda: monitor.simulator_counters.get('done')
+                         and monitor.estimator_counters.get('samples_out') == n_samples
+                         and monitor.estimate_samples == n_samples
+                         and monitor.truth_samples == n_samples, 'the run to complete',
+                         timeout_s)
         error, compared = monitor.score(last_s=20.0)
-        rss = {name: (rss_early[name], _rss_bytes(p.pid)) for name, p in procs.items()}
+        rss = {name: (rss_early[name], _rss_bytes(p.pid)) for name, p in graph.procs.items()}
     finally:
-        codes = {}
-        for name, p in procs.items():
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-        for name, p in procs.items():
-            try:
-                codes[name] = p.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                codes[name] = p.wait()
-        ex.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=ctx)
+        codes = graph.close()
 
     sim_c, est_c = monitor.simulator_counters, monitor.estimator_counters
     print(f'two processes 5 Hz, {duration_s:g} s: NRMSE {error:.4f}; simulator {sim_c}; '
@@ -269,7 +217,7 @@ def _two_process_run(tmp_path, monkeypatch, duration_s: float, realtime_factor: 
     assert monitor.estimate_samples == monitor.truth_samples == n_samples
     assert compared >= 20000
     assert error < NRMSE_LIMIT
-    assert codes == {'estimator': 0, 'simulator': 0}, {k: logs[k].read_text() for k in logs}
+    assert codes == {'estimator': 0, 'simulator': 0}, graph.log_texts()
     print('resident memory (early, end) in MB: '
           + ', '.join(f'{k} {a / 2**20:.1f} -> {b / 2**20:.1f}' for k, (a, b) in rss.items()))
     return rss

@@ -208,3 +208,34 @@ def test_fast_fit_prediction_matches_exact_prediction(effects):
     k = p.keep
     tol = 5e-4 if 'beam' in effects else 1e-5
     assert np.sqrt(np.mean((fast[k] - exact[k]) ** 2)) / np.std(exact[k]) < tol
+
+
+def test_aperiodic_record_has_no_fundamental_and_a_white_noise_floor():
+    """
+    Robot-like motion (two incommensurate sines and a 10 s hold) is not periodic.
+
+    Before: the deflection spectrum's strongest peak was taken for a fundamental (on a lab-like
+    record with steps as well, 0.06 Hz), and the noise "floor" of compare came out at 1.15
+    (larger than the signal) while the model's error was 0.039.  Now fundamental_response
+    refuses the record, and the floor is the white current noise, 2 % of the signal RMS
+    (tolerance 10 %: the scaled-MAD estimate of 60 000 samples has a relative sd of about
+    0.5 %; the signal's own second differences add < 1 %).
+    """
+    from ipmc_sensor_ros.workbench.metrics import noise_rms
+
+    fs, n = 1000.0, 60000
+    t = np.arange(n) / fs
+    w = 0.8e-3 * np.sin(2 * np.pi * 0.7 * t) + 0.4e-3 * np.sin(2 * np.pi * 2.3 * t + 1)
+    w[(t > 20) & (t < 30)] = 0.0
+    clean = lti_response_fft(SensorModel(PAPER_SAMPLES['slim']).transfer, t, w)
+    sigma = 0.02 * np.std(clean)
+    current = clean + sigma * np.random.default_rng(5).standard_normal(n)
+    with pytest.raises(ValueError, match='not periodic'):
+        fundamental_response(t, w, current, source='robot.csv')
+    assert noise_rms(t, w, current) == pytest.approx(sigma, rel=0.1)
+    # a crank-slider record (with 1 % laser noise) is still periodic: its harmonics explain it
+    crank = CrankSlider(2.0, 2e-3, 15e-3).deflection(t)
+    laser = crank + 0.01 * np.std(crank) * np.random.default_rng(6).standard_normal(n)
+    point = fundamental_response(t, laser, lti_response_fft(
+        SensorModel(PAPER_SAMPLES['slim']).transfer, t, crank), source='crank.csv')
+    assert point.frequency_hz == pytest.approx(2.0, rel=1e-4)

@@ -332,12 +332,8 @@ def add_data_args(p: argparse.ArgumentParser) -> None:
                    help='ipmc-timeseries/1 or ipmc-frf/1 files, directories of them, or rosbag2 '
                         'bags (see: ipmc-model import for lab files)')
     g = p.add_argument_group('data')
-    g.add_argument(
-        '--current-topic',
-        default='current',
-        metavar='TOPIC',
-        help='bags: topic of the current blocks',
-    )
+    g.add_argument('--current-topic', default='current', metavar='TOPIC',
+                   help='bags: topic of the current blocks')
     g.add_argument('--deflection-topic', default='deflection_truth', metavar='TOPIC',
                    help='bags: topic of the measured deflection')
     g.add_argument('--geometry', metavar='L,W,T',

@@ -365,27 +365,19 @@ def _cmd_import(args) -> int:
 
 def add_parsers(sub, formatter) -> None:
     p = sub.add_parser(
-        'simulate',
-        formatter_class=formatter,
-        help="write synthetic crank-slider measurements from the package's simulator",
-    )
+        'simulate', formatter_class=formatter,
+        help="write synthetic crank-slider measurements from the package's simulator")
     add_model_args(p)
     p.add_argument('--out', required=True, metavar='DIR', help='output directory')
     renamed_flag(p, '--bag', '--out DIR --format bag')
-    p.add_argument(
-        '--samples',
-        default='slim,short',
-        metavar='LIST',
-        help='paper samples, comma list (big, slim, short)',
-    )
+    p.add_argument('--samples', default='slim,short', metavar='LIST',
+                   help='paper samples, comma list (big, slim, short)')
     p.add_argument('--frequencies', default='1:20:8', metavar='LO:HI:N|LIST',
                    help="crank frequencies, Hz: 'lo:hi:n' (log-spaced) or a comma list")
-    p.add_argument(
-        '--duration', type=float, default=6.0, metavar='S', help='record length per frequency, s'
-    )
-    p.add_argument(
-        '--sample-rate', type=float, default=1000.0, metavar='HZ', help='sample rate, Hz'
-    )
+    p.add_argument('--duration', type=float, default=6.0, metavar='S',
+                   help='record length per frequency, s')
+    p.add_argument('--sample-rate', type=float, default=1000.0, metavar='HZ',
+                   help='sample rate, Hz')
     p.add_argument('--crank-radius', type=float, default=2e-3, metavar='M',
                    help='crank radius = deflection amplitude, m')
     p.add_argument('--noise-rel', type=float, default=0.01, help='noise RMS / clean current RMS')

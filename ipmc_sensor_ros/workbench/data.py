@@ -82,6 +82,11 @@ def groups_from(data: Sequence, min_periods: int = 2) -> list[FitGroup]:
         else:
             if d.deflection_m is None:
                 raise ValueError(f'{d.path}: no deflection column: cannot measure the response')
-            g.points.append(fundamental_response(d.time_s, d.deflection_m, d.current_a,
-                                                 source=d.path, min_periods=min_periods))
+            try:
+                g.points.append(fundamental_response(d.time_s, d.deflection_m, d.current_a,
+                                                     source=d.path, min_periods=min_periods))
+            except ValueError as exc:
+                raise ValueError(f'{exc}; fit reads periodic (crank-slider) records: '
+                                 f'`ipmc-model diagnose DATA --save-model FILE` fits the '
+                                 f'material in the time domain on any record') from None
     return list(groups.values())

@@ -31,6 +31,13 @@ from scipy.optimize import minimize_scalar
 
 __all__ = ['FrequencyPoint', 'fundamental_response', 'cross_spectral_response', 'harmonic_fit']
 
+#: A record is periodic at f0 only if its harmonics explain the deflection: at most this fraction
+#: of the deflection's variance may be left by the K-harmonic fit.  A crank-slider record leaves
+#: its laser noise (1 % of the amplitude: 1e-4 of the variance) and a slow laser drift of 10 % of
+#: the amplitude about 1e-2; robot-like motion, steps and free vibration leave most of it, and
+#: their "fundamental" would be a peak of a broadband spectrum, not a response.
+MAX_APERIODIC_FRACTION = 0.1
+
 
 @dataclass(frozen=True)
 class FrequencyPoint:
@@ -167,7 +174,13 @@ def fundamental_response(time_s, deflection_m, current_a, *, frequency_hz: float
     sl = slice(t.size - n_keep, t.size)
     tt, ww, ii = t[sl] - t[sl][0], w[sl], i[sl]
     k_max = n_harmonics or int(max(1, min(12, np.floor(0.45 * fs / f0))))
-    pw, _, cov_w = harmonic_fit(tt, ww, f0, k_max)
+    pw, resid_w, cov_w = harmonic_fit(tt, ww, f0, k_max)
+    variance_w = float(np.var(ww))
+    if variance_w > 0 and float(np.mean(resid_w ** 2)) > MAX_APERIODIC_FRACTION * variance_w:
+        raise ValueError(
+            f'{source}: the deflection is not periodic: mean + {k_max} harmonics of {f0:.4g} Hz '
+            f'explain {100 * (1 - float(np.mean(resid_w ** 2)) / variance_w):.0f} % of it (need '
+            f'{100 * (1 - MAX_APERIODIC_FRACTION):.0f} %)')
     pi_, _, cov_i = harmonic_fit(tt, ii, f0, k_max)
     h = pi_[0] / pw[0]
     sdm_w, sdp_w = _phasor_sd(cov_w, pw[0])
