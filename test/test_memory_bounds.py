@@ -204,3 +204,14 @@ def test_noise_rms_windows_by_bisection_equal_the_masks():
     args = (rec.time_s, rec.deflection_m, rec.current_a)
     with single_threaded_blas():     # the fits' thin products are slow with BLAS threads
         assert metrics.noise_rms(*args) == _noise_rms_masks(*args)
+
+
+def test_long_records_get_an_fft_length_without_bluestein():
+    # a prime length near 5e6 made numpy's FFT take 725 MiB more (Bluestein, measured); a
+    # length whose largest prime factor is at most its square root never uses Bluestein
+    for n in (999_500, 4_999_999, 100_003, 65_537):
+        m = freqresp._fft_length(n)
+        assert freqresp._largest_prime_factor(m) ** 2 <= m
+        assert 0 < n - m < 10                      # a few samples fewer
+    for n in (4_999_500, 5_000_000, 99_500, 53):    # unchanged: the same spectrum as before
+        assert freqresp._fft_length(n) == n

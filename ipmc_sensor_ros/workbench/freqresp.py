@@ -67,7 +67,42 @@ class FrequencyPoint:
         return float(np.degrees(np.angle(self.response)))
 
 
+#: Records longer than this get an FFT length without Bluestein's algorithm (:func:`_fft_length`).
+BLUESTEIN_FREE_ABOVE = 65_536
+
+
+def _largest_prime_factor(n: int) -> int:
+    largest, d = 1, 2
+    while d * d <= n:
+        while n % d == 0:
+            largest, n = d, n // d
+        d += 1 if d == 2 else 2
+    return max(largest, n)
+
+
+def _fft_length(n: int) -> int:
+    """
+    Return ``n``, or for long records the nearest shorter length FFT'd without Bluestein.
+
+    A length whose largest prime factor exceeds its square root can make pocketfft use
+    Bluestein's algorithm, with ~145 B of working memory per sample (725 MiB for a prime
+    length near 5e6, measured); a length without that property never does.  Records up to
+    ``BLUESTEIN_FREE_ABOVE`` samples keep their length (a few MB at most).
+    """
+    m = n
+    while m > BLUESTEIN_FREE_ABOVE and _largest_prime_factor(m) ** 2 > m:
+        m -= 1
+    return m
+
+
 def _coarse_frequency(t: np.ndarray, x: np.ndarray, fs: float) -> float:
+    """
+    Peak of the windowed deflection spectrum, Hz (the start of the least-squares refinement).
+
+    Over the whole record, or over its last samples when a length a few samples shorter
+    avoids Bluestein's algorithm (:func:`_fft_length`; bounded memory for any length).
+    """
+    x = x[x.size - _fft_length(x.size):]
     n = x.size
     windowed = x - x.mean()
     windowed *= np.hanning(n)    # in place: one record-length copy, not three
