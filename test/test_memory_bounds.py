@@ -114,7 +114,7 @@ def test_estimate_memory_per_sample_is_bounded(monkeypatch):
 
 
 def _harmonic_fit_whole(t, x, f0, k):
-    """The previous one-matrix harmonic fit (reference)."""
+    """Fit harmonics with the previous one-matrix least squares (reference)."""
     w0 = 2 * np.pi * f0
     powers = np.cumprod(np.broadcast_to(np.exp(1j * w0 * t), (k, t.size)), axis=0)
     a = np.empty((t.size, 2 * k + 1))
@@ -185,7 +185,7 @@ def test_running_detrended_nrmse_equals_scipy_detrend(monkeypatch):
 
 
 def _noise_rms_masks(t, w, y, window_s=4.0):
-    """The previous window selection of :func:`metrics.noise_rms` by masks (reference)."""
+    """Return :func:`metrics.noise_rms` with the previous window selection by masks (reference)."""
     p = freqresp.fundamental_response(t, w, y)
     f0, k = p.frequency_hz, p.extra['harmonics']
     span = max(2, int(round(window_s * f0))) / f0
