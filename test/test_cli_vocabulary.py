@@ -146,7 +146,8 @@ def test_import_verb_passes_everything_to_the_library(monkeypatch, tmp_path, cap
     calls = []
 
     def fake_import(paths, out_dir, *, geometry=None, meta=None, columns=None,
-                    current_gain_a_per_v=None, sample=None):
+                    current_gain_a_per_v=None, sample=None, notice=None):
+        assert callable(notice)
         calls.append(dict(paths=paths, out_dir=out_dir, geometry=geometry, meta=meta,
                           columns=columns, gain=current_gain_a_per_v, sample=sample))
         return [out_dir / 'run1.csv']

@@ -82,11 +82,12 @@ def test_geometry_sources_and_conflict(tmp_path):
     assert by_yaml.geometry == SLIM
     agree = import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=META, geometry='22mm,7mm,360um')
     assert agree.geometry == SLIM
-    with pytest.raises(DataFormatError, match=r'length conflict: geometry argument says 11mm '
+    with pytest.raises(DataFormatError, match=r'length conflict: the geometry argument says 11mm '
                                               r'\(0\.011 m\) but run metadata .*run\.json says '
                                               r'length_mm: 22 \(0\.022 m\)'):
         import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=META, geometry='11mm,7mm,360um')
-    with pytest.raises(DataFormatError, match=r'no length, width, thickness: pass geometry='):
+    with pytest.raises(DataFormatError,
+                       match=r'no length, width, thickness: give the geometry \(--geometry '):
         import_lab_file(LAB / 'daq_slim_5Hz.tsv')
     with pytest.raises(DataFormatError, match=r"geometry argument: '22' is not a length with a "
                                               r'unit'):
@@ -119,7 +120,9 @@ def test_geometry_sources_and_conflict(tmp_path):
 
 def test_voltage_needs_a_gain_and_a_current_refuses_one():
     with pytest.raises(DataFormatError, match=r"tia_slim_5Hz\.csv:1: column 'Current \[V\]' is a "
-                                              r'voltage: give current_gain_a_per_v'):
+                                              r'voltage: give the transimpedance of the current '
+                                              r'amplifier \(--current-gain V_PER_A; '
+                                              r'current_gain_a_per_v'):
         import_lab_file(LAB / 'tia_slim_5Hz.csv', meta=META)
     with pytest.raises(DataFormatError, match=r'current_gain_a_per_v = 1e-06 given but column '
                                               r"'Current \[uA\]' is already a current"):
@@ -217,3 +220,60 @@ def test_parse_columns_spec():
                          ('speed=v', "unknown role 'speed'"), ('time=a,time=b', 'twice')):
         with pytest.raises(ValueError, match=message):
             parse_columns_spec(bad)
+
+
+def _windows_export(path: Path, header: str, columns: str) -> None:
+    """A German lab PC's export: cp1252 text, ';' cells, decimal comma, 2 Hz crank, 10 s."""
+    t = np.arange(0, 10, 0.002)
+    rows = [f'{a:.1f};{b:.5f};{c:.4f}'.replace('.', ',') for a, b, c in
+            zip(t * 1e3, np.sin(2 * np.pi * 2 * t), 300 * np.cos(2 * np.pi * 2 * t))]
+    path.write_bytes((header + columns + '\n' + '\n'.join(rows) + '\n').encode('cp1252'))
+
+
+def test_header_geometry_legacy_encoding_and_unused_columns_are_read_and_said(tmp_path):
+    """
+    Real lab exports: geometry in the free-text header, cp1252 text, German column names.
+
+    Before: 'not UTF-8 text' refused the file; with it re-encoded, the header geometry was
+    ignored (no geometry: refused) and 'Auslenkung [mm]' was silently dropped (current-only).
+    """
+    src = tmp_path / 'messung.txt'
+    _windows_export(src, 'Messung vom 20.11.2026\nLänge: 22 mm; Breite: 7 mm; Dicke: 360 µm\n\n',
+                    'Zeit [ms];Auslenkung [mm];Strom [nA]')
+    ts = import_lab_file(src)
+    assert (ts.geometry.length_m, ts.geometry.width_m, ts.geometry.thickness_m) == \
+        pytest.approx((0.022, 0.007, 360e-6), rel=1e-12)
+    assert ts.extra['text_encoding'] == 'cp1252'
+    assert ts.deflection_m is not None      # 'Auslenkung' is the deflection; its peak lies
+    assert np.max(ts.deflection_m) == pytest.approx(1e-3, 1e-3)    # between samples
+    assert np.max(ts.current_a) == pytest.approx(300e-9, rel=1e-6)  # cos peaks at t = 0
+    said = []
+    import_lab_files([src], tmp_path / 'out', notice=said.append)
+    assert any('read as cp1252' in s for s in said)
+    assert any('geometry from its header' in s and 'messung.txt:2' in s for s in said)
+    # English names, one per line, unit in brackets or after a decimal-comma value
+    other = tmp_path / 'run.txt'
+    _windows_export(other, 'Length [mm]: 22\nwidth = 7 mm\nThickness: 0,36 mm\n',
+                    'Time [ms];Laser [mm];Current [nA]')
+    assert import_lab_file(other).geometry.thickness_m == pytest.approx(360e-6, rel=1e-12)
+    # a header that disagrees with --geometry is refused naming both, never chosen between
+    with pytest.raises(DataFormatError, match=r'length conflict: the geometry argument says '
+                                              r'.*but the file header says .*messung\.txt:2'):
+        import_lab_file(src, geometry='20mm,7mm,360um')
+
+
+def test_unused_column_and_voltage_current_with_a_gain(tmp_path):
+    t = np.arange(0, 4, 0.001)
+    src = tmp_path / 'tia.csv'
+    rows = '\n'.join(f'{a:.4f},{np.sin(2 * np.pi * 2 * a):.5f},{0.3 * np.cos(a):.6f},21.5'
+                     for a in t)
+    src.write_text('Time (s),Tip displacement (mm),Amplifier output (V),Temp (C)\n' + rows + '\n')
+    ts = import_lab_file(src, geometry='22mm,7mm,360um', current_gain_a_per_v=1e-6)
+    assert np.max(ts.current_a) == pytest.approx(0.3e-6, rel=1e-4)
+    assert ts.extra['unused_columns'] == 'Temp (C)'
+    said = []
+    import_lab_files([src], tmp_path / 'out', notice=said.append, geometry='22mm,7mm,360um',
+                     current_gain_a_per_v=1e-6)
+    assert any('column(s) not imported: Temp (C)' in s for s in said)
+    with pytest.raises(DataFormatError, match='no current column'):
+        import_lab_file(src, geometry='22mm,7mm,360um')      # a voltage without a gain

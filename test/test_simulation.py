@@ -140,3 +140,55 @@ def test_field_fidelity_simulator_matches_exact_prediction_and_refuses_other_eff
     with pytest.raises(ParameterError, match='time_delay'):
         FieldSensorSimulator(SensorModel.named('h2', PAPER_SAMPLES['short'],
                                                extra_effects='time_delay'), fs)
+
+
+def test_robot_motion_is_the_same_in_any_blocks_and_its_velocity_is_its_derivative():
+    """
+    The live simulator's robot_motion: blocks of any size give one motion; v = dw/dt.
+
+    Velocity against the central difference of w at 1 kHz: the pieces are raised cosines and
+    sines of at most 2 Hz over >= 0.2 s, whose central-difference error is (2 pi f dt)^2 / 6
+    relative, i.e. below 1e-3 of the peak velocity away from the segment joins (the joins are
+    C1, so the difference there is O(dt) of the velocity's jump in slope: 1 % is allowed).
+    """
+    from ipmc_sensor_ros.simulation.daq import robot_motion
+    from ipmc_sensor_ros.simulation.stimuli import RobotMotion
+
+    t = np.arange(0, 60, 1e-3)
+    for seed in (0, 7):
+        whole = RobotMotion(seed=seed).deflection(t)
+        blocks = RobotMotion(seed=seed)
+        np.testing.assert_array_equal(
+            np.concatenate([blocks.deflection(t[k:k + 333]) for k in range(0, t.size, 333)]),
+            whole)
+        np.testing.assert_array_equal(robot_motion(t, seed), whole)   # the offline generator
+        assert np.ptp(whole) > 1e-3 and np.max(np.abs(whole)) <= 1.5e-3 * 1.6
+        v = RobotMotion(seed=seed).velocity(t)
+        fd = np.gradient(whole, t)
+        assert np.max(np.abs(v - fd)) <= 0.01 * np.max(np.abs(v))
+
+
+def test_measurement_chain_adds_drift_and_mains_hum_without_changing_the_noise():
+    from ipmc_sensor_ros.simulation.chain import MeasurementChain
+
+    model = SensorModel(PAPER_SAMPLES['slim'])
+    t = np.arange(0, 10, 1e-3)
+    stim = CrankSlider(2.0, 2e-3, 20e-3)
+    base = dict(noise_rms_a=20e-9, current_offset_a=10e-9, seed=4)
+    _, plain = SensorSimulator(model, 1000.0, **base).run(stim, t)
+    _, drifting = SensorSimulator(model, 1000.0, current_offset_drift_a_per_s=1e-9 / 60,
+                                  **base).run(stim, t)
+    _, humming = SensorSimulator(model, 1000.0, mains_hz=50, mains_rms_a=30e-9, **base).run(
+        stim, t)
+    # the noise sequence is the same, so the differences are the drift and the hum alone
+    np.testing.assert_allclose(drifting - plain, 1e-9 / 60 * t, rtol=0, atol=1e-20)
+    hum = humming - plain
+    assert np.std(hum) == pytest.approx(30e-9, rel=1e-3)    # 500 whole periods of 50 Hz
+    spectrum = np.abs(np.fft.rfft(hum))
+    freqs = np.fft.rfftfreq(t.size, 1e-3)
+    peaks = sorted(freqs[np.argsort(spectrum)[-4:]])
+    assert peaks == pytest.approx([50.0, 100.0, 150.0, 200.0])
+    with pytest.raises(ParameterError, match="'mains_hz' must be 0, 50 or 60"):
+        MeasurementChain(mains_hz=55)
+    with pytest.raises(ParameterError, match="'mains_rms_a' must be >= 0"):
+        MeasurementChain(mains_rms_a=-1e-9)

@@ -354,7 +354,7 @@ def _cmd_import(args) -> int:
                                meta=Path(args.meta) if args.meta else None,
                                columns=_parse_columns(args.columns),
                                current_gain_a_per_v=None if gain is None else 1.0 / gain,
-                               sample=args.sample)
+                               sample=args.sample, notice=lambda text: print(f'note: {text}'))
     for path in written:
         print(f'wrote {path}')
     print(f'imported {len(written)} file(s) into {args.out} (ipmc-timeseries/1); next: '

@@ -17,8 +17,8 @@ from ..simulation.stimuli import STIMULUS_KINDS, Sampled, Stimulus, make_stimulu
 from .specs import (DIAGNOSTICS_SPECS, GEOMETRY_SPECS, MATERIAL_SPECS, MODEL_SPECS, QOS_SPECS,
                     Spec, check_choice)
 
-__all__ = ['SIMULATOR_SPECS', 'SIMULATOR_OWN_SPECS', 'STIMULI', 'load_stimulus_csv',
-           'read_stimulus_csv', 'build_stimulus', 'describe_stimulus']
+__all__ = ['SIMULATOR_SPECS', 'SIMULATOR_OWN_SPECS', 'CHAIN_PARAMETERS', 'STIMULI',
+           'load_stimulus_csv', 'read_stimulus_csv', 'build_stimulus', 'describe_stimulus']
 
 STIMULI = tuple(sorted(STIMULUS_KINDS)) + ('file',)
 
@@ -32,7 +32,8 @@ SIMULATOR_OWN_SPECS = (
          "(large deflection: the physical source of the 'nonlinearity' effect)", read_only=True,
          choices=('linear', 'elastica')),
     Spec('stimulus', 'crank_slider', str, 'tip-deflection stimulus: crank_slider, sweep, '
-         'free_vibration, step or file', choices=STIMULI),
+         'free_vibration, step, robot_motion (holds, moves and slow sines drawn from seed) or '
+         'file', choices=STIMULI),
     Spec('motor_frequency_hz', 1.0, float, 'crank_slider: motor (drive) frequency, Hz',
          low=1e-3, high=1e3),
     Spec('crank_radius_m', 0.002, float, 'crank_slider: crank radius r (half the '
@@ -43,7 +44,8 @@ SIMULATOR_OWN_SPECS = (
     Spec('sweep_stop_hz', 50.0, float, 'sweep: stop frequency, Hz', low=1e-3, high=1e4),
     Spec('sweep_duration_s', 20.0, float, 'sweep: duration of one sweep (then repeated), s',
          low=1e-3, high=1e6),
-    Spec('amplitude_m', 0.001, float, 'sweep, step and free_vibration: tip amplitude, m',
+    Spec('amplitude_m', 0.001, float, 'sweep, step, free_vibration and robot_motion (levels '
+         'within +-amplitude): tip amplitude, m',
          low=-1.0, high=1.0),
     Spec('natural_frequency_hz', 30.0, float, 'free_vibration: natural frequency, Hz',
          low=1e-3, high=1e4),
@@ -63,9 +65,17 @@ SIMULATOR_OWN_SPECS = (
          '(dimensionless, 1 = ideal)', low=-1e6, high=1e6),
     Spec('current_offset_a', 0.0, float, 'measurement chain: constant current offset, A',
          low=-1.0, high=1.0),
+    Spec('current_offset_drift_a_per_s', 0.0, float, 'measurement chain: drift of the '
+         'current offset with simulated time (an amplifier warming up), A/s',
+         low=-1e-3, high=1e-3),
     Spec('noise_rms_a', 0.0, float, 'measurement chain: white Gaussian noise RMS, A',
          low=0.0, high=1.0),
-    Spec('seed', 0, int, 'seed of the noise generator', low=0, high=2 ** 31 - 1),
+    Spec('mains_hz', 0, int, 'measurement chain: mains hum at this line frequency and its '
+         'harmonics 2-4: 0 (none), 50 or 60 Hz', low=0, high=60, choices=(0, 50, 60)),
+    Spec('mains_rms_a', 0.0, float, 'measurement chain: RMS of the mains hum (line and '
+         'harmonics together), A', low=0.0, high=1.0),
+    Spec('seed', 0, int, "seed of the noise generator and of robot_motion's moves",
+         low=0, high=2 ** 31 - 1),
     Spec('channels', 1, int, "sensors in the array: 'current' and 'deflection_truth' blocks "
          "carry one column per channel ('time_s,current_ch0_A,...' when > 1); each channel is "
          'its own sensor with its own noise (seed + channel)', low=1, high=256),
@@ -75,6 +85,10 @@ SIMULATOR_OWN_SPECS = (
          'each have at least this many matched subscriptions (0 = start at once)',
          low=0, high=1000),
 )
+
+#: The simulator parameters that set its measurement chain (keywords of MeasurementChain).
+CHAIN_PARAMETERS = ('current_gain', 'current_offset_a', 'current_offset_drift_a_per_s',
+                    'noise_rms_a', 'mains_hz', 'mains_rms_a')
 
 SIMULATOR_SPECS = tuple(dataclasses.replace(s, read_only=True) for s in
                         GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + SIMULATOR_OWN_SPECS
@@ -135,6 +149,8 @@ def build_stimulus(values: dict) -> tuple[Stimulus, float]:
               'duration_s': values['sweep_duration_s']}
     elif kind == 'free_vibration':
         kw = {k: values[k] for k in ('amplitude_m', 'natural_frequency_hz', 'damping_ratio')}
+    elif kind == 'robot_motion':
+        kw = {'amplitude_m': values['amplitude_m'], 'seed': values['seed']}
     else:  # step
         kw = {'amplitude_m': values['amplitude_m'], 'start_s': values['step_start_s']}
     return make_stimulus(kind, **kw), 0.0

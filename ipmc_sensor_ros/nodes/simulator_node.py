@@ -40,7 +40,7 @@ from ..physics.beam import check_fidelity
 from ..errors import ParameterError
 from ..simulation.sensor import FieldSensorSimulator, SensorSimulator
 from ..interface.simulator import (SIMULATOR_OWN_SPECS as _OWN_SPECS,  # noqa: F401 (re-exported)
-                                   SIMULATOR_SPECS, STIMULI,
+                                   CHAIN_PARAMETERS, SIMULATOR_SPECS, STIMULI,
                                    build_stimulus, describe_stimulus, load_stimulus_csv,
                                    read_stimulus_csv)
 from . import params as P
@@ -84,9 +84,8 @@ class SimulatorNode(Node):
             field = check_fidelity(v['fidelity'], v['beam_model'])
             self._sims = []
             for c in range(self._channels):   # each channel its own sensor and noise
-                chain = dict(current_gain=v['current_gain'],
-                             current_offset_a=v['current_offset_a'],
-                             noise_rms_a=v['noise_rms_a'], seed=v['seed'] + c)
+                chain = {name: v[name] for name in CHAIN_PARAMETERS}
+                chain['seed'] = v['seed'] + c
                 self._sims.append(
                     FieldSensorSimulator(self._model, v['sample_rate_hz'],
                                          beam_model=v['beam_model'], **chain) if field

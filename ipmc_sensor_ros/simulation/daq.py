@@ -22,6 +22,7 @@ import numpy as np
 
 from ..physics.model import SensorModel
 from .sensor import predict_current
+from .stimuli import RobotMotion
 
 __all__ = ['daq_current', 'robot_motion', 'started', 'intermittent_motion']
 
@@ -38,35 +39,8 @@ def started(time_s, deflection_m, rest_s: float = 2.0, onset_s: float = 0.5) -> 
 
 
 def robot_motion(time_s, seed: int = 0, amplitude_m: float = 1.5e-3) -> np.ndarray:
-    """
-    Robot-like deflection: segments of 2-6 s, each a hold.
-
-    a move to a new level (0.2-0.6 s raised cosine) then hold, or slow sines (0.2-2 Hz)
-    around the current level.
-    """
-    rng = np.random.default_rng(seed)
-    t = np.asarray(time_s, float)
-    w = np.zeros_like(t)
-    level, start = 0.0, 1.0
-    while start < t[-1]:
-        dur = rng.uniform(2.0, 6.0)
-        sel = (t >= start) & (t < start + dur)
-        tau = t[sel] - start
-        kind = rng.integers(3)
-        if kind == 0:
-            w[sel] = level
-        elif kind == 1:
-            new = rng.uniform(-amplitude_m, amplitude_m)
-            w[sel] = level + (new - level) * _ramp(tau / rng.uniform(0.2, 0.6))
-            level = new
-        else:
-            f = rng.uniform(0.2, 2.0)
-            amp = rng.uniform(0.2, 0.6) * amplitude_m
-            w[sel] = level + amp * np.sin(2 * np.pi * f * tau) * _ramp(tau / 0.3) * _ramp(
-                (dur - tau) / 0.3
-            )
-        start += dur
-    return w
+    """Robot-like deflection, m: :class:`~.stimuli.RobotMotion` (holds, moves, slow sines)."""
+    return RobotMotion(amplitude_m=amplitude_m, seed=seed).deflection(time_s)
 
 
 def intermittent_motion(time_s, seed: int = 0, amplitude_m: float = 1.5e-3,

@@ -16,9 +16,9 @@ Two simulators:
   0.3 deg over 0.5-50 Hz at 1 kHz for the paper's samples (tested at
   <= 0.2 dB / 1 deg).
 
-A measurement chain follows the sensor: ``i_meas = current_gain * i +
-current_offset_a + noise``, the noise white Gaussian of RMS ``noise_rms_a``
-from a seeded generator (reproducible).
+A measurement chain follows the sensor (:class:`~.chain.MeasurementChain`: amplifier gain,
+offset and its drift, white noise, mains hum; keyword arguments of both simulators), from
+seeded generators (reproducible).
 """
 from __future__ import annotations
 
@@ -33,6 +33,7 @@ from ..physics.model import SensorModel
 from ..physics.parameters import ParameterError
 from ..physics.pipeline import DriftSchedule
 from ..lti.reduction import ReducedModel, reduce_model, reduce_model_parts
+from .chain import MeasurementChain
 from .stimuli import Stimulus
 
 __all__ = [
@@ -93,9 +94,8 @@ class FieldSensorSimulator:
 
     SUPPORTED = ('surface_resistance', 'hydration_drift')
 
-    def __init__(self, model: SensorModel, sample_rate_hz: float, *, current_gain: float = 1.0,
-                 current_offset_a: float = 0.0, noise_rms_a: float = 0.0, seed: int = 0,
-                 beam_model: str = 'linear'):
+    def __init__(self, model: SensorModel, sample_rate_hz: float, *, beam_model: str = 'linear',
+                 **chain):
         from ..physics.beam import make_beam
         from ..physics.effects import get_effect
         from ..physics.field import FieldSolver
@@ -106,9 +106,7 @@ class FieldSensorSimulator:
                                  f'{list(self.SUPPORTED)} only, not {bad}')
         self.model = model
         self.sample_rate_hz = float(sample_rate_hz)
-        self.current_gain, self.current_offset_a = float(current_gain), float(current_offset_a)
-        self.noise_rms_a = float(noise_rms_a)
-        self._rng = np.random.default_rng(seed)
+        self.chain = MeasurementChain(**chain)
         base = model.without_effect('hydration_drift')
         self._solver = FieldSolver(base, beam=make_beam(beam_model))
         self._diffusivity_at = None
@@ -125,11 +123,7 @@ class FieldSensorSimulator:
     def run(self, stimulus: Stimulus, time_s) -> tuple[np.ndarray, np.ndarray]:
         t = np.asarray(time_s, float)
         w, v = stimulus.deflection(t), stimulus.velocity(t)
-        i = self._stream.step(w, v)
-        i = self.current_gain * i + self.current_offset_a
-        if self.noise_rms_a > 0:
-            i = i + self._rng.normal(0.0, self.noise_rms_a, i.shape)
-        return w, i
+        return w, self.chain.apply(t, self._stream.step(w, v))
 
 
 class SensorSimulator:
@@ -154,32 +148,22 @@ class SensorSimulator:
     ----------
     model : the sensing model (H1/H2 + effects).
     sample_rate_hz : output sample rate, Hz.
-    current_gain : dimensionless gain error of the current amplifier (1 = ideal).
-    current_offset_a : constant offset added to the current, A.
-    noise_rms_a : white Gaussian noise RMS, A.
-    seed : seed of the noise generator.
+    **chain : the measurement chain's keywords (:class:`~.chain.MeasurementChain`:
+        ``current_gain``, ``current_offset_a``, ``current_offset_drift_a_per_s``,
+        ``noise_rms_a``, ``mains_hz``, ``mains_rms_a``, ``seed``).
     order : order of the internal reduction of R(s).
     update_s : coefficient update interval for time-varying effects, s.
 
     """
 
-    def __init__(self, model: SensorModel, sample_rate_hz: float, *, current_gain: float = 1.0,
-                 current_offset_a: float = 0.0, noise_rms_a: float = 0.0, seed: int = 0,
-                 order: int = 8, update_s: float = 5.0, replay_s: float = 1.0):
+    def __init__(self, model: SensorModel, sample_rate_hz: float, *, order: int = 8,
+                 update_s: float = 5.0, replay_s: float = 1.0, **chain):
         fs = float(sample_rate_hz)
         if not (math.isfinite(fs) and fs > 0):
             raise ParameterError(f"parameter 'sample_rate_hz' must be > 0, got {sample_rate_hz!r}")
-        for name, value in (('current_gain', current_gain), ('current_offset_a', current_offset_a),
-                            ('noise_rms_a', noise_rms_a)):
-            if not math.isfinite(float(value)):
-                raise ParameterError(f"parameter '{name}' must be finite, got {value!r}")
-        if noise_rms_a < 0:
-            raise ParameterError(f"parameter 'noise_rms_a' must be >= 0, got {noise_rms_a!r}")
+        self.chain = MeasurementChain(**chain)
         self.model = model
         self.sample_rate_hz = fs
-        self.current_gain = float(current_gain)
-        self.current_offset_a = float(current_offset_a)
-        self.noise_rms_a = float(noise_rms_a)
         self.order = int(order)
         self.update_s = float(update_s)
         compiled = model.compiled
@@ -197,7 +181,6 @@ class SensorSimulator:
         self._delay_int, self._delay_frac = int(math.floor(delay)), float(
             delay - math.floor(delay)
         )
-        self._rng = np.random.default_rng(seed)
         self._zi = np.zeros((self.sos.shape[0], 2))
         self._history = np.zeros(self._delay_int + 1)
         self._t_start: float | None = None
@@ -243,15 +226,11 @@ class SensorSimulator:
         self._history = buf[-(n + 1):]
         return out
 
-    def measure(self, clean_current_a, elapsed_s=None) -> np.ndarray:
-        """Apply the effects' output transforms (at ``elapsed_s``) and the measurement chain."""
-        i = np.asarray(clean_current_a, float)
-        if elapsed_s is not None:
-            i = self._compiled.apply_output_transforms(np.asarray(elapsed_s, float), i)
-        i = self.current_gain * i + self.current_offset_a
-        if self.noise_rms_a > 0:
-            i = i + self._rng.normal(0.0, self.noise_rms_a, i.shape)
-        return i
+    def measure(self, clean_current_a, elapsed_s, time_s) -> np.ndarray:
+        """Apply the effects' output transforms (at ``elapsed_s``), then the measurement chain."""
+        i = self._compiled.apply_output_transforms(np.asarray(elapsed_s, float),
+                                                   np.asarray(clean_current_a, float))
+        return self.chain.apply(time_s, i)
 
     def run(self, stimulus: Stimulus, time_s) -> tuple[np.ndarray, np.ndarray]:
         """
@@ -283,7 +262,7 @@ class SensorSimulator:
             for sl in self._drift.slices(elapsed, self._follow_drift):
                 parts.append(self.clean_current(v[sl]))
             clean = np.concatenate(parts)
-        return w, self.measure(clean, elapsed)
+        return w, self.measure(clean, elapsed, t)
 
     def _follow_drift(self, material) -> None:
         """

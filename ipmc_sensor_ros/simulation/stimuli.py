@@ -15,8 +15,8 @@ import numpy as np
 
 from ..physics.parameters import ParameterError
 
-__all__ = ['Stimulus', 'CrankSlider', 'Sweep', 'FreeVibration', 'Step', 'Sampled', 'make_stimulus',
-           'STIMULUS_KINDS']
+__all__ = ['Stimulus', 'CrankSlider', 'Sweep', 'FreeVibration', 'Step', 'RobotMotion', 'Sampled',
+           'make_stimulus', 'STIMULUS_KINDS']
 
 
 def _pos(name, value, allow_zero=False):
@@ -252,12 +252,88 @@ class Sampled(Stimulus):
         )
 
 
+@dataclass(frozen=True)
+class RobotMotion(Stimulus):
+    """
+    Robot-like motion: from ``first_move_s`` on, segments of 2-6 s, each one of three.
+
+    A hold; a move to a new level in +-``amplitude_m`` (a raised cosine of 0.2-0.6 s, then
+    held); or slow sines (0.2-2 Hz, 0.2-0.6 ``amplitude_m``, faded in and out over 0.3 s)
+    around the current level.  The segments are drawn from ``seed`` in order, as far as the
+    latest time asked for, so any cut of time into blocks gives the same motion; the velocity
+    is the analytic derivative of each piece.
+    """
+
+    amplitude_m: float = 1.5e-3
+    seed: int = 0
+    first_move_s: float = 1.0
+
+    def __post_init__(self):
+        _pos('amplitude_m', self.amplitude_m)
+        _pos('first_move_s', self.first_move_s, allow_zero=True)
+        object.__setattr__(self, '_rng', np.random.default_rng(self.seed))
+        object.__setattr__(self, '_segments', [])      # (start, dur, kind, level, a, b)
+        object.__setattr__(self, '_level', 0.0)
+
+    def _until(self, t_max: float) -> list:
+        segments = self._segments
+        start = segments[-1][0] + segments[-1][1] if segments else self.first_move_s
+        rng, level = self._rng, self._level
+        while start < t_max:
+            dur = rng.uniform(2.0, 6.0)
+            kind = int(rng.integers(3))
+            if kind == 1:
+                new = rng.uniform(-self.amplitude_m, self.amplitude_m)
+                segments.append((start, dur, 1, level, new, rng.uniform(0.2, 0.6)))
+                level = new
+            elif kind == 2:
+                f = rng.uniform(0.2, 2.0)
+                segments.append((start, dur, 2, level, f,
+                                 rng.uniform(0.2, 0.6) * self.amplitude_m))
+            else:
+                segments.append((start, dur, 0, level, 0.0, 0.0))
+            start += dur
+        object.__setattr__(self, '_level', level)
+        return segments
+
+    def _pieces(self, t):
+        t = np.asarray(t, float)
+        for start, dur, kind, level, a, b in self._until(float(np.max(t, initial=0.0))):
+            sel = (t >= start) & (t < start + dur)
+            if np.any(sel):
+                yield sel, t[sel] - start, dur, kind, level, a, b
+
+    def deflection(self, t):
+        w = np.zeros(np.shape(t))
+        for sel, tau, dur, kind, level, a, b in self._pieces(t):
+            if kind == 0:
+                w[sel] = level
+            elif kind == 1:
+                w[sel] = level + (a - level) * _smoothstep(tau / b)[0]
+            else:
+                w[sel] = level + b * np.sin(2 * np.pi * a * tau) * _smoothstep(tau / 0.3)[0] \
+                    * _smoothstep((dur - tau) / 0.3)[0]
+        return w
+
+    def velocity(self, t):
+        v = np.zeros(np.shape(t))
+        for sel, tau, dur, kind, level, a, b in self._pieces(t):
+            if kind == 1:
+                v[sel] = (a - level) * _smoothstep(tau / b)[1] / b
+            elif kind == 2:
+                (r1, d1), (r2, d2) = _smoothstep(tau / 0.3), _smoothstep((dur - tau) / 0.3)
+                phase = 2 * np.pi * a * tau
+                v[sel] = b * (2 * np.pi * a * np.cos(phase) * r1 * r2
+                              + np.sin(phase) * (d1 * r2 - r1 * d2) / 0.3)
+        return v
+
+
 STIMULUS_KINDS = {'crank_slider': CrankSlider, 'sweep': Sweep, 'free_vibration': FreeVibration,
-                  'step': Step}
+                  'step': Step, 'robot_motion': RobotMotion}
 
 
 def make_stimulus(kind: str, **params) -> Stimulus:
-    """Build a stimulus by name (``crank_slider``, ``sweep``, ``free_vibration``, ``step``)."""
+    """Build a stimulus by name (a key of :data:`STIMULUS_KINDS`)."""
     if kind not in STIMULUS_KINDS:
         raise ParameterError(f"unknown stimulus '{kind}'; choose one of {sorted(STIMULUS_KINDS)} "
                              '(or a file via Sampled)')

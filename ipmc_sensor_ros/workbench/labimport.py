@@ -31,8 +31,12 @@ A lab file is free text, then one column-header line, then numeric rows::
   ``geometry`` (``"22mm,7mm,360um"``, a :class:`Geometry`, or a mapping in
   metres) and/or a run-metadata file ``meta`` (JSON or YAML) with
   ``length_mm``/``width_mm``/``thickness_um`` (any length unit suffix, or
-  values like ``"22 mm"``; optionally under ``geometry:``).  When both give
-  a value and they differ, the import is refused naming both.
+  values like ``"22 mm"``; optionally under ``geometry:``) and/or the file's
+  free-text header: a line such as ``Length: 22 mm``, ``thickness = 0.36 mm``
+  or ``Width [mm]: 7`` (English or German part names, :data:`HEADER_GEOMETRY_NAMES`;
+  ``:`` or ``=``; the unit after the value or in brackets; several parts on one line
+  separated by ``;`` or tabs).  When two sources give a value and they differ,
+  the import is refused naming both.
 """
 from __future__ import annotations
 
@@ -59,11 +63,15 @@ __all__ = ['import_lab_file', 'import_lab_files', 'parse_columns_spec', 'ROLE_NA
 #: Words that name each column role (matched against the words of a column stem).
 ROLE_NAMES = {
     'time': ('time', 't', 'zeit'),
-    'deflection': ('deflection', 'displacement', 'laser', 'tip', 'position'),
+    'deflection': ('deflection', 'displacement', 'laser', 'tip', 'position', 'auslenkung'),
     'current': ('current', 'i', 'strom'),
 }
 _ROLE_UNITS = {'time': TIME_UNITS, 'deflection': LENGTH_UNITS, 'current': CURRENT_UNITS}
 _GEOMETRY_PARTS = ('length', 'width', 'thickness')
+#: Encoding of a lab export that is not UTF-8: Windows' Western code page, in which LabVIEW and
+#: spreadsheet exports on European lab PCs write 'µA' or 'Länge'.  Said in the output file
+#: (``text_encoding``) and by ``ipmc-model import``.
+LEGACY_ENCODING = 'cp1252'
 #: Most lines of free text searched for the column header.
 MAX_HEADER_LINES = 500
 _DIALECTS = (('\t', '.'), ('\t', ','), (';', '.'), (';', ','), (',', '.'))
@@ -79,7 +87,7 @@ def _is_row(line: str, delimiter: str, decimal: str) -> int:
 
 def _find_table(path, source: TextSource):
     """
-    Return (notes, column-header cells, its line, delimiter, decimal).
+    Return (notes as (line, text), column-header cells, its line, delimiter, decimal).
 
     Source at the first row.
     """
@@ -98,7 +106,7 @@ def _find_table(path, source: TextSource):
                 if n and len(head.split(delimiter)) == n and not _is_row(head, delimiter,
                                                                          decimal):
                     source.unread(line)
-                    notes = [text.strip() for _, text in previous[:-1] if text.strip()]
+                    notes = [(n, text.strip()) for n, text in previous[:-1] if text.strip()]
                     cells = [c.strip() for c in head.split(delimiter)]
                     return notes, cells, head_line, delimiter, decimal
         if line.strip():
@@ -131,8 +139,14 @@ def _words(stem: str) -> list[str]:
     return [w for w in re.split(r'[^a-z0-9]+', stem.lower()) if w]
 
 
-def _assign(path, cells: list[str], line: int, columns: Mapping[str, str] | None):
-    """Map role -> (index, unit) of the file's columns."""
+def _assign(path, cells: list[str], line: int, columns: Mapping[str, str] | None,
+            current_in_volts: bool = False):
+    """
+    Map role -> (index, unit) of the file's columns.
+
+    With ``current_in_volts`` (a transimpedance gain was given) and no column named as a current,
+    the one remaining column whose unit is a voltage is the current.
+    """
     found: dict[str, tuple[int, str | None]] = {}
     wanted = dict(columns or {})
     unknown = sorted(set(wanted) - set(ROLE_NAMES))
@@ -158,13 +172,19 @@ def _assign(path, cells: list[str], line: int, columns: Mapping[str, str] | None
         if len(hits) > 1:
             raise DataFormatError(path, line, f'two columns could be the {role}: '
                                   f'{[cells[k] for k in hits]}; choose one with '
-                                  f"columns={{'{role}': ...}}")
+                                  f'--columns {role}=NAME')
         if hits:
             found[role] = (hits[0], split_unit(cells[hits[0]])[1])
+    if 'current' not in found and current_in_volts:
+        taken = {i for i, _ in found.values()}
+        volts = [k for k, c in enumerate(cells) if k not in taken
+                 and unit_factor(split_unit(c)[1] or '', VOLTAGE_UNITS) is not None]
+        if len(volts) == 1:
+            found['current'] = (volts[0], split_unit(cells[volts[0]])[1])
     for role in ('time', 'current'):
         if role not in found:
             raise DataFormatError(path, line, f'no {role} column among {cells}; name it with '
-                                  f"columns={{'{role}': ...}}")
+                                  f'--columns {role}=NAME')
     return found
 
 
@@ -173,16 +193,17 @@ def _factor(path, line: int, role: str, cell: str, unit: str | None,
     """Factor from the column's unit to SI (A for a current measured in V, via ``gain``)."""
     if unit is None:
         raise DataFormatError(path, line, f'column {cell!r} ({role}) has no unit: write it as '
-                              f"'{cell} [unit]' or pass columns={{'{role}': '{cell} [unit]'}}; "
+                              f"'{cell} [unit]' or name it with --columns '{role}={cell} [unit]'; "
                               f"units: {', '.join(_ROLE_UNITS[role])}")
     factor = unit_factor(unit, _ROLE_UNITS[role])
     if role == 'current':
         volts = unit_factor(unit, VOLTAGE_UNITS)
         if volts is not None:
             if gain is None:
-                raise DataFormatError(path, line, f'column {cell!r} is a voltage: give '
-                                      'current_gain_a_per_v (amperes per volt of the current '
-                                      'amplifier) to convert it to a current')
+                raise DataFormatError(path, line, f'column {cell!r} is a voltage: give the '
+                                      'transimpedance of the current amplifier (--current-gain '
+                                      'V_PER_A; current_gain_a_per_v in Python) to convert it '
+                                      'to a current')
             return volts * gain
         if factor is not None and gain is not None:
             raise DataFormatError(path, line, f'current_gain_a_per_v = {gain!r} given but column '
@@ -260,6 +281,38 @@ def _meta_geometry(meta: PathLike, data: dict) -> dict[str, tuple[float, str]]:
     return out
 
 
+#: Names of the geometry parts in a free-text header (English and, like the column names,
+#: German: 'Länge: 22 mm').
+HEADER_GEOMETRY_NAMES = {'length': 'length', 'länge': 'length', 'laenge': 'length',
+                         'width': 'width', 'breite': 'width',
+                         'thickness': 'thickness', 'dicke': 'thickness', 'stärke': 'thickness'}
+#: A geometry line of a free-text header: part name, optional [unit], ':' or '=', value, unit.
+_HEADER_GEOMETRY = re.compile(
+    r'^\W*(' + '|'.join(HEADER_GEOMETRY_NAMES) + r')\s*(?:[\[(]\s*([^\])]+?)\s*[\])])?\s*[:=]\s*'
+    r'([-+]?\d+(?:[.,]\d+)?(?:[eE][-+]?\d+)?)\s*([A-Za-zµμ]*)\s*[;,]?\s*$', re.IGNORECASE)
+
+
+def _header_geometry(path, notes) -> dict[str, tuple[float, str]]:
+    """Map part -> (metres, 'file:line: text') from header lines such as ``Length: 22 mm``."""
+    out: dict[str, tuple[float, str]] = {}
+    for line, text in notes:
+        for piece in re.split(r'[;\t]', text) if ';' in text or '\t' in text else [text]:
+            m = _HEADER_GEOMETRY.match(piece.strip())
+            if not m:
+                continue
+            part, unit = HEADER_GEOMETRY_NAMES[m.group(1).lower()], m.group(2) or m.group(4)
+            where = f'{path}:{line}: {piece.strip()}'
+            try:
+                metres = parse_length(f'{m.group(3).replace(",", ".")} {unit}')
+            except ValueError as exc:
+                raise DataFormatError(path, line, f'header {part}: {exc}') from None
+            if part in out and not math.isclose(out[part][0], metres, rel_tol=1e-9):
+                raise DataFormatError(path, line, f'the header gives the {part} twice '
+                                      f'({out[part][1]} and {piece.strip()})')
+            out[part] = (metres, where)
+    return out
+
+
 def _flag_geometry(geometry) -> dict[str, tuple[float, str]]:
     if isinstance(geometry, Geometry):
         return {p: (getattr(geometry, f'{p}_m'), f"{p}_m={getattr(geometry, f'{p}_m')!r}")
@@ -274,26 +327,32 @@ def _flag_geometry(geometry) -> dict[str, tuple[float, str]]:
     return {p: (parse_length(v), v) for p, v in zip(_GEOMETRY_PARTS, parts)}
 
 
-def _geometry(path, geometry, meta, meta_data: dict, sample: str) -> Geometry:
+def _geometry(path, geometry, meta, meta_data: dict, sample: str, notes) -> Geometry:
     try:
         flag = _flag_geometry(geometry) if geometry is not None else {}
     except (ValueError, KeyError) as exc:
         raise DataFormatError(path, None, f'geometry argument: {exc}') from None
-    from_meta = _meta_geometry(meta, meta_data) if meta is not None else {}
+    sources = (('the geometry argument', flag),
+               (f'run metadata {meta}', _meta_geometry(meta, meta_data) if meta is not None
+                else {}),
+               ('the file header', _header_geometry(path, notes)))
     values = {}
     for part in _GEOMETRY_PARTS:
-        a, b = flag.get(part), from_meta.get(part)
-        if a and b and not math.isclose(a[0], b[0], rel_tol=1e-9):
-            raise DataFormatError(path, None, f'{part} conflict: geometry argument says {a[1]} '
-                                  f'({a[0]!r} m) but run metadata {meta} says {b[1]} '
-                                  f'({b[0]!r} m); fix one of them')
-        if a or b:
-            values[part] = (a or b)[0]
+        given = [(name, got[part]) for name, got in sources if part in got]
+        for name, (metres, text) in given[1:]:
+            first, (first_m, first_text) = given[0]
+            if not math.isclose(metres, first_m, rel_tol=1e-9):
+                raise DataFormatError(path, None, f'{part} conflict: {first} says {first_text} '
+                                      f'({first_m!r} m) but {name} says {text} ({metres!r} m); '
+                                      'fix one of them')
+        if given:
+            values[part] = given[0][1][0]
     missing = [p for p in _GEOMETRY_PARTS if p not in values]
     if missing:
-        raise DataFormatError(path, None, f"no {', '.join(missing)}: pass geometry="
-                              "'22mm,7mm,360um' (length,width,thickness) or a run metadata file "
-                              'with length_mm, width_mm, thickness_um')
+        raise DataFormatError(path, None, f"no {', '.join(missing)}: give the geometry "
+                              '(--geometry 22mm,7mm,360um, i.e. length,width,thickness), a run '
+                              'metadata file (--meta) with length_mm, width_mm, thickness_um, '
+                              "or header lines such as 'Length: 22 mm'")
     try:
         return Geometry(values['length'], values['width'], values['thickness'], name=sample)
     except ParameterError as exc:
@@ -342,10 +401,10 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
         raise DataFormatError(path, None, f'sample conflict: argument says {sample!r} but run '
                               f'metadata {meta} says {meta_sample!r}')
     name = _one_line(sample or meta_sample or '')
-    geo = _geometry(path, geometry, meta, meta_data, name)
-    with TextSource(path, max_bytes=max_bytes) as source:
+    with TextSource(path, max_bytes=max_bytes, fallback_encoding=LEGACY_ENCODING) as source:
         notes, cells, line, delimiter, decimal = _find_table(path, source)
-        roles = _assign(path, cells, line, columns)
+        geo = _geometry(path, geometry, meta, meta_data, name, notes)
+        roles = _assign(path, cells, line, columns, current_gain_a_per_v is not None)
         factors = {role: _factor(path, line, role, cells[k], unit, current_gain_a_per_v)
                    for role, (k, unit) in roles.items()}
         t_index, t_unit = roles['time']
@@ -361,9 +420,19 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
         k = int(np.argmax(steps <= 0)) + 1
         raise DataFormatError(path, line + 1 + k, f'time step below float resolution after '
                               f'conversion to seconds at {t[k]!r} s')
-    extra: dict[str, str] = {f'note_{k + 1:02d}': _one_line(n) for k, n in enumerate(notes)}
+    extra: dict[str, str] = {f'note_{k + 1:02d}': _one_line(n)
+                             for k, (_, n) in enumerate(notes)}
     extra['lab_columns'] = _one_line(', '.join(f'{role}={cells[k]}'
                                                for role, (k, _) in roles.items()))
+    header_geometry = [text for _, text in _header_geometry(path, notes).values()]
+    if header_geometry:
+        extra['geometry_header'] = _one_line('; '.join(header_geometry))
+    if source.encoding != 'utf-8':
+        extra['text_encoding'] = source.encoding
+    used = {k for k, _ in roles.values()}
+    unused = [c for k, c in enumerate(cells) if k not in used]
+    if unused:
+        extra['unused_columns'] = _one_line(', '.join(unused))
     if current_gain_a_per_v is not None:
         extra['current_gain_a_per_v'] = repr(float(current_gain_a_per_v))
     known: dict[str, float] = {}
@@ -391,13 +460,15 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
 
 
 def import_lab_files(paths: Iterable[PathLike], out_dir: PathLike, *,
-                     overwrite: bool = False, **options) -> list[Path]:
+                     overwrite: bool = False, notice=None, **options) -> list[Path]:
     """
     Import each lab file and write it as ``<out_dir>/<stem>.csv`` (``ipmc-timeseries/1``).
 
     All files are read first and nothing is written if any fails; an existing
     output is refused unless ``overwrite``.  ``options`` are those of
-    :func:`import_lab_file`.  Returns the written paths, in input order.
+    :func:`import_lab_file`.  ``notice(text)`` is told what was read other than as asked (a
+    file that is not UTF-8, geometry taken from a file header).  Returns the written paths, in
+    input order.
     """
     paths = [Path(p) for p in paths]
     out = Path(out_dir)
@@ -411,6 +482,16 @@ def import_lab_files(paths: Iterable[PathLike], out_dir: PathLike, *,
         if dst.exists() and not overwrite:
             raise DataFormatError(dst, None, 'output exists; remove it or pass overwrite')
     series = [import_lab_file(p, **options) for p in paths]
+    for src, ts in zip(paths, series):
+        if notice is not None and 'text_encoding' in ts.extra:
+            notice(f"{src}: not UTF-8 text: read as {ts.extra['text_encoding']} (Windows "
+                   'Western); check the units and names it printed')
+        if notice is not None and 'unused_columns' in ts.extra:
+            notice(f"{src}: column(s) not imported: {ts.extra['unused_columns']} (name one with "
+                   '--columns deflection=NAME or current=NAME)'
+                   + ('' if ts.deflection_m is not None else '; no deflection column found'))
+        if notice is not None and 'geometry_header' in ts.extra:
+            notice(f"{src}: geometry from its header: {ts.extra['geometry_header']}")
     out.mkdir(parents=True, exist_ok=True)
     for ts, dst in zip(series, targets):
         write_timeseries(dst, ts)

@@ -105,12 +105,18 @@ class TextSource:
     """
     A UTF-8 text file read as header lines, then chunks of whole data lines.
 
-    Use as a context manager.  ``lineno`` is the number of lines consumed.
+    Use as a context manager.  ``lineno`` is the number of lines consumed.  With
+    ``fallback_encoding`` (lab exports: Windows PCs write ``cp1252``), a line that is not UTF-8
+    is decoded with it instead, and so is every later line; ``encoding`` then names it so the
+    caller can say so.
     """
 
-    def __init__(self, path: PathLike, *, max_bytes: int | None = MAX_BYTES) -> None:
+    def __init__(self, path: PathLike, *, max_bytes: int | None = MAX_BYTES,
+                 fallback_encoding: str | None = None) -> None:
         self.path = path
         self.max_bytes = max_bytes
+        self.encoding = 'utf-8'
+        self._fallback = fallback_encoding
         self._file = _open_regular(path, max_bytes)
         self._buf = b''
         self._offset = 0  # file offset of _buf[0]
@@ -141,12 +147,19 @@ class TextSource:
 
     def _check(self, raw: bytes, first_line: int) -> str:
         try:
-            text = raw.decode('utf-8')
+            text = raw.decode(self.encoding)
         except UnicodeDecodeError as exc:
             line = first_line + raw.count(b'\n', 0, exc.start)
-            raise DataFormatError(self.path, line, f'not UTF-8 text (binary file?): byte '
-                                  f'0x{raw[exc.start]:02x} at offset '
-                                  f'{self._offset + exc.start} cannot be decoded') from None
+            error = DataFormatError(self.path, line, f'not {self.encoding} text (binary file?): '
+                                    f'byte 0x{raw[exc.start]:02x} at offset '
+                                    f'{self._offset + exc.start} cannot be decoded')
+            if self._fallback is None or self.encoding == self._fallback:
+                raise error from None
+            self.encoding = self._fallback
+            try:
+                text = raw.decode(self.encoding)
+            except UnicodeDecodeError:
+                raise error from None
         if '\x00' in text:
             pos = text.index('\x00')
             raise DataFormatError(self.path, first_line + text.count('\n', 0, pos),
@@ -232,11 +245,13 @@ def _fast_block(raw: bytes, ncol: int, delimiter: str, decimal: str) -> np.ndarr
 
 
 def _slow_block(path, raw: bytes, first: int, columns: Sequence[str], delimiter: str,
-                decimal: str, state: dict) -> tuple[np.ndarray, DataFormatError | None]:
+                decimal: str, state: dict,
+                encoding: str = 'utf-8') -> tuple[np.ndarray, DataFormatError | None]:
     """Rows parsed line by line up to the first error (returned, not raised)."""
     ncol = len(columns)
     rows: list[list[float]] = []
-    for k, text in enumerate(raw.decode('utf-8').split('\n')[:-1]):
+    # a byte the encoding cannot decode becomes U+FFFD: that row is then refused as not numeric
+    for k, text in enumerate(raw.decode(encoding, errors='replace').split('\n')[:-1]):
         lineno = first + k
         if text.endswith('\r'):
             text = text[:-1]
@@ -294,7 +309,8 @@ def read_table(source: TextSource, columns: Sequence[str], check: BlockCheck | N
         block = None if 'blank' in state else _fast_block(raw, ncol, delimiter, decimal)
         error = None
         if block is None:
-            block, error = _slow_block(source.path, raw, first, columns, delimiter, decimal, state)
+            block, error = _slow_block(source.path, raw, first, columns, delimiter, decimal, state,
+                                       source.encoding)
         if block.shape[0]:
             if first_row_line is None:
                 first_row_line = first  # a blank line before a row is an error: rows start here
