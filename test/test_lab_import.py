@@ -223,7 +223,7 @@ def test_parse_columns_spec():
 
 
 def _windows_export(path: Path, header: str, columns: str) -> None:
-    """A German lab PC's export: cp1252 text, ';' cells, decimal comma, 2 Hz crank, 10 s."""
+    """Write a German lab PC's export: cp1252, ';' cells, decimal comma, 2 Hz crank, 10 s."""
     t = np.arange(0, 10, 0.002)
     rows = [f'{a:.1f};{b:.5f};{c:.4f}'.replace('.', ',') for a, b, c in
             zip(t * 1e3, np.sin(2 * np.pi * 2 * t), 300 * np.cos(2 * np.pi * 2 * t))]
