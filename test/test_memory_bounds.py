@@ -155,6 +155,28 @@ def test_chunked_transfer_equals_the_one_shot_fft(monkeypatch):
     assert np.array_equal(sensor.lti_response_fft(transfer, t, w), ref)
 
 
+def test_overlap_save_blocks_equal_the_whole_record_convolution(monkeypatch):
+    """
+    Long records are convolved in blocks; the result is the whole-record one.
+
+    2^16-point blocks on a 300 s robot-motion record (the blocks' history is 33 s, the same
+    ratio to the block as in use): the sampled kernel's ringing tails beyond the history
+    leave < 2e-4 of the current's RMS (measured 1.1e-4; 2.9e-6 at the 2^21 points used in
+    production on a 5e6-sample record).
+    """
+    from ipmc_sensor_ros.simulation.stimuli import RobotMotion
+
+    model = SensorModel(PAPER_SAMPLES['slim'])
+    t = np.arange(300_000) / 1000.0
+    w = RobotMotion(seed=2).deflection(t) + 1e-4 * np.sin(2 * np.pi * 7 * t)
+    whole = sensor.lti_response_fft(model.transfer, t, w)
+    monkeypatch.setattr(sensor, 'OVERLAP_SAVE_FFT', 1 << 16)
+    monkeypatch.setattr(sensor, 'OVERLAP_SAVE_ABOVE', 1 << 17)
+    blocks = sensor.lti_response_fft(model.transfer, t, w)
+    assert blocks.shape == whole.shape
+    assert np.max(np.abs(blocks - whole)) < 2e-4 * np.std(whole)
+
+
 @pytest.mark.parametrize('steps', ['uniform', 'jittered', 'one_odd_step'])
 def test_piecewise_gradient_equals_numpy_gradient(monkeypatch, steps):
     n = 1_001

@@ -256,6 +256,23 @@ def _check(run):
     assert c['samples_in'] == (c['samples_out'] + c['samples_rejected'] + c['samples_dropped']
                                + c['samples_unpublished']), summary
     assert c['samples_rejected'] == 0 and c['samples_dropped'] == 0, summary
+    # every hostile value refused with one line
+    for phase, name, value, ok, reason, _ in run['results']:
+        if phase != 'valid':
+            assert not ok, (name, value)
+            assert reason and '\n' not in reason and len(reason) < 400, (name, reason)
+    # the peer waits for each reply, and a reply waits behind the node's input backlog
+    # (up to QOS_DEPTH messages): on a starved machine a set took ~13 s
+    assert len(run['results']) >= 10, 'the parameter peer hardly ran'
+    # resident memory from 30 % of the run (at least 15 s: the histories are full ~10 s after
+    # the data starts) to its end: the stalled reader makes the point writer keep at most
+    # QOS_DEPTH unacknowledged points (measured: +12 MB while filling), so growth beyond
+    # 20 MB once full is a leak (one 100-byte object kept per sample: +42 MB over 70 % of
+    # 10 minutes)
+    assert run['rss_early'] is not None, summary
+    assert run['rss_end'] - run['rss_early'] <= 20e6, summary
+    # what the monitor received: checked last, since a monitor starved longer than its
+    # history loses rows (not the node's doing) and then nothing is left to compare against
     rows = np.concatenate([np.frombuffer(b, dtype=np.float64) for b in blocks]).reshape(
         -1, len(ESTIMATE_COLUMNS.split(',')))     # one-sample blocks: time_s, deflection_m, std
     times, received = rows[:, 0], rows[:, 1]
@@ -269,14 +286,6 @@ def _check(run):
     assert np.all(np.diff(times) > 0), 'output stamps not strictly increasing'
     lost = n - c['samples_in']
     assert n - times.size == lost + c['samples_unpublished'], summary
-    # every hostile value refused with one line
-    for phase, name, value, ok, reason, _ in run['results']:
-        if phase != 'valid':
-            assert not ok, (name, value)
-            assert reason and '\n' not in reason and len(reason) < 400, (name, reason)
-    # the peer waits for each reply, and a reply waits behind the node's input backlog
-    # (up to QOS_DEPTH messages): on a starved machine a set took ~13 s
-    assert len(run['results']) >= 10, 'the parameter peer hardly ran'
     # clean reference: the ROS-free stream core with the default parameters, fed the samples
     # the node delivered (same gaps, same resets), equals the node's output on every sample
     # before the first accepted change (1e-12 m: the same float64 code, rounding only)
@@ -303,13 +312,6 @@ def _check(run):
     # after valid +-10 % changes the output stays within twice the reference amplitude
     # (the gain is a product of a few material and geometry factors, each +-10 %)
     assert np.max(np.abs(received)) <= 2.0 * np.max(np.abs(ref_w)), summary
-    # resident memory from 30 % of the run (at least 15 s: the histories are full ~10 s after
-    # the data starts) to its end: the stalled reader makes the point writer keep at most
-    # QOS_DEPTH unacknowledged points (measured: +12 MB while filling), so growth beyond
-    # 20 MB once full is a leak (one 100-byte object kept per sample: +42 MB over 70 % of
-    # 10 minutes)
-    assert run['rss_early'] is not None, summary
-    assert run['rss_end'] - run['rss_early'] <= 20e6, summary
     return summary
 
 

@@ -331,9 +331,28 @@ def lti_response_fft(transfer, time_s, deflection_m, pad_s: float = 2.0) -> np.n
     w = np.asarray(deflection_m, float)
     if t.size < 2:
         raise ValueError('need at least two samples')
-    x, n, fs, _ = padded_record(t, w, pad_s)
+    x, n, fs, n_pad = padded_record(t, w, pad_s)
+    if n > OVERLAP_SAVE_ABOVE and n_pad < OVERLAP_SAVE_FFT // 4:
+        return _overlap_save(transfer, x, t.size, fs)
     spectrum = np.fft.rfft(x, n)
     del x
+    _apply_transfer(transfer, spectrum, n, fs)
+    y = np.fft.irfft(spectrum, n)    # (scipy.fft's keeps a cached plan of 16 B per point)
+    del spectrum
+    return y[: t.size].copy()    # not a view holding the FFT length (up to 2x the record)
+
+
+#: Records whose FFT length would exceed this are convolved in overlap-save blocks of
+#: OVERLAP_SAVE_FFT points (half of each block is history), so memory stays ~100 MB whatever
+#: the length (a 5e6-sample record's 2^23-point FFT took ~250 MB).  The history of 2^20
+#: samples (17 min at 1 kHz) is far beyond the sensor's memory that the whole-record method
+#: already relies on (``pad_s``), so both give the linear convolution to rounding.
+OVERLAP_SAVE_ABOVE = 1 << 22
+OVERLAP_SAVE_FFT = 1 << 21
+
+
+def _apply_transfer(transfer, spectrum: np.ndarray, n: int, fs: float) -> None:
+    """Multiply an rfft spectrum of ``n`` points in place by the transfer (no DC, real Nyquist)."""
     f = np.fft.rfftfreq(n, 1.0 / fs)
     # the transfer is evaluated TRANSFER_CHUNK frequencies at a time and applied in place
     # (on every frequency at once, its temporaries took ~100 B per sample)
@@ -344,10 +363,28 @@ def lti_response_fft(transfer, time_s, deflection_m, pad_s: float = 2.0) -> np.n
         if n % 2 == 0 and a + TRANSFER_CHUNK >= f.size:
             h[-1] = h[-1].real
         spectrum[a:a + TRANSFER_CHUNK] *= h
-    del f
-    y = np.fft.irfft(spectrum, n)    # (scipy.fft's keeps a cached plan of 16 B per point)
-    del spectrum
-    return y[: t.size].copy()    # not a view holding the FFT length (up to 2x the record)
+
+
+def _overlap_save(transfer, x: np.ndarray, n_out: int, fs: float,
+                  n_fft: int | None = None) -> np.ndarray:
+    """Return the first ``n_out`` samples of the linear convolution of ``x`` with the model."""
+    n_fft = n_fft or OVERLAP_SAVE_FFT
+    # the sampled transfer's kernel is two-sided (s R(s) sampled up to Nyquist rings both
+    # ways, as the whole-record method's does), so each block sees past and future input
+    history, future = n_fft // 2, n_fft // 8
+    block = n_fft - history - future
+    h = np.ones(n_fft // 2 + 1, dtype=complex)
+    _apply_transfer(transfer, h, n_fft, fs)
+    y = np.empty(n_out)
+    segment = np.empty(n_fft)
+    for start in range(0, n_out, block):
+        lo = start - history                       # the block's input: past, itself, future
+        segment[:] = 0.0
+        piece = x[max(lo, 0):min(lo + n_fft, x.size)]
+        segment[max(lo, 0) - lo:max(lo, 0) - lo + piece.size] = piece
+        out = np.fft.irfft(np.fft.rfft(segment) * h, n_fft)
+        y[start:start + block] = out[history:history + min(block, n_out - start)]
+    return y
 
 
 def predict_current(model: SensorModel, time_s, deflection_m, pad_s: float = 2.0) -> np.ndarray:
