@@ -138,3 +138,36 @@ def test_current_only_input(short_run, tmp_path, capsys):
     assert main(['compare', str(only.parent)]) == 2
     err = capsys.readouterr().err
     assert 'skipped' in err and 'current only' in err and 'no usable data' in err
+
+
+def test_level_error_is_what_the_detrended_nrmse_leaves_out():
+    """
+    An estimate off by a level and a drift: the detrended NRMSE is blind to it, level_error not.
+
+    e = m + 1e-4 m + 2e-5 m/s * t over 10 s: start error 1e-4 m, end 3e-4 m (to rounding:
+    the line of e - m is exact), raw NRMSE = RMS(1e-4 + 2e-5 t) / RMS(m) (computed directly).
+    """
+    from ipmc_sensor_ros.workbench.metrics import level_error
+
+    t = np.arange(0, 10, 1e-3)
+    m = 1e-3 * np.sin(2 * np.pi * 3 * t)
+    e = m + 1e-4 + 2e-5 * t
+    level = level_error(e, m)
+    assert level['nrmse'] < 1e-9                   # means and trends removed: nothing left
+    assert level['start_error_m'] == pytest.approx(1e-4, rel=1e-6)
+    assert level['end_error_m'] == pytest.approx(1e-4 + 2e-5 * t[-1], rel=1e-6)
+    assert level['mean_error_m'] == pytest.approx(2e-4, rel=1e-3)
+    raw = np.sqrt(np.mean((e - m) ** 2) / np.mean(m ** 2))
+    assert level['nrmse_raw'] == pytest.approx(raw, rel=1e-9)
+
+
+def test_estimate_reports_the_level_error_beside_the_nrmse(short_run, tmp_path, capsys):
+    js = tmp_path / 'e.json'
+    assert main(['estimate', str(short_run / 'short_5Hz.csv'), '--out', str(tmp_path / 'o'),
+                 '--json', str(js)]) == 0
+    row = json.loads(js.read_text())[0]
+    assert {'nrmse', 'nrmse_raw', 'mean_error_m', 'start_error_m', 'end_error_m'} <= set(row)
+    assert all(np.isfinite(row[k]) for k in ('nrmse_raw', 'start_error_m', 'end_error_m'))
+    out = capsys.readouterr().out
+    assert f"as measured (nothing removed): {row['nrmse_raw']:.4f}, level error " \
+        f"{row['start_error_m']:+.3g} m -> {row['end_error_m']:+.3g} m" in out

@@ -156,7 +156,7 @@ def _resolve_values(data, base: dict, explicit: set[str], params: str | None, pr
 
 
 def estimate_accuracy(time_s, estimate_m, measured_m, leak_corner_hz: float,
-                      delay_s: float = 0.0) -> tuple[float, float, str]:
+                      delay_s: float = 0.0) -> tuple[float, float, str, dict]:
     """
     NRMSE of the estimated deflection.
 
@@ -171,9 +171,10 @@ def estimate_accuracy(time_s, estimate_m, measured_m, leak_corner_hz: float,
     leak transient 5 / (2 pi f_leak) when the record is long enough, else
     covers the whole record; the measurement is delayed by ``delay_s`` (the
     estimate of a model with a time delay lags by it).
-    Returns (nrmse, seconds used, which part was used).
+    Returns (nrmse, seconds used, which part was used, the level error that the NRMSE leaves
+    out: :func:`~ipmc_sensor_ros.workbench.metrics.level_error`).
     """
-    from ..workbench.metrics import detrended_nrmse
+    from ..workbench.metrics import level_error
 
     t = np.asarray(time_s, float)
     transient = 5.0 / (2 * np.pi * leak_corner_hz)
@@ -195,8 +196,8 @@ def estimate_accuracy(time_s, estimate_m, measured_m, leak_corner_hz: float,
         truth = np.interp(t_sel - delay_s, t, np.asarray(measured_m, float))
     else:
         truth = np.asarray(measured_m, float)[sel]
-    err = detrended_nrmse(estimate, truth)
-    return err, float(t_sel[-1] - t_sel[0]), what
+    level = level_error(estimate, truth)
+    return level['nrmse'], float(t_sel[-1] - t_sel[0]), what, level
 
 
 #: Rows formatted at a time when writing an ipmc-estimate/1 file.
@@ -311,12 +312,16 @@ def _cmd_estimate(args) -> int:
             msg += (f"; {resets} filter reset(s) at time gaps > {values['max_gap_s']} s "
                     'or backward jumps')
         if measured is not None:
-            err, used, what = estimate_accuracy(
+            err, used, what, level = estimate_accuracy(
                 t_out, w, measured, estimator.inverse.leak_corner_hz, estimator.delay_s
             )
             row['nrmse'] = err
+            row.update(level)
             msg += (f'; NRMSE {err:.4f} = RMS(estimate - measured) / RMS(measured), means and '
-                    f'linear trends removed, over {fmt_time_s(used)} s ({what})')
+                    f'linear trends removed, over {fmt_time_s(used)} s ({what}); '
+                    f"as measured (nothing removed): {level['nrmse_raw']:.4f}, level error "
+                    f"{level['start_error_m']:+.3g} m -> {level['end_error_m']:+.3g} m (what a "
+                    'reader at rest sees, if the measured deflection is zero at rest)')
         else:
             msg += '; no measured deflection in the input: accuracy not reported'
         print(msg)

@@ -7,13 +7,14 @@ Figures of merit, defined once for every verb, report and test.
 * :func:`noise_rms` -- the measurement-noise RMS of a current record, the noise floor every
   error is compared with (``compare``, ``fit``, ``diagnose``);
 * :func:`detrended_nrmse` -- :func:`nrmse` after removing the mean and linear trend of each
-  (``estimate``: a current sensor cannot see a constant deflection), in bounded memory.
+  (``estimate``: a current sensor cannot see a constant deflection), in bounded memory;
+  :func:`level_error` -- what it removes: the error of the estimate's level and its drift.
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ['fit_percent', 'nrmse', 'noise_rms', 'detrended_nrmse', 'CHUNK_ROWS']
+__all__ = ['fit_percent', 'nrmse', 'noise_rms', 'detrended_nrmse', 'level_error', 'CHUNK_ROWS']
 
 #: Samples per piece of the running sums of :func:`detrended_nrmse`.
 CHUNK_ROWS = 65_536
@@ -44,6 +45,31 @@ def detrended_nrmse(estimate, truth) -> float:
     held ~70 B per sample).  Agrees with the detrend formulation to rounding (< 1e-12
     relative, tested).
     """
+    sums = _error_sums(estimate, truth)
+    return float(np.sqrt(sums['ss_err'] / sums['ss_truth']))
+
+
+def level_error(estimate, truth) -> dict[str, float]:
+    """
+    What :func:`detrended_nrmse` leaves out: the error of the estimate's level, m.
+
+    One pass of the running sums gives both: ``nrmse`` (:func:`detrended_nrmse`) and
+    ``nrmse_raw``: RMS(e - m) / RMS(m) with nothing removed (meaningful when the measured
+    deflection is zero at rest, as a robot stack reads it); ``mean_error_m``: mean(e - m);
+    ``start_error_m`` / ``end_error_m``: the least-squares line of e - m at the first and
+    last sample (a drift of the estimate against the measurement).
+    """
+    sums = _error_sums(estimate, truth)
+    half = 0.5 * (sums['n'] - 1) / sums['n']      # centred index of the last sample
+    return {'nrmse': float(np.sqrt(sums['ss_err'] / sums['ss_truth'])),
+            'nrmse_raw': float(np.sqrt(sums['ss_err_raw'] / sums['ss_truth_raw'])),
+            'mean_error_m': sums['mean_diff'],
+            'start_error_m': sums['mean_diff'] - sums['slope_diff'] * half,
+            'end_error_m': sums['mean_diff'] + sums['slope_diff'] * half}
+
+
+def _error_sums(estimate, truth) -> dict:
+    """Means, slopes and residual sums of squares of e and m, in bounded pieces."""
     e_all = np.asarray(estimate, float)
     m_all = np.asarray(truth, float)
     n = e_all.size
@@ -57,10 +83,12 @@ def detrended_nrmse(estimate, truth) -> float:
     def x_centred(sl: slice) -> np.ndarray:
         return (np.arange(sl.start, min(sl.stop, n)) - centre) / n
 
-    sum_e = sum_m = 0.0
+    sum_e = sum_m = ss_err_raw = ss_truth_raw = 0.0
     for sl in pieces:
         sum_e += float(np.sum(e_all[sl]))
         sum_m += float(np.sum(m_all[sl]))
+        ss_err_raw += float(np.sum((e_all[sl] - m_all[sl]) ** 2))
+        ss_truth_raw += float(np.sum(m_all[sl] ** 2))
     mean_e, mean_m = sum_e / n, sum_m / n
     sxx = (n * n - 1.0) / (12.0 * n)     # sum of x_centred^2, exact
     sxe = sxm = 0.0
@@ -76,7 +104,9 @@ def detrended_nrmse(estimate, truth) -> float:
         m = m_all[sl] - (mean_m + slope_m * x)
         ss_err += float(np.sum((e - m) ** 2))
         ss_truth += float(np.sum(m ** 2))
-    return float(np.sqrt(ss_err / ss_truth))
+    return {'n': n, 'ss_err': ss_err, 'ss_truth': ss_truth, 'ss_err_raw': ss_err_raw,
+            'ss_truth_raw': ss_truth_raw, 'mean_diff': mean_e - mean_m,
+            'slope_diff': slope_e - slope_m}
 
 
 def noise_rms(t: np.ndarray, w: np.ndarray, y: np.ndarray, window_s: float = 4.0) -> float:
