@@ -106,13 +106,16 @@ class CompiledModel:
             i = eff.output_transform(elapsed_s, i, self.model, values)
         return i
 
-    def predict(self, elapsed_s, deflection_m, linear_response: Callable) -> np.ndarray:
+    def predict(self, elapsed_s, deflection_m, linear_response: Callable,
+                span_response: Callable | None = None) -> np.ndarray:
         """
         Return the current for a deflection record.
 
         Input transforms, ``linear_response(model, w)`` of the LTI part (quasi-static over a
         drifting material, :func:`time_varying_response`), output transforms. Prediction and
-        fitting share this order of operations.
+        fitting share this order of operations.  ``span_response(model, w, lo, hi)``
+        (optional): the same response at samples ``lo:hi`` only, used for a drifting
+        material, whose node responses are needed between their neighbours only.
         """
         w = self.apply_input_transforms(elapsed_s, deflection_m)
         if self.material_at is None:
@@ -122,6 +125,8 @@ class CompiledModel:
                 elapsed_s,
                 self.material_at,
                 lambda mat: linear_response(self.model.with_material(mat), w),
+                None if span_response is None else
+                lambda mat, lo, hi: span_response(self.model.with_material(mat), w, lo, hi),
             )
         return self.apply_output_transforms(elapsed_s, i)
 
@@ -220,23 +225,39 @@ def material_nodes(elapsed_s: np.ndarray, material_at, max_step: float = 0.05) -
     return np.linspace(t0, t1, n + 1)
 
 
-def time_varying_response(elapsed_s: np.ndarray, material_at, response_for) -> np.ndarray:
+def time_varying_response(elapsed_s: np.ndarray, material_at, response_for,
+                          span_response_for=None) -> np.ndarray:
     """
     Quasi-static response of a system whose material drifts slowly.
 
     The LTI responses ``response_for(material)`` at :func:`material_nodes`,
     linearly interpolated in time between neighbouring nodes (error ~
     step^2/8 of the response's curvature in the material: < 1e-3 relative
-    for 5 % steps).
+    for 5 % steps).  ``span_response_for(material, lo, hi)`` (optional): the response
+    at samples ``lo:hi`` only; each node's response is needed only between its two
+    neighbours, so with it the nodes together cost about two full responses.
     """
     nodes = material_nodes(elapsed_s, material_at)
+    # interval k (between nodes k-1 and k) holds samples bounds[k-1]:bounds[k]; the last
+    # interval includes the final sample
+    bounds = np.searchsorted(elapsed_s, nodes, side='left')
+    bounds[0], bounds[-1] = 0, elapsed_s.size
+    last = nodes.size - 1
+
+    def node_response(k):
+        lo, hi = int(bounds[max(k - 1, 0)]), int(bounds[min(k + 1, last)])
+        mat = material_at(nodes[k])
+        resp = (response_for(mat)[lo:hi] if span_response_for is None
+                else span_response_for(mat, lo, hi))
+        return resp, lo
+
     out = np.zeros(elapsed_s.size)
-    previous = response_for(material_at(nodes[0]))
+    previous = node_response(0)
     for k in range(1, nodes.size):
-        current = response_for(material_at(nodes[k]))
-        sel = (elapsed_s >= nodes[k - 1]) & ((elapsed_s < nodes[k]) if k < nodes.size - 1
-                                             else (elapsed_s <= nodes[k]))
-        frac = (elapsed_s[sel] - nodes[k - 1]) / (nodes[k] - nodes[k - 1])
-        out[sel] = (1 - frac) * previous[sel] + frac * current[sel]
+        current = node_response(k)
+        a, b = int(bounds[k - 1]), int(bounds[k])
+        frac = (elapsed_s[a:b] - nodes[k - 1]) / (nodes[k] - nodes[k - 1])
+        out[a:b] = ((1 - frac) * previous[0][a - previous[1]:b - previous[1]]
+                    + frac * current[0][a - current[1]:b - current[1]])
         previous = current
     return out
