@@ -249,7 +249,7 @@ def test_row_matrix_prediction_matches_exact_prediction(effects):
     Long records predict their fit rows through the row matrix (timefit._row_matrix).
 
     It must equal the exact FFT prediction to far below the noise: 1e-5 relative, the
-    tolerance of the per-bin path above (measured 5e-9..5e-7; a delay falls back to bins).
+    tolerance of the per-bin path above (measured 5e-9..5e-7 relative).
     """
     from ipmc_sensor_ros.simulation.sensor import predict_current
     from ipmc_sensor_ros.workbench.timefit import Record, predict, prepare

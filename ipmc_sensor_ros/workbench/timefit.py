@@ -42,8 +42,11 @@ __all__ = ['Record', 'PreparedRecord', 'prepare', 'FitSpec', 'ModelFit', 'fit_mo
 #: records with more FFT bins than this get a row matrix (:func:`_row_matrix`); below it the
 #: per-bin path is cheaper than the (rows x grid) product
 ROW_MATRIX_ABOVE = 16_384
-#: smallest damping ratio of a rational pole for the row-matrix path (:func:`_smooth_on_grid`)
-MIN_POLE_DAMPING = 0.3
+#: smallest distance, in grid steps, of a singularity of H(exp(v)) from the record's band of
+#: log frequencies v for the cubic interpolation (:func:`_smooth_on_grid`)
+MIN_SINGULARITY_STEPS = 20.0
+#: largest phase 2 pi f tau of a pure delay at the top bin for the cubic interpolation
+MAX_DELAY_PHASE = 4.0
 
 
 @dataclass
@@ -74,6 +77,7 @@ class PreparedRecord:
     pad: int
     x_bins: np.ndarray = None   # FFT of x_pad at ``bins``
     grid_hz: np.ndarray = None  # interpolation grid of the transfer function
+    lagrange: tuple = None      # (first grid index, 4 weights) per bin (_lagrange4)
     fold: np.ndarray = None     # per-bin weight and shift to p.rows[0] (_rows_from_spectrum)
     row_matrix: np.ndarray = None   # (rows, grid) map from H on the grid to the rows (_row_matrix)
 
@@ -125,6 +129,7 @@ def prepare(records: Sequence[Record], *, settle_s: float = 0.5, max_rows_per_re
                 grid,
             )
         )
+        out[-1].lagrange = _lagrange4(out[-1])
         if bins.size > row_matrix_above:
             out[-1].row_matrix = _row_matrix(out[-1])
     return out
@@ -147,7 +152,7 @@ def predict(p: PreparedRecord, model: SensorModel, cache: dict | None = None,
     if rows is not None and model.compiled.input_transforms:
         return predict(p, model, cache)[rows]
     if rows is not None:
-        matrix = p.row_matrix is not None and _smooth_on_grid(model)
+        matrix = p.row_matrix is not None and _smooth_on_grid(p, model)
         idx = np.searchsorted(p.rows, rows) if matrix else None
 
         def span_response(m: SensorModel, w: np.ndarray, lo: int, hi: int) -> np.ndarray:
@@ -179,44 +184,75 @@ def predict(p: PreparedRecord, model: SensorModel, cache: dict | None = None,
 def _transfer_on_bins(
     p: PreparedRecord, model: SensorModel, cache: dict | None = None
 ) -> np.ndarray:
-    """H at the record's FFT bins: min-phase part interpolated from the log grid, delay exact."""
+    """
+    H at the record's FFT bins, interpolated from its values on the log grid.
+
+    Smooth H (:func:`_smooth_on_grid`): cubic Lagrange interpolation of complex H in log f
+    (the interpolation of the row matrix, :func:`_row_matrix`); otherwise the min-phase
+    part's log-magnitude and unwrapped phase linearly in log f, the delay exactly.
+    """
     key = (model, p.n_fft, float(p.freqs[0]), p.freqs.size)
     if cache is not None and key in cache:
         return cache[key]
-    out = _interpolated_transfer(p, model)
+    if p.lagrange is not None and _smooth_on_grid(p, model):
+        j, w = p.lagrange
+        hg = _transfer_on_grid(p, model, cache)
+        out = w[0] * hg[j] + w[1] * hg[j + 1] + w[2] * hg[j + 2] + w[3] * hg[j + 3]
+    else:
+        out = _interpolated_transfer(p, model)
     if cache is not None:
         cache[key] = out
     return out
 
 
 def _transfer_on_grid(p: PreparedRecord, model: SensorModel, cache: dict | None) -> np.ndarray:
-    """H (without delay: :func:`_smooth_on_grid` holds) on the record's log grid."""
+    """H (delay included: :func:`_smooth_on_grid` holds) on the record's log grid."""
     key = ('grid', model, p.grid_hz.size, float(p.grid_hz[0]), float(p.grid_hz[-1]))
     if cache is not None and key in cache:
         return cache[key]
-    out = model.min_phase_transfer(2j * np.pi * p.grid_hz)
+    out = model.transfer(2j * np.pi * p.grid_hz)
     if cache is not None:
         cache[key] = out
     return out
 
 
-def _smooth_on_grid(model: SensorModel) -> bool:
+def _smooth_on_grid(p: PreparedRecord, model: SensorModel) -> bool:
     """
-    Tell whether H is smooth enough for the row matrix's cubic interpolation in log f.
+    Tell whether H is smooth enough for cubic interpolation in log f on the record's grid.
 
-    No pure delay (it is not smooth in log f), and every exact rational pole damped by at
-    least ``MIN_POLE_DAMPING`` (a pole pair of damping zeta puts a singularity of H(exp(v))
-    about asin(zeta) from the real log-frequency axis v; an undamped beam mode would need a
-    far finer grid). The diffusive part (H1 eq. 31, eq. 45) has its poles on the negative
-    real axis: singularities pi/2 from the axis.
+    With v = ln(omega) and grid step h, the error of cubic Lagrange interpolation of
+    H(exp(v)) is about (h/r)^4 relative, r the distance of its nearest singularity from
+    the band [v_min, v_max] in the complex v plane.  A pole p puts one at v = ln|p| +
+    j (arg p - pi/2): pi/2 from the real axis for a real pole (the diffusive part, H1
+    eq. 31 and eq. 45, and the amplifier pole), only asin(zeta) for a pole pair of damping
+    zeta (a beam mode) unless it lies outside the band.  Required: r >= 20 h for every
+    exact rational pole (error < 1e-5), and a pure delay tau with 2 pi f_max tau <= 4 (its
+    factor exp(-j tau exp(v)) has 4th derivative ~ (omega tau)^4: error < 1e-6).
     """
-    if model.delay_s() != 0.0:
-        return False
+    key = (model, p.grid_hz.size, float(p.grid_hz[0]), float(p.grid_hz[-1]))
+    if key in _SMOOTH:
+        return _SMOOTH[key]
+    lg = np.log(2 * np.pi * p.grid_hz)
+    h, v0, v1 = lg[1] - lg[0], lg[0], lg[-1]
+    ok = 2 * np.pi * p.grid_hz[-1] * abs(model.delay_s()) <= MAX_DELAY_PHASE
     for _z, poles, _k in model.compiled.rational_factors:
-        poles = np.asarray(poles, complex)
-        if poles.size and np.any(-poles.real < MIN_POLE_DAMPING * np.abs(poles)):
-            return False
-    return True
+        for pole in np.atleast_1d(np.asarray(poles, complex)):
+            if not ok:
+                break
+            if pole == 0:
+                ok = False
+                break
+            re = np.log(abs(pole))
+            dx = max(0.0, re - v1, v0 - re)
+            dy = abs(np.angle(pole)) - np.pi / 2
+            ok = np.hypot(dx, dy) >= MIN_SINGULARITY_STEPS * h
+    if len(_SMOOTH) > 10_000:
+        _SMOOTH.clear()
+    _SMOOTH[key] = bool(ok)
+    return bool(ok)
+
+
+_SMOOTH: dict = {}
 
 
 def _lagrange4(p: PreparedRecord) -> tuple[np.ndarray, np.ndarray]:
