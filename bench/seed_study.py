@@ -7,7 +7,8 @@ Seed study of the stepwise diagnosis (issue 15 targets), written to a table as i
 Data: :func:`~ipmc_sensor_ros.workbench.scenarios.hidden_effects_campaign` (the generator of
 the tests: exact closed-form H2 prediction with the hidden effects, values drawn from a seeded
 generator by ``random_effect_values``; slim + short, 8 frequencies 1-20 Hz, 6 s at 1 kHz,
-1 % noise).  Groups (run in this order, one table row per combination):
+1 % noise; combinations with hydration_drift: 2 frequencies x 120 s, as the single-effect
+drift test).  Groups (run in this order, one table row per combination):
 
 - ``null``: nothing missing (H2 data, H2 model), ``--null-seeds`` seeds: success = nothing named;
 - ``pairs``: every pair of surface_resistance, amplifier_bandwidth, time_delay,
@@ -77,7 +78,11 @@ def run(groups, seeds, null_seeds, out, seed_first=False):
         fh.write('group\thidden\tseed\tok\tnamed\tties\terror_over_floor\tseconds\t'
                  'cpu_seconds\n')
     for group, hidden, seed in plan:
-        recs, _ = hidden_effects_campaign(hidden, seed)
+        # a drift needs long records (as the single-effect drift test, test_diagnose):
+        # 0.05-0.2 %/s changes d by < 1.2 % over 6 s, under 1 % noise; 2 frequencies x 120 s
+        kwargs = (dict(frequencies_hz=(3.0, 7.0), duration_s=120.0)
+                  if 'hydration_drift' in hidden else {})
+        recs, _ = hidden_effects_campaign(hidden, seed, **kwargs)
         t0, c0 = time.perf_counter(), _cpu_s()
         diag = diagnose(recs)
         dt, cpu = time.perf_counter() - t0, _cpu_s() - c0
