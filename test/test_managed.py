@@ -385,3 +385,21 @@ def test_sigterm_on_the_first_line_exits_zero_without_traceback(entry, tmp_path)
     assert 'unconfigured' in text
     assert proc.returncode == 0, text
     assert 'Traceback' not in text and 'Error' not in text, text
+
+
+def test_autostart_configures_and_activates_at_start(managed_estimator):
+    messages = crank_messages(0.3)
+    plain = plain_estimates(messages)
+    client, node = managed_estimator(autostart=True)
+    client.spin_until(lambda: client.publishers('/deflection/block') == 1, 'the activation')
+    assert client.state() == 'active' and node.configured
+    _send_all(client, node, messages)
+    np.testing.assert_array_equal(client.estimates(), plain)   # same core, same arithmetic
+
+
+def test_autostart_with_a_bad_parameter_stays_unconfigured(managed_estimator, capfd):
+    client, node = managed_estimator(autostart=True, band_low_hz=80.0)
+    client.spin_until(lambda: 'configure failed' in capfd.readouterr().err,
+                      'the configure error')
+    assert client.state() == 'unconfigured' and not node.configured
+    assert client.publishers('/deflection/block') == 0

@@ -25,6 +25,11 @@ cleanup / shutdown /      destroy the topics and release the model and the filte
 error processing
 ========================  ===================================================================
 
+Parameter ``autostart`` (bool, default false, managed nodes only): at start-up the node
+configures and activates itself (as nav2's lifecycle manager does with ``autostart``), for
+launch files and users that want the plain behaviour with the lifecycle services available; a
+failed configure leaves it unconfigured with the reason logged.
+
 The simulator pauses on deactivate: on activate it continues with the next sample, its
 times shifted by the pause (a gap the estimator sees as one).  Signals and exit codes are
 those of :func:`~ipmc_sensor_ros.nodes.runner.run`.
@@ -36,17 +41,26 @@ import threading
 from typing import Any
 
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from . import params as P
+from ..interface.specs import Spec
 from .estimator_node import ESTIMATOR_SPECS, EstimatorNode
 from .runner import run
 from .simulator_node import SIMULATOR_SPECS, SimulatorNode
 
-__all__ = ['ManagedEstimatorNode', 'ManagedSimulatorNode', 'main_estimator', 'main_simulator']
+__all__ = ['ManagedEstimatorNode', 'ManagedSimulatorNode', 'main_estimator', 'main_simulator',
+           'AUTOSTART_SPEC']
 
 SUCCESS = TransitionCallbackReturn.SUCCESS
 FAILURE = TransitionCallbackReturn.FAILURE
+
+#: The managed nodes' own parameter (read once, at start-up).
+AUTOSTART_SPEC = Spec('autostart', False, bool,
+                      'configure and activate at start-up (managed nodes only; as a lifecycle '
+                      "manager's autostart); false: wait for the lifecycle services",
+                      read_only=True)
 
 
 def _one_line(exc: BaseException) -> str:
@@ -77,9 +91,17 @@ class ManagedMixin:
         P.check_unknown_overrides(self, self._SPECS, kwargs.get('cli_args'),
                                   default_name=self._DEFAULT_NAME)
         P.declare(self, self._SPECS)
-        self.get_logger().info(
-            f'unconfigured (managed node): ros2 lifecycle set {self.get_fully_qualified_name()}'
-            ' configure, then activate')
+        self._autostart_timer = None
+        if self.get_parameter('autostart').value:
+            # once the executor spins (a transition needs no spinning, but the node's
+            # services and the "ready" line come first); steady: runs before /clock
+            self._autostart_timer = self.create_timer(
+                0.0, self._autostart, clock=Clock(clock_type=ClockType.STEADY_TIME))
+            self.get_logger().info('unconfigured (managed node, autostart): configuring')
+        else:
+            self.get_logger().info(
+                'unconfigured (managed node): ros2 lifecycle set '
+                f'{self.get_fully_qualified_name()} configure, then activate')
 
     @property
     def configured(self) -> bool:
@@ -139,6 +161,15 @@ class ManagedMixin:
         return self.on_cleanup(state)
 
     # -- helpers ----------------------------------------------------------------------
+    def _autostart(self) -> None:
+        """Configure, then activate, once (parameter ``autostart``)."""
+        timer, self._autostart_timer = self._autostart_timer, None
+        if timer is None:
+            return
+        self.destroy_timer(timer)
+        if self.trigger_configure() == SUCCESS:
+            self.trigger_activate()
+
     def _release(self) -> None:
         with self._lock:
             self._configured = False
@@ -166,7 +197,7 @@ class ManagedMixin:
 class ManagedEstimatorNode(ManagedMixin, EstimatorNode, LifecycleNode):
     """The estimator node (:class:`EstimatorNode`) as a managed node (module docstring)."""
 
-    _SPECS = ESTIMATOR_SPECS
+    _SPECS = ESTIMATOR_SPECS + (AUTOSTART_SPEC,)
     _DEFAULT_NAME = 'ipmc_estimator'
     _BUILT = ('_stream', '_array', '_reduced', '_model_key', '_pending')
 
@@ -189,7 +220,7 @@ class ManagedEstimatorNode(ManagedMixin, EstimatorNode, LifecycleNode):
 class ManagedSimulatorNode(ManagedMixin, SimulatorNode, LifecycleNode):
     """The simulator node (:class:`SimulatorNode`) as a managed node (module docstring)."""
 
-    _SPECS = SIMULATOR_SPECS
+    _SPECS = SIMULATOR_SPECS + (AUTOSTART_SPEC,)
     _DEFAULT_NAME = 'ipmc_simulator'
     _BUILT = ('_sim', '_sims', '_model', '_stimulus')
 
