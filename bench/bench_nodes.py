@@ -207,6 +207,25 @@ def _cpu_seconds(pid: int) -> float:
         return float('nan')
 
 
+def stop_trial(proc, executor, sink, context) -> None:
+    """
+    End a trial: SIGINT the node process (killed after 10 s), then the sink and its context.
+
+    Shared by the node and the sensor-array benchmarks.
+    """
+    import rclpy
+
+    proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+    executor.shutdown()
+    sink.destroy_node()
+    rclpy.shutdown(context=context)
+
+
 def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
     import numpy as np
     import rclpy
@@ -273,15 +292,7 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
     sent = int(out.split()[2]) if out.startswith('SENT') else -1
     # the driver paces itself but cannot always keep up: a trial counts at the rate achieved
     achieved = (int(out.split()[1]) / float(out.split()[3])) if out.startswith('SENT') else 0.0
-    proc.send_signal(signal.SIGINT)
-    try:
-        proc.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
-    ex.shutdown()
-    sink.destroy_node()
-    rclpy.shutdown(context=ctx)
+    stop_trial(proc, ex, sink, ctx)
     lat = np.array(latencies) if latencies else np.array([np.nan])
     return {'kind': kind, 'rate_msg_s': rate, 'n': n, 'sent': sent, 'received': received[0],
             'lossless': bool(sent > 0 and received[0] == sent),
