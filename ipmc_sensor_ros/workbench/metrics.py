@@ -51,7 +51,7 @@ def detrended_nrmse(estimate, truth) -> float:
 
 def level_error(estimate, truth) -> dict[str, float]:
     """
-    What :func:`detrended_nrmse` leaves out: the error of the estimate's level, m.
+    Return what :func:`detrended_nrmse` leaves out: the error of the estimate's level, m.
 
     One pass of the running sums gives both: ``nrmse`` (:func:`detrended_nrmse`) and
     ``nrmse_raw``: RMS(e - m) / RMS(m) with nothing removed (meaningful when the measured
