@@ -12,12 +12,11 @@ Run: ``python -m bench.bench_arrays [--smoke]`` (also part of ``python -m bench.
 """
 from __future__ import annotations
 
-import signal
 import subprocess
 import sys
 import time
 
-from bench.bench_nodes import _cpu_seconds, _env
+from bench.bench_nodes import _cpu_seconds, _env, stop_trial
 
 CHANNELS = 16
 FS = 1000.0
@@ -109,15 +108,7 @@ def _array_trial(n: int, duration: float) -> dict:
         ex.spin_once(timeout_sec=0.01)
     out = driver.communicate(timeout=5)[0] if driver.poll() is not None else ''
     sent = int(out.split()[2]) if out.startswith('SENT') else -1
-    proc.send_signal(signal.SIGINT)
-    try:
-        proc.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
-    ex.shutdown()
-    sink.destroy_node()
-    rclpy.shutdown(context=ctx)
+    stop_trial(proc, ex, sink, ctx)
     cpu = ((cpu_end - cpu_start) / (wall_end - wall_start) if cpu_start is not None
            else float('nan'))
     return {'n': n, 'sent': sent, 'received': received[0], 'cpu_fraction': cpu,

@@ -84,18 +84,24 @@ offsets = np.arange(n) / fs
 signal = 1e-6 * np.sin(2 * np.pi * 5.0 * offsets)
 start = time.time() - epoch
 back = offsets[::-1].copy()
-msg = pack_block(start - back, signal)
-times = np.frombuffer(msg.data, dtype=float).reshape(n, 2)[:, 0]   # a view of the message
+from rclpy.serialization import serialize_message
+# serialised once (CDR, little-endian): the rows (time, current) are the last 16 n bytes; each
+# send rewrites the times in place and publishes the bytes (publish of a message object costs
+# ~100 us of conversion and serialisation: the driver would need most of a core at 4000 msg/s)
+buf = bytearray(serialize_message(pack_block(start - back, signal)))
+times = np.frombuffer(buf, dtype="<f8", count=2 * n, offset=len(buf) - 16 * n).reshape(n, 2)[:, 0]
 while k < total:
     # a DAQ's steady sample clock: message k ends at start + k / rate (contiguous samples, no
     # jitter in the stamps); it is published when due, and after a stall the backlog goes out
     # at once, as a buffered DAQ delivers it
+    # sleeps of at least 1 ms, then every message due is sent back to back: a sleep costs
+    # ~30 us of CPU and overshoots by ~170 us here, more than a publish of the bytes (~5 us)
     due = t0 + k / rate
     now = time.monotonic()
     if due > now:
-        time.sleep(due - now)
-    times[:] = start + k / rate - back   # in place: a new message per send (45 us) would
-    pub.publish(msg)                      # cap the driver below the rates under test
+        time.sleep(max(due - now, 1e-3))
+    times[:] = start + k / rate - back   # in place, in the serialised message
+    pub.publish(bytes(buf))
     k += 1
 print(f"SENT {k} {k * n} {time.monotonic() - t0:.6f}", flush=True)
 time.sleep(2.0)
@@ -207,13 +213,56 @@ def _cpu_seconds(pid: int) -> float:
         return float('nan')
 
 
+def stop_trial(proc, executor, sink, context) -> None:
+    """
+    End a trial: SIGINT the node process (killed after 10 s), then the sink and its context.
+
+    Shared by the node and the sensor-array benchmarks.
+    """
+    import rclpy
+
+    proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+    executor.shutdown()
+    sink.destroy_node()
+    rclpy.shutdown(context=context)
+
+
+def block_rows_and_last_time(raw: bytes) -> tuple[int, float]:
+    """
+    Return (rows, time of the last row) of a serialised ``Float64MultiArray`` block.
+
+    Reads the CDR bytes (little-endian) without deserialising: ``layout.dim[0].size`` rows,
+    ``layout.dim[1].size`` columns, time in the first column of the last row.  The sink of the
+    one-sample trials does this instead of building message objects (~50 us per message).
+    """
+    import struct
+
+    off = 4                                     # encapsulation header
+    ndim, = struct.unpack_from('<I', raw, off)
+    off += 4
+    sizes = []
+    for _ in range(ndim):
+        n_chars, = struct.unpack_from('<I', raw, off)
+        off = (off + 4 + n_chars + 3) & ~3      # label string, padded to 4
+        sizes.append(struct.unpack_from('<I', raw, off)[0])
+        off += 8                                # size, stride
+    rows, columns = sizes[0], sizes[1]
+    if rows == 0:
+        return 0, float('nan')
+    return rows, struct.unpack_from('<d', raw, len(raw) - 8 * columns)[0]
+
+
 def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
     import numpy as np
     import rclpy
     from std_msgs.msg import Float64MultiArray
 
     from ipmc_sensor_ros.nodes import params as P
-    from ipmc_sensor_ros.interface.blocks import unpack_columns
 
     fs = rate * n
     domain = random.randint(201, 232)
@@ -233,17 +282,22 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
     qos = P.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'})
     received = [0]
     latencies: list[float] = []
+    node_cpu: list[tuple[float, float]] = []    # (wall, CPU s of the node) while data flows
 
     epoch = time.time() - 100.0
 
-    def on_block(msg):
+    def on_block(raw: bytes):
         now = time.time() - epoch
         # the estimator sends ESTIMATE_COLUMNS, the pass-through its input's two columns
-        times, _ = unpack_columns(msg, msg.layout.dim[1].label)
-        received[0] += len(times)
-        latencies.append(now - float(times[-1]))
+        rows, last = block_rows_and_last_time(raw)
+        received[0] += rows
+        latencies.append(now - last)
+        if len(latencies) % 256 == 1:
+            node_cpu.append((time.monotonic(), _cpu_seconds(proc.pid)))
 
-    sub = sink.create_subscription(Float64MultiArray, 'deflection/block', on_block, qos)
+    # raw: the sink counts from the serialised bytes, so it is not the bottleneck
+    sub = sink.create_subscription(Float64MultiArray, 'deflection/block', on_block, qos,
+                                   raw=True)
     from ipmc_sensor_ros.nodes.runner import make_executor
 
     ex = make_executor(context=ctx)   # the sink must not be the bottleneck of one-sample trials
@@ -253,8 +307,6 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
     ready_by = time.monotonic() + 30
     while sub.get_publisher_count() == 0 and time.monotonic() < ready_by:
         ex.spin_once(timeout_sec=0.05)
-    cpu_start = _cpu_seconds(proc.pid)
-    wall_start = time.monotonic()
     driver = subprocess.Popen(
         [sys.executable, '-c', DRIVER, str(rate), str(n), str(duration), str(fs), repr(epoch)],
         env=env,
@@ -268,25 +320,22 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
     deadline = time.monotonic() + 3
     while time.monotonic() < deadline:
         ex.spin_once(timeout_sec=0.01)
-    node_cpu = (_cpu_seconds(proc.pid) - cpu_start) / (time.monotonic() - wall_start)
+    node_cpu.append((time.monotonic(), _cpu_seconds(proc.pid)))
+    # the node's CPU while data flowed (first to last block received, sampled every 256
+    # blocks): not the driver's start-up, its 1 s wait and 2 s linger, nor the 3 s tail
+    flow = node_cpu[:-1] if len(node_cpu) > 2 else node_cpu
+    cpu_fraction = ((flow[-1][1] - flow[0][1]) / (flow[-1][0] - flow[0][0])
+                    if len(flow) > 1 and flow[-1][0] > flow[0][0] else float('nan'))
     out = driver.communicate(timeout=5)[0] if driver.poll() is not None else ''
     sent = int(out.split()[2]) if out.startswith('SENT') else -1
     # the driver paces itself but cannot always keep up: a trial counts at the rate achieved
     achieved = (int(out.split()[1]) / float(out.split()[3])) if out.startswith('SENT') else 0.0
-    proc.send_signal(signal.SIGINT)
-    try:
-        proc.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
-    ex.shutdown()
-    sink.destroy_node()
-    rclpy.shutdown(context=ctx)
+    stop_trial(proc, ex, sink, ctx)
     lat = np.array(latencies) if latencies else np.array([np.nan])
     return {'kind': kind, 'rate_msg_s': rate, 'n': n, 'sent': sent, 'received': received[0],
             'lossless': bool(sent > 0 and received[0] == sent),
             'achieved_msg_s': achieved,
-            'node_cpu_fraction': node_cpu,
+            'node_cpu_fraction': cpu_fraction,
             'driver_kept_up': bool(achieved >= 0.97 * rate),
             'latency_median_ms': float(np.median(lat) * 1e3),
             'latency_p99_ms': float(np.percentile(lat, 99) * 1e3)}

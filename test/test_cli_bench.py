@@ -42,3 +42,19 @@ def test_effect_catalog_doc_is_in_sync():
 
     doc = (ROOT / 'docs' / 'effects.md').read_text()
     assert catalog_markdown().strip() in doc
+
+
+def test_bench_sink_reads_rows_and_last_time_from_the_serialised_block():
+    """The node benchmark's raw sink must count what a deserialising subscriber would."""
+    import numpy as np
+    from rclpy.serialization import serialize_message
+
+    from bench.bench_nodes import block_rows_and_last_time
+    from ipmc_sensor_ros.interface.blocks import estimate_columns
+    from ipmc_sensor_ros.nodes.messages import BlockPacker, pack_block
+
+    t = 1234.5 + np.arange(7) / 1000.0
+    assert block_rows_and_last_time(serialize_message(pack_block(t, np.sin(t)))) == (7, t[-1])
+    for rows in (1, 3):        # the estimator's 3 columns (odd labels and padding)
+        msg = BlockPacker(estimate_columns(1)).pack(t[:rows], t[:rows] * 2, t[:rows] * 3)
+        assert block_rows_and_last_time(serialize_message(msg)) == (rows, t[rows - 1])

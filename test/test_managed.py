@@ -18,11 +18,13 @@ import sys
 import time
 from pathlib import Path
 
+import dataclasses
+
 import numpy as np
 import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.msg import Transition, TransitionEvent
 from lifecycle_msgs.srv import ChangeState, GetState
 from rcl_interfaces.srv import SetParameters
 from rclpy.executors import SingleThreadedExecutor
@@ -30,11 +32,14 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray
 
 from conftest import TEST_DOMAIN, DirectNode
+from ipmc_sensor_ros.interface import specs as C
+from ipmc_sensor_ros.interface.blocks import current_columns, estimate_columns, unpack_columns
 from ipmc_sensor_ros.nodes import params as P
 from ipmc_sensor_ros.nodes.managed import ManagedEstimatorNode, ManagedSimulatorNode
 from ipmc_sensor_ros.nodes.messages import (CURRENT_COLUMNS, ESTIMATE_COLUMNS, pack_block,
                                             unpack_block)
 from ipmc_sensor_ros.physics.model import SensorModel
+from ipmc_sensor_ros.physics.modelfile import save_model
 from ipmc_sensor_ros.physics.parameters import Geometry
 from ipmc_sensor_ros.simulation.sensor import SensorSimulator
 from ipmc_sensor_ros.simulation.stimuli import CrankSlider
@@ -63,7 +68,8 @@ def crank_messages(seconds: float, t0: float = 1000.0, block: int = 100) -> list
 class Client:
     """A tester node: lifecycle service clients, a ``current`` publisher, output recorders."""
 
-    def __init__(self, ctx, managed, target: str, record_current: bool = False):
+    def __init__(self, ctx, managed, target: str, record_current: bool = False,
+                 columns: str | None = None):
         self.node = rclpy.create_node('lifecycle_tester', context=ctx)
         self.ex = SingleThreadedExecutor(context=ctx)
         self.ex.add_node(self.node)
@@ -75,9 +81,11 @@ class Client:
         self.blocks: list = []
         self.currents: list = []
         self.diagnostics: list[DiagnosticArray] = []
-        self.node.create_subscription(
-            Float64MultiArray, 'deflection/block',
-            lambda m: self.blocks.append(unpack_block(m, ESTIMATE_COLUMNS)), QOS)
+        # a sensor array's blocks (``columns``) as (times, table) pairs
+        unpack = ((lambda m: unpack_block(m, ESTIMATE_COLUMNS)) if columns is None else
+                  (lambda m: unpack_columns(m, columns)))
+        self.node.create_subscription(Float64MultiArray, 'deflection/block',
+                                      lambda m: self.blocks.append(unpack(m)), QOS)
         if record_current:
             self.node.create_subscription(
                 Float64MultiArray, 'current',
@@ -140,10 +148,10 @@ def managed_estimator():
     rclpy.init(context=ctx, domain_id=TEST_DOMAIN)
     made = []
 
-    def make(**overrides):
+    def make(columns=None, **overrides):
         params = [Parameter(k, value=v) for k, v in overrides.items()]
         node = ManagedEstimatorNode(context=ctx, parameter_overrides=params)
-        client = Client(ctx, node, '/ipmc_estimator')
+        client = Client(ctx, node, '/ipmc_estimator', columns=columns)
         made.append((client, node))
         return client, node
 
@@ -385,3 +393,155 @@ def test_sigterm_on_the_first_line_exits_zero_without_traceback(entry, tmp_path)
     assert 'unconfigured' in text
     assert proc.returncode == 0, text
     assert 'Traceback' not in text and 'Error' not in text, text
+
+
+def test_autostart_configures_and_activates_at_start(managed_estimator):
+    messages = crank_messages(0.3)
+    plain = plain_estimates(messages)
+    client, node = managed_estimator(autostart=True)
+    client.spin_until(lambda: client.publishers('/deflection/block') == 1, 'the activation')
+    assert client.state() == 'active' and node.configured
+    _send_all(client, node, messages)
+    np.testing.assert_array_equal(client.estimates(), plain)   # same core, same arithmetic
+
+
+def test_autostart_with_a_bad_parameter_stays_unconfigured(managed_estimator, capfd):
+    client, node = managed_estimator(autostart=True, band_low_hz=80.0)
+    client.spin_until(lambda: 'configure failed' in capfd.readouterr().err,
+                      'the configure error')
+    assert client.state() == 'unconfigured' and not node.configured
+    assert client.publishers('/deflection/block') == 0
+
+
+# -- error processing (rclpy.lifecycle: ERROR -> errorprocessing -> on_error) ---------------
+def _active(client, node):
+    assert client.transition(Transition.TRANSITION_CONFIGURE)
+    assert client.transition(Transition.TRANSITION_ACTIVATE)
+    client.spin_until(lambda: client.publishers('/deflection/block') == 1, 'the activation')
+
+
+def test_data_callback_raising_while_active_goes_through_error_processing_to_unconfigured(
+        managed_estimator, capfd):
+    messages = crank_messages(0.3)
+    plain = plain_estimates(messages)
+    client, node = managed_estimator()
+    events = []
+    client.node.create_subscription(TransitionEvent, '/ipmc_estimator/transition_event',
+                                    lambda m: events.append(m.goal_state.label), 10)
+    _active(client, node)
+    calls = []
+
+    def broken(*args, **kwargs):
+        calls.append(1)
+        raise RuntimeError('driver returned garbage')
+
+    node._stream.feed = broken     # a bug in the data path, as the subscription sees it
+    client.spin_until(lambda: client.pub.get_subscription_count() > 0, 'the subscription')
+    for msg in messages:
+        client.pub.publish(msg)
+    # rclpy's lifecycle path: active -> deactivating (callback returns ERROR) ->
+    # errorprocessing -> (on_error SUCCESS) unconfigured; the process and the node live on.
+    client.spin_until(lambda: 'unconfigured' in events, 'the error processing')
+    assert events[-3:] == ['deactivating', 'errorprocessing', 'unconfigured'], events
+    assert client.state() == 'unconfigured' and not node.configured and node._stream is None
+    client.spin_until(lambda: client.publishers('/deflection/block') == 0
+                      and client.pub.get_subscription_count() == 0, 'the topics to close')
+    assert len(calls) == 1          # further messages dropped until the node was deactivated
+    err = capfd.readouterr().err
+    assert 'Traceback' not in err, err
+    lines = [line for line in err.splitlines() if 'error while active' in line]
+    assert len(lines) == 1 and 'current subscription' in lines[0] \
+        and 'driver returned garbage' in lines[0], err
+    # a supervisor can configure it again: a fresh filter, the plain node's estimates
+    _active(client, node)
+    client.blocks.clear()
+    _send_all(client, node, messages)
+    np.testing.assert_array_equal(client.estimates(), plain)
+
+
+def test_transition_callback_raising_goes_to_unconfigured_or_finalized(managed_estimator,
+                                                                       capfd):
+    client, node = managed_estimator()
+    _active(client, node)
+
+    def broken():
+        raise OSError('device busy')
+
+    node._on_deactivated = broken           # deactivate raises: ERROR -> on_error
+    assert not client.transition(Transition.TRANSITION_DEACTIVATE)
+    assert client.state() == 'unconfigured' and not node.configured
+    client.spin_until(lambda: client.publishers('/deflection/block') == 0, 'the release')
+    err = capfd.readouterr().err
+    assert 'deactivate failed: OSError: device busy' in err and 'Traceback' not in err, err
+
+    del node._on_deactivated
+    _active(client, node)
+    node._on_deactivated = broken
+    node._release = broken                  # ... and on_error cannot release: finalized
+    try:
+        assert not client.transition(Transition.TRANSITION_DEACTIVATE)
+        assert client.state() == 'finalized'
+    finally:
+        del node._on_deactivated, node._release
+    err = capfd.readouterr().err
+    assert 'error processing failed: OSError: device busy; finalized' in err, err
+    assert 'Traceback' not in err
+
+
+# -- sensor arrays through configure -> activate -----------------------------------------
+def _array_currents(n: int, channels: int, seed: int = 5) -> np.ndarray:
+    """Return DAQ-like currents: 1 uA at 1 Hz, 30 nA offset, 2 % noise, 50 Hz hum."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / FS
+    return np.stack([1e-6 * np.sin(2 * np.pi * t + 0.4 * c) + 30e-9
+                     + 2e-8 * rng.standard_normal(n) + 5e-9 * np.sin(2 * np.pi * 50.0 * t)
+                     for c in range(channels)], axis=1)
+
+
+@pytest.mark.parametrize('channels, per_channel_models', [(2, False), (4, True)])
+def test_managed_sensor_array_equals_the_plain_node(managed_estimator, tmp_path, channels,
+                                                    per_channel_models):
+    overrides = {'channels': channels}
+    if per_channel_models:      # channel 1 and 3: a softer beam, from a model file
+        base = C.build_model(C.defaults(C.ESTIMATOR_SPECS))
+        soft = base.with_material(dataclasses.replace(
+            base.material, youngs_modulus_pa=0.5 * base.material.youngs_modulus_pa))
+        save_model(tmp_path / 'soft.yaml', soft)
+        overrides['model_files'] = ['', str(tmp_path / 'soft.yaml')] * (channels // 2)
+    n, size = 1000, 100
+    t = 200.0 + np.arange(n) / FS
+    table = _array_currents(n, channels)
+    table[350, 1] = np.nan          # one bad value: channel 1 of that block rejected only
+    messages = [pack_block(t[k:k + size], table[k:k + size, 0], current_columns(channels),
+                           *[table[k:k + size, c] for c in range(1, channels)])
+                for k in range(0, n, size)]
+    columns = estimate_columns(channels)
+    plain = DirectNode(**overrides)
+    try:
+        ref = []
+        plain.node._pub_block.publish = lambda m: ref.append(unpack_columns(m, columns))
+        for msg in messages:
+            plain.send(msg)
+        ref_counters = plain.node.channel_counters()
+    finally:
+        plain.close()
+
+    client, node = managed_estimator(columns=columns, **overrides)
+    got = client.blocks
+    _active(client, node)
+    client.spin_until(lambda: all(client.publishers(f'/ch{c}/deflection') == 1
+                                  for c in range(channels)), 'the per-channel publishers')
+    client.spin_until(lambda: client.pub.get_subscription_count() > 0, 'the subscription')
+    for msg in messages:
+        before = node.counters()['messages_in']
+        client.pub.publish(msg)
+        client.spin_until(lambda: node.counters()['messages_in'] > before, 'the input')
+    client.spin_until(lambda: len(got) == len(ref), 'the estimates')
+    # same parameters, same core, same messages: equal bit for bit, counters per channel too
+    assert len(ref) == len(messages) and node.array is not None
+    for (t_got, v_got), (t_ref, v_ref) in zip(got, ref):
+        np.testing.assert_array_equal(t_got, t_ref)
+        np.testing.assert_array_equal(v_got, v_ref)
+    assert node.channel_counters() == ref_counters
+    assert ref_counters[1]['samples_rejected'] == size \
+        and ref_counters[0]['samples_rejected'] == 0

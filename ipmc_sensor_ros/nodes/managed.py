@@ -25,6 +25,22 @@ cleanup / shutdown /      destroy the topics and release the model and the filte
 error processing
 ========================  ===================================================================
 
+Parameter ``autostart`` (bool, default false, managed nodes only): at start-up the node
+configures and activates itself (as nav2's lifecycle manager does with ``autostart``), for
+launch files and users that want the plain behaviour with the lifecycle services available; a
+failed configure leaves it unconfigured with the reason logged.
+
+Errors follow the lifecycle design's error processing (rclpy.lifecycle): a transition
+callback that raises (e.g. destroying a topic fails during deactivate) is logged on one line
+and returns ERROR, so rclpy enters ``errorprocessing`` and calls ``on_error``, which releases
+everything and returns SUCCESS (-> ``unconfigured``), or, if that release fails too,
+FAILURE (-> ``finalized``).  rclpy does not route an exception raised while *active* by a
+data callback (subscription or timer) to error processing (it would end the process with a
+traceback): the managed nodes catch it, log one line naming the callback, drop further input
+and request ``deactivate`` whose callback returns ERROR, so the node goes through
+``errorprocessing`` to ``unconfigured`` and the process keeps running (a supervisor sees the
+transition events and may configure it again).
+
 The simulator pauses on deactivate: on activate it continues with the next sample, its
 times shifted by the pause (a gap the estimator sees as one).  Signals and exit codes are
 those of :func:`~ipmc_sensor_ros.nodes.runner.run`.
@@ -36,17 +52,27 @@ import threading
 from typing import Any
 
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import Clock, ClockType
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from . import params as P
+from ..interface.specs import Spec
 from .estimator_node import ESTIMATOR_SPECS, EstimatorNode
 from .runner import run
 from .simulator_node import SIMULATOR_SPECS, SimulatorNode
 
-__all__ = ['ManagedEstimatorNode', 'ManagedSimulatorNode', 'main_estimator', 'main_simulator']
+__all__ = ['ManagedEstimatorNode', 'ManagedSimulatorNode', 'main_estimator', 'main_simulator',
+           'AUTOSTART_SPEC']
 
 SUCCESS = TransitionCallbackReturn.SUCCESS
 FAILURE = TransitionCallbackReturn.FAILURE
+ERROR = TransitionCallbackReturn.ERROR
+
+#: The managed nodes' own parameter (read once, at start-up).
+AUTOSTART_SPEC = Spec('autostart', False, bool,
+                      'configure and activate at start-up (managed nodes only; as a lifecycle '
+                      "manager's autostart); false: wait for the lifecycle services",
+                      read_only=True)
 
 
 def _one_line(exc: BaseException) -> str:
@@ -77,9 +103,19 @@ class ManagedMixin:
         P.check_unknown_overrides(self, self._SPECS, kwargs.get('cli_args'),
                                   default_name=self._DEFAULT_NAME)
         P.declare(self, self._SPECS)
-        self.get_logger().info(
-            f'unconfigured (managed node): ros2 lifecycle set {self.get_fully_qualified_name()}'
-            ' configure, then activate')
+        self._autostart_timer = None
+        self._fault: str | None = None       # a data callback's error, awaiting error processing
+        self._fault_timer = None
+        if self.get_parameter('autostart').value:
+            # once the executor spins (a transition needs no spinning, but the node's
+            # services and the "ready" line come first); steady: runs before /clock
+            self._autostart_timer = self.create_timer(
+                0.0, self._autostart, clock=Clock(clock_type=ClockType.STEADY_TIME))
+            self.get_logger().info('unconfigured (managed node, autostart): configuring')
+        else:
+            self.get_logger().info(
+                'unconfigured (managed node): ros2 lifecycle set '
+                f'{self.get_fully_qualified_name()} configure, then activate')
 
     @property
     def configured(self) -> bool:
@@ -107,26 +143,46 @@ class ManagedMixin:
             self._close_io()
             self.get_logger().error(f'activate failed: {_one_line(exc)}')
             return FAILURE
-        self._on_activated()
-        super().on_activate(state)        # enables the lifecycle publishers
+        try:
+            self._on_activated()
+            super().on_activate(state)        # enables the lifecycle publishers
+        except Exception as exc:  # error processing follows (module docstring)
+            self.get_logger().error(f'activate failed: {_one_line(exc)}; error processing')
+            return ERROR
+        self._fault = None
         self.get_logger().info('active')
         return SUCCESS
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Say "inactive" on /diagnostics, then destroy the topics and timers."""
-        super().on_deactivate(state)
-        diagnostics = getattr(self, '_diagnostics', None)
-        if diagnostics is not None:
-            diagnostics.announce('inactive (lifecycle): no input taken, nothing published')
-        self._on_deactivated()
-        self._close_io()
+        """
+        Say "inactive" on /diagnostics, then destroy the topics and timers.
+
+        ERROR (-> error processing) after a data callback's error or if this fails.
+        """
+        try:
+            super().on_deactivate(state)
+            diagnostics = getattr(self, '_diagnostics', None)
+            if diagnostics is not None:
+                diagnostics.announce('error: ' + self._fault if self._fault else
+                                     'inactive (lifecycle): no input taken, nothing published')
+            self._on_deactivated()
+            self._close_io()
+        except Exception as exc:  # error processing follows (module docstring)
+            self.get_logger().error(f'deactivate failed: {_one_line(exc)}; error processing')
+            return ERROR
+        if self._fault:
+            return ERROR
         self.get_logger().info('inactive')
         return SUCCESS
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Release the model and the filter (back to unconfigured)."""
-        self._close_io()
-        self._release()
+        """Release the model and the filter (back to unconfigured); ERROR if that fails."""
+        try:
+            self._close_io()
+            self._release()
+        except Exception as exc:  # error processing follows (module docstring)
+            self.get_logger().error(f'cleanup failed: {_one_line(exc)}; error processing')
+            return ERROR
         self.get_logger().info('cleaned up (unconfigured)')
         return SUCCESS
 
@@ -135,10 +191,57 @@ class ManagedMixin:
         return self.on_cleanup(state)
 
     def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Release everything; SUCCESS takes the node back to unconfigured."""
-        return self.on_cleanup(state)
+        """
+        Release everything after an error (state ``errorprocessing``).
+
+        SUCCESS takes the node to unconfigured; FAILURE, if the release fails, to finalized.
+        """
+        self._fault = None
+        try:
+            self._close_io()
+            self._release()
+        except Exception as exc:  # noqa: BLE001 - finalized, never a crash
+            self.get_logger().error(f'error processing failed: {_one_line(exc)}; finalized')
+            return FAILURE
+        self.get_logger().error('error processed: released, unconfigured')
+        return SUCCESS
 
     # -- helpers ----------------------------------------------------------------------
+    def _autostart(self) -> None:
+        """Configure, then activate, once (parameter ``autostart``)."""
+        timer, self._autostart_timer = self._autostart_timer, None
+        if timer is None:
+            return
+        self.destroy_timer(timer)
+        if self.trigger_configure() == SUCCESS:
+            self.trigger_activate()
+
+    def _guarded(self, callback, name: str, *args) -> None:
+        """
+        Run a data callback; on an exception, log it and start error processing.
+
+        The transition runs from a one-shot timer, out of the callback (whose topic it
+        destroys); until then further calls are dropped.
+        """
+        if self._fault is not None:
+            return
+        try:
+            callback(*args)
+        except Exception as exc:  # a bug or a broken device while active: never a crash
+            self._fault = f'{name}: {_one_line(exc)}'
+            self.get_logger().error(f'error while active in {self._fault}; error processing '
+                                    '(deactivate -> errorprocessing -> unconfigured)')
+            self._fault_timer = self.create_timer(
+                0.0, self._process_fault, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def _process_fault(self) -> None:
+        timer, self._fault_timer = self._fault_timer, None
+        if timer is None:
+            return
+        self.destroy_timer(timer)
+        if self._fault is not None:
+            self.trigger_deactivate()          # returns ERROR: on_error follows
+
     def _release(self) -> None:
         with self._lock:
             self._configured = False
@@ -166,7 +269,7 @@ class ManagedMixin:
 class ManagedEstimatorNode(ManagedMixin, EstimatorNode, LifecycleNode):
     """The estimator node (:class:`EstimatorNode`) as a managed node (module docstring)."""
 
-    _SPECS = ESTIMATOR_SPECS
+    _SPECS = ESTIMATOR_SPECS + (AUTOSTART_SPEC,)
     _DEFAULT_NAME = 'ipmc_estimator'
     _BUILT = ('_stream', '_array', '_reduced', '_model_key', '_pending')
 
@@ -185,11 +288,17 @@ class ManagedEstimatorNode(ManagedMixin, EstimatorNode, LifecycleNode):
         if self._configured:
             super()._on_parameters_set(parameters)
 
+    def _on_current(self, msg) -> None:
+        self._guarded(super()._on_current, 'current subscription', msg)
+
+    def _on_timer(self) -> None:
+        self._guarded(super()._on_timer, 'status timer')
+
 
 class ManagedSimulatorNode(ManagedMixin, SimulatorNode, LifecycleNode):
     """The simulator node (:class:`SimulatorNode`) as a managed node (module docstring)."""
 
-    _SPECS = SIMULATOR_SPECS
+    _SPECS = SIMULATOR_SPECS + (AUTOSTART_SPEC,)
     _DEFAULT_NAME = 'ipmc_simulator'
     _BUILT = ('_sim', '_sims', '_model', '_stimulus')
 
@@ -202,6 +311,12 @@ class ManagedSimulatorNode(ManagedMixin, SimulatorNode, LifecycleNode):
         if not self._configured:
             return {'samples_published': 0, 'blocks_published': 0, 'done': False}
         return super().counters()
+
+    def _on_tick(self) -> None:
+        self._guarded(super()._on_tick, 'publish timer')
+
+    def _publish_counters(self) -> None:
+        self._guarded(super()._publish_counters, 'counters timer')
 
     def _on_deactivated(self) -> None:
         self._paused_ns = self.get_clock().now().nanoseconds

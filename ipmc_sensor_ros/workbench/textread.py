@@ -101,6 +101,10 @@ def _open_regular(path: PathLike, max_bytes: int | None):
     return os.fdopen(fd, 'rb')
 
 
+#: How an encoding is named in messages.
+_ENCODING_NAMES = {'utf-8': 'UTF-8', 'cp1252': 'Windows-1252'}
+
+
 class TextSource:
     """
     A UTF-8 text file read as header lines, then chunks of whole data lines.
@@ -150,7 +154,8 @@ class TextSource:
             text = raw.decode(self.encoding)
         except UnicodeDecodeError as exc:
             line = first_line + raw.count(b'\n', 0, exc.start)
-            error = DataFormatError(self.path, line, f'not {self.encoding} text (binary file?): '
+            shown = _ENCODING_NAMES.get(self.encoding, self.encoding)
+            error = DataFormatError(self.path, line, f'not {shown} text (binary file?): '
                                     f'byte 0x{raw[exc.start]:02x} at offset '
                                     f'{self._offset + exc.start} cannot be decoded')
             if self._fallback is None or self.encoding == self._fallback:
