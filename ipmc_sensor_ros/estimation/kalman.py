@@ -94,6 +94,7 @@ from scipy.linalg import solve_discrete_are
 import scipy.signal as sig
 
 from .inverse import ParameterError, _positive
+from .leak_schedule import LeakSchedule
 from ..lti.discretize import van_loan
 from ..lti.reduction import ReducedModel
 
@@ -321,12 +322,16 @@ class KalmanEstimator:
         self._c, self._iw, self._ib, self._n = c, iw, ib, N
         self._motion_idx = np.r_[np.arange(n), iv]
         self._c_list = c.tolist()
-        self._moving = self._moving_mode(ac, qc, c, scale, wl, dt)
-        # until the first rest the deflection's level is unknown (the motion may have begun
-        # before the record) and the offset is not learned: leak at START_LEAK_CORNER_HZ
-        self._moving_start = self._moving_mode(
-            ac, qc, c, scale, 2 * math.pi * START_LEAK_CORNER_HZ, dt
-        )
+        # moving-mode gain sets for a ladder of leak corners, built when first used; the
+        # corner follows the motion (leak_schedule.py): floor leak_corner_hz once the offset
+        # is trusted, START_LEAK_CORNER_HZ before the first rest (level unknown, offset not
+        # learned) and while it is not
+        self._design = (ac, qc, c, scale, dt)
+        self._modes = {}
+        self._r0 = abs(float(np.real(self.reduced.charge_response(np.array([0.0]))[0])))
+        self._sched = LeakSchedule(fs, self._r0, self.leak_corner_hz, START_LEAK_CORNER_HZ)
+        self._moving = self._ladder_mode(self._sched.floor_index)
+        self._moving_start = self._ladder_mode(self._sched.start_index)
         self.std_moving_m = self._moving.std_m
         self._n_max = fs * self.rest_offset_time_s
         self._rewind_n = max(1, int(round(REST_REWIND_WINDOWS * self.rest_window_s * fs)))
@@ -362,6 +367,15 @@ class KalmanEstimator:
             self.noise_energy_a2 = self.current_noise_a**2 * float(
                 np.sum(sig.sosfilt(self._bp, imp) ** 2)
             )
+
+    def _ladder_mode(self, index: int) -> '_Mode':
+        """Moving-mode predictor for the ladder's corner ``index`` (built once, kept)."""
+        mode = self._modes.get(index)
+        if mode is None:
+            ac, qc, c, scale, dt = self._design
+            wl = 2 * math.pi * float(self._sched.corners_hz[index])
+            mode = self._modes[index] = self._moving_mode(ac, qc, c, scale, wl, dt)
+        return mode
 
     def _moving_mode(self, ac, qc, c, scale, wl, dt) -> '_Mode':
         """Steady-state Kalman predictor of the moving model with deflection leak wl (rad/s)."""
@@ -417,6 +431,8 @@ class KalmanEstimator:
         self._b_last = 0.0
         self.last_std = self._moving_start.std_m
         self.last_rest = np.zeros(0, bool)
+        self._sched.reset()
+        self._sig_seq = None
         # the last rest samples and the offset before each (see _rewind)
         self._rest_y = deque(maxlen=self._rewind_n)
         self._rest_b = deque(maxlen=self._rewind_n)
@@ -470,7 +486,9 @@ class KalmanEstimator:
             self._energy = float(zf[0] / a)
             floor = np.maximum(floor, hf * self._hp_ratio)
             self._sigma2 = max(self.current_noise_a ** 2, self._hf_energy / self._hp_unit)
+            self._sig_seq = np.maximum(self.current_noise_a ** 2, hf / self._hp_unit)
         else:
+            self._sig_seq = None
             e, zf = sig.lfilter([1 - a], [1, -a], np.minimum(band * band, self._clip_a2()),
                                 zi=[a * self._energy])
             self._energy = float(zf[0] / a)
@@ -509,6 +527,7 @@ class KalmanEstimator:
         cuts = np.flatnonzero(np.diff(flags.astype(np.int8))) + 1
         bounds = [0, *cuts.tolist(), y.size]
         out = np.empty(y.size)
+        count0 = self._sched.count
         for lo, hi in zip(bounds[:-1], bounds[1:]):
             if flags[lo]:
                 self._seen_rest = True
@@ -517,33 +536,100 @@ class KalmanEstimator:
                 out[lo:hi] = self._run_rest(y[lo:hi])
             else:
                 if was_rest:                              # leaving rest: leak towards this level
-                    self._w_ref = float(self._s[self._iw])
-                    self._s[self._iw] = 0.0
-                    self._rewind()
-                mode = self._mode()
-                out[lo:hi], self._b_last, self._s = mode.run(y[lo:hi], self._s)
-                out[lo:hi] += self._w_ref
-                self._offset_var += self._q_b_step * (hi - lo)
+                    self._leave_rest()
+                self._run_moving(y, lo, hi, out, count0)
             was_rest = bool(flags[lo])
+        self._sched.count = count0 + y.size
         self.at_rest = bool(flags[-1])
         self.last_std = self._mode().std_m
         return out, np.full(y.size, self.last_std)
+
+    def _leave_rest(self) -> None:
+        """Re-reference w to the held level, slowest allowed corner, rewind (see _rewind)."""
+        self._w_ref = float(self._s[self._iw])
+        self._s[self._iw] = 0.0
+        sch = self._sched
+        sch.moving_n = 0          # J at t = 0 is the leak term alone: the slowest corner
+        sch.index = self._floor_index(self._offset_var)
+        self._rewind()
+        sch.u_prev = float(self._s[self._iw])
+
+    def _floor_index(self, offset_var: float) -> int:
+        """
+        Slowest allowed ladder index.
+
+        leak_corner_hz only while the offset is known to OFFSET_TRUSTED_A RMS (learned at
+        rest, its variance growing by the drift during motion); else START_LEAK_CORNER_HZ
+        (an offset error db ramps w by db / R0 per second).
+        """
+        if self._seen_rest and offset_var < OFFSET_TRUSTED_A ** 2:
+            return self._sched.floor_index
+        return self._sched.start_index
+
+    def _choose(self, stats, sigma2: float, offset_var: float, moving_n: int) -> int:
+        """Leak corner index for the motion so far (LeakSchedule.choose)."""
+        # before the first rest the offset is not observable: its term is left out
+        p_b = offset_var if self._seen_rest else 0.0
+        return self._sched.choose(stats, sigma2, p_b, self._floor_index(offset_var), moving_n)
+
+    def _sigma2_at(self, k: int) -> float:
+        """Measured noise variance after sample k of the present block."""
+        if self._sig_seq is None:
+            return self._noise_var()
+        return float(self._sig_seq[k])
+
+    def _run_moving(self, y: np.ndarray, lo: int, hi: int, out: np.ndarray, count0: int):
+        """
+        Moving-mode filter over y[lo:hi], with the leak corner re-chosen on the sample grid.
+
+        Each run goes to hi with the present corner; if a grid point inside it would switch
+        the corner, the run is cut there (its state recomputed) and continued with the new.
+        """
+        sch = self._sched
+        q = self._q_b_step
+        pos = lo
+        while pos < hi:
+            phase = (count0 + pos) % sch.step
+            if phase == 0:
+                sch.index = self._choose(
+                    sch.stats, self._sigma2_at(pos), self._offset_var, sch.moving_n
+                )
+            mode = self._mode()
+            w, b_last, s_end = mode.run(y[pos:hi], self._s)
+            seq = sch.stats_sequence(w)
+            cut = hi
+            for g in range(pos + sch.step - phase, hi, sch.step):
+                k = g - pos
+                new = self._choose(
+                    seq[:, k - 1], self._sigma2_at(g), self._offset_var + q * k, sch.moving_n + k
+                )
+                if new != sch.index:
+                    cut = g
+                    break
+            n = cut - pos
+            if cut < hi:
+                w = w[:n]
+                _, b_last, s_end = mode.run(y[pos:cut], self._s)
+            out[pos:cut] = w + self._w_ref
+            self._b_last, self._s = b_last, s_end
+            sch.stats = seq[:, n - 1].copy()
+            sch.u_prev = float(w[-1])
+            sch.moving_n += n
+            self._offset_var += q * n
+            pos = cut
 
     def _noise_var(self) -> float:
         """White-noise variance per sample: the measured one, never below current_noise_a^2."""
         return max(self.current_noise_a ** 2, self._sigma2)
 
     def _mode(self) -> '_Mode':
-        """
-        Moving-mode predictor for the present offset uncertainty.
+        """Moving-mode predictor for the leak corner in use (see _choose)."""
+        return self._ladder_mode(self._sched.index)
 
-        The slow leak (KALMAN_LEAK_CORNER_HZ) only while the offset is known to
-        OFFSET_TRUSTED_A RMS (learned at rest, its variance growing by the drift during
-        motion); else the start leak (an offset error db ramps w by db / R0 per second).
-        """
-        if self._seen_rest and self._offset_var < OFFSET_TRUSTED_A ** 2:
-            return self._moving
-        return self._moving_start
+    @property
+    def leak_corner_in_use_hz(self) -> float:
+        """Return the deflection leak corner chosen for the motion so far, Hz."""
+        return self._sched.corner_hz
 
     def _run_rest(self, y: np.ndarray) -> np.ndarray:
         """
@@ -663,14 +749,12 @@ class KalmanEstimator:
                 self.at_rest = True
         st = self._s.tolist()
         iw, ib = self._iw, self._ib
+        sch = self._sched
         if self.at_rest and self._w_ref:
             st[iw] += self._w_ref
             self._w_ref = 0.0
         elif was_rest and not self.at_rest:
-            self._w_ref = st[iw]
-            st[iw] = 0.0
-            self._s[:] = st
-            self._rewind()
+            self._leave_rest()
             st = self._s.tolist()
         if self.at_rest:
             self._seen_rest = True
@@ -688,12 +772,18 @@ class KalmanEstimator:
             self._b_last = b
             self._offset_var = self._noise_var() / n1
         else:
+            if sch.count % sch.step == 0:
+                sch.index = self._choose(sch.stats, self._noise_var(), self._offset_var,
+                                         sch.moving_n)
             mode = self._mode()
             innov = y - sum(map(mul, self._c_list, st))
-            w = st[iw] + mode.k_w * innov + self._w_ref
+            u = st[iw] + mode.k_w * innov
+            w = u + self._w_ref
             self._b_last = st[ib] + mode.k_b * innov
             new = [sum(map(mul, row, st)) + g * y for row, g in zip(mode.f_rows, mode.g_list)]
             self._offset_var += self._q_b_step
+            sch.update_one(u)
+        sch.count += 1
         self._s[:] = new
         return w
 
@@ -711,6 +801,7 @@ class KalmanEstimator:
             'sigma2': self._sigma2,
             'lp': self._lp,
             'seen_rest': self._seen_rest,
+            'leak': self._sched.get_state(),
         }
 
     def set_state(self, state: dict) -> None:
@@ -731,6 +822,8 @@ class KalmanEstimator:
         self._sigma2 = float(state['sigma2'])
         self._lp = float(state['lp'])
         self._seen_rest = bool(state['seen_rest'])
+        if 'leak' in state:
+            self._sched.set_state(state['leak'])
 
     def current_output(self) -> np.ndarray:
         """Deflection held in the predicted state (per channel), m."""
@@ -755,6 +848,10 @@ class KalmanEstimator:
             self._b_last = old._b_last
             self.at_rest = old.at_rest
             self._energy = old._energy
+            # the motion statistics and the corner in use (the nearest of this ladder)
+            self._sched.set_state(old._sched.get_state())
+            ladder = self._sched.corners_hz
+            self._sched.index = int(np.argmin(np.abs(np.log(ladder / old.leak_corner_in_use_hz))))
         else:
             self._s[self._iw] = float(old.current_output()[0])
 

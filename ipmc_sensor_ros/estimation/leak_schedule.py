@@ -1,0 +1,177 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+Motion-adaptive deflection leak corner for :class:`~.kalman.KalmanEstimator`.
+
+While the sensor moves, the Kalman estimate w leaks towards the last held level
+w_ref at a corner f (``w' = v - 2 pi f (w - w_ref)``).  Three errors depend on f
+(R0 = R_n(0), A s/m; current noise sigma A RMS per sample at fs; offset error of
+variance P_b, A^2; t = time since the motion began, s):
+
+* the leak itself: a high-pass at f on w - w_ref.  On motion of mean square S
+  about w_ref and velocity mean square V, the lost part is ``(f / f_eff)^2 S`` with
+  ``f_eff = sqrt(V / S) / 2 pi`` (a sinusoid at f_m: f_eff = f_m, error f / f_m);
+* white current noise: it is a white velocity of two-sided PSD sigma^2 / (fs R0^2)
+  integrated by 1 / (s + w_f), w_f = 2 pi f: variance
+  ``sigma^2 / (fs R0^2) * (1 - exp(-2 w_f t)) / (2 w_f)``;
+* the offset error: a constant velocity error db / R0 ramping w through the same
+  integrator: ``P_b / R0^2 * ((1 - exp(-w_f t)) / w_f)^2``.
+
+:meth:`LeakSchedule.choose` picks, from a ladder of corners (``LADDER_RATIO`` apart),
+the one minimising the sum J(f) of these mean squares, from quantities the filter
+measures causally: S and V as running means (``STATS_WINDOW_S``) of the estimate's
+``u = w - w_ref`` and of its sample-to-sample velocity, sigma^2 the measured white
+noise, P_b the offset variance (learned at rest, growing by the drift while moving),
+t the samples since leaving rest.  Under 1 % noise sigma and S^(1/2) f_m both scale
+with the motion, so the optimum scales with f_m (f ~ 0.02 f_m for the slim sample
+after a 2 s rest); a short move after a hold keeps the slowest corner (all three
+terms are small at small t), a long one raises it as its noise and offset ramps
+grow.  Before the first rest the offset is not observable (any value of it fits
+the current, ``H(0) = 0``): the offset term is left out and the floor is
+``START_LEAK_CORNER_HZ`` (the clean 1 Hz crank then keeps its 2 % leak error).
+Decisions are taken every ``STEP_S`` on a fixed sample grid (so blocks of any size
+and single samples decide identically) and only when J drops by ``HYSTERESIS``;
+the corner never exceeds ``CEILING_FRACTION * f_eff`` nor ``CEILING_HZ``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.signal as sig
+
+__all__ = ['LeakSchedule', 'leak_error_terms']
+
+#: Ratio between neighbouring corners of the ladder (J is flat within a factor 2 of its
+#: minimum: the leak term grows as f^2, the noise term falls as 1/f).
+LADDER_RATIO = 2.0
+#: Highest corner, Hz: 1 Hz keeps the leak's phase lead below 3 deg down to 20 Hz motion.
+CEILING_HZ = 1.0
+#: Highest corner relative to the motion's f_eff: a 5 % amplitude / 3 deg phase error on it.
+CEILING_FRACTION = 0.05
+#: Time constant of the running means S, V, s: two periods of 1 Hz motion (a 0.2 Hz motion
+#: is then averaged over less than a cycle, so S and V fluctuate; the leak term keeps the
+#: corner low there).
+STATS_WINDOW_S = 2.0
+#: Decision interval, s (much shorter than the leak time constants 1 / (2 pi f) >= 0.16 s
+#: that it changes, and a few times per stats window).
+STEP_S = 0.25
+#: Switch only when the predicted mean-square error falls by this fraction (hysteresis).
+HYSTERESIS = 0.2
+
+
+def leak_error_terms(f_hz, s_m2, v_m2_s2, sigma2_a2, p_b_a2, t_s, r0, fs):
+    """
+    Predicted mean-square errors (m^2) of a leak at ``f_hz``: (leak, noise, offset).
+
+    Parameters
+    ----------
+    f_hz : leak corner(s), Hz (array).
+    s_m2, v_m2_s2 : mean squares of w - w_ref (m^2) and of its velocity (m^2/s^2).
+    sigma2_a2 : white current noise variance per sample, A^2.
+    p_b_a2 : offset error variance, A^2 (0: left out).
+    t_s : time since the motion began, s.
+    r0 : R_n(0), A s/m.
+    fs : sample rate, Hz.
+
+    """
+    f = np.asarray(f_hz, float)
+    wf = 2 * math.pi * f
+    leak = (wf * s_m2) ** 2 / v_m2_s2 if v_m2_s2 > 0 else np.zeros_like(f)
+    noise = sigma2_a2 / (fs * r0 * r0) * -np.expm1(-2 * wf * t_s) / (2 * wf)
+    offset = p_b_a2 / (r0 * r0) * (np.expm1(-wf * t_s) / wf) ** 2
+    return leak, noise, offset
+
+
+class LeakSchedule:
+    """
+    Running motion statistics and the chosen leak-corner index (see the module docstring).
+
+    Parameters
+    ----------
+    fs : sample rate, Hz.
+    r0 : R_n(0), A s/m.
+    floor_hz : slowest corner (the estimator's ``leak_corner_hz``), Hz.
+    start_hz : floor before the first rest and while the offset is not trusted, Hz.
+
+    """
+
+    def __init__(self, fs: float, r0: float, floor_hz: float, start_hz: float):
+        self.fs, self.r0 = float(fs), float(r0)
+        top = max(min(CEILING_HZ, fs / 20.0), floor_hz, start_hz)
+        n = int(math.floor(math.log(top / floor_hz) / math.log(LADDER_RATIO) + 1e-9)) + 1
+        corners = {floor_hz * LADDER_RATIO ** k for k in range(n)} | {max(start_hz, floor_hz)}
+        self.corners_hz = np.array(sorted(corners))
+        self.floor_index = 0
+        self.start_index = int(np.flatnonzero(self.corners_hz == max(start_hz, floor_hz))[0])
+        self.step = max(1, int(round(STEP_S * fs)))
+        self.alpha = math.exp(-1.0 / (fs * STATS_WINDOW_S))
+        self.reset()
+
+    def reset(self) -> None:
+        self.index = self.start_index
+        self.stats = np.zeros(3)        # running means of [1, u^2, v^2] (weight, S, V)
+        self.u_prev = 0.0
+        self.moving_n = 0               # samples since the motion began
+        self.count = 0                  # absolute sample counter (decision grid)
+
+    def get_state(self) -> dict:
+        return {'index': self.index, 'stats': self.stats.copy(), 'u_prev': self.u_prev,
+                'moving_n': self.moving_n, 'count': self.count}
+
+    def set_state(self, state: dict) -> None:
+        self.index = int(state['index'])
+        self.stats = np.asarray(state['stats'], float).copy()
+        self.u_prev = float(state['u_prev'])
+        self.moving_n = int(state['moving_n'])
+        self.count = int(state['count'])
+
+    @property
+    def corner_hz(self) -> float:
+        """Return the leak corner in use, Hz."""
+        return float(self.corners_hz[self.index])
+
+    def f_eff_hz(self, stats=None) -> float:
+        """Return the motion's effective frequency sqrt(V / S) / 2 pi, Hz (0 if unknown)."""
+        w, s, v = self.stats if stats is None else stats
+        return math.sqrt(v / s) / (2 * math.pi) if s > 0 and v > 0 and w > 0 else 0.0
+
+    def choose(self, stats, sigma2_a2: float, p_b_a2: float, floor_index: int,
+               moving_n: int) -> int:
+        """Corner index minimising J with hysteresis, within [floor, ceiling]."""
+        wgt, s, v = stats
+        f_eff = self.f_eff_hz(stats)
+        top = max(self.corners_hz[floor_index], min(CEILING_HZ, CEILING_FRACTION * f_eff))
+        hi = int(np.searchsorted(self.corners_hz, top * (1 + 1e-9), side='right'))
+        if hi <= floor_index + 1 or wgt <= 0:
+            return floor_index
+        f = self.corners_hz[floor_index:hi]
+        terms = leak_error_terms(f, s / wgt, v / wgt, sigma2_a2, p_b_a2, moving_n / self.fs,
+                                 self.r0, self.fs)
+        j = terms[0] + terms[1] + terms[2]
+        best = floor_index + int(np.argmin(j))
+        cur = self.index
+        if cur < floor_index or cur >= hi:
+            return best
+        if j[best - floor_index] < (1.0 - HYSTERESIS) * j[cur - floor_index]:
+            return best
+        return cur
+
+    def stats_sequence(self, u: np.ndarray) -> np.ndarray:
+        """Running means after each sample of u (shape (3, n)); the state is not changed."""
+        v = np.diff(u, prepend=self.u_prev) * self.fs
+        x = np.vstack([np.ones(u.size), u * u, v * v])
+        a = self.alpha
+        out, _ = sig.lfilter([1 - a], [1, -a], x, axis=1, zi=(a * self.stats)[:, None])
+        return out
+
+    def update_one(self, u: float) -> None:
+        """Take one moving sample u = w - w_ref into the running means."""
+        v = (u - self.u_prev) * self.fs
+        a, b = self.alpha, 1.0 - self.alpha
+        st = self.stats
+        st[0] = a * st[0] + b
+        st[1] = a * st[1] + b * u * u
+        st[2] = a * st[2] + b * v * v
+        self.u_prev = u
+        self.moving_n += 1
