@@ -7,9 +7,13 @@ w_ref at a corner f (``w' = v - 2 pi f (w - w_ref)``).  Three errors depend on f
 (R0 = R_n(0), A s/m; current noise sigma A RMS per sample at fs; offset error of
 variance P_b, A^2; t = time since the motion began, s):
 
-* the leak itself: a high-pass at f on w - w_ref.  On motion of mean square S
-  about w_ref and velocity mean square V, the lost part is ``(f / f_eff)^2 S`` with
-  ``f_eff = sqrt(V / S) / 2 pi`` (a sinusoid at f_m: f_eff = f_m, error f / f_m);
+* the leak itself: a high-pass at f on u = w - w_ref.  On motion of mean square S and
+  velocity mean square V about w_ref it loses ``(f / f_eff)^2 S`` with
+  ``f_eff = sqrt(V / S) / 2 pi`` (a sinusoid at f_m: f_eff = f_m, error f / f_m); and
+  a level M held away from w_ref (a robot that moved there and keeps moving about it)
+  decays as ``M (1 - exp(-w_f t))``, w_f = 2 pi f.  M is the running mean of u less
+  what an oscillation leaves in a running mean of time constant tau:
+  ``M^2 = max(mean(u)^2 - 2 S / (1 + (2 pi f_eff tau)^2), 0)``;
 * white current noise: it is a white velocity of two-sided PSD sigma^2 / (fs R0^2)
   integrated by 1 / (s + w_f), w_f = 2 pi f: variance
   ``sigma^2 / (fs R0^2) * (1 - exp(-2 w_f t)) / (2 w_f)``;
@@ -18,8 +22,8 @@ variance P_b, A^2; t = time since the motion began, s):
 
 :meth:`LeakSchedule.choose` picks, from a ladder of corners (``LADDER_RATIO`` apart),
 the one minimising the sum J(f) of these mean squares, from quantities the filter
-measures causally: S and V as running means (``STATS_WINDOW_S``) of the estimate's
-``u = w - w_ref`` and of its sample-to-sample velocity, sigma^2 the measured white
+measures causally: mean(u), S and V as running means (``STATS_WINDOW_S`` = tau) of the
+estimate's u, u^2 and squared sample-to-sample velocity, sigma^2 the measured white
 noise, P_b the offset variance (learned at rest, growing by the drift while moving),
 t the samples since leaving rest.  Under 1 % noise sigma and S^(1/2) f_m both scale
 with the motion, so the optimum scales with f_m (f ~ 0.02 f_m for the slim sample
@@ -57,17 +61,18 @@ STATS_WINDOW_S = 2.0
 #: that it changes, and a few times per stats window).
 STEP_S = 0.25
 #: Switch only when the predicted mean-square error falls by this fraction (hysteresis).
-HYSTERESIS = 0.2
+HYSTERESIS = 0.5
 
 
-def leak_error_terms(f_hz, s_m2, v_m2_s2, sigma2_a2, p_b_a2, t_s, r0, fs):
+def leak_error_terms(f_hz, m_m, s_m2, v_m2_s2, sigma2_a2, p_b_a2, t_s, r0, fs):
     """
     Predicted mean-square errors (m^2) of a leak at ``f_hz``: (leak, noise, offset).
 
     Parameters
     ----------
     f_hz : leak corner(s), Hz (array).
-    s_m2, v_m2_s2 : mean squares of w - w_ref (m^2) and of its velocity (m^2/s^2).
+    m_m : running mean of u = w - w_ref, m.
+    s_m2, v_m2_s2 : mean squares of u (m^2) and of its velocity (m^2/s^2).
     sigma2_a2 : white current noise variance per sample, A^2.
     p_b_a2 : offset error variance, A^2 (0: left out).
     t_s : time since the motion began, s.
@@ -77,7 +82,12 @@ def leak_error_terms(f_hz, s_m2, v_m2_s2, sigma2_a2, p_b_a2, t_s, r0, fs):
     """
     f = np.asarray(f_hz, float)
     wf = 2 * math.pi * f
-    leak = (wf * s_m2) ** 2 / v_m2_s2 if v_m2_s2 > 0 else np.zeros_like(f)
+    if v_m2_s2 > 0:
+        leak = (wf * s_m2) ** 2 / v_m2_s2
+        residual = 2 * s_m2 / (1 + v_m2_s2 / s_m2 * STATS_WINDOW_S ** 2)
+    else:
+        leak, residual = np.zeros_like(f), 0.0
+    leak = leak + max(m_m * m_m - residual, 0.0) * np.expm1(-wf * t_s) ** 2
     noise = sigma2_a2 / (fs * r0 * r0) * -np.expm1(-2 * wf * t_s) / (2 * wf)
     offset = p_b_a2 / (r0 * r0) * (np.expm1(-wf * t_s) / wf) ** 2
     return leak, noise, offset
@@ -110,7 +120,7 @@ class LeakSchedule:
 
     def reset(self) -> None:
         self.index = self.start_index
-        self.stats = np.zeros(3)        # running means of [1, u^2, v^2] (weight, S, V)
+        self.stats = np.zeros(4)        # running means of [1, u, u^2, v^2] (weight, M, S, V)
         self.u_prev = 0.0
         self.moving_n = 0               # samples since the motion began
         self.count = 0                  # absolute sample counter (decision grid)
@@ -133,20 +143,20 @@ class LeakSchedule:
 
     def f_eff_hz(self, stats=None) -> float:
         """Return the motion's effective frequency sqrt(V / S) / 2 pi, Hz (0 if unknown)."""
-        w, s, v = self.stats if stats is None else stats
+        w, _, s, v = self.stats if stats is None else stats
         return math.sqrt(v / s) / (2 * math.pi) if s > 0 and v > 0 and w > 0 else 0.0
 
     def choose(self, stats, sigma2_a2: float, p_b_a2: float, floor_index: int,
                moving_n: int) -> int:
         """Corner index minimising J with hysteresis, within [floor, ceiling]."""
-        wgt, s, v = stats
+        wgt, m, s, v = stats
         f_eff = self.f_eff_hz(stats)
         top = max(self.corners_hz[floor_index], min(CEILING_HZ, CEILING_FRACTION * f_eff))
         hi = int(np.searchsorted(self.corners_hz, top * (1 + 1e-9), side='right'))
         if hi <= floor_index + 1 or wgt <= 0:
             return floor_index
         f = self.corners_hz[floor_index:hi]
-        terms = leak_error_terms(f, s / wgt, v / wgt, sigma2_a2, p_b_a2, moving_n / self.fs,
+        terms = leak_error_terms(f, m / wgt, s / wgt, v / wgt, sigma2_a2, p_b_a2, moving_n / self.fs,
                                  self.r0, self.fs)
         j = terms[0] + terms[1] + terms[2]
         best = floor_index + int(np.argmin(j))
@@ -160,7 +170,7 @@ class LeakSchedule:
     def stats_sequence(self, u: np.ndarray) -> np.ndarray:
         """Running means after each sample of u (shape (3, n)); the state is not changed."""
         v = np.diff(u, prepend=self.u_prev) * self.fs
-        x = np.vstack([np.ones(u.size), u * u, v * v])
+        x = np.vstack([np.ones(u.size), u, u * u, v * v])
         a = self.alpha
         out, _ = sig.lfilter([1 - a], [1, -a], x, axis=1, zi=(a * self.stats)[:, None])
         return out
@@ -171,7 +181,8 @@ class LeakSchedule:
         a, b = self.alpha, 1.0 - self.alpha
         st = self.stats
         st[0] = a * st[0] + b
-        st[1] = a * st[1] + b * u * u
-        st[2] = a * st[2] + b * v * v
+        st[1] = a * st[1] + b * u
+        st[2] = a * st[2] + b * u * u
+        st[3] = a * st[3] + b * v * v
         self.u_prev = u
         self.moving_n += 1
