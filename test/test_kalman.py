@@ -236,8 +236,9 @@ def test_leaving_rest_keeps_motion_current_out_of_the_offset():
     # (started(): amplitude ramps in) only after its averaging window.  Leaving rest re-runs
     # the last 2 windows in the moving mode from the offset learned before them, so the
     # offset stays at 0: without the rewind it took 0.26 nA of motion current (a ramp of
-    # 0.8 um/s on slim).  Bound 0.1 nA; and the error does not ramp: its mean over the last
-    # 3 s is within 3 um of that over s 5-8 (0.26 nA would give 8 um in 10 s).
+    # 0.8 um/s on slim).  Bound 0.1 nA.  (The error's mean is no ramp test any more: the
+    # adaptive leak raises its corner during the motion, each rise a leak transient of
+    # about (f / 5 Hz) * 2 mm.)
     t = np.arange(int(15 * FS)) / FS
     w = started(t, CrankSlider(5.0, 2e-3, 20e-3).deflection(t))
     i = daq_current(SLIM, t, w)
@@ -246,8 +247,6 @@ def test_leaving_rest_keeps_motion_current_out_of_the_offset():
         [est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
     )
     assert abs(est.inverse.offset_a) < 0.1e-9
-    err = w_hat - w
-    assert abs(np.mean(err[t >= 12]) - np.mean(err[(t >= 5) & (t < 8)])) < 3e-6
     assert nrmse(w_hat[t >= 5], w[t >= 5]) < 0.015     # leaky: 0.7 %, reduction error ~1 %
 
 
@@ -270,3 +269,77 @@ def test_moving_from_start_offset_error_below_leaky(sample):
         )
     sel = t >= 5
     assert nrmse(out['kalman'][sel], w[sel]) < 0.8 * nrmse(out['leaky'][sel], w[sel])
+
+
+def _crank_after_rest(model, f, seed, noise=0.01, seconds=20.0, amplitude=2e-3):
+    t = np.arange(int(seconds * FS)) / FS
+    w = started(t, CrankSlider(f, amplitude, 20e-3, phase_rad=0.3).deflection(t))
+    i = daq_current(model, t, w, offset_a=10e-9, noise_fraction=noise, seed=seed)
+    return t, w, i
+
+
+def test_leak_corner_rises_with_noisy_fast_motion_and_bounds_the_error():
+    # Issue-14 crank row at 20 Hz (slim, 1 % noise = ~0.6 uA per sample, 10 nA offset, 2 s rest
+    # first).  The rest learns the offset only to sigma / sqrt(~1700) = 15 nA, so the old fixed
+    # slow leak let noise and offset error wander (14-28 %).  The schedule must raise the
+    # corner (predicted optimum ~0.02 f_m = 0.4 Hz; the noise meter's clip at 20 x 20 nA
+    # under-reads sigma, so >= 0.1 Hz) and the error must stay near what leak_error_terms
+    # predicts for that corner: sqrt(J) / rms(w) ~ 3 % with the true sigma; bound 4 %.
+    from ipmc_sensor_ros.estimation.leak_schedule import leak_error_terms
+    t, w, i = _crank_after_rest(SLIM, 20.0, seed=51)
+    est = DeflectionEstimator(SLIM, FS, estimator='kalman')
+    w_hat = np.concatenate(
+        [est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
+    )
+    kal = est.inverse
+    assert kal.leak_corner_in_use_hz >= 0.1
+    assert kal.leak_corner_in_use_hz <= 0.05 * 20.0 + 1e-12      # ceiling 0.05 f_eff
+    sel = t >= 5
+    err = nrmse(w_hat[sel], w[sel])
+    s = float(np.mean(w[sel] ** 2))
+    true_sigma = 0.01 * float(np.sqrt(np.mean((i - 10e-9) ** 2)))
+    terms = leak_error_terms([kal.leak_corner_in_use_hz], 0.0, s, (2 * np.pi * 20.0) ** 2 * s,
+                             true_sigma ** 2, true_sigma ** 2 / 1700, 15.0, kal._r0, FS)
+    predicted = float(np.sqrt(sum(x[0] for x in terms) / s))
+    assert 0.01 < predicted < 0.04
+    assert err < 0.04
+    assert err < 1.5 * predicted
+
+
+def test_leak_corner_stays_low_on_slow_motion_after_rest():
+    # A 0.2 Hz, 2 mm sine after 2 s of rest (slim, 1 % noise + 10 nA).  Its 1 % noise is
+    # 0.2 x that of a 1 Hz crank and the offset is learned to < 1 nA (trusted): the leak
+    # term (f / 0.2 Hz)^2 dominates, so the corner stays within the slowest rungs
+    # (<= 0.004 Hz, a 2 % leak error), and the estimate is as good as at the fixed 0.001 Hz.
+    t = np.arange(int(30 * FS)) / FS
+    w = started(t, 2e-3 * np.sin(2 * np.pi * 0.2 * t))
+    i = daq_current(SLIM, t, w, offset_a=10e-9, noise_fraction=0.01, seed=52)
+    est = DeflectionEstimator(SLIM, FS, estimator='kalman')
+    corners = []
+    out = []
+    for k in range(0, t.size, 1000):
+        out.append(est.process(t[k:k + 1000], i[k:k + 1000])[1])
+        corners.append(est.inverse.leak_corner_in_use_hz)
+    assert max(corners[3:]) <= 0.004 + 1e-12
+    sel = t >= 5
+    assert nrmse(np.concatenate(out)[sel], w[sel]) < 0.03
+
+
+def test_adaptive_corner_blocks_and_single_samples_agree(reduced_slim):
+    # A noisy 20 Hz crank after rest makes the schedule switch corners; the switches fall on
+    # the same sample grid whatever the block size, so blocks of 1000, 37 and single samples
+    # give the same estimate (1 um: see test_blocks_single_samples_and_process_one_agree).
+    t, w, i = _crank_after_rest(SLIM, 20.0, seed=53, seconds=10.0)
+    a, b, c = (KalmanEstimator(reduced_slim, FS) for _ in range(3))
+    wa = blocks(a, i, 1000)
+    wb = blocks(b, i, 37)
+    wc = np.array([c.process_one(x) for x in i])
+    assert a.leak_corner_in_use_hz > 0.02
+    assert a.leak_corner_in_use_hz == b.leak_corner_in_use_hz == c.leak_corner_in_use_hz
+    assert np.max(np.abs(wa - wb)) < 1e-6
+    assert np.max(np.abs(wa - wc)) < 1e-6
+    # the state (with the schedule's statistics) saves and restores exactly
+    saved = a.get_state()
+    tail = a.process(i[:500])
+    a.set_state(saved)
+    assert np.array_equal(a.process(i[:500]), tail)

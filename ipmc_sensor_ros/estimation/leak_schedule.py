@@ -11,9 +11,11 @@ variance P_b, A^2; t = time since the motion began, s):
   velocity mean square V about w_ref it loses ``(f / f_eff)^2 S`` with
   ``f_eff = sqrt(V / S) / 2 pi`` (a sinusoid at f_m: f_eff = f_m, error f / f_m); and
   a level M held away from w_ref (a robot that moved there and keeps moving about it)
-  decays as ``M (1 - exp(-w_f t))``, w_f = 2 pi f.  M is the running mean of u less
-  what an oscillation leaves in a running mean of time constant tau:
-  ``M^2 = max(mean(u)^2 - 2 S / (1 + (2 pi f_eff tau)^2), 0)``;
+  decays as ``M (1 - exp(-w_f t))``, w_f = 2 pi f.  M^2 is the running mean of u squared
+  less what an oscillation leaves in a running mean of time constant tau,
+  ``2 S / (1 + (2 pi f_eff tau)^2)``, and less the noise and offset wander that the
+  corner in use predicts (the two terms below): the estimate's own drift must not read
+  as a held level, or it would keep the corner that lets it drift;
 * white current noise: it is a white velocity of two-sided PSD sigma^2 / (fs R0^2)
   integrated by 1 / (s + w_f), w_f = 2 pi f: variance
   ``sigma^2 / (fs R0^2) * (1 - exp(-2 w_f t)) / (2 w_f)``;
@@ -64,7 +66,8 @@ STEP_S = 0.25
 HYSTERESIS = 0.5
 
 
-def leak_error_terms(f_hz, m_m, s_m2, v_m2_s2, sigma2_a2, p_b_a2, t_s, r0, fs):
+def leak_error_terms(f_hz, m_m, s_m2, v_m2_s2, sigma2_a2, p_b_a2, t_s, r0, fs,
+                     wander_m2=0.0):
     """
     Predicted mean-square errors (m^2) of a leak at ``f_hz``: (leak, noise, offset).
 
@@ -72,6 +75,7 @@ def leak_error_terms(f_hz, m_m, s_m2, v_m2_s2, sigma2_a2, p_b_a2, t_s, r0, fs):
     ----------
     f_hz : leak corner(s), Hz (array).
     m_m : running mean of u = w - w_ref, m.
+    wander_m2 : mean square of the estimate's own drift in m_m (noise + offset), m^2.
     s_m2, v_m2_s2 : mean squares of u (m^2) and of its velocity (m^2/s^2).
     sigma2_a2 : white current noise variance per sample, A^2.
     p_b_a2 : offset error variance, A^2 (0: left out).
@@ -87,7 +91,7 @@ def leak_error_terms(f_hz, m_m, s_m2, v_m2_s2, sigma2_a2, p_b_a2, t_s, r0, fs):
         residual = 2 * s_m2 / (1 + v_m2_s2 / s_m2 * STATS_WINDOW_S ** 2)
     else:
         leak, residual = np.zeros_like(f), 0.0
-    leak = leak + max(m_m * m_m - residual, 0.0) * np.expm1(-wf * t_s) ** 2
+    leak = leak + max(m_m * m_m - residual - wander_m2, 0.0) * np.expm1(-wf * t_s) ** 2
     noise = sigma2_a2 / (fs * r0 * r0) * -np.expm1(-2 * wf * t_s) / (2 * wf)
     offset = p_b_a2 / (r0 * r0) * (np.expm1(-wf * t_s) / wf) ** 2
     return leak, noise, offset
@@ -156,8 +160,10 @@ class LeakSchedule:
         if hi <= floor_index + 1 or wgt <= 0:
             return floor_index
         f = self.corners_hz[floor_index:hi]
-        terms = leak_error_terms(f, m / wgt, s / wgt, v / wgt, sigma2_a2, p_b_a2, moving_n / self.fs,
-                                 self.r0, self.fs)
+        t = moving_n / self.fs
+        args = (s / wgt, v / wgt, sigma2_a2, p_b_a2, t, self.r0, self.fs)
+        _, noise, offset = leak_error_terms([self.corners_hz[self.index]], 0.0, *args)
+        terms = leak_error_terms(f, m / wgt, *args, wander_m2=float(noise[0] + offset[0]))
         j = terms[0] + terms[1] + terms[2]
         best = floor_index + int(np.argmin(j))
         cur = self.index
