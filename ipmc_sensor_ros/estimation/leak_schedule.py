@@ -13,9 +13,10 @@ variance P_b, A^2; t = time since the motion began, s):
   a level M held away from w_ref (a robot that moved there and keeps moving about it)
   decays as ``M (1 - exp(-w_f t))``, w_f = 2 pi f.  M^2 is the running mean of u squared
   less what an oscillation leaves in a running mean of time constant tau,
-  ``2 S / (1 + (2 pi f_eff tau)^2)``, and less the noise and offset wander that the
-  corner in use predicts (the two terms below): the estimate's own drift must not read
-  as a held level, or it would keep the corner that lets it drift;
+  ``2 S / (1 + (2 pi f_eff tau)^2)``, and less ``WANDER_SIGMAS^2`` times the mean-square
+  noise and offset wander that the corner in use predicts (the two terms below): the
+  estimate's own drift must not read as a held level, or it would keep the corner that
+  lets it drift;
 * white current noise: it is a white velocity of two-sided PSD sigma^2 / (fs R0^2)
   integrated by 1 / (s + w_f), w_f = 2 pi f: variance
   ``sigma^2 / (fs R0^2) * (1 - exp(-2 w_f t)) / (2 w_f)``;
@@ -62,6 +63,10 @@ STATS_WINDOW_S = 2.0
 #: Decision interval, s (much shorter than the leak time constants 1 / (2 pi f) >= 0.16 s
 #: that it changes, and a few times per stats window).
 STEP_S = 0.25
+#: A running mean of u counts as a held level only beyond this many standard deviations of
+#: the wander predicted for the corner in use (3: a 0.3 % chance per decision of reading an
+#: offset or noise drift as a level).
+WANDER_SIGMAS = 3.0
 #: Switch only when the predicted mean-square error falls by this fraction (hysteresis).
 HYSTERESIS = 0.5
 
@@ -163,7 +168,7 @@ class LeakSchedule:
         t = moving_n / self.fs
         args = (s / wgt, v / wgt, sigma2_a2, p_b_a2, t, self.r0, self.fs)
         _, noise, offset = leak_error_terms([self.corners_hz[self.index]], 0.0, *args)
-        terms = leak_error_terms(f, m / wgt, *args, wander_m2=float(noise[0] + offset[0]))
+        terms = leak_error_terms(f, m / wgt, *args, wander_m2=WANDER_SIGMAS ** 2 * float(noise[0] + offset[0]))
         j = terms[0] + terms[1] + terms[2]
         best = floor_index + int(np.argmin(j))
         cur = self.index
