@@ -435,7 +435,7 @@ class KalmanEstimator:
         self.last_std = self._moving_start.std_m
         self.last_rest = np.zeros(0, bool)
         self._sched.reset()
-        self._sig_seq = None
+        self._hf_seq = None
         # the last rest samples and the offset before each (see _rewind)
         self._rest_y = deque(maxlen=self._rewind_n)
         self._rest_b = deque(maxlen=self._rewind_n)
@@ -488,9 +488,9 @@ class KalmanEstimator:
             self._energy = float(zf[0] / a)
             floor = np.maximum(floor, hf * self._hp_ratio)
             self._sigma2 = max(self.current_noise_a ** 2, self._hf_energy / self._hp_unit)
-            self._sig_seq = np.maximum(self.current_noise_a ** 2, hf / self._hp_unit)
+            self._hf_seq = hf          # noise level after each sample (see _sigma2_at)
         else:
-            self._sig_seq = None
+            self._hf_seq = None
             e, zf = sig.lfilter([1 - a], [1, -a], np.minimum(band * band, self._clip_a2()),
                                 zi=[a * self._energy])
             self._energy = float(zf[0] / a)
@@ -568,17 +568,23 @@ class KalmanEstimator:
             return self._sched.floor_index
         return self._sched.start_index
 
-    def _choose(self, stats, sigma2: float, offset_var: float, moving_n: int) -> int:
-        """Leak corner index for the motion so far (LeakSchedule.choose)."""
-        # before the first rest the offset is not observable: its term is left out
-        p_b = offset_var if self._seen_rest else 0.0
-        return self._sched.choose(stats, sigma2, p_b, self._floor_index(offset_var), moving_n)
+    def _choose(self, stats, sigma2, offset_var, moving_n) -> np.ndarray:
+        """Leak corner indices for the motion so far (LeakSchedule.choose, vectorised)."""
+        offset_var = np.asarray(offset_var, float)
+        if self._seen_rest:
+            floor = np.where(offset_var < OFFSET_TRUSTED_A ** 2,
+                             self._sched.floor_index, self._sched.start_index)
+            p_b = offset_var
+        else:
+            # before the first rest the offset is not observable: its term is left out
+            floor, p_b = self._sched.start_index, 0.0
+        return self._sched.choose(stats, sigma2, p_b, floor, moving_n)
 
-    def _sigma2_at(self, k: int) -> float:
-        """Measured noise variance after sample k of the present block."""
-        if self._sig_seq is None:
+    def _sigma2_at(self, k):
+        """Measured noise variance after sample(s) k of the present block (as process_one)."""
+        if self._hf_seq is None:
             return self._noise_var()
-        return float(self._sig_seq[k])
+        return np.maximum(self.current_noise_a ** 2, self._hf_seq[k] / self._hp_unit)
 
     def _run_moving(self, y: np.ndarray, lo: int, hi: int, out: np.ndarray, count0: int):
         """
@@ -593,21 +599,21 @@ class KalmanEstimator:
         while pos < hi:
             phase = (count0 + pos) % sch.step
             if phase == 0:
-                sch.index = self._choose(
-                    sch.stats, self._sigma2_at(pos), self._offset_var, sch.moving_n
-                )
+                sch.index = int(self._choose(
+                    sch.stats, self._sigma2_at(pos), self._offset_var, sch.moving_n)[0])
             mode = self._mode()
             w, b_last, s_end = mode.run(y[pos:hi], self._s)
             seq = sch.stats_sequence(w)
             cut = hi
-            for g in range(pos + sch.step - phase, hi, sch.step):
-                k = g - pos
+            grid = np.arange(pos + sch.step - phase, hi, sch.step)
+            if grid.size:
+                k = grid - pos
                 new = self._choose(
-                    seq[:, k - 1], self._sigma2_at(g), self._offset_var + q * k, sch.moving_n + k
-                )
-                if new != sch.index:
-                    cut = g
-                    break
+                    seq[:, k - 1], self._sigma2_at(grid), self._offset_var + q * k,
+                    sch.moving_n + k)
+                change = np.flatnonzero(new != sch.index)
+                if change.size:
+                    cut = int(grid[change[0]])
             n = cut - pos
             if cut < hi:
                 w = w[:n]
@@ -775,8 +781,8 @@ class KalmanEstimator:
             self._offset_var = self._noise_var() / n1
         else:
             if sch.count % sch.step == 0:
-                sch.index = self._choose(sch.stats, self._noise_var(), self._offset_var,
-                                         sch.moving_n)
+                sch.index = int(self._choose(sch.stats, self._noise_var(), self._offset_var,
+                                             sch.moving_n)[0])
             mode = self._mode()
             innov = y - sum(map(mul, self._c_list, st))
             u = st[iw] + mode.k_w * innov

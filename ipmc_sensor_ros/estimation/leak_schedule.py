@@ -60,9 +60,9 @@ CEILING_FRACTION = 0.05
 #: is then averaged over less than a cycle, so S and V fluctuate; the leak term keeps the
 #: corner low there).
 STATS_WINDOW_S = 2.0
-#: Decision interval, s (much shorter than the leak time constants 1 / (2 pi f) >= 0.16 s
-#: that it changes, and a few times per stats window).
-STEP_S = 0.25
+#: Decision interval, s: half the stats window (S and V change little in between); one per
+#: 1000-sample block at 1 kHz, which keeps the decisions cheap.
+STEP_S = 1.0
 #: A running mean of u counts as a held level only beyond this many standard deviations of
 #: the wander predicted for the corner in use (3: a 0.3 % chance per decision of reading an
 #: offset or noise drift as a level).
@@ -80,13 +80,13 @@ def leak_error_terms(f_hz, m_m, s_m2, v_m2_s2, sigma2_a2, p_b_a2, t_s, r0, fs,
     ----------
     f_hz : leak corner(s), Hz (array).
     m_m : running mean of u = w - w_ref, m.
-    wander_m2 : mean square of the estimate's own drift in m_m (noise + offset), m^2.
     s_m2, v_m2_s2 : mean squares of u (m^2) and of its velocity (m^2/s^2).
     sigma2_a2 : white current noise variance per sample, A^2.
     p_b_a2 : offset error variance, A^2 (0: left out).
     t_s : time since the motion began, s.
     r0 : R_n(0), A s/m.
     fs : sample rate, Hz.
+    wander_m2 : what the estimate's own drift puts into m_m^2 (not a held level), m^2.
 
     """
     f = np.asarray(f_hz, float)
@@ -121,6 +121,7 @@ class LeakSchedule:
         n = int(math.floor(math.log(top / floor_hz) / math.log(LADDER_RATIO) + 1e-9)) + 1
         corners = {floor_hz * LADDER_RATIO ** k for k in range(n)} | {max(start_hz, floor_hz)}
         self.corners_hz = np.array(sorted(corners))
+        self._wf = 2 * math.pi * self.corners_hz
         self.floor_index = 0
         self.start_index = int(np.flatnonzero(self.corners_hz == max(start_hz, floor_hz))[0])
         self.step = max(1, int(round(STEP_S * fs)))
@@ -155,28 +156,44 @@ class LeakSchedule:
         w, _, s, v = self.stats if stats is None else stats
         return math.sqrt(v / s) / (2 * math.pi) if s > 0 and v > 0 and w > 0 else 0.0
 
-    def choose(self, stats, sigma2_a2: float, p_b_a2: float, floor_index: int,
-               moving_n: int) -> int:
-        """Corner index minimising J with hysteresis, within [floor, ceiling]."""
-        wgt, m, s, v = stats
-        f_eff = self.f_eff_hz(stats)
-        top = max(self.corners_hz[floor_index], min(CEILING_HZ, CEILING_FRACTION * f_eff))
-        hi = int(np.searchsorted(self.corners_hz, top * (1 + 1e-9), side='right'))
-        if hi <= floor_index + 1 or wgt <= 0:
-            return floor_index
-        f = self.corners_hz[floor_index:hi]
-        t = moving_n / self.fs
-        args = (s / wgt, v / wgt, sigma2_a2, p_b_a2, t, self.r0, self.fs)
-        _, noise, offset = leak_error_terms([self.corners_hz[self.index]], 0.0, *args)
-        terms = leak_error_terms(f, m / wgt, *args, wander_m2=WANDER_SIGMAS ** 2 * float(noise[0] + offset[0]))
-        j = terms[0] + terms[1] + terms[2]
-        best = floor_index + int(np.argmin(j))
+    def choose(self, stats, sigma2_a2, p_b_a2, floor_index, moving_n) -> np.ndarray:
+        """
+        Corner index minimising J with hysteresis, within [floor, ceiling].
+
+        Vectorised over decision points (columns of ``stats``, shape (4, G); the other
+        arguments scalars or length G), each judged against the index in use: a block's
+        decisions are evaluated at once and the caller keeps those up to the first change.
+        """
+        wgt, m, s, v = np.asarray(stats, float).reshape(4, -1)
+        g = wgt.size
+        floor = np.broadcast_to(np.asarray(floor_index, int), (g,))
+        ok = (wgt > 0) & (s > 0) & (v > 0)
+        wgt = np.where(ok, wgt, 1.0)
+        s, v, m = np.where(ok, s / wgt, 1.0), np.where(ok, v / wgt, 1.0), m / wgt
+        t = np.asarray(moving_n, float) / self.fs
+        k_n = np.asarray(sigma2_a2, float) / (self.fs * self.r0 * self.r0)
+        k_o = np.asarray(p_b_a2, float) / (self.r0 * self.r0)
+        # leak_error_terms written out for a (G, K) grid of decision points x corners
+        wf = self._wf
         cur = self.index
-        if cur < floor_index or cur >= hi:
-            return best
-        if j[best - floor_index] < (1.0 - HYSTERESIS) * j[cur - floor_index]:
-            return best
-        return cur
+        wc = wf[cur]
+        e = np.exp(-wc * t)
+        wander = k_n * (1 - e * e) / (2 * wc) + k_o * ((1 - e) / wc) ** 2
+        residual = 2 * s / (1 + v / s * STATS_WINDOW_S ** 2)
+        held = np.maximum(m * m - residual - WANDER_SIGMAS ** 2 * wander, 0.0)
+        e = np.exp(-np.multiply.outer(t * np.ones(g), wf))
+        j = ((s * s / v)[:, None] * wf * wf + held[:, None] * (1 - e) ** 2
+             + (k_n * np.ones(g))[:, None] * (1 - e * e) / (2 * wf)
+             + (k_o * np.ones(g))[:, None] * ((1 - e) / wf) ** 2)
+        top = np.maximum(self.corners_hz[floor],
+                         np.minimum(CEILING_HZ, CEILING_FRACTION * np.sqrt(v / s) / (2 * math.pi)))
+        k = np.arange(wf.size)
+        allowed = (k >= floor[:, None]) & (self.corners_hz <= top[:, None] * (1 + 1e-9))
+        j = np.where(allowed, j, np.inf)
+        best = np.argmin(j, axis=1)
+        rows = np.arange(g)
+        keep = allowed[:, cur] & (j[rows, best] >= (1.0 - HYSTERESIS) * j[:, cur])
+        return np.where(ok, np.where(keep, cur, best), floor)
 
     def stats_sequence(self, u: np.ndarray) -> np.ndarray:
         """Running means after each sample of u (shape (3, n)); the state is not changed."""
