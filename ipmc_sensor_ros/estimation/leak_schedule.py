@@ -14,9 +14,10 @@ variance P_b, A^2; t = time since the motion began, s):
   decays as ``M (1 - exp(-w_f t))``, w_f = 2 pi f.  M^2 is the running mean of u squared
   less what an oscillation leaves in a running mean of time constant tau,
   ``2 S / (1 + (2 pi f_eff tau)^2)``, and less ``WANDER_SIGMAS^2`` times the mean-square
-  noise and offset wander that the corner in use predicts (the two terms below): the
-  estimate's own drift must not read as a held level, or it would keep the corner that
-  lets it drift;
+  noise and offset wander predicted at the slowest allowed corner (the two terms below):
+  the estimate's own drift must not read as a held level, or it would keep the corner
+  that lets it drift (judged at the floor, not at the corner in use, so that the choice
+  cannot flip back and forth with it);
 * white current noise: it is a white velocity of two-sided PSD sigma^2 / (fs R0^2)
   integrated by 1 / (s + w_f), w_f = 2 pi f: variance
   ``sigma^2 / (fs R0^2) * (1 - exp(-2 w_f t)) / (2 w_f)``;
@@ -64,7 +65,7 @@ STATS_WINDOW_S = 2.0
 #: 1000-sample block at 1 kHz, which keeps the decisions cheap.
 STEP_S = 1.0
 #: A running mean of u counts as a held level only beyond this many standard deviations of
-#: the wander predicted for the corner in use (3: a 0.3 % chance per decision of reading an
+#: the wander predicted at the slowest allowed corner (3: a 0.3 % chance per decision of reading an
 #: offset or noise drift as a level).
 WANDER_SIGMAS = 3.0
 #: Switch only when the predicted mean-square error falls by this fraction (hysteresis).
@@ -176,7 +177,7 @@ class LeakSchedule:
         # leak_error_terms written out for a (G, K) grid of decision points x corners
         wf = self._wf
         cur = self.index
-        wc = wf[cur]
+        wc = wf[floor]
         e = np.exp(-wc * t)
         wander = k_n * (1 - e * e) / (2 * wc) + k_o * ((1 - e) / wc) ** 2
         residual = 2 * s / (1 + v / s * STATS_WINDOW_S ** 2)
