@@ -19,9 +19,13 @@ with white noises of intensities ``q_v = 2 a sigma_v^2`` (velocity RMS sigma_v =
 ``motion_velocity_m_s``, flat up to ``motion_bandwidth_hz``), ``q_b =
 offset_drift_a_per_s^2 * 60 s`` (moves by ``offset_drift_a_per_s * 60 s`` RMS per
 minute), measurement noise RMS ``current_noise_a`` per sample.  The leak ``w_l``
-makes w detectable (an unmeasured integrator has no steady-state gain): 0.02 Hz
-(``START_LEAK_CORNER_HZ``) until the first rest, when the level is unknown, then
-0.001 Hz towards the last held level (``KALMAN_LEAK_CORNER_HZ``).  Exact
+makes w detectable (an unmeasured integrator has no steady-state gain) and caps what
+noise and offset error integrate into it; its corner follows the motion
+(:mod:`~ipmc_sensor_ros.estimation.leak_schedule`: the corner of a ladder that minimises
+the predicted leak + noise + offset error, about 0.02 f_motion under 1 % noise), never
+below 0.02 Hz (``START_LEAK_CORNER_HZ``) until the first rest and while the offset is
+not trusted, else never below 0.001 Hz (``KALMAN_LEAK_CORNER_HZ``), towards the last
+held level.  Exact
 discretisation (Van Loan, expm), gain from :func:`scipy.linalg.solve_discrete_are`.
 
 Defaults (from the DAQ and the motion)
@@ -68,8 +72,10 @@ previous estimate (P_b grows by q_b per second of motion) and, once it has
 (lag 0.17 nA at 1 nA/min with the default 10 s); sigma is the *measured* noise.
 Leaving rest, the last ``REST_REWIND_WINDOWS`` rest windows are re-run in the moving
 mode from the offset learned before them (the detector's lag), and the leak pulls
-towards the held level (not zero): at ``leak_corner_hz`` while the offset is known
-to ``OFFSET_TRUSTED_A``, else at ``START_LEAK_CORNER_HZ``.  The moving mode is an
+towards the held level (not zero), starting from ``leak_corner_hz`` while the offset is
+known to ``OFFSET_TRUSTED_A``, else from ``START_LEAK_CORNER_HZ``, then at the corner the
+schedule picks (re-chosen every ``leak_schedule.STEP_S`` on a fixed sample grid; one
+gain set per ladder corner, built when first used).  The moving mode is an
 LTI filter run over each run of moving samples in modal coordinates (one first-order
 :func:`scipy.signal.lfilter` per eigenvalue of the closed-loop matrix, conjugate
 pairs once), so blocks are vectorised and the state passes exactly between modes.
@@ -299,7 +305,6 @@ class KalmanEstimator:
         iw, iv, ib = n, n + 1, n + 2
         N = n + 3
         a = 2 * math.pi * self.motion_bandwidth_hz
-        wl = 2 * math.pi * self.leak_corner_hz
         sv = self.motion_velocity_m_s
         ac = np.zeros((N, N))
         ac[:n, :n] = ar
@@ -349,21 +354,26 @@ class KalmanEstimator:
         # the noise floor is averaged over NOISE_WINDOW_S and each sample's energy capped at
         # ENERGY_CLIP^2 times the configured noise's, so a jump in the current cannot raise it
         self._alpha_hf = math.exp(-1.0 / (fs * NOISE_WINDOW_S))
-        # white-noise level seen above the motion band (0.3 fs .. Nyquist): energy ratio to the
-        # band.  Fourth order: a second-order high-pass at fs/4 let 0.6 % of a 20 Hz motion
-        # current through (148 nA 'noise' on a clean 2 mm crank, slim), which the leak schedule
-        # would take for white noise; fourth order at 0.3 fs passes 2e-5 of it.
+        # white-noise level seen above the motion band (fs/4 .. Nyquist): energy ratio to the band
         self._hp = (
-            sig.butter(4, 0.3 * fs, btype='highpass', fs=fs, output='sos')
+            sig.butter(2, fs / 4, btype='highpass', fs=fs, output='sos')
             if fs / 4 > 2 * hi
             else None
         )
         if self._hp is not None:
             imp = np.zeros(4096)
             imp[0] = 1.0
-            self._hp_list = [section.tolist() for section in self._hp]
+            self._hp_list = self._hp[0].tolist()
             self._hp_unit = float(np.sum(sig.sosfilt(self._hp, imp) ** 2))
             self._hf_clip = NOISE_CLIP ** 2 * self.current_noise_a ** 2 * self._hp_unit
+            # the leak schedule's white-noise level: fourth order at 0.3 fs.  The detector's
+            # second-order high-pass at fs/4 lets 0.6 % of a 20 Hz motion current through (148
+            # nA of 'noise' on a clean 2 mm crank, slim), which the schedule would integrate as
+            # white noise; this one passes 2e-5 of it.
+            self._nz = sig.butter(4, 0.3 * fs, btype='highpass', fs=fs, output='sos')
+            self._nz_list = [section.tolist() for section in self._nz]
+            self._nz_unit = float(np.sum(sig.sosfilt(self._nz, imp) ** 2))
+            self._nz_clip = NOISE_CLIP ** 2 * self.current_noise_a ** 2 * self._nz_unit
             self._hp_ratio = float(
                 np.sum(sig.sosfilt(self._bp, imp) ** 2) / np.sum(sig.sosfilt(self._hp, imp) ** 2)
             )
@@ -429,6 +439,8 @@ class KalmanEstimator:
         self._offset_var = OFFSET_PRIOR_A ** 2
         self._sigma2 = self.current_noise_a ** 2
         self._hp_zi = np.zeros((2 if self._hp is None else self._hp.shape[0], 2))
+        self._nz_zi = np.zeros((2, 2))
+        self._nz_energy = 0.0 if self._hp is None else self.current_noise_a ** 2 * self._nz_unit
         self._hf_energy = 0.0 if self._hp is None else self.current_noise_a ** 2 * self._hp_unit
         self.at_rest = False
         self._b_last = 0.0
@@ -470,7 +482,8 @@ class KalmanEstimator:
         floor = self.noise_energy_a2
         if self._hp is not None and self.rest_detection:
             # measured white-noise floor (never below the configured DAQ noise)
-            high, self._hp_zi = sig.sosfilt(self._hp, y, zi=self._hp_zi)
+            high, zf = sig.lfilter(self._hp[0, :3], self._hp[0, 3:], y, zi=self._hp_zi[0])
+            self._hp_zi[0] = zf
             ah = self._alpha_hf
             hf, zf = sig.lfilter(
                 [1 - ah],
@@ -488,7 +501,12 @@ class KalmanEstimator:
             self._energy = float(zf[0] / a)
             floor = np.maximum(floor, hf * self._hp_ratio)
             self._sigma2 = max(self.current_noise_a ** 2, self._hf_energy / self._hp_unit)
-            self._hf_seq = hf          # noise level after each sample (see _sigma2_at)
+            # the leak schedule's noise level after each sample (see _sigma2_at)
+            high, self._nz_zi = sig.sosfilt(self._nz, y, zi=self._nz_zi)
+            self._hf_seq, zf = sig.lfilter(
+                [1 - ah], [1, -ah], np.minimum(high * high, self._nz_clip), zi=[ah * self._nz_energy]
+            )
+            self._nz_energy = float(zf[0] / ah)
         else:
             self._hf_seq = None
             e, zf = sig.lfilter([1 - a], [1, -a], np.minimum(band * band, self._clip_a2()),
@@ -584,7 +602,13 @@ class KalmanEstimator:
         """Measured noise variance after sample(s) k of the present block (as process_one)."""
         if self._hf_seq is None:
             return self._noise_var()
-        return np.maximum(self.current_noise_a ** 2, self._hf_seq[k] / self._hp_unit)
+        return np.maximum(self.current_noise_a ** 2, self._hf_seq[k] / self._nz_unit)
+
+    def _sigma2_one(self) -> float:
+        """Measured noise variance after the present sample (process_one)."""
+        if self._hp is None or not self.rest_detection:
+            return self._noise_var()
+        return max(self.current_noise_a ** 2, self._nz_energy / self._nz_unit)
 
     def _run_moving(self, y: np.ndarray, lo: int, hi: int, out: np.ndarray, count0: int):
         """
@@ -732,17 +756,23 @@ class KalmanEstimator:
         self._energy = e
         floor = self.noise_energy_a2
         if self._hp is not None and self.rest_detection:
-            high = x
-            for hz, (h0, h1, h2, _, g1, g2) in zip(self._hp_zi, self._hp_list):
-                y0, y1 = hz.item(0), hz.item(1)
-                inp, high = high, h0 * high + y0
-                hz[0], hz[1] = h1 * inp - g1 * high + y1, h2 * inp - g2 * high
+            h0, h1, h2, _, g1, g2 = self._hp_list
+            hz = self._hp_zi
+            y0, y1 = hz.item(0), hz.item(1)
+            high = h0 * x + y0
+            hz[0] = (h1 * x - g1 * high + y1, h2 * x - g2 * high)
             ah = self._alpha_hf
             self._hf_energy = hf = ah * self._hf_energy + (1 - ah) * min(
                 high * high, self._hf_clip
             )
             floor = max(floor, hf * self._hp_ratio)
             self._sigma2 = max(self.current_noise_a ** 2, hf / self._hp_unit)
+            nz = x
+            for hz, (h0, h1, h2, _, g1, g2) in zip(self._nz_zi, self._nz_list):
+                y0, y1 = hz.item(0), hz.item(1)
+                inp, nz = nz, h0 * nz + y0
+                hz[0], hz[1] = h1 * inp - g1 * nz + y1, h2 * inp - g2 * nz
+            self._nz_energy = ah * self._nz_energy + (1 - ah) * min(nz * nz, self._nz_clip)
         was_rest = self.at_rest
         self._lp = lp = a * self._lp + (1 - a) * x
         if self.rest_detection:
@@ -781,7 +811,7 @@ class KalmanEstimator:
             self._offset_var = self._noise_var() / n1
         else:
             if sch.count % sch.step == 0:
-                sch.index = int(self._choose(sch.stats, self._noise_var(), self._offset_var,
+                sch.index = int(self._choose(sch.stats, self._sigma2_one(), self._offset_var,
                                              sch.moving_n)[0])
             mode = self._mode()
             innov = y - sum(map(mul, self._c_list, st))
@@ -805,6 +835,8 @@ class KalmanEstimator:
             'w_ref': self._w_ref,
             'hp_zi': self._hp_zi.copy(),
             'hf_energy': self._hf_energy,
+            'nz_zi': self._nz_zi.copy(),
+            'nz_energy': self._nz_energy,
             'offset_var': self._offset_var,
             'sigma2': self._sigma2,
             'lp': self._lp,
@@ -826,6 +858,9 @@ class KalmanEstimator:
         self._w_ref = float(state['w_ref'])
         self._hp_zi = np.asarray(state['hp_zi'], float).copy()
         self._hf_energy = float(state['hf_energy'])
+        if 'nz_zi' in state:
+            self._nz_zi = np.asarray(state['nz_zi'], float).copy()
+            self._nz_energy = float(state['nz_energy'])
         self._offset_var = float(state['offset_var'])
         self._sigma2 = float(state['sigma2'])
         self._lp = float(state['lp'])
