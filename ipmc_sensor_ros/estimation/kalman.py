@@ -503,9 +503,8 @@ class KalmanEstimator:
             self._sigma2 = max(self.current_noise_a ** 2, self._hf_energy / self._hp_unit)
             # the leak schedule's noise level after each sample (see _sigma2_at)
             high, self._nz_zi = sig.sosfilt(self._nz, y, zi=self._nz_zi)
-            self._hf_seq, zf = sig.lfilter(
-                [1 - ah], [1, -ah], np.minimum(high * high, self._nz_clip), zi=[ah * self._nz_energy]
-            )
+            nz2 = np.minimum(high * high, self._nz_clip)
+            self._hf_seq, zf = sig.lfilter([1 - ah], [1, -ah], nz2, zi=[ah * self._nz_energy])
             self._nz_energy = float(zf[0] / ah)
         else:
             self._hf_seq = None
