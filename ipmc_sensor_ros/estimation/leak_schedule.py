@@ -122,7 +122,7 @@ class LeakSchedule:
         n = int(math.floor(math.log(top / floor_hz) / math.log(LADDER_RATIO) + 1e-9)) + 1
         corners = {floor_hz * LADDER_RATIO ** k for k in range(n)} | {max(start_hz, floor_hz)}
         self.corners_hz = np.array(sorted(corners))
-        self._wf = 2 * math.pi * self.corners_hz
+        self._wf = (2 * math.pi * self.corners_hz).tolist()
         self.floor_index = 0
         self.start_index = int(np.flatnonzero(self.corners_hz == max(start_hz, floor_hz))[0])
         self.step = max(1, int(round(STEP_S * fs)))
@@ -161,40 +161,53 @@ class LeakSchedule:
         """
         Corner index minimising J with hysteresis, within [floor, ceiling].
 
-        Vectorised over decision points (columns of ``stats``, shape (4, G); the other
-        arguments scalars or length G), each judged against the index in use: a block's
-        decisions are evaluated at once and the caller keeps those up to the first change.
+        For each decision point (columns of ``stats``, shape (4, G); the other arguments
+        scalars or length G), judged against the index in use, up to the first point that
+        changes it (the caller cuts the run there; later entries repeat that choice).
         """
-        wgt, m, s, v = np.asarray(stats, float).reshape(4, -1)
-        g = wgt.size
-        floor = np.broadcast_to(np.asarray(floor_index, int), (g,))
-        ok = (wgt > 0) & (s > 0) & (v > 0)
-        wgt = np.where(ok, wgt, 1.0)
-        s, v, m = np.where(ok, s / wgt, 1.0), np.where(ok, v / wgt, 1.0), m / wgt
-        t = np.asarray(moving_n, float) / self.fs
-        k_n = np.asarray(sigma2_a2, float) / (self.fs * self.r0 * self.r0)
-        k_o = np.asarray(p_b_a2, float) / (self.r0 * self.r0)
-        # leak_error_terms written out for a (G, K) grid of decision points x corners
-        wf = self._wf
-        cur = self.index
-        wc = wf[floor]
-        e = np.exp(-wc * t)
-        wander = k_n * (1 - e * e) / (2 * wc) + k_o * ((1 - e) / wc) ** 2
+        st = np.asarray(stats, float).reshape(4, -1)
+        g = st.shape[1]
+        cols = [np.broadcast_to(np.asarray(x, float), (g,)).tolist()
+                for x in (sigma2_a2, p_b_a2, floor_index, moving_n)]
+        out = np.full(g, self.index)
+        for c, (wgt, m, s, v) in enumerate(st.T.tolist()):
+            k = self._choose_one(wgt, m, s, v, *(col[c] for col in cols))
+            if k != self.index:
+                out[c:] = k
+                break
+        return out
+
+    def _choose_one(self, wgt, m, s, v, sigma2_a2, p_b_a2, floor, moving_n) -> int:
+        """One decision (leak_error_terms written out in scalars: it runs once a second)."""
+        floor = int(floor)
+        if not (wgt > 0 and s > 0 and v > 0):
+            return floor
+        s, v, m = s / wgt, v / wgt, m / wgt
+        corners, wf = self.corners_hz, self._wf
+        f_eff = math.sqrt(v / s) / (2 * math.pi)
+        top = max(corners[floor], min(CEILING_HZ, CEILING_FRACTION * f_eff))
+        hi = int(np.searchsorted(corners, top * (1 + 1e-9), side='right'))
+        if hi <= floor + 1:
+            return floor
+        t = moving_n / self.fs
+        k_n = sigma2_a2 / (self.fs * self.r0 * self.r0)
+        k_o = p_b_a2 / (self.r0 * self.r0)
+        k_l = s * s / v
+        e = math.exp(-wf[floor] * t)
+        wander = k_n * (1 - e * e) / (2 * wf[floor]) + k_o * ((1 - e) / wf[floor]) ** 2
         residual = 2 * s / (1 + v / s * STATS_WINDOW_S ** 2)
-        held = np.maximum(m * m - residual - WANDER_SIGMAS ** 2 * wander, 0.0)
-        e = np.exp(-np.multiply.outer(t * np.ones(g), wf))
-        j = ((s * s / v)[:, None] * wf * wf + held[:, None] * (1 - e) ** 2
-             + (k_n * np.ones(g))[:, None] * (1 - e * e) / (2 * wf)
-             + (k_o * np.ones(g))[:, None] * ((1 - e) / wf) ** 2)
-        top = np.maximum(self.corners_hz[floor],
-                         np.minimum(CEILING_HZ, CEILING_FRACTION * np.sqrt(v / s) / (2 * math.pi)))
-        k = np.arange(wf.size)
-        allowed = (k >= floor[:, None]) & (self.corners_hz <= top[:, None] * (1 + 1e-9))
-        j = np.where(allowed, j, np.inf)
-        best = np.argmin(j, axis=1)
-        rows = np.arange(g)
-        keep = allowed[:, cur] & (j[rows, best] >= (1.0 - HYSTERESIS) * j[:, cur])
-        return np.where(ok, np.where(keep, cur, best), floor)
+        held = max(m * m - residual - WANDER_SIGMAS ** 2 * wander, 0.0)
+        j = {}
+        for k in range(floor, hi):
+            w = wf[k]
+            e = math.exp(-w * t)
+            j[k] = (k_l * w * w + held * (1 - e) ** 2 + k_n * (1 - e * e) / (2 * w)
+                    + k_o * ((1 - e) / w) ** 2)
+        best = min(j, key=j.get)
+        cur = self.index
+        if cur not in j or j[best] < (1.0 - HYSTERESIS) * j[cur]:
+            return best
+        return cur
 
     def stats_sequence(self, u: np.ndarray) -> np.ndarray:
         """Running means after each sample of u (shape (3, n)); the state is not changed."""
