@@ -210,7 +210,7 @@ class LeakSchedule:
         return cur
 
     def stats_sequence(self, u: np.ndarray) -> np.ndarray:
-        """Running means after each sample of u (shape (3, n)); the state is not changed."""
+        """Return the running means after each sample of u (shape (4, n)); state unchanged."""
         v = np.diff(u, prepend=self.u_prev) * self.fs
         x = np.vstack([np.ones(u.size), u, u * u, v * v])
         a = self.alpha
