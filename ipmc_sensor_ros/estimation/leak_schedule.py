@@ -79,15 +79,26 @@ def leak_error_terms(f_hz, m_m, s_m2, v_m2_s2, sigma2_a2, p_b_a2, t_s, r0, fs,
 
     Parameters
     ----------
-    f_hz : leak corner(s), Hz (array).
-    m_m : running mean of u = w - w_ref, m.
-    s_m2, v_m2_s2 : mean squares of u (m^2) and of its velocity (m^2/s^2).
-    sigma2_a2 : white current noise variance per sample, A^2.
-    p_b_a2 : offset error variance, A^2 (0: left out).
-    t_s : time since the motion began, s.
-    r0 : R_n(0), A s/m.
-    fs : sample rate, Hz.
-    wander_m2 : what the estimate's own drift puts into m_m^2 (not a held level), m^2.
+    f_hz : array_like
+        Leak corner(s), Hz.
+    m_m : float
+        Running mean of u = w - w_ref, m.
+    s_m2 : float
+        Mean square of u, m^2.
+    v_m2_s2 : float
+        Mean square of the velocity of u, m^2/s^2.
+    sigma2_a2 : float
+        White current noise variance per sample, A^2.
+    p_b_a2 : float
+        Offset error variance, A^2 (0: left out).
+    t_s : float
+        Time since the motion began, s.
+    r0 : float
+        R_n(0), A s/m.
+    fs : float
+        Sample rate, Hz.
+    wander_m2 : float
+        What the estimate's own drift puts into m_m^2 (not a held level), m^2.
 
     """
     f = np.asarray(f_hz, float)
