@@ -115,7 +115,8 @@ def test_block_packer_reuses_one_message_and_follows_length_changes():
 
 
 def _same_bits(a, b) -> bool:
-    return np.array_equal(np.asarray(a, float).view(np.uint64), np.asarray(b, float).view(np.uint64))
+    bits = [np.asarray(x, float).view(np.uint64) for x in (a, b)]
+    return np.array_equal(*bits)
 
 
 @pytest.mark.parametrize('columns', [CURRENT_COLUMNS, ESTIMATE_COLUMNS])

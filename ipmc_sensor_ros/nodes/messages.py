@@ -239,7 +239,7 @@ class _CdrWalk:
         self.pos += len(text.encode()) + 1
 
     def spans(self, end: int) -> list[tuple[int, int]]:
-        """Return the data spans (start, stop) of bytes [0, end), padding excluded."""
+        """Return the data spans of bytes 0 .. end - 1 as (start, stop) pairs, padding excluded."""
         out, start = [], 0
         for p in [q for q in self.pads if q < end] + [end]:
             if p > start:
