@@ -7,8 +7,10 @@ Seed study of the stepwise diagnosis (issue 15 targets), written to a table as i
 Data: :func:`~ipmc_sensor_ros.workbench.scenarios.hidden_effects_campaign` (the generator of
 the tests: exact closed-form H2 prediction with the hidden effects, values drawn from a seeded
 generator by ``random_effect_values``; slim + short, 8 frequencies 1-20 Hz, 6 s at 1 kHz,
-1 % noise; combinations with hydration_drift: 2 frequencies x 120 s, as the single-effect
-drift test).  Groups (run in this order, one table row per combination):
+1 % noise; combinations with hydration_drift: 120 s records at 2, 7 and 20 Hz, the ends and
+middle of the sweep's band: long enough for the drift, as the single-effect drift test, and
+reaching 20 Hz, where beam inertia shows (its error grows as f^2)).  Groups (run in this
+order, one table row per combination):
 
 - ``null``: nothing missing (H2 data, H2 model), ``--null-seeds`` seeds: success = nothing named;
 - ``pairs``: every pair of surface_resistance, amplifier_bandwidth, time_delay,
@@ -41,6 +43,7 @@ TRIPLES = [
     ('amplifier_bandwidth', 'current_offset', 'hydration_drift'),
     ('surface_resistance', 'hydration_drift', 'beam_inertia'),
 ]
+DRIFT_FREQUENCIES_HZ = (2.0, 7.0, 20.0)
 LOOKALIKE = [('amplifier_bandwidth',), ('time_delay',)]
 OTHER = {'amplifier_bandwidth': 'time_delay', 'time_delay': 'amplifier_bandwidth'}
 
@@ -64,23 +67,26 @@ def _cpu_s():
     return t.user + t.system + t.children_user + t.children_system
 
 
-def run(groups, seeds, null_seeds, out, seed_first=False):
+def run(groups, seeds, null_seeds, out, seed_first=False, first_seed=0, drift='all'):
     plan = []
     if 'null' in groups:
         plan += [('null', (), s) for s in range(null_seeds)]
     combos = [(g, h) for g, hs in (('pairs', PAIRS), ('triples', TRIPLES),
-                                   ('lookalike', LOOKALIKE)) if g in groups for h in hs]
+                                   ('lookalike', LOOKALIKE)) if g in groups for h in hs
+              if drift == 'all' or (drift == 'only') == ('hydration_drift' in h)]
+    seed_range = range(first_seed, seeds)
     if seed_first:      # every combination gets its first seed before any gets a second
-        plan += [(g, h, s) for s in range(seeds) for g, h in combos]
+        plan += [(g, h, s) for s in seed_range for g, h in combos]
     else:
-        plan += [(g, h, s) for g, h in combos for s in range(seeds)]
+        plan += [(g, h, s) for g, h in combos for s in seed_range]
     with open(out, 'a') as fh:
         fh.write('group\thidden\tseed\tok\tnamed\tties\terror_over_floor\tseconds\t'
                  'cpu_seconds\n')
     for group, hidden, seed in plan:
         # a drift needs long records (as the single-effect drift test, test_diagnose):
-        # 0.05-0.2 %/s changes d by < 1.2 % over 6 s, under 1 % noise; 2 frequencies x 120 s
-        kwargs = (dict(frequencies_hz=(3.0, 7.0), duration_s=120.0)
+        # 0.05-0.2 %/s changes d by < 1.2 % over 6 s, under 1 % noise; 120 s records at the
+        # ends and middle of the band (3 and 7 Hz alone hid beam inertia, ~0.039 (f/f_1)^2)
+        kwargs = (dict(frequencies_hz=DRIFT_FREQUENCIES_HZ, duration_s=120.0)
                   if 'hydration_drift' in hidden else {})
         recs, _ = hidden_effects_campaign(hidden, seed, **kwargs)
         t0, c0 = time.perf_counter(), _cpu_s()
@@ -122,10 +128,15 @@ def main(argv=None) -> int:
     ap.add_argument('--out', default='seed_study.tsv')
     ap.add_argument('--seed-first', action='store_true',
                     help='loop seeds outside combinations (broad coverage of a partial run)')
+    ap.add_argument('--first-seed', type=int, default=0,
+                    help='seeds first-seed .. seeds-1 (to continue a partial run)')
+    ap.add_argument('--drift', choices=('all', 'only', 'none'), default='all',
+                    help='combinations with hydration_drift: all, only those, or none')
     ap.add_argument('--table', action='store_true', help='print the table of --out and exit')
     args = ap.parse_args(argv)
     if not args.table:
-        run(set(args.only.split(',')), args.seeds, args.null_seeds, args.out, args.seed_first)
+        run(set(args.only.split(',')), args.seeds, args.null_seeds, args.out, args.seed_first,
+            args.first_seed, args.drift)
     print(table(args.out))
     return 0
 

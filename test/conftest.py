@@ -44,6 +44,21 @@ def ros_context(**kwargs):
             rclpy.shutdown(context=ctx)
 
 
+def _typed(msg, msg_type):
+    """Return ``msg`` as a message object (publishers may be handed serialised bytes)."""
+    from rclpy.serialization import deserialize_message
+
+    return deserialize_message(msg, msg_type) if isinstance(msg, bytes) else msg
+
+
+def _point_row(msg) -> tuple:
+    """Return (sec, nanosec, frame_id, x, z) of a published ``PointStamped`` (or its bytes)."""
+    from geometry_msgs.msg import PointStamped
+
+    p = _typed(msg, PointStamped)
+    return (p.header.stamp.sec, p.header.stamp.nanosec, p.header.frame_id, p.point.x, p.point.z)
+
+
 class DirectNode:
     """
     The estimator node driven synchronously through its subscription callback.
@@ -53,6 +68,7 @@ class DirectNode:
 
     def __init__(self, **overrides):
         from rclpy.parameter import Parameter
+        from std_msgs.msg import Float64MultiArray
 
         from ipmc_sensor_ros.nodes.estimator_node import EstimatorNode
         from ipmc_sensor_ros.nodes.messages import ESTIMATE_COLUMNS, unpack_block
@@ -64,12 +80,14 @@ class DirectNode:
         self.published: list = []
         self.points: list = []
         self.node._pub_block.publish = lambda m: self.published.append(
-            unpack_block(m, ESTIMATE_COLUMNS))
-        self.node._pub_point.publish = lambda p: self.points.append(
-            (p.header.stamp.sec, p.header.stamp.nanosec, p.header.frame_id, p.point.x, p.point.z))
+            unpack_block(_typed(m, Float64MultiArray), ESTIMATE_COLUMNS))
+        self.node._pub_point.publish = lambda m: self.points.append(_point_row(m))
 
     def send(self, msg) -> None:
-        self.node._on_current(msg)
+        from rclpy.serialization import serialize_message
+
+        # as the subscription delivers it: serialised (the node's one-sample path reads bytes)
+        self.node._on_current_raw(serialize_message(msg))
 
     def close(self) -> None:
         import rclpy

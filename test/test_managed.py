@@ -413,6 +413,48 @@ def test_autostart_with_a_bad_parameter_stays_unconfigured(managed_estimator, ca
     assert client.publishers('/deflection/block') == 0
 
 
+def test_managed_simulator_publish_raising_goes_through_error_processing(capfd):
+    """
+    A failure in the simulator's publish timer while active.
+
+    (a broken stimulus file, a middleware error) is not a crash: one line, error processing
+    to unconfigured (its publishers closed), and a supervisor can configure it again.
+    """
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=TEST_DOMAIN)
+    node = ManagedSimulatorNode(context=ctx, parameter_overrides=[
+        Parameter('realtime_factor', value=1.0), Parameter('block_size', value=10)])
+    client = Client(ctx, node, '/ipmc_simulator', record_current=True)
+    calls = []
+
+    def broken():
+        calls.append(1)
+        raise OSError('stimulus file vanished')
+
+    try:
+        client.spin_until(lambda: client.publishers('/ipmc_simulator/transition_event') == 1,
+                          'the lifecycle node')
+        assert client.transition(Transition.TRANSITION_CONFIGURE)
+        assert client.transition(Transition.TRANSITION_ACTIVATE)
+        client.spin_until(lambda: len(client.currents) >= 5, '5 blocks')
+        node._publish_block = broken
+        client.spin_until(lambda: client.state() == 'unconfigured', 'the error processing')
+        assert not node.configured and node._sim is None and len(calls) == 1
+        client.spin_until(lambda: client.publishers('/current') == 1, 'the publisher to close')
+        err = capfd.readouterr().err
+        assert 'Traceback' not in err, err
+        lines = [line for line in err.splitlines() if 'error while active' in line]
+        assert len(lines) == 1 and 'publish timer' in lines[0] \
+            and 'stimulus file vanished' in lines[0], err
+        del node._publish_block                         # configured again: it publishes again
+        n = len(client.currents)
+        assert client.transition(Transition.TRANSITION_CONFIGURE)
+        assert client.transition(Transition.TRANSITION_ACTIVATE)
+        client.spin_until(lambda: len(client.currents) >= n + 5, 'the new stream')
+    finally:
+        client.close()
+
+
 # -- error processing (rclpy.lifecycle: ERROR -> errorprocessing -> on_error) ---------------
 def _active(client, node):
     assert client.transition(Transition.TRANSITION_CONFIGURE)

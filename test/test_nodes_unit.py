@@ -37,6 +37,9 @@ from ipmc_sensor_ros.nodes.messages import (
     pack_block,
     unpack_block,
     BlockPacker,
+    OneSampleCodec,
+    PointCodec,
+    point_message,
 )
 from ipmc_sensor_ros.nodes.simulator_node import SIMULATOR_SPECS, SimulatorNode
 from ipmc_sensor_ros.physics.model import SensorModel
@@ -109,6 +112,65 @@ def test_block_packer_reuses_one_message_and_follows_length_changes():
         block = unpack_block(msg, DEFLECTION_COLUMNS)
         assert np.array_equal(block.times_s, t) and np.array_equal(block.values, w)
         assert claimed_samples(msg) == n
+
+
+def _same_bits(a, b) -> bool:
+    bits = [np.asarray(x, float).view(np.uint64) for x in (a, b)]
+    return np.array_equal(*bits)
+
+
+@pytest.mark.parametrize('columns', [CURRENT_COLUMNS, ESTIMATE_COLUMNS])
+def test_one_sample_codec_matches_rclpy_serialisation(columns):
+    """
+    The one-sample hot path reads and writes what rclpy's serialiser reads and writes.
+
+    Written bytes deserialise to the packed message (bit for bit, incl. -0.0, inf, NaN,
+    subnormals) and differ from ``serialize_message`` only in padding bytes (rclpy leaves
+    buffer contents there); bytes from rclpy read back the same floats, whatever their
+    padding holds; any other message reads as None.
+    """
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    codec = OneSampleCodec(columns)
+    width = len(columns.split(','))
+    rows = [(1795e6 + 0.123456789, -3.5e-7, 1e-9)[:width], (0.0, -0.0, float('inf'))[:width],
+            (5e-324, float('nan'), -1e308)[:width]]
+    for row in rows:
+        msg = BlockPacker(columns).pack_one(*row)
+        raw = serialize_message(msg)
+        mine = codec.encode(*row)
+        back = deserialize_message(mine, Float64MultiArray)
+        assert back.layout == msg.layout and _same_bits(back.data, row)
+        assert len(mine) == len(raw) and mine[-8 * width:] == raw[-8 * width:]
+        assert _same_bits(codec.decode(raw), row)
+        in_spans = {p for a, b in codec._spans for p in range(a, b)}
+        pads = [p for p in range(len(raw) - 8 * width) if p not in in_spans]
+        assert pads                                     # both layouts have padded labels
+        garbage = bytearray(raw)                        # any padding content reads the same
+        for p in pads:
+            garbage[p] = 0xA5
+        assert _same_bits(codec.decode(bytes(garbage)), row)
+        for p in sorted(in_spans)[::7]:                 # a changed data byte does not
+            changed = bytearray(raw)
+            changed[p] ^= 0x10
+            assert codec.decode(bytes(changed)) is None
+    other = 'time_s,deflection_m' if columns == CURRENT_COLUMNS else CURRENT_COLUMNS
+    two_rows = serialize_message(BlockPacker(columns).pack(*([np.arange(2.0)] * width)))
+    for raw in (serialize_message(BlockPacker(other).pack_one(*([1.0] * len(other.split(','))))),
+                two_rows, serialize_message(Float64MultiArray()), b'', b'\x00\x01\x00\x00'):
+        assert codec.decode(raw) is None
+
+
+def test_point_codec_matches_point_message():
+    """The serialised tip point deserialises to :func:`point_message` (bit for bit)."""
+    from rclpy.serialization import deserialize_message
+
+    for length, frame in ((0.022, 'ipmc_clamp'), (0.011, 'a/b_long.frame-name_xyz'),
+                          (0.02, 'odd')):
+        codec = PointCodec(length, frame)
+        for t, w in ((1795424281.153031770, 1.25e-3), (0.0, -0.0), (12.5e-9, -2e-3)):
+            assert deserialize_message(codec.encode(t, w), PointStamped) == point_message(
+                t, length, w, frame)
 
 
 def test_unpack_honours_data_offset_and_accepts_one_dimensional():

@@ -27,6 +27,7 @@ from geometry_msgs.msg import PointStamped as PointMsg
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64MultiArray, String
 
 from ..interface import specs as C
@@ -38,8 +39,8 @@ from ..errors import DataError, IpmcError
 from ..physics.parameters import short_repr
 from . import params as P
 from ..interface.blocks import current_columns, estimate_columns, unpack_columns
-from .messages import (CURRENT_COLUMNS, BlockPacker, claimed_samples,
-                       one_sample, point_message, unpack_block)
+from .messages import (CURRENT_COLUMNS, BlockPacker, OneSampleCodec, PointCodec,
+                       claimed_samples, one_sample, unpack_block)
 from .diagnostics import DiagnosticsPublisher
 from .runner import run
 
@@ -127,11 +128,16 @@ class EstimatorNode(Node):
     def _open_io(self) -> None:
         """Create the subscription, the publishers, the timer and /diagnostics."""
         qos = P.make_qos(self._values)
+        # raw: bytes in, so that one-sample blocks never become message objects (README
+        # "Benchmarks": rclpy's conversion of a Float64MultiArray costs more than the estimate)
         self._sub = P.create_subscription(
-            self, Float64MultiArray, 'current', self._on_current, qos
+            self, Float64MultiArray, 'current', self._on_current_raw, qos, raw=True
         )
         self._pub_block = P.create_publisher(self, Float64MultiArray, 'deflection/block', qos)
         self._packer = BlockPacker(estimate_columns(self._channels))
+        self._one_in = OneSampleCodec(CURRENT_COLUMNS)
+        self._one_out = OneSampleCodec(estimate_columns(1))
+        self._points: PointCodec | None = None
         self._pub_points = [P.create_publisher(self, PointMsg, 'deflection', qos)
                             if self._channels == 1 else
                             P.create_publisher(self, PointMsg, f'ch{c}/deflection', qos)
@@ -232,23 +238,35 @@ class EstimatorNode(Node):
         return self._stream.last_warning
 
     # -- data path: unpack -> stream core -> publish ----------------------------
+    def _on_current_raw(self, raw: bytes) -> None:
+        """
+        Subscription callback (serialised message).
+
+        A one-sample current block is read from its bytes and its estimate written as bytes
+        (:class:`OneSampleCodec`); anything else is deserialised and takes :meth:`_on_current`.
+        """
+        if self._array is None:
+            one = self._one_in.decode(raw)
+            if one is not None and self._feed_one(*one):
+                return
+        try:
+            msg = deserialize_message(raw, Float64MultiArray)
+        except Exception as exc:  # bytes that are no Float64MultiArray: counted, never fatal
+            with self._lock:
+                (self._array or self._stream).reject(
+                    0, f'undecodable message ({len(raw)} bytes): {short_repr(str(exc))}')
+            return
+        self._on_current(msg)
+
     def _on_current(self, msg: Float64MultiArray) -> None:
         if self._array is not None:
             return self._on_current_array(msg)
+        one = one_sample(msg)
+        if one and self._feed_one(*one):
+            return
         with self._lock:
             if self._rebuilt is not None:
                 self._apply_rebuilt()
-            one = one_sample(msg)
-            if one:
-                out = self._stream.feed_one(*one)
-                if out is not False:
-                    self._diagnostics.observe_one(one[1])
-                    if out is not None:
-                        std = self._stream.estimator.std_m
-                        self._publish(
-                            self._packer.pack_one(out[0], out[1], std), out[0], out[1], 1
-                        )
-                    return
             try:
                 block = unpack_block(msg, CURRENT_COLUMNS)
             except DataError as exc:
@@ -260,6 +278,24 @@ class EstimatorNode(Node):
                 t, w = out
                 std = np.full(t.size, self._stream.estimator.std_m)
                 self._publish(self._packer.pack(t, w, std), t, w, t.size)
+
+    def _feed_one(self, time_s: float, current_a: float) -> bool:
+        """
+        Estimate one timed sample on the stream core's lean path; publish it as bytes.
+
+        False (nothing touched) when the sample needs the general path.
+        """
+        with self._lock:
+            if self._rebuilt is not None:
+                self._apply_rebuilt()
+            out = self._stream.feed_one(time_s, current_a)
+            if out is False:
+                return False
+            self._diagnostics.observe_one(current_a)
+            if out is not None:
+                t, w = out
+                self._publish(self._one_out.encode(t, w, self._stream.estimator.std_m), t, w, 1)
+            return True
 
     def _publish(self, block_msg: Float64MultiArray, times, deflections, n: int) -> None:
         """
@@ -292,8 +328,10 @@ class EstimatorNode(Node):
             )
 
     def _publish_point(self, time_s: float, deflection_m: float, channel: int = 0) -> None:
-        self._pub_points[channel].publish(point_message(
-            time_s, float(self._values['length_m']), deflection_m, self._values['frame_id']))
+        key = (float(self._values['length_m']), self._values['frame_id'])
+        if self._points is None or self._points.key != key:
+            self._points = PointCodec(*key)
+        self._pub_points[channel].publish(self._points.encode(time_s, deflection_m))
 
     def _on_current_array(self, msg: Float64MultiArray) -> None:
         """Estimate a sensor array's block: unpack N columns, :class:`ArrayStream`, publish."""

@@ -288,8 +288,8 @@ class ManagedEstimatorNode(ManagedMixin, EstimatorNode, LifecycleNode):
         if self._configured:
             super()._on_parameters_set(parameters)
 
-    def _on_current(self, msg) -> None:
-        self._guarded(super()._on_current, 'current subscription', msg)
+    def _on_current_raw(self, raw) -> None:
+        self._guarded(super()._on_current_raw, 'current subscription', raw)
 
     def _on_timer(self) -> None:
         self._guarded(super()._on_timer, 'status timer')

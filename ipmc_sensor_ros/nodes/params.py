@@ -223,9 +223,9 @@ def _destroy(node, entity) -> None:
             entity.destroy()
 
 
-def create_subscription(node, msg_type, topic: str, callback, qos: QoSProfile):
+def create_subscription(node, msg_type, topic: str, callback, qos: QoSProfile, raw=False):
     """``node.create_subscription`` with the standard QoS override parameters."""
-    return node.create_subscription(msg_type, topic, callback, qos,
+    return node.create_subscription(msg_type, topic, callback, qos, raw=raw,
                                     qos_overriding_options=qos_overriding_options())
 
 
