@@ -345,3 +345,21 @@ def test_adaptive_corner_blocks_and_single_samples_agree(reduced_slim):
     tail = a.process(i[:500])
     a.set_state(saved)
     assert np.array_equal(a.process(i[:500]), tail)
+
+
+def test_noise_term_of_the_leak_schedule_matches_the_filter(reduced_slim):
+    # leak_error_terms' noise term: white current noise sigma is a white velocity of two-sided
+    # PSD sigma^2 / (fs R0^2) integrated by 1 / (s + 2 pi f): variance
+    # sigma^2 / (fs R0^2) / (4 pi f) once t >> 1 / (2 pi f).  Checked on the moving-mode filter
+    # itself at f = 0.064 Hz (tau = 2.5 s) over 360 s of pure noise: the sample variance of an
+    # Ornstein-Uhlenbeck path over 144 tau is uncertain by sqrt(1 / 144) = 8 %, and the filter's
+    # own high-frequency posterior noise (not in the term) adds ~5 %: bounds 0.8 - 1.35.
+    from ipmc_sensor_ros.estimation.leak_schedule import leak_error_terms
+    est = KalmanEstimator(reduced_slim, FS, rest_detection=False)
+    k = int(np.argmin(np.abs(est._sched.corners_hz - 0.064)))
+    f = float(est._sched.corners_hz[k])
+    sigma = 200e-9
+    y = sigma * np.random.default_rng(61).standard_normal(400000)
+    w, _, _ = est._ladder_mode(k).run(y, np.zeros(est._n))
+    predicted = leak_error_terms([f], 0.0, 1.0, 1.0, sigma ** 2, 0.0, 1e9, est._r0, FS)[1][0]
+    assert 0.8 < np.var(w[40000:]) / predicted < 1.35
