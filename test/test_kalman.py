@@ -363,3 +363,16 @@ def test_noise_term_of_the_leak_schedule_matches_the_filter(reduced_slim):
     w, _, _ = est._ladder_mode(k).run(y, np.zeros(est._n))
     predicted = leak_error_terms([f], 0.0, 1.0, 1.0, sigma ** 2, 0.0, 1e9, est._r0, FS)[1][0]
     assert 0.8 < np.var(w[40000:]) / predicted < 1.35
+
+
+def test_rest_offset_follows_a_drift_without_lag(reduced_slim):
+    # 60 s at rest, offset 10 nA drifting 10 nA/min, 20 nA noise.  Past rest_offset_time_s
+    # (10 s) the offset is a level-and-trend average: no lag behind a linear drift, where an
+    # exponential average over 10 s trails it by 10 s * 10 nA/min = 1.7 nA.  The level's noise
+    # is ~2.5 x the EMA's variance: 0.2 nA RMS; bound 0.7 nA (3.5 sigma), well below 1.7 nA.
+    t = np.arange(int(60 * FS)) / FS
+    y = 10e-9 + 10e-9 * t / 60 + 20e-9 * np.random.default_rng(62).standard_normal(t.size)
+    est = KalmanEstimator(reduced_slim, FS)
+    blocks(est, y)
+    assert est.at_rest
+    assert abs(est.offset_a - (10e-9 + 10e-9 * t[-1] / 60)) < 0.7e-9
