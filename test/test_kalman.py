@@ -215,9 +215,10 @@ def test_robot_motion_with_hum_beats_leaky():
 def test_drifting_offset_with_intermittent_motion_stays_bounded():
     # Issue-14 row 5, shortened to 10 min at 500 Hz (bench runs the full hour): offset 10 nA
     # drifting 1 nA/min, 1 % noise, a 10 s robot-like burst every minute.  Target: |error|
-    # <= 0.2 mm at all times.  Between bursts the offset is re-learned at rest (lag of the
-    # 10 s average behind a 1 nA/min drift: 0.17 nA); each burst starts from a held level
-    # and loses < 0.6 %/s of its excursion to the leak (0.001 Hz) plus ~1 % reduction error.
+    # <= 0.2 mm at all times.  Between bursts the offset is re-learned at rest (past 10 s a
+    # level-and-trend average: no lag behind the drift); each burst starts from a held level
+    # and loses < 0.6 %/s of its excursion to the leak (0.001 Hz on such short moves) plus
+    # ~1 % reduction error.
     fs = 500.0
     t = np.arange(int(600 * fs)) / fs
     from ipmc_sensor_ros.simulation.daq import intermittent_motion

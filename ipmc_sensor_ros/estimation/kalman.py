@@ -68,8 +68,9 @@ At rest the deflection is held (frozen, as a gyro's angle while its bias is
 learned at standstill), the charge and velocity states are zeroed and the offset
 is the running mean of the current, started with the weight sigma^2/P_b of its
 previous estimate (P_b grows by q_b per second of motion) and, once it has
-``fs * rest_offset_time_s`` samples, an exponential average that follows drift
-(lag 0.17 nA at 1 nA/min with the default 10 s); sigma is the *measured* noise.
+``fs * rest_offset_time_s`` samples, a level-and-trend average that follows a drift
+without lag (an exponential average would trail 1 nA/min by 0.17 nA with the default
+10 s); sigma is the *measured* noise.
 Leaving rest, the last ``REST_REWIND_WINDOWS`` rest windows are re-run in the moving
 mode from the offset learned before them (the detector's lag), and the leak pulls
 towards the held level (not zero), starting from ``leak_corner_hz`` while the offset is
@@ -710,7 +711,7 @@ class KalmanEstimator:
         m = min(y.size, self._rewind_n)
         lo = y.size - m
         # offset before sample k: the running mean of the samples before k (weight n0 on b0);
-        # past n_max samples the exponential average's lag is ignored (rewinds are short)
+        # past n_max samples the rest offset is a level-and-trend average: no rewind then
         counts = np.minimum(n0 + np.arange(lo, y.size), self._n_max)
         csum = np.concatenate([[0.0], np.cumsum(y)])[lo:y.size]
         b_before = np.where(
