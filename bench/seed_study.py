@@ -61,6 +61,39 @@ def judge(group, hidden, diag):
     return named == set(hidden) and at_floor
 
 
+def judge_with_ties(hidden, diag):
+    """
+    Return True when the right set is named, or one look-alike swap is reported as a tie.
+
+    The issue's look-alike rule (never the wrong one alone) applied to sets: the named set
+    differs from the hidden one by one effect, and the verdict reports the hidden one as a
+    tie of the named one ("beam_inertia instead of amplifier_bandwidth ...").
+    """
+    named, truth = set(diag.missing_effects), set(hidden)
+    if diag.final.error > 1.2 * diag.noise_floor:
+        return False
+    if named == truth:
+        return True
+    extra, missing = named - truth, truth - named
+    if len(extra) != 1 or len(missing) != 1:
+        return False
+    (x,), (y,) = extra, missing
+    return any(t == y or t.startswith(f'{y} instead of {x}') for t in diag.ties)
+
+
+def campaign_kwargs(hidden) -> dict:
+    """
+    Return the record design of a combination (keyword arguments of the campaign).
+
+    A drift needs long records (as the single-effect drift test, test_diagnose): 0.05-0.2 %/s
+    changes d by < 1.2 % over 6 s, under 1 % noise; so 120 s records at the ends and middle
+    of the band (3 and 7 Hz alone hid beam inertia, whose error is ~0.039 (f/f_1)^2).
+    """
+    if 'hydration_drift' in hidden:
+        return dict(frequencies_hz=DRIFT_FREQUENCIES_HZ, duration_s=120.0)
+    return {}
+
+
 def _cpu_s():
     """CPU seconds of this process and its reaped children (the diagnosis' worker pool)."""
     t = os.times()
@@ -81,21 +114,18 @@ def run(groups, seeds, null_seeds, out, seed_first=False, first_seed=0, drift='a
         plan += [(g, h, s) for g, h in combos for s in seed_range]
     with open(out, 'a') as fh:
         fh.write('group\thidden\tseed\tok\tnamed\tties\terror_over_floor\tseconds\t'
-                 'cpu_seconds\n')
+                 'cpu_seconds\tok_with_ties\n')
     for group, hidden, seed in plan:
-        # a drift needs long records (as the single-effect drift test, test_diagnose):
-        # 0.05-0.2 %/s changes d by < 1.2 % over 6 s, under 1 % noise; 120 s records at the
-        # ends and middle of the band (3 and 7 Hz alone hid beam inertia, ~0.039 (f/f_1)^2)
-        kwargs = (dict(frequencies_hz=DRIFT_FREQUENCIES_HZ, duration_s=120.0)
-                  if 'hydration_drift' in hidden else {})
-        recs, _ = hidden_effects_campaign(hidden, seed, **kwargs)
+        recs, _ = hidden_effects_campaign(hidden, seed, **campaign_kwargs(hidden))
         t0, c0 = time.perf_counter(), _cpu_s()
         diag = diagnose(recs)
         dt, cpu = time.perf_counter() - t0, _cpu_s() - c0
         ok = judge(group, hidden, diag)
+        ok_tie = ok or (group in ('pairs', 'triples') and judge_with_ties(hidden, diag))
         line = (f"{group}\t{'+'.join(hidden) or '-'}\t{seed}\t{int(ok)}\t"
                 f"{'+'.join(diag.missing_effects) or '-'}\t{'|'.join(diag.ties) or '-'}\t"
-                f'{diag.final.error / diag.noise_floor:.4f}\t{dt:.1f}\t{cpu:.1f}\n')
+                f'{diag.final.error / diag.noise_floor:.4f}\t{dt:.1f}\t{cpu:.1f}\t'
+                f'{int(ok_tie)}\n')
         with open(out, 'a') as fh:
             fh.write(line)
         print(line, end='', flush=True)
@@ -110,12 +140,14 @@ def table(path):
             if f[0] == 'group':
                 continue
             cpu = float(f[8]) if len(f) > 8 else float('nan')
-            rows.setdefault((f[0], f[1]), []).append((int(f[3]), float(f[6]), float(f[7]), cpu))
-    out = ['| group | hidden effects | target met | max error/floor | median wall s | '
-           'median CPU s |', '|---|---|---|---|---|---|']
+            tie = int(f[9]) if len(f) > 9 else int(f[3])    # older rows: strict only
+            rows.setdefault((f[0], f[1]), []).append((int(f[3]), tie, float(f[6]), float(f[7]),
+                                                      cpu))
+    out = ['| group | hidden effects | target met | with look-alike ties | max error/floor | '
+           'median wall s | median CPU s |', '|---|---|---|---|---|---|---|']
     for (g, h), v in rows.items():
-        ok, r, s, c = zip(*v)
-        out.append(f'| {g} | {h} | {sum(ok)}/{len(ok)} | {max(r):.3f} | '
+        ok, tie, r, s, c = zip(*v)
+        out.append(f'| {g} | {h} | {sum(ok)}/{len(ok)} | {sum(tie)}/{len(tie)} | {max(r):.3f} | '
                    f'{np.median(s):.0f} | {np.median(c):.0f} |')
     return '\n'.join(out)
 

@@ -341,6 +341,7 @@ def test_bad_messages_are_rejected_and_leave_the_filter_untouched(harness, reduc
             (pack_block(tb[0] + 2.0 * (tb - tb[0]), ib), 'sample period'),   # a 500 Hz DAQ
             (pack_block(tb, ib * 1e7), 'not a sensing current'),
             (pack_block(tb - 2 * T0, ib), 'sample times must lie'),
+            (b'\x00\x01\x00\x00\x02\x00\x00\x00\xff', 'undecodable'),  # truncated CDR
         ]
 
     n_bad = 0

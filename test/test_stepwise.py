@@ -224,11 +224,11 @@ def test_seed_study_hit_rate(group, hidden, n_seeds):
     floor, or for look-alikes the true one or a tie) in >= 9 of 10 seeds.  Minutes per
     combination: run with ``-m slow`` (``bench/seed_study.py`` writes the same as a table).
     """
-    from bench.seed_study import judge
+    from bench.seed_study import campaign_kwargs, judge
 
     ok = []
     for seed in range(n_seeds):
-        recs, _ = hidden_effects_campaign(hidden, seed)
+        recs, _ = hidden_effects_campaign(hidden, seed, **campaign_kwargs(hidden))
         ok.append(judge(group, hidden, diagnose(recs)))
     need = n_seeds if group == 'null' else n_seeds - 1
     assert sum(ok) >= need, (group, hidden, ok)

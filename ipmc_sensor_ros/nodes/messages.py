@@ -33,6 +33,7 @@ import numpy as np
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
+from ..interface.cdr import CdrWalk, OneSampleCodec
 from ..interface.blocks import (
     CURRENT_COLUMNS,
     DEFLECTION_COLUMNS,
@@ -211,102 +212,6 @@ def _byte_order(serialised: bytes) -> str:
     return '<' if serialised[1] & 1 else '>'    # CDR_LE = 0x0001, CDR_BE = 0x0000
 
 
-class _CdrWalk:
-    """
-    Offsets of a CDR (XCDR1) serialisation: where each field starts and which bytes are padding.
-
-    A primitive of n bytes is aligned to n from the start of the body (after the 4-byte
-    encapsulation header).  Padding bytes carry no data and serialisers leave whatever was in
-    the buffer there (seen with rclpy), so they are zeroed in templates and skipped when
-    comparing.
-    """
-
-    def __init__(self):
-        self.pos = 4
-        self.pads: list[int] = []
-
-    def field(self, size: int, count: int = 1) -> int:
-        """Skip ``count`` primitives of ``size`` bytes; return where the first starts."""
-        while (self.pos - 4) % size:
-            self.pads.append(self.pos)
-            self.pos += 1
-        start = self.pos
-        self.pos += size * count
-        return start
-
-    def string(self, text: str) -> None:
-        self.field(4)                                   # length, incl. the terminating NUL
-        self.pos += len(text.encode()) + 1
-
-    def spans(self, end: int) -> list[tuple[int, int]]:
-        """Return the data spans of bytes 0 .. end - 1 as (start, stop) pairs, padding excluded."""
-        out, start = [], 0
-        for p in [q for q in self.pads if q < end] + [end]:
-            if p > start:
-                out.append((start, p))
-            start = p + 1
-        return out
-
-
-def _zero_pads(serialised: bytes, walk: _CdrWalk) -> bytearray:
-    out = bytearray(serialised)
-    for p in walk.pads:
-        out[p] = 0
-    return out
-
-
-class OneSampleCodec:
-    """
-    Read and write one-sample blocks of one column layout as serialised (CDR) bytes.
-
-    The hot path of one-sample streams.  rclpy converts a ``Float64MultiArray`` to and from
-    Python objects on every take and publish; with one sample per message that conversion,
-    not the estimate, is most of a node's cost (README "Benchmarks").  A one-sample block of
-    a given layout is a constant prefix (encapsulation header, the two dimensions, the data
-    offset and length) followed by its one row of float64, so it is read with a comparison
-    of the prefix (padding bytes skipped) and one ``struct`` unpack, and written by appending
-    the packed row to the prefix.  The prefix is rclpy's own serialisation of the same block,
-    so what is written deserialises to exactly the message object (tested; padding zeroed),
-    and a message that does not match (another layout, byte order or length) reads as
-    ``None`` and takes the general path with its precise layout checks.
-    """
-
-    def __init__(self, columns: str):
-        width = len(columns.split(','))
-        walk = _CdrWalk()
-        walk.field(4)                                   # layout.dim: sequence length
-        for label in (SAMPLE_LABEL, columns):
-            walk.string(label)
-            walk.field(4, 2)                            # size, stride
-        walk.field(4, 2)                                # layout.data_offset, len(data)
-        self._cut = walk.field(8, width)                # data: the one row
-        template = _zero_pads(
-            serialize_message(BlockPacker(columns).pack_one(*([0.0] * width))), walk)
-        if len(template) != walk.pos:                   # a layout this walk does not know
-            raise DataError(f'unexpected serialised size {len(template)} of a one-sample '
-                            f"'{columns}' block (expected {walk.pos})")
-        self.columns = columns
-        self._size = walk.pos
-        self._prefix = bytes(template[:self._cut])
-        self._spans = walk.spans(self._cut)
-        self._row = struct.Struct(_byte_order(template) + 'd' * width)
-
-    def decode(self, raw: bytes) -> tuple[float, ...] | None:
-        """Return the row (time, values...) of a one-sample block, or None for any other."""
-        if len(raw) != self._size:
-            return None
-        prefix = self._prefix
-        if not raw.startswith(prefix):                  # padding bytes not zero: compare data
-            for a, b in self._spans:
-                if raw[a:b] != prefix[a:b]:
-                    return None
-        return self._row.unpack_from(raw, self._cut)
-
-    def encode(self, *row: float) -> bytes:
-        """Return the serialised one-sample block of ``row`` (time, values...)."""
-        return self._prefix + self._row.pack(*row)
-
-
 class PointCodec:
     """
     Write :func:`point_message` as serialised bytes (its stamp and ``z`` set in a template).
@@ -317,12 +222,13 @@ class PointCodec:
 
     def __init__(self, length_m: float, frame_id: str):
         self.key = (length_m, frame_id)
-        walk = _CdrWalk()
+        walk = CdrWalk()
         walk.field(4, 2)                                # header.stamp: int32 sec, uint32 nanosec
         walk.string(frame_id)
         self._z_at = walk.field(8, 3) + 16             # point: x, y, z
-        self._template = _zero_pads(
-            serialize_message(point_message(0.0, length_m, 0.0, frame_id)), walk)
+        self._template = bytearray(serialize_message(point_message(0.0, length_m, 0.0, frame_id)))
+        for p in walk.pads:                             # serialisers leave garbage there
+            self._template[p] = 0
         order = _byte_order(self._template)
         self._stamp = struct.Struct(order + 'iI')
         self._z = struct.Struct(order + 'd')

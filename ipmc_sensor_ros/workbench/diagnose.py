@@ -608,6 +608,11 @@ def _diagnose(
         ]
         if first_iteration:
             first_ties = [c.effect for c in ties]
+        else:   # a later step's tie is as much a verdict as the first's (e.g. beam inertia
+            # and an amplifier pole next to a delay, which absorbs the pole's phase)
+            late_ties.extend(
+                f'{c.effect} instead of {best.effect} (held-out error {c.error:.4f} vs '
+                f'{best.error:.4f}, dBIC {c.fit.bic - best.fit.bic:+.0f})' for c in ties)
         reason = (
             f'held-out error {current.error:.4f} -> {best.error:.4f} '
             f'({current.error / best.error:.2f}x), BIC -{current.fit.bic - best.fit.bic:.0f}'
