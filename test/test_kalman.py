@@ -64,11 +64,10 @@ def test_blocks_single_samples_and_process_one_agree(reduced_slim):
     wa = blocks(a, i, 1000)
     wb = blocks(b, i, 37)
     wc = np.array([c.process_one(x) for x in i])
-    # blocks of any size: the same recursion (state exact between modes) up to rounding, except
-    # that the measured noise level used by the rest-offset weighting is updated per block:
-    # 1 um bound against a 2 mm motion
-    assert np.max(np.abs(wa - wb)) < 1e-6
-    assert np.max(np.abs(wa - wc)) < 1e-6
+    # blocks of any size: the same recursion (state exact between modes, the rest offset's
+    # weight a count, the noise measured at each sample) up to rounding: 1e-12 m
+    assert np.max(np.abs(wa - wb)) < 1e-12
+    assert np.max(np.abs(wa - wc)) < 1e-12
     assert a.at_rest == b.at_rest == c.at_rest
 
 
@@ -328,10 +327,9 @@ def test_leak_corner_stays_low_on_slow_motion_after_rest():
 
 def test_adaptive_corner_blocks_and_single_samples_agree(reduced_slim):
     # A noisy 20 Hz crank after rest makes the schedule switch corners; the switches fall on
-    # the same sample grid whatever the block size.  Known gap: the rest's offset variance
-    # uses the noise level measured per block (as before), so a switch can come one or two
-    # grid steps (0.25 s) apart between block sizes; each step changes the leak transient
-    # by about (0.256 Hz / 20 Hz) * 2 mm = 26 um: bound 0.1 mm, and the same final corner.
+    # the same sample grid whatever the block size, and every input to the decision (the rest
+    # offset's weight as a count, the noise measured at each sample) is the same for blocks
+    # and single samples: equal up to rounding (1e-12 m), the same final corner.
     t, w, i = _crank_after_rest(SLIM, 20.0, seed=53, seconds=10.0)
     a, b, c = (KalmanEstimator(reduced_slim, FS) for _ in range(3))
     wa = blocks(a, i, 1000)
@@ -339,8 +337,8 @@ def test_adaptive_corner_blocks_and_single_samples_agree(reduced_slim):
     wc = np.array([c.process_one(x) for x in i])
     assert a.leak_corner_in_use_hz > 0.02
     assert a.leak_corner_in_use_hz == b.leak_corner_in_use_hz == c.leak_corner_in_use_hz
-    assert np.max(np.abs(wa - wb)) < 1e-4
-    assert np.max(np.abs(wa - wc)) < 1e-4
+    assert np.max(np.abs(wa - wb)) < 1e-12
+    assert np.max(np.abs(wa - wc)) < 1e-12
     # the state (with the schedule's statistics) saves and restores exactly
     saved = a.get_state()
     tail = a.process(i[:500])

@@ -438,7 +438,11 @@ class KalmanEstimator:
         self._lp = 0.0
         self._energy = 10.0 * self.rest_leave * self.noise_energy_a2
         self._offset_var = OFFSET_PRIOR_A ** 2
+        # at rest the offset's weight is a sample count (its variance = sigma^2 / count with the
+        # noise measured at each sample, so blocks and single samples agree); None while moving
+        self._offset_n: float | None = None
         self._sigma2 = self.current_noise_a ** 2
+        self._sig2_seq = None
         self._hp_zi = np.zeros((2 if self._hp is None else self._hp.shape[0], 2))
         self._nz_zi = np.zeros((2, 2))
         self._nz_energy = 0.0 if self._hp is None else self.current_noise_a ** 2 * self._nz_unit
@@ -503,13 +507,15 @@ class KalmanEstimator:
             self._energy = float(zf[0] / a)
             floor = np.maximum(floor, hf * self._hp_ratio)
             self._sigma2 = max(self.current_noise_a ** 2, self._hf_energy / self._hp_unit)
+            # the measured noise after each sample, as process_one sees it (see _run_rest)
+            self._sig2_seq = np.maximum(self.current_noise_a ** 2, hf / self._hp_unit)
             # the leak schedule's noise level after each sample (see _sigma2_at)
             high, self._nz_zi = sig.sosfilt(self._nz, y, zi=self._nz_zi)
             nz2 = np.minimum(high * high, self._nz_clip)
             self._hf_seq, zf = sig.lfilter([1 - ah], [1, -ah], nz2, zi=[ah * self._nz_energy])
             self._nz_energy = float(zf[0] / ah)
         else:
-            self._hf_seq = None
+            self._hf_seq = self._sig2_seq = None
             e, zf = sig.lfilter([1 - a], [1, -a], np.minimum(band * band, self._clip_a2()),
                                 zi=[a * self._energy])
             self._energy = float(zf[0] / a)
@@ -554,7 +560,7 @@ class KalmanEstimator:
                 self._seen_rest = True
                 self._s[self._iw] += self._w_ref          # rest holds the absolute deflection
                 self._w_ref = 0.0
-                out[lo:hi] = self._run_rest(y[lo:hi])
+                out[lo:hi] = self._run_rest(y[lo:hi], lo)
             else:
                 if was_rest:                              # leaving rest: leak towards this level
                     self._leave_rest()
@@ -570,6 +576,7 @@ class KalmanEstimator:
         self._w_ref = float(self._s[self._iw])
         self._s[self._iw] = 0.0
         self._trend = None
+        self._offset_n = None
         sch = self._sched
         sch.moving_n = 0          # J at t = 0 is the leak term alone: the slowest corner
         sch.index = self._floor_index(self._offset_var)
@@ -665,7 +672,11 @@ class KalmanEstimator:
         """Return the deflection leak corner chosen for the motion so far, Hz."""
         return self._sched.corner_hz
 
-    def _run_rest(self, y: np.ndarray) -> np.ndarray:
+    def _rest_sigma2(self, k: int) -> float:
+        """Measured noise variance after sample k of the present block (as process_one)."""
+        return self._noise_var() if self._sig2_seq is None else float(self._sig2_seq[k])
+
+    def _run_rest(self, y: np.ndarray, lo: int) -> np.ndarray:
         """
         Rest: deflection held, velocity and charge states zero.
 
@@ -684,7 +695,10 @@ class KalmanEstimator:
         w = np.full(y.size, s_end[self._iw])
         u = y
         b0 = self._s[self._ib]
-        n0 = self._noise_var() / self._offset_var
+        # weight of the offset so far: carried as a count through a rest (see reset), converted
+        # from its variance with the noise at the rest's first sample
+        n0 = (self._rest_sigma2(lo) / self._offset_var if self._offset_n is None
+              else self._offset_n)
         counts = n0 + np.arange(1, y.size + 1)
         if counts[-1] <= self._n_max:
             b = (n0 * b0 + float(np.sum(u))) / counts[-1]
@@ -703,7 +717,8 @@ class KalmanEstimator:
         self._remember_rest(y, b0, n0)
         self._s = s_end
         self._b_last = b
-        self._offset_var = self._noise_var() / n_end
+        self._offset_n = n_end
+        self._offset_var = self._rest_sigma2(lo + y.size - 1) / n_end
         return w
 
     def _remember_rest(self, y: np.ndarray, b0: float, n0: float) -> None:
@@ -808,7 +823,8 @@ class KalmanEstimator:
             self._seen_rest = True
             for j in self._motion_idx.tolist():
                 st[j] = 0.0
-            n0 = self._noise_var() / self._offset_var
+            n0 = (self._noise_var() / self._offset_var if self._offset_n is None
+                  else self._offset_n)
             self._rest_y.append(y)
             self._rest_b.append(st[ib] if n0 + 1.0 <= self._n_max else math.nan)
             n1 = min(n0 + 1.0, self._n_max)
@@ -825,6 +841,7 @@ class KalmanEstimator:
             new = st
             new[ib] = b
             self._b_last = b
+            self._offset_n = n1
             self._offset_var = self._noise_var() / n1
         else:
             if sch.count % sch.step == 0:
@@ -855,6 +872,7 @@ class KalmanEstimator:
             'nz_zi': self._nz_zi.copy(),
             'nz_energy': self._nz_energy,
             'offset_var': self._offset_var,
+            'offset_n': self._offset_n,
             'sigma2': self._sigma2,
             'lp': self._lp,
             'seen_rest': self._seen_rest,
@@ -880,6 +898,8 @@ class KalmanEstimator:
             self._nz_zi = np.asarray(state['nz_zi'], float).copy()
             self._nz_energy = float(state['nz_energy'])
         self._offset_var = float(state['offset_var'])
+        n = state.get('offset_n')
+        self._offset_n = None if n is None else float(n)
         self._sigma2 = float(state['sigma2'])
         self._lp = float(state['lp'])
         self._seen_rest = bool(state['seen_rest'])
@@ -907,6 +927,7 @@ class KalmanEstimator:
             self._w_ref = old._w_ref
             self._seen_rest = old._seen_rest
             self._offset_var = old._offset_var
+            self._offset_n = old._offset_n
             self._s[self._ib] = old._s[old._ib]
             self._b_last = old._b_last
             self.at_rest = old.at_rest
