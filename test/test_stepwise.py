@@ -58,6 +58,25 @@ def test_several_hidden_effects_are_all_named(hidden, seed):
             )
 
 
+def test_exchange_pass_replaces_an_early_stand_in_when_the_budget_is_spent():
+    """
+    From H1 with an offset, a 50 Hz amplifier pole and surface resistance missing.
+
+    The first search step takes a 5 ms delay (it mimics the pole's and the diffusion's phase
+    together), the offset and surface resistance fill the budget of 3, and the error stays 4.6x
+    the floor.  The exchange pass then tries each chosen effect against every one not in the
+    model and puts the pole in the delay's place: the right set, at the floor.
+    """
+    hidden = ('surface_resistance', 'amplifier_bandwidth', 'current_offset')
+    recs, _ = hidden_effects_campaign(hidden, 6, **SMALL)
+    diag = diagnose(recs)
+    assert set(diag.missing_effects) == set(hidden), diag.summary()
+    assert diag.final.error <= FLOOR_FACTOR * diag.noise_floor, diag.summary()
+    swaps = [s for s in diag.steps if s.action == 'swapped' and 'exchange pass' in s.reason]
+    assert [s.effect for s in swaps] == ['amplifier_bandwidth'], diag.summary()
+    assert 'replaces time_delay' in swaps[0].reason
+
+
 def test_lab_like_data_offset_named_amplifier_not_delay_hum_reported():
     """H2 x 200 Hz amplifier, 15 nA offset, 3 % hum at 50 Hz, 2 % noise (the issue's lab case)."""
     recs = crank_slider_campaign(

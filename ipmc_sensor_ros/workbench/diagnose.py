@@ -33,7 +33,12 @@ Procedure (:func:`diagnose`)
 4. **Backward check** after each addition: an effect chosen earlier whose
    removal raises the held-out error by less than 1 % and the BIC by less than
    ``min_delta_bic`` is dropped.
-5. Stop when the held-out error reaches the noise floor (within ``stop_factor``,
+5. **Exchange pass** when the search ended above the floor (``explained`` false): each
+   chosen effect (but the offset) is tried against every effect not in the model, all
+   refitted; the best exchange that passes the significance rule (on the candidate's own
+   plausibility) is made, until none does (an early stand-in, e.g. a delay mimicking an
+   amplifier pole and the diffusion's phase together, can fill the effect budget).
+6. Stop when the held-out error reaches the noise floor (within ``stop_factor``,
    5 %; the floor is the error a perfect model would have, from the measured
    noise), when nothing passes the significance rule, or after ``max_effects``
    additions.  ``explained``: final error <= ``explained_factor`` (1.15) x floor
