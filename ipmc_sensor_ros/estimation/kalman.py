@@ -579,33 +579,26 @@ class KalmanEstimator:
         self._offset_n = None
         sch = self._sched
         sch.moving_n = 0          # J at t = 0 is the leak term alone: the slowest corner
-        sch.index = self._floor_index(self._offset_var)
+        sch.index = int(self._floor_index(self._offset_var))
         self._rewind()
         sch.u_prev = float(self._s[self._iw])
 
-    def _floor_index(self, offset_var: float) -> int:
+    def _floor_index(self, offset_var):
         """
-        Slowest allowed ladder index.
+        Slowest allowed ladder index (per value of ``offset_var``, scalar or array).
 
         leak_corner_hz only while the offset is known to OFFSET_TRUSTED_A RMS (learned at
         rest, its variance growing by the drift during motion); else START_LEAK_CORNER_HZ
         (an offset error db ramps w by db / R0 per second).
         """
-        if self._seen_rest and offset_var < OFFSET_TRUSTED_A ** 2:
-            return self._sched.floor_index
-        return self._sched.start_index
+        trusted = self._seen_rest & (np.asarray(offset_var) < OFFSET_TRUSTED_A ** 2)
+        return np.where(trusted, self._sched.floor_index, self._sched.start_index)
 
     def _choose(self, stats, sigma2, offset_var, moving_n) -> np.ndarray:
         """Leak corner indices for the motion so far (LeakSchedule.choose, vectorised)."""
-        offset_var = np.asarray(offset_var, float)
-        if self._seen_rest:
-            floor = np.where(offset_var < OFFSET_TRUSTED_A ** 2,
-                             self._sched.floor_index, self._sched.start_index)
-            p_b = offset_var
-        else:
-            # before the first rest the offset is not observable: its term is left out
-            floor, p_b = self._sched.start_index, 0.0
-        return self._sched.choose(stats, sigma2, p_b, floor, moving_n)
+        # before the first rest the offset is not observable: its term is left out
+        p_b = offset_var if self._seen_rest else 0.0
+        return self._sched.choose(stats, sigma2, p_b, self._floor_index(offset_var), moving_n)
 
     def _sigma2_at(self, k):
         """Measured noise variance after sample(s) k of the present block (as process_one)."""

@@ -195,34 +195,25 @@ class LeakSchedule:
         return out
 
     def _choose_one(self, wgt, m, s, v, sigma2_a2, p_b_a2, floor, moving_n) -> int:
-        """One decision (leak_error_terms written out in scalars: it runs once a second)."""
+        """One decision: J = the sum of :func:`leak_error_terms` over the allowed corners."""
         floor = int(floor)
         if not (wgt > 0 and s > 0 and v > 0):
             return floor
         s, v, m = s / wgt, v / wgt, m / wgt
-        corners, wf = self.corners_hz, self._wf
+        corners = self.corners_hz
         f_eff = math.sqrt(v / s) / (2 * math.pi)
         top = max(corners[floor], min(CEILING_HZ, CEILING_FRACTION * f_eff))
         hi = int(np.searchsorted(corners, top * (1 + 1e-9), side='right'))
         if hi <= floor + 1:
             return floor
-        t = moving_n / self.fs
-        k_n = sigma2_a2 / (self.fs * self.r0 * self.r0)
-        k_o = p_b_a2 / (self.r0 * self.r0)
-        k_l = s * s / v
-        e = math.exp(-wf[floor] * t)
-        wander = k_n * (1 - e * e) / (2 * wf[floor]) + k_o * ((1 - e) / wf[floor]) ** 2
-        residual = 2 * s / (1 + v / s * STATS_WINDOW_S ** 2)
-        held = max(m * m - residual - WANDER_SIGMAS ** 2 * wander, 0.0)
-        j = {}
-        for k in range(floor, hi):
-            w = wf[k]
-            e = math.exp(-w * t)
-            j[k] = (k_l * w * w + held * (1 - e) ** 2 + k_n * (1 - e * e) / (2 * w)
-                    + k_o * ((1 - e) / w) ** 2)
-        best = min(j, key=j.get)
+        args = (sigma2_a2, p_b_a2, moving_n / self.fs, self.r0, self.fs)
+        # the estimate's own wander, judged at the slowest allowed corner (module docstring)
+        _, noise, offset = leak_error_terms(corners[floor], m, s, v, *args)
+        wander = WANDER_SIGMAS ** 2 * float(noise + offset)
+        j = sum(leak_error_terms(corners[floor:hi], m, s, v, *args, wander_m2=wander))
+        best = floor + int(np.argmin(j))
         cur = self.index
-        if cur not in j or j[best] < (1.0 - HYSTERESIS) * j[cur]:
+        if not floor <= cur < hi or j[best - floor] < (1.0 - HYSTERESIS) * j[cur - floor]:
             return best
         return cur
 

@@ -412,7 +412,7 @@ def _diagnose(
         offset_info = _offset_test(prepared, current.fit.models)
         if offset_info['p_value'] < offset_p:
             say('mean current found: fitting current_offset')
-            shape = tuple(p.name for p in get_effect('current_offset').parameters)
+            shape = _shapes('current_offset')[0]
             c = _Job(prepared, current.spec, current.x, folds, fold_nfev, priors)(
                 ('current_offset', shape)
             )
@@ -438,7 +438,7 @@ def _diagnose(
         if not remaining:
             break
         items = [(n, s) for n in remaining
-                 for s in SHAPES.get(n, (tuple(p.name for p in get_effect(n).parameters),))]
+                 for s in _shapes(n)]
         say(
             f'step {len(steps) + 1}: {len(items)} candidate fits on '
             f'{min(n_jobs, len(items))} process(es)'
@@ -539,13 +539,13 @@ def _diagnose(
             if (name, shape) not in chosen:
                 continue
             added = [st for st in steps if st.effect == name and st.action in ('added', 'swapped')]
+            base = None
             for alt in [a for st in added[-1:] for a in st.alternatives]:
                 if alt in {e for e, _ in chosen} or alt in replaced:
                     continue
-                base = _without(prepared, current, name, folds, fold_nfev, priors)
-                alt_shape = SHAPES.get(alt, (tuple(p.name for p in get_effect(alt).parameters),))[
-                    0
-                ]
+                if base is None:        # the model without `name`: the same for every alt
+                    base = _without(prepared, current, name, folds, fold_nfev, priors)
+                alt_shape = _shapes(alt)[0]
                 cand = _Job(
                     _with_models(prepared, base.fit.models),
                     base.spec,
@@ -604,7 +604,7 @@ def _diagnose(
             job = _Job(_with_models(prepared, base.fit.models), base.spec, base.x, folds,
                        fold_nfev, priors)
             items = [(n, sh) for n in pool_names if n not in names
-                     for sh in SHAPES.get(n, (tuple(p.name for p in get_effect(n).parameters),))]
+                     for sh in _shapes(n)]
             say(f'exchange {name}: {len(items)} candidate fits')
             # plausible in its own parameters (the model kept may carry flags of its own, e.g.
             # an offset drift beyond the typical range, shared by every candidate)
@@ -697,6 +697,11 @@ def _merge_shapes(cands: list[Candidate], tie_tol: float) -> list[Candidate]:
         else:
             by[c.effect] = c if c.error < o.error else o
     return list(by.values())
+
+
+def _shapes(name: str) -> tuple[tuple[str, ...], ...]:
+    """Return the free-parameter sets an effect is tried in (SHAPES, else all its parameters)."""
+    return SHAPES.get(name, (tuple(p.name for p in get_effect(name).parameters),))
 
 
 def _refit_set(prepared, baseline: Candidate, effects, folds, fold_nfev, priors) -> Candidate:
