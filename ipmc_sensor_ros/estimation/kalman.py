@@ -102,6 +102,7 @@ import scipy.signal as sig
 
 from .inverse import ParameterError, _positive
 from .leak_schedule import LeakSchedule
+from .periodic_offset import PeriodicOffset
 from ..lti.discretize import van_loan
 from ..lti.reduction import ReducedModel
 
@@ -336,6 +337,7 @@ class KalmanEstimator:
         self._modes = {}
         self._r0 = abs(float(np.real(self.reduced.charge_response(np.array([0.0]))[0])))
         self._sched = LeakSchedule(fs, self._r0, self.leak_corner_hz, START_LEAK_CORNER_HZ)
+        self._periodic = PeriodicOffset(fs)
         self._moving = self._ladder_mode(self._sched.floor_index)
         self._moving_start = self._ladder_mode(self._sched.start_index)
         self.std_moving_m = self._moving.std_m
@@ -435,6 +437,8 @@ class KalmanEstimator:
         # start as if just moving: rest is entered only after ~rest_window_s of quiet current
         self._w_ref = 0.0
         self._seen_rest = False
+        self._offset_learned = False      # learned from whole periods of motion (no rest)
+        self.last_period_s = math.nan     # period of the last motion found periodic, s
         self._lp = 0.0
         self._energy = 10.0 * self.rest_leave * self.noise_energy_a2
         self._offset_var = OFFSET_PRIOR_A ** 2
@@ -452,6 +456,8 @@ class KalmanEstimator:
         self.last_std = self._moving_start.std_m
         self.last_rest = np.zeros(0, bool)
         self._sched.reset()
+        self._periodic.reset()
+        self._motion_prior = (0.0, self._offset_var)    # offset and variance as motion began
         self._hf_seq = None
         self._trend = None                # (S1, S2) of the rest's level-and-trend average
         # the last rest samples and the offset before each (see _rewind)
@@ -579,6 +585,8 @@ class KalmanEstimator:
         self._offset_n = None
         sch = self._sched
         sch.moving_n = 0          # J at t = 0 is the leak term alone: the slowest corner
+        self._periodic.reset()    # a new motion segment
+        self._motion_prior = (float(self._s[self._ib]), self._offset_var)
         sch.index = int(self._floor_index(self._offset_var))
         self._rewind()
         sch.u_prev = float(self._s[self._iw])
@@ -591,13 +599,13 @@ class KalmanEstimator:
         rest, its variance growing by the drift during motion); else START_LEAK_CORNER_HZ
         (an offset error db ramps w by db / R0 per second).
         """
-        trusted = self._seen_rest & (np.asarray(offset_var) < OFFSET_TRUSTED_A ** 2)
+        trusted = self._offset_known & (np.asarray(offset_var) < OFFSET_TRUSTED_A ** 2)
         return np.where(trusted, self._sched.floor_index, self._sched.start_index)
 
     def _choose(self, stats, sigma2, offset_var, moving_n) -> np.ndarray:
         """Leak corner indices for the motion so far (LeakSchedule.choose, vectorised)."""
         # before the first rest the offset is not observable: its term is left out
-        p_b = offset_var if self._seen_rest else 0.0
+        p_b = offset_var if self._offset_known else 0.0
         return self._sched.choose(stats, sigma2, p_b, self._floor_index(offset_var), moving_n)
 
     def _sigma2_at(self, k):
@@ -614,10 +622,11 @@ class KalmanEstimator:
 
     def _run_moving(self, y: np.ndarray, lo: int, hi: int, out: np.ndarray, count0: int):
         """
-        Moving-mode filter over y[lo:hi], with the leak corner re-chosen on the sample grid.
+        Moving-mode filter over y[lo:hi], cut at the decision grid.
 
-        Each run goes to hi with the present corner; if a grid point inside it would switch
-        the corner, the run is cut there (its state recomputed) and continued with the new.
+        At each grid point (every ``leak_schedule.STEP_S`` of samples) the offset is updated
+        from whole periods of the motion when it is periodic (:meth:`_periodic_update`) and
+        the leak corner re-chosen, as :meth:`process_one` does at the same samples.
         """
         sch = self._sched
         q = self._q_b_step
@@ -625,32 +634,74 @@ class KalmanEstimator:
         while pos < hi:
             phase = (count0 + pos) % sch.step
             if phase == 0:
+                sigma2 = float(self._sigma2_at(pos))
+                self._periodic_update(sigma2)
                 sch.index = int(self._choose(
-                    sch.stats, self._sigma2_at(pos), self._offset_var, sch.moving_n)[0])
-            mode = self._mode()
-            w, b_last, s_end = mode.run(y[pos:hi], self._s)
-            seq = sch.stats_sequence(w)
-            cut = hi
-            grid = np.arange(pos + sch.step - phase, hi, sch.step)
-            if grid.size:
-                k = grid - pos
-                new = self._choose(
-                    seq[:, k - 1], self._sigma2_at(grid), self._offset_var + q * k,
-                    sch.moving_n + k)
-                change = np.flatnonzero(new != sch.index)
-                if change.size:
-                    cut = int(grid[change[0]])
+                    sch.stats, sigma2, self._offset_var, sch.moving_n)[0])
+            cut = min(hi, pos + sch.step - phase)
             n = cut - pos
-            if cut < hi:
-                w = w[:n]
-                _, b_last, s_end = mode.run(y[pos:cut], self._s)
+            w, b_last, s_end = self._mode().run(y[pos:cut], self._s)
+            seq = sch.stats_sequence(w)
             out[pos:cut] = w + self._w_ref
             self._b_last, self._s = b_last, s_end
             sch.stats = seq[:, n - 1].copy()
             sch.u_prev = float(w[-1])
             sch.moving_n += n
             self._offset_var += q * n
+            self._periodic.extend(y[pos:cut], w)
             pos = cut
+
+    @property
+    def _offset_known(self) -> bool:
+        """Whether the offset has been observed: at rest or from whole periods of motion."""
+        return self._seen_rest or self._offset_learned
+
+    def _periodic_update(self, sigma2: float) -> None:
+        """
+        Offset from whole periods of the motion since it began, if it is periodic.
+
+        :mod:`~.periodic_offset` gives b_p with variance R_p from the last window; it is
+        fused with the offset known when the motion began (b_0, variance P_0 grown by the
+        drift since): b = (b_0 R_p + b_p P_0) / (P_0 + R_p), as a Kalman update (the
+        windows of successive updates overlap, so each update starts from b_0).  w is
+        corrected as if the new offset had been used since the motion began: an offset
+        error db ramped it by db / R0 per second through the leak w_l, i.e. by
+        db (1 - exp(-w_l t)) / (w_l R0).  Before the first rest the level is unknown and the
+        leak pulls w towards w_ref; a periodic motion is then taken to oscillate about
+        w_ref at once (its mean over the same whole periods, corrected alike, is removed).
+        """
+        found = self._periodic.estimate(math.sqrt(sigma2))
+        if found is None:
+            return
+        b_p, r_p, period_s, mean_u, span_s = found
+        sch = self._sched
+        # fused with the offset known when the motion began (its variance grown by the
+        # drift), not with the last update: successive windows overlap
+        b0, p0 = self._motion_prior
+        p0 += self._q_b_step * sch.moving_n
+        iw, ib = self._iw, self._ib
+        db = (b0 * r_p + b_p * p0) / (p0 + r_p) - float(self._s[ib])
+        wl = 2 * math.pi * sch.corner_hz
+        t = min(sch.moving_n / self._fs, span_s)
+        ramp = db * -math.expm1(-wl * t) / (wl * self._r0)
+        shift = ramp
+        if not self._seen_rest:
+            # mean over tau in [t - span, t] of the ramp at tau (clipped at the motion's start)
+            t0 = max(t - span_s, 0.0)
+            mean_ramp = db / (wl * self._r0) * (
+                1.0 - (math.exp(-wl * t0) - math.exp(-wl * t)) / (wl * max(t - t0, 1e-12)))
+            shift += mean_u - mean_ramp
+        self._s[ib] += db
+        self._s[iw] -= shift
+        self._b_last = float(self._s[ib])
+        self._offset_var = p0 * r_p / (p0 + r_p)
+        self._offset_learned = True
+        # the leak schedule's statistics of u follow the shift
+        wgt, m, s2, v2 = sch.stats.tolist()
+        sch.stats = np.array([wgt, m - shift * wgt, s2 - 2 * shift * m + shift * shift * wgt, v2])
+        sch.u_prev -= shift
+        self._periodic.shift_u(shift)
+        self.last_period_s = period_s
 
     def _noise_var(self) -> float:
         """White-noise variance per sample: the measured one, never below current_noise_a^2."""
@@ -838,7 +889,10 @@ class KalmanEstimator:
             self._offset_var = self._noise_var() / n1
         else:
             if sch.count % sch.step == 0:
-                sch.index = int(self._choose(sch.stats, self._sigma2_one(), self._offset_var,
+                sigma2 = self._sigma2_one()
+                self._periodic_update(sigma2)
+                st = self._s.tolist()
+                sch.index = int(self._choose(sch.stats, sigma2, self._offset_var,
                                              sch.moving_n)[0])
             mode = self._mode()
             innov = y - sum(map(mul, self._c_list, st))
@@ -848,6 +902,7 @@ class KalmanEstimator:
             new = [sum(map(mul, row, st)) + g * y for row, g in zip(mode.f_rows, mode.g_list)]
             self._offset_var += self._q_b_step
             sch.update_one(u)
+            self._periodic.add_one(y, u)
         sch.count += 1
         self._s[:] = new
         return w
@@ -869,6 +924,9 @@ class KalmanEstimator:
             'sigma2': self._sigma2,
             'lp': self._lp,
             'seen_rest': self._seen_rest,
+            'offset_learned': self._offset_learned,
+            'periodic': self._periodic.get_state(),
+            'motion_prior': self._motion_prior,
             'leak': self._sched.get_state(),
             'trend': self._trend,
         }
@@ -896,6 +954,10 @@ class KalmanEstimator:
         self._sigma2 = float(state['sigma2'])
         self._lp = float(state['lp'])
         self._seen_rest = bool(state['seen_rest'])
+        self._offset_learned = bool(state.get('offset_learned', False))
+        if 'periodic' in state:
+            self._periodic.set_state(state['periodic'])
+            self._motion_prior = tuple(float(v) for v in state['motion_prior'])
         if 'leak' in state:
             self._sched.set_state(state['leak'])
         trend = state.get('trend')
@@ -919,6 +981,10 @@ class KalmanEstimator:
             self._s[self._iw] = old._s[old._iw]
             self._w_ref = old._w_ref
             self._seen_rest = old._seen_rest
+            self._offset_learned = old._offset_learned
+            if old._fs == self._fs:
+                self._periodic.set_state(old._periodic.get_state())
+            self._motion_prior = old._motion_prior
             self._offset_var = old._offset_var
             self._offset_n = old._offset_n
             self._s[self._ib] = old._s[old._ib]
