@@ -81,8 +81,14 @@ LTI filter run over each run of moving samples in modal coordinates (one first-o
 :func:`scipy.signal.lfilter` per eigenvalue of the closed-loop matrix, conjugate
 pairs once), so blocks are vectorised and the state passes exactly between modes.
 
-Limits: an offset while the sensor never rests is learned only at ``f_c`` (as the
-leaky inverse's offset error); motion slower than the detector's band with R0 dw/dt
+Periodic motion: once a second while moving, the offset is also learned from whole periods
+of the motion when it is periodic (:mod:`~.periodic_offset`; mean current over k periods =
+b, since the charge returns), fused with the offset known when the motion began; w is
+corrected for the ramp the old value caused and, before the first rest, centred
+(:meth:`KalmanEstimator._periodic_update`).
+
+Limits: an offset while the sensor never rests nor moves periodically is learned only at
+``f_c`` (as the leaky inverse's offset error); motion slower than the detector's band with R0 dw/dt
 within 4 sigma of the offset is taken for rest (its current for offset); an
 offset *step* while moving is integrated until the next rest.
 

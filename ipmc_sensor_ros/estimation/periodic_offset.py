@@ -67,8 +67,10 @@ def motion_period(x: np.ndarray, min_lag: int = 2) -> tuple[float, float] | None
 
     The peak of the first stretch of the normalised autocorrelation above
     ``MIN_CORRELATION`` after its first zero crossing (a period's multiples correlate as
-    well, so the largest value is not the period); refined to a fraction of a sample on the peak near its largest multiple that
-    overlaps at least a quarter of the record (parabolic interpolation).
+    well, so the largest value is not the period); refined to a fraction of a sample on the
+    peak near its largest multiple that overlaps at least a quarter of the record and still
+    correlates (parabolic interpolation).  Each lag is normalised by the energies of its two
+    overlapping parts, so a motion fading in or out keeps its correlation.
     """
     x = np.asarray(x, float)
     n = x.size
@@ -80,8 +82,6 @@ def motion_period(x: np.ndarray, min_lag: int = 2) -> tuple[float, float] | None
     r = np.fft.irfft(spec.real ** 2 + spec.imag ** 2, nfft)[:n]
     if not r[0] > 0:
         return None
-    # normalised per lag by the energies of the two overlapping parts (a motion fading in or
-    # out keeps its correlation at its period)
     cs = np.concatenate([[0.0], np.cumsum(x * x)])
     lags = np.arange(n)
     r = r / np.sqrt(np.maximum(cs[n - lags] * (cs[n] - cs[lags]), 1e-300))
