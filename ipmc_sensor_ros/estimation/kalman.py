@@ -602,7 +602,7 @@ class KalmanEstimator:
         Slowest allowed ladder index (per value of ``offset_var``, scalar or array).
 
         leak_corner_hz only while the offset is known to OFFSET_TRUSTED_A RMS (learned at
-        rest, its variance growing by the drift during motion); else START_LEAK_CORNER_HZ
+        rest or from whole periods, its variance growing by the drift during motion); else START_LEAK_CORNER_HZ
         (an offset error db ramps w by db / R0 per second).
         """
         trusted = self._offset_known & (np.asarray(offset_var) < OFFSET_TRUSTED_A ** 2)
@@ -670,9 +670,10 @@ class KalmanEstimator:
         fused with the offset known when the motion began (b_0, variance P_0 grown by the
         drift since): b = (b_0 R_p + b_p P_0) / (P_0 + R_p), as a Kalman update (the
         windows of successive updates overlap, so each update starts from b_0).  w is
-        corrected as if the new offset had been used since the motion began: an offset
-        error db ramped it by db / R0 per second through the leak w_l, i.e. by
-        db (1 - exp(-w_l t)) / (w_l R0).  Before the first rest the level is unknown and the
+        corrected as if the new offset had been used over the whole periods the estimate
+        spans (t = min(time moving, k P)): an offset error db ramped it by db / R0 per
+        second through the leak w_l, i.e. by db (1 - exp(-w_l t)) / (w_l R0).  (Over the
+        whole motion, the noise of successive estimates would be multiplied by its length.)  Before the first rest the level is unknown and the
         leak pulls w towards w_ref; a periodic motion is then taken to oscillate about
         w_ref at once (its mean over the same whole periods, corrected alike, is removed).
         """
