@@ -602,8 +602,8 @@ class KalmanEstimator:
         Slowest allowed ladder index (per value of ``offset_var``, scalar or array).
 
         leak_corner_hz only while the offset is known to OFFSET_TRUSTED_A RMS (learned at
-        rest or from whole periods, its variance growing by the drift during motion); else START_LEAK_CORNER_HZ
-        (an offset error db ramps w by db / R0 per second).
+        rest or from whole periods, its variance growing by the drift during motion); else
+        START_LEAK_CORNER_HZ (an offset error db ramps w by db / R0 per second).
         """
         trusted = self._offset_known & (np.asarray(offset_var) < OFFSET_TRUSTED_A ** 2)
         return np.where(trusted, self._sched.floor_index, self._sched.start_index)
@@ -673,9 +673,10 @@ class KalmanEstimator:
         corrected as if the new offset had been used over the whole periods the estimate
         spans (t = min(time moving, k P)): an offset error db ramped it by db / R0 per
         second through the leak w_l, i.e. by db (1 - exp(-w_l t)) / (w_l R0).  (Over the
-        whole motion, the noise of successive estimates would be multiplied by its length.)  Before the first rest the level is unknown and the
-        leak pulls w towards w_ref; a periodic motion is then taken to oscillate about
-        w_ref at once (its mean over the same whole periods, corrected alike, is removed).
+        whole motion, the noise of successive estimates would be multiplied by its length.)
+        Before the first rest the level is unknown and the leak pulls w towards w_ref; a
+        periodic motion is then taken to oscillate about w_ref at once (its mean over the
+        same whole periods, corrected alike, is removed).
         """
         found = self._periodic.estimate(math.sqrt(sigma2))
         if found is None:
