@@ -444,7 +444,6 @@ class KalmanEstimator:
         self._w_ref = 0.0
         self._seen_rest = False
         self._offset_learned = False      # learned from whole periods of motion (no rest)
-        self.last_period_s = math.nan     # period of the last motion found periodic, s
         self._lp = 0.0
         self._energy = 10.0 * self.rest_leave * self.noise_energy_a2
         self._offset_var = OFFSET_PRIOR_A ** 2
@@ -681,7 +680,7 @@ class KalmanEstimator:
         found = self._periodic.estimate(math.sqrt(sigma2))
         if found is None:
             return
-        b_p, r_p, period_s, mean_u, span_s = found
+        b_p, r_p, _, mean_u, span_s = found
         sch = self._sched
         # fused with the offset known when the motion began (its variance grown by the
         # drift), not with the last update: successive windows overlap
@@ -709,7 +708,6 @@ class KalmanEstimator:
         sch.stats = np.array([wgt, m - shift * wgt, s2 - 2 * shift * m + shift * shift * wgt, v2])
         sch.u_prev -= shift
         self._periodic.shift_u(shift)
-        self.last_period_s = period_s
 
     def _noise_var(self) -> float:
         """White-noise variance per sample: the measured one, never below current_noise_a^2."""

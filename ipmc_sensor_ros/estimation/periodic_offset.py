@@ -116,10 +116,6 @@ def motion_period(x: np.ndarray, min_lag: int = 2) -> tuple[float, float] | None
     return (pk + float(np.clip(frac, -0.5, 0.5))) / m, float(r[pk])
 
 
-def _interp(grid_t, values, t):
-    return np.interp(t, grid_t, values)
-
-
 def periodic_offset(q_sum, dt: float, period_s: float, sigma_a: float, fs: float):
     """
     Offset b (A) and its variance from whole periods, or None if not periodic.
@@ -153,7 +149,7 @@ def periodic_offset(q_sum, dt: float, period_s: float, sigma_a: float, fs: float
     qq = np.concatenate([[0.0], np.cumsum(0.5 * (q[1:] + q[:-1]) * dt)])
 
     def qbar(end):
-        return (_interp(t, qq, end) - _interp(t, qq, end - period_s)) / period_s
+        return (np.interp(end, t, qq) - np.interp(end - period_s, t, qq)) / period_s
 
     now = qbar(span)
 
@@ -268,5 +264,5 @@ class PeriodicOffset:
         gu = np.asarray(self.grid_u)
         t = np.arange(gu.size) * dt
         span = t[-1]
-        mean_u = (gu[-1] - _interp(t, gu, span - k * period_s)) / (k * period_s * self.fs)
+        mean_u = (gu[-1] - np.interp(span - k * period_s, t, gu)) / (k * period_s * self.fs)
         return b, var, period_s, float(mean_u), k * period_s
