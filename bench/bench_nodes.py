@@ -119,12 +119,13 @@ from ipmc_sensor_ros.nodes.runner import make_executor
 kind, rate, n, duration = sys.argv[1], float(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4])
 domain = random.randint(201, 232)
 rclpy.init(domain_id=domain)
-if kind == "estimator":
+if kind in ("estimator", "kalman"):
     from ipmc_sensor_ros.nodes.estimator_node import EstimatorNode
     node = EstimatorNode(parameter_overrides=[
         Parameter("sample_rate_hz", value=rate * n), Parameter("publish_points", value="none"),
         Parameter("max_gap_s", value=1.0),
-        Parameter("band_high_hz", value=min(50.0, rate * n / 4))])
+        Parameter("band_high_hz", value=min(50.0, rate * n / 4))]
+        + ([Parameter("estimator", value="kalman")] if kind == "kalman" else []))
     handled = lambda: node.counters()["messages_in"]
 else:
     ns = {}
@@ -185,6 +186,29 @@ def bench_node_cpu(smoke: bool = False) -> list[dict]:
                      'value': cost['estimator'], 'unit': 'us/msg',
                      'baseline': f"pass-through {cost['passthrough']:.0f} us/msg",
                      'ratio': cost['estimator'] / cost['passthrough'], 'target': '-'})
+    return rows
+
+
+def bench_estimator_cost(smoke: bool = False) -> list[dict]:
+    """
+    Node CPU per message with ``estimator: kalman`` against ``estimator: leaky``.
+
+    The issue-14 cost rule ("within 2x in the node benchmark"): the same harness as
+    :func:`bench_node_cpu` (driver and node, whole-process CPU per message handled), one
+    fresh process per estimator, at a robot DAQ's 1 kHz in 1- and 100-sample messages and
+    at 4000 one-sample messages/s.
+    """
+    rows = []
+    for n, rate in ((1, 1000.0), (1, 4000.0), (100, 10.0), (1000, 10.0), (1000, 500.0)):
+        cost = {}
+        for kind in ('estimator', 'kalman'):
+            r = _node_in_process(kind, rate, n, 1.0 if smoke else 10.0)
+            cost[kind] = r['cpu_s'] / r['handled'] * 1e6 if r['handled'] else float('nan')
+        rows.append({'benchmark': f'estimator node CPU per message, kalman, {n}-sample messages '
+                                  f'at {rate:.0f} msg/s ({n * rate:.0f} samples/s)',
+                     'value': cost['kalman'], 'unit': 'us/msg',
+                     'baseline': f"estimator: leaky {cost['estimator']:.0f} us/msg",
+                     'ratio': cost['kalman'] / cost['estimator'], 'target': '<= 2'})
     return rows
 
 
@@ -535,9 +559,15 @@ if __name__ == '__main__':   # python -m bench.bench_nodes [--one-sample]: the n
     ap.add_argument('--smoke', action='store_true')
     ap.add_argument('--two-process', action='store_true',
                     help='only the one-sample ladder with driver and node (no sink)')
+    ap.add_argument('--estimator-cost', action='store_true',
+                    help='only the CPU per message of estimator kalman against leaky')
     a = ap.parse_args()
     if a.two_process:
         print(bench_node_rate_two_process(a.smoke), flush=True)
+        raise SystemExit(0)
+    if a.estimator_cost:
+        for row in bench_estimator_cost(a.smoke):
+            print(row, flush=True)
         raise SystemExit(0)
     for row in bench_nodes(a.smoke, sizes=(1,) if a.one_sample else (1, 1000),
                            extras=not a.one_sample):

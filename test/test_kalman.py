@@ -374,3 +374,51 @@ def test_rest_offset_follows_a_drift_without_lag(reduced_slim):
     blocks(est, y)
     assert est.at_rest
     assert abs(est.offset_a - (10e-9 + 10e-9 * t[-1] / 60)) < 0.7e-9
+
+
+@pytest.mark.parametrize('sample,fs', [('slim', 1000.0), ('big', 1000.0), ('slim', 10000.0)])
+def test_moving_predictor_inverts_the_reduced_model_at_unit_gain(sample, fs):
+    # The optimal gain with a random-walk offset scaled every motion by 0.992 (flat over
+    # 0.2-50 Hz); K_w is now solved for unit gain at 5 Hz.  Over 1-50 Hz the response of
+    # the floor corner's predictor times H(j w) is measured within 6e-4 of 1 (the leak's
+    # phase lead f_c / f is 1e-3 at 1 Hz); bound 2e-3.  Every corner shares the gain, so a
+    # switch of corner cannot step w (see test_clean_crank_from_rest_beats_the_leaky).
+    red = reduce_model(SensorModel(PAPER_SAMPLES[sample]), 4)
+    kal = KalmanEstimator(red, fs)
+    mode = kal._ladder_mode(kal._sched.floor_index)
+    n, iw = mode.f.shape[0], kal._iw
+    ikc = np.eye(n) - np.outer(mode.k, kal._c)
+    for f in (1.0, 2.0, 5.0, 10.0, 20.0, 50.0):
+        z = np.exp(2j * np.pi * f / fs)
+        resp = ikc[iw] @ np.linalg.solve(z * np.eye(n) - mode.f, mode.gvec) + mode.k[iw]
+        assert abs(resp * red.frequency_response(f) - 1.0) < 2e-3, f
+    for index in range(len(kal._sched.corners_hz)):
+        np.testing.assert_array_equal(kal._ladder_mode(index).k, mode.k)
+
+
+@pytest.mark.parametrize('f', [1.0, 5.0, 20.0])
+def test_clean_crank_from_rest_beats_the_leaky(f):
+    # Issue-14 row "clean crank-slider as today": clean current from exact H2, 2 s of rest,
+    # then a 2 mm crank.  Measured 0.16 / 0.24 / 0.19 % (leaky 1.3 / 0.7 / 0.2 %).  Before
+    # this, the Kalman was worse at 5 and 20 Hz (0.9 / 0.6 %): a fade-in taken for an offset
+    # (test_periodic_offset), a corner switch stepping w by 15 um, and a 0.8 % gain loss.
+    # Bounds: no worse than the leaky, and 0.5 %.
+    t = np.arange(int(30 * FS)) / FS
+    w = started(t, CrankSlider(f, 2e-3, 20e-3).deflection(t))
+    i = daq_current(SLIM, t, w)
+    kal = DeflectionEstimator(SLIM, FS, estimator='kalman')
+    w_hat = np.concatenate(
+        [kal.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)])
+    leaky = DeflectionEstimator(SLIM, FS)
+    w_leaky = np.concatenate(
+        [leaky.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)])
+    sel = t >= 5
+    assert nrmse(w_hat[sel], w[sel]) <= nrmse(w_leaky[sel], w[sel])
+    assert nrmse(w_hat[sel], w[sel]) < 0.005
+    if f == 5.0:
+        # the corner rose during the run (0.001 -> 0.016 Hz at 16 s), and no one-period
+        # mean of the error left 3 um (0.4 um measured; the step was 15 um)
+        assert kal.inverse.leak_corner_in_use_hz > kal.inverse.leak_corner_hz
+        per = int(FS / f)
+        err = (w_hat - w)[5000:5000 + (t.size - 5000) // per * per].reshape(-1, per)
+        assert np.max(np.abs(err.mean(axis=1))) < 3e-6

@@ -12,7 +12,7 @@ from ipmc_sensor_ros.estimation.periodic_offset import (
 from ipmc_sensor_ros.lti.reduction import reduce_model
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
-from ipmc_sensor_ros.simulation.daq import daq_current, robot_motion
+from ipmc_sensor_ros.simulation.daq import daq_current, robot_motion, started
 from ipmc_sensor_ros.simulation.stimuli import CrankSlider, FreeVibration
 
 FS = 1000.0
@@ -151,3 +151,26 @@ def test_blocks_and_single_samples_agree_through_periodic_updates():
     tail = a.process(i[:2500])
     a.set_state(saved)
     assert np.array_equal(a.process(i[:2500]), tail)
+
+
+def test_a_motion_fading_in_is_not_taken_for_an_offset():
+    # 1.5 s after a 5 Hz crank began to fade in over 0.5 s: the one-period means of the
+    # charge change during the fade (the mean of a growing oscillation over a period is not
+    # zero), which b_k against b_h alone took for 24 nA of offset (0.9 nA noise std) 1 s in,
+    # moving w by 12 um.  Each one-period difference must now agree with b_k P: the estimate
+    # uses only the periods after the fade (Qbar(t - kP) averages [t - (k+1)P, t - kP], so
+    # k P <= 1 s - P) and lies within 4 of its standard deviations.
+    t = np.arange(int(3.5 * FS)) / FS
+    w = started(t, CrankSlider(5.0, 2e-3, 20e-3).deflection(t))
+    i = daq_current(SLIM, t, w, offset_a=10e-9, noise_a=1e-12, seed=7)
+    for end_s in (3.0, 3.5):            # 1 s in: too few periods after the fade, none is fine
+        moving = (t >= 2.0) & (t < end_s)
+        est = PeriodicOffset(FS)
+        est.extend(i[moving], np.zeros(int(moving.sum())))
+        found = est.estimate(20e-9)
+        if found is None and end_s < 3.5:
+            continue
+        assert found is not None
+        b, var, _, _, span_s = found
+        assert span_s <= end_s - 2.5 - 0.2 + 1e-3
+        assert abs(b - 10e-9) < 4 * np.sqrt(var)

@@ -103,7 +103,7 @@ from collections import deque
 from operator import mul
 
 import numpy as np
-from scipy.linalg import solve_discrete_are
+from scipy.linalg import solve_discrete_are, solve_discrete_lyapunov
 import scipy.signal as sig
 
 from .inverse import ParameterError, _positive
@@ -341,6 +341,7 @@ class KalmanEstimator:
         # learned) and while it is not
         self._design = (ac, qc, c, scale, dt)
         self._modes = {}
+        self._gain = None
         self._r0 = abs(float(np.real(self.reduced.charge_response(np.array([0.0]))[0])))
         self._sched = LeakSchedule(fs, self._r0, self.leak_corner_hz, START_LEAK_CORNER_HZ)
         self._periodic = PeriodicOffset(fs)
@@ -391,29 +392,104 @@ class KalmanEstimator:
             )
 
     def _ladder_mode(self, index: int) -> '_Mode':
-        """Moving-mode predictor for the ladder's corner ``index`` (built once, kept)."""
+        """
+        Moving-mode predictor for the ladder's corner ``index`` (built once, kept).
+
+        Every corner uses one gain (:meth:`_moving_gain`); only the leak changes along the
+        ladder.  The optimal gains of the corners differ in K_w alone (by under 4 % from
+        0.001 to 0.5 Hz), and changing K_w in motion moves w by dK_w times the running sum
+        of the innovation, which a periodic model mismatch turns into a step (15 um on a
+        clean 2 mm, 5 Hz crank, slim, when the corner rose from 0.001 to 0.016 Hz) that the
+        slow leak then keeps for 1 / (2 pi f) seconds.  With one gain the switch is
+        bumpless.  The reported standard deviation is that of the gain in use.
+        """
         mode = self._modes.get(index)
         if mode is None:
-            ac, qc, c, scale, dt = self._design
+            if self._gain is None:
+                self._gain = self._moving_gain()
             wl = 2 * math.pi * float(self._sched.corners_hz[index])
-            mode = self._modes[index] = self._moving_mode(ac, qc, c, scale, wl, dt)
+            mode = self._modes[index] = self._moving_mode(wl, self._gain)
         return mode
 
-    def _moving_mode(self, ac, qc, c, scale, wl, dt) -> '_Mode':
-        """Steady-state Kalman predictor of the moving model with deflection leak wl (rad/s)."""
-        N, iw, ib = ac.shape[0], self._iw, self._ib
+    def _moving_model(self, wl):
+        """Discrete moving model with leak wl (rad/s): (ad, ad_s, qd_s, c_s), _s = scaled."""
+        ac, qc, c, scale, dt = self._design
         moving = ac.copy()
-        moving[iw, iw] = -wl
+        moving[self._iw, self._iw] = -wl
         ad, qd = van_loan(moving, qc, dt)
         s_inv = 1.0 / scale
         ad_s = ad * s_inv[:, None] * scale[None, :]
         qd_s = qd * s_inv[:, None] * s_inv[None, :]
-        c_s = c * scale / self.current_noise_a
-        p_s = solve_discrete_are(ad_s.T, c_s[:, None], qd_s + 1e-30 * np.eye(N), np.array([[1.0]]))
-        k_s = p_s @ c_s / (c_s @ p_s @ c_s + 1.0)
-        post = p_s - np.outer(k_s, c_s @ p_s)
-        mode = _Mode(ad, k_s * scale / self.current_noise_a, c, iw, ib, scale)
-        mode.std_m = float(math.sqrt(max(post[iw, iw], 0.0)) * scale[iw])
+        return ad, ad_s, qd_s, c * scale / self.current_noise_a
+
+    def _moving_gain(self) -> np.ndarray:
+        """
+        Moving-mode gain (A -> state): Kalman at the floor, K_w for unit in-band gain.
+
+        The steady-state Kalman gain at the floor corner, but for K_w.  With the offset a
+        random walk, the optimal K_w (35.8 m/A for the slim sample at the
+        defaults; 37.2 m/A without drift) scales every motion by 0.992, flat from 0.2 to
+        50 Hz: the posterior w = w_pred + K_w (y - y_pred) inverts the reduced model at
+        unit gain for one K_w only, and the in-band gain moves by about 0.6 % per m/A of
+        K_w.  That 0.8 % was the Kalman's whole error on a clean crank (the leaky's: 0.2 %
+        at 20 Hz).  The offset gain K_b (1e-6 of the others) is kept: it alone separates a
+        drifting offset from motion.  K_w is solved (secant) so that the real part of the
+        predictor's response times H(j 2 pi f_ref) is 1 at f_ref = motion_bandwidth_hz / 10
+        (5 Hz); at 20-50 kHz the optimal K_w is 1.4-3.4 times too small.
+        """
+        ad, ad_s, qd_s, c_s = self._moving_model(
+            2 * math.pi * float(self._sched.corners_hz[self._sched.floor_index]))
+        n = ad.shape[0]
+        scale = self._design[3]
+        try:
+            p_s = solve_discrete_are(
+                ad_s.T, c_s[:, None], qd_s + 1e-30 * np.eye(n), np.array([[1.0]]))
+        except (np.linalg.LinAlgError, ValueError) as exc:
+            raise ParameterError(
+                f'Kalman design failed at sample_rate_hz = {self._fs:g} ({exc}); '
+                'use estimator: leaky or a lower sample rate'
+            ) from None
+        k = p_s @ c_s / (c_s @ p_s @ c_s + 1.0) * scale / self.current_noise_a
+        f_ref = min(self.motion_bandwidth_hz, self._fs / 20) / 10
+        h = complex(self.reduced.transfer(np.array([2j * math.pi * f_ref]))[0])
+        z = complex(np.exp(2j * math.pi * f_ref / self._fs))
+        c, iw = self._c, self._iw
+
+        def in_band_gain(k_w):
+            kk = k.copy()
+            kk[iw] = k_w
+            ikc = np.eye(n) - np.outer(kk, c)
+            resp = ikc[iw] @ np.linalg.solve(z * np.eye(n) - ad @ ikc, ad @ kk) + k_w
+            return (resp * h).real - 1.0
+
+        # the gain is affine in K_w (measured): secant steps converge in one or two
+        k0, k1 = k[iw], 1.1 * k[iw]
+        g0, g1 = in_band_gain(k0), in_band_gain(k1)
+        for _ in range(6):
+            if g1 == g0 or abs(g1) < 1e-9:
+                break
+            k0, g0, k1 = k1, g1, k1 - g1 * (k1 - k0) / (g1 - g0)
+            g1 = in_band_gain(k1)
+        if not (abs(g1) < 1e-6 and k1 > 0):
+            raise ParameterError(
+                f'Kalman design: no deflection gain gives unit gain at {f_ref:g} Hz '
+                f'(sample_rate_hz = {self._fs:g}; left {g1:.3g}); use estimator: leaky'
+            )
+        k[iw] = k1
+        return k
+
+    def _moving_mode(self, wl, gain) -> '_Mode':
+        """Predictor of the moving model with leak wl (rad/s) and ``gain``, its w std."""
+        ad, ad_s, qd_s, c_s = self._moving_model(wl)
+        n, scale = ad.shape[0], self._design[3]
+        # error covariance of a fixed gain: P = F P F' + A K K' A' + Q, F = A (I - K C)
+        k_s = np.asarray(gain, float) * self.current_noise_a / scale
+        ikc = np.eye(n) - np.outer(k_s, c_s)
+        ak = ad_s @ k_s
+        p_s = solve_discrete_lyapunov(ad_s @ ikc, qd_s + np.outer(ak, ak), method='bilinear')
+        post = ikc @ p_s @ ikc.T + np.outer(k_s, k_s)
+        mode = _Mode(ad, np.asarray(gain, float), self._c, self._iw, self._ib, scale)
+        mode.std_m = float(math.sqrt(max(post[self._iw, self._iw], 0.0)) * scale[self._iw])
         return mode
 
     # -- properties -----------------------------------------------------------
