@@ -39,7 +39,7 @@ def test_rebuild_with_offset_tracker_continues_without_jump_or_nan(before, after
     w = CrankSlider(2.0, 2e-3, 15e-3).deflection(t)
     i = predict_current(model, t, w) + 30e-9          # a DAQ offset of 30 nA
     n = int(30 * FS)
-    est = DeflectionEstimator(model, FS, **before)
+    est = DeflectionEstimator(model, FS, estimator='leaky', **before)   # the tracker: leaky only
     _, y_before = est.process(t[:n], i[:n])
     new = est.rebuilt(**after)
     _, y_after = new.process(t[n:], i[n:])
@@ -47,7 +47,8 @@ def test_rebuild_with_offset_tracker_continues_without_jump_or_nan(before, after
     # one sample of a 2 Hz, 2 mm motion moves the tip by at most 2*pi*2*2e-3/1000 = 25 um
     # (measured jump: 0.1 um)
     assert abs(y_after[0] - y_before[-1]) < 25e-6
-    _, y_ref = DeflectionEstimator(model, FS, **{**before, **after}).process(t, i)
+    _, y_ref = DeflectionEstimator(model, FS, estimator='leaky',
+                                   **{**before, **after}).process(t, i)
     dev = np.abs(y_after - y_ref[n:])
     if keeps_reference:
         # same offset tracker before and after: the offset estimate carries over, so the
@@ -72,7 +73,7 @@ def test_hydration_drift_with_offset_tracker_gives_no_nan():
     t = np.arange(int(20 * FS)) / FS
     w = CrankSlider(2.0, 2e-3, 15e-3).deflection(t)
     i = predict_current(model, t, w) + 30e-9
-    est = DeflectionEstimator(model, FS, offset_corner_hz=0.01)
+    est = DeflectionEstimator(model, FS, estimator='leaky', offset_corner_hz=0.01)
     _, y = est.process(t, i)
     assert np.all(np.isfinite(y))
     # bumpless at each rebuild (k = 5000, 10000, 15000): the slope does not jump.  The
@@ -215,7 +216,8 @@ def test_duplicated_effect_parameter_and_unicode_digits_are_refused():
 
 
 def test_offset_corner_above_nyquist_is_refused_like_the_leak_corner():
-    values = {**C.defaults(C.ESTIMATOR_SPECS), 'sample_rate_hz': 100.0, 'offset_corner_hz': 60.0}
+    values = {**C.defaults(C.ESTIMATOR_SPECS), 'sample_rate_hz': 100.0, 'offset_corner_hz': 60.0,
+              'estimator': 'leaky'}
     with pytest.raises(ValueError, match='offset_corner_hz.*Nyquist'):
         C.build_estimator(values)
 

@@ -118,7 +118,7 @@ def test_crank_with_offset_after_rest(sample, f):
     w_hat = np.concatenate(
         [est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
     )
-    leaky = DeflectionEstimator(model, FS)
+    leaky = DeflectionEstimator(model, FS, estimator='leaky')
     w_leaky = np.concatenate(
         [leaky.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
     )
@@ -171,7 +171,7 @@ def test_deflection_estimator_options():
         DeflectionEstimator(SLIM, FS, estimator='magic')
     with pytest.raises(ParameterError, match='offset_corner_hz'):
         DeflectionEstimator(SLIM, FS, estimator='kalman', offset_corner_hz=0.01)
-    est = DeflectionEstimator(SLIM, FS)
+    est = DeflectionEstimator(SLIM, FS, estimator='leaky')
     t = np.arange(100) / FS
     _, w, std = est.process_with_std(t, np.zeros(100))
     assert np.all(np.isnan(std))          # the leaky inverse has no uncertainty model
@@ -201,7 +201,7 @@ def test_robot_motion_with_hum_beats_leaky():
     w_hat = np.concatenate(
         [est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
     )
-    leaky = DeflectionEstimator(SLIM, FS)
+    leaky = DeflectionEstimator(SLIM, FS, estimator='leaky')
     w_l = np.concatenate(
         [leaky.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
     )
@@ -409,7 +409,7 @@ def test_clean_crank_from_rest_beats_the_leaky(f):
     kal = DeflectionEstimator(SLIM, FS, estimator='kalman')
     w_hat = np.concatenate(
         [kal.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)])
-    leaky = DeflectionEstimator(SLIM, FS)
+    leaky = DeflectionEstimator(SLIM, FS, estimator='leaky')
     w_leaky = np.concatenate(
         [leaky.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)])
     sel = t >= 5
@@ -422,3 +422,26 @@ def test_clean_crank_from_rest_beats_the_leaky(f):
         per = int(FS / f)
         err = (w_hat - w)[5000:5000 + (t.size - 5000) // per * per].reshape(-1, per)
         assert np.max(np.abs(err.mean(axis=1))) < 3e-6
+
+
+def test_kalman_with_an_amplifier_pole_in_the_model():
+    # amplifier_bandwidth adds a pole: R_n(s) is then strictly proper (4 zeros, 5 poles).
+    # ReducedModel.charge_response broadcast zeros against poles and failed, and the modal
+    # realisation gave R_n a feedthrough it no longer has.  Now the model-aware Kalman is
+    # back to clean-data accuracy (measured 0.12 % over the last 20 s of a clean 5 Hz crank;
+    # bound 1 %) and the plain model, which misses the 20 Hz pole, is far worse (24 %).
+    from ipmc_sensor_ros.simulation.sensor import predict_current
+    true = SensorModel.named('h2', PAPER_SAMPLES['slim'],
+                             extra_effects='amplifier_bandwidth(corner_hz=20)')
+    t = np.arange(int(40 * FS)) / FS
+    w = CrankSlider(5.0, 2e-3, 15e-3).deflection(t)
+    i = predict_current(true, t, w)
+    sel = t >= 20
+    err = {}
+    for name, model in (('aware', true), ('plain', SensorModel.named('h2', PAPER_SAMPLES['slim']))):
+        est = DeflectionEstimator(model, FS, estimator='kalman')
+        w_hat = np.concatenate(
+            [est.process(t[k:k + 250], i[k:k + 250])[1] for k in range(0, t.size, 250)])
+        err[name] = nrmse(w_hat[sel], w[sel])
+    assert err['aware'] < 0.01
+    assert err['plain'] > 5 * err['aware']

@@ -162,7 +162,7 @@ def offset_corner_hz(
 
 def _modal_realisation(reduced: ReducedModel):
     """
-    R_n(s) = k + sum_i r_i / (s - p_i) (distinct real poles) as (A, B, C, D).
+    R_n(s) = d + sum_i r_i / (s - p_i) (distinct real poles) as (A, B, C, D).
 
     a diagonal, well-scaled realisation (each state is a first-order lag of v).
     """
@@ -173,8 +173,15 @@ def _modal_realisation(reduced: ReducedModel):
         raise ParameterError(
             'reduced model has repeated poles; the Kalman estimator needs distinct poles'
         )
+    if z.size > p.size:
+        raise ParameterError(
+            f'reduced model has more zeros ({z.size}) than poles ({p.size}); the Kalman '
+            'estimator needs a proper R_n(s)'
+        )
     r = np.array([k * np.prod(pi - z) / np.prod([pi - pj for pj in p if pj != pi]) for pi in p])
-    return np.diag(p), np.ones((p.size, 1)), r[None, :], np.array([[k]])
+    # feedthrough k only when R_n is biproper (an amplifier pole makes it strictly proper)
+    d = k if z.size == p.size else 0.0
+    return np.diag(p), np.ones((p.size, 1)), r[None, :], np.array([[d]])
 
 
 class _Mode:

@@ -95,7 +95,9 @@ class ReducedModel:
     def charge_response(self, s) -> np.ndarray:
         """R_n(s) = H_n(s)/s, A s m^-1."""
         s = np.asarray(s, dtype=complex)[..., None]
-        return self.gain * np.prod((s - self.zeros_rad_s) / (s - self.poles_rad_s), axis=-1)
+        # numerator and denominator apart: an effect may add poles (amplifier_bandwidth)
+        return (self.gain * np.prod(s - self.zeros_rad_s, axis=-1)
+                / np.prod(s - self.poles_rad_s, axis=-1))
 
     def transfer(self, s) -> np.ndarray:
         s = np.asarray(s, dtype=complex)
