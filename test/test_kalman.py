@@ -438,7 +438,8 @@ def test_kalman_with_an_amplifier_pole_in_the_model():
     i = predict_current(true, t, w)
     sel = t >= 20
     err = {}
-    for name, model in (('aware', true), ('plain', SensorModel.named('h2', PAPER_SAMPLES['slim']))):
+    plain = SensorModel.named('h2', PAPER_SAMPLES['slim'])
+    for name, model in (('aware', true), ('plain', plain)):
         est = DeflectionEstimator(model, FS, estimator='kalman')
         w_hat = np.concatenate(
             [est.process(t[k:k + 250], i[k:k + 250])[1] for k in range(0, t.size, 250)])
