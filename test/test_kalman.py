@@ -446,3 +446,22 @@ def test_kalman_with_an_amplifier_pole_in_the_model():
         err[name] = nrmse(w_hat[sel], w[sel])
     assert err['aware'] < 0.01
     assert err['plain'] > 5 * err['aware']
+
+
+def test_the_sample_where_the_level_was_learned_is_the_same_in_blocks_and_samples():
+    # level_known_n: the first rest (2 s rest first: the detector's ~0.2 s window) or the first
+    # offset from whole periods (moving from t = 0: the first 1 s grid point with >= 2 periods
+    # behind it); `ipmc-model estimate` compares the Kalman from there.
+    t = np.arange(8000) / FS
+    crank = CrankSlider(5.0, 2e-3, 20e-3).deflection(t)
+    for w, lo, hi in ((started(t, crank), 100, 500), (crank, 1000, 1000)):
+        i = daq_current(SLIM, t, w, offset_a=10e-9, noise_fraction=0.01, seed=1)
+        a = DeflectionEstimator(SLIM, FS, estimator='kalman')
+        b = DeflectionEstimator(SLIM, FS, estimator='kalman')
+        for k in range(0, t.size, 37):
+            a.process(t[k:k + 37], i[k:k + 37])
+        for k in range(t.size):
+            b.process_one(t[k], i[k])
+        assert a.inverse.level_known_n == b.inverse.level_known_n
+        assert lo <= a.inverse.level_known_n <= hi
+        assert a.settling()[0] == a.inverse.level_known_n / FS

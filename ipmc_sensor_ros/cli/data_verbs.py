@@ -156,7 +156,8 @@ def _resolve_values(data, base: dict, explicit: set[str], params: str | None, pr
 
 
 def estimate_accuracy(time_s, estimate_m, measured_m, leak_corner_hz: float,
-                      delay_s: float = 0.0) -> tuple[float, float, str, dict]:
+                      delay_s: float = 0.0,
+                      settle: tuple[float, str] | None = None) -> tuple[float, float, str, dict]:
     """
     NRMSE of the estimated deflection.
 
@@ -170,17 +171,22 @@ def estimate_accuracy(time_s, estimate_m, measured_m, leak_corner_hz: float,
     so they are removed before comparing.  The comparison starts after the
     leak transient 5 / (2 pi f_leak) when the record is long enough, else
     covers the whole record; the measurement is delayed by ``delay_s`` (the
-    estimate of a model with a time delay lags by it).
+    estimate of a model with a time delay lags by it).  ``settle`` = (seconds,
+    description), when given, replaces the leak rule
+    (:meth:`~ipmc_sensor_ros.estimation.deflection.DeflectionEstimator.settling`: the
+    Kalman estimator knows when it learned the level).
     Returns (nrmse, seconds used, which part was used, the level error that the NRMSE leaves
     out: :func:`~ipmc_sensor_ros.workbench.metrics.level_error`).
     """
     from ..workbench.metrics import level_error
 
     t = np.asarray(time_s, float)
-    transient = 5.0 / (2 * np.pi * leak_corner_hz)
-    sel = t >= t[0] + transient + delay_s
+    if settle is None:
+        transient = 5.0 / (2 * np.pi * leak_corner_hz)
+        settle = (transient, f'after the {fmt_time_s(transient)} s leak transient')
+    sel = t >= t[0] + settle[0] + delay_s
     if np.count_nonzero(sel) >= 10:
-        what = f'after the {fmt_time_s(transient)} s leak transient'
+        what = settle[1]
     else:
         sel = t >= t[0] + delay_s
         what = 'whole record'
@@ -312,8 +318,13 @@ def _cmd_estimate(args) -> int:
             msg += (f"; {resets} filter reset(s) at time gaps > {values['max_gap_s']} s "
                     'or backward jumps')
         if measured is not None:
+            # the Kalman knows when it learned the level; with resets that refers to its last
+            # segment only, and the leak rule is used
+            settle = (estimator.settling()
+                      if estimator.estimator == 'kalman' and not resets else None)
             err, used, what, level = estimate_accuracy(
-                t_out, w, measured, estimator.inverse.leak_corner_hz, estimator.delay_s
+                t_out, w, measured, estimator.inverse.leak_corner_hz, estimator.delay_s,
+                settle=settle
             )
             row['nrmse'] = err
             row.update(level)

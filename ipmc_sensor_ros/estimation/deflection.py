@@ -41,7 +41,9 @@ import numpy as np
 from scipy.signal import lfilter
 
 from .inverse import DEFAULT_LEAK_CORNER_HZ, ParameterError, InverseEstimator
-from .kalman import DEFAULT_CURRENT_NOISE_A, KALMAN_LEAK_CORNER_HZ, KalmanEstimator
+from .kalman import (
+    DEFAULT_CURRENT_NOISE_A, KALMAN_LEAK_CORNER_HZ, START_LEAK_CORNER_HZ, KalmanEstimator,
+)
 from .mains import MainsFilter, detect_lines
 from ..physics.model import SensorModel
 from ..physics.pipeline import DriftSchedule
@@ -169,6 +171,28 @@ class DeflectionEstimator:
         return {'sample_rate_hz': self.inverse.sample_rate_hz,
                 'leak_corner_hz': self.inverse.leak_corner_hz,
                 'offset_corner_hz': self.inverse.offset_corner_hz}
+
+    def settling(self) -> tuple[float, str]:
+        """
+        Return (seconds since the reset, why) before the estimate is comparable with a measurement.
+
+        A current sensor cannot see a constant deflection (H(0) = 0): the level before the
+        record is unknown until the estimator learns it.  Leaky: never; its leak forgets the
+        initial level within 5 / (2 pi f_leak).  Kalman: at the first rest or the first
+        offset from whole periods (``level_known_n``); if neither happened yet, the leak
+        while the level is unknown (``START_LEAK_CORNER_HZ``) sets it alike.
+        """
+        fs = self.inverse.sample_rate_hz
+        if self.estimator == 'kalman':
+            known = self.inverse.level_known_n
+            if known is not None:
+                return known / fs, (f'from {known / fs:.4g} s, when the level was learned '
+                                    '(first rest or whole periods)')
+            transient = 5.0 / (2 * np.pi * START_LEAK_CORNER_HZ)
+            return transient, (f'after the {transient:.4g} s leak transient (the level was '
+                               'never learned: no rest, no whole periods)')
+        transient = 5.0 / (2 * np.pi * self.inverse.leak_corner_hz)
+        return transient, f'after the {transient:.4g} s leak transient'
 
     # -- streaming --------------------------------------------------------------
     def reset(self) -> None:

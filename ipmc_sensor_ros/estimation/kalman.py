@@ -527,6 +527,9 @@ class KalmanEstimator:
         self._w_ref = 0.0
         self._seen_rest = False
         self._offset_learned = False      # learned from whole periods of motion (no rest)
+        # sample (since the reset) at which the offset, hence the level, was first known
+        self.level_known_n: int | None = None
+        self._grid_n = 0
         self._lp = 0.0
         self._energy = 10.0 * self.rest_leave * self.noise_energy_a2
         self._offset_var = OFFSET_PRIOR_A ** 2
@@ -652,6 +655,8 @@ class KalmanEstimator:
         for lo, hi in zip(bounds[:-1], bounds[1:]):
             if flags[lo]:
                 self._seen_rest = True
+                if self.level_known_n is None:
+                    self.level_known_n = count0 + lo
                 self._s[self._iw] += self._w_ref          # rest holds the absolute deflection
                 self._w_ref = 0.0
                 out[lo:hi] = self._run_rest(y[lo:hi], lo)
@@ -723,6 +728,7 @@ class KalmanEstimator:
             phase = (count0 + pos) % sch.step
             if phase == 0:
                 sigma2 = float(self._sigma2_at(pos))
+                self._grid_n = count0 + pos
                 self._periodic_update(sigma2)
                 sch.index = int(self._choose(
                     sch.stats, sigma2, self._offset_var, sch.moving_n)[0])
@@ -786,6 +792,8 @@ class KalmanEstimator:
         self._b_last = float(self._s[ib])
         self._offset_var = p0 * r_p / (p0 + r_p)
         self._offset_learned = True
+        if self.level_known_n is None:
+            self.level_known_n = self._grid_n
         # the leak schedule's statistics of u follow the shift
         wgt, m, s2, v2 = sch.stats.tolist()
         sch.stats = np.array([wgt, m - shift * wgt, s2 - 2 * shift * m + shift * shift * wgt, v2])
@@ -954,6 +962,8 @@ class KalmanEstimator:
             st = self._s.tolist()
         if self.at_rest:
             self._seen_rest = True
+            if self.level_known_n is None:
+                self.level_known_n = sch.count
             for j in self._motion_idx.tolist():
                 st[j] = 0.0
             n0 = (self._noise_var() / self._offset_var if self._offset_n is None
@@ -979,6 +989,7 @@ class KalmanEstimator:
         else:
             if sch.count % sch.step == 0:
                 sigma2 = self._sigma2_one()
+                self._grid_n = sch.count
                 self._periodic_update(sigma2)
                 st = self._s.tolist()
                 sch.index = int(self._choose(sch.stats, sigma2, self._offset_var,
@@ -1014,6 +1025,7 @@ class KalmanEstimator:
             'lp': self._lp,
             'seen_rest': self._seen_rest,
             'offset_learned': self._offset_learned,
+            'level_known_n': self.level_known_n,
             'periodic': self._periodic.get_state(),
             'motion_prior': self._motion_prior,
             'leak': self._sched.get_state(),
@@ -1044,6 +1056,8 @@ class KalmanEstimator:
         self._lp = float(state['lp'])
         self._seen_rest = bool(state['seen_rest'])
         self._offset_learned = bool(state.get('offset_learned', False))
+        known = state.get('level_known_n')
+        self.level_known_n = None if known is None else int(known)
         if 'periodic' in state:
             self._periodic.set_state(state['periodic'])
             self._motion_prior = tuple(float(v) for v in state['motion_prior'])
@@ -1071,6 +1085,8 @@ class KalmanEstimator:
             self._w_ref = old._w_ref
             self._seen_rest = old._seen_rest
             self._offset_learned = old._offset_learned
+            if old.level_known_n is not None:
+                self.level_known_n = 0         # known from this estimator's first sample
             if old._fs == self._fs:
                 self._periodic.set_state(old._periodic.get_state())
             self._motion_prior = old._motion_prior
