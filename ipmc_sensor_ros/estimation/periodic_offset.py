@@ -29,8 +29,12 @@ of it that still overlaps a quarter of the window).  A motion is accepted as per
 if ``b_k`` agrees with ``b_h`` (h = ceil(k / 2), the same end, half the periods) within
 ``AGREE_SIGMAS`` times the white-noise standard deviation of ``b_h``: a start, a stop, a
 decaying vibration or a drifting level all change q between the two windows differently
-and are refused, and the largest such k is used.  White current noise sigma (per sample at
-fs) leaves ``sigma / sqrt(fs k P)`` in b_k (0.22 nA for 20 nA over 8 s at 1 kHz).
+and are refused; and only if each one-period difference ``Qbar(t - jP) - Qbar(t - (j+1)P)``
+lies within ``PERIOD_SIGMAS`` of its own white noise from ``b_k P`` (a motion fading in
+changes its one-period mean while it grows, in both windows alike: 24 nA taken for offset
+1 s into a 5 Hz crank fading in over 0.5 s).  The largest k that passes is used.  White
+current noise sigma (per sample at fs) leaves ``sigma / sqrt(fs k P)`` in b_k (0.22 nA for
+20 nA over 8 s at 1 kHz).
 
 Where it cannot help: non-periodic motion (robot moves, steps, sweeps), periods longer than
 ``window_s / (MIN_PERIODS + 1)`` (2.7 s by default), and periodic motion whose mean level
