@@ -19,7 +19,10 @@ the model's effects around the filter, per block:
   mean of T(w) (H(0) = 0) and the leak removes it from the filter output, so
   the estimator adds back m = <T(w) - w>, the mean an even nonlinearity gives a
   zero-mean deflection, tracked by a first-order average of the estimates with
-  the leak's time constant and applied per block (with one block of lag);
+  the leak's time constant and applied per block (with one block of lag).  The
+  Kalman estimator leaks only while moving, at the corner in use, and holds an
+  absolute level at rest: its average follows the corner in use and is frozen
+  at rest (else a held 2 mm step with a_2 = 2 crept towards 2.36 mm);
 * a time-varying material (``hydration_drift``) is followed by rebuilding the
   filter every ``update_s`` seconds of data time for the material at that time,
   each reduction warm-started from the previous one.
@@ -259,11 +262,19 @@ class DeflectionEstimator:
             w = w_prime
             for eff, values in reversed(self._deflection_inv):
                 w = np.asarray(eff.inverse_input_transform(w, self.model, values), dtype=float)
-            a = float(
-                np.exp(-2 * np.pi * self.inverse.leak_corner_hz / self.inverse.sample_rate_hz)
-            )
-            avg, self._bias_zi = lfilter([1 - a], [1, -a], w_prime - w, zi=self._bias_zi)
-            self._bias_m = float(avg[-1])
+            gap = w_prime - w
+            if self.estimator == 'kalman':
+                # the Kalman removes the mean only while moving, at the corner in use (and
+                # centres periodic motion before the first rest); at rest it holds an
+                # absolute level, whose T(w) - w it did not remove: the average is frozen
+                gap = gap[~self.inverse.last_rest]
+                corner = self.inverse.leak_corner_in_use_hz
+            else:
+                corner = self.inverse.leak_corner_hz
+            a = float(np.exp(-2 * np.pi * corner / self.inverse.sample_rate_hz))
+            if gap.size:
+                avg, self._bias_zi = lfilter([1 - a], [1, -a], gap, zi=self._bias_zi)
+                self._bias_m = float(avg[-1])
         self.last_std_m = np.full(w.size, getattr(self.inverse, 'last_std', np.nan))
         return (t - self.delay_s if self.delay_s else t), w
 
