@@ -25,7 +25,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 
-from ipmc_sensor_ros.estimation.inverse import InverseEstimator
+from ipmc_sensor_ros.estimation.kalman import KalmanEstimator
 from ipmc_sensor_ros.nodes import params as P
 from ipmc_sensor_ros.nodes.estimator_node import ESTIMATOR_SPECS, EstimatorNode
 from ipmc_sensor_ros.nodes.messages import (
@@ -64,9 +64,9 @@ def reduced():
     return reduce_model(MODEL, 4, (0.1, 50.0))
 
 
-def reference(reduced, **kw) -> InverseEstimator:
-    """Return the core estimator the node must reproduce with default parameters."""
-    return InverseEstimator(reduced, FS, **kw)
+def reference(reduced, **kw) -> KalmanEstimator:
+    """Return the core estimator the node must reproduce with default parameters (kalman)."""
+    return KalmanEstimator(reduced, FS, **kw)
 
 
 def crank_record(seconds: float, f_hz: float = 5.0):
@@ -495,7 +495,7 @@ def test_effects_current_offset_is_removed_and_delay_restamps(harness, reduced):
     # The offset is subtracted before the filter; the pure delay is not inverted
     # but re-stamped: output times are input times minus 2 ms.
     delayed = SensorModel.named('h2', SLIM, extra_effects='time_delay(delay_s=0.002)')
-    ref = InverseEstimator(reduce_model(delayed, 4, (0.1, 50.0)), FS).process(i)
+    ref = reference(reduce_model(delayed, 4, (0.1, 50.0))).process(i)
     assert np.max(np.abs(h.outputs() - ref)) <= 1e-12
     assert np.allclose(np.concatenate([b.times_s for b in h.blocks]), t - 0.002, rtol=0, atol=1e-9)
 

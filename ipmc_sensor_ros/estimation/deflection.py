@@ -80,7 +80,7 @@ class DeflectionEstimator:
                  leak_corner_hz: float | None = None,
                  offset_corner_hz: float | None = None, prewarp_hz: float | None = None,
                  update_s: float = 5.0, reduced: ReducedModel | None = None,
-                 history_s: float = 0.5, estimator: str = 'leaky', mains_hz: float = 0,
+                 history_s: float = 0.5, estimator: str = 'kalman', mains_hz: float = 0,
                  current_noise_a: float = DEFAULT_CURRENT_NOISE_A):
         if estimator not in ESTIMATORS:
             raise ParameterError(

@@ -140,7 +140,7 @@ ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
     Spec('sample_rate_hz', 1000.0, float, 'sample rate of the current the filter is designed '
          'for, Hz; blocks whose median sample period differs by more than 1 % are rejected',
          low=1.0, high=1e6, read_only=True),
-    Spec('estimator', 'leaky', str, "'leaky': the leaky inverse of the reduced model; "
+    Spec('estimator', 'kalman', str, "'leaky': the leaky inverse of the reduced model; "
          "'kalman': offset-aware Kalman filter with a rest detector (learns the DAQ offset, "
          'holds the deflection at rest, publishes its standard deviation)',
          choices=ESTIMATORS, read_only=True),

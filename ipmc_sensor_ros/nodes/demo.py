@@ -10,7 +10,9 @@ ROS_DOMAIN_ID is set) with discovery limited to localhost.  The simulator runs
 ``--duration`` simulated seconds (default 120) in fast mode; a monitor node in
 this process subscribes to ``deflection/block`` and ``deflection_truth``,
 aligns them by sample time and scores the last 20 s (the first 100 s let the
-leak transient decay: time constant 16 s at the default 0.01 Hz corner).
+start-up settle: the default Kalman estimator learns the motion's level from
+whole periods within seconds; the leaky's leak transient has a 16 s time
+constant at its 0.01 Hz corner).
 
 It prints drive frequency, samples sent, samples estimated, the normalised RMS
 error RMS(est - truth) / RMS(truth) and PASS if it is below 5 %; the exit code
