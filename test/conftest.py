@@ -102,3 +102,20 @@ def direct_node():
     d = DirectNode()
     yield d
     d.close()
+
+
+def blocks_and_samples(make, current, block: int = 1000):
+    """
+    Run three fresh estimators from ``make()`` over ``current``: blocks, 37-sample blocks, samples.
+
+    Returns the estimators and their outputs; the ROS-free filter cores promise the same
+    estimates up to rounding whatever the block size.
+    """
+    import numpy as np
+
+    ests = [make() for _ in range(3)]
+    a, b, c = ests
+    wa = np.concatenate([a.process(current[k:k + block]) for k in range(0, current.size, block)])
+    wb = np.concatenate([b.process(current[k:k + 37]) for k in range(0, current.size, 37)])
+    wc = np.array([c.process_one(x) for x in current])
+    return ests, (wa, wb, wc)

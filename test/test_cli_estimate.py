@@ -105,10 +105,10 @@ def test_kalman_is_compared_from_when_it_learned_the_level(short_run, tmp_path, 
     assert main(['estimate', str(short_run / 'short_5Hz.csv'), '--params', str(params),
                  '--out', str(tmp_path / 'k'), '--json', str(js)]) == 0
     out = capsys.readouterr().out
-    assert 'when the level was learned' in out
+    assert 'level learned then' in out
     row = json.loads(js.read_text())[0]
     assert row['nrmse'] < 0.03
-    assert 3.0 < float(out.split(' s (from ')[0].rsplit('over ', 1)[1]) < 5.5
+    assert 3.0 < float(out.split(' s (after the first ')[0].rsplit('over ', 1)[1]) < 5.5
 
 
 def test_short_record_still_reports_accuracy(short_run, tmp_path, capsys):

@@ -13,6 +13,7 @@ from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
 from ipmc_sensor_ros.simulation.daq import daq_current, robot_motion, started
 from ipmc_sensor_ros.simulation.stimuli import CrankSlider, Step
+from conftest import blocks_and_samples
 
 FS = 1000.0
 SLIM = SensorModel(PAPER_SAMPLES['slim'])
@@ -60,10 +61,7 @@ def test_blocks_single_samples_and_process_one_agree(reduced_slim):
     t = np.arange(int(6 * FS)) / FS
     w = started(t, CrankSlider(3.0, 2e-3, 20e-3).deflection(t), rest_s=1.5) * (t < 4.5)
     i = daq_current(SLIM, t, w, offset_a=8e-9, noise_a=20e-9, seed=4)
-    a, b, c = (KalmanEstimator(reduced_slim, FS) for _ in range(3))
-    wa = blocks(a, i, 1000)
-    wb = blocks(b, i, 37)
-    wc = np.array([c.process_one(x) for x in i])
+    (a, b, c), (wa, wb, wc) = blocks_and_samples(lambda: KalmanEstimator(reduced_slim, FS), i)
     # blocks of any size: the same recursion (state exact between modes, the rest offset's
     # weight a count, the noise measured at each sample) up to rounding: 1e-12 m
     assert np.max(np.abs(wa - wb)) < 1e-12
@@ -330,10 +328,7 @@ def test_adaptive_corner_blocks_and_single_samples_agree(reduced_slim):
     # offset's weight as a count, the noise measured at each sample) is the same for blocks
     # and single samples: equal up to rounding (1e-12 m), the same final corner.
     t, w, i = _crank_after_rest(SLIM, 20.0, seed=53, seconds=10.0)
-    a, b, c = (KalmanEstimator(reduced_slim, FS) for _ in range(3))
-    wa = blocks(a, i, 1000)
-    wb = blocks(b, i, 37)
-    wc = np.array([c.process_one(x) for x in i])
+    (a, b, c), (wa, wb, wc) = blocks_and_samples(lambda: KalmanEstimator(reduced_slim, FS), i)
     assert a.leak_corner_in_use_hz > 0.02
     assert a.leak_corner_in_use_hz == b.leak_corner_in_use_hz == c.leak_corner_in_use_hz
     assert np.max(np.abs(wa - wb)) < 1e-12

@@ -14,6 +14,7 @@ from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
 from ipmc_sensor_ros.simulation.daq import daq_current, robot_motion, started
 from ipmc_sensor_ros.simulation.stimuli import CrankSlider, FreeVibration
+from conftest import blocks_and_samples
 
 FS = 1000.0
 SLIM = SensorModel(PAPER_SAMPLES['slim'])
@@ -140,10 +141,7 @@ def test_blocks_and_single_samples_agree_through_periodic_updates():
     # are the same sums in blocks and samples: equal up to rounding (1e-12 m).
     red = reduce_model(SLIM, 4)
     _, _, i = _crank_current(5.0, 8.0, 10e-9, 0.01, seed=7)
-    a, b, c = (KalmanEstimator(red, FS) for _ in range(3))
-    wa = np.concatenate([a.process(i[k:k + 1000]) for k in range(0, i.size, 1000)])
-    wb = np.concatenate([b.process(i[k:k + 37]) for k in range(0, i.size, 37)])
-    wc = np.array([c.process_one(x) for x in i])
+    (a, b, c), (wa, wb, wc) = blocks_and_samples(lambda: KalmanEstimator(red, FS), i)
     assert a._offset_learned and b._offset_learned and c._offset_learned
     assert np.max(np.abs(wa - wb)) < 1e-12
     assert np.max(np.abs(wa - wc)) < 1e-12

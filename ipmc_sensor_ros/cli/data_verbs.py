@@ -180,13 +180,14 @@ def estimate_accuracy(time_s, estimate_m, measured_m, leak_corner_hz: float,
     """
     from ..workbench.metrics import level_error
 
+    from ..estimation.deflection import leak_transient_s
+
     t = np.asarray(time_s, float)
     if settle is None:
-        transient = 5.0 / (2 * np.pi * leak_corner_hz)
-        settle = (transient, f'after the {fmt_time_s(transient)} s leak transient')
+        settle = (leak_transient_s(leak_corner_hz), 'leak transient')
     sel = t >= t[0] + settle[0] + delay_s
     if np.count_nonzero(sel) >= 10:
-        what = settle[1]
+        what = f'after the first {fmt_time_s(settle[0])} s: {settle[1]}'
     else:
         sel = t >= t[0] + delay_s
         what = 'whole record'

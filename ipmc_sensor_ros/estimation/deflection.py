@@ -52,10 +52,15 @@ from ..physics.model import SensorModel
 from ..physics.pipeline import DriftSchedule
 from ..lti.reduction import ReducedModel, reduce_model_parts
 
-__all__ = ['DeflectionEstimator', 'ESTIMATORS']
+__all__ = ['DeflectionEstimator', 'ESTIMATORS', 'leak_transient_s']
 
 #: The estimator cores: the leaky inverse and the offset-aware Kalman filter.
 ESTIMATORS = ('leaky', 'kalman')
+
+
+def leak_transient_s(corner_hz: float) -> float:
+    """Return the time a leak at ``corner_hz`` takes to forget a level, s: 5 time constants."""
+    return 5.0 / (2 * np.pi * corner_hz)
 
 
 class DeflectionEstimator:
@@ -181,21 +186,18 @@ class DeflectionEstimator:
 
         A current sensor cannot see a constant deflection (H(0) = 0): the level before the
         record is unknown until the estimator learns it.  Leaky: never; its leak forgets the
-        initial level within 5 / (2 pi f_leak).  Kalman: at the first rest or the first
+        initial level within :func:`leak_transient_s`.  Kalman: at the first rest or the first
         offset from whole periods (``level_known_n``); if neither happened yet, the leak
         while the level is unknown (``START_LEAK_CORNER_HZ``) sets it alike.
         """
-        fs = self.inverse.sample_rate_hz
         if self.estimator == 'kalman':
             known = self.inverse.level_known_n
             if known is not None:
-                return known / fs, (f'from {known / fs:.4g} s, when the level was learned '
-                                    '(first rest or whole periods)')
-            transient = 5.0 / (2 * np.pi * START_LEAK_CORNER_HZ)
-            return transient, (f'after the {transient:.4g} s leak transient (the level was '
-                               'never learned: no rest, no whole periods)')
-        transient = 5.0 / (2 * np.pi * self.inverse.leak_corner_hz)
-        return transient, f'after the {transient:.4g} s leak transient'
+                return (known / self.inverse.sample_rate_hz,
+                        'level learned then (first rest or whole periods)')
+            return (leak_transient_s(START_LEAK_CORNER_HZ),
+                    'leak transient; level never learned (no rest, no whole periods)')
+        return leak_transient_s(self.inverse.leak_corner_hz), 'leak transient'
 
     # -- streaming --------------------------------------------------------------
     def reset(self) -> None:

@@ -442,7 +442,7 @@ class KalmanEstimator:
         at 20 Hz).  The offset gain K_b (1e-6 of the others) is kept: it alone separates a
         drifting offset from motion.  K_w is solved (secant) so that the real part of the
         predictor's response times H(j 2 pi f_ref) is 1 at f_ref = motion_bandwidth_hz / 10
-        (5 Hz); at 20-50 kHz the optimal K_w is 1.4-3.4 times too small.
+        (5 Hz); at 20-50 kHz the optimal K_w is 1.6-2.4 times too small.
         """
         ad, ad_s, qd_s, c_s = self._moving_model(
             2 * math.pi * float(self._sched.corners_hz[self._sched.floor_index]))
@@ -529,7 +529,6 @@ class KalmanEstimator:
         self._offset_learned = False      # learned from whole periods of motion (no rest)
         # sample (since the reset) at which the offset, hence the level, was first known
         self.level_known_n: int | None = None
-        self._grid_n = 0
         self._lp = 0.0
         self._energy = 10.0 * self.rest_leave * self.noise_energy_a2
         self._offset_var = OFFSET_PRIOR_A ** 2
@@ -655,8 +654,7 @@ class KalmanEstimator:
         for lo, hi in zip(bounds[:-1], bounds[1:]):
             if flags[lo]:
                 self._seen_rest = True
-                if self.level_known_n is None:
-                    self.level_known_n = count0 + lo
+                self._level_known_at(count0 + lo)
                 self._s[self._iw] += self._w_ref          # rest holds the absolute deflection
                 self._w_ref = 0.0
                 out[lo:hi] = self._run_rest(y[lo:hi], lo)
@@ -728,8 +726,7 @@ class KalmanEstimator:
             phase = (count0 + pos) % sch.step
             if phase == 0:
                 sigma2 = float(self._sigma2_at(pos))
-                self._grid_n = count0 + pos
-                self._periodic_update(sigma2)
+                self._periodic_update(sigma2, count0 + pos)
                 sch.index = int(self._choose(
                     sch.stats, sigma2, self._offset_var, sch.moving_n)[0])
             cut = min(hi, pos + sch.step - phase)
@@ -750,7 +747,12 @@ class KalmanEstimator:
         """Whether the offset has been observed: at rest or from whole periods of motion."""
         return self._seen_rest or self._offset_learned
 
-    def _periodic_update(self, sigma2: float) -> None:
+    def _level_known_at(self, n: int) -> None:
+        """Note sample n as the first where the level is known (if it is the first)."""
+        if self.level_known_n is None:
+            self.level_known_n = n
+
+    def _periodic_update(self, sigma2: float, n: int) -> None:
         """
         Offset from whole periods of the motion since it began, if it is periodic.
 
@@ -764,7 +766,7 @@ class KalmanEstimator:
         whole motion, the noise of successive estimates would be multiplied by its length.)
         Before the first rest the level is unknown and the leak pulls w towards w_ref; a
         periodic motion is then taken to oscillate about w_ref at once (its mean over the
-        same whole periods, corrected alike, is removed).
+        same whole periods, corrected alike, is removed).  ``n``: the sample counter now.
         """
         found = self._periodic.estimate(math.sqrt(sigma2))
         if found is None:
@@ -792,8 +794,7 @@ class KalmanEstimator:
         self._b_last = float(self._s[ib])
         self._offset_var = p0 * r_p / (p0 + r_p)
         self._offset_learned = True
-        if self.level_known_n is None:
-            self.level_known_n = self._grid_n
+        self._level_known_at(n)
         # the leak schedule's statistics of u follow the shift
         wgt, m, s2, v2 = sch.stats.tolist()
         sch.stats = np.array([wgt, m - shift * wgt, s2 - 2 * shift * m + shift * shift * wgt, v2])
@@ -962,8 +963,7 @@ class KalmanEstimator:
             st = self._s.tolist()
         if self.at_rest:
             self._seen_rest = True
-            if self.level_known_n is None:
-                self.level_known_n = sch.count
+            self._level_known_at(sch.count)
             for j in self._motion_idx.tolist():
                 st[j] = 0.0
             n0 = (self._noise_var() / self._offset_var if self._offset_n is None
@@ -989,8 +989,7 @@ class KalmanEstimator:
         else:
             if sch.count % sch.step == 0:
                 sigma2 = self._sigma2_one()
-                self._grid_n = sch.count
-                self._periodic_update(sigma2)
+                self._periodic_update(sigma2, sch.count)
                 st = self._s.tolist()
                 sch.index = int(self._choose(sch.stats, sigma2, self._offset_var,
                                              sch.moving_n)[0])
