@@ -14,7 +14,7 @@ from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
 from ipmc_sensor_ros.simulation.daq import daq_current, robot_motion, started
 from ipmc_sensor_ros.simulation.stimuli import CrankSlider, FreeVibration
-from conftest import blocks_and_samples
+from conftest import assert_agree_and_restore, blocks_and_samples
 
 FS = 1000.0
 SLIM = SensorModel(PAPER_SAMPLES['slim'])
@@ -141,14 +141,9 @@ def test_blocks_and_single_samples_agree_through_periodic_updates():
     # are the same sums in blocks and samples: equal up to rounding (1e-12 m).
     red = reduce_model(SLIM, 4)
     _, _, i = _crank_current(5.0, 8.0, 10e-9, 0.01, seed=7)
-    (a, b, c), (wa, wb, wc) = blocks_and_samples(lambda: KalmanEstimator(red, FS), i)
-    assert a._offset_learned and b._offset_learned and c._offset_learned
-    assert np.max(np.abs(wa - wb)) < 1e-12
-    assert np.max(np.abs(wa - wc)) < 1e-12
-    saved = a.get_state()
-    tail = a.process(i[:2500])
-    a.set_state(saved)
-    assert np.array_equal(a.process(i[:2500]), tail)
+    ests, outputs = blocks_and_samples(lambda: KalmanEstimator(red, FS), i)
+    assert all(e._offset_learned for e in ests)
+    assert_agree_and_restore(ests, outputs, i[:2500])
 
 
 def test_a_motion_fading_in_is_not_taken_for_an_offset():
