@@ -9,6 +9,7 @@ through DeflectionEstimator with their defaults (Kalman: current_noise_a default
 0..2 unless --seeds.  Usage:
 
     PYTHONPATH=$PWD python bench/bench_estimators.py [--seeds 3] [--hour] [--cost]
+        [--estimators kalman]
 """
 from __future__ import annotations
 
@@ -156,13 +157,16 @@ def main():
     ap.add_argument('--hour', action='store_true')
     ap.add_argument('--cost', action='store_true')
     ap.add_argument('--only-hour', action='store_true')
+    ap.add_argument('--estimators', default='leaky,kalman',
+                    help='comma-separated: leaky, kalman (default both)')
     args = ap.parse_args()
+    ests = tuple(args.estimators.split(','))
     table: dict = {}
     if args.only_hour:
         args.seeds, args.hour = 0, True
     for seed in range(args.first_seed, args.first_seed + args.seeds):
         for name, sample, t, w, i, mains in scenarios(seed):
-            for est in ('leaky', 'kalman'):
+            for est in ests:
                 w_hat, _ = run(
                     SensorModel(PAPER_SAMPLES[sample]),
                     t,
@@ -172,7 +176,7 @@ def main():
                 )
                 table.setdefault((name, sample), {}).setdefault(est, []).append(nrmse(w_hat, w, t))
     for name, sample, t, w, i, after in (clean_crank_rows() if args.seeds else []):
-        for est in ('leaky', 'kalman'):
+        for est in ests:
             w_hat, _ = run(SensorModel(PAPER_SAMPLES[sample]), t, i, est)
             table.setdefault((name, sample), {}).setdefault(est, []).append(
                 nrmse(w_hat, w, t, after)
@@ -180,15 +184,17 @@ def main():
     print(f"{'row':52s} {'sample':6s} {'leaky NRMSE %':>18s} {'kalman NRMSE %':>18s}")
     for (name, sample), d in table.items():
         def fmt(v):
+            if not v:
+                return '-'
             return f'{100 * np.mean(v):6.1f} (max {100 * np.max(v):5.1f})'
 
         bound = (
             f'  ramp-ref {100 * BOUNDS[(name, sample)]:5.1f}' if (name, sample) in BOUNDS else ''
         )
-        print(f"{name:52s} {sample:6s} {fmt(d['leaky']):>18s} {fmt(d['kalman']):>18s}{bound}")
+        print(f"{name:52s} {sample:6s} {fmt(d.get('leaky', [])):>18s} {fmt(d.get('kalman', [])):>18s}{bound}")
     if args.hour:
         m, t, w, i = hour_row()
-        for est in ('leaky', 'kalman'):
+        for est in ests:
             w_hat, _ = run(m, t, i, est, block=10000)
             print(f'1 h, drift 1 nA/min, intermittent motion: {est:6s} max |error| = '
                   f'{1e3 * np.max(np.abs(w_hat - w)[t > 5]):.3f} mm')
