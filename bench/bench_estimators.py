@@ -191,7 +191,8 @@ def main():
         bound = (
             f'  ramp-ref {100 * BOUNDS[(name, sample)]:5.1f}' if (name, sample) in BOUNDS else ''
         )
-        print(f"{name:52s} {sample:6s} {fmt(d.get('leaky', [])):>18s} {fmt(d.get('kalman', [])):>18s}{bound}")
+        cells = ' '.join(f'{fmt(d.get(est, [])):>18s}' for est in ('leaky', 'kalman'))
+        print(f'{name:52s} {sample:6s} {cells}{bound}')
     if args.hour:
         m, t, w, i = hour_row()
         for est in ests:

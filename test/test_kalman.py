@@ -477,7 +477,8 @@ def _chirp_then_hold(t):
     """A 2 -> 6 Hz chirp over 3 s (not periodic) that ends 1 mm up, then held."""
     u = np.clip(t / 3.0, 0.0, 1.0)
     window = np.clip(t / 0.2, 0, 1) * np.clip((3.0 - t) / 0.3, 0, 1)
-    return 1e-3 * u * u * (3 - 2 * u) + 0.5e-3 * np.sin(2 * np.pi * (2 * t + t * t * 4 / 6)) * window
+    chirp = np.sin(2 * np.pi * (2 * t + t * t * 4 / 6))
+    return 1e-3 * u * u * (3 - 2 * u) + 0.5e-3 * chirp * window
 
 
 def test_the_first_rest_removes_the_ramp_of_the_unknown_offset(reduced_slim):
