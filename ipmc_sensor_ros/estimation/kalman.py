@@ -58,14 +58,19 @@ The current is band-passed (``REST_BAND_LOW_HZ`` = 1 Hz to min(50 Hz, fs/4)), ea
 sample's energy capped at ``ENERGY_CLIP`` times the noise's (a pulse then delays
 rest by < 0.5 s) and averaged over ``rest_window_s``.  The noise energy is the
 larger of ``current_noise_a`` and the white noise measured above the motion band
-(fs/4 .. Nyquist, averaged over ``NOISE_WINDOW_S``).  The sensor is *at rest* when
+(fs/4 .. Nyquist, averaged over ``NOISE_WINDOW_S``, from zero with the bias corrected, so
+it is known within tens of samples of the start).  The sensor is *at rest* when
 the band energy falls below ``rest_enter`` times the noise's; it is *moving* again
 as soon as the energy exceeds ``rest_leave`` times it (hysteresis), one sample
 exceeds 6 sigma, or the low-passed current departs from the offset estimate by
 more than 4 sigma of their difference (a slow deflection ramp is a steady current
 R0 dw/dt the band-pass cannot see).
 At rest the deflection is held (frozen, as a gyro's angle while its bias is
-learned at standstill), the charge and velocity states are zeroed and the offset
+learned at standstill) at its *smoothed* value where the detector last saw motion:
+the quiet samples the detector needed are dropped, the leak's losses over the move are
+restored and the ramp of the offset's error (the offset learned at this rest against
+the one the move ran with, an RTS-smoothed random walk) is removed
+(:meth:`KalmanEstimator._enter_rest`).  The charge and velocity states are zeroed and the offset
 is the running mean of the current, started with the weight sigma^2/P_b of its
 previous estimate (P_b grows by q_b per second of motion) and, once it has
 ``fs * rest_offset_time_s`` samples, a level-and-trend average that follows a drift
@@ -513,7 +518,7 @@ class KalmanEstimator:
         p_s = solve_discrete_lyapunov(ad_s @ ikc, qd_s + np.outer(ak, ak), method='bilinear')
         post = ikc @ p_s @ ikc.T + np.outer(k_s, k_s)
         mode = _Mode(ad, np.asarray(gain, float), self._c, self._iw, self._ib, scale)
-        mode.leak_a = math.exp(-wl / self._fs)      # w's decay per sample (see _ramp_sequence)
+        mode.leak_a = math.exp(-wl / self._fs)      # w's decay per sample (see _enter_rest)
         mode.std_m = float(math.sqrt(max(post[self._iw, self._iw], 0.0)) * scale[self._iw])
         return mode
 
@@ -551,14 +556,16 @@ class KalmanEstimator:
         # the detector starts undecided (at the leave threshold): motion crosses it at once;
         # rest needs rest_window_s of quiet current (the first samples' energy is no average)
         self._energy = self.rest_leave * self.noise_energy_a2
-        # (absolute w, ramp factor, samples since) at the last sample the detector saw motion:
-        # the record's start counts as one (w = 0); see _enter_rest
-        self._quiet = (0.0, 0.0, 0)
-        # until the first rest: the ramp factor F (w per ampere of offset error, m/A) and the
-        # offset b_ref it is relative to; during the first rest (level, F, b_ref)
-        self._ramp_f: float | None = 0.0
-        self._ramp_b = 0.0
-        self._first_rest = None
+        # the motion segment since the last rest (or the start): [leak loss L (m), samples,
+        # offset b_ref the filter used, its variance P0]; None once a periodic update
+        # corrected it.  See _enter_rest.
+        self._seg: list | None = [0.0, 0, 0.0, OFFSET_PRIOR_A ** 2]
+        # (absolute w, L, segment samples, samples since) at the last sample the detector saw
+        # motion: the record's start counts as one (w = 0)
+        self._quiet = (0.0, 0.0, 0, 0)
+        # through a rest: (level, C, b_ref) of the held-level correction, the rest's samples
+        self._held_fix = None
+        self._rest_own_n = 0
         self._offset_var = OFFSET_PRIOR_A ** 2
         # at rest the offset's weight is a sample count (its variance = sigma^2 / count with the
         # noise measured at each sample, so blocks and single samples agree); None while moving
@@ -740,7 +747,7 @@ class KalmanEstimator:
 
     def _enter_rest(self) -> None:
         """
-        Hold the deflection at its estimate where the detector last saw motion.
+        Hold the deflection at its smoothed estimate where the detector last saw motion.
 
         The detector confirms rest only after ``rest_window_s`` (times ln(rest_leave /
         rest_enter)) of quiet current; over those samples the moving filter integrated only
@@ -749,41 +756,49 @@ class KalmanEstimator:
         last sample with motion (the record's start: 0) is kept instead, when at most
         ``QUIET_REWIND_MAX_S`` ago.
 
-        Before the first rest the offset was unknown: the moving filter integrated its error
-        db = b - b_ref as a ramp, db F (F: :meth:`_ramp_sequence`).  Through the first rest
-        the held level is corrected with the offset learned so far (see :meth:`_run_rest`).
+        The rest then smooths the motion segment that ended (a fixed-interval smoother run
+        once, at the rest), for two errors the causal filter had to accept while moving:
+
+        - *the leak*: w only feeds the output (C has no w term), so the leak-free estimate is
+          w + L, L the sum of what the leak removed, (1 - a) w per sample (a = exp(-w_l /
+          fs)).  A 0.001 Hz leak took 4.8 % of an 8 s move (70 um of 1.5 mm); before the
+          first rest the 0.02 Hz leak took 21 % of a 1 mm, 3 s move.
+        - *the offset*: the segment ran with offset b_ref (variance P0); the rest learns b.
+          With a random-walk offset (intensity q) the smoothed offset error averaged over
+          the segment's T seconds is (b - b_ref) (1 + P0 / (P0 + q T)) / 2 (RTS smoother:
+          the error at the start is (b - b_ref) P0 / (P0 + q T), at the end b - b_ref,
+          linear between): 1 before the first rest (P0 = OFFSET_PRIOR_A^2, a constant
+          unknown offset), 1/2 for a pure drift.  As a velocity it ramped w by that times T
+          / R0 (H(0) = 0): C = (1 + P0 / (P0 + q T)) T / (2 R0).
+
+        The held level is w + L - (b - b_ref) C with the offset learned so far (see
+        :meth:`_run_rest`).  What remains is the noise walk of the leak-free integral,
+        sigma sqrt(T fs) / (fs R0): 5.5 um after 8 s at 20 nA (slim).  A segment corrected
+        by a periodic update (:meth:`_periodic_update`) is not smoothed again.
         """
-        w_q, f_q, n_q = self._quiet
+        w_q, l_q, n_seg, since = self._quiet
+        seg = self._seg
         iw = self._iw
-        if n_q > self._quiet_max_n:
-            w_q, f_q = float(self._s[iw]) + self._w_ref, self._ramp_f or 0.0
-        self._s[iw] = w_q                                 # rest holds the absolute deflection
+        if since > self._quiet_max_n:
+            w_q = float(self._s[iw]) + self._w_ref
+            l_q, n_seg = (seg[0], seg[1]) if seg is not None else (0.0, 0)
+        level = w_q + l_q
+        self._s[iw] = level                               # rest holds the absolute deflection
         self._w_ref = 0.0
-        if self._ramp_f is not None:                      # the first rest
-            self._first_rest = (w_q, f_q, self._ramp_b) if f_q else None
-            self._ramp_f = None
+        self._held_fix = None
+        if seg is not None and n_seg:
+            p0 = seg[3]
+            c = 0.5 * (1.0 + p0 / (p0 + self._q_b_step * n_seg)) * n_seg * self._ramp_step
+            self._held_fix = (level, c, seg[2])
+        self._seg = None
+        self._rest_own_n = 0
         self._seen_rest = True
-
-    def _ramp_sequence(self, mode, n: int) -> np.ndarray | None:
-        """
-        Ramp factor F after each of n moving samples (None after the first rest).
-
-        An offset error db is a velocity db / R0 (H(0) = 0) that the leak (pole a =
-        exp(-w_l / fs) per sample) integrates: F_k = a F_(k-1) + 1 / (fs R0), m/A.
-        """
-        if self._ramp_f is None:
-            return None
-        a = mode.leak_a
-        decay = a ** np.arange(1, n + 1)
-        seq = decay * self._ramp_f + self._ramp_step * (1.0 - decay) / (1.0 - a)
-        self._ramp_f = float(seq[-1])
-        return seq
 
     def _leave_rest(self) -> None:
         """Re-reference w to the held level, slowest allowed corner, rewind (see _rewind)."""
         self._w_ref = float(self._s[self._iw])
         self._s[self._iw] = 0.0
-        self._first_rest = None
+        self._held_fix = None
         self._trend = None
         self._offset_n = None
         sch = self._sched
@@ -793,6 +808,8 @@ class KalmanEstimator:
         sch.index = int(self._floor_index(self._offset_var))
         self._rewind()
         sch.u_prev = float(self._s[self._iw])
+        # a new segment, relative to the offset the moving filter starts from (see _enter_rest)
+        self._seg = [0.0, 0, float(self._s[self._ib]), self._offset_var]
 
     def _floor_index(self, offset_var):
         """
@@ -853,15 +870,7 @@ class KalmanEstimator:
             w, b_last, s_end = mode.run(y[pos:cut], self._s)
             seq = sch.stats_sequence(w)
             out[pos:cut] = w + self._w_ref
-            ramp = self._ramp_sequence(mode, n)
-            motion = np.flatnonzero(code[pos:cut] == 0)
-            if motion.size:
-                j = int(motion[-1])
-                self._quiet = (float(out[pos + j]), 0.0 if ramp is None else float(ramp[j]),
-                               n - 1 - j)
-            else:
-                w_q, f_q, n_q = self._quiet
-                self._quiet = (w_q, f_q, n_q + n)
+            self._track_segment(w, out[pos:cut], code[pos:cut], mode.leak_a)
             self._b_last, self._s = b_last, s_end
             sch.stats = seq[:, n - 1].copy()
             sch.u_prev = float(w[-1])
@@ -869,6 +878,26 @@ class KalmanEstimator:
             self._offset_var += q * n
             self._periodic.extend(y[pos:cut], w)
             pos = cut
+
+    def _track_segment(self, w, out, code, a) -> None:
+        """Leak loss, segment length and the last motion sample (see _enter_rest)."""
+        seg = self._seg
+        motion = np.flatnonzero(code == 0)
+        n = w.size
+        if seg is not None:
+            csum = np.cumsum(w)
+            if motion.size:
+                j = int(motion[-1])
+                self._quiet = (float(out[j]), seg[0] + (1.0 - a) * float(csum[j] - w[j]),
+                               seg[1] + j + 1, n - 1 - j)
+            seg[0] += (1.0 - a) * float(csum[-1])
+            seg[1] += n
+        elif motion.size:
+            j = int(motion[-1])
+            self._quiet = (float(out[j]), 0.0, 0, n - 1 - j)
+        if not motion.size:
+            w_q, l_q, n_seg, since = self._quiet
+            self._quiet = (w_q, l_q, n_seg, since + n)
 
     @property
     def _offset_known(self) -> bool:
@@ -923,11 +952,10 @@ class KalmanEstimator:
         self._offset_var = p0 * r_p / (p0 + r_p)
         self._offset_learned = True
         self._level_known_at(n)
-        # the ramp so far is corrected: later offset errors are relative to this offset
-        w_q, _, n_q = self._quiet
-        self._quiet = (w_q - shift, 0.0, n_q)
-        if self._ramp_f is not None:
-            self._ramp_f, self._ramp_b = 0.0, float(self._s[ib])
+        # the segment's ramp is corrected here, not smoothed again at the rest
+        w_q, _, _, since = self._quiet
+        self._quiet = (w_q - shift, 0.0, 0, since)
+        self._seg = None
         # the leak schedule's statistics of u follow the shift
         wgt, m, s2, v2 = sch.stats.tolist()
         sch.stats = np.array([wgt, m - shift * wgt, s2 - 2 * shift * m + shift * shift * wgt, v2])
@@ -955,9 +983,10 @@ class KalmanEstimator:
         """
         Rest: deflection held, velocity and charge states zero.
 
-        Through the first rest the held level is corrected for the ramp the offset's error
-        caused before it (see :meth:`_enter_rest`), with the offset learned so far, until the
-        offset is known to ``OFFSET_TRUSTED_A`` or its running mean is full; then held.
+        Through a rest the held level is corrected for the ramp the offset's error caused
+        in the motion before it (see :meth:`_enter_rest`), with the offset learned so far,
+        until the rest's own samples know it to ``OFFSET_TRUSTED_A`` or the running mean is
+        full; then held.
 
         The detector has seen quiet current for ~rest_window_s, many times the sensor's
         memory.  Offset = running mean of the current, weighted by its prior variance
@@ -979,7 +1008,7 @@ class KalmanEstimator:
         n0 = (self._rest_sigma2(lo) / self._offset_var if self._offset_n is None
               else self._offset_n)
         counts = n0 + np.arange(1, y.size + 1)
-        first = self._first_rest
+        first = self._held_fix
         b_seq = None
         if counts[-1] <= self._n_max:
             if first is None:
@@ -1002,18 +1031,20 @@ class KalmanEstimator:
                 b_seq = np.concatenate([(n0 * b0 + np.cumsum(u[:k])) / counts[:k],
                                         2.0 * s1_seq - s2_seq])
         if first is not None:
-            # the first rest: the level less the ramp of the offset learned so far, until
-            # the offset is trusted or its average full (then held)
-            level, f_q, b_ref = first
-            w = level - (b_seq - b_ref) * f_q
+            # the level less the ramp of the offset learned so far (see _enter_rest), until
+            # this rest alone knows the offset to OFFSET_TRUSTED_A or its average is full
+            level, c, b_ref = first
+            w = level - (b_seq - b_ref) * c
             sig2 = (np.full(y.size, self._noise_var()) if self._sig2_seq is None
                     else self._sig2_seq[lo:lo + y.size])
+            own = self._rest_own_n + np.arange(1, y.size + 1)
             done = np.flatnonzero(
-                (counts >= self._n_max) | (sig2 < OFFSET_TRUSTED_A ** 2 * counts))
+                (counts >= self._n_max) | (sig2 < OFFSET_TRUSTED_A ** 2 * own))
             if done.size:
                 w[done[0]:] = w[done[0]]
-                self._first_rest = None
+                self._held_fix = None
             s_end[self._iw] = w[-1]
+        self._rest_own_n += y.size
         s_end[self._ib] = b
         self._remember_rest(y, b0, n0)
         self._s = s_end
@@ -1142,13 +1173,15 @@ class KalmanEstimator:
                 self._trend = (s1, s2)
                 b = 2.0 * s1 - s2
             new = st
-            first = self._first_rest
-            if first is None:
+            fix = self._held_fix
+            self._rest_own_n += 1
+            if fix is None:
                 w = st[iw]
-            else:                               # the first rest (see _run_rest)
-                w = new[iw] = first[0] - (b - first[2]) * first[1]
-                if n1 >= self._n_max or self._noise_var() < OFFSET_TRUSTED_A ** 2 * n1:
-                    self._first_rest = None
+            else:                               # see _run_rest
+                w = new[iw] = fix[0] - (b - fix[2]) * fix[1]
+                if (n0 + 1.0 >= self._n_max
+                        or self._noise_var() < OFFSET_TRUSTED_A ** 2 * self._rest_own_n):
+                    self._held_fix = None
             new[ib] = b
             self._b_last = b
             self._offset_n = n1
@@ -1164,13 +1197,17 @@ class KalmanEstimator:
             innov = y - sum(map(mul, self._c_list, st))
             u = st[iw] + mode.k_w * innov
             w = u + self._w_ref
-            if self._ramp_f is not None:
-                self._ramp_f = mode.leak_a * self._ramp_f + self._ramp_step
-            if motion:                          # see _enter_rest
-                self._quiet = (w, self._ramp_f or 0.0, 0)
-            else:
-                w_q, f_q, n_q = self._quiet
-                self._quiet = (w_q, f_q, n_q + 1)
+            seg = self._seg                     # see _track_segment
+            if seg is not None:
+                seg[1] += 1
+                if motion:
+                    self._quiet = (w, seg[0], seg[1], 0)
+                seg[0] += (1.0 - mode.leak_a) * u
+            elif motion:
+                self._quiet = (w, 0.0, 0, 0)
+            if not motion:
+                w_q, l_q, n_seg, since = self._quiet
+                self._quiet = (w_q, l_q, n_seg, since + 1)
             self._b_last = st[ib] + mode.k_b * innov
             new = [sum(map(mul, row, st)) + g * y for row, g in zip(mode.f_rows, mode.g_list)]
             self._offset_var += self._q_b_step
@@ -1205,8 +1242,9 @@ class KalmanEstimator:
             'leak': self._sched.get_state(),
             'trend': self._trend,
             'quiet': self._quiet,
-            'ramp': (self._ramp_f, self._ramp_b),
-            'first_rest': self._first_rest,
+            'segment': None if self._seg is None else list(self._seg),
+            'held_fix': self._held_fix,
+            'rest_own_n': self._rest_own_n,
             'rest_tail': (list(self._rest_y), list(self._rest_b)),
         }
 
@@ -1245,12 +1283,14 @@ class KalmanEstimator:
         trend = state.get('trend')
         self._trend = None if trend is None else (float(trend[0]), float(trend[1]))
         if 'quiet' in state:
-            w_q, f_q, n_q = state['quiet']
-            self._quiet = (float(w_q), float(f_q), int(n_q))
-            f, b = state['ramp']
-            self._ramp_f, self._ramp_b = (None if f is None else float(f)), float(b)
-            first = state['first_rest']
-            self._first_rest = None if first is None else tuple(float(v) for v in first)
+            w_q, l_q, n_seg, since = state['quiet']
+            self._quiet = (float(w_q), float(l_q), int(n_seg), int(since))
+            seg = state['segment']
+            self._seg = None if seg is None else [float(seg[0]), int(seg[1]), float(seg[2]),
+                                                  float(seg[3])]
+            fix = state['held_fix']
+            self._held_fix = None if fix is None else tuple(float(v) for v in fix)
+            self._rest_own_n = int(state['rest_own_n'])
         if 'rest_tail' in state:          # the rest samples a move would rewind (see _rewind)
             ys, bs = state['rest_tail']
             self._rest_y.clear()
@@ -1291,8 +1331,9 @@ class KalmanEstimator:
             # the motion statistics and the corner in use (the nearest of this ladder)
             self._sched.set_state(old._sched.get_state())
             self._trend = old._trend
-            self._quiet, self._first_rest = old._quiet, old._first_rest
-            self._ramp_f, self._ramp_b = old._ramp_f, old._ramp_b
+            self._quiet, self._held_fix = old._quiet, old._held_fix
+            self._seg = None if old._seg is None else list(old._seg)
+            self._rest_own_n = old._rest_own_n
             ladder = self._sched.corners_hz
             self._sched.index = int(np.argmin(np.abs(np.log(ladder / old.leak_corner_in_use_hz))))
         else:
