@@ -474,7 +474,7 @@ def test_a_record_that_starts_at_rest_holds_its_start_level(reduced_slim):
 
 
 def _chirp_then_hold(t):
-    """A 2 -> 6 Hz chirp over 3 s (not periodic) that ends 1 mm up, then held."""
+    """Return a 2 -> 6 Hz chirp over 3 s (not periodic) that ends 1 mm up, then held."""
     u = np.clip(t / 3.0, 0.0, 1.0)
     window = np.clip(t / 0.2, 0, 1) * np.clip((3.0 - t) / 0.3, 0, 1)
     chirp = np.sin(2 * np.pi * (2 * t + t * t * 4 / 6))
@@ -509,7 +509,7 @@ def test_first_rest_correction_agrees_in_blocks_and_samples_and_restores(reduced
 
 
 def _moves_and_holds(t):
-    """Rest 1 s, a 3 s move to 1 mm, rest 3 s, an 8 s move to 2 mm, rest (chirped moves)."""
+    """Return: rest 1 s, a 3 s move to 1 mm, rest 3 s, an 8 s move to 2 mm, rest (chirps)."""
     def move(t0, dur, h0, h1):
         u = np.clip((t - t0) / dur, 0, 1)
         tt = np.clip(t - t0, 0, dur)
