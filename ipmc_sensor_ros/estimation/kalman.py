@@ -761,8 +761,8 @@ class KalmanEstimator:
 
         - *the leak*: w only feeds the output (C has no w term), so the leak-free estimate is
           w + L, L the sum of what the leak removed, (1 - a) w per sample (a = exp(-w_l /
-          fs)).  A 0.001 Hz leak took 4.8 % of an 8 s move (70 um of 1.5 mm); before the
-          first rest the 0.02 Hz leak took 21 % of a 1 mm, 3 s move.
+          fs)).  The 0.001 Hz leak took 38 um of an 8 s move to +1 mm; before the first
+          rest the 0.02 Hz leak took 21 % of a 3 s move to 1 mm (both slim, tested).
         - *the offset*: the segment ran with offset b_ref (variance P0); the rest learns b.
           With a random-walk offset (intensity q) the smoothed offset error averaged over
           the segment's T seconds is (b - b_ref) (1 + P0 / (P0 + q T)) / 2 (RTS smoother:
@@ -772,8 +772,8 @@ class KalmanEstimator:
           / R0 (H(0) = 0): C = (1 + P0 / (P0 + q T)) T / (2 R0).
 
         The held level is w + L - (b - b_ref) C with the offset learned so far (see
-        :meth:`_run_rest`).  What remains is the noise walk of the leak-free integral,
-        sigma sqrt(T fs) / (fs R0): 5.5 um after 8 s at 20 nA (slim).  A segment corrected
+        :meth:`_run_rest`).  What remains is the noise walk of the leak-free integral
+        (measured 10 um after an 8 s move at 20 nA, slim).  A segment corrected
         by a periodic update (:meth:`_periodic_update`) is not smoothed again.
         """
         w_q, l_q, n_seg, since = self._quiet
