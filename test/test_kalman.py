@@ -99,15 +99,13 @@ def test_invalid_configuration_is_refused(reduced_slim, kw, name):
         KalmanEstimator(reduced_slim, FS, **kw)
 
 
-@pytest.mark.parametrize('sample,f', [('slim', 1.0), ('short', 1.0)])
+@pytest.mark.parametrize('sample', ['slim', 'short'])
+@pytest.mark.parametrize('f', [1.0, 5.0, 20.0])
 def test_crank_with_offset_after_rest(sample, f):
     # Issue-14 row 1 (crank, 1 % noise + 10 nA offset), starting from 2 s of rest (the offset is
-    # learned there).  Kalman defaults, not the scenario's noise.  Target 3 %; tolerance: the
-    # offset learned in ~1.7 s of detected rest has std sigma/sqrt(1700) (0.7 nA slim, 1.4 nA
-    # short at 1 Hz), which integrates during 18 s of motion into an RMS error of about
-    # db * 11 s / R0 (25 um, 1.7 %): bound 3 % + 1 %.  At 5 and 20 Hz the same 1 % noise is
-    # 5-40 times larger and the rest-learned offset alone exceeds the target (bound printed
-    # by bench/bench_estimators.py).
+    # learned there).  Kalman defaults, not the scenario's noise.  The issue's target, 3 %, is
+    # asserted: measured 1.1-2.4 % on this seed, worst 2.9 % over the bench's seeds 0-2 and 91
+    # (the rest holds the level from its start and whole periods refine the offset).
     model = SensorModel(PAPER_SAMPLES[sample])
     t = np.arange(int(20 * FS)) / FS
     w = started(t, CrankSlider(f, 2e-3, 20e-3, phase_rad=0.7).deflection(t))
@@ -121,7 +119,7 @@ def test_crank_with_offset_after_rest(sample, f):
         [leaky.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
     )
     sel = t >= 5
-    assert nrmse(w_hat[sel], w[sel]) < 0.04
+    assert nrmse(w_hat[sel], w[sel]) < 0.03
     assert nrmse(w_hat[sel], w[sel]) < nrmse(w_leaky[sel], w[sel])
     assert np.all(np.isfinite(est.last_std_m)) and est.last_std_m[0] > 0
 
@@ -137,8 +135,9 @@ def test_step_held_with_offset_big():
         [est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
     )
     sel = t >= 5
-    # target 3 %; tolerance 1 % for the offset learned in 2 s (see the crank test)
-    assert nrmse(w_hat[sel], w[sel]) < 0.04
+    # target 3 %; the rest holds the leak-free level of the move (measured 0.02 %); 1 % leaves
+    # room for the leak-free integral's noise walk over the 50 ms rise (a few um of 2 mm)
+    assert nrmse(w_hat[sel], w[sel]) < 0.01
     assert est.inverse.at_rest
 
 
@@ -188,8 +187,7 @@ def test_deflection_estimator_options():
 
 def test_robot_motion_with_hum_beats_leaky():
     # Issue-14 row 3 (shortened to 30 s): robot-like motion with holds, 10 nA offset,
-    # 1 % noise + 3 % 50 Hz hum, mains_hz 50.  Target 5 %; the offset learned during holds of
-    # seconds has std < 1 nA (noise 20-60 nA), i.e. < 50 um after the leak: tolerance 3 %.
+    # 1 % noise + 3 % 50 Hz hum, mains_hz 50.  The target, 5 %, is asserted (measured 0.9 %).
     t = np.arange(int(30 * FS)) / FS
     w = robot_motion(t, seed=31)
     i = daq_current(
@@ -205,7 +203,7 @@ def test_robot_motion_with_hum_beats_leaky():
     )
     sel = t >= 5
     assert est.mains.line_present is False or est.mains.line_ratio > 0
-    assert nrmse(w_hat[sel], w[sel]) < 0.08
+    assert nrmse(w_hat[sel], w[sel]) < 0.05
     assert nrmse(w_hat[sel], w[sel]) < 0.5 * nrmse(w_l[sel], w[sel])
 
 
@@ -532,3 +530,20 @@ def test_a_rest_restores_what_the_leak_took_from_the_move_before_it(reduced_slim
         w = KalmanEstimator(reduced_slim, FS).process(i)
         for k in (6000, 17900):                  # in the two rests after the moves
             assert abs(w[k] - wt[k]) < tol, (noise, k, w[k] - wt[k])
+
+
+def test_damped_free_vibration_with_offset_and_noise():
+    # Issue-14 row 4: the paper's Fig. 7 motion (2 mm, 30 Hz, damping 0.05) released after
+    # 5.5 s of hold, 1 % noise + 10 nA offset, slim.  The target, 5 %, is asserted (bench,
+    # seeds 0-2 and 91: 0.4-0.9 %; the hold teaches the offset, the rest after the ring-down
+    # holds the smoothed level).
+    from ipmc_sensor_ros.simulation.stimuli import FreeVibration
+    t = np.arange(int(8 * FS)) / FS
+    w = FreeVibration(2e-3, 30.0, 0.05, release_s=5.7).deflection(t)
+    i = daq_current(SLIM, t, w, offset_a=10e-9, noise_fraction=0.01, seed=23)
+    est = DeflectionEstimator(SLIM, FS, estimator='kalman')
+    w_hat = np.concatenate(
+        [est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
+    )
+    sel = t >= 5
+    assert nrmse(w_hat[sel], w[sel]) < 0.05
