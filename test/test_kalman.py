@@ -29,6 +29,11 @@ def nrmse(est, truth):
     return float(np.sqrt(np.mean((est - truth) ** 2)) / np.sqrt(np.mean(truth ** 2)))
 
 
+def in_blocks(est, t, i, n=1000):
+    """Return a DeflectionEstimator's estimates of current i (A) at times t, n per call."""
+    return np.concatenate([est.process(t[k:k + n], i[k:k + n])[1] for k in range(0, t.size, n)])
+
+
 def blocks(est, i, n=1000):
     return np.concatenate([est.process(i[k:k + n]) for k in range(0, i.size, n)])
 
@@ -111,13 +116,9 @@ def test_crank_with_offset_after_rest(sample, f):
     w = started(t, CrankSlider(f, 2e-3, 20e-3, phase_rad=0.7).deflection(t))
     i = daq_current(model, t, w, offset_a=10e-9, noise_fraction=0.01, seed=21)
     est = DeflectionEstimator(model, FS, estimator='kalman')
-    w_hat = np.concatenate(
-        [est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
-    )
+    w_hat = in_blocks(est, t, i)
     leaky = DeflectionEstimator(model, FS, estimator='leaky')
-    w_leaky = np.concatenate(
-        [leaky.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
-    )
+    w_leaky = in_blocks(leaky, t, i)
     sel = t >= 5
     assert nrmse(w_hat[sel], w[sel]) < 0.03
     assert nrmse(w_hat[sel], w[sel]) < nrmse(w_leaky[sel], w[sel])
@@ -131,9 +132,7 @@ def test_step_held_with_offset_big():
     w = Step(2e-3, start_s=2.3, rise_time_s=0.05).deflection(t)
     i = daq_current(BIG, t, w, offset_a=10e-9, noise_fraction=0.01, seed=22)
     est = DeflectionEstimator(BIG, FS, estimator='kalman')
-    w_hat = np.concatenate(
-        [est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
-    )
+    w_hat = in_blocks(est, t, i)
     sel = t >= 5
     # target 3 %; the rest holds the leak-free level of the move (measured 0.02 %); 1 % leaves
     # room for the leak-free integral's noise walk over the 50 ms rise (a few um of 2 mm)
@@ -194,13 +193,9 @@ def test_robot_motion_with_hum_beats_leaky():
         SLIM, t, w, offset_a=10e-9, noise_fraction=0.01, mains_hz=50, hum_fraction=0.03, seed=31
     )
     est = DeflectionEstimator(SLIM, FS, estimator='kalman', mains_hz=50)
-    w_hat = np.concatenate(
-        [est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
-    )
+    w_hat = in_blocks(est, t, i)
     leaky = DeflectionEstimator(SLIM, FS, estimator='leaky')
-    w_l = np.concatenate(
-        [leaky.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
-    )
+    w_l = in_blocks(leaky, t, i)
     sel = t >= 5
     assert est.mains.line_present is False or est.mains.line_ratio > 0
     assert nrmse(w_hat[sel], w[sel]) < 0.05
@@ -239,9 +234,7 @@ def test_leaving_rest_keeps_motion_current_out_of_the_offset():
     w = started(t, CrankSlider(5.0, 2e-3, 20e-3).deflection(t))
     i = daq_current(SLIM, t, w)
     est = DeflectionEstimator(SLIM, FS, estimator='kalman')
-    w_hat = np.concatenate(
-        [est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
-    )
+    w_hat = in_blocks(est, t, i)
     assert abs(est.inverse.offset_a) < 0.1e-9
     assert nrmse(w_hat[t >= 5], w[t >= 5]) < 0.015     # leaky: 0.7 %, reduction error ~1 %
 
@@ -259,9 +252,7 @@ def test_moving_from_start_offset_error_below_leaky(sample):
     out = {}
     for name in ('leaky', 'kalman'):
         est = DeflectionEstimator(model, FS, estimator=name)
-        out[name] = np.concatenate(
-            [est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
-        )
+        out[name] = in_blocks(est, t, i)
     sel = t >= 5
     assert nrmse(out['kalman'][sel], w[sel]) < 0.8 * nrmse(out['leaky'][sel], w[sel])
 
@@ -283,9 +274,7 @@ def test_leak_corner_rises_with_noisy_fast_motion_and_bounds_the_error():
     from ipmc_sensor_ros.estimation.leak_schedule import leak_error_terms
     t, w, i = _crank_after_rest(SLIM, 20.0, seed=51)
     est = DeflectionEstimator(SLIM, FS, estimator='kalman')
-    w_hat = np.concatenate(
-        [est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
-    )
+    w_hat = in_blocks(est, t, i)
     kal = est.inverse
     assert kal.leak_corner_in_use_hz >= 0.1
     assert kal.leak_corner_in_use_hz <= 0.05 * 20.0 + 1e-12      # ceiling 0.05 f_eff
@@ -395,11 +384,9 @@ def test_clean_crank_from_rest_beats_the_leaky(f):
     w = started(t, CrankSlider(f, 2e-3, 20e-3).deflection(t))
     i = daq_current(SLIM, t, w)
     kal = DeflectionEstimator(SLIM, FS, estimator='kalman')
-    w_hat = np.concatenate(
-        [kal.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)])
+    w_hat = in_blocks(kal, t, i)
     leaky = DeflectionEstimator(SLIM, FS, estimator='leaky')
-    w_leaky = np.concatenate(
-        [leaky.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)])
+    w_leaky = in_blocks(leaky, t, i)
     sel = t >= 5
     assert nrmse(w_hat[sel], w[sel]) <= nrmse(w_leaky[sel], w[sel])
     assert nrmse(w_hat[sel], w[sel]) < 0.005
@@ -542,8 +529,6 @@ def test_damped_free_vibration_with_offset_and_noise():
     w = FreeVibration(2e-3, 30.0, 0.05, release_s=5.7).deflection(t)
     i = daq_current(SLIM, t, w, offset_a=10e-9, noise_fraction=0.01, seed=23)
     est = DeflectionEstimator(SLIM, FS, estimator='kalman')
-    w_hat = np.concatenate(
-        [est.process(t[k:k + 1000], i[k:k + 1000])[1] for k in range(0, t.size, 1000)]
-    )
+    w_hat = in_blocks(est, t, i)
     sel = t >= 5
     assert nrmse(w_hat[sel], w[sel]) < 0.05
