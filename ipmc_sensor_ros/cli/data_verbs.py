@@ -178,9 +178,8 @@ def estimate_accuracy(time_s, estimate_m, measured_m, leak_corner_hz: float,
     Returns (nrmse, seconds used, which part was used, the level error that the NRMSE leaves
     out: :func:`~ipmc_sensor_ros.workbench.metrics.level_error`).
     """
-    from ..workbench.metrics import level_error
-
     from ..estimation.deflection import leak_transient_s
+    from ..workbench.metrics import level_error
 
     t = np.asarray(time_s, float)
     if settle is None:

@@ -623,7 +623,7 @@ class KalmanEstimator:
         configured one was taken for motion for its first 0.3 s, in rest/motion flickers
         that walked w by 20-40 um before the first rest.
         """
-        if np.ndim(n) == 0:
+        if isinstance(n, int):          # one sample (process_one): no numpy on the hot path
             return 1.0 if n >= self._settled_n else 1.0 / -math.expm1(n * self._log_ah)
         if n[0] >= self._settled_n:
             return 1.0
