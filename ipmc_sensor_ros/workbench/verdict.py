@@ -118,8 +118,10 @@ class Diagnosis:
         for d in self.interference:
             if d.get('removable'):
                 lines.append(
-                    f"interference: {d['frequency_hz']:g} Hz line, level {d['level']:.3g} of the "
-                    f"signal RMS in {d['records']} record(s): removed before fitting"
+                    f"interference: {d['frequency_hz']:g} Hz line (measured "
+                    f"{d['measured_hz'][0]:.3f}-{d['measured_hz'][1]:.3f} Hz), level "
+                    f"{d['level']:.3g} of the signal RMS in {d['records']} record(s): removed "
+                    'before fitting'
                 )
         if self.offset_test:
             ot = self.offset_test
