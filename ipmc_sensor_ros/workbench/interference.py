@@ -116,7 +116,7 @@ def _stimulus_harmonics(t, w, max_harmonics: int = 20):
 
 
 def _sinusoids(t, freqs):
-    """A column of ones, then cosine/sine pairs at ``freqs``."""
+    """Return a column of ones, then cosine/sine pairs at ``freqs``."""
     cols = [np.ones_like(t)]
     for f in freqs:
         cols += [np.cos(2 * np.pi * f * t), np.sin(2 * np.pi * f * t)]
@@ -124,7 +124,7 @@ def _sinusoids(t, freqs):
 
 
 def _measured_mains(t, y, stim, f_mains, fs):
-    """The record's mains fundamental, Hz, near ``f_mains`` (see module docstring)."""
+    """Return the record's mains fundamental, Hz, near ``f_mains`` (see module docstring)."""
     a = _sinusoids(t, stim)
     r = y - a @ np.linalg.lstsq(a, y, rcond=None)[0]
     nfft = 1 << int(np.ceil(np.log2(8 * r.size)))
