@@ -79,6 +79,7 @@ class TimeDelay(Effect):
     physics = ('Non-simultaneous sampling of two channels or a digital filter in one of them '
                'delays the current relative to the deflection.')
     equation = 'H -> H exp(-s tau)'
+    scope = 'recording'
     parameters = (EffectParameter('delay_s', 's', 1e-3, 1e-6, 0.1, (1e-5, 5e-3),
                                   'delay tau of the current relative to the deflection'),)
     signature = (
@@ -106,6 +107,7 @@ class CurrentOffset(Effect):
     )
     equation = 'i_meas(t) = i(t) + i_0 + i_1 (t - t_start)'
     lti = False
+    scope = 'recording'
     parameters = (
         EffectParameter(
             'offset_a', 'A', 0.0, -1e-3, 1e-3, (-1e-6, 1e-6), 'constant offset i_0', False

@@ -51,7 +51,12 @@ __all__ = [
     'loaded_plugins',
     'get_effect',
     'catalog_markdown',
+    'SCOPES',
+    'split_by_scope',
 ]
+
+#: The values of :attr:`Effect.scope`.
+SCOPES = ('sensor', 'recording')
 
 
 @dataclass(frozen=True)
@@ -101,6 +106,11 @@ class Effect:
     lti: ClassVar[bool] = True
     #: True if the effect needs a long record (e.g. drifts) to be seen.
     needs_long_record: ClassVar[bool] = False
+    #: What the effect belongs to: ``'sensor'`` (the sample, its electrodes and its amplifier:
+    #: travels with a saved model to every later recording) or ``'recording'`` (one recording's
+    #: offset, drift, channel skew: kept in a model file under the calibration's provenance and
+    #: not applied to other records unless asked for; the estimator learns its own offset).
+    scope: ClassVar[str] = 'sensor'
 
     def defaults(self) -> dict[str, float]:
         return {p.name: p.default for p in self.parameters}
@@ -181,6 +191,9 @@ def register_effect(cls, source: str = 'built-in'):
         raise ParameterError(f'{short_repr(cls)} is not an Effect subclass with a name')
     if not isinstance(cls.name, str) or not cls.name.isidentifier():
         raise ParameterError(f'effect name {short_repr(cls.name)} must be an identifier')
+    if cls.scope not in SCOPES:
+        raise ParameterError(f"effect '{cls.name}': scope must be one of {SCOPES}, "
+                             f'got {short_repr(cls.scope)}')
     previous = _SOURCES.get(cls.name)
     if previous is not None and previous != source:
         what = 'a built-in effect' if previous == 'built-in' else f'defined by plugin {previous}'
@@ -189,6 +202,18 @@ def register_effect(cls, source: str = 'built-in'):
     EFFECTS[cls.name] = cls()
     _SOURCES[cls.name] = source
     return cls
+
+
+def split_by_scope(specs) -> tuple[tuple, tuple]:
+    """
+    Split effect specs (anything with a ``name``) into (sensor, recording) by :attr:`Effect.scope`.
+
+    The one rule that decides what a saved model carries to other recordings.
+    """
+    sensor, recording = [], []
+    for spec in specs:
+        (recording if get_effect(spec.name).scope == 'recording' else sensor).append(spec)
+    return tuple(sensor), tuple(recording)
 
 
 def get_effect(name: str) -> Effect:
@@ -282,6 +307,9 @@ def catalog_markdown() -> str:
             lines.append('* **Parameters**: ' + '; '.join(
                 f'`{p.name}` ({p.unit}; bounds {p.lower:g}..{p.upper:g}; typical '
                 f'{p.typical[0]:g}..{p.typical[1]:g}): {p.description}' for p in eff.parameters))
+        lines.append(f'* **Belongs to**: the {eff.scope}'
+                     + (' (not carried to other recordings by a saved model)'
+                        if eff.scope == 'recording' else ''))
         lines.append(f'* **Signature in residuals**: {eff.signature}')
         lines.append(f'* **Reference**: {eff.reference}\n')
     return '\n'.join(lines)
