@@ -233,12 +233,15 @@ class DeflectionEstimator:
         t_out, w = self.process(time_s, current_a)
         return t_out, w, self.last_std_m
 
-    def process(self, time_s, current_a) -> tuple[np.ndarray, np.ndarray]:
+    def process(self, time_s, current_a, steps=None) -> tuple[np.ndarray, np.ndarray]:
         """
         Filter one block; returns (output times, deflection).
 
         Pass validated values
-        (:func:`~ipmc_sensor_ros.estimation.stream.validate_block`).
+        (:func:`~ipmc_sensor_ros.estimation.stream.validate_block`).  ``steps[k]`` is the
+        number of sample periods from the sample fed before sample k (1: contiguous; m > 1:
+        m - 1 samples missing, bridged by the filter); None: all 1.  The stream decides it
+        (:class:`~ipmc_sensor_ros.estimation.stream.StreamEstimator`).
         """
         t = np.asarray(time_s, float)
         i = np.asarray(current_a, float)
@@ -328,7 +331,7 @@ class DeflectionEstimator:
         return not (self._current_inv or self._deflection_inv or self._material_at is not None
                     or self.mains.sos.shape[0])
 
-    def process_one(self, time_s: float, current_a: float) -> tuple[float, float]:
+    def process_one(self, time_s: float, current_a: float, steps: int = 1) -> tuple[float, float]:
         """
         One sample, as floats (output time, deflection).
 
