@@ -155,35 +155,28 @@ def _resolve_values(data, base: dict, explicit: set[str], params: str | None, pr
     return values
 
 
-def estimate_accuracy(time_s, estimate_m, measured_m, leak_corner_hz: float,
-                      delay_s: float = 0.0,
-                      settle: tuple[float, str] | None = None) -> tuple[float, float, str, dict]:
+def estimate_accuracy(time_s, estimate_m, measured_m, delay_s: float = 0.0,
+                      settle: tuple[float, str] = (0.0, 'from the start')
+                      ) -> tuple[float, float, str, dict]:
     """
     NRMSE of the estimated deflection.
 
     RMS(e - m) / RMS(m) of the estimate e and the measurement m, each with
     its mean and linear trend removed.
 
-    A current sensor cannot see a constant deflection: the estimator's leak
-    (corner ``leak_corner_hz``) removes it, and the deflection before the
-    record started leaves a transient decaying as exp(-2 pi f_leak t), a slow
-    drift over a short record; both are outside what the sensor can measure,
-    so they are removed before comparing.  The comparison starts after the
-    leak transient 5 / (2 pi f_leak) when the record is long enough, else
-    covers the whole record; the measurement is delayed by ``delay_s`` (the
-    estimate of a model with a time delay lags by it).  ``settle`` = (seconds,
-    description), when given, replaces the leak rule
-    (:meth:`~ipmc_sensor_ros.estimation.deflection.DeflectionEstimator.settling`: the
-    Kalman estimator knows when it learned the level).
+    A current sensor cannot see a constant deflection: the level before the record started
+    is learned only at a rest or over the motion's corner, so mean and trend are removed
+    before comparing (the raw error is reported beside, in the level dict).  The comparison
+    starts after ``settle`` = (seconds, why)
+    (:meth:`~ipmc_sensor_ros.estimation.deflection.DeflectionEstimator.settling`) when the
+    record is long enough, else covers the whole record; the measurement is delayed by
+    ``delay_s`` (the estimate of a model with a time delay lags by it).
     Returns (nrmse, seconds used, which part was used, the level error that the NRMSE leaves
     out: :func:`~ipmc_sensor_ros.workbench.metrics.level_error`).
     """
-    from ..estimation.deflection import leak_transient_s
     from ..workbench.metrics import level_error
 
     t = np.asarray(time_s, float)
-    if settle is None:
-        settle = (leak_transient_s(leak_corner_hz), 'leak transient')
     sel = t >= t[0] + settle[0] + delay_s
     if np.count_nonzero(sel) >= 10:
         what = f'after the first {fmt_time_s(settle[0])} s: {settle[1]}'
@@ -211,9 +204,12 @@ WRITE_CHUNK_ROWS = 65_536
 
 
 def _write_estimate(path: Path, data, values: dict, model_text: str, params, resets: int,
-                    t, current, w, measured) -> None:
+                    t, current, w, measured, std=None, smoothed: bool = False) -> None:
     cols = ['time_s', 'current_A', 'deflection_estimate_m']
     arrays = [t, current, w]
+    if std is not None:
+        cols.append('deflection_estimate_std_m')
+        arrays.append(std)
     if measured is not None:
         cols.append('deflection_m')
         arrays.append(measured)
@@ -228,6 +224,7 @@ def _write_estimate(path: Path, data, values: dict, model_text: str, params, res
         f'# model: {model_text}',
         f"# params: {params or 'defaults of the estimator node'}",
         f'# resets: {resets}',
+        f"# estimate: {'smoothed (fixed-interval, every sample sees the whole record)' if smoothed else 'causal (the live filter, as the node publishes it)'}",
         '# deflection_estimate_m: the estimate; '
         'deflection_m: the measured deflection of the input',
     ]
@@ -258,7 +255,7 @@ def read_estimate(path) -> dict[str, np.ndarray]:
 
 def _cmd_estimate(args) -> int:
     """Offline estimation with the node's code path and parameters file."""
-    from ..estimation.stream import estimate_record, validate_block
+    from ..estimation.stream import estimate_record, smooth_record, validate_block
     from ..interface import specs as config
     from ..workbench.io import TimeSeries, write_bag
 
@@ -284,11 +281,18 @@ def _cmd_estimate(args) -> int:
         with Progress(
             f'estimating {data.current_a.size} samples of {src} with {model_text} '
             f"(order {estimator.reduction_order}, fs {float(values['sample_rate_hz']):g} Hz, "
-            f'{estimator.estimator} estimator, leak {estimator.inverse.leak_corner_hz:g} Hz)'
+            f"{estimator.estimator} estimator, {'causal' if args.causal else 'smoothed'})"
         ) as prog:
             prog.step('running')
+            fresh = estimator.rebuilt()
             t_out, w, stream = estimate_record(estimator, data.time_s, current,
                                                max_gap_s=float(values['max_gap_s']), source=src)
+            std = estimator.last_std_m if t_out.size == estimator.last_std_m.size else None
+            if not args.causal and stream.kept.any():
+                prog.step('smoothing')
+                t_out, w, std = smooth_record(fresh, np.asarray(data.time_s)[stream.kept],
+                                              current[stream.kept],
+                                              max_gap_s=float(values['max_gap_s']))
         resets = stream.counters['resets']
         if not stream.kept.any():
             raise ParameterError(f'{src}: no sample passed the stream rules '
@@ -311,7 +315,7 @@ def _cmd_estimate(args) -> int:
         else:
             out = out_dir / f'{stem}.estimate.csv'
             _write_estimate(out, data, values, model_text, args.params, resets, t_out, current, w,
-                            measured)
+                            measured, std, smoothed=not args.causal)
         row = {'source': src, 'out': str(out), 'samples': int(t_out.size), 'resets': resets}
         msg = f'{src}: {t_out.size} estimates -> {out}'
         if resets:
@@ -320,11 +324,8 @@ def _cmd_estimate(args) -> int:
         if measured is not None:
             # the Kalman knows when it learned the level; with resets that refers to its last
             # segment only, and the leak rule is used
-            settle = (estimator.settling()
-                      if estimator.estimator == 'kalman' and not resets else None)
             err, used, what, level = estimate_accuracy(
-                t_out, w, measured, estimator.inverse.leak_corner_hz, estimator.delay_s,
-                settle=settle
+                t_out, w, measured, estimator.delay_s, settle=estimator.settling()
             )
             row['nrmse'] = err
             row.update(level)
@@ -435,6 +436,9 @@ def add_parsers(sub, formatter) -> None:
         default='timeseries',
         help='output format: ipmc-estimate/1 text (estimate and measured columns) or bags',
     )
+    p.add_argument('--causal', action='store_true',
+                   help="the live filter's output (what the node publishes, sample by sample); "
+                        'default: the smoothed estimate (every sample sees the whole record)')
     p.add_argument(
         '--storage', choices=('sqlite3', 'mcap'), default='sqlite3', help='output bag storage'
     )

@@ -38,7 +38,8 @@ from ..errors import DataError
 from .deflection import DeflectionEstimator
 
 __all__ = ['StreamEstimator', 'validate_block', 'COUNTER_NAMES', 'MAX_ABS_CURRENT_A',
-           'MAX_BLOCK_SAMPLES', 'MAX_STAMP_S', 'PERIOD_TOLERANCE', 'estimate_record']
+           'MAX_BLOCK_SAMPLES', 'MAX_STAMP_S', 'PERIOD_TOLERANCE', 'estimate_record',
+           'smooth_record']
 
 #: Largest block accepted by default (samples).
 MAX_BLOCK_SAMPLES = 1_000_000
@@ -399,3 +400,25 @@ def estimate_record(estimator: DeflectionEstimator, time_s, current_a, *, max_ga
                              max_block_samples=max(block_samples, 1), source=source)
     t, w, stream.kept = stream.run_record(time_s, current_a, block_samples=block_samples)
     return t, w, stream
+
+
+def smooth_record(estimator: DeflectionEstimator, time_s, current_a, max_gap_s: float = 0.1):
+    """
+    Offline smoothed estimate of the samples a stream kept: (times, deflection, std).
+
+    The record is cut where the live stream would reset (time stepping back, or a gap longer
+    than ``max_gap_s``); each piece is smoothed from a fresh start
+    (:meth:`DeflectionEstimator.smooth`), its missing samples bridged (``steps`` from the
+    stamps at ``estimator.sample_rate_hz``).
+    """
+    t = np.asarray(time_s, float)
+    i = np.asarray(current_a, float)
+    dt = np.diff(t)
+    cuts = np.flatnonzero(~((dt > 0.0) & (dt <= max_gap_s))) + 1
+    steps = np.ones(t.size, dtype=np.int64)
+    steps[1:] = np.maximum(1, np.rint(dt * estimator.sample_rate_hz)).astype(np.int64)
+    out = [estimator.smooth(t[a:b], i[a:b], steps[a:b])
+           for a, b in zip([0, *cuts], [*cuts, t.size]) if b > a]
+    if not out:
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    return tuple(np.concatenate(p) for p in zip(*out))

@@ -19,8 +19,8 @@ from typing import Any, Iterable, Mapping, Sequence
 
 from ..errors import ParameterError
 from ..estimation.deflection import ESTIMATORS, DeflectionEstimator
+from ..estimation.config import CONFIG_FIELDS, SETTINGS, EstimatorConfig
 from ..estimation.inverse import DEFAULT_LEAK_CORNER_HZ
-from ..estimation.kalman import DEFAULT_CURRENT_NOISE_A, KALMAN_LEAK_CORNER_HZ
 from ..estimation.stream import MAX_BLOCK_SAMPLES
 from ..physics.effects import load_plugins  # noqa: F401 (re-exported for the node)
 from ..physics.model import BASES, SensorModel
@@ -140,22 +140,20 @@ ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
     Spec('sample_rate_hz', 1000.0, float, 'sample rate of the current the filter is designed '
          'for, Hz; blocks whose median sample period differs by more than 1 % are rejected',
          low=1.0, high=1e6, read_only=True),
-    Spec('estimator', 'kalman', str, "'leaky': the leaky inverse of the reduced model; "
-         "'kalman': offset-aware Kalman filter with a rest detector (learns the DAQ offset, "
-         'holds the deflection at rest, publishes its standard deviation)',
-         choices=ESTIMATORS, read_only=True),
-    Spec('leak_corner_hz', 0.0, float, 'leak corner f_c, Hz (time constant 1/(2 pi f_c) of the '
-         f"initial-condition and held-step decay); 0 = the estimator's default "
-         f'({DEFAULT_LEAK_CORNER_HZ:g} Hz leaky, {KALMAN_LEAK_CORNER_HZ:g} Hz kalman)',
-         low=0.0, high=1e4),
+    Spec('estimator', 'kalman', str, "'kalman': the state-space Kalman filter (sensor, motion "
+         'about a working point, current offset and drift, mains lines; rest as a '
+         "measurement; publishes its standard deviation); 'leaky': the leaky inverse of the "
+         'reduced model, a simple baseline without uncertainty', choices=ESTIMATORS,
+         read_only=True),
+    Spec('leak_corner_hz', 0.0, float, "estimator 'leaky' only: leak corner f_c, Hz (time "
+         'constant 1/(2 pi f_c) of the initial-condition and held-step decay); 0 = '
+         f'{DEFAULT_LEAK_CORNER_HZ:g} Hz', low=0.0, high=1e4),
     Spec('offset_corner_hz', 0.0, float, "estimator 'leaky' only: corner of the current-offset "
          'tracker, Hz (0 = off)', low=0.0, high=1e4),
-    Spec('current_noise_a', DEFAULT_CURRENT_NOISE_A, float, "estimator 'kalman': white-noise "
-         'RMS of the DAQ current per sample, A (the filter measures it at rest and never '
-         'assumes less)', low=1e-15, high=1e-3),
-    Spec('mains_hz', 0, int, 'notch the mains line and its harmonics from the current before '
-         'the filter: 0 (off), 50 or 60 Hz; a line found while off is reported',
-         low=0, high=60, choices=(0, 50, 60)),
+    Spec('mains_hz', 'auto', str, "mains hum: 'auto' measures a line near 50 or 60 Hz in the "
+         "data and models it (line states at the measured frequency); '50' or '60' measures "
+         "near that one; '0' = no hum model (the leaky baseline notches '50'/'60' and ignores "
+         "'auto')", choices=('auto', '0', '50', '60')),
     Spec('frame_id', 'ipmc_clamp', str, 'frame of the deflection points: origin at the '
          'clamp, x along the beam to the tip, z in the bending direction',
          pattern=FRAME_ID_PATTERN, max_length=128),
@@ -165,6 +163,12 @@ ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
          "'last_of_block' or 'none'", choices=PUBLISH_POINTS),
     Spec('max_block_samples', 100_000, int, 'largest accepted input block, samples',
          low=1, high=MAX_BLOCK_SAMPLES, read_only=True),
+) + tuple(
+    # every setting of the Kalman estimator, from its one table (estimation/config.py)
+    Spec(st.name, st.default, type(st.default),
+         f"estimator 'kalman': {st.text}" + (f', {st.unit}' if st.unit else ''),
+         low=st.low, high=st.high)
+    for st in SETTINGS
 ) + QOS_SPECS + DIAGNOSTICS_SPECS
 
 #: Largest sensor array one node handles.
@@ -186,8 +190,8 @@ ESTIMATOR_SPECS = ESTIMATOR_SPECS + ARRAY_SPECS
 MODEL_KEYS = GEOMETRY_NAMES + MATERIAL_NAMES + ('model', 'effects', 'model_file',
                                                 'reduction_order', 'band_low_hz', 'band_high_hz')
 #: Parameters whose change needs a new filter on the same reduction.
-FILTER_KEYS = ('sample_rate_hz', 'leak_corner_hz', 'offset_corner_hz', 'estimator', 'mains_hz',
-               'current_noise_a')
+FILTER_KEYS = ('sample_rate_hz', 'leak_corner_hz', 'offset_corner_hz', 'estimator',
+               'mains_hz') + CONFIG_FIELDS
 
 
 def model_key(values: Mapping[str, Any]) -> tuple:
@@ -292,13 +296,13 @@ def build_estimator(
                                  f'({band[1]}) must satisfy low < high')
         offset = float(values['offset_corner_hz'])
         leak = float(values['leak_corner_hz'])
+        config = EstimatorConfig(**{name: values[name] for name in CONFIG_FIELDS})
         return DeflectionEstimator(model, float(values['sample_rate_hz']),
                                    reduction_order=int(values['reduction_order']), band_hz=band,
                                    leak_corner_hz=leak if leak > 0.0 else None,
                                    offset_corner_hz=offset if offset > 0.0 else None,
                                    reduced=reduced, estimator=values['estimator'],
-                                   mains_hz=int(values['mains_hz']),
-                                   current_noise_a=float(values['current_noise_a']))
+                                   mains_hz=values['mains_hz'], config=config)
     except ParameterError:
         raise
     except Exception as exc:  # numerics of an extreme but in-range combination

@@ -32,7 +32,7 @@ from std_msgs.msg import Float64MultiArray, String
 
 from ..interface import specs as C
 from ..estimation.deflection import DeflectionEstimator
-from ..estimation.inverse import InverseEstimator
+from ..estimation.core import EstimatorCore
 from ..estimation.array import ArrayStream, check_array_estimators
 from ..estimation.stream import COUNTER_NAMES, StreamEstimator
 from ..errors import DataError, IpmcError
@@ -162,7 +162,7 @@ class EstimatorNode(Node):
         r = estimator.reduced
         return (f'ready: {estimator.model.describe()} model, order {r.order} reduction '
                 f'over {r.band_hz[0]}-{r.band_hz[1]} Hz, fs = {estimator.sample_rate_hz} Hz, '
-                f'leak corner {estimator.inverse.leak_corner_hz} Hz; '
+                f'{estimator.estimator} estimator, mains {estimator.mains_hz}; '
                 f"listening on {self.resolve_topic_name('current')}"
                 + (f' ({self._channels} channels)' if self._array is not None else ''))
 
@@ -214,10 +214,10 @@ class EstimatorNode(Node):
         return self._stream
 
     @property
-    def estimator(self) -> InverseEstimator:
-        """Return the discrete inverse filter currently in use (replaced on parameter changes)."""
+    def estimator(self) -> EstimatorCore:
+        """Return the estimator core currently in use (replaced on parameter changes)."""
         self.settle()
-        return self._stream.estimator.inverse
+        return self._stream.estimator.core
 
     @property
     def deflection_estimator(self) -> DeflectionEstimator:
@@ -276,7 +276,7 @@ class EstimatorNode(Node):
             if out is not None:
                 self._diagnostics.observe(block.values)
                 t, w = out
-                std = np.full(t.size, self._stream.estimator.std_m)
+                std = self._stream.estimator.last_std_m
                 self._publish(self._packer.pack(t, w, std), t, w, t.size)
 
     def _feed_one(self, time_s: float, current_a: float) -> bool:

@@ -1,0 +1,68 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+The rest test: is the sensor still over the last ``rest_window_s``?
+
+A still sensor's current is its offset, the mains lines and white noise (H(0) = 0: a held
+deflection gives no current).  Over the window's N samples of r = i - lines (the lines as
+the filter predicts them), two chi-square tests at the level ``rest_false_alarm`` decide:
+
+* **spread**: sum (r - mean r - lines)^2 / R < chi2_{N-1-2K}: no motion current beyond the
+  noise R, which the filter measures (:mod:`.filter`), once the window's own least-squares
+  fit of the K modelled mains lines is removed (a hum the filter has not learned yet does not
+  hide a rest; at rest the filter then learns it within a window);
+* **level**: (mean r - b)^2 / (R/N + P_b) < chi2_1: the window's mean agrees with the
+  filter's offset b within its own uncertainty P_b (so an offset not yet learned does not
+  hide a rest, and a slow deflection ramp, a steady current the spread cannot see, is
+  motion).
+
+When both pass, the filter applies the zero-velocity pseudo-measurements (as zero-velocity
+updates in foot-mounted inertial navigation): the tip velocity and the motion's current are
+zero within ``rest_velocity_m_s``.  The test runs on every sample; a window that fails ends
+the rest at once.  Motion whose current stays within the noise over a whole window is taken
+for rest; its deflection is then below ``R0^-1 sqrt(R/N)`` per second (R0 = R_n(0)).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from scipy.stats import chi2
+
+__all__ = ['RestTest']
+
+
+@dataclass(frozen=True)
+class RestTest:
+    """Thresholds of the two tests for a window of ``n`` samples at ``false_alarm``."""
+
+    n: int
+    spread_limit: float
+    level_limit: float
+
+    @classmethod
+    def design(cls, window_s: float, sample_rate_hz: float, false_alarm: float,
+               lines: int = 0) -> 'RestTest':
+        """Thresholds for a window of ``window_s`` with ``lines`` mains lines fitted in it."""
+        n = max(8 + 2 * lines, int(round(window_s * sample_rate_hz)))
+        return cls(n, float(chi2.isf(false_alarm, n - 1 - 2 * lines)),
+                   float(chi2.isf(false_alarm, 1)))
+
+    def still(self, total: float, total_sq: float, line_energy: float, offset_a: float,
+              offset_var_a2: float, noise_var_a2: float) -> bool:
+        """
+        Return True if a full window is consistent with a still sensor.
+
+        Parameters
+        ----------
+        total, total_sq : sum of r and of r^2 over the window, A and A^2.
+        line_energy : energy of the window's least-squares mains lines, A^2.
+        offset_a, offset_var_a2 : the filter's offset and its variance.
+        noise_var_a2 : the measured white-noise variance per sample, A^2.
+
+        """
+        n = self.n
+        mean = total / n
+        spread = max(total_sq - total * mean - line_energy, 0.0)
+        if spread > self.spread_limit * noise_var_a2:
+            return False
+        d = mean - offset_a
+        return d * d <= self.level_limit * (noise_var_a2 / n + offset_var_a2)
