@@ -235,9 +235,10 @@ def test_node_array_parameter_change_reaches_every_channel(array_node):
     a = array_node(2)
     t = np.arange(100) / FS
     a.send(t, _currents(100, 2))
-    result = a.node.set_parameters([Parameter('leak_corner_hz', value=0.05)])[0]
+    result = a.node.set_parameters([Parameter('motion_corner_hz', value=0.5)])[0]
     assert result.successful, result.reason
-    assert [ch.estimator.inverse.leak_corner_hz for ch in a.node.array.channels] == [0.05, 0.05]
+    assert [ch.estimator.config.motion_corner_hz
+            for ch in a.node.array.channels] == [0.5, 0.5]
     # a model change is rebuilt off the data path, then swapped into every channel
     result = a.node.set_parameters([Parameter('length_m', value=0.03)])[0]
     assert result.successful, result.reason

@@ -72,7 +72,7 @@ SETTINGS = (
             'less than 4 um in 4 s'),
     Setting('rest_window_s', 0.2, 's', 1e-3, 60.0,
             'window of the rest test: five periods of the slowest crank of the paper'),
-    Setting('rest_false_alarm', 1e-3, '', 1e-12, 0.5,
+    Setting('rest_false_alarm', 1e-6, '', 1e-15, 0.5,
             'probability that the rest test calls a still window moving (chi-square level)'),
 )
 

@@ -16,8 +16,8 @@ handles the model's other effects around the core, per block:
 * effects with an ``input_transform`` T (e.g. ``nonlinearity``) are undone on the core's
   output (``inverse_input_transform``).  The sensor cannot see the mean of T(w) (H(0) = 0)
   and the core centres its moving estimate on its working point, so the estimator adds back
-  m = <T(w) - w> while moving, averaged at the core's ``settling`` corner (frozen at rest,
-  where the core holds an absolute level);
+  m = <T(w) - w>, averaged while moving (``NONLINEAR_MEAN_CORNER_HZ``; the leaky core: at its
+  leak corner) and frozen at rest, where the core holds an absolute level;
 * a time-varying material (``hydration_drift``) is followed by rebuilding the core every
   ``update_s`` seconds of data time for the material at that time, each reduction
   warm-started from the previous one; the new core continues from the old one's state.
@@ -44,6 +44,10 @@ from .kalman import KalmanEstimator, parse_mains
 from .mains import MainsFilter, detect_lines
 
 __all__ = ['DeflectionEstimator', 'ESTIMATORS', 'leak_transient_s']
+
+#: Corner of the running mean of T(w) - w while the Kalman core moves, Hz (time constant 8 s):
+#: many periods of a 1 Hz crank, while a 0.2 s move to a hold shifts it by 2.5 % of its gap.
+NONLINEAR_MEAN_CORNER_HZ = 0.02
 
 
 def leak_transient_s(corner_hz: float) -> float:
@@ -123,7 +127,7 @@ class DeflectionEstimator:
         if self.estimator == 'kalman':
             given = [k for k, v in self._leaky_args.items() if v is not None]
             if given:
-                raise ParameterError(f'parameter(s) {given} apply to estimator \\'leaky\\' only '
+                raise ParameterError(f'parameter(s) {given} apply to estimator "leaky" only '
                                      '(the Kalman estimator learns the offset and holds levels '
                                      'itself)')
             return KalmanEstimator(reduced, sample_rate_hz, self.config, self.mains_hz)
@@ -247,7 +251,7 @@ class DeflectionEstimator:
         for eff, values in reversed(self._deflection_inv):
             w = np.asarray(eff.inverse_input_transform(w, self.model, values), dtype=float)
         gap = (w_prime - w)[~est.still]
-        corner = getattr(self.core, 'leak_corner_hz', self.config.motion_corner_hz)
+        corner = getattr(self.core, 'leak_corner_hz', NONLINEAR_MEAN_CORNER_HZ)
         a = float(np.exp(-2 * np.pi * corner / self.sample_rate_hz))
         if gap.size:
             avg, self._bias_zi = lfilter([1 - a], [1, -a], gap, zi=self._bias_zi)

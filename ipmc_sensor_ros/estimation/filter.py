@@ -97,16 +97,22 @@ class KalmanFilter:
     ----------
     model : StateSpaceModel
         The model (sensor, motion, offset, lines).
+    rest_lines_hz : sequence of float, optional
+        Lines the rest test fits in its window (default: the model's): a hum the model has no
+        states for yet must not hide a rest.
 
     """
 
-    def __init__(self, model: StateSpaceModel):
+    def __init__(self, model: StateSpaceModel, rest_lines_hz=None):
         self.model = model
         cfg = model.config
+        lines = tuple(model.lines_hz if rest_lines_hz is None or model.lines_hz
+                      else rest_lines_hz)
+        self.rest_lines_hz = lines
         self.rest = RestTest.design(cfg.rest_window_s, model.sample_rate_hz,
-                                    cfg.rest_false_alarm, len(model.lines_hz))
+                                    cfg.rest_false_alarm, len(lines))
         # one step of each line's phasor e^{-i W_k / fs} (sliding DFT of the rest window)
-        self._rot = np.exp(-2j * np.pi * np.asarray(model.lines_hz) / model.sample_rate_hz)
+        self._rot = np.exp(-2j * np.pi * np.asarray(lines) / model.sample_rate_hz)
         self._alpha = 1.0 / (NOISE_AVERAGE_S * model.sample_rate_hz)
         s = model.scale
         self._anchor = np.zeros(model.size)
@@ -120,7 +126,7 @@ class KalmanFilter:
 
     def initial_state(self) -> FilterState:
         x, P = self.model.prior()
-        k = len(self.model.lines_hz)
+        k = len(self.rest_lines_hz)
         return FilterState(x, P, self.model.config.current_noise_a ** 2,
                            np.zeros(self.rest.n), line_sums=np.zeros(k, complex),
                            phase=np.ones(k, complex), phases=np.ones((self.rest.n, k), complex))
@@ -223,19 +229,19 @@ class KalmanFilter:
         n = self.rest.n
         window, pos = st.window, st.window_pos
         phase = st.phase * self._rot ** steps if st.samples else st.phase
-        if m.lines_hz:
-            r = y - float(x[m.il::2] @ s[m.il::2])
+        r = y - float(x[m.il::2] @ s[m.il::2]) if m.lines_hz else y
+        if self._rot.size:
             sums = st.line_sums + r * phase - window[pos] * st.phases[pos]
             st.phases[pos] = phase
         else:
-            r, sums = y, st.line_sums
+            sums = st.line_sums
         window[pos] = r
         count = min(st.window_count + 1, n)
         state = (window, count, (pos + 1) % n, sums, phase, st.phases)
         if count < n:
             return False, state
         total = float(window.sum())
-        energy = 2.0 / n * float(np.sum(np.abs(sums) ** 2)) if m.lines_hz else 0.0
+        energy = 2.0 / n * float(np.sum(np.abs(sums) ** 2)) if self._rot.size else 0.0
         b, pb = x[m.ib] * s[m.ib], st.P[m.ib, m.ib] * s[m.ib] ** 2
         return self.rest.still(total, float(window @ window), energy, b, pb,
                                st.noise_var_a2), state

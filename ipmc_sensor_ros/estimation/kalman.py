@@ -30,8 +30,10 @@ from .statespace import StateSpaceModel
 __all__ = ['KalmanEstimator', 'MAINS_CHOICES', 'parse_mains', 'LINE_CHECK_S']
 
 #: Data between two measurements of the mains line, s (also the stretch measured): 2 s
-#: resolves 0.5 Hz and, zero-padded, finds the line to ~0.01 Hz at 3 % hum.
+#: resolves 0.5 Hz and, zero-padded, finds the line to ~0.01 Hz at 3 % hum.  The first
+#: measurement is made after ``LINE_FIRST_S`` (0.5 s: to ~0.05 Hz), so hum is modelled early.
 LINE_CHECK_S = 2.0
+LINE_FIRST_S = 0.5
 #: A measured line this far from the modelled one retunes the model, Hz: the line states'
 #: random walk follows a smaller error (the phasor turns by 2 pi 0.02 rad/s).
 LINE_RETUNE_HZ = 0.02
@@ -78,10 +80,31 @@ class KalmanEstimator:
         self.config = config or EstimatorConfig()
         self.mains_hz = parse_mains(mains_hz)
         fs = float(sample_rate_hz)
-        nominal_line = self.mains_hz if self.mains_hz not in ('auto', 0.0) else 0.0
-        self._filter = KalmanFilter(StateSpaceModel(reduced, self.config, fs, nominal_line))
+        # until measured: a line at each nominal frequency (hum at the start must not be
+        # taken for an offset), then the measured one
+        nominal_line = () if self.mains_hz == 0.0 else self._nominal()
         self._check_n = max(64, int(round(LINE_CHECK_S * fs)))
+        self._first_n = max(64, int(round(LINE_FIRST_S * fs)))
+        self._filter = self._new_filter(StateSpaceModel(reduced, self.config, fs, nominal_line))
         self.reset()
+
+    def _new_filter(self, model: StateSpaceModel) -> KalmanFilter:
+        """The filter for ``model``; its rest test fits the nominal lines until one is modelled."""
+        from .statespace import line_frequencies_hz
+
+        nominal = () if self.mains_hz == 0.0 else self._nominal()
+        rest_lines = tuple(f for f0 in nominal for f in line_frequencies_hz(
+            f0, model.sample_rate_hz, self.config.line_harmonics))
+        return KalmanFilter(model, rest_lines)
+
+    def _nominal(self) -> tuple:
+        return NOMINAL_LINES_HZ if self.mains_hz == 'auto' else (self.mains_hz,)
+
+    def _next_check(self, samples: int) -> int:
+        """The sample count of the next line measurement after ``samples``."""
+        if samples < self._first_n:
+            return self._first_n
+        return self._first_n + ((samples - self._first_n) // self._check_n + 1) * self._check_n
 
     # -- properties ---------------------------------------------------------------------
     @property
@@ -110,12 +133,13 @@ class KalmanEstimator:
         a = 0
         while a < y.size:
             # cut where the line check falls due (a fixed sample count, however cut)
-            b = min(y.size, a + self._check_n - self._state.samples % self._check_n)
+            due = self._next_check(self._state.samples)
+            b = min(y.size, a + due - self._state.samples)
             self._state, w, s, still = self._filter.run(self._state, y[a:b], st[a:b])
             self._remember(y[a:b], still)
             parts.append((w, s, still))
             a = b
-            if self._state.samples % self._check_n == 0:
+            if self._state.samples == due:
                 self._check_line()
         if not parts:
             return Estimate(np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool))
@@ -138,13 +162,18 @@ class KalmanEstimator:
     def _check_line(self) -> None:
         if self.mains_hz == 0.0:
             return
-        nominal = NOMINAL_LINES_HZ if self.mains_hz == 'auto' else (self.mains_hz,)
-        f_line, _ = measure_line(self._recent, self.sample_rate_hz, nominal,
+        seen = min(self._state.samples, self._check_n)
+        recent = np.roll(self._recent, -(self._state.samples % self._check_n))[-seen:]
+        f_line, _ = measure_line(recent, self.sample_rate_hz, self._nominal(),
                                  self.config.line_harmonics)
-        if not f_line or abs(f_line - self.line_hz) <= LINE_RETUNE_HZ:
+        old = self.model.fundamentals_hz
+        if f_line and len(old) == 1 and abs(f_line - old[0]) <= LINE_RETUNE_HZ:
             return
+        if not f_line and (len(old) < 2 or self._state.samples > self._first_n):
+            return        # no line: keep what is modelled (the nominal pair only at the start)
+        f_line = f_line or ()
         model = StateSpaceModel(self.reduced, self.config, self.sample_rate_hz, f_line)
-        filt = KalmanFilter(model)
+        filt = self._new_filter(model)
         self._state = carry_state(self._filter, filt, self._state)
         self._filter = filt
 
@@ -159,29 +188,28 @@ class KalmanEstimator:
         y = np.asarray(current_a, dtype=float)
         line = self.model.line_hz
         if self.mains_hz != 0.0:
-            nominal = NOMINAL_LINES_HZ if self.mains_hz == 'auto' else (self.mains_hz,)
-            line = measure_line(y, self.sample_rate_hz, nominal, self.config.line_harmonics)[0]
-            line = line or (self.mains_hz if self.mains_hz != 'auto' else 0.0)
-        filt = KalmanFilter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,
-                                            line))
+                line = measure_line(y, self.sample_rate_hz, self._nominal(),
+                                self.config.line_harmonics)[0]
+        filt = self._new_filter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,
+                                                line))
         w, s, _ = smooth(filt, filt.initial_state(), y, steps)
         return Estimate(w, s, np.zeros(y.size, dtype=bool))
 
     # -- state ------------------------------------------------------------------------------
     def get_state(self) -> dict:
-        return {'filter': self._state.copy(), 'line_hz': self.line_hz,
+        return {'filter': self._state.copy(), 'line_hz': self.model.fundamentals_hz,
                 'recent': self._recent.copy(), 'first_rest_n': self._first_rest_n}
 
     def set_state(self, state: dict) -> None:
         try:
             fs: FilterState = state['filter']
-            line = float(state['line_hz'])
+            line = tuple(float(f) for f in state['line_hz'])
             recent = np.asarray(state['recent'], dtype=float)
         except (KeyError, TypeError, ValueError):
             raise ParameterError('not a state of this Kalman estimator') from None
-        if line != self.line_hz:
-            self._filter = KalmanFilter(StateSpaceModel(self.reduced, self.config,
-                                                        self.sample_rate_hz, line))
+        if line != self.model.fundamentals_hz:
+            self._filter = self._new_filter(StateSpaceModel(self.reduced, self.config,
+                                                            self.sample_rate_hz, line))
         if fs.x.shape != (self.model.size,) or recent.shape != self._recent.shape:
             raise ParameterError('state was saved from a different estimator design')
         self._state = fs.copy()
@@ -202,8 +230,9 @@ class KalmanEstimator:
         if changes:
             raise ParameterError(f'cannot rebuild the Kalman estimator with {sorted(changes)}')
         new = KalmanEstimator(reduced or self.reduced, fs, config, mains)
-        if new.mains_hz == self.mains_hz and self.line_hz:
-            new._filter = KalmanFilter(StateSpaceModel(new.reduced, config, fs, self.line_hz))
+        if new.mains_hz == self.mains_hz:
+            new._filter = new._new_filter(StateSpaceModel(new.reduced, config, fs,
+                                                          self.model.fundamentals_hz))
         new._state = carry_state(self._filter, new._filter, self._state)
         new._first_rest_n = self._first_rest_n
         return new
@@ -240,10 +269,10 @@ def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> Fil
     Map a filter state onto another model of the same sensor family.
 
     States with a physical meaning in both (deflection, velocity, acceleration, working
-    point, offset, drift, and the line states when both models have the same number) are
-    carried with their covariance; the sensor's charge states are set to their steady value
-    for the current velocity (x_R = -u / p_i) with their prior covariance; new line states
-    start from their prior.
+    point, offset, drift, and each line state whose frequency is within 1 Hz of one of the old
+    model) are carried with their covariance; the sensor's charge states are set to their
+    steady value for the current velocity (x_R = -u / p_i) with their prior covariance; new
+    line states start from their prior.
     """
     mo, mn = old.model, new.model
     x_old = state.x * mo.scale
@@ -252,9 +281,11 @@ def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> Fil
     P_old = state.P * np.outer(mo.scale, mo.scale)
     src = list(range(mo.iw, mo.il))
     dst = list(range(mn.iw, mn.il))
-    if len(mo.lines_hz) == len(mn.lines_hz):
-        src += list(range(mo.il, mo.size))
-        dst += list(range(mn.il, mn.size))
+    for k, f in enumerate(mn.lines_hz):
+        near = [j for j, g in enumerate(mo.lines_hz) if abs(g - f) < 1.0]
+        if near:
+            src += [mo.il + 2 * near[0], mo.il + 2 * near[0] + 1]
+            dst += [mn.il + 2 * k, mn.il + 2 * k + 1]
     x[dst] = x_old[src]
     P[np.ix_(dst, dst)] = P_old[np.ix_(src, src)]
     poles = np.diag(mn.sensor[0])

@@ -6,7 +6,8 @@ The estimator models the hum as states (:mod:`.statespace`) at a line frequency 
 from the data (``mains_hz: auto``: near 50 or 60 Hz; ``50``/``60``: near that one).  Grids
 run up to +-0.5 Hz off nominal, so the fundamental is measured, not assumed:
 
-* periodogram of the stretch (Hann window, zero-padded to ``PAD`` x its length);
+* periodogram of the stretch (Hann window, zero-padded to ``PAD`` x its length and to a
+  grid of at most 0.02 Hz);
 * for each candidate f within +-``SEARCH_HZ`` of a nominal, the summed power at k f,
   k = 1..3 below 0.45 fs (the harmonics move together);
 * the best candidate's fundamental by a parabolic vertex of the summed power;
@@ -43,7 +44,8 @@ def measure_line(current_a, sample_rate_hz: float, nominal=NOMINAL_LINES_HZ,
     if x.size < 64 or not np.all(np.isfinite(x)):
         return 0.0, 0.0
     x = (x - x.mean()) * np.hanning(x.size)
-    n_fft = 1 << int(math.ceil(math.log2(PAD * x.size)))
+    # grid at most 0.02 Hz (the parabola's vertex then errs far below the grid)
+    n_fft = 1 << int(math.ceil(math.log2(max(PAD * x.size, fs / 0.02))))
     power = np.abs(np.fft.rfft(x, n_fft)) ** 2
     df = fs / n_fft
     best = (0.0, -1.0)
@@ -53,7 +55,7 @@ def measure_line(current_a, sample_rate_hz: float, nominal=NOMINAL_LINES_HZ,
             continue
         cand = np.arange(int((f0 - SEARCH_HZ) / df), int((f0 + SEARCH_HZ) / df) + 1)
         summed = sum(power[np.minimum(k * cand, power.size - 1)] for k in ks)
-        j = int(np.argmax(summed))
+        j = int(np.argmax(summed[1:-1])) + 1     # the edges only serve the vertex
         if summed[j] > best[1]:
             best = (_vertex(cand, summed, j) * df, float(summed[j]))
     f_line = best[0]

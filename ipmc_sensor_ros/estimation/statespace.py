@@ -111,13 +111,14 @@ class StateSpaceModel:
         Motion, offset and line priors.
     sample_rate_hz : float
         Nominal sample rate, Hz.
-    line_hz : float
-        Mains fundamental in the model, Hz (0: no line states).
+    line_hz : float or tuple of float
+        Mains fundamental(s) in the model, Hz (0 or (): no line states; several while the line
+        is not yet measured, e.g. (50, 60)).
 
     """
 
     def __init__(self, reduced: ReducedModel, config: EstimatorConfig, sample_rate_hz: float,
-                 line_hz: float = 0.0):
+                 line_hz=0.0):
         fs = float(sample_rate_hz)
         if not (math.isfinite(fs) and fs > 0):
             raise ParameterError(f"parameter 'sample_rate_hz' must be > 0 Hz, got "
@@ -127,8 +128,10 @@ class StateSpaceModel:
                 f"parameter 'motion_bandwidth_hz' = {config.motion_bandwidth_hz:g} Hz must be "
                 f'below the Nyquist frequency {fs / 2:g} Hz')
         self.reduced, self.config, self.sample_rate_hz = reduced, config, fs
-        self.line_hz = float(line_hz)
-        self.lines_hz = line_frequencies_hz(self.line_hz, fs, config.line_harmonics)
+        self.fundamentals_hz = tuple(float(f) for f in np.atleast_1d(line_hz) if f)
+        self.line_hz = self.fundamentals_hz[0] if len(self.fundamentals_hz) == 1 else 0.0
+        self.lines_hz = tuple(f for f0 in self.fundamentals_hz
+                              for f in line_frequencies_hz(f0, fs, config.line_harmonics))
         self.sensor = modal_realisation(reduced)
         n = self.n_sensor = reduced.order
         self.iw, self.iu, self.ia, self.ih, self.ib = n, n + 1, n + 2, n + 3, n + 4
