@@ -73,7 +73,11 @@ class Record:
     was sampled (``sample_time_s``, s since the record start), ``offset_a`` and ``hum_a``
     contained in ``current_a``.  ``grid_current_a`` / ``grid_deflection_m``: every sample of
     the nominal grid n / ``sample_rate_hz`` (no drops, no jitter) with offset and hum removed
-    (clean current + the same white noise + quantisation error): the bounds' input.
+    (clean current + the same white noise + quantisation error): the bounds' input;
+    ``grid_pre_current_a`` / ``grid_post_current_a`` the same for grid samples before and
+    after the record (the estimator does not see them): the causal bound starts before a
+    record whose motion went on before it (``stationary``), the non-causal one sees past its
+    end.
     ``noise_std_a`` is the white-noise RMS, ``lsb_a`` the quantisation step (0: none).
     ``model`` / ``effects``: the sensor model the user would have, as text for
     ``SensorModel.named(model, geometry, extra_effects=effects)``.
@@ -91,6 +95,8 @@ class Record:
     hum_a: np.ndarray
     grid_current_a: np.ndarray
     grid_deflection_m: np.ndarray
+    grid_pre_current_a: np.ndarray
+    grid_post_current_a: np.ndarray
     noise_std_a: float
     lsb_a: float
     mains_hz: float
@@ -166,19 +172,47 @@ def _kept_rows(daq: Daq, n: int, rng) -> np.ndarray:
     return keep
 
 
+def _grid_current(sensor, motion, daq: Daq, parts: dict, lsb: float) -> np.ndarray:
+    """The bounds' input on the nominal grid: clean + noise + quantisation error."""
+    if not parts['sampled']:
+        return parts['measured'] - parts['offset'] - parts['hum']
+    nominal = parts['nominal']
+    clean = sensor_current(sensor, motion, nominal, daq.sample_rate_hz)
+    hum = _hum(daq, nominal, parts['hum_amp'])
+    total = clean + parts['offset'] + hum + parts['noise']
+    return _quantise(total, daq, lsb) - parts['offset'] - hum
+
+
+def _outside_current(sensor, motion, daq: Daq, t: np.ndarray, noise_std: float, lsb: float,
+                     offset_a: float, rng) -> np.ndarray:
+    """
+    The current at grid times ``t`` outside the record (clean + noise + quantisation error).
+
+    What the bounds' filters may see before and after the record (the estimator does not get
+    it).  Drawn after everything else, so the record does not depend on it.
+    """
+    if t.size == 0:
+        return np.zeros(0)
+    total = sensor_current(sensor, motion, t, daq.sample_rate_hz) + offset_a
+    total = total + (rng.normal(0.0, noise_std, t.size) if noise_std > 0 else 0.0)
+    return _quantise(total, daq, lsb) - offset_a
+
+
 def acquire(name: str, seed: int, sensor: Sensor, motion, duration_s: float, daq: Daq, rng, *,
-            stationary: bool = False, description: str = '', tags: tuple = ()) -> Record:
+            stationary: bool = False, description: str = '', tags: tuple = (),
+            pre_record_s: float = 0.0, post_record_s: float = 0.0) -> Record:
     """
     Sample the current of ``sensor`` under ``motion`` for ``duration_s`` through ``daq``.
 
     The clean current is :func:`~.sensor.sensor_current` (exact H2, FFT with pre-roll and
-    padding) at the instants the DAQ samples.
+    padding) at the instants the DAQ samples.  ``pre_record_s`` / ``post_record_s``: lengths
+    of ``grid_pre_current_a`` / ``grid_post_current_a`` kept for the bounds.
     """
     fs = daq.sample_rate_hz
     n = int(round(duration_s * fs))
     nominal = np.arange(n) / fs
-    jitter = rng.uniform(-daq.stamp_jitter, daq.stamp_jitter, n) / fs if daq.stamp_jitter \
-        else np.zeros(n)
+    jitter = (rng.uniform(-daq.stamp_jitter, daq.stamp_jitter, n) / fs if daq.stamp_jitter
+              else np.zeros(n))
     sampled = daq.jitter_kind == 'sampled' and daq.stamp_jitter > 0
     instants = nominal + jitter if sampled else nominal
     clean = sensor_current(sensor, motion, instants, fs)
@@ -191,21 +225,20 @@ def acquire(name: str, seed: int, sensor: Sensor, motion, duration_s: float, daq
     lsb = _lsb_a(daq, clean + offset + hum + noise)
     measured = _quantise(clean + offset + hum + noise, daq, lsb)
     keep = _kept_rows(daq, n, rng)
-    stamps = nominal + jitter
-    if sampled:
-        clean_grid = sensor_current(sensor, motion, nominal, fs)
-        hum_grid = _hum(daq, nominal, hum_amp)
-        grid_measured = _quantise(clean_grid + offset + hum_grid + noise, daq, lsb)
-        grid_current = grid_measured - offset - hum_grid
-        grid_deflection = motion(nominal)
-        deflection = motion(instants)
-    else:
-        grid_current = measured - offset - hum
-        grid_deflection = deflection = motion(nominal)
+    parts = dict(sampled=sampled, nominal=nominal, measured=measured, offset=offset, hum=hum,
+                 hum_amp=hum_amp, noise=noise)
+    grid_current = _grid_current(sensor, motion, daq, parts, lsb)
+    pre, post = (_outside_current(sensor, motion, daq, t, noise_std, lsb, float(offset[0]), rng)
+                 for t in (np.arange(-int(round(pre_record_s * fs)), 0) / fs,
+                           (n + np.arange(int(round(post_record_s * fs)))) / fs))
+    grid_deflection = motion(nominal)
+    deflection = motion(instants) if sampled else grid_deflection
     return Record(name=name, seed=seed, sensor=sensor, sample_rate_hz=fs,
-                  time_s=daq.time_origin_s + stamps[keep], current_a=measured[keep],
+                  time_s=daq.time_origin_s + (nominal + jitter)[keep], current_a=measured[keep],
                   deflection_m=deflection[keep], sample_time_s=instants[keep],
                   offset_a=offset[keep], hum_a=hum[keep], grid_current_a=grid_current,
-                  grid_deflection_m=grid_deflection, noise_std_a=noise_std, lsb_a=lsb,
-                  mains_hz=daq.mains_hz, time_origin_s=daq.time_origin_s,
-                  stationary=stationary, description=description, tags=tuple(tags))
+                  grid_deflection_m=grid_deflection, grid_pre_current_a=pre,
+                  grid_post_current_a=post,
+                  noise_std_a=noise_std, lsb_a=lsb, mains_hz=daq.mains_hz,
+                  time_origin_s=daq.time_origin_s, stationary=stationary,
+                  description=description, tags=tuple(tags))

@@ -44,7 +44,9 @@ class Scenario:
         sensor, motion, daq = self.make(rng)
         return acquire(self.name, int(seed), sensor, motion, self.duration_s, daq, rng,
                        stationary=self.stationary, description=self.description,
-                       tags=(self.tag,))
+                       tags=(self.tag,),
+                       pre_record_s=max(3 * self.duration_s, 60.0) if self.stationary else 0.0,
+                       post_record_s=min(self.duration_s, 60.0))
 
 
 def _hum(rng, nominal_hz: float, fraction: float, of: str = 'rms') -> dict:
