@@ -66,7 +66,7 @@ class Bounds:
 
 
 def evaluation_mask(time_s: np.ndarray, after_s: float) -> np.ndarray:
-    """Samples evaluated: from ``after_s`` seconds after the record start on."""
+    """Return the samples evaluated: from ``after_s`` seconds after the record start on."""
     return np.asarray(time_s) >= after_s
 
 

@@ -67,7 +67,7 @@ def test_noncausal_bound_is_not_above_the_causal_one(name):
 
 @pytest.mark.parametrize('name', QUICK)
 def test_causal_bound_beats_a_naive_leaky_integrator(name):
-    """w ~ (1/R0) * leaky integral of the clean current, leak 0.01/0.1/1 Hz, best of the three."""
+    """Naive: w = leaky integral of the clean current / R0, leak 0.01/0.1/1 Hz, best of three."""
     r = build(name, 0)
     fs = r.sample_rate_hz
     r0 = abs(frequency_response(r.sensor, [1e-4])[0]) / (2 * math.pi * 1e-4)   # H ~ s R0

@@ -1,7 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
 """
-The scenario library (bench/scenarios): its H2 against the package, its current against a
-direct convolution, its DAQ habits, its seeds, and its independence from the package.
+The scenario library (bench/scenarios).
+
+Its H2 against the package, its current against a direct convolution, its DAQ habits, its
+seeds, and its independence from the package.
 """
 import math
 import subprocess
@@ -46,10 +48,12 @@ def test_material_and_paper_samples_match_the_package_parameters():
 
 def _direct_current(sensor, motion, t, fs_fine=64000.0, span_s=1.0):
     """
-    Sum of the impulse response times the motion, at any instants: a check independent of
-    the generator's FFT (another grid, another length, the motion evaluated at t - tau for
-    the whole past, no padding).  The impulse response is the inverse FFT of H on a 64 kHz
-    grid over +-0.5 s (12 slowest time constants of the narrow sample: the tail is 6e-6).
+    Sum the impulse response times the motion, at any instants.
+
+    A check independent of the generator's FFT (another grid, another length, the motion
+    evaluated at t - tau for the whole past, no padding).  The impulse response is the inverse
+    FFT of H on a 64 kHz grid over +-0.5 s (12 slowest time constants of the narrow sample:
+    the tail is 6e-6).
     """
     n = int(span_s * fs_fine)
     dt = 1.0 / fs_fine

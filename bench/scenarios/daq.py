@@ -173,7 +173,7 @@ def _kept_rows(daq: Daq, n: int, rng) -> np.ndarray:
 
 
 def _grid_current(sensor, motion, daq: Daq, parts: dict, lsb: float) -> np.ndarray:
-    """The bounds' input on the nominal grid: clean + noise + quantisation error."""
+    """Return the bounds' input on the nominal grid: clean + noise + quantisation error."""
     if not parts['sampled']:
         return parts['measured'] - parts['offset'] - parts['hum']
     nominal = parts['nominal']
@@ -186,7 +186,7 @@ def _grid_current(sensor, motion, daq: Daq, parts: dict, lsb: float) -> np.ndarr
 def _outside_current(sensor, motion, daq: Daq, t: np.ndarray, noise_std: float, lsb: float,
                      offset_a: float, rng) -> np.ndarray:
     """
-    The current at grid times ``t`` outside the record (clean + noise + quantisation error).
+    Return the current at grid times ``t`` outside the record (clean + noise + quantisation).
 
     What the bounds' filters may see before and after the record (the estimator does not get
     it).  Drawn after everything else, so the record does not depend on it.

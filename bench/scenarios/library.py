@@ -57,7 +57,7 @@ def _hum(rng, nominal_hz: float, fraction: float, of: str = 'rms') -> dict:
 
 
 def _crank(rng, frequency_hz: float, from_rest: bool) -> Crank:
-    """The paper's rig: crank radius 1.8-2.2 mm (2 mm amplitude), rod 15-25 mm."""
+    """Draw the paper's rig: crank radius 1.8-2.2 mm (2 mm amplitude), rod 15-25 mm."""
     return Crank(frequency_hz, rng.uniform(1.8, 2.2) * MM, rng.uniform(15, 25) * MM,
                  phase_rad=rng.uniform(0, 2 * math.pi),
                  start_s=rng.uniform(0.2, 0.5) if from_rest else None,
@@ -86,7 +86,7 @@ def _sines(rng, n: int, lo_hz: float, hi_hz: float, lo_m: float, hi_m: float) ->
 
 def _path(rng, first_s: float, stop_s: float, gap_s: tuple, move_s: float,
           level_m: float) -> MinJerkPath:
-    """Holds of ``gap_s`` = (min, max) s joined by ``move_s`` moves to levels within +-level_m."""
+    """Draw holds of ``gap_s`` = (min, max) s joined by ``move_s`` moves to levels +-level_m."""
     starts, t = [], first_s
     while t + move_s < stop_s:
         starts.append(t)
@@ -245,7 +245,7 @@ def names() -> list[str]:
 
 
 def build(name: str, seed: int = 0) -> Record:
-    """The record of scenario ``name`` for ``seed``."""
+    """Return the record of scenario ``name`` for ``seed``."""
     try:
         scenario = SCENARIOS[name]
     except KeyError:

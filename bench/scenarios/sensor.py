@@ -81,7 +81,7 @@ class Sensor:
 
     @property
     def model_effects(self) -> str:
-        """What the user would add to ``h2``: ``SensorModel.named('h2', g, effects)``."""
+        """Return what the user would add to ``h2``: ``SensorModel.named('h2', g, effects)``."""
         if self.amplifier_corner_hz is None:
             return ''
         return f'amplifier_bandwidth(corner_hz={self.amplifier_corner_hz:g})'
