@@ -2,38 +2,46 @@
 """
 Physical-limit bounds for the deflection estimate of a record (no estimator code).
 
-What the best linear filter that knows the true deflection spectrum could do on the same
-record, on the record's nominal sample grid (no dropped rows, no jitter) with the offset and
-the hum removed (clean current + the record's white noise and quantisation error):
+What the best linear time-invariant filter that knows the true deflection spectrum could do
+on the same record: on its nominal sample grid (no dropped rows, no jitter), with the offset
+and the hum removed (clean current + the record's white noise and quantisation error); the
+noise is white, S_n = sigma^2 + lsb^2/12 per sample; H_k = H(j 2 pi f_k) is the exact sensor
+response (w band-limited: the DAQ samples the continuous current).
 
-**Causal Wiener bound.**  The oracle spectrum S_w is the periodogram of the record's true
-deflection (zero-padded to ``pad`` times its length: the transform of its biased
-autocorrelation, a valid spectrum), smoothed over +-``smooth_bins`` bins; the noise is white,
-S_n = sigma^2 + lsb^2/12 per sample.  With the sampled sensor response H_k = H(j 2 pi f_k)
-(w band-limited: the DAQ samples the continuous current), the current's spectrum is
-Phi_y = |H|^2 S_w + S_n = s_e^2 |G|^2 with G monic and minimum-phase, found by the cepstral
-method on the dense FFT grid (log Phi_y -> real cepstrum c; log s_e^2 = c_0,
-log G = the transform of c_n for n > 0).  The Wiener-Kolmogorov causal filter is
+**Two models of the motion.**  A *stationary* record (zero-mean motion going on since before
+power-on: cranks, sines) uses the spectrum S_x of x = w and R = H.  A record *from rest*
+(steps, holds, pick-and-place, motion started in the record) uses the spectrum of its
+increments x = w_n - w_(n-1) and R = H / D, D = 1 - e^(-j Omega): holds are then levels an
+integrator keeps (S_w = S_x / |D|^2, unbounded at f = 0), and H(0) = 0 (a one-bin notch
+that no finite FFT grid resolves) never appears, since R(0) = lim H / D != 0.  The estimate
+of w is then the running sum of the estimated increments from the true w_0 (0 for a record
+from rest; the field record's level at power-on, which the bound is given).
 
-    W_c = [S_w H* / G*]_+ / (s_e^2 G),       [.]_+ = the part at lags n >= 0,
+**Oracle spectrum.**  The periodogram of x over the record, zero-padded to ``pad`` x its
+length (the transform of its biased autocorrelation: a valid spectrum), smoothed by a
+triangle of half-width ``smooth_hz``.  Window: a Kaiser window (beta = KAISER_BETA, side
+lobes ~ -100 dB) over a stationary record, so the truncation of an oscillation leaks no
+power to f ~ 0 (the filter would otherwise integrate it); a ``taper_s`` cosine taper at the
+end only of a record from rest (it has no edge at its start).
 
-applied from a zero state to the record (the record starts from rest: zero current before
-it), its impulse response cut to lags 0 .. M/2 (exactly causal).  Reported: its raw NRMSE,
+**Causal Wiener bound.**  Phi_y = |R|^2 S_x + S_n = s_e^2 |G|^2, G monic and minimum-phase,
+by the cepstral method on the dense FFT grid (log Phi_y -> real cepstrum c; log s_e^2 = c_0;
+log G = the transform of c_n, n > 0).  Wiener-Kolmogorov: W = [S_x R* / G*]_+ / (s_e^2 G)
+([.]_+: lags n >= 0); for increments [U / D]_+ = (U_+ + U_-(1)) / D (U_-(1): the sum of U's
+negative lags), the 1/D being the running sum.  Its impulse response is cut to lags
+0 .. M/2 (exactly causal) and it runs from a zero state: at the record start for a record
+from rest (zero current before it), at the start of ``grid_pre_current_a`` (the current of
+the motion before power-on, which the estimator does not see) for a stationary record, so
+the bound carries no cold-start transient: a lower bound there.  Reported: the raw NRMSE,
 RMS(error)/RMS(w) over t >= ``after_s``.
 
-**Non-causal Wiener bound.**  W_nc = S_w H* / Phi_y (error spectrum S_e = S_w S_n / Phi_y),
-applied to the zero-padded record; its raw NRMSE is measured the same way
-(``noncausal_nrmse``) and the spectral expectation sum(S_e)/sum(S_w) is kept as a
-cross-check (``noncausal_expected``).  For stationary zero-mean motion it is a true lower
-bound; for a record that starts from rest and holds levels it is not (a filter that starts
-from the known rest state keeps what H(0) = 0 hides).
-
-**H(0) = 0 and held levels.**  At f = 0 the current carries nothing (H = 0): the zero bin of
-S_w enters neither filter (it is multiplied by H* = 0), and the expectation leaves it out
-(its share of the record mean is an artefact of the padding).  A level held after rest is
-not lost: on a finite record it has spectrum at f ~ 1/T, where H != 0, and the oracle S_w
-(large there, ~1/f^2 for steps) makes both filters integrate down to the frequency where
-the noise wins.
+**Non-causal Wiener bound.**  W = S_x R* / Phi_y, error spectrum S_e = S_x S_n / Phi_y.  On a
+stationary record it is the expectation sqrt(sum S_e / sum S_x) (the zero bin left out:
+H(0) = 0): a true lower bound.  On a record from rest it is the filter run on the record
+(with ``grid_post_current_a``, the current after it, as its future), measured like the causal
+one, and at most the causal bound (a smoother may ignore the future): not a lower bound,
+since the best estimator of a record from rest is not time-invariant (a filter that knows
+when the motion stopped stops integrating noise; the LTI filter integrates it all along).
 """
 from __future__ import annotations
 
@@ -50,6 +58,7 @@ __all__ = ['Bounds', 'wiener_bounds', 'record_bounds', 'nrmse', 'evaluation_mask
 #: on a noise-free record, far below any DAQ (1e-12 in power = 1e-6 in amplitude).
 NOISE_FLOOR = 1e-12
 
+#: Kaiser window parameter of a stationary record's periodogram (side lobes ~ -100 dB).
 KAISER_BETA = 14.0
 
 
@@ -59,8 +68,8 @@ class Bounds:
 
     causal_nrmse: float
     noncausal_nrmse: float        # stationary: expected; else min(realised, causal)
-    noncausal_expected: float     # sum(S_e) / sum(S_w) (stationary records; else NaN)
-    noncausal_realised: float     # the filter on the record, first and last after_s left out
+    noncausal_expected: float     # sqrt(sum S_e / sum S_w) (stationary records; else NaN)
+    noncausal_realised: float     # the non-causal filter run on the record, after after_s
     causal_estimate_m: np.ndarray
     noncausal_estimate_m: np.ndarray
 
@@ -95,7 +104,7 @@ def _periodogram(x: np.ndarray, m: int, taper_n: int | None) -> np.ndarray:
     """
     |DFT_m(x * window)|^2 / sum(window^2).
 
-    ``taper_n`` None: a Hann window over the whole record (a stationary record: no edge
+    ``taper_n`` None: a Kaiser window over the whole record (a stationary record: no edge
     leakage down to f = 0 to mistake for slow motion); else a ``taper_n``-sample cosine
     taper at the end only (a record from rest has no edge at its start).
     """
@@ -135,6 +144,22 @@ def _filters(s_x: np.ndarray, r: np.ndarray, s_n: float, m: int, integrate: bool
     return np.fft.rfft(k), s_x * np.conj(r) / phi, phi
 
 
+def _motion_model(w, h, f, sample_rate_hz, response, stationary):
+    """(x, R): (w, H) for a stationary record, (increments of w, H / D) for one from rest."""
+    if stationary:
+        x, r = w, h.copy()
+        r[0] = 0.0
+    else:
+        x = np.diff(w, prepend=w[0])
+        d = -np.expm1(-2j * np.pi * f / sample_rate_hz)
+        d[0] = 1.0
+        r = h / d
+        f0 = 1e-6 * sample_rate_hz           # R(0) = lim H / D (H ~ j omega R0, D ~ j Omega)
+        r[0] = (response(np.array([f0]))[0] / -np.expm1(-2j * np.pi * f0 / sample_rate_hz)).real
+    r[-1] = abs(r[-1])                       # the Nyquist bin of a real filter is real
+    return x, r
+
+
 def wiener_bounds(current_a, deflection_m, sample_rate_hz: float, response, noise_var_a2: float,
                   *, stationary: bool, pre_current_a=None, post_current_a=None,
                   after_s: float = 1.0, pad: int = 4,
@@ -160,17 +185,7 @@ def wiener_bounds(current_a, deflection_m, sample_rate_hz: float, response, nois
     f = np.fft.rfftfreq(m, 1.0 / sample_rate_hz)
     h = np.asarray(response(f), dtype=complex)
     s_n = max(float(noise_var_a2), NOISE_FLOOR * float(np.mean(y ** 2)))
-    if stationary:
-        r, x = h, w
-        r[0] = 0.0
-    else:
-        x = np.diff(w, prepend=w[0])
-        d = -np.expm1(-2j * np.pi * f / sample_rate_hz)
-        d[0] = 1.0
-        r = h / d
-        f0 = 1e-6 * sample_rate_hz           # R(0) = lim H / D (H ~ j omega R0, D ~ j Omega)
-        r[0] = (response(np.array([f0]))[0] / -np.expm1(-2j * np.pi * f0 / sample_rate_hz)).real
-    r[-1] = abs(r[-1])                       # the Nyquist bin of a real filter is real
+    x, r = _motion_model(w, h, f, sample_rate_hz, response, stationary)
     taper_n = None if stationary else int(round(taper_s * sample_rate_hz))
     s_x = _smooth(_periodogram(x, m, taper_n), int(round(smooth_hz * m / sample_rate_hz)))
     causal, noncausal, phi = _filters(s_x, r, s_n, m, integrate=not stationary)
