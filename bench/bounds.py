@@ -31,8 +31,8 @@ log G = the transform of c_n, n > 0).  Wiener-Kolmogorov: W = [S_x R* / G*]_+ / 
 negative lags), the 1/D being the running sum.  Its impulse response is cut to lags
 0 .. M/2 (exactly causal) and it runs from a zero state: at the record start for a record
 from rest (zero current before it), at the start of ``grid_pre_current_a`` (the current of
-the motion before power-on, which the estimator does not see) for a stationary record, so
-the bound carries no cold-start transient: a lower bound there.  Reported: the raw NRMSE,
+the motion before power-on, which the estimator does not see) when the tip moves at power-on,
+so the bound carries no cold-start transient: a lower bound there.  Reported: the raw NRMSE,
 RMS(error)/RMS(w) over t >= ``after_s``.
 
 **Non-causal Wiener bound.**  W = S_x R* / Phi_y, error spectrum S_e = S_x S_n / Phi_y.  On a
@@ -171,7 +171,7 @@ def wiener_bounds(current_a, deflection_m, sample_rate_hz: float, response, nois
     the truth at the same samples; ``response(f_hz)``: H(j 2 pi f), A/m; ``noise_var_a2``:
     the white-noise variance per sample, A^2; ``stationary``: zero-mean motion going on since
     before the record (spectrum of w) or motion after rest (spectrum of its increments);
-    ``pre_current_a``: the current before the record (motion since before power-on), where the
+    ``pre_current_a``: the current before the record (motion going on at power-on), where the
     filters start (zero state there), or None: they start at the record (rest before it);
     ``post_current_a``: the current after it (the non-causal filter's future at the end).
     """
@@ -214,6 +214,6 @@ def record_bounds(record: Record, *, after_s: float = 1.0, **kwargs) -> Bounds:
     return wiener_bounds(record.grid_current_a, record.grid_deflection_m, record.sample_rate_hz,
                          lambda f: frequency_response(record.sensor, f), var,
                          stationary=record.stationary,
-                         pre_current_a=record.grid_pre_current_a if record.stationary else None,
+                         pre_current_a=record.grid_pre_current_a,
                          post_current_a=record.grid_post_current_a,
                          after_s=after_s, **kwargs)

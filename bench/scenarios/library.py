@@ -30,7 +30,13 @@ EPOCH_S = 1.7e9
 
 @dataclass(frozen=True)
 class Scenario:
-    """A named scenario: ``build(seed)`` returns its :class:`~.daq.Record`."""
+    """
+    A named scenario: ``build(seed)`` returns its :class:`~.daq.Record`.
+
+    ``stationary``: zero-mean motion going on since before power-on; ``moving_at_start``: the
+    tip moves when the record starts (implied by ``stationary``).  Either way the record keeps
+    the current before it for the bounds (``grid_pre_current_a``).
+    """
 
     name: str
     tag: str
@@ -38,6 +44,7 @@ class Scenario:
     make: Callable
     description: str
     stationary: bool = False
+    moving_at_start: bool = False
 
     def build(self, seed: int) -> Record:
         rng = np.random.default_rng([int(seed), zlib.crc32(self.name.encode())])
@@ -45,7 +52,8 @@ class Scenario:
         return acquire(self.name, int(seed), sensor, motion, self.duration_s, daq, rng,
                        stationary=self.stationary, description=self.description,
                        tags=(self.tag,),
-                       pre_record_s=max(3 * self.duration_s, 60.0) if self.stationary else 0.0,
+                       pre_record_s=(max(3 * self.duration_s, 60.0)
+                                     if self.stationary or self.moving_at_start else 0.0),
                        post_record_s=min(self.duration_s, 60.0))
 
 
@@ -188,7 +196,8 @@ def _scenarios() -> list[Scenario]:
                  '5 -> 25 nA, 50 Hz hum 2 % of the peak current, 0.5 nA, 16 bit'),
         Scenario('slim-field-lab', 'field', 60.0, _field_lab,
                  'slim, 0.2-3 Hz sines since power-on with step-and-holds on top (never still), '
-                 '200 Hz amplifier, 15 nA offset, 50 Hz hum 3 %, noise 2 %, 16 bit'),
+                 '200 Hz amplifier, 15 nA offset, 50 Hz hum 3 %, noise 2 %, 16 bit',
+                 moving_at_start=True),
         Scenario('slim-crank-poweron-20na', 'crank', 30.0, _crank_poweron_20na,
                  'slim, 2 Hz crank moving since before power-on, 20 nA offset, noise 1 %',
                  stationary=True),
