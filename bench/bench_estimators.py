@@ -106,8 +106,8 @@ def run_estimator(record: Record, causal: bool = True, estimator: str = 'kalman'
         else:
             res = stream.feed(t[k:end], i[k:end])
             std = np.asarray(est.last_std_m, dtype=float)
-        if res is None:
-            continue
+        if res is None:               # today a block is estimated whole or not at all
+            continue                  # NEW API: per-row accounting (refused rows) goes here
         n = res[0].size
         index.append(np.arange(k, end))
         t_out.append(res[0])
