@@ -80,16 +80,21 @@ def run_estimator(record: Record, causal: bool = True, estimator: str = 'kalman'
     ``causal=False`` asks for the offline smoothed estimate: None while there is none.
     """
     from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
-    from ipmc_sensor_ros.estimation.stream import StreamEstimator
     from ipmc_sensor_ros.physics.model import SensorModel
     from ipmc_sensor_ros.physics.parameters import Geometry
 
-    if not causal:
-        return None          # NEW API: the smoother's estimate (and its std) plugs in here
     model = SensorModel.named(record.model, Geometry(*record.geometry_m, record.sample),
                               extra_effects=record.effects)
     est = DeflectionEstimator(model, record.sample_rate_hz, estimator=estimator)
-    # NEW API: a per-sample std from the filter replaces the per-block est.last_std_m below
+    if not causal:
+        return _smoothed(record, est, block_samples)
+    return _causal(record, est, block_samples)
+
+
+def _causal(record: Record, est, block_samples: int) -> Estimate:
+    """The live estimate: the stream rules, block by block (1: the one-sample path)."""
+    from ipmc_sensor_ros.estimation.stream import StreamEstimator
+
     stream = StreamEstimator(est, max_gap_s=0.1, source=record.name)
     t, i = record.time_s, record.current_a
     index, t_out, w_out, std_out = [], [], [], []
@@ -107,7 +112,7 @@ def run_estimator(record: Record, causal: bool = True, estimator: str = 'kalman'
             res = stream.feed(t[k:end], i[k:end])
             std = np.asarray(est.last_std_m, dtype=float)
         if res is None:               # today a block is estimated whole or not at all
-            continue                  # NEW API: per-row accounting (refused rows) goes here
+            continue
         n = res[0].size
         index.append(np.arange(k, end))
         t_out.append(res[0])
@@ -118,6 +123,19 @@ def run_estimator(record: Record, causal: bool = True, estimator: str = 'kalman'
            else np.zeros(0, dtype=dtype))
     rows = cat(index, np.int64)
     return Estimate(rows, cat(t_out), cat(w_out), cat(std_out), int(t.size), int(rows.size), cpu)
+
+
+def _smoothed(record: Record, est, block_samples: int) -> Estimate:
+    """The offline smoothed estimate of the rows the stream keeps (as ``ipmc-model estimate``)."""
+    from ipmc_sensor_ros.estimation.stream import smooth_record
+
+    fresh = est.rebuilt()
+    causal = _causal(record, est, block_samples)
+    rows = causal.row_index
+    cpu0 = time.process_time()
+    t_out, w, std = smooth_record(fresh, record.time_s[rows], record.current_a[rows])
+    cpu = time.process_time() - cpu0 + causal.cpu_s
+    return Estimate(rows, t_out, w, std, causal.rows_given, int(rows.size), cpu)
 
 
 def _scores(record: Record, estimate: Estimate | None) -> dict:

@@ -10,9 +10,11 @@ its samples; there is no second implementation)::
     rest test on the window of r = i - lines(x-)        (:mod:`.rest`)
     update    nu = i - c x-,  S = c P- c' + R,  K = P- c' / S,  x = x- + K nu,
               P = P- - K S K'
-    at rest   velocity = 0, motion current = 0          (pseudo-measurements, :mod:`.rest`)
-              working point = w                         (its prior released first:
-                                                         :attr:`~.statespace.StateSpaceModel.hold_variance`)
+    at rest   velocity = 0, acceleration = 0, motion current = 0 (pseudo-measurements,
+              :mod:`.rest`); working point = w (its prior released first when the tip
+              moved since the working point was last set:
+              :attr:`~.statespace.StateSpaceModel.hold_variance`; a record that starts at
+              rest keeps the starting working point, its rest position)
 
 R, the white-noise variance per sample, is measured on r = i - lines: the third difference
 r_k - 3 r_{k-1} + 3 r_{k-2} - r_{k-3} has variance 20 R for white noise and passes a motion
@@ -65,6 +67,9 @@ class FilterState:
     line_sums: np.ndarray = field(default=None, repr=False)
     phase: np.ndarray = field(default=None, repr=False)
     phases: np.ndarray = field(default=None, repr=False)
+    total: float = 0.0
+    total_sq: float = 0.0
+    moved: bool = False
 
     def copy(self) -> 'FilterState':
         return replace(self, x=self.x.copy(), P=self.P.copy(), window=self.window.copy(),
@@ -150,98 +155,101 @@ class KalmanFilter:
         Filter ``current_a`` (A) from ``state``; return (new state, w, std, still).
 
         ``steps[k]``: sample periods from the sample before (None: all 1).  ``record``: filled
-        at rows ``offset + k`` for the smoother.
+        at rows ``offset + k`` for the smoother.  The loop keeps its state in local variables
+        and builds the returned :class:`FilterState` once; a block and single samples run the
+        same statements.
         """
-        y = np.asarray(current_a, dtype=float)
-        n = y.size
-        st = np.ones(n, dtype=np.int64) if steps is None else np.asarray(steps, dtype=np.int64)
-        out_w, out_s = np.empty(n), np.empty(n)
-        out_still = np.empty(n, dtype=bool)
-        state = state.copy()
+        y = np.asarray(current_a, dtype=float).tolist()
+        n = len(y)
+        st = [1] * n if steps is None else np.asarray(steps, dtype=np.int64).tolist()
+        m, rest = self.model, self.rest
+        iw, ih, ib, il = m.iw, m.ih, m.ib, m.il
+        sw, sb = float(m.scale[iw]), float(m.scale[ib])
+        line_scale = m.scale[il::2] if m.lines_hz else None
+        c, hold, rows, alpha, rot = m.c, m.hold_variance, self._rest_rows, self._alpha, self._rot
+        nw = rest.n
+        x, P = state.x.copy(), state.P.copy()
+        win, sums = state.window.copy(), state.line_sums.copy()
+        phase, phases = state.phase.copy(), state.phases.copy()
+        count, pos, total, total_sq = (state.window_count, state.window_pos, state.total,
+                                       state.total_sq)
+        noise, weight = state.noise_var_a2, state.noise_weight
+        samples, contiguous, still, moved = (state.samples, state.contiguous, state.still,
+                                             state.moved)
+        out_w, out_s, out_still = np.empty(n), np.empty(n), np.empty(n, dtype=bool)
+        F, Q = m.discrete(1)
+        last_steps = 1
         for k in range(n):
-            state = self._step(state, float(y[k]), int(st[k]), record, offset + k)
-            out_w[k], out_s[k] = self.deflection(state)
-            out_still[k] = state.still
-        return state, out_w, out_s, out_still
-
-    def _step(self, st: FilterState, y: float, steps: int, record, row: int) -> FilterState:
-        m = self.model
-        F, Q = m.discrete(steps)
-        if st.samples:
-            x = F @ st.x
-        else:
-            x = st.x
-        still, window_state = self._rest_test(st, x, y, steps)
-        if st.samples:
-            P = F @ st.P @ F.T + Q
-        else:
-            P = st.P
-        if still:
-            P[m.ih, m.ih] += m.hold_variance
-        if record is not None:
-            record.x_pred[row], record.P_pred[row] = x, P
-            record.steps[row], record.still[row] = steps, still
-        c = m.c
-        Pc = P @ c
-        cpc = float(c @ Pc)
-        nu = y - float(c @ x)
-        S = cpc + st.noise_var_a2
-        K = Pc / S
-        x = x + K * nu
-        P = P - np.outer(K, Pc)
-        noise, noise_weight = self._noise(st, window_state[0], window_state[2], steps)
-        if still:
-            for row_c, var in self._rest_rows:
-                Pc = P @ row_c
-                K = Pc / (float(row_c @ Pc) + var)
-                x = x - K * float(row_c @ x)
-                P = P - np.outer(K, Pc)
-        P = 0.5 * (P + P.T)
-        if record is not None:
-            record.x_post[row], record.P_post[row] = x, P
-        return FilterState(x, P, noise, *window_state[:3], still, st.samples + 1,
-                           min(st.contiguous + 1, 4) if steps == 1 else 1, noise_weight,
-                           *window_state[3:])
-
-    def _noise(self, st: FilterState, window: np.ndarray, pos: int, steps: int) -> float:
-        """Update the measured noise variance with the newest third difference (docstring)."""
-        if steps != 1 or st.contiguous < 3:
-            return st.noise_var_a2, st.noise_weight
-        n = window.size
-        r0, r1, r2, r3 = (window[(pos - j) % n] for j in (1, 2, 3, 4))
-        d = r0 - 3.0 * r1 + 3.0 * r2 - r3
-        sample = d * d / 20.0
-        if st.noise_weight:
-            sample = min(sample, NOISE_CLIP * st.noise_var_a2)
-        weight = (1.0 - self._alpha) * st.noise_weight
-        value = (weight * st.noise_var_a2 + sample) / (weight + 1.0)
-        return max(value, NOISE_FLOOR_A ** 2), weight + 1.0
-
-    def _rest_test(self, st: FilterState, x: np.ndarray, y: float, steps: int):
-        """
-        Add r = y - lines(x-) to the window; return (still, window state).
-
-        The window state is (window, count, pos, line sums, phase, phases): a sliding DFT of
-        the window at each line frequency, so the test can remove the lines' least-squares fit.
-        """
-        m = self.model
-        s = m.scale
-        n = self.rest.n
-        window, pos = st.window, st.window_pos
-        phase = st.phase * self._rot ** steps if st.samples else st.phase
-        r = y - float(x[m.il::2] @ s[m.il::2]) if m.lines_hz else y
-        if self._rot.size:
-            sums = st.line_sums + r * phase - window[pos] * st.phases[pos]
-            st.phases[pos] = phase
-        else:
-            sums = st.line_sums
-        window[pos] = r
-        count = min(st.window_count + 1, n)
-        state = (window, count, (pos + 1) % n, sums, phase, st.phases)
-        if count < n:
-            return False, state
-        total = float(window.sum())
-        energy = 2.0 / n * float(np.sum(np.abs(sums) ** 2)) if self._rot.size else 0.0
-        b, pb = x[m.ib] * s[m.ib], st.P[m.ib, m.ib] * s[m.ib] ** 2
-        return self.rest.still(total, float(window @ window), energy, b, pb,
-                               st.noise_var_a2), state
+            yk, sk = y[k], st[k]
+            if sk != last_steps:
+                F, Q = m.discrete(sk)
+                last_steps = sk
+            if samples:
+                x = F @ x
+                if rot.size:
+                    phase = phase * (rot if sk == 1 else rot ** sk)
+            # the rest window: r = i - lines(x-), its running sums and sliding DFT
+            r = yk - float(x[il::2] @ line_scale) if line_scale is not None else yk
+            old = win[pos]
+            if rot.size:
+                sums += r * phase - old * phases[pos]
+                phases[pos] = phase
+            win[pos] = r
+            total += r - old
+            total_sq += r * r - old * old
+            pos += 1
+            if pos == nw:               # exact sums once per window (no drift of the running ones)
+                pos = 0
+                total, total_sq = float(win.sum()), float(win @ win)
+            count = min(count + 1, nw)
+            if count == nw:
+                energy = 2.0 / nw * float(np.sum(np.abs(sums) ** 2)) if rot.size else 0.0
+                still = rest.still(total, total_sq, energy, float(x[ib]) * sb,
+                                   float(P[ib, ib]) * sb * sb, noise)
+                moved = moved or not still
+            else:
+                still = False
+            if samples:
+                P = F @ P @ F.T + Q
+            if still and moved:         # a new hold: the working point is where the tip is held
+                P[ih, ih] += hold
+                moved = False
+            if record is not None:
+                j = offset + k
+                record.x_pred[j], record.P_pred[j] = x, P
+                record.steps[j], record.still[j] = sk, still
+            # the update with the current
+            Pc = P @ c
+            S = float(c @ Pc) + noise
+            K = Pc / S
+            x = x + K * (yk - float(c @ x))
+            P = P - np.outer(K, Pc)
+            # the measured noise: third difference of r (module docstring)
+            if sk != 1:
+                contiguous = 0
+            elif contiguous < 3:
+                contiguous += 1
+            else:
+                d = r - 3.0 * win[(pos - 2) % nw] + 3.0 * win[(pos - 3) % nw] - win[(pos - 4) % nw]
+                value = d * d / 20.0
+                if weight:
+                    value = min(value, NOISE_CLIP * noise)
+                weight = (1.0 - alpha) * weight
+                noise = max((weight * noise + value) / (weight + 1.0), NOISE_FLOOR_A ** 2)
+                weight += 1.0
+            if still:                   # the rest pseudo-measurements (velocity, ... = 0)
+                for row_c, var in rows:
+                    Pc = P @ row_c
+                    K = Pc / (float(row_c @ Pc) + var)
+                    x = x - K * float(row_c @ x)
+                    P = P - np.outer(K, Pc)
+            P = 0.5 * (P + P.T)
+            if record is not None:
+                record.x_post[offset + k], record.P_post[offset + k] = x, P
+            samples += 1
+            out_w[k] = x[iw] * sw
+            out_s[k] = math.sqrt(max(P[iw, iw], 0.0)) * sw
+            out_still[k] = still
+        new = FilterState(x, P, noise, win, count, pos, still, samples, contiguous, weight,
+                          sums, phase, phases, total, total_sq, moved)
+        return new, out_w, out_s, out_still

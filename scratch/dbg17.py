@@ -1,0 +1,34 @@
+import sys
+import numpy as np
+sys.path.insert(0, '/work/wt/core/scratch')
+from gen import *
+import proto
+from proto import build
+t, w, y, m, noise = record(crank(5.0), 6.0, offset=0e-9, noise=0.2e-9)
+ssm = build(m, motion_corner_hz=0.1, offset_walk_a=1e-15, offset_drift_walk_a_per_s=1e-18, offset_prior_a=1e-15)
+F, Q = ssm.discrete(1); c = ssm.c; R = noise**2
+idx, Pm = proto.stationary_P(ssm)
+for pw in (1e-9, 1e-6, 1e-5, 1e-4, 1e-3):
+    x = np.zeros(ssm.size); P = np.diag(np.r_[np.zeros(ssm.n_sensor), pw**2, 0, 1e-30, 1e-36])
+    W = np.empty(t.size)
+    for k in range(t.size):
+        if k: x = F@x; P = F@P@F.T + Q
+        Pc = P@c; S = c@Pc + R; K = Pc/S
+        x = x + K*(y[k]-c@x); P = P - np.outer(K, Pc)
+        W[k] = x[ssm.iw]
+    s = (t>=4)&(t<4.4)
+    X = np.c_[np.sin(2*np.pi*5*t[s]), np.cos(2*np.pi*5*t[s]), np.ones(s.sum())]
+    cw = np.linalg.lstsq(X, w[s], rcond=None)[0]; ce = np.linalg.lstsq(X, W[s], rcond=None)[0]
+    print('P0w', pw, 'ratio', round(np.hypot(*ce[:2])/np.hypot(*cw[:2]),4), 'nrmse', round(nrmse(W, w, t, 2),4), 'sqrtPw end', np.sqrt(P[ssm.iw,ssm.iw]))
+pw=1e-3
+x = np.zeros(ssm.size); P = np.diag(np.r_[np.zeros(ssm.n_sensor), pw**2, 0, 1e-30, 1e-36])
+nus = np.empty(t.size); Ss = np.empty(t.size); U = np.empty(t.size)
+for k in range(t.size):
+    if k: x = F@x; P = F@P@F.T + Q
+    Pc = P@c; S = c@Pc + R; K = Pc/S
+    nus[k] = y[k]-c@x; Ss[k] = S
+    x = x + K*nus[k]; P = P - np.outer(K, Pc); U[k] = x[ssm.iu]
+s = t > 3
+print('innov rms', np.sqrt(np.mean(nus[s]**2)), 'pred std', np.sqrt(np.mean(Ss[s])), 'noise', noise)
+from ipmc_sensor_ros.simulation.stimuli import CrankSlider
+print('u est vs true ratio', np.std(U[s])/np.std(np.gradient(w, t)[s]))
