@@ -16,9 +16,9 @@ its samples; there is no second implementation)::
               :attr:`~.statespace.StateSpaceModel.hold_variance`; a record that starts at
               rest keeps the starting working point, its rest position)
 
-R, the white-noise variance per sample, is measured on r = i - lines: the third difference
-r_k - 3 r_{k-1} + 3 r_{k-2} - r_{k-3} has variance 20 R for white noise and passes a motion
-current at f only as (2 sin(pi f / fs))^6 (4e-6 at 20 Hz and 1 kHz), so its square / 20,
+R, the white-noise variance per sample, is measured on the current: the third difference
+i_k - 3 i_{k-1} + 3 i_{k-2} - i_{k-3} has variance 20 R for white noise and passes a current
+at f only as (2 sin(pi f / fs))^6 (4e-6 at 20 Hz, 0.06 at 150 Hz, at 1 kHz), so its square / 20,
 averaged over ``NOISE_AVERAGE_S`` (weights normalised, so the first differences already give
 R; ``current_noise_a`` until then), is R.  Differences across a bridged gap are skipped.  The state is held in scaled units (x / scale) so that every entry of P is
 O(1) whatever the sensor (deflections of mm, currents of nA).
@@ -70,6 +70,7 @@ class FilterState:
     total: float = 0.0
     total_sq: float = 0.0
     moved: bool = False
+    quiet: int = 0
 
     def copy(self) -> 'FilterState':
         return replace(self, x=self.x.copy(), P=self.P.copy(), window=self.window.copy(),
@@ -129,6 +130,11 @@ class KalmanFilter:
         self._rest_rows = ((model.c_velocity, v2), (accel, v2 * model.sample_rate_hz ** 2),
                            (model.c_motion, m2), (self._anchor, anchor_var))
 
+    @property
+    def rotation(self) -> np.ndarray:
+        """One sample's turn e^{-i W_k / fs} of each rest-test line."""
+        return self._rot
+
     def initial_state(self) -> FilterState:
         x, P = self.model.prior()
         k = len(self.rest_lines_hz)
@@ -174,8 +180,8 @@ class KalmanFilter:
         count, pos, total, total_sq = (state.window_count, state.window_pos, state.total,
                                        state.total_sq)
         noise, weight = state.noise_var_a2, state.noise_weight
-        samples, contiguous, still, moved = (state.samples, state.contiguous, state.still,
-                                             state.moved)
+        samples, contiguous, still, moved, quiet = (state.samples, state.contiguous, state.still,
+                                                    state.moved, state.quiet)
         out_w, out_s, out_still = np.empty(n), np.empty(n), np.empty(n, dtype=bool)
         F, Q = m.discrete(1)
         last_steps = 1
@@ -188,32 +194,43 @@ class KalmanFilter:
                 x = F @ x
                 if rot.size:
                     phase = phase * (rot if sk == 1 else rot ** sk)
-            # the rest window: r = i - lines(x-), its running sums and sliding DFT
-            r = yk - float(x[il::2] @ line_scale) if line_scale is not None else yk
+            # the rest window holds the current; its sliding DFT fits the lines (rest.py)
             old = win[pos]
             if rot.size:
-                sums += r * phase - old * phases[pos]
+                sums += yk * phase - old * phases[pos]
                 phases[pos] = phase
-            win[pos] = r
-            total += r - old
-            total_sq += r * r - old * old
+            win[pos] = yk
+            total += yk - old
+            total_sq += yk * yk - old * old
             pos += 1
             if pos == nw:               # exact sums once per window (no drift of the running ones)
                 pos = 0
                 total, total_sq = float(win.sum()), float(win @ win)
             count = min(count + 1, nw)
+            b, pb = float(x[ib]) * sb, float(P[ib, ib]) * sb * sb
+            if line_scale is not None:  # this sample less the lines the filter predicts
+                r = yk - float(x[il::2] @ line_scale)
+                pb += float(np.diag(P)[il::2] @ line_scale ** 2)
+            else:
+                r = yk
+            quiet = quiet + 1 if rest.sample_ok(r, b, pb, noise) else 0
             if count == nw:
                 energy = 2.0 / nw * float(np.sum(np.abs(sums) ** 2)) if rot.size else 0.0
-                still = rest.still(total, total_sq, energy, float(x[ib]) * sb,
-                                   float(P[ib, ib]) * sb * sb, noise)
+                was_still = still
+                still = quiet >= nw and rest.still(total, total_sq, energy, b,
+                                                   float(P[ib, ib]) * sb * sb, noise)
+                # the working point is released when the tip leaves a rest (the centre of the
+                # coming motion is unknown) and when a new hold begins (it is where the tip is
+                # held); a record that starts at rest keeps its rest position until it moves
+                release = was_still != still and (not still or moved)
                 moved = moved or not still
             else:
-                still = False
+                still = release = False
             if samples:
                 P = F @ P @ F.T + Q
-            if still and moved:         # a new hold: the working point is where the tip is held
+            if release:
                 P[ih, ih] += hold
-                moved = False
+                moved = moved and not still
             if record is not None:
                 j = offset + k
                 record.x_pred[j], record.P_pred[j] = x, P
@@ -230,7 +247,7 @@ class KalmanFilter:
             elif contiguous < 3:
                 contiguous += 1
             else:
-                d = r - 3.0 * win[(pos - 2) % nw] + 3.0 * win[(pos - 3) % nw] - win[(pos - 4) % nw]
+                d = yk - 3.0 * win[(pos - 2) % nw] + 3.0 * win[(pos - 3) % nw] - win[(pos - 4) % nw]
                 value = d * d / 20.0
                 if weight:
                     value = min(value, NOISE_CLIP * noise)
@@ -251,5 +268,5 @@ class KalmanFilter:
             out_s[k] = math.sqrt(max(P[iw, iw], 0.0)) * sw
             out_still[k] = still
         new = FilterState(x, P, noise, win, count, pos, still, samples, contiguous, weight,
-                          sums, phase, phases, total, total_sq, moved)
+                          sums, phase, phases, total, total_sq, moved, quiet)
         return new, out_w, out_s, out_still

@@ -15,7 +15,11 @@ the filter predicts them), two chi-square tests at the level ``rest_false_alarm`
   hide a rest, and a slow deflection ramp, a steady current the spread cannot see, is
   motion).
 
-When both pass, the filter applies the zero-velocity pseudo-measurements (as zero-velocity
+and every sample of the window must agree with rest on its own: (r_k - b)^2 < chi2_1 (R + P_b)
+(a motion that starts ends the rest at its first telling sample, before the pseudo-measurements
+below could push its current into the offset; ``RestTest.sample_ok``).
+
+When all pass, the filter applies the zero-velocity pseudo-measurements (as zero-velocity
 updates in foot-mounted inertial navigation): the tip velocity and the motion's current are
 zero within ``rest_velocity_m_s``.  The test runs on every sample; a window that fails ends
 the rest at once.  Motion whose current stays within the noise over a whole window is taken
@@ -37,6 +41,12 @@ class RestTest:
     n: int
     spread_limit: float
     level_limit: float
+
+    def sample_ok(self, r: float, offset_a: float, offset_var_a2: float,
+                  noise_var_a2: float) -> bool:
+        """Return True if one sample r agrees with a still sensor (offset + noise)."""
+        d = r - offset_a
+        return d * d <= self.level_limit * (noise_var_a2 + offset_var_a2)
 
     @classmethod
     def design(cls, window_s: float, sample_rate_hz: float, false_alarm: float,
