@@ -71,6 +71,7 @@ class FilterState:
     total_sq: float = 0.0
     moved: bool = False
     quiet: int = 0
+    cusum: tuple = (0.0, 0.0)
 
     def copy(self) -> 'FilterState':
         return replace(self, x=self.x.copy(), P=self.P.copy(), window=self.window.copy(),
@@ -171,7 +172,6 @@ class KalmanFilter:
         m, rest = self.model, self.rest
         iw, ih, ib, il = m.iw, m.ih, m.ib, m.il
         sw, sb = float(m.scale[iw]), float(m.scale[ib])
-        line_scale = m.scale[il::2] if m.lines_hz else None
         c, hold, rows, alpha, rot = m.c, m.hold_variance, self._rest_rows, self._alpha, self._rot
         nw = rest.n
         x, P = state.x.copy(), state.P.copy()
@@ -182,6 +182,7 @@ class KalmanFilter:
         noise, weight = state.noise_var_a2, state.noise_weight
         samples, contiguous, still, moved, quiet = (state.samples, state.contiguous, state.still,
                                                     state.moved, state.quiet)
+        cusum = state.cusum
         out_w, out_s, out_still = np.empty(n), np.empty(n), np.empty(n, dtype=bool)
         F, Q = m.discrete(1)
         last_steps = 1
@@ -208,12 +209,12 @@ class KalmanFilter:
                 total, total_sq = float(win.sum()), float(win @ win)
             count = min(count + 1, nw)
             b, pb = float(x[ib]) * sb, float(P[ib, ib]) * sb * sb
-            if line_scale is not None:  # this sample less the lines the filter predicts
-                r = yk - float(x[il::2] @ line_scale)
-                pb += float(np.diag(P)[il::2] @ line_scale ** 2)
+            if rot.size and count == nw:     # this sample less the window's fit of the lines
+                r = yk - 2.0 / nw * float(np.sum((sums * np.conj(phase)).real))
             else:
                 r = yk
-            quiet = quiet + 1 if rest.sample_ok(r, b, pb, noise) else 0
+            ok, cusum = rest.sample_ok(r, b, pb, noise, cusum)
+            quiet = quiet + 1 if ok else 0
             if count == nw:
                 energy = 2.0 / nw * float(np.sum(np.abs(sums) ** 2)) if rot.size else 0.0
                 was_still = still
@@ -268,5 +269,5 @@ class KalmanFilter:
             out_s[k] = math.sqrt(max(P[iw, iw], 0.0)) * sw
             out_still[k] = still
         new = FilterState(x, P, noise, win, count, pos, still, samples, contiguous, weight,
-                          sums, phase, phases, total, total_sq, moved, quiet)
+                          sums, phase, phases, total, total_sq, moved, quiet, cusum)
         return new, out_w, out_s, out_still

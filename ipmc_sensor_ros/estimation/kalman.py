@@ -300,7 +300,7 @@ def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> Fil
     out = replace(init, x=x / mn.scale, P=P / np.outer(mn.scale, mn.scale),
                   noise_var_a2=state.noise_var_a2, samples=state.samples,
                   contiguous=state.contiguous, noise_weight=state.noise_weight,
-                  still=state.still, moved=state.moved, quiet=state.quiet)
+                  still=state.still, moved=state.moved, quiet=state.quiet, cusum=state.cusum)
     if state.window.size != new.rest.n:
         return replace(out, still=False, moved=True)    # the rest test's window restarts
     # the window carries over; its sliding DFT is recomputed for the new model's rest lines

@@ -27,11 +27,16 @@ for rest; its deflection is then below ``R0^-1 sqrt(R/N)`` per second (R0 = R_n(
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from scipy.stats import chi2
 
-__all__ = ['RestTest']
+__all__ = ['RestTest', 'CUSUM_DRIFT']
+
+#: CUSUM drift, in noise sigmas: half the smallest shift it must see quickly (a motion whose
+#: current is one noise sigma; smaller ones are left to the window's level test).
+CUSUM_DRIFT = 0.5
 
 
 @dataclass(frozen=True)
@@ -41,20 +46,32 @@ class RestTest:
     n: int
     spread_limit: float
     level_limit: float
+    cusum_limit: float = math.inf
 
-    def sample_ok(self, r: float, offset_a: float, offset_var_a2: float,
-                  noise_var_a2: float) -> bool:
-        """Return True if one sample r agrees with a still sensor (offset + noise)."""
-        d = r - offset_a
-        return d * d <= self.level_limit * (noise_var_a2 + offset_var_a2)
+    def sample_ok(self, r: float, offset_a: float, offset_var_a2: float, noise_var_a2: float,
+                  cusum: tuple[float, float]) -> tuple[bool, tuple[float, float]]:
+        """
+        Test one sample r against a still sensor (offset + noise); return (ok, new CUSUM).
+
+        A sample that fails restarts the CUSUM.
+        """
+        z = (r - offset_a) / math.sqrt(noise_var_a2 + offset_var_a2)
+        up = max(0.0, cusum[0] + z - CUSUM_DRIFT)
+        down = max(0.0, cusum[1] - z - CUSUM_DRIFT)
+        ok = z * z <= self.level_limit and up <= self.cusum_limit and down <= self.cusum_limit
+        return ok, ((up, down) if ok else (0.0, 0.0))
 
     @classmethod
     def design(cls, window_s: float, sample_rate_hz: float, false_alarm: float,
                lines: int = 0) -> 'RestTest':
         """Thresholds for a window of ``window_s`` with ``lines`` mains lines fitted in it."""
         n = max(8 + 2 * lines, int(round(window_s * sample_rate_hz)))
+        # Siegmund: mean run length to a false alarm ~ exp(2 k (h + 1.166)) / (2 k^2) samples,
+        # one-sided; two sides halve it
+        k = CUSUM_DRIFT
+        cusum = math.log(2 * k * k / (2 * false_alarm)) / (2 * k) - 1.166
         return cls(n, float(chi2.isf(false_alarm, n - 1 - 2 * lines)),
-                   float(chi2.isf(false_alarm, 1)))
+                   float(chi2.isf(false_alarm, 1)), max(cusum, 1.0))
 
     def still(self, total: float, total_sq: float, line_energy: float, offset_a: float,
               offset_var_a2: float, noise_var_a2: float) -> bool:
