@@ -232,7 +232,7 @@ class ManagedMixin:
         return SUCCESS
 
     def _release_all(self, what: str) -> bool:
-        """Close the topics and release the model (cleanup, shutdown); False (logged) if that fails."""
+        """Close the topics, release the model (cleanup, shutdown); False (logged) on failure."""
         with self._lock:
             self._taking = False
             try:
