@@ -9,6 +9,7 @@ when the input had one, so the two can never be mistaken for each other.
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +20,7 @@ from ..physics.parameters import PAPER_SAMPLES, ParameterError
 from .args import (Progress, add_data_args, add_model_args, add_output_args, effects_from_args,
                    fmt_time_s, load_data, material_from_args, parse_geometry, parse_samples,
                    renamed_flag, say, write_json)
+from .outputs import printable, write_complete
 
 __all__ = ['add_parsers', 'read_estimate', 'estimate_accuracy', 'ESTIMATE_FORMAT']
 
@@ -219,7 +221,7 @@ def _write_estimate(path: Path, data, values: dict, model_text: str, params, res
         arrays.append(measured)
     head = [
         f'# format: {ESTIMATE_FORMAT}',
-        f'# source: {data.path}',
+        f'# source: {printable(data.path)}',
         f'# sample: {data.sample}',
         *(
             f'# {k}: {values[k]!r}'
@@ -256,88 +258,184 @@ def read_estimate(path) -> dict[str, np.ndarray]:
     return {c: table[:, j] for j, c in enumerate(cols)}
 
 
-def _cmd_estimate(args) -> int:
-    """Offline estimation with the node's code path and parameters file."""
-    from ..estimation.stream import estimate_record, validate_block
-    from ..interface import specs as config
+class EstimatorCache:
+    """
+    The estimators of a batch: each built once per set of parameter values, then copied.
+
+    Building one (model reduction, filter design) takes ~0.5 s; a copy of the freshly built
+    estimator is the same estimator in its start state and takes ~1 ms, so a directory of
+    small files costs its reading and estimating, not one build per file.
+    """
+
+    def __init__(self):
+        self._built: dict = {}
+        self.builds = 0        #: estimators built (not copies)
+
+    def get(self, values: dict):
+        """A fresh estimator of ``values`` (``interface.specs.build_estimator``)."""
+        import copy
+
+        from ..interface import specs as config
+
+        key = repr(sorted(values.items()))
+        if key not in self._built:
+            self._built[key] = config.build_estimator(values)
+            self.builds += 1
+        return copy.deepcopy(self._built[key])
+
+
+def _estimate_inputs(args) -> list[Path]:
+    """The inputs of ``estimate`` (files, bags, directories expanded), in natural order."""
+    from .args import _expand, natural_key
+
+    return sorted(_expand(args.data), key=natural_key)
+
+
+def _read_one(args, path: Path):
+    """Read one input of ``estimate`` (as :func:`.args.load_data` reads each)."""
+    import argparse
+
+    from ..workbench.io import TimeSeries
+
+    data = load_data(argparse.Namespace(**{**vars(args), 'data': [str(path)]}),
+                     need_deflection=False)[0]
+    if not isinstance(data, TimeSeries):
+        raise ParameterError(f'{data.path}: a time series is needed (this is a '
+                             'frequency-response file)')
+    for note in data.notes:
+        say(printable(note))
+    return data
+
+
+def _checked_current(data) -> np.ndarray:
+    """The record's current through the stream's value rule; the error names file:line."""
+    from ..errors import DataError
+    from ..estimation.stream import validate_block
+
+    try:
+        return validate_block(data.current_a, max_samples=max(data.current_a.size, 1))
+    except DataError as exc:
+        if exc.index is None:
+            raise ParameterError(f'{data.path}: {exc}') from None
+        reason = str(exc).replace(f' at index {exc.index}', '')
+        raise ParameterError(f'{data.where(exc.index)}: {reason}') from None
+
+
+def _estimate_one(args, path: Path, base: dict, explicit: set, cache: EstimatorCache) -> dict:
+    """Estimate one input and write its output; returns its summary row."""
+    from ..estimation.stream import estimate_record
+
+    data = _read_one(args, path)
+    src = printable(data.path)
+    values = _resolve_values(data, base, explicit, args.params, args.prefer)
+    current = _checked_current(data)
+    estimator = cache.get(values)
+    model_text = estimator.model.describe()
+    with Progress(
+        f'estimating {data.current_a.size} samples of {src} with {model_text} '
+        f"(order {estimator.reduction_order}, fs {float(values['sample_rate_hz']):g} Hz, "
+        f'{estimator.estimator} estimator, leak {estimator.inverse.leak_corner_hz:g} Hz)'
+    ) as prog:
+        prog.step('running')
+        t_out, w, stream = estimate_record(estimator, data.time_s, current,
+                                           max_gap_s=float(values['max_gap_s']), source=src)
+    kept = stream.kept
+    if not kept.any():
+        raise ParameterError(f'{src}: no sample passed the stream rules '
+                             f'({stream.last_rejection}); nothing written')
+    measured = data.deflection_m
+    if not kept.all():
+        say(f'{data.where(int(np.argmin(kept)))}: {int((~kept).sum())} sample(s) from here on '
+            f'rejected by the stream rules (no estimate written for them): '
+            f'{stream.last_rejection}')
+        current = current[kept]
+        measured = None if measured is None else measured[kept]
+    out, note = _write_output(args, data, values, model_text, stream.counters['resets'],
+                              t_out, current, w, measured)
+    row = {'source': src, 'out': printable(out), 'samples': int(t_out.size),
+           'resets': stream.counters['resets']}
+    print(_estimate_line(row, values, estimator, t_out, w, measured) + note)
+    return row
+
+
+def _write_output(args, data, values, model_text, resets, t_out, current, w, measured):
+    """Write the estimate of one input (text or bag); (output path, note to print)."""
     from ..workbench.io import TimeSeries, write_bag
 
-    base = (
-        config.load_params_file(args.params)
-        if args.params
-        else config.defaults(config.ESTIMATOR_SPECS)
-    )
-    explicit = _explicit_params(args.params) if args.params else set()
+    stem = Path(data.path).name.removesuffix('.csv').removesuffix('.txt')
     out_dir = Path(args.out)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    summary = []
-    for data in load_data(args, need_deflection=False):
-        src = data.path
-        if not isinstance(data, TimeSeries):
-            raise ParameterError(
-                f'{src}: a time series is needed (this is a frequency-response file)'
-            )
-        values = _resolve_values(data, base, explicit, args.params, args.prefer)
-        current = validate_block(data.current_a, max_samples=max(data.current_a.size, 1))
-        estimator = config.build_estimator(values)
-        model_text = estimator.model.describe()
-        with Progress(
-            f'estimating {data.current_a.size} samples of {src} with {model_text} '
-            f"(order {estimator.reduction_order}, fs {float(values['sample_rate_hz']):g} Hz, "
-            f'{estimator.estimator} estimator, leak {estimator.inverse.leak_corner_hz:g} Hz)'
-        ) as prog:
-            prog.step('running')
-            t_out, w, stream = estimate_record(estimator, data.time_s, current,
-                                               max_gap_s=float(values['max_gap_s']), source=src)
-        resets = stream.counters['resets']
-        if not stream.kept.any():
-            raise ParameterError(f'{src}: no sample passed the stream rules '
-                                 f'({stream.last_rejection}); nothing written')
-        if not stream.kept.all():
-            say(f'{src}: {int((~stream.kept).sum())} sample(s) rejected by the stream rules '
-                f'(no estimate written for them): {stream.last_rejection}')
-            current = current[stream.kept]
-        measured = data.deflection_m
-        if measured is not None and not stream.kept.all():
-            measured = measured[stream.kept]
-        stem = Path(src).name.removesuffix('.csv').removesuffix('.txt')
-        if args.format == 'bag':
-            out = out_dir / f'{stem}_estimate'
-            write_bag(out, TimeSeries(path='', sample=data.sample, geometry=data.geometry,
-                                      known=data.known, sample_rate_hz=data.sample_rate_hz,
-                                      time_s=t_out, current_a=current, deflection_m=w),
-                      storage=args.storage, current_topic=args.current_topic,
-                      deflection_topic=args.estimate_topic)
-        else:
-            out = out_dir / f'{stem}.estimate.csv'
-            _write_estimate(out, data, values, model_text, args.params, resets, t_out, current, w,
-                            measured)
-        row = {'source': src, 'out': str(out), 'samples': int(t_out.size), 'resets': resets}
-        msg = f'{src}: {t_out.size} estimates -> {out}'
-        if resets:
-            msg += (f"; {resets} filter reset(s) at time gaps > {values['max_gap_s']} s "
-                    'or backward jumps')
-        if measured is not None:
-            # the Kalman knows when it learned the level; with resets that refers to its last
-            # segment only, and the leak rule is used
-            settle = (estimator.settling()
-                      if estimator.estimator == 'kalman' and not resets else None)
-            err, used, what, level = estimate_accuracy(
-                t_out, w, measured, estimator.inverse.leak_corner_hz, estimator.delay_s,
-                settle=settle
-            )
-            row['nrmse'] = err
-            row.update(level)
-            msg += (f'; NRMSE {err:.4f} = RMS(estimate - measured) / RMS(measured), means and '
-                    f'linear trends removed, over {fmt_time_s(used)} s ({what}); '
-                    f"as measured (nothing removed): {level['nrmse_raw']:.4f}, level error "
-                    f"{level['start_error_m']:+.3g} m -> {level['end_error_m']:+.3g} m (what a "
-                    'reader at rest sees, if the measured deflection is zero at rest)')
-        else:
-            msg += '; no measured deflection in the input: accuracy not reported'
-        print(msg)
-        summary.append(row)
+    if args.format == 'bag':
+        out = out_dir / f'{stem}_estimate'
+        ts = TimeSeries(path='', sample=data.sample, geometry=data.geometry, known=data.known,
+                        sample_rate_hz=data.sample_rate_hz, time_s=t_out, current_a=current,
+                        deflection_m=w)
+        note = write_complete(out, lambda p: write_bag(
+            p, ts, storage=args.storage, current_topic=args.current_topic,
+            deflection_topic=args.estimate_topic), args.overwrite)
+    else:
+        out = out_dir / f'{stem}.estimate.csv'
+        note = write_complete(out, lambda p: _write_estimate(
+            p, data, values, model_text, args.params, resets, t_out, current, w, measured),
+            args.overwrite)
+    return out, (f'; {note}' if note else '')
+
+
+def _estimate_line(row: dict, values: dict, estimator, t_out, w, measured) -> str:
+    """The printed line of one estimated input (and its accuracy in ``row``)."""
+    resets = row['resets']
+    msg = f"{row['source']}: {t_out.size} estimates -> {row['out']}"
+    if resets:
+        msg += (f"; {resets} filter reset(s) at time gaps > {values['max_gap_s']} s "
+                'or backward jumps')
+    if measured is None:
+        return msg + '; no measured deflection in the input: accuracy not reported'
+    # the Kalman knows when it learned the level; with resets that refers to its last
+    # segment only, and the leak rule is used
+    settle = (estimator.settling()
+              if estimator.estimator == 'kalman' and not resets else None)
+    err, used, what, level = estimate_accuracy(
+        t_out, w, measured, estimator.inverse.leak_corner_hz, estimator.delay_s, settle=settle)
+    row['nrmse'] = err
+    row.update(level)
+    return msg + (f'; NRMSE {err:.4f} = RMS(estimate - measured) / RMS(measured), means and '
+                  f'linear trends removed, over {fmt_time_s(used)} s ({what}); '
+                  f"as measured (nothing removed): {level['nrmse_raw']:.4f}, level error "
+                  f"{level['start_error_m']:+.3g} m -> {level['end_error_m']:+.3g} m (what a "
+                  'reader at rest sees, if the measured deflection is zero at rest)')
+
+
+def _cmd_estimate(args) -> int:
+    """
+    Offline estimation with the node's code path and parameters file.
+
+    Each input is estimated on its own: one that fails is reported (naming the file and,
+    for its data, the line) and the rest are estimated.  Exit status 0 if every input was
+    written, 1 if some failed, 2 if none was written.
+    """
+    from ..interface import specs as config
+
+    base = (config.load_params_file(args.params) if args.params
+            else config.defaults(config.ESTIMATOR_SPECS))
+    explicit = _explicit_params(args.params) if args.params else set()
+    paths = _estimate_inputs(args)
+    cache = EstimatorCache()
+    summary, failed = [], []
+    for path in paths:
+        try:
+            summary.append(_estimate_one(args, path, base, explicit, cache))
+        except (ValueError, OSError) as exc:
+            text = printable(exc)
+            if printable(path) not in text:
+                text = f'{printable(path)}: {text}'
+            print(f'ipmc-model estimate: error: {text}', file=sys.stderr)
+            failed.append(printable(path))
+    if len(paths) > 1 or failed:
+        print(f'estimate: {len(summary)} of {len(paths)} input(s) written to '
+              f'{printable(args.out)}'
+              + (f"; {len(failed)} failed: {', '.join(failed)}" if failed else ''))
     write_json(args.json, summary)
+    if failed:
+        return 2 if not summary else 1
     return 0
 
 
@@ -418,8 +516,11 @@ def add_parsers(sub, formatter) -> None:
         '--out',
         required=True,
         metavar='DIR',
-        help='output directory: <input>.estimate.csv (ipmc-estimate/1) or <input>_estimate bags',
+        help='output directory: <input>.estimate.csv (ipmc-estimate/1) or <input>_estimate bags; '
+        'an output that exists is not replaced (see --overwrite)',
     )
+    p.add_argument('--overwrite', action='store_true',
+                   help='replace outputs that exist (default: refuse, naming what wrote them)')
     p.add_argument(
         '--params',
         metavar='FILE',

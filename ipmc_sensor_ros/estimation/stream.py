@@ -87,10 +87,10 @@ def validate_block(values, max_samples: int = MAX_BLOCK_SAMPLES,
     finite = np.isfinite(x)
     if not finite.all():
         raise DataError(f'current block has {int((~finite).sum())} non-finite sample(s) '
-                        f'(first at index {int(np.argmin(finite))})')
+                        f'(first at index {int(np.argmin(finite))})', index=int(np.argmin(finite)))
     k = int(np.argmax(np.abs(x) > max_abs_current_a))
     raise DataError(f'current block has |i| > {max_abs_current_a} A at index {k} '
-                    f'({x[k]!r} A): not a sensing current')
+                    f'({float(x[k])!r} A): not a sensing current', index=k)
 
 
 def _no_log(text: str) -> None:
