@@ -172,3 +172,128 @@ def test_shutdown_logs_once_and_the_process_ends(managed_child):
     assert code == 0, text
     assert text.count('shut down (finalized)') == 1, text
     assert 'cleaned up' not in text and 'Traceback' not in text, text
+
+
+# ---------------------------------------------------------------------------
+# Command line: errors that name the place, batches, names, outputs, cost per file
+# ---------------------------------------------------------------------------
+def _record(path: Path, rows: int = 3000, seed: int = 0) -> list[str]:
+    """Write an ``ipmc-timeseries/1`` record of white current (10 nA) and return its lines."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(rows) / FS
+    lines = ['# format: ipmc-timeseries/1', '# sample: slim', '# length_m: 0.022',
+             '# width_m: 0.007', '# thickness_m: 0.00036', '# sample_rate_hz: 1000.0',
+             'time_s,current_A']
+    lines += [f'{a!r},{b!r}' for a, b in zip(t.tolist(), rng.normal(0, 1e-8, rows).tolist())]
+    Path(path).write_bytes(('\n'.join(lines) + '\n').encode())
+    return lines
+
+
+def _estimate(*argv) -> int:
+    from ipmc_sensor_ros.cli.main import main
+
+    return main(['estimate', *map(str, argv)])
+
+
+def test_a_bad_row_is_named_by_file_and_line_and_the_batch_goes_on(tmp_path, capsys):
+    src = tmp_path / 'in'
+    src.mkdir()
+    for name in ('a', 'b', 'c'):
+        lines = _record(src / f'{name}.csv')
+    row = 2992
+    lines[7 + row] = lines[7 + row].split(',')[0] + ',2.0'     # one row of 2 A in b.csv
+    (src / 'b.csv').write_text('\n'.join(lines) + '\n')
+    code = _estimate(src, '--out', tmp_path / 'o')
+    out, err = capsys.readouterr()
+    assert code == 1                                      # some inputs failed
+    assert f'b.csv:{8 + row}: current block has |i| > 1.0 A (2.0 A)' in err
+    assert sorted(p.name for p in (tmp_path / 'o').iterdir()) == ['a.estimate.csv',
+                                                                  'c.estimate.csv']
+    assert '2 of 3 input(s) written' in out and '1 failed' in out and 'b.csv' in out
+
+
+def test_an_incomplete_last_line_is_named_and_not_read(tmp_path, capsys):
+    lines = _record(tmp_path / 'live.csv')
+    # a recorder still writing: the last row cut inside its number
+    with open(tmp_path / 'live.csv', 'a') as f:
+        f.write('3.0,-6.937703375')
+    assert _estimate(tmp_path / 'live.csv', '--out', tmp_path / 'o') == 0
+    err = capsys.readouterr().err
+    assert f'live.csv:{len(lines) + 1}: last line has no line end' in err
+    from ipmc_sensor_ros.cli.data_verbs import read_estimate
+
+    est = read_estimate(tmp_path / 'o' / 'live.estimate.csv')
+    assert est['time_s'].size == 3000 and np.all(np.abs(est['current_A']) < 1e-6)
+
+
+def test_a_file_name_that_is_not_utf8_is_estimated_and_shown_escaped(tmp_path, capsys):
+    src = os.fsencode(tmp_path) + b'/caf\xe9.csv'     # Latin-1 e-acute
+    _record(os.fsdecode(src))
+    out_dir = tmp_path / 'o'
+    assert _estimate(os.fsdecode(src), '--out', out_dir) == 0
+    out = capsys.readouterr().out
+    assert 'caf\\xe9.csv: 3000 estimates' in out
+    written = os.listdir(os.fsencode(out_dir))
+    assert written == [b'caf\xe9.estimate.csv']
+    head = (out_dir / os.fsdecode(written[0])).read_bytes()[:200].decode()
+    assert 'caf\\xe9.csv' in head
+
+
+def test_nothing_empty_is_left_behind_on_an_error(tmp_path, monkeypatch):
+    from ipmc_sensor_ros.cli import data_verbs
+
+    _record(tmp_path / 'x.csv')
+
+    def broken(path, *args):
+        Path(path).write_text('# format: ipmc-estimate/1\n')
+        raise OSError(28, 'No space left on device')
+
+    monkeypatch.setattr(data_verbs, '_write_estimate', broken)
+    assert _estimate(tmp_path / 'x.csv', '--out', tmp_path / 'o') == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['x.csv']   # no output, no folder
+
+
+def test_two_runs_with_the_same_out_never_lose_rows_silently(tmp_path, capsys):
+    for name, seed in (('a', 1), ('b', 2)):
+        (tmp_path / name).mkdir()
+        _record(tmp_path / name / 'run.csv', seed=seed)
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    cmd = [sys.executable, '-m', 'ipmc_sensor_ros.cli', 'estimate']
+    runs = [subprocess.Popen(cmd + [str(tmp_path / name / 'run.csv'), '--out',
+                                    str(tmp_path / 'same')], env=env, text=True,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+            for name in ('a', 'b')]
+    results = [(r.wait(timeout=120), *r.communicate()) for r in runs]
+    codes = sorted(code for code, _, _ in results)
+    assert codes == [0, 2], results                      # one writes, the other refuses
+    refusal = next(err for code, _, err in results if code)
+    written = (tmp_path / 'same' / 'run.estimate.csv').read_text()
+    first = 'a/run.csv' if 'a/run.csv' in written else 'b/run.csv'
+    assert 'run.estimate.csv: exists, written from' in refusal and first in refusal
+    assert written.count('\n') == 3000 + 12               # complete: header and every row
+    # --overwrite replaces, and says what it replaced
+    assert _estimate(tmp_path / 'a' / 'run.csv', '--out', tmp_path / 'same', '--overwrite') == 0
+    assert 'replaced' in capsys.readouterr().out
+
+
+def test_the_estimator_is_built_once_for_a_directory_of_one_model(tmp_path, monkeypatch):
+    from ipmc_sensor_ros.interface import specs
+
+    src = tmp_path / 'in'
+    src.mkdir()
+    for k in range(5):
+        _record(src / f'r{k}.csv', rows=100, seed=k)
+    built = []
+    real = specs.build_estimator
+    monkeypatch.setattr(specs, 'build_estimator', lambda *a, **kw: built.append(1) or
+                        real(*a, **kw))
+    assert _estimate(src, '--out', tmp_path / 'o') == 0
+    assert len(built) == 1
+    # each file gets the estimator in its start state: the same input gives the same output
+    from ipmc_sensor_ros.cli.data_verbs import read_estimate
+
+    last = read_estimate(tmp_path / 'o' / 'r4.estimate.csv')['deflection_estimate_m']
+    _record(src / 'r9.csv', rows=100, seed=4)
+    assert _estimate(src / 'r9.csv', '--out', tmp_path / 'o2') == 0
+    again = read_estimate(tmp_path / 'o2' / 'r9.estimate.csv')['deflection_estimate_m']
+    np.testing.assert_array_equal(last, again)

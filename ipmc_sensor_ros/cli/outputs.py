@@ -66,10 +66,12 @@ def write_complete(final: Path, write: Callable[[Path], None], overwrite: bool) 
     """
     if final.exists() and not overwrite:
         raise _exists(final)
+    made = [p for p in (final.parent, *final.parent.parents) if not p.exists()]
     final.parent.mkdir(parents=True, exist_ok=True)
     scratch = final.parent / f'.ipmc-partial-{os.getpid()}'
     scratch.mkdir(exist_ok=True)
     part = scratch / final.name
+    done = False
     try:
         write(part)
         note = f'replaced {printable(final)} (written {first_writer(final)})' \
@@ -88,13 +90,15 @@ def write_complete(final: Path, write: Callable[[Path], None], overwrite: bool) 
                 os.link(part, final)        # never replaces an existing name
             except FileExistsError:
                 raise _exists(final) from None
+        done = True
         return note
     finally:
         _remove(part)
-        try:
-            scratch.rmdir()
-        except OSError:
-            pass
+        for folder in [scratch] + ([] if done else made):   # directories made for nothing
+            try:
+                folder.rmdir()
+            except OSError:
+                pass
 
 
 def _exists(final: Path) -> ParameterError:
