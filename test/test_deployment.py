@@ -297,3 +297,102 @@ def test_the_estimator_is_built_once_for_a_directory_of_one_model(tmp_path, monk
     assert _estimate(src / 'r9.csv', '--out', tmp_path / 'o2') == 0
     again = read_estimate(tmp_path / 'o2' / 'r9.estimate.csv')['deflection_estimate_m']
     np.testing.assert_array_equal(last, again)
+
+
+# ---------------------------------------------------------------------------
+# Physically possible or flagged
+# ---------------------------------------------------------------------------
+@pytest.mark.ros
+def test_an_estimate_beyond_the_geometry_is_flagged_and_diagnostics_go_error(tmp_path,
+                                                                            monkeypatch):
+    """
+    A current that means 15 mm of tip motion on a 22 mm beam (L/2 = 11 mm).
+
+    The block carries each estimate with ``deflection_beyond_limit`` set exactly where
+    |w| > L/2, the points (last of each block) are +-inf there (REP 117), and /diagnostics
+    turn ERROR.
+    """
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from geometry_msgs.msg import PointStamped
+    from std_msgs.msg import Float64MultiArray
+
+    from ipmc_sensor_ros.interface.blocks import ESTIMATE_COLUMNS
+    from ipmc_sensor_ros.nodes.messages import unpack_block
+    from ipmc_sensor_ros.physics.model import SensorModel
+    from ipmc_sensor_ros.physics.parameters import Geometry
+    from ipmc_sensor_ros.simulation.sensor import SensorSimulator
+    from ipmc_sensor_ros.simulation.stimuli import CrankSlider
+    from test_managed import QOS
+
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    model = SensorModel.named('h2', Geometry(0.022, 0.007, 0.00036))
+    k = np.arange(3000)
+    _, current = SensorSimulator(model, FS).run(
+        CrankSlider(5.0, crank_radius_m=15e-3, rod_length_m=60e-3), k / FS)
+    child = ChildNode(tmp_path, 'ipmc_sensor_ros.nodes.estimator_node.main',
+                      '-p', 'publish_points:=last_of_block')
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=child.domain)
+    node = rclpy.create_node('robot_stack', context=ctx)
+    blocks, points, diagnostics = [], [], []
+    node.create_subscription(Float64MultiArray, 'deflection/block',
+                             lambda m: blocks.append(unpack_block(m, ESTIMATE_COLUMNS)), QOS)
+    node.create_subscription(PointStamped, 'deflection', lambda m: points.append(m.point.z), QOS)
+    node.create_subscription(DiagnosticArray, '/diagnostics',
+                             lambda m: diagnostics.extend(m.status), 10)
+    pub = node.create_publisher(Float64MultiArray, 'current', QOS)
+    client = Client(ctx, None, '/ipmc_estimator')
+    client.ex.add_node(node)
+    try:
+        client.spin_until(lambda: pub.get_subscription_count() == 1
+                          and node.count_publishers('/deflection') == 1
+                          and node.count_publishers('/deflection/block') == 1, 'the node',
+                          check=child.alive)
+        client.spin_for(0.5)       # the node's writers matched with our readers
+        for a in range(0, k.size, 100):
+            pub.publish(pack_block(1000.0 + k[a:a + 100] / FS, current[a:a + 100]))
+        client.spin_until(lambda: sum(len(b) for b in blocks) == k.size
+                          and len(points) == len(blocks), 'the estimates', check=child.alive)
+        client.spin_until(lambda: any(s.level == DiagnosticStatus.ERROR for s in diagnostics),
+                          'an ERROR status', check=child.alive)
+    finally:
+        node.destroy_node()
+        client.close()
+        rclpy.shutdown(context=ctx)
+        child.stop()
+    w = np.concatenate([b.values for b in blocks])
+    flags = np.concatenate([b.extra[:, 1] for b in blocks])
+    beyond = np.abs(w) > 0.011
+    assert 0.05 < beyond.mean() < 0.95             # some estimates beyond, some within
+    np.testing.assert_array_equal(flags, beyond.astype(float))
+    z, last = np.array(points), np.array([b.values[-1] for b in blocks])
+    far = np.abs(last) > 0.011
+    assert far.any() and not far.all()
+    np.testing.assert_array_equal(np.isinf(z), far)
+    np.testing.assert_array_equal(np.sign(z), np.sign(last))
+    np.testing.assert_array_equal(z[~far], last[~far])
+    error = next(s for s in diagnostics if s.level == DiagnosticStatus.ERROR)
+    assert 'beyond the geometric limit |w| > 0.011 m' in error.message
+
+
+def test_estimate_files_flag_the_same_way(tmp_path, capsys):
+    from ipmc_sensor_ros.cli.data_verbs import read_estimate
+    from ipmc_sensor_ros.physics.model import SensorModel
+    from ipmc_sensor_ros.physics.parameters import Geometry
+    from ipmc_sensor_ros.simulation.sensor import SensorSimulator
+    from ipmc_sensor_ros.simulation.stimuli import CrankSlider
+
+    model = SensorModel.named('h2', Geometry(0.022, 0.007, 0.00036))
+    t = np.arange(3000) / FS
+    _, i = SensorSimulator(model, FS).run(
+        CrankSlider(5.0, crank_radius_m=15e-3, rod_length_m=60e-3), t)
+    lines = _record(tmp_path / 'far.csv')[:7]
+    lines += [f'{a!r},{b!r}' for a, b in zip(t.tolist(), i.tolist())]
+    (tmp_path / 'far.csv').write_text('\n'.join(lines) + '\n')
+    assert _estimate(tmp_path / 'far.csv', '--out', tmp_path / 'o') == 0
+    est = read_estimate(tmp_path / 'o' / 'far.estimate.csv')
+    beyond = np.abs(est['deflection_estimate_m']) > 0.011
+    assert beyond.any() and not beyond.all()
+    np.testing.assert_array_equal(est['deflection_beyond_limit'], beyond.astype(float))
+    assert (f'{beyond.sum()} estimate(s) beyond the geometric limit |w| > L/2 = 0.011 m'
+            in capsys.readouterr().out)

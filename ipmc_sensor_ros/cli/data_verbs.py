@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..estimation.limits import beyond_limit, deflection_limit_m
 from ..physics.beam import FIDELITIES
 from ..physics.model import SensorModel
 from ..physics.parameters import PAPER_SAMPLES, ParameterError
@@ -213,12 +214,15 @@ WRITE_CHUNK_ROWS = 65_536
 
 
 def _write_estimate(path: Path, data, values: dict, model_text: str, params, resets: int,
-                    t, current, w, measured) -> None:
+                    t, current, w, measured, flagged: tuple) -> None:
+    flags, limit_m = flagged
     cols = ['time_s', 'current_A', 'deflection_estimate_m']
     arrays = [t, current, w]
     if measured is not None:
         cols.append('deflection_m')
         arrays.append(measured)
+    cols.append('deflection_beyond_limit')
+    arrays.append(flags)
     head = [
         f'# format: {ESTIMATE_FORMAT}',
         f'# source: {printable(data.path)}',
@@ -232,6 +236,9 @@ def _write_estimate(path: Path, data, values: dict, model_text: str, params, res
         f'# resets: {resets}',
         '# deflection_estimate_m: the estimate; '
         'deflection_m: the measured deflection of the input',
+        '# deflection_beyond_limit: 1.0 where |deflection_estimate_m| > '
+        f'{limit_m!r} m = L/2 (not physically possible), '
+        'else 0.0',
     ]
     # repr: the shortest text that reads back exactly; written in chunks so that memory
     # stays a few MB above the arrays themselves (a whole-file list of row strings took
@@ -350,15 +357,24 @@ def _estimate_one(args, path: Path, base: dict, explicit: set, cache: EstimatorC
             f'{stream.last_rejection}')
         current = current[kept]
         measured = None if measured is None else measured[kept]
+    limit_m = deflection_limit_m(estimator.model.geometry.length_m)
+    flags = beyond_limit(w, limit_m)
     out, note = _write_output(args, data, values, model_text, stream.counters['resets'],
-                              t_out, current, w, measured)
+                              t_out, current, w, measured, (flags, limit_m))
     row = {'source': src, 'out': printable(out), 'samples': int(t_out.size),
-           'resets': stream.counters['resets']}
+           'resets': stream.counters['resets'],
+           'samples_beyond_limit': int(np.count_nonzero(flags))}
+    if row['samples_beyond_limit']:
+        note += (f"; {row['samples_beyond_limit']} estimate(s) beyond the geometric limit "
+                 f'|w| > L/2 = {limit_m:g} m (not '
+                 'physically possible: offset drift, wrong model or geometry?), flagged in '
+                 'column deflection_beyond_limit')
     print(_estimate_line(row, values, estimator, t_out, w, measured) + note)
     return row
 
 
-def _write_output(args, data, values, model_text, resets, t_out, current, w, measured):
+def _write_output(args, data, values, model_text, resets, t_out, current, w, measured,
+                  flagged):
     """Write the estimate of one input (text or bag); (output path, note to print)."""
     from ..workbench.io import TimeSeries, write_bag
 
@@ -375,7 +391,8 @@ def _write_output(args, data, values, model_text, resets, t_out, current, w, mea
     else:
         out = out_dir / f'{stem}.estimate.csv'
         note = write_complete(out, lambda p: _write_estimate(
-            p, data, values, model_text, args.params, resets, t_out, current, w, measured),
+            p, data, values, model_text, args.params, resets, t_out, current, w, measured,
+            flagged),
             args.overwrite)
     return out, (f'; {note}' if note else '')
 
