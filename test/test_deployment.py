@@ -396,3 +396,41 @@ def test_estimate_files_flag_the_same_way(tmp_path, capsys):
     np.testing.assert_array_equal(est['deflection_beyond_limit'], beyond.astype(float))
     assert (f'{beyond.sum()} estimate(s) beyond the geometric limit |w| > L/2 = 0.011 m'
             in capsys.readouterr().out)
+
+
+# ---------------------------------------------------------------------------
+# Output stamps across a parameter change
+# ---------------------------------------------------------------------------
+@pytest.mark.ros
+@pytest.mark.parametrize('delays', [('', 'time_delay(delay_s=0.002)'),
+                                    ('time_delay(delay_s=0.002)', '')])
+def test_output_stamps_stay_strictly_increasing_when_time_delay_changes(delays):
+    """Adding (or removing) ``time_delay`` while running: stamps never repeat or go back."""
+    from rclpy.parameter import Parameter
+
+    from conftest import DirectNode
+
+    before, after = ([d] if d else [] for d in delays)
+    direct = DirectNode(publish_points='per_sample', **({'effects': before} if before else {}))
+    try:
+        msgs = one_sample_messages(600, 1000.0)
+        for msg in msgs[:300]:
+            direct.send(msg)
+        result = direct.node.set_parameters(
+            [Parameter('effects', Parameter.Type.STRING_ARRAY, after)])
+        assert result[0].successful, result[0].reason
+        direct.node.settle()
+        for msg in msgs[300:]:
+            direct.send(msg)
+        assert direct.node.rebuilds == 1
+        stamps = np.concatenate([b.times_s for b in direct.published])
+        points = np.array([sec + 1e-9 * nsec for sec, nsec, *_ in direct.points])
+        counters = direct.node.counters()
+    finally:
+        direct.close()
+    assert np.all(np.diff(stamps) > 0), stamps[np.flatnonzero(np.diff(stamps) <= 0)[0]:][:5]
+    assert np.all(np.diff(points) > 0)
+    # each estimate not published is counted; the invariant holds
+    assert counters['samples_out'] == stamps.size
+    assert counters['samples_in'] == counters['samples_out'] + counters['samples_dropped']
+    assert counters['samples_dropped'] == (2 if before == [] else 0)
