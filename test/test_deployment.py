@@ -303,8 +303,8 @@ def test_the_estimator_is_built_once_for_a_directory_of_one_model(tmp_path, monk
 # Physically possible or flagged
 # ---------------------------------------------------------------------------
 @pytest.mark.ros
-def test_an_estimate_beyond_the_geometry_is_flagged_and_diagnostics_go_error(tmp_path,
-                                                                            monkeypatch):
+def test_an_estimate_beyond_the_geometry_is_flagged_and_diagnostics_go_error(
+        tmp_path, monkeypatch):
     """
     A current that means 15 mm of tip motion on a 22 mm beam (L/2 = 11 mm).
 
