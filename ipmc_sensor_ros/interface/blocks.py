@@ -28,8 +28,8 @@ from ..errors import DataError
 from ..physics.parameters import short_repr
 
 __all__ = ['DataError', 'SAMPLE_LABEL', 'CURRENT_COLUMNS', 'DEFLECTION_COLUMNS',
-           'ESTIMATE_COLUMNS', 'current_columns', 'deflection_columns', 'estimate_columns',
-           'unpack_columns', 'unpack_pairs']
+           'ESTIMATE_COLUMNS', 'ESTIMATE_COLUMNS_UNFLAGGED', 'current_columns',
+           'deflection_columns', 'estimate_columns', 'unpack_columns', 'unpack_pairs']
 
 #: Label of the row dimension.
 SAMPLE_LABEL = 'sample'
@@ -41,6 +41,8 @@ DEFLECTION_COLUMNS = 'time_s,deflection_m'
 #: of each estimate, metres, and its flag ``deflection_beyond_limit`` (1.0 when |w| exceeds
 #: what the geometry allows, else 0.0: :mod:`ipmc_sensor_ros.estimation.limits`).
 ESTIMATE_COLUMNS = 'time_s,deflection_m,deflection_std_m,deflection_beyond_limit'
+#: The estimator's output without the flag column, as recorded bags may hold it (read only).
+ESTIMATE_COLUMNS_UNFLAGGED = 'time_s,deflection_m,deflection_std_m'
 
 
 def current_columns(channels: int = 1) -> str:
