@@ -70,7 +70,7 @@ def one_sample_messages(n: int, t0: float, seed: int = 0) -> list:
 
 @pytest.fixture
 def managed_child(tmp_path, monkeypatch):
-    """A managed estimator (autostart) in a child process and a tester :class:`Client`."""
+    """Start a managed estimator (autostart) in a child process; yield it and a tester."""
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     child = ChildNode(tmp_path, 'ipmc_sensor_ros.nodes.managed.main_estimator',
                       '-p', 'autostart:=true', '-p', 'publish_points:=none')

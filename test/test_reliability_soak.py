@@ -360,7 +360,7 @@ RSS_FLAT_BYTES = 5e6
 
 def _check_deployment(run, duration_s):
     """
-    The deployment soak's guarantees (module docstring); returns the summary line.
+    Check the deployment soak's guarantees (module docstring); return the summary line.
 
     A sample lost before the node must be counted by it (``samples_lost``, when the node
     counts losses), none refused; CPU and memory are judged on runs of a minute or more.

@@ -279,7 +279,7 @@ class EstimatorCache:
         self.builds = 0        #: estimators built (not copies)
 
     def get(self, values: dict):
-        """A fresh estimator of ``values`` (``interface.specs.build_estimator``)."""
+        """Return a fresh estimator of ``values`` (``interface.specs.build_estimator``)."""
         import copy
 
         from ..interface import specs as config
@@ -292,7 +292,7 @@ class EstimatorCache:
 
 
 def _estimate_inputs(args) -> list[Path]:
-    """The inputs of ``estimate`` (files, bags, directories expanded), in natural order."""
+    """Return the inputs of ``estimate`` (files, bags, directories expanded), in order."""
     from .args import _expand, natural_key
 
     return sorted(_expand(args.data), key=natural_key)
@@ -315,7 +315,7 @@ def _read_one(args, path: Path):
 
 
 def _checked_current(data) -> np.ndarray:
-    """The record's current through the stream's value rule; the error names file:line."""
+    """Check the record's current by the stream's value rule; the error names file:line."""
     from ..errors import DataError
     from ..estimation.stream import validate_block
 
@@ -398,7 +398,7 @@ def _write_output(args, data, values, model_text, resets, t_out, current, w, mea
 
 
 def _estimate_line(row: dict, values: dict, estimator, t_out, w, measured) -> str:
-    """The printed line of one estimated input (and its accuracy in ``row``)."""
+    """Return the printed line of one estimated input (and put its accuracy in ``row``)."""
     resets = row['resets']
     msg = f"{row['source']}: {t_out.size} estimates -> {row['out']}"
     if resets:

@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: Apache-2.0
-"""
+r"""
 How the command line writes its outputs and names files.
 
 * **Complete or absent**: an output is written under a temporary name in a private
@@ -11,7 +11,7 @@ How the command line writes its outputs and names files.
   (``link`` for a file, ``rename`` onto a missing name for a bag directory), so two runs
   started together cannot both win.
 * **Any file name**: names that are not UTF-8 (a Latin-1 ``é`` from an old instrument PC)
-  are handled as bytes and shown with escapes (``caf\\xe9.csv``), never an encoding error.
+  are handled as bytes and shown with escapes (``caf\xe9.csv``), never an encoding error.
 """
 from __future__ import annotations
 

@@ -251,7 +251,7 @@ class ManagedMixin:
             publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))
 
     def _output_publishers(self) -> list:
-        """The data publishers to flush on deactivate (subclass hook)."""
+        """Return the data publishers to flush on deactivate (subclass hook)."""
         return []
 
     # -- helpers ----------------------------------------------------------------------

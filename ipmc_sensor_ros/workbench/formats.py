@@ -395,7 +395,7 @@ def _read_rows(source: TextSource, header: _Header, check, max_rows) -> list[np.
 
 
 def incomplete_notes(path, source: TextSource) -> tuple[str, ...]:
-    """The note of a last line without a line end, not read (:mod:`.textread`), if any."""
+    """Return the note of a last line without a line end, not read (:mod:`.textread`)."""
     if source.incomplete_line is None:
         return ()
     return (f'{path}:{source.incomplete_line}: last line has no line end (file still being '
