@@ -1,7 +1,5 @@
 # SPDX-License-Identifier: Apache-2.0
-"""
-Verbs that make or convert data: ``simulate``, ``estimate`` (:mod:`.estimate_verb`), ``import``.
-"""
+"""Verbs that make or convert data: simulate, estimate (:mod:`.estimate_verb`), import."""
 from __future__ import annotations
 
 import math
