@@ -141,7 +141,8 @@ def test_column_labels():
     assert current_columns(3) == 'time_s,current_ch0_A,current_ch1_A,current_ch2_A'
     assert deflection_columns(2) == 'time_s,deflection_ch0_m,deflection_ch1_m'
     assert estimate_columns(2) == ('time_s,deflection_ch0_m,deflection_std_ch0_m,'
-                                   'deflection_ch1_m,deflection_std_ch1_m')
+                                   'deflection_beyond_limit_ch0,deflection_ch1_m,'
+                                   'deflection_std_ch1_m,deflection_beyond_limit_ch1')
 
 
 # -- 2. the node in process ---------------------------------------------------------------------
@@ -200,9 +201,11 @@ def test_node_array_blocks_match_the_core(array_node):
     for k, (times, out) in zip(range(0, n, 200), a.blocks):
         r_t, r_w, r_std, r_has = ref.feed(t[k:k + 200], table[k:k + 200])
         np.testing.assert_array_equal(times, r_t)
-        np.testing.assert_array_equal(out[:, 0::2], r_w)     # deflection columns
-        np.testing.assert_array_equal(out[:, 1::2], r_std)   # kalman: the filter's std
-    assert np.isnan(a.blocks[3][1][:, 4]).all() and np.isfinite(a.blocks[3][1][:, 0]).all()
+        np.testing.assert_array_equal(out[:, 0::3], r_w)     # deflection columns
+        np.testing.assert_array_equal(out[:, 1::3], r_std)   # kalman: the filter's std
+        np.testing.assert_array_equal(out[:, 2::3], np.where(r_has, 0.0, np.nan)[None, :]
+                                      .repeat(len(times), 0))     # flags: all within L/2
+    assert np.isnan(a.blocks[3][1][:, 6]).all() and np.isfinite(a.blocks[3][1][:, 0]).all()
     per = a.node.channel_counters()
     # the wrong-layout message is counted as the rows of this array its payload fills:
     # ceil(4 values / 4 columns) = 1
@@ -318,7 +321,7 @@ def test_simulator_array_to_estimator_array_over_dds(tmp_path, monkeypatch):
     w_t = np.concatenate([b[1] for b in truth])
     np.testing.assert_array_equal(t_e, t_t)          # the same sample times, in order
     last = t_e >= t_e[-1] - 20.0
-    errors = [nrmse(w_e[last, 2 * c], w_t[last, c]) for c in range(channels)]
+    errors = [nrmse(w_e[last, 3 * c], w_t[last, c]) for c in range(channels)]
     print(f'array of {channels} over DDS: NRMSE per channel {np.round(errors, 4).tolist()}')
     assert max(errors) < 0.05, errors
     # the channels are different signals (0.1 s apart on a 1 Hz crank): a swapped column fails

@@ -82,7 +82,7 @@ def test_output_keeps_measured_and_names_the_estimate(short_run, tmp_path):
     est = read_estimate(tmp_path / 'short_5Hz.estimate.csv')
     measured = read_timeseries(short_run / 'short_5Hz.csv')
     assert set(est) == {'time_s', 'current_A', 'deflection_estimate_m', 'deflection_estimate_std_m',
-                        'deflection_m'}
+                        'deflection_m', 'deflection_beyond_limit'}
     assert np.array_equal(est['deflection_m'], measured.deflection_m)
     assert np.array_equal(est['time_s'], measured.time_s)               # exact round trip
     assert not np.allclose(est['deflection_estimate_m'], est['deflection_m'])
@@ -156,7 +156,8 @@ def test_current_only_input(short_run, tmp_path, capsys):
     assert main(['estimate', str(only), '--out', str(tmp_path / 'o')]) == 0
     assert 'accuracy not reported' in capsys.readouterr().out
     assert set(read_estimate(tmp_path / 'o' / 'current_only.estimate.csv')) == {
-        'time_s', 'current_A', 'deflection_estimate_m', 'deflection_estimate_std_m'}
+        'time_s', 'current_A', 'deflection_estimate_m', 'deflection_estimate_std_m',
+        'deflection_beyond_limit'}
     # verbs that need a deflection skip it with a line; only current-only files -> clear error
     assert main(['compare', str(only.parent)]) == 2
     err = capsys.readouterr().err

@@ -133,8 +133,8 @@ def test_one_sample_codec_matches_rclpy_serialisation(columns):
 
     codec = OneSampleCodec(columns)
     width = len(columns.split(','))
-    rows = [(1795e6 + 0.123456789, -3.5e-7, 1e-9)[:width], (0.0, -0.0, float('inf'))[:width],
-            (5e-324, float('nan'), -1e308)[:width]]
+    rows = [(1795e6 + 0.123456789, -3.5e-7, 1e-9, 1.0)[:width],
+            (0.0, -0.0, float('inf'), 0.0)[:width], (5e-324, float('nan'), -1e308, -0.0)[:width]]
     for row in rows:
         msg = BlockPacker(columns).pack_one(*row)
         raw = serialize_message(msg)

@@ -88,10 +88,10 @@ def validate_block(values, max_samples: int = MAX_BLOCK_SAMPLES,
     finite = np.isfinite(x)
     if not finite.all():
         raise DataError(f'current block has {int((~finite).sum())} non-finite sample(s) '
-                        f'(first at index {int(np.argmin(finite))})')
+                        f'(first at index {int(np.argmin(finite))})', index=int(np.argmin(finite)))
     k = int(np.argmax(np.abs(x) > max_abs_current_a))
     raise DataError(f'current block has |i| > {max_abs_current_a} A at index {k} '
-                    f'({x[k]!r} A): not a sensing current')
+                    f'({float(x[k])!r} A): not a sensing current', index=k)
 
 
 def _no_log(text: str) -> None:
@@ -137,6 +137,7 @@ class StreamEstimator:
         self.last_time_s: float | None = None   # last sample fed to the filter
         self._last_valid_s: float | None = None  # last well-formed sample time seen (period rule)
         self._fs = float(estimator.sample_rate_hz)
+        self._stamp_floor_s: float | None = None   # output stamps must pass it (delay grew)
 
     # -- configuration --------------------------------------------------------------
     @property
@@ -150,6 +151,9 @@ class StreamEstimator:
         Should the hand-over itself fail, ``new`` starts afresh and that is counted as a
         reset.
         """
+        old = self.estimator
+        if self.last_time_s is not None and new.delay_s > old.delay_s:
+            self._stamp_floor_s = self.last_time_s - old.delay_s   # the last output stamp
         try:
             new.continue_from(self.estimator)
         except Exception as exc:  # never lose the stream over a hand-over
@@ -168,7 +172,7 @@ class StreamEstimator:
         node activated again).
         """
         self.estimator.reset()
-        self.last_time_s = self._last_valid_s = None
+        self.last_time_s = self._last_valid_s = self._stamp_floor_s = None
 
     def check_invariant(self) -> bool:
         c = self.counters
@@ -314,8 +318,32 @@ class StreamEstimator:
             self._say(f'non-finite estimate on {self.source}: block dropped, filter reset')
             return None
         self.last_time_s = float(t[-1])
+        if self._stamp_floor_s is not None:
+            return self._past_floor(t_out, w)
         c['samples_out'] += current.size
         return t_out, w
+
+    def _past_floor(self, t_out: np.ndarray, w: np.ndarray):
+        """
+        Output stamps strictly increase: withhold estimates stamped at or before the floor.
+
+        After ``time_delay`` grew by d, the first estimates (stamped ``t - delay``) fall on
+        instants already published (within rounding: less than half a period after the last
+        stamp); they are counted in ``samples_dropped``, not published.
+        """
+        keep = t_out > self._stamp_floor_s + 0.5 / self._fs
+        n_keep = int(np.count_nonzero(keep))
+        c = self.counters
+        c['samples_out'] += n_keep
+        if n_keep < t_out.size:
+            c['samples_dropped'] += t_out.size - n_keep
+            self._say(f'time_delay grew on {self.source}: {t_out.size - n_keep} estimate(s) '
+                      f'stamped at or before the last published one ({self._stamp_floor_s!r} s) '
+                      'not published (output stamps strictly increase)')
+        if not n_keep:
+            return None
+        self._stamp_floor_s = None
+        return t_out[keep], w[keep]
 
     def feed_one(self, time_s: float, current_a: float):
         """
@@ -331,7 +359,7 @@ class StreamEstimator:
         if not (0.0 <= t <= MAX_STAMP_S and -MAX_ABS_CURRENT_A <= i <= MAX_ABS_CURRENT_A):
             return False
         last = self.last_time_s
-        if last is None or self._last_valid_s != last:
+        if last is None or self._last_valid_s != last or self._stamp_floor_s is not None:
             return False
         step = (t - last) * self._fs
         if not (1.0 - PERIOD_TOLERANCE <= step <= GAP_PERIODS and t - last <= self.max_gap_s):

@@ -12,7 +12,9 @@ diagnostic_aggregator).  The ROS publisher is
 
 Rules (evaluated on the change of the counters since the previous evaluation):
 
-* ERROR: no new sample for ``stale_after_s`` (or none at all since start);
+* ERROR: no new sample for ``stale_after_s`` (or none at all since start); an estimate
+  beyond what the geometry allows (``samples_beyond_limit`` rose:
+  :mod:`ipmc_sensor_ros.estimation.limits`);
 * WARN: messages rejected, filter resets, time gaps, samples dropped;
   measured sample rate off ``sample_rate_hz`` by more than
   ``rate_tolerance`` (relative; only over intervals of >= 1 s with data);
@@ -253,6 +255,12 @@ class HealthMonitor:
             errors.append('no data for ' + (f'{since:.1f} s' if self._last_data_s is not None
                                             else f'{since:.1f} s since start')
                           + f' (stale_after_s {lim.stale_after_s:g})')
+        beyond = delta.get('samples_beyond_limit', 0) if self._prev is not None else \
+            int(status.get('samples_beyond_limit', 0))
+        if beyond > 0:
+            errors.append(f'{beyond} estimate(s) beyond the geometric limit |w| > '
+                          f"{_text(status.get('deflection_limit_m'))} m: not physically "
+                          'possible (offset drift, wrong model or geometry?)')
         if self._prev is not None:
             for key, text in self.WARN_COUNTERS:
                 if delta.get(key, 0) > 0:

@@ -4,8 +4,9 @@ ROS 2 node ``ipmc_estimator``: sensing current (A) in, tip deflection (m) out.
 
 Unpack -> :class:`~ipmc_sensor_ros.estimation.stream.StreamEstimator` (every rule of the
 stream: values, times, gaps, resets, counters) -> publish: ``deflection/block``
-(``time_s,deflection_m,deflection_std_m``, one per accepted input message), ``deflection``
-(``PointStamped`` (L, 0, w) in the clamp frame: per sample / last of block / none),
+(``time_s,deflection_m,deflection_std_m,deflection_beyond_limit``, one per accepted input
+message), ``deflection`` (``PointStamped`` (L, 0, w) in the clamp frame: per sample / last of
+block / none; z = +-inf beyond the limit of :mod:`~ipmc_sensor_ros.estimation.limits`),
 ``estimator/counters`` (JSON, 1 Hz) and ``/diagnostics``.  Parameter changes are validated by
 building the new estimator and applied without an output jump.  README "ROS 2 interface".
 
@@ -16,6 +17,7 @@ building the new estimator and applied without an output jump.  README "ROS 2 in
 from __future__ import annotations
 
 import json
+import math
 import sys
 import threading
 import time
@@ -34,6 +36,7 @@ from ..interface import specs as C
 from ..estimation.deflection import DeflectionEstimator
 from ..estimation.core import EstimatorCore
 from ..estimation.array import ArrayStream, check_array_estimators
+from ..estimation.limits import LimitCheck
 from ..estimation.stream import COUNTER_NAMES, StreamEstimator
 from ..errors import DataError, IpmcError
 from ..physics.parameters import short_repr
@@ -122,6 +125,7 @@ class EstimatorNode(Node):
             self._array = ArrayStream(estimators, **rules)
             self._stream = self._array.channels[0]
             self._in_columns = current_columns(self._channels)
+        self._limits = [LimitCheck() for _ in range(self._channels)]
         self._channel_names = ((topic,) if self._array is None else
                                tuple(f'{topic} ch{c}' for c in range(self._channels)))
 
@@ -201,9 +205,12 @@ class EstimatorNode(Node):
             return {name: self._status(ch)
                     for name, ch in zip(self._channel_names, self._array.channels)}
         stream = stream or self._stream
+        channel = 0 if self._array is None else self._array.channels.index(stream)
         with self._lock:
             out = dict(stream.counters)
+            out['samples_beyond_limit'] = self._limits[channel].count
             out.update(stream.estimator.status())
+            out['deflection_limit_m'] = self._limits[channel].limit_m
         if out['offset_a'] is not None:
             out['estimated_offset_a'] = out['offset_a']   # the filter's own offset (kalman)
         return out
@@ -276,8 +283,10 @@ class EstimatorNode(Node):
             if out is not None:
                 self._diagnostics.observe(block.values)
                 t, w = out
-                std = self._stream.estimator.last_std_m
-                self._publish(self._packer.pack(t, w, std), t, w, t.size)
+                est = self._stream.estimator
+                flags = self._limits[0].flags(est, w)
+                self._publish(self._packer.pack(t, w, est.last_std_m, flags),
+                              t, w, t.size)
 
     def _feed_one(self, time_s: float, current_a: float) -> bool:
         """
@@ -294,7 +303,9 @@ class EstimatorNode(Node):
             self._diagnostics.observe_one(current_a)
             if out is not None:
                 t, w = out
-                self._publish(self._one_out.encode(t, w, self._stream.estimator.std_m), t, w, 1)
+                est = self._stream.estimator
+                flag = self._limits[0].flag_one(est, w)
+                self._publish(self._one_out.encode(t, w, est.std_m, flag), t, w, 1)
             return True
 
     def _publish(self, block_msg: Float64MultiArray, times, deflections, n: int) -> None:
@@ -331,6 +342,9 @@ class EstimatorNode(Node):
         key = (float(self._values['length_m']), self._values['frame_id'])
         if self._points is None or self._points.key != key:
             self._points = PointCodec(*key)
+        limit = self._limits[channel].limit_m
+        if not -limit <= deflection_m <= limit:     # REP 117: out of range is +-inf
+            deflection_m = math.copysign(math.inf, deflection_m)
         self._pub_points[channel].publish(self._points.encode(time_s, deflection_m))
 
     def _on_current_array(self, msg: Float64MultiArray) -> None:
@@ -354,7 +368,10 @@ class EstimatorNode(Node):
                     self._diagnostics.observe_one(float(table[0, c]), self._channel_names[c])
                 else:
                     self._diagnostics.observe(table[:, c], channel=self._channel_names[c])
-            cols = [a for c in range(self._channels) for a in (w[:, c], std[:, c])]
+            flags = np.full(w.shape, np.nan)
+            for c in np.flatnonzero(has).tolist():
+                flags[:, c] = self._limits[c].flags(array.channels[c].estimator, w[:, c])
+            cols = [a for c in range(self._channels) for a in (w[:, c], std[:, c], flags[:, c])]
             try:
                 self._pub_block.publish(self._packer.pack(t, *cols))
             except Exception as exc:  # back-pressure: counted per channel, never a reset

@@ -97,14 +97,17 @@ def _on_signal(signum, frame) -> None:
 SPIN_PERIOD_S = 0.1
 
 
-def spin_until_signalled(executor, context=None) -> None:
+def spin_until_signalled(executor, context=None, node=None) -> None:
     """
     Spin ``executor`` until SIGINT/SIGTERM was received or the context shut down.
 
-    A loop of ``spin_once`` (see the module docstring for why not ``spin``); an
-    exception raised by a callback propagates out of it.
+    Also until ``node`` says it is ``finalized`` (a managed node after the ``shutdown``
+    transition: the executable then ends, exit status 0).  A loop of ``spin_once`` (see the
+    module docstring for why not ``spin``); an exception raised by a callback propagates out
+    of it.
     """
-    while not _SIGNALLED and not _stopping(context):
+    while (not _SIGNALLED and not _stopping(context)
+           and not getattr(node, 'finalized', False)):
         executor.spin_once(timeout_sec=SPIN_PERIOD_S)
 
 
@@ -164,7 +167,7 @@ def _run(node_factory, name: str, args) -> int:
         node = node_factory()
         node.get_logger().debug(f'executor: {type(executor).__name__}')
         executor.add_node(node)
-        spin_until_signalled(executor, node.context)
+        spin_until_signalled(executor, node.context, node)
     except _SHUTDOWN:
         pass
     except (ParameterError, ParameterException) as exc:

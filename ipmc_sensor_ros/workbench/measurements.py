@@ -52,6 +52,10 @@ class TimeSeries:
     extra : unrecognised header keys (text values) / sidecar ``extra``.
     deflection_alignment : ``"exact"`` (measured at the sample times),
         ``"linear"`` (interpolated from other times, bags only) or None.
+    first_row_line : 1-based line of the first data row of a text file (rows are
+        contiguous: sample k is on line ``first_row_line + k``); None for bags.
+    notes : what the reader left out and why, one line each naming the place (e.g. an
+        incomplete last line of a file still being written).
     """
 
     path: str
@@ -64,6 +68,8 @@ class TimeSeries:
     deflection_m: np.ndarray | None = None
     extra: dict = field(default_factory=dict)
     deflection_alignment: str | None = None
+    first_row_line: int | None = None
+    notes: tuple = ()
 
     def __post_init__(self) -> None:
         if not isinstance(self.geometry, Geometry):
@@ -90,6 +96,12 @@ class TimeSeries:
     @property
     def n_samples(self) -> int:
         return int(self.time_s.size)
+
+    def where(self, k: int) -> str:
+        """Return where sample ``k`` is: ``path:line`` in a text file, else path and time."""
+        if self.first_row_line is not None:
+            return f'{self.path}:{self.first_row_line + int(k)}'
+        return f'{self.path}: sample {int(k)} (t = {float(self.time_s[k])!r} s)'
 
     @property
     def has_deflection(self) -> bool:
