@@ -251,8 +251,8 @@ def test_configure_with_a_bad_parameter_fails_naming_it_and_stays_unconfigured(
     result = node.set_parameters([Parameter('youngs_modulus_pa', value=-5.0)])[0]
     assert not result.successful and 'youngs_modulus_pa' in result.reason
     before = node.estimator
-    assert node.set_parameters([Parameter('leak_corner_hz', value=0.02)])[0].successful
-    assert node.estimator is not before and node.estimator.leak_corner_hz == 0.02
+    assert node.set_parameters([Parameter('motion_corner_hz', value=2.0)])[0].successful
+    assert node.estimator is not before and node.estimator.config.motion_corner_hz == 2.0
     assert client.transition(Transition.TRANSITION_ACTIVATE)
     # an active node takes a valid change too and keeps estimating
     assert node.set_parameters([Parameter('leak_corner_hz', value=0.03)])[0].successful

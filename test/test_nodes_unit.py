@@ -353,7 +353,7 @@ def test_bad_messages_are_rejected_and_leave_the_filter_untouched(harness, reduc
                 assert reason in h.node.last_rejection
         h.send(pack_block(tb, ib))
 
-    ref = reference(reduced).process(i)
+    ref = reference(reduced).estimate(i).deflection_m
     out = h.outputs()
     assert out.shape == ref.shape
     # Identical arithmetic on identical blocks: only float rounding could differ.
@@ -380,7 +380,7 @@ def test_backward_time_jump_resets_the_filter_and_warns(harness, reduced, capfd)
     assert 'time jumped back by' in capfd.readouterr().err
     # After the reset the output is that of a fresh filter fed the replayed block.
     replay = h.blocks[-1].values
-    assert np.max(np.abs(replay - reference(reduced).process(i[:250]))) <= 1e-12
+    assert np.max(np.abs(replay - reference(reduced).estimate(i[:250]).deflection_m)) <= 1e-12
     check_accounting(c)
 
 
@@ -395,7 +395,7 @@ def test_long_gap_resets_short_gap_is_bridged(harness, reduced):
     c = h.node.counters()
     assert c['gaps'] == 1 and c['resets'] == 1
     assert 'gap of 0.25' in h.node.last_warning
-    assert np.max(np.abs(h.blocks[-1].values - reference(reduced).process(i[500:600]))) <= 1e-12
+    assert np.max(np.abs(h.blocks[-1].values - reference(reduced).estimate(i[500:600]).deflection_m)) <= 1e-12
 
 
 def test_one_dimensional_messages_infer_times_and_per_sample_points(harness, reduced):
@@ -407,7 +407,7 @@ def test_one_dimensional_messages_infer_times_and_per_sample_points(harness, red
     times = np.concatenate([b.times_s for b in h.blocks])
     # Spacing 1/fs from the node clock at the first sample (no gap detection in this mode).
     assert np.allclose(np.diff(times), 1.0 / FS, rtol=0, atol=1e-6)
-    assert np.max(np.abs(h.outputs() - reference(reduced).process(i))) <= 1e-12
+    assert np.max(np.abs(h.outputs() - reference(reduced).estimate(i).deflection_m)) <= 1e-12
     p = h.points[-1]
     assert p.header.frame_id == 'beam' and p.point.x == pytest.approx(0.022) and p.point.y == 0.0
     assert p.point.z == h.outputs()[-1]
@@ -456,25 +456,25 @@ def test_invalid_parameter_changes_are_refused_with_reason(harness, reduced):
     t, _, i = crank_record(0.5)
     for k in range(0, 500, 100):
         h.send(pack_block(t[k:k + 100], i[k:k + 100]))
-    assert np.max(np.abs(h.outputs() - reference(reduced).process(i))) <= 1e-12
+    assert np.max(np.abs(h.outputs() - reference(reduced).estimate(i).deflection_m)) <= 1e-12
 
 
-def test_valid_leak_change_is_applied_without_an_output_jump(harness, reduced):
+def test_valid_setting_change_is_applied_without_an_output_jump(harness, reduced):
     h = harness(overrides={'publish_points': 'none'})
-    t, w, i = crank_record(31.0, f_hz=1.0)
-    cut = 30000                      # at 30 s the 1 Hz crank is at its peak (2 mm)
+    t, w, i = crank_record(11.0, f_hz=1.0)
+    cut = 10000                      # at 10 s the 1 Hz crank is at its peak (2 mm)
     for k in range(0, cut, 1000):
         h.send(pack_block(t[k:k + 1000], i[k:k + 1000]))
-    result = h.node.set_parameters([Parameter('leak_corner_hz', value=0.02)])[0]
+    result = h.node.set_parameters([Parameter('motion_corner_hz', value=2.0)])[0]
     assert result.successful, result.reason
-    assert h.node.estimator.leak_corner_hz == 0.02
+    assert h.node.estimator.config.motion_corner_hz == 2.0
     h.send(pack_block(t[cut:cut + 100], i[cut:cut + 100]))
     before, after = h.blocks[-2].values[-1], h.blocks[-1].values[0]
-    unchanged = reference(reduced).process(i[:cut + 1])[-1]
-    # The rebuilt filter starts from the steady state with the old filter's output,
-    # so its first sample differs from what the unchanged filter would give only by
-    # the different leak acting for one sample: measured 2.6 um; 10 um = 0.5 % of the
-    # 2 mm amplitude.  A reset or a fresh filter would be off by about 1.8 mm.
+    unchanged = reference(reduced).estimate(i[:cut + 1]).deflection_m[-1]
+    # The rebuilt filter carries the whole state (same sensor: the charge states too), so its
+    # first sample differs from the unchanged filter's only by one step of another prior; one
+    # sample of a 1 Hz, 2 mm crank moves the tip by up to 13 um, so 10 um bounds a jump.
+    # A reset or a fresh filter would be off by about 1.8 mm.
     assert abs(after - unchanged) <= 10e-6
     assert abs(after - before) <= 10e-6
     # A model change is applied too (new reduction) and refused values are not stored.
@@ -495,7 +495,7 @@ def test_effects_current_offset_is_removed_and_delay_restamps(harness, reduced):
     # The offset is subtracted before the filter; the pure delay is not inverted
     # but re-stamped: output times are input times minus 2 ms.
     delayed = SensorModel.named('h2', SLIM, extra_effects='time_delay(delay_s=0.002)')
-    ref = reference(reduce_model(delayed, 4, (0.1, 50.0))).process(i)
+    ref = reference(reduce_model(delayed, 4, (0.1, 50.0))).estimate(i).deflection_m
     assert np.max(np.abs(h.outputs() - ref)) <= 1e-12
     assert np.allclose(np.concatenate([b.times_s for b in h.blocks]), t - 0.002, rtol=0, atol=1e-9)
 
