@@ -9,6 +9,12 @@ stream: values, times, gaps, resets, counters) -> publish: ``deflection/block``
 ``estimator/counters`` (JSON, 1 Hz) and ``/diagnostics``.  Parameter changes are validated by
 building the new estimator and applied without an output jump.  README "ROS 2 interface".
 
+One source per stream: the node follows one publisher of ``current`` (its GID from the message
+info; :class:`~ipmc_sensor_ros.interface.sources.SourceSelector`), counts and names the others it
+ignores, counts the followed publisher's messages that never arrived (sequence numbers) and those
+the middleware reports lost, and switches to another publisher once the followed one has been
+silent for ``stale_after_s``.
+
 ``channels`` > 1 (a sensor array): N-column blocks through
 :class:`~ipmc_sensor_ros.estimation.array.ArrayStream` (one stream core per channel), points on
 ``ch<c>/deflection``, one /diagnostics status per channel; README "Sensor arrays".
@@ -25,9 +31,11 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from geometry_msgs.msg import PointStamped as PointMsg
 from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
+from rclpy.subscription import Subscription
 from std_msgs.msg import Float64MultiArray, String
 
 from ..interface import specs as C
@@ -39,6 +47,7 @@ from ..errors import DataError, IpmcError
 from ..physics.parameters import short_repr
 from . import params as P
 from ..interface.blocks import current_columns, estimate_columns, unpack_columns
+from ..interface.sources import IGNORED, SWITCHED, SourceSelector
 from .messages import (CURRENT_COLUMNS, BlockPacker, OneSampleCodec, PointCodec,
                        claimed_samples, one_sample, unpack_block)
 from .diagnostics import DiagnosticsPublisher
@@ -114,7 +123,9 @@ class EstimatorNode(Node):
         rules = dict(max_gap_s=float(self._values['max_gap_s']),
                      max_block_samples=int(self._values['max_block_samples']), source=topic,
                      now_s=lambda: self.get_clock().now().nanoseconds * 1e-9,
-                     warn=lambda text: logger.warning(text, throttle_duration_sec=1.0))
+                     warn=lambda text: logger.warning(text, throttle_duration_sec=1.0),
+                     rate_tolerance=float(self._values['rate_tolerance']))
+        self._sources = SourceSelector(float(self._values['stale_after_s']))
         self._array = None
         if self._channels == 1:
             self._stream = StreamEstimator(estimator, **rules)
@@ -130,9 +141,15 @@ class EstimatorNode(Node):
         qos = P.make_qos(self._values)
         # raw: bytes in, so that one-sample blocks never become message objects (README
         # "Benchmarks": rclpy's conversion of a Float64MultiArray costs more than the estimate)
-        self._sub = P.create_subscription(
-            self, Float64MultiArray, 'current', self._on_current_raw, qos, raw=True
-        )
+        self._sub = self.create_subscription(
+            Float64MultiArray, 'current', self._on_current_message, qos, raw=True,
+            qos_overriding_options=P.qos_overriding_options(),
+            event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_message_lost))
+        # with the message info (publisher GID, sequence number): _on_current_message takes
+        # one argument or two, since rclpy 9.1.2's EventsExecutor hands a message-info
+        # callback the (message, info) pair as one argument
+        self._sub._callback_type = Subscription.CallbackType.WithMessageInfo
+        self._sources.forget()
         self._pub_block = P.create_publisher(self, Float64MultiArray, 'deflection/block', qos)
         self._packer = BlockPacker(estimate_columns(self._channels))
         self._one_in = OneSampleCodec(CURRENT_COLUMNS)
@@ -204,6 +221,10 @@ class EstimatorNode(Node):
         with self._lock:
             out = dict(stream.counters)
             out.update(stream.estimator.status())
+            out.update(stream.status())
+            out['followed_publisher'] = (self._sources.name(self._sources.followed)
+                                         if self._sources.followed is not None else '')
+            out['ignored_publishers'] = self._sources.describe_ignored()
         if out['offset_a'] is not None:
             out['estimated_offset_a'] = out['offset_a']   # the filter's own offset (kalman)
         return out
@@ -238,17 +259,83 @@ class EstimatorNode(Node):
         return self._stream.last_warning
 
     # -- data path: unpack -> stream core -> publish ----------------------------
+    def _on_current_message(self, raw, info=None) -> None:
+        """
+        Subscription callback: follow one publisher (module docstring), then the data path.
+
+        ``raw`` is the serialised message and ``info`` rclpy's message info, or ``raw`` the
+        pair (see :meth:`_open_io`).
+        """
+        if info is None and type(raw) is tuple:
+            raw, info = raw
+        if info is not None:
+            gid = info['publisher_gid']
+            gid = None if gid is None else gid['data']
+            code = self._sources.admit(gid, info['publication_sequence_number'],
+                                       time.monotonic())
+            if code and self._on_source_event(code, gid):
+                return
+        self._on_current_raw(raw)
+
+    def _on_source_event(self, code: int, gid: bytes) -> bool:
+        """Count and say a source event; True when the message is ignored."""
+        target = self._array or self._stream
+        if target is None:
+            return True
+        sources, topic = self._sources, self._sub.topic_name
+        if code == IGNORED:
+            first = sources.ignored.get(gid) == 1 and gid not in sources.names
+            if first:
+                self._name_publishers()
+            with self._lock:
+                target.count('messages_ignored', 1, (
+                    f'ignoring messages of {sources.name(gid)} on {topic}: following '
+                    f'{sources.name(sources.followed)} (one source per stream; another is '
+                    f'followed once it is silent for stale_after_s = {sources.stale_after_s:g} s)'
+                ) if first else '')
+            return True
+        if code == SWITCHED:
+            self._name_publishers()
+            with self._lock:
+                target.count('source_switches', 1, (
+                    f'{sources.name(sources.previous)} silent on {topic} for more than '
+                    f'stale_after_s = {sources.stale_after_s:g} s: now following '
+                    f'{sources.name(gid)}'))
+            return False
+        with self._lock:
+            target.count('messages_lost', code, f'{code} message(s) of {sources.name(gid)} on '
+                                                f'{topic} never arrived (sequence numbers)')
+        return False
+
+    def _name_publishers(self) -> None:
+        """Learn the node names of the publishers of ``current`` (for the messages)."""
+        try:
+            for pub in self.get_publishers_info_by_topic(self._sub.topic_name):
+                self._sources.names[bytes(pub.endpoint_gid)] = (
+                    f"{pub.node_namespace.rstrip('/')}/{pub.node_name}")
+        except Exception:  # noqa: BLE001 - names are a convenience; the GID is said anyway
+            pass
+
+    def _on_message_lost(self, event) -> None:
+        """Count the messages the middleware reports lost on ``current``."""
+        target = self._array or self._stream
+        if target is not None and event.total_count_change > 0:
+            with self._lock:
+                target.count('messages_lost_reported', event.total_count_change,
+                             f'the middleware reports {event.total_count_change} message(s) '
+                             f'lost on {self._sub.topic_name} ({event.total_count} in all)')
+
     def _on_current_raw(self, raw: bytes) -> None:
         """
-        Subscription callback (serialised message).
+        Data path of one serialised message.
 
         A one-sample current block is read from its bytes and its estimate written as bytes
         (:class:`OneSampleCodec`); anything else is deserialised and takes :meth:`_on_current`.
         """
         if self._array is None:
             one = self._one_in.decode(raw)
-            if one is not None and self._feed_one(*one):
-                return
+            if one is not None:
+                return self._feed_one(*one)
         try:
             msg = deserialize_message(raw, Float64MultiArray)
         except Exception as exc:  # bytes that are no Float64MultiArray: counted, never fatal
@@ -262,8 +349,8 @@ class EstimatorNode(Node):
         if self._array is not None:
             return self._on_current_array(msg)
         one = one_sample(msg)
-        if one and self._feed_one(*one):
-            return
+        if one:
+            return self._feed_one(*one)
         with self._lock:
             if self._rebuilt is not None:
                 self._apply_rebuilt()
@@ -274,28 +361,21 @@ class EstimatorNode(Node):
                 return
             out = self._stream.feed(block.times_s, block.values, claimed=claimed_samples(msg))
             if out is not None:
-                self._diagnostics.observe(block.values)
+                self._diagnostics.observe(block.values[self._stream.accepted])
                 t, w = out
                 std = np.full(t.size, self._stream.estimator.std_m)
                 self._publish(self._packer.pack(t, w, std), t, w, t.size)
 
-    def _feed_one(self, time_s: float, current_a: float) -> bool:
-        """
-        Estimate one timed sample on the stream core's lean path; publish it as bytes.
-
-        False (nothing touched) when the sample needs the general path.
-        """
+    def _feed_one(self, time_s: float, current_a: float) -> None:
+        """Estimate one timed sample (:meth:`StreamEstimator.feed_one`); publish it as bytes."""
         with self._lock:
             if self._rebuilt is not None:
                 self._apply_rebuilt()
             out = self._stream.feed_one(time_s, current_a)
-            if out is False:
-                return False
-            self._diagnostics.observe_one(current_a)
             if out is not None:
+                self._diagnostics.observe_one(current_a)
                 t, w = out
                 self._publish(self._one_out.encode(t, w, self._stream.estimator.std_m), t, w, 1)
-            return True
 
     def _publish(self, block_msg: Float64MultiArray, times, deflections, n: int) -> None:
         """
@@ -348,12 +428,13 @@ class EstimatorNode(Node):
             if out is None:
                 return
             t, w, std, has = out
-            one = t.size == 1   # observe_one: no numpy per sample (40 -> 6 us)
+            one = table.shape[0] == 1   # observe_one: no numpy per sample (40 -> 6 us)
             for c in np.flatnonzero(has).tolist():
                 if one:
                     self._diagnostics.observe_one(float(table[0, c]), self._channel_names[c])
                 else:
-                    self._diagnostics.observe(table[:, c], channel=self._channel_names[c])
+                    self._diagnostics.observe(table[array.channels[c].accepted, c],
+                                              channel=self._channel_names[c])
             cols = [a for c in range(self._channels) for a in (w[:, c], std[:, c])]
             try:
                 self._pub_block.publish(self._packer.pack(t, *cols))
@@ -433,8 +514,10 @@ class EstimatorNode(Node):
             self._pending = None
             old = self._values
             self._values = values
-            (self._stream if self._array is None else self._array).max_gap_s = float(
-                values['max_gap_s'])
+            for ch in (self._array.channels if self._array is not None else (self._stream,)):
+                ch.max_gap_s = float(values['max_gap_s'])
+                ch.rate_tolerance = float(values['rate_tolerance'])
+            self._sources.stale_after_s = float(values['stale_after_s'])
             self._changed.update(p.name for p in parameters)
             if (key != self._model_key or self._wanted is not None or self._builder is not None
                     or self._rebuilt is not None):
