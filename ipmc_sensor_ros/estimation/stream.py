@@ -9,32 +9,26 @@ run; the node only unpacks messages, calls :meth:`StreamEstimator.feed` (a block
 
 * **values**: a current that is not finite or has ``|i| > MAX_ABS_CURRENT_A`` is refused
   (that sample only);
-* **time** (:mod:`~ipmc_sensor_ros.estimation.timebase`): samples are taken at their stamps.
-  Each accepted stamp takes the nearest slot of a grid that follows the stamps (jitter up to
-  25 % of the period); ``steps`` = the slots since the previous accepted sample is handed to
-  the filter (``DeflectionEstimator.process(time_s, current_a, steps)``): missing samples
-  and gaps up to ``max_gap_s`` are bridged by the filter's prediction (counted in
-  ``gaps_bridged``; the slots no sample arrived for in ``samples_lost``).  A duplicated stamp,
-  a stamp behind the previous one by at most ``max_gap_s`` or on the previous sample's slot
-  is refused (that sample; no reset).  A gap longer than ``max_gap_s`` (``gaps``) or a jump
-  back by more than ``max_gap_s`` (a bag loop, a new run) starts a new run: filter reset
-  (``resets``).  The output time of a sample is its own stamp (minus a model delay);
-* **rate**: the grid measures the sample rate from ``RATE_WINDOW_S`` windows of stamps.  A
-  rate off ``sample_rate_hz`` by more than ``rate_tolerance`` is reported once (the warning,
-  and ``measured_rate_hz`` for /diagnostics); the filter is rebuilt at the measured rate
-  (bumpless, :meth:`DeflectionEstimator.rebuilt`) whenever it differs from the filter's by
-  more than ``RATE_FOLLOW_FRACTION``, beyond the tolerance or within it (``rate_rebuilds``);
+* **time** (:mod:`~ipmc_sensor_ros.estimation.timebase`): samples are taken at their stamps,
+  on the nearest slot of a grid that follows them (jitter up to 25 % of the period).  The
+  slots since the previous accepted sample are the ``steps`` handed to the filter
+  (``DeflectionEstimator.process(time_s, current_a, steps)``): missing samples and gaps up to
+  ``max_gap_s`` are bridged by its prediction (``gaps_bridged``, ``samples_lost``).  A
+  duplicated stamp, a stamp behind the previous one by at most ``max_gap_s`` or on the previous
+  sample's slot is refused (that sample; no reset).  A longer gap (``gaps``) or jump back (a
+  bag loop, a new run) starts a new run: filter reset (``resets``).  The output time of a
+  sample is its stamp (minus a model delay);
+* **rate**: measured from the stamps (``measured_rate_hz``); off ``sample_rate_hz`` by more
+  than ``rate_tolerance`` it is reported once; the filter is rebuilt at the measured rate
+  (bumpless) whenever the two differ by more than ``RATE_FOLLOW_FRACTION`` (``rate_rebuilds``);
 * **messages**: a block longer than ``max_block_samples`` (``too_long``) or one that cannot be
   read (``malformed``, :meth:`reject`) is refused whole;
-* **accounting**: the counters of :data:`COUNTER_NAMES` with the invariants
-  ``samples_in == samples_out + samples_rejected + samples_dropped + samples_unpublished``
-  and ``samples_rejected == sum of rejected_<reason>`` (:data:`REJECT_REASONS`).  A refused
+* **accounting** (:class:`~ipmc_sensor_ros.estimation.accounting.StreamAccounts`): every
+  sample counted once, as estimated, refused (per reason), dropped or undelivered; a refused
   sample never touches the filter; a non-finite estimate drops its samples and resets; an
-  estimate that could not be delivered (:meth:`unpublished`) is counted and changes nothing.
-  Messages from publishers the node does not follow (``messages_ignored``), messages lost
-  before the node (``messages_lost``, from the publisher's sequence numbers;
-  ``messages_lost_reported`` by the middleware) and switches of the followed publisher
-  (``source_switches``) are counted here too (:mod:`~ipmc_sensor_ros.interface.sources`).
+  estimate that could not be delivered (:meth:`~StreamAccounts.unpublished`) is counted and
+  changes nothing.  The node counts its source events here too (other publishers ignored,
+  messages lost before it; :mod:`~ipmc_sensor_ros.interface.sources`).
 
 One rule per sample: :meth:`StreamEstimator.feed_one` applies it to one sample;
 :meth:`StreamEstimator.feed` applies it to a block, running its leading samples that are
@@ -51,20 +45,15 @@ from typing import Callable
 import numpy as np
 
 from ..errors import DataError
+from .accounting import (COUNTER_NAMES, MAX_ABS_CURRENT_A, MAX_BLOCK_SAMPLES, REJECT_REASONS,
+                         StreamAccounts, _as_block, validate_block)
 from .deflection import DeflectionEstimator
 from .timebase import (JITTER_FRACTION, MAX_STAMP_S, NON_FINITE, OUT_OF_RANGE, RATE_WINDOW_S,
-                       REFUSAL_NAMES, START, Timebase)
+                       START, Timebase)
 
 __all__ = ['StreamEstimator', 'validate_block', 'COUNTER_NAMES', 'REJECT_REASONS',
            'MAX_ABS_CURRENT_A', 'MAX_BLOCK_SAMPLES', 'MAX_STAMP_S', 'JITTER_FRACTION',
            'RATE_WINDOW_S', 'RATE_FOLLOW_FRACTION', 'estimate_record']
-
-#: Largest block accepted by default (samples).
-MAX_BLOCK_SAMPLES = 1_000_000
-
-#: Largest plausible sensing current, A (IPMC currents are nA..uA; 1 A means a wiring or
-#: unit error).
-MAX_ABS_CURRENT_A = 1.0
 
 #: The filter is rebuilt at the measured rate when it differs from the filter's by more than
 #: this fraction.  The sensor differentiates, so a relative rate error is the same relative
@@ -72,66 +61,8 @@ MAX_ABS_CURRENT_A = 1.0
 #: times the ~100 ppm a DAQ crystal is off the host clock (which never causes a rebuild).
 RATE_FOLLOW_FRACTION = 0.002
 
-#: Why samples are refused; each has a counter ``rejected_<reason>``.
-REJECT_REASONS = ('duplicate_stamp', 'stamp_behind', 'stamp_too_close', 'non_finite',
-                  'out_of_range', 'malformed', 'too_long')
 
-#: Counters kept per stream; see the module docstring for the invariants.
-COUNTER_NAMES = ('messages_in', 'samples_in', 'samples_out', 'samples_rejected',
-                 'messages_rejected', 'samples_dropped', 'samples_unpublished',
-                 'messages_unpublished', 'resets', 'gaps', 'gaps_bridged', 'samples_lost',
-                 'rate_rebuilds', 'messages_lost', 'messages_lost_reported',
-                 'messages_ignored', 'source_switches') + tuple(
-                     f'rejected_{r}' for r in REJECT_REASONS)
-
-_WHY = {'duplicate_stamp': 'the same stamp as the previous sample',
-        'stamp_behind': 'behind the previous sample',
-        'stamp_too_close': 'on the grid slot of the previous sample',
-        'non_finite': 'non-finite stamp or current',
-        'out_of_range': f'stamp outside [0, {MAX_STAMP_S:.0f}] s or |i| > {MAX_ABS_CURRENT_A} A'}
-
-
-def validate_block(values, max_samples: int = MAX_BLOCK_SAMPLES,
-                   max_abs_current_a: float = MAX_ABS_CURRENT_A) -> np.ndarray:
-    """
-    Check a whole block of current samples (offline tools that refuse a file as a whole).
-
-    Returns a float64 1-D array, or raises :class:`~ipmc_sensor_ros.errors.DataError` saying why
-    (empty, too long, non-finite or implausibly large values).  The stream itself refuses
-    such values one sample at a time.
-    """
-    x = _as_block(values, max_samples)
-    if float(np.max(np.abs(x))) <= max_abs_current_a:   # one pass; NaN makes it False
-        return x
-    finite = np.isfinite(x)
-    if not finite.all():
-        raise DataError(f'current block has {int((~finite).sum())} non-finite sample(s) '
-                        f'(first at index {int(np.argmin(finite))})')
-    k = int(np.argmax(np.abs(x) > max_abs_current_a))
-    raise DataError(f'current block has |i| > {max_abs_current_a} A at index {k} '
-                    f'({x[k]!r} A): not a sensing current')
-
-
-def _as_block(values, max_samples: int) -> np.ndarray:
-    """Return ``values`` as a float64 1-D array of 1..max_samples; DataError saying why not."""
-    try:
-        x = np.asarray(values, dtype=float)
-    except (TypeError, ValueError):
-        raise DataError('current block is not numeric') from None
-    if x.ndim != 1:
-        raise DataError(f'current block must be 1-D, got shape {x.shape}')
-    if x.size == 0:
-        raise DataError('current block is empty')
-    if x.size > max_samples:
-        raise DataError(f'current block has {x.size} samples, more than the limit {max_samples}')
-    return x
-
-
-def _no_log(text: str) -> None:
-    return None
-
-
-class StreamEstimator:
+class StreamEstimator(StreamAccounts):
     """
     Stream rules and accounting around a :class:`DeflectionEstimator` (module docstring).
 
@@ -161,21 +92,16 @@ class StreamEstimator:
                  warn: Callable[[str], None] | None = None, rate_tolerance: float = 0.05):
         if not (math.isfinite(max_gap_s) and max_gap_s > 0.0):
             raise DataError(f'max_gap_s must be > 0 s, got {max_gap_s!r}')
+        super().__init__(source, warn)
         self.estimator = estimator
         self.max_block_samples = int(max_block_samples)
-        self.source = source
         self.rate_tolerance = float(rate_tolerance)
         self._now_s = now_s or (lambda: 0.0)
-        self._warn = warn or _no_log
-        self.counters: dict[str, int] = dict.fromkeys(COUNTER_NAMES, 0)
-        self.last_rejection = ''
-        self.last_warning = ''
         self.nominal_rate_hz = float(estimator.sample_rate_hz)
         self.timebase = Timebase(1.0 / self.nominal_rate_hz, max_gap_s)
         self.accepted = np.zeros(0, dtype=bool)   # input samples of the last feed with output
         self._filter_hz = self.nominal_rate_hz      # rate the filter is (to be) built for
         self._rate_reported = False
-        self._refused_since = 0                     # refusals since the last accepted sample
 
     # -- configuration --------------------------------------------------------------
     @property
@@ -232,76 +158,10 @@ class StreamEstimator:
         self.timebase.forget()
         self._refused_since = 0
 
-    def check_invariant(self) -> bool:
-        c = self.counters
-        return (c['samples_in'] == c['samples_out'] + c['samples_rejected']
-                + c['samples_dropped'] + c['samples_unpublished']
-                and c['samples_rejected'] == sum(c[f'rejected_{r}'] for r in REJECT_REASONS))
-
     def status(self) -> dict:
         """Return the stream's time state for counters and diagnostics (JSON-able)."""
         return {'measured_rate_hz': self.measured_rate_hz, 'filter_rate_hz': self.sample_rate_hz,
                 'grid_period_s': self.timebase.period_s}
-
-    # -- events -------------------------------------------------------------------------
-    def _say(self, text: str) -> None:
-        self.last_warning = text
-        self._warn(text)
-
-    def reject(self, n_samples: int, reason: str, kind: str = 'malformed') -> None:
-        """Count a message of ``n_samples`` claimed samples as received and refused whole."""
-        c = self.counters
-        c['messages_in'] += 1
-        c['samples_in'] += n_samples
-        c['messages_rejected'] += 1
-        c['samples_rejected'] += n_samples
-        c[f'rejected_{kind}'] += n_samples
-        self.last_rejection = reason
-        self._say(f'rejected message on {self.source} ({n_samples} sample(s)): {reason}')
-
-    def unpublished(self, n_samples: int, reason: str) -> None:
-        """
-        Move ``n_samples`` just counted as ``samples_out`` to ``samples_unpublished``.
-
-        The estimate exists (the filter ran) but could not be delivered. No reset.
-        """
-        c = self.counters
-        c['samples_out'] -= n_samples
-        c['samples_unpublished'] += n_samples
-        c['messages_unpublished'] += 1
-        self._say(f'could not publish {n_samples} estimate(s) from {self.source}: {reason}')
-
-    def count(self, name: str, n: int = 1, text: str = '') -> None:
-        """Add ``n`` to counter ``name`` (source events: ignored, lost, switches); say ``text``."""
-        self.counters[name] += n
-        if text:
-            self._say(text)
-
-    def _refuse(self, code: int, t: float, i: float) -> None:
-        reason = REFUSAL_NAMES[code]
-        c = self.counters
-        c['samples_rejected'] += 1
-        c[f'rejected_{reason}'] += 1
-        self._refused_since += 1
-        last = self.timebase.last_s
-        where = '' if last is None else f' (previous sample at {last!r} s)'
-        self.last_rejection = f'sample at {t!r} s, {i!r} A: {_WHY[reason]}{where}'
-        self._say(f'refused a sample on {self.source}: {self.last_rejection}')
-
-    def _begin_run(self) -> None:
-        """Count and say why a run began (a long gap, a jump back); the first is not counted."""
-        tb = self.timebase
-        if tb.break_kind == 'gap':
-            self.counters['gaps'] += 1
-            text = (f'gap of {tb.break_s:.6g} s (> max_gap_s = {tb.max_gap_s:g} s) on '
-                    f'{self.source}: filter reset')
-        elif tb.break_kind == 'back':
-            text = (f'time jumped back by {tb.break_s:.6g} s on {self.source}: filter reset '
-                    f'(a new run: more than max_gap_s = {tb.max_gap_s:g} s back)')
-        else:
-            return
-        self.counters['resets'] += 1
-        self._say(text)
 
     def _rate_action(self) -> float | None:
         """Judge a freshly measured rate: report a mismatch once; return a rate to follow."""
@@ -353,14 +213,6 @@ class StreamEstimator:
             return START
         self._refuse(code, t, i)
         return -1
-
-    def _bridged(self, steps: int, refused: int) -> None:
-        """Count a bridged gap of ``steps`` periods; slots no refused sample explains are lost."""
-        c = self.counters
-        c['gaps_bridged'] += 1
-        lost = steps - 1 - refused
-        if lost > 0:
-            c['samples_lost'] += lost
 
     def _admit_block(self, t: np.ndarray, i: np.ndarray):
         """
@@ -505,13 +357,6 @@ class StreamEstimator:
         if len(parts) == 1:
             return parts[0]
         return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
-
-    def _drop(self, n: int) -> None:
-        """Drop ``n`` samples whose estimate is not finite; reset the filter."""
-        self.estimator.reset()
-        self.counters['samples_dropped'] += n
-        self.counters['resets'] += 1
-        self._say(f'non-finite estimate on {self.source}: {n} sample(s) dropped, filter reset')
 
     def run_record(self, time_s, current_a, block_samples: int = 1000):
         """

@@ -31,11 +31,9 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from geometry_msgs.msg import PointStamped as PointMsg
 from rclpy.clock import Clock, ClockType
-from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
-from rclpy.subscription import Subscription
 from std_msgs.msg import Float64MultiArray, String
 
 from ..interface import specs as C
@@ -47,10 +45,11 @@ from ..errors import DataError, IpmcError
 from ..physics.parameters import short_repr
 from . import params as P
 from ..interface.blocks import current_columns, estimate_columns, unpack_columns
-from ..interface.sources import IGNORED, SWITCHED, SourceSelector
+from ..interface.sources import SourceSelector
 from .messages import (CURRENT_COLUMNS, BlockPacker, OneSampleCodec, PointCodec,
                        claimed_samples, one_sample, unpack_block)
 from .diagnostics import DiagnosticsPublisher
+from .sources import FollowedSource, subscribe_followed
 from .runner import run
 
 __all__ = ['EstimatorNode', 'ESTIMATOR_SPECS', 'COUNTER_NAMES', 'PUBLISH_POINTS', 'main']
@@ -123,9 +122,10 @@ class EstimatorNode(Node):
         rules = dict(max_gap_s=float(self._values['max_gap_s']),
                      max_block_samples=int(self._values['max_block_samples']), source=topic,
                      now_s=lambda: self.get_clock().now().nanoseconds * 1e-9,
-                     warn=lambda text: logger.warning(text, throttle_duration_sec=1.0),
+                     warn=logger.warning,          # the stream bounds what it says
                      rate_tolerance=float(self._values['rate_tolerance']))
-        self._sources = SourceSelector(float(self._values['stale_after_s']))
+        self._source = FollowedSource(self, SourceSelector(float(self._values['stale_after_s'])),
+                                      lambda: self._array or self._stream, self._lock)
         self._array = None
         if self._channels == 1:
             self._stream = StreamEstimator(estimator, **rules)
@@ -141,15 +141,11 @@ class EstimatorNode(Node):
         qos = P.make_qos(self._values)
         # raw: bytes in, so that one-sample blocks never become message objects (README
         # "Benchmarks": rclpy's conversion of a Float64MultiArray costs more than the estimate)
-        self._sub = self.create_subscription(
-            Float64MultiArray, 'current', self._on_current_message, qos, raw=True,
-            qos_overriding_options=P.qos_overriding_options(),
-            event_callbacks=SubscriptionEventCallbacks(message_lost=self._on_message_lost))
-        # with the message info (publisher GID, sequence number): _on_current_message takes
-        # one argument or two, since rclpy 9.1.2's EventsExecutor hands a message-info
-        # callback the (message, info) pair as one argument
-        self._sub._callback_type = Subscription.CallbackType.WithMessageInfo
-        self._sources.forget()
+        self._sub = subscribe_followed(self, Float64MultiArray, 'current',
+                                       self._on_current_message, qos,
+                                       self._source.on_message_lost)
+        self._source.topic = self._sub.topic_name
+        self._source.selector.forget()
         self._pub_block = P.create_publisher(self, Float64MultiArray, 'deflection/block', qos)
         self._packer = BlockPacker(estimate_columns(self._channels))
         self._one_in = OneSampleCodec(CURRENT_COLUMNS)
@@ -222,9 +218,7 @@ class EstimatorNode(Node):
             out = dict(stream.counters)
             out.update(stream.estimator.status())
             out.update(stream.status())
-            out['followed_publisher'] = (self._sources.name(self._sources.followed)
-                                         if self._sources.followed is not None else '')
-            out['ignored_publishers'] = self._sources.describe_ignored()
+            out.update(self._source.status())
         if out['offset_a'] is not None:
             out['estimated_offset_a'] = out['offset_a']   # the filter's own offset (kalman)
         return out
@@ -260,70 +254,10 @@ class EstimatorNode(Node):
 
     # -- data path: unpack -> stream core -> publish ----------------------------
     def _on_current_message(self, raw, info=None) -> None:
-        """
-        Subscription callback: follow one publisher (module docstring), then the data path.
-
-        ``raw`` is the serialised message and ``info`` rclpy's message info, or ``raw`` the
-        pair (see :meth:`_open_io`).
-        """
-        if info is None and type(raw) is tuple:
-            raw, info = raw
-        if info is not None:
-            gid = info['publisher_gid']
-            gid = None if gid is None else gid['data']
-            code = self._sources.admit(gid, info['publication_sequence_number'],
-                                       time.monotonic())
-            if code and self._on_source_event(code, gid):
-                return
-        self._on_current_raw(raw)
-
-    def _on_source_event(self, code: int, gid: bytes) -> bool:
-        """Count and say a source event; True when the message is ignored."""
-        target = self._array or self._stream
-        if target is None:
-            return True
-        sources, topic = self._sources, self._sub.topic_name
-        if code == IGNORED:
-            first = sources.ignored.get(gid) == 1 and gid not in sources.names
-            if first:
-                self._name_publishers()
-            with self._lock:
-                target.count('messages_ignored', 1, (
-                    f'ignoring messages of {sources.name(gid)} on {topic}: following '
-                    f'{sources.name(sources.followed)} (one source per stream; another is '
-                    f'followed once it is silent for stale_after_s = {sources.stale_after_s:g} s)'
-                ) if first else '')
-            return True
-        if code == SWITCHED:
-            self._name_publishers()
-            with self._lock:
-                target.count('source_switches', 1, (
-                    f'{sources.name(sources.previous)} silent on {topic} for more than '
-                    f'stale_after_s = {sources.stale_after_s:g} s: now following '
-                    f'{sources.name(gid)}'))
-            return False
-        with self._lock:
-            target.count('messages_lost', code, f'{code} message(s) of {sources.name(gid)} on '
-                                                f'{topic} never arrived (sequence numbers)')
-        return False
-
-    def _name_publishers(self) -> None:
-        """Learn the node names of the publishers of ``current`` (for the messages)."""
-        try:
-            for pub in self.get_publishers_info_by_topic(self._sub.topic_name):
-                self._sources.names[bytes(pub.endpoint_gid)] = (
-                    f"{pub.node_namespace.rstrip('/')}/{pub.node_name}")
-        except Exception:  # noqa: BLE001 - names are a convenience; the GID is said anyway
-            pass
-
-    def _on_message_lost(self, event) -> None:
-        """Count the messages the middleware reports lost on ``current``."""
-        target = self._array or self._stream
-        if target is not None and event.total_count_change > 0:
-            with self._lock:
-                target.count('messages_lost_reported', event.total_count_change,
-                             f'the middleware reports {event.total_count_change} message(s) '
-                             f'lost on {self._sub.topic_name} ({event.total_count} in all)')
+        """Subscription callback: follow one publisher (module docstring), then the data path."""
+        raw, info = FollowedSource.unpack(raw, info)
+        if info is None or self._source.admit(info):
+            self._on_current_raw(raw)
 
     def _on_current_raw(self, raw: bytes) -> None:
         """
@@ -517,7 +451,7 @@ class EstimatorNode(Node):
             for ch in (self._array.channels if self._array is not None else (self._stream,)):
                 ch.max_gap_s = float(values['max_gap_s'])
                 ch.rate_tolerance = float(values['rate_tolerance'])
-            self._sources.stale_after_s = float(values['stale_after_s'])
+            self._source.selector.stale_after_s = float(values['stale_after_s'])
             self._changed.update(p.name for p in parameters)
             if (key != self._model_key or self._wanted is not None or self._builder is not None
                     or self._rebuilt is not None):
