@@ -258,6 +258,7 @@ def read_estimate(path) -> dict[str, np.ndarray]:
 
 def _cmd_estimate(args) -> int:
     """Offline estimation with the node's code path and parameters file."""
+    from ..estimation.accounting import record_summary
     from ..estimation.stream import estimate_record, validate_block
     from ..interface import specs as config
     from ..workbench.io import TimeSeries, write_bag
@@ -312,8 +313,10 @@ def _cmd_estimate(args) -> int:
             out = out_dir / f'{stem}.estimate.csv'
             _write_estimate(out, data, values, model_text, args.params, resets, t_out, current, w,
                             measured)
-        row = {'source': src, 'out': str(out), 'samples': int(t_out.size), 'resets': resets}
-        msg = f'{src}: {t_out.size} estimates -> {out}'
+        # rows given, estimated and refused per reason (estimation/accounting.py)
+        rows, rows_text = record_summary(stream.counters)
+        row = {'source': src, 'out': str(out), 'samples': int(t_out.size), **rows}
+        msg = f'{src}: {rows_text} -> {out}'
         if resets:
             msg += (f"; {resets} filter reset(s) at time gaps > {values['max_gap_s']} s "
                     'or backward jumps')

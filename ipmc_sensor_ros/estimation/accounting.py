@@ -28,7 +28,7 @@ from ..errors import DataError
 from .timebase import MAX_STAMP_S, REFUSAL_NAMES, Timebase
 
 __all__ = ['StreamAccounts', 'validate_block', 'COUNTER_NAMES', 'REJECT_REASONS',
-           'MAX_ABS_CURRENT_A', 'MAX_BLOCK_SAMPLES']
+           'MAX_ABS_CURRENT_A', 'MAX_BLOCK_SAMPLES', 'record_summary']
 
 #: Largest block accepted by default (samples).
 MAX_BLOCK_SAMPLES = 1_000_000
@@ -90,6 +90,26 @@ def _as_block(values, max_samples: int) -> np.ndarray:
     if x.size > max_samples:
         raise DataError(f'current block has {x.size} samples, more than the limit {max_samples}')
     return x
+
+
+def record_summary(counters: dict) -> tuple[dict, str]:
+    """
+    Return what became of a record's rows: a JSON-able dict and one line of text.
+
+    Rows given, estimated and refused (with the count per reason), slots lost in the stamps
+    and filter resets, from a stream's :data:`COUNTER_NAMES` counters.
+    """
+    by_reason = {r: counters[f'rejected_{r}'] for r in REJECT_REASONS if counters[f'rejected_{r}']}
+    out = {'rows_given': counters['samples_in'], 'rows_estimated': counters['samples_out'],
+           'rows_refused': counters['samples_rejected'], 'refused_by_reason': by_reason,
+           'rows_dropped': counters['samples_dropped'], 'samples_lost': counters['samples_lost'],
+           'resets': counters['resets']}
+    why = ', '.join(f'{n} {r.replace("_", " ")}' for r, n in by_reason.items())
+    text = (f"{out['rows_given']} rows, {out['rows_estimated']} estimated, "
+            f"{out['rows_refused']} refused" + (f' ({why})' if why else '')
+            + (f", {out['samples_lost']} missing in the stamps (bridged)"
+               if out['samples_lost'] else ''))
+    return out, text
 
 
 def _no_log(text: str) -> None:
