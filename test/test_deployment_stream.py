@@ -1,12 +1,11 @@
 # SPDX-License-Identifier: Apache-2.0
 """
-The estimator node in deployment (issue 30): one source per stream, nothing lost without a
-count, and /diagnostics saying so.
+The estimator node in deployment (issue 30): one source per stream, nothing lost uncounted.
 
-Two harnesses: the node driven through its subscription callback with the message info a
-middleware delivers (``DirectNode``: deterministic), and the node with real publishers over
-DDS in one process (the black-box reproduction of two publishers on ``current`` and of
-messages that never reach the node).
+And /diagnostics saying so.  Two harnesses: the node driven through its subscription callback
+with the message info a middleware delivers (``DirectNode``: deterministic), and the node with
+real publishers over DDS in one process (the black-box reproduction of two publishers on
+``current`` and of messages that never reach the node).
 """
 from __future__ import annotations
 
@@ -103,8 +102,9 @@ def test_the_other_publisher_is_followed_once_the_first_is_silent(capfd):
         assert c['source_switches'] == 1 and c['messages_ignored'] == 100
         assert c['samples_out'] == 200 and c['resets'] == 1      # B's stamps: a new run
         err = capfd.readouterr().err
-        assert f"silent on /current for more than stale_after_s = 0.2 s: now following gid " \
-            f"{GID_B.hex('.')}" in err
+        gid_b = GID_B.hex('.')
+        assert f'silent on /current for more than stale_after_s = 0.2 s: now following gid ' \
+            f'{gid_b}' in err
     finally:
         d.close()
 
@@ -237,8 +237,8 @@ def test_messages_lost_before_the_node_over_dds_are_counted(dds):
     node = _estimator(make, qos_depth=20, max_gap_s=2.0)
     seen = _recorded(node)
     driver = make(rclpy.node.Node, 'daq_driver')
-    writer = driver.create_publisher(Float64MultiArray, 'current',
-                                     QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+    qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    writer = driver.create_publisher(Float64MultiArray, 'current', qos)
     _spin_until(ex, lambda: writer.get_subscription_count() > 0)
     _diagnose(node)
     for k in range(100):

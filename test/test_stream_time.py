@@ -1,12 +1,12 @@
 # SPDX-License-Identifier: Apache-2.0
 """
-Time as measured (issue 27): the stream's decisions on jittered, gapped, duplicated and off-rate
-stamps, and the black-box reproductions through the node's message path.
+Time as measured (issue 27): decisions on jittered, gapped, duplicated and off-rate stamps.
 
 The decisions (steps handed to the filter, refusals, resets, rate rebuilds) are checked with a
-recording stand-in for the filter; the black-box figures with the node's default estimator on
-records of the exact H2 (eq. 45, evaluated by FFT: no reduction, nothing shared with the
-estimator) sampled by a DAQ on its own clock and stamped by a host with jitter.
+recording stand-in for the filter; the black-box figures through the node's message path with
+its default estimator, on records of the exact H2 (eq. 45, evaluated by FFT: no reduction,
+nothing shared with the estimator) sampled by a DAQ on its own clock and stamped by a host with
+jitter.
 """
 from __future__ import annotations
 
@@ -115,8 +115,11 @@ def _amplitude(t, w, after_s=2.0):
 # -- decisions -----------------------------------------------------------------------------
 @pytest.mark.parametrize('jitter', [0.05, 0.25])
 def test_jittered_stamps_are_all_taken_contiguously(jitter):
-    """+-5 % and +-25 % uniform jitter: every sample accepted with steps 1 (main: 40-48 %
-    refused as 'faster than sample_rate_hz')."""
+    """
+    Jitter of +-5 % and +-25 %: every sample accepted with steps 1.
+
+    On main 40-48 % were refused as 'faster than sample_rate_hz'.
+    """
     stamps, _, _ = _daq(FS, 10_000, jitter=jitter, seed=4)
     stream = _fed(stamps)
     c = stream.counters

@@ -21,12 +21,15 @@ within the remaining 25 % of the stamps' slots, which the grid's updates keep it
 * **phase and period** are refitted at the end of each *window* of accepted samples: a
   least-squares line of the stamps against their slots (outliers beyond half a period
   dropped, :func:`fit_line`).  The anchor becomes the line's value at the window's last slot
-  (the phase tracks the stamps with a lag of at most one window); the period takes the
+  (the phase follows the stamps with a lag of at most one window); the period takes the
   fitted slope only where it differs from the current one by more than ``SIGNIFICANCE``
   standard errors (a DAQ clock some ppm off the host's is followed; stamp noise is not).
-  Windows start with ``FIRST_WINDOW_SAMPLES`` samples at the beginning of a run and double
-  up to ``RATE_WINDOW_S`` of data, so a stream some % off the nominal rate is followed
-  before its phase drifts off the grid;
+  A window ends before the period's remaining uncertainty (``SIGNIFICANCE`` standard errors)
+  could move the grid by ``DRIFT_MARGIN`` of a period, and never before
+  ``FIRST_WINDOW_SAMPLES``; until the run has ``RATE_WINDOW_S`` of data each fit takes every
+  sample of the run, then windows of ``RATE_WINDOW_S``.  So the first windows of a run are a
+  few samples long and a stream some % off the nominal rate is followed before its phase
+  drifts off the grid;
 * **re-lock**: a grid whose period is off by more than the jitter margin cannot see it
   (every stamp still has a nearest slot: a 700 Hz stream on a 1 kHz grid looks like a 1 kHz
   stream missing 3 samples in 10).  The median spacing of the stamps can: from

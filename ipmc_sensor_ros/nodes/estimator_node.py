@@ -261,7 +261,7 @@ class EstimatorNode(Node):
 
     def _on_current_raw(self, raw: bytes) -> None:
         """
-        Data path of one serialised message.
+        Take one serialised message (the data path).
 
         A one-sample current block is read from its bytes and its estimate written as bytes
         (:class:`OneSampleCodec`); anything else is deserialised and takes :meth:`_on_current`.
