@@ -163,6 +163,10 @@ def test_a_rate_mismatch_is_reported_once_and_on_diagnostics(capfd):
         err = capfd.readouterr().err
         assert err.count('measured sample rate 700') == 1
         assert d.node.counters()['rate_rebuilds'] == 1
+        # the offset and mains-line estimates take the current at its measured rate
+        d.node._on_timer()
+        stats = next(iter(d.node._diagnostics._stats.values()))
+        assert abs(stats.sample_rate_hz - 700.0) < 0.1
     finally:
         d.close()
 

@@ -381,7 +381,7 @@ class StreamEstimator(StreamAccounts):
                 out_w[n_out:n_out + m] = res[1]
                 n_out += m
                 kept[k:end] = self.accepted
-        return out_t[:n_out].copy(), out_w[:n_out].copy(), kept
+        return out_t[:n_out], out_w[:n_out], kept
 
 
 def estimate_record(estimator: DeflectionEstimator, time_s, current_a, *, max_gap_s: float = 0.1,

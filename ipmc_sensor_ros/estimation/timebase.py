@@ -36,8 +36,8 @@ within the remaining 25 % of the stamps' slots, which the grid's updates keep it
   ``RELOCK_MIN_SAMPLES`` samples on, a median spacing more than ``JITTER_FRACTION`` away
   from ``P`` re-locks the grid to the stamps (slots re-counted from their spacings, then
   fitted).  A stream losing more than half its samples cannot be told from a slower one;
-* **the measured rate** ``1/P`` is reported (``measured``) after every window of at least
-  ``RATE_WINDOW_S`` of data; the stream decides what it implies
+* **the measured rate** ``1/P`` is reported (``measured``) after every window of
+  ``RATE_WINDOW_S`` of data (or ``MAX_WINDOW_SAMPLES``); the stream decides what it implies
   (:class:`~ipmc_sensor_ros.estimation.stream.StreamEstimator`).
 
 Refused stamps (:meth:`Timebase.admit` codes): non-finite, outside ``[0, MAX_STAMP_S]``,
@@ -59,7 +59,7 @@ import numpy as np
 
 __all__ = ['Timebase', 'grid_slot', 'fit_line', 'MAX_STAMP_S', 'JITTER_FRACTION',
            'RATE_WINDOW_S', 'FIRST_WINDOW_SAMPLES', 'RELOCK_MIN_SAMPLES', 'SIGNIFICANCE',
-           'DRIFT_MARGIN',
+           'DRIFT_MARGIN', 'MAX_WINDOW_SAMPLES',
            'START', 'DUPLICATE', 'BEHIND', 'TOO_CLOSE', 'NON_FINITE', 'OUT_OF_RANGE',
            'REFUSAL_NAMES']
 
@@ -73,6 +73,11 @@ JITTER_FRACTION = 0.25
 #: The rate is measured from windows of this much data, s (0.5 s at 1 kHz: a slope known to
 #: ~1e-4 with 25 % jitter, far below the 0.2 % at which the filter follows the rate).
 RATE_WINDOW_S = 0.5
+
+#: Longest window, samples: bounds the memory at high rates (a window is ``RATE_WINDOW_S`` of
+#: data or this many samples, whichever is fewer); 8192 stamps with 25 % jitter give the
+#: slope to ~1e-6, far inside what the rate rules need.
+MAX_WINDOW_SAMPLES = 8192
 
 #: First window of a run, samples: a stream 2 % off the nominal rate drifts 0.16 periods in
 #: it, inside the jitter margin, and is then followed.
@@ -269,7 +274,7 @@ class Timebase:
         self.anchor_s = tc + slope * (k[-1] - kc)       # the fitted line at the last slot
         self.anchor_slot = self.last_slot
         n = t.size
-        full = math.ceil(RATE_WINDOW_S / period - 1e-9)
+        full = min(math.ceil(RATE_WINDOW_S / period - 1e-9), MAX_WINDOW_SAMPLES)
         if n >= full:                                   # a rate window: measured, restarted
             self.measured = period
             self.fresh = True

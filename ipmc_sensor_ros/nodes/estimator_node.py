@@ -392,6 +392,7 @@ class EstimatorNode(Node):
     # -- periodic -------------------------------------------------------------
     def _on_timer(self) -> None:
         self._ticks += 1
+        self._diagnostics.follow_rate(self._stream.sample_rate_hz)
         counters = self._status()
         if self._array is not None:
             counters = dict(self._array.totals(), channels=list(counters.values()))
