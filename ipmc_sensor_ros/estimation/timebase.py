@@ -254,7 +254,10 @@ class Timebase:
         k = np.array(self._win_k, dtype=float)
         period = self.period_s
         relock = False
-        if t.size >= RELOCK_MIN_SAMPLES:
+        # a grid off by more than the jitter margin shows as gaps (a slower stream) or as
+        # stamps between slots (a faster one); without either there is nothing to re-lock
+        suspect = self._close or k[-1] - k[0] > t.size - 1
+        if suspect and t.size >= RELOCK_MIN_SAMPLES:
             stamps = np.sort(np.concatenate([t, self._close])) if self._close else t
             spacing = float(np.median(np.diff(stamps)))
             # a grid at the median spacing must explain the stamps with at most every other
