@@ -32,10 +32,12 @@ within the remaining 25 % of the stamps' slots, which the grid's updates keep it
   drifts off the grid;
 * **re-lock**: a grid whose period is off by more than the jitter margin cannot see it
   (every stamp still has a nearest slot: a 700 Hz stream on a 1 kHz grid looks like a 1 kHz
-  stream missing 3 samples in 10).  The median spacing of the stamps can: from
-  ``RELOCK_MIN_SAMPLES`` samples on, a median spacing more than ``JITTER_FRACTION`` away
-  from ``P`` re-locks the grid to the stamps (slots re-counted from their spacings, then
-  fitted).  A stream losing more than half its samples cannot be told from a slower one;
+  stream missing 3 samples in 10, a 2 kHz one like a 1 kHz one with a stamp between slots).
+  The median spacing of the stamps can: in a window of at least ``RELOCK_MIN_SAMPLES`` that
+  has gaps or stamps between slots, a median spacing more than ``JITTER_FRACTION`` away from
+  ``P`` that explains the stamps with at most every other slot empty re-locks the grid (slots
+  re-counted from the spacings, then fitted).  A stream losing more than half its samples
+  cannot be told from a slower one;
 * **the measured rate** ``1/P`` is reported (``measured``) after every window of
   ``RATE_WINDOW_S`` of data (or ``MAX_WINDOW_SAMPLES``); the stream decides what it implies
   (:class:`~ipmc_sensor_ros.estimation.stream.StreamEstimator`).
