@@ -332,8 +332,8 @@ def test_bad_messages_are_rejected_and_leave_the_filter_untouched(harness, reduc
             (wrong_label, 'dim[1].label'),
             (odd, 'odd'),
             (pack_block(tb[:10] - 0.02, ib[:10]), 'behind the previous sample'),  # late
-            (pack_block(tb, ib + 5.0), '|i| > 1.0 A'),
-            (pack_block(tb - 2 * T0, ib), 'stamp outside'),
+            (pack_block(tb, ib + 5.0), 'within +-1.0 A'),
+            (pack_block(tb - 2 * T0, ib), 'must lie in'),
             (b'\x00\x01\x00\x00\x02\x00\x00\x00\xff', 'undecodable'),  # truncated CDR
         ]
 

@@ -53,7 +53,8 @@ _WHY = {'duplicate_stamp': 'the same stamp as the previous sample',
         'stamp_behind': 'behind the previous sample',
         'stamp_too_close': 'on the grid slot of the previous sample',
         'non_finite': 'non-finite stamp or current',
-        'out_of_range': f'stamp outside [0, {MAX_STAMP_S:.0f}] s or |i| > {MAX_ABS_CURRENT_A} A'}
+        'out_of_range': f'stamps must lie in [0, {MAX_STAMP_S:.0f}] s and currents within '
+                        f'+-{MAX_ABS_CURRENT_A} A'}
 
 
 def validate_block(values, max_samples: int = MAX_BLOCK_SAMPLES,
