@@ -249,6 +249,7 @@ def _checked_current(data) -> np.ndarray:
 
 def _estimate_one(args, path: Path, base: dict, explicit: set, cache: EstimatorCache) -> dict:
     """Estimate one input and write its output; returns its summary row."""
+    from ..estimation.accounting import record_summary
     from ..estimation.stream import estimate_record
 
     data = _read_one(args, path)
@@ -280,9 +281,11 @@ def _estimate_one(args, path: Path, base: dict, explicit: set, cache: EstimatorC
     flags = beyond_limit(w, limit_m)
     out, note = _write_output(args, data, values, model_text, stream.counters['resets'],
                               t_out, current, w, measured, (flags, limit_m))
-    row = {'source': src, 'out': printable(out), 'samples': int(t_out.size),
+    # rows given, estimated and refused per reason (estimation/accounting.py)
+    rows, rows_text = record_summary(stream.counters)
+    row = {'source': src, 'out': printable(out), 'samples': int(t_out.size), **rows,
            'resets': stream.counters['resets'],
-           'samples_beyond_limit': int(np.count_nonzero(flags))}
+           'samples_beyond_limit': int(np.count_nonzero(flags)), 'rows_text': rows_text}
     if row['samples_beyond_limit']:
         note += (f"; {row['samples_beyond_limit']} estimate(s) beyond the geometric limit "
                  f'|w| > L/2 = {limit_m:g} m (not '
@@ -319,7 +322,7 @@ def _write_output(args, data, values, model_text, resets, t_out, current, w, mea
 def _estimate_line(row: dict, values: dict, estimator, t_out, w, measured) -> str:
     """Return the printed line of one estimated input (and put its accuracy in ``row``)."""
     resets = row['resets']
-    msg = f"{row['source']}: {t_out.size} estimates -> {row['out']}"
+    msg = f"{row['source']}: {row.pop('rows_text')} -> {row['out']}"
     if resets:
         msg += (f"; {resets} filter reset(s) at time gaps > {values['max_gap_s']} s "
                 'or backward jumps')

@@ -32,7 +32,8 @@ __all__ = ['Spec', 'ParameterError', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_
            'QOS_SPECS', 'ESTIMATOR_SPECS', 'PUBLISH_POINTS', 'MATERIAL_NAMES', 'GEOMETRY_NAMES',
            'ARRAY_SPECS', 'MAX_CHANNELS', 'channel_values', 'build_channel_estimators',
            'defaults', 'load_params_file', 'build_model', 'build_estimator', 'check_choice',
-           'check_values', 'markdown_table', 'FRAME_ID_PATTERN', 'DIAGNOSTICS_SPECS']
+           'check_values', 'markdown_table', 'FRAME_ID_PATTERN', 'DIAGNOSTICS_SPECS',
+           'STREAM_DIAGNOSTICS_SPECS']
 
 
 @dataclass(frozen=True)
@@ -129,6 +130,14 @@ DIAGNOSTICS_SPECS = (
          "amplitude exceeds this fraction of the current's RMS", low=0.0, high=10.0),
 )
 
+#: Diagnostics parameters of a stream of samples the node receives (the estimator's input).
+STREAM_DIAGNOSTICS_SPECS = (
+    Spec('loss_warn_fraction', 0.01, float, 'diagnostics: WARN when more than this fraction '
+         'of the samples of a diagnostics period (1 s) was lost before the node (gaps in the '
+         'stamps, bridged ones included; messages of the followed publisher that never '
+         'arrived) or refused by the stream rules', low=0.0, high=1.0),
+)
+
 
 ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
     Spec('reduction_order', 4, int, 'order n of the stable reduction of R(s) = H(s)/s',
@@ -137,9 +146,9 @@ ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
          low=1e-4, high=1e5),
     Spec('band_high_hz', 50.0, float, 'upper edge of the reduction fit band, Hz',
          low=1e-4, high=1e5),
-    Spec('sample_rate_hz', 1000.0, float, 'sample rate of the current the filter is designed '
-         'for, Hz; blocks whose median sample period differs by more than 1 % are rejected',
-         low=1.0, high=1e6, read_only=True),
+    Spec('sample_rate_hz', 1000.0, float, 'nominal sample rate of the current, Hz; the rate '
+         'is measured from the stamps, a mismatch beyond rate_tolerance is reported and the '
+         'filter runs at the measured rate', low=1.0, high=1e6, read_only=True),
     Spec('estimator', 'kalman', str, "'leaky': the leaky inverse of the reduced model; "
          "'kalman': offset-aware Kalman filter with a rest detector (learns the DAQ offset, "
          'holds the deflection at rest, publishes its standard deviation)',
@@ -159,13 +168,14 @@ ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
     Spec('frame_id', 'ipmc_clamp', str, 'frame of the deflection points: origin at the '
          'clamp, x along the beam to the tip, z in the bending direction',
          pattern=FRAME_ID_PATTERN, max_length=128),
-    Spec('max_gap_s', 0.1, float, 'largest time gap between consecutive samples bridged '
-         'without a filter reset, s', low=1e-6, high=1e6),
+    Spec('max_gap_s', 0.1, float, 'largest time gap between consecutive samples bridged by '
+         'the filter without a reset, s; a longer gap, or a stamp further back, starts a new '
+         'run (filter reset)', low=1e-6, high=1e6),
     Spec('publish_points', 'per_sample', str, "deflection PointStamped output: 'per_sample', "
          "'last_of_block' or 'none'", choices=PUBLISH_POINTS),
     Spec('max_block_samples', 100_000, int, 'largest accepted input block, samples',
          low=1, high=MAX_BLOCK_SAMPLES, read_only=True),
-) + QOS_SPECS + DIAGNOSTICS_SPECS
+) + QOS_SPECS + DIAGNOSTICS_SPECS + STREAM_DIAGNOSTICS_SPECS
 
 #: Largest sensor array one node handles.
 MAX_CHANNELS = 256
