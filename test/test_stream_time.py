@@ -36,6 +36,7 @@ class Recorder:
         self.sample_rate_hz = float(sample_rate_hz)
         self.log = [] if log is None else log
         self.std_m = 0.0
+        self.delay_s = 0.0
 
     def process(self, time_s, current_a, steps=None):
         self.log.extend(('sample', t, s) for t, s in zip(time_s.tolist(), steps.tolist()))
