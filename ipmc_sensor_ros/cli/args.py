@@ -40,7 +40,8 @@ from ..physics.parameters import (PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, Mat
 __all__ = ['HelpFormatter', 'Progress', 'say', 'natural_key', 'fmt_time_s', 'param_names',
            'parse_geometry', 'material_from_args', 'load_material', 'effects_from_args',
            'load_data', 'add_model_args', 'add_data_args', 'add_output_args', 'write_json',
-           'report_dir', 'parse_samples', 'renamed_flag', 'SYMBOL_TO_NAME']
+           'report_dir', 'parse_samples', 'renamed_flag', 'SYMBOL_TO_NAME',
+           'add_model_file_args', 'recording_effects_wanted']
 
 MATERIAL_KEYS = tuple(MaterialParameters.__dataclass_fields__)
 LENGTH_UNITS_M = {'m': 1.0, 'mm': 1e-3, 'um': 1e-6, 'µm': 1e-6, 'μm': 1e-6}
@@ -209,7 +210,8 @@ def _model_file(args):
     """
     Return the saved model of ``--model-file`` (None without it); with ``--params`` it is refused.
 
-    Two sources of the material, nothing chosen silently.
+    Two sources of the material, nothing chosen silently.  The file is read once per
+    command; its notices and what happens to its recording effects are printed then.
     """
     path = getattr(args, 'model_file', None)
     if not path:
@@ -217,9 +219,23 @@ def _model_file(args):
     if getattr(args, 'params', None):
         raise ParameterError(f'--model-file {path} and --params {args.params} both give the '
                              'material: use one')
-    from ..physics.modelfile import load_model
+    saved = getattr(args, '_saved_model', None)
+    if saved is None:
+        from ..physics.modelfile import load_model
 
-    return load_model(path)
+        saved = load_model(path)
+        args._saved_model = saved
+        for notice in saved.notices:
+            say(f'notice: {notice}')
+        note = saved.recording_note(recording_effects_wanted(args))
+        if note:
+            say(('WARNING: ' if recording_effects_wanted(args) else '') + note)
+    return saved
+
+
+def recording_effects_wanted(args) -> bool:
+    """Return True if ``--apply-recording-effects`` was given."""
+    return bool(getattr(args, 'apply_recording_effects', False))
 
 
 def material_from_args(args) -> MaterialParameters:
@@ -244,8 +260,11 @@ def effects_from_args(args) -> tuple:
     extra = getattr(args, 'effects', '') or ''
     saved = _model_file(args)
     if saved is None:
+        if recording_effects_wanted(args):
+            raise ParameterError('--apply-recording-effects applies the recording effects of '
+                                 'a --model-file; no --model-file given')
         return model_effects(args.model, extra)
-    base = parse_effects(saved.effects)
+    base = saved.effects_for(recording_effects_wanted(args))
     added = parse_effects(extra)
     for e in added:
         if e.name in {b.name for b in base}:
@@ -317,14 +336,23 @@ def add_model_args(p: argparse.ArgumentParser, *, effects: bool = True) -> None:
                             "'time_delay(delay_s=0.002),nonlinearity' (see: ipmc-model effects)")
         g.add_argument('--plugin', action='append', metavar='FILE',
                        help='Python file defining more effects (repeatable)')
-    g.add_argument('--model-file', metavar='FILE',
-                   help='a saved model (ipmc-model/1 YAML from --save-model): its effects with '
-                        'their values and its material replace --model and --params')
+    add_model_file_args(g)
     g.add_argument('--params', metavar='FILE',
                    help="material YAML ('material:') or a ROS 2 params file of the nodes "
                         "(default: the paper's Tables 1-2)")
     g.add_argument('--set', action='append', metavar='NAME=VALUE',
                    help='override a material parameter, e.g. --set d=3e-11 (repeatable)')
+
+
+def add_model_file_args(g) -> None:
+    """``--model-file`` and ``--apply-recording-effects`` (every verb that takes a model)."""
+    g.add_argument('--model-file', metavar='FILE',
+                   help='a saved model (ipmc-model/1 YAML from --save-model): its sensor effects '
+                        'with their values and its material replace --model and --params')
+    g.add_argument('--apply-recording-effects', action='store_true',
+                   help="also apply the model file's recording effects (offset, drift, channel "
+                        'delay of the calibration records); for those records only: the '
+                        'estimator learns its own offset')
 
 
 def add_data_args(p: argparse.ArgumentParser) -> None:

@@ -22,7 +22,13 @@ Signals
     process spinning forever in 4 of 5 runs (EventsExecutor; also seen with
     SingleThreadedExecutor), the context never shut down, and in 10 of 12 runs it
     raised ``RCLError`` ("the given context is not valid") out of the executor's
-    wait-set set-up.
+    wait-set set-up.  While the node is being built (parameters read, model files parsed,
+    the filter designed) the handler raises instead, so a signal ends a slow start at once
+    (exit 0), rather than after it.
+
+Help
+    ``-h`` / ``--help`` among the non-ROS arguments prints the node's usage and parameters
+    and exits 0 without starting rclpy.
 
 Teardown
     executor, node, context are destroyed in that order; there is no ``os._exit``
@@ -40,9 +46,10 @@ import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import remove_ros_args
 
 from ..physics.parameters import read_yaml
-from .params import ParameterError, params_files
+from .params import ParameterError, node_help, params_files, ros_arguments
 
 __all__ = ['run', 'make_executor', 'executor_name', 'spin_until_signalled']
 
@@ -89,8 +96,19 @@ def _stopping(context=None) -> bool:
 _SIGNALLED: set = set()
 
 
+#: True while the node is being built (parameters read, model files parsed, filter designed).
+_STARTING = [False]
+
+
+class _InterruptedStart(Exception):
+    """A signal arrived while the node was being built."""
+
+
 def _on_signal(signum, frame) -> None:
     _SIGNALLED.add(signum)
+    if _STARTING[0]:       # reading a model file or designing a filter: stop it now
+        _STARTING[0] = False
+        raise _InterruptedStart(signum)
 
 
 #: Longest wait of one ``spin_once`` call, s: the bound on the exit delay after a signal.
@@ -108,7 +126,7 @@ def spin_until_signalled(executor, context=None) -> None:
         executor.spin_once(timeout_sec=SPIN_PERIOD_S)
 
 
-def _report_configuration_error(name: str, exc: Exception) -> None:
+def _report_configuration_error(name: str, exc: Exception, args) -> None:
     text = str(exc)
     hint = ''
     if "type 'INTEGER'" in text and "expecting type 'DOUBLE'" in text:
@@ -116,7 +134,7 @@ def _report_configuration_error(name: str, exc: Exception) -> None:
     elif 'out of range' in text and any(f'Parameter {n} out of range' in text
                                         for n in ('length_m', 'width_m', 'thickness_m')):
         hint = ' (lengths are in metres: is it in millimetres?)'
-    files = params_files()
+    files = params_files(args)
     source = f" (parameters files: {', '.join(files)})" if files and not any(
         f in text for f in files) else ''
     print(f'{name}: invalid parameter: {exc}{hint}{source}', file=sys.stderr)
@@ -131,6 +149,10 @@ def run(node_factory, name: str, args=None) -> int:
     A signal at any moment gives 0 without a traceback.  A configuration error is
     printed on one line naming the parameter (no traceback) and gives 2.
     """
+    args = list(sys.argv if args is None else args)
+    if {'-h', '--help'} & set(remove_ros_args(args)[1:]):
+        print(node_help(name))
+        return 0
     # A shell starts background jobs with SIGINT ignored, and Python keeps an
     # inherited SIG_IGN: restore the default so SIGINT always stops the node.
     _SIGNALLED.clear()
@@ -140,6 +162,23 @@ def run(node_factory, name: str, args=None) -> int:
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)
+
+
+def _build(node_factory, args):
+    """
+    Return ``node_factory(cli_args=<the process's ROS arguments>)``; a signal interrupts it.
+
+    The node sees the arguments rcl parsed for it (params files, ``-p``, remaps) as its own
+    ``cli_args``.  While it is built (model files read, filter designed) a SIGINT/SIGTERM
+    raises at once instead of waiting for the build to end.
+    """
+    _STARTING[0] = True
+    try:
+        if _SIGNALLED:
+            raise _InterruptedStart(min(_SIGNALLED))
+        return node_factory(cli_args=ros_arguments(args))
+    finally:
+        _STARTING[0] = False
 
 
 def _run(node_factory, name: str, args) -> int:
@@ -161,15 +200,15 @@ def _run(node_factory, name: str, args) -> int:
         # The executor exists before the node logs "ready", so a signal sent on that
         # line finds a complete executor.
         executor = make_executor()
-        node = node_factory()
+        node = _build(node_factory, args)
         node.get_logger().debug(f'executor: {type(executor).__name__}')
         executor.add_node(node)
         spin_until_signalled(executor, node.context)
-    except _SHUTDOWN:
+    except (*_SHUTDOWN, _InterruptedStart):
         pass
     except (ParameterError, ParameterException) as exc:
         if not _SIGNALLED:
-            _report_configuration_error(name, exc)
+            _report_configuration_error(name, exc, args)
             code = 2
     except RCLError:
         if not _stopping():
