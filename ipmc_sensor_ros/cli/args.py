@@ -41,7 +41,7 @@ __all__ = ['HelpFormatter', 'Progress', 'say', 'natural_key', 'fmt_time_s', 'par
            'parse_geometry', 'material_from_args', 'load_material', 'effects_from_args',
            'load_data', 'add_model_args', 'add_data_args', 'add_output_args', 'write_json',
            'report_dir', 'parse_samples', 'renamed_flag', 'SYMBOL_TO_NAME',
-           'add_model_file_args', 'recording_effects_wanted']
+           'add_model_file_args', 'recording_effects_wanted', 'estimate_values']
 
 MATERIAL_KEYS = tuple(MaterialParameters.__dataclass_fields__)
 LENGTH_UNITS_M = {'m': 1.0, 'mm': 1e-3, 'um': 1e-6, 'µm': 1e-6, 'μm': 1e-6}
@@ -271,6 +271,40 @@ def effects_from_args(args) -> tuple:
             raise ParameterError(f"--effects: '{e.name}' is already in --model-file "
                                  f'{args.model_file} (with its fitted values)')
     return tuple(base) + tuple(added)
+
+
+def estimate_values(values: dict, explicit: set[str], args) -> tuple[dict, set[str]]:
+    """
+    Node parameter values for ``estimate`` with ``--model-file`` (unchanged without it).
+
+    The model file gives the model and the material (``--params`` may still give the filter
+    settings, but no model or material value: two sources are refused, naming both); a data
+    header whose material disagrees with the file is then a conflict ``--prefer`` decides.
+    Returns (values, names given explicitly).
+    """
+    from ..interface.specs import MATERIAL_NAMES
+    from ..physics.modelfile import RECORDING_PARAMETER, load_model
+
+    path = getattr(args, 'model_file', None)
+    if not path:
+        if recording_effects_wanted(args):
+            raise ParameterError('--apply-recording-effects applies the recording effects of '
+                                 'a --model-file; no --model-file given')
+        return values, explicit
+    given = sorted(explicit & (set(MATERIAL_NAMES) | {'model', 'effects', 'model_file'}))
+    if given:
+        raise ParameterError(f'--model-file {path} and --params {args.params} both define the '
+                             f'model ({", ".join(given)}): use one')
+    saved = load_model(path)
+    for notice in saved.notices:
+        say(f'notice: {notice}')
+    note = saved.recording_note(recording_effects_wanted(args))
+    if note:
+        say(('WARNING: ' if recording_effects_wanted(args) else '') + note)
+    out = dict(values, model_file=str(path))
+    out[RECORDING_PARAMETER] = recording_effects_wanted(args)
+    out.update({k: v for k, v in saved.material.to_dict().items() if k in MATERIAL_NAMES})
+    return out, explicit | set(MATERIAL_NAMES)
 
 
 def _expand(paths) -> list[Path]:

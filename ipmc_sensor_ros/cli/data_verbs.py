@@ -16,9 +16,9 @@ import numpy as np
 from ..physics.beam import FIDELITIES
 from ..physics.model import SensorModel
 from ..physics.parameters import PAPER_SAMPLES, ParameterError
-from .args import (Progress, add_data_args, add_model_args, add_output_args, effects_from_args,
-                   fmt_time_s, load_data, material_from_args, parse_geometry, parse_samples,
-                   renamed_flag, say, write_json)
+from .args import (Progress, add_data_args, add_model_args, add_model_file_args, add_output_args,
+                   effects_from_args, estimate_values, fmt_time_s, load_data, material_from_args,
+                   parse_geometry, parse_samples, renamed_flag, say, write_json)
 
 __all__ = ['add_parsers', 'read_estimate', 'estimate_accuracy', 'ESTIMATE_FORMAT']
 
@@ -268,6 +268,7 @@ def _cmd_estimate(args) -> int:
         else config.defaults(config.ESTIMATOR_SPECS)
     )
     explicit = _explicit_params(args.params) if args.params else set()
+    base, explicit = estimate_values(base, explicit, args)
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = []
@@ -277,7 +278,8 @@ def _cmd_estimate(args) -> int:
             raise ParameterError(
                 f'{src}: a time series is needed (this is a frequency-response file)'
             )
-        values = _resolve_values(data, base, explicit, args.params, args.prefer)
+        values = _resolve_values(data, base, explicit, args.params or args.model_file,
+                                 args.prefer)
         current = validate_block(data.current_a, max_samples=max(data.current_a.size, 1))
         estimator = config.build_estimator(values)
         model_text = estimator.model.describe()
@@ -426,6 +428,7 @@ def add_parsers(sub, formatter) -> None:
         help='ROS 2 params file of the estimator node (config/estimator.yaml); values it '
         'does not set come from the data header (geometry) or the node defaults',
     )
+    add_model_file_args(p)
     p.add_argument('--prefer', choices=('none', 'header', 'params'), default='none',
                    help='which wins when the data header and --params give different geometry or '
                         'material values (none: stop with an error naming both)')

@@ -9,13 +9,14 @@ from __future__ import annotations
 import datetime
 from pathlib import Path
 
-from ..physics.model import SensorModel, format_effect, parse_model_name
+from ..physics.model import SensorModel
 from ..physics.parameters import MaterialParameters, ParameterError
+from ..workbench.measurements import round_rate_hz
 from .args import (Progress, add_data_args, add_model_args, add_output_args, effects_from_args,
-                   load_data, material_from_args, param_names, renamed_flag, report_dir, say,
-                   write_json)
+                   load_data, material_from_args, natural_key, param_names, renamed_flag,
+                   report_dir, say, write_json)
 
-__all__ = ['add_parsers', 'params_file_doc']
+__all__ = ['add_parsers', 'params_file_doc', 'params_file_text']
 
 FREE_HELP = ('parameters estimated from the data, comma list of symbols d, alpha0, C-, kappa_e, '
              'Y, r0, T or full names')
@@ -44,60 +45,110 @@ def _model_text(data, material, effects) -> str:
 
 
 # ---------------------------------------------------------------------------
-def params_file_doc(material: MaterialParameters, geometry, base: str, extra_effects,
-                    sample_rate_hz: float | None = None) -> dict:
-    """ROS 2 params file contents for both nodes, under ``/**/<node>`` (any namespace)."""
+def _effect_text(spec) -> str:
+    """``name(p=v, ...)`` with every digit of the fitted values (not the 6 of format_effect)."""
+    if not spec.values:
+        return spec.name
+    return f"{spec.name}({', '.join(f'{k}={v!r}' for k, v in spec.values)})"
+
+
+def params_file_doc(model, geometry, sample_rate_hz: float | None = None) -> dict:
+    """
+    ROS 2 params for both nodes, under ``/**/<node>`` (any namespace): a view of ``model``.
+
+    ``model`` is a :class:`~ipmc_sensor_ros.physics.modelfile.ModelFile`: its sensor effects
+    and material, with ``geometry`` and the measured sample rate.  Its recording effects are
+    not node parameters (the node learns its own offset); nothing else is added.
+    """
+    material = model.material.to_dict()
+    constants = {k: v for k, v in material.items() if k in _NOT_NODE_PARAMS}
+    if constants != {k: getattr(MaterialParameters(), k) for k in constants}:
+        raise ParameterError(f'the model changes physical constants {sorted(constants)}, which '
+                             'are not node parameters: use --save-model and model_file')
     params = {'length_m': geometry.length_m, 'width_m': geometry.width_m,
               'thickness_m': geometry.thickness_m}
-    params.update({k: v for k, v in material.to_dict().items() if k not in _NOT_NODE_PARAMS})
+    params.update({k: v for k, v in material.items() if k not in _NOT_NODE_PARAMS})
     if sample_rate_hz:
-        params['sample_rate_hz'] = float(sample_rate_hz)
-    params['model'] = base
-    params['effects'] = [format_effect(e) for e in extra_effects] or ['']
+        params['sample_rate_hz'] = round_rate_hz(sample_rate_hz)
+    names = [e.name for e in model.effects]
+    params['model'] = 'h2' if 'surface_resistance' in names else 'h1'
+    extra = [_effect_text(e) for e in model.effects if e.name != 'surface_resistance']
+    if extra:
+        params['effects'] = extra
     return {'/**/ipmc_estimator': {'ros__parameters': params},
             '/**/ipmc_simulator': {'ros__parameters': dict(params)}}
 
 
-def _save_params(path: Path, groups, data, res, args, effects) -> list[Path]:
-    """One params file per sample geometry (``NAME_<sample>.yaml`` when several)."""
+def params_file_text(doc: dict) -> str:
+    """YAML text of a params file as rcl reads it: plain, no anchors or aliases."""
     import yaml
 
+    class _Plain(yaml.SafeDumper):
+        def ignore_aliases(self, data) -> bool:
+            return True
+
+    return yaml.dump(doc, Dumper=_Plain, sort_keys=False)
+
+
+def _save_params(path: Path, groups, data, res) -> list[Path]:
+    """
+    One params file per sample geometry (``NAME_<sample>.yaml`` when several).
+
+    The fitted model (:func:`params_file_doc`), with each sample's known header values.
+    """
+    from ..physics.modelfile import ModelFile
     from ..workbench.io import TimeSeries
 
-    base = args.model.strip().lower()
-    extra = effects[len(parse_model_name(base)[1]):]
+    fitted = ModelFile.from_model(effects=res.effects, material=res.material)
     written = []
     for g in groups:
         out = path if len(groups) == 1 else path.with_name(f'{path.stem}_{g.name}{path.suffix}')
-        material = res.material.replace(
-            **{
-                k: v
-                for k, v in g.known.items()
-                if k not in res.free and k in MaterialParameters.__dataclass_fields__
-            }
-        )
-        rates = {
-            d.sample_rate_hz
-            for d in data
-            if isinstance(d, TimeSeries) and d.geometry == g.geometry
-        }
-        doc = params_file_doc(
-            material, g.geometry, base, extra, rates.pop() if len(rates) == 1 else None
-        )
-        sources = sorted({Path(p.source).name for p in g.points if getattr(p, 'source', '')})
+        known = {k: v for k, v in g.known.items()
+                 if k not in res.free and k in MaterialParameters.__dataclass_fields__}
+        view = ModelFile(fitted.effects, fitted.material.replace(**known),
+                         fitted.recording_effects)
+        rates = {d.sample_rate_hz for d in data
+                 if isinstance(d, TimeSeries) and d.geometry == g.geometry}
+        doc = params_file_doc(view, g.geometry, rates.pop() if len(rates) == 1 else None)
+        sources = sorted({Path(p.source).name for p in g.points if getattr(p, 'source', '')},
+                         key=natural_key)
         head = [
             '# Written by ipmc-model fit on '
             f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC',
-            f'# sample {g.name}: geometry from the data; model {base}'
-            + (' + ' + ', '.join(doc['/**/ipmc_estimator']['ros__parameters']['effects'])
-               if extra else ''),
+            f'# sample {g.name}: geometry from the data; fitted model {view.name}',
             f"# fitted: {', '.join(res.free)}; chi2/dof {res.chi2:.4g}/{res.dof}",
             f"# data: {', '.join(sources[:12])}{' ...' if len(sources) > 12 else ''}",
-            '# use: ros2 run ipmc_sensor_ros ipmc_estimator --ros-args --params-file THIS_FILE',
         ]
-        out.write_text('\n'.join(head) + '\n' + yaml.safe_dump(doc, sort_keys=False))
+        if view.recording_effects:
+            head.append('# not node parameters (recording effects of the calibration): '
+                        + ', '.join(_effect_text(e) for e in view.recording_effects))
+        head.append('# use: ros2 run ipmc_sensor_ros ipmc_estimator --ros-args --params-file '
+                    'THIS_FILE')
+        try:
+            out.write_text('\n'.join(head) + '\n' + params_file_text(doc), encoding='utf-8')
+        except OSError as exc:
+            raise ParameterError(f'{out}: cannot write: {exc.strerror or exc}') from None
         written.append(out)
     return written
+
+
+def _free_names(args, fit_eff) -> tuple[str, ...]:
+    """
+    The ``--free`` names with the parameters of the fitted ``--effects`` added, once each.
+
+    An effect parameter named alone (``delay_s``) and qualified (``time_delay.delay_s``) is
+    one parameter.
+    """
+    from ..workbench.discovery import effect_free_names, free_names
+
+    qualified = effect_free_names(fit_eff, frequency_domain=True)
+    short = {q.split('.', 1)[1]: q for q in qualified}
+    free = []
+    for name in free_names(args.free) + qualified:
+        name = short.get(name, name)
+        if name not in free:
+            free.append(name)
+    return tuple(free)
 
 
 def _cmd_fit(args) -> int:
@@ -105,16 +156,14 @@ def _cmd_fit(args) -> int:
     from ..workbench.data import groups_from
     from ..workbench.freqfit import fit_parameters
 
-    from ..workbench.discovery import (acts_on_transfer, effect_free_names, effects_to_fit,
-                                       free_names, next_command)
+    from ..workbench.discovery import acts_on_transfer, effects_to_fit, next_command
 
     effects = effects_from_args(args)
     material = material_from_args(args)
     data = load_data(args)
     groups = groups_from(data)
     fit_eff = effects_to_fit(args.effects)
-    free = free_names(args.free)
-    free += tuple(n for n in effect_free_names(fit_eff, frequency_domain=True) if n not in free)
+    free = _free_names(args, fit_eff)
     for e in fit_eff:
         if not acts_on_transfer(e):
             say(f'{e}: kept at its catalog values (a frequency-response fit cannot see it; '
@@ -141,18 +190,21 @@ def _cmd_fit(args) -> int:
         from ..physics.modelfile import save_model
 
         save_model(args.save_model, effects=res.effects, material=res.material,
-                   tool='ipmc-model fit', data_files=args.data, ci95=res.ci95,
+                   tool='ipmc-model fit', data_files=_data_files(data), ci95=res.ci95,
                    error={'chi2': res.chi2, 'dof': res.dof, 'p_value': res.p_value})
-        print(f'saved the whole model to {args.save_model}')
+        _print_saved(args.save_model)
     if args.save:
-        for path in _save_params(Path(args.save), groups, data, res, args, effects):
-            print(f'saved node parameters (key /**/ipmc_estimator, geometry included) to {path}')
+        for path in _save_params(Path(args.save), groups, data, res):
+            print(f'saved node parameters (the fitted model; key /**/ipmc_estimator, geometry '
+                  f'included) to {path}')
     if args.save_material:
         save_yaml(args.save_material, res.material)
         print(f'saved fitted material to {args.save_material}')
-    print('next: ' + (next_command('compare', args.data, args.save_model)
-                      if res.adequate or args.save_model
-                      else next_command('diagnose', args.data, None, f'--model {args.model}')))
+    print(_with_recording_flag(
+        'next: ' + (next_command('compare', args.data, args.save_model)
+                    if res.adequate or args.save_model
+                    else next_command('diagnose', args.data, None, f'--model {args.model}')),
+        args.save_model))
     rd = report_dir(args.report)
     if rd:
         from ..workbench.report import fit_report
@@ -276,12 +328,15 @@ def _cmd_diagnose(args) -> int:
     if args.save_model:
         from ..physics.modelfile import save_model
 
+        final = diag.final or diag.baseline
         save_model(args.save_model, diag.final_model, tool='ipmc-model diagnose',
-                   data_files=args.data,
-                   error={'held_out': diag.final.error, 'noise_floor': diag.noise_floor},
-                   extra={'missing_effects': diag.missing_effects, 'explained': diag.explained})
-        print(f'saved the whole model to {args.save_model}')
-    print(diagnosis_next_command(diag, args.data, args.save_model, args.model))
+                   data_files=_data_files(data),
+                   error={'held_out': final.error, 'noise_floor': diag.noise_floor},
+                   extra={'missing_effects': diag.missing_effects, 'explained': diag.explained,
+                          'mains_lines': [d for d in diag.interference if d.get('removable')]})
+        _print_saved(args.save_model)
+    print(_with_recording_flag(diagnosis_next_command(diag, args.data, args.save_model,
+                                                      args.model), args.save_model))
     write_json(args.json, diag.to_json())
     rd = report_dir(args.report)
     if rd:
@@ -289,6 +344,35 @@ def _cmd_diagnose(args) -> int:
 
         print(f'report: {diagnose_report(rd, diag)}')
     return 0
+
+
+def _data_files(data) -> list[str]:
+    """The files (and bags) a model was fitted on, in natural order, for its provenance."""
+    return sorted({str(d.path) for d in data}, key=natural_key)
+
+
+def _print_saved(path) -> None:
+    """Say what a saved model holds: the sensor, and what stays with the calibration records."""
+    from ..physics.modelfile import load_model
+
+    saved = load_model(path)
+    print(f'saved the whole model to {path}: {saved.name}')
+    if saved.recording_effects:
+        print('  ' + saved.recording_note(False))
+
+
+def _with_recording_flag(line: str, model_path) -> str:
+    """
+    Return the printed next command, with ``--apply-recording-effects`` if it needs it.
+
+    The next command compares the saved model with the records it was fitted on, whose
+    recording effects (offset, channel delay) it must then include.
+    """
+    from ..physics.modelfile import RECORDING_FLAG, load_model
+
+    if model_path and '--model-file' in line and load_model(model_path).recording_effects:
+        return f'{line} {RECORDING_FLAG}'
+    return line
 
 
 def _add_settle(p) -> None:

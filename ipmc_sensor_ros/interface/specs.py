@@ -92,7 +92,7 @@ MODEL_SPECS = (
          "diagnose --save-model'): its base, effects with their fitted values and its material "
          "replace 'model', 'effects' and the material parameters, which must then keep their "
          "defaults ('' = none)", read_only=True, max_length=4096),
-    Spec('apply_recording_effects', False, bool, "also apply the recording effects of "
+    Spec('apply_recording_effects', False, bool, 'also apply the recording effects of '
          "'model_file' (offset and its drift, channel delay: properties of the calibration "
          'records, not of the sensor; off: the estimator learns its own offset)',
          read_only=True),

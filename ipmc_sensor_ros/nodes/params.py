@@ -351,7 +351,7 @@ def node_help(executable: str) -> str:
              'parameters (name type default; ranges and descriptions: docs/ros_interface.md):']
     for s in specs:
         default = '[]' if s.kind is list else repr(s.default)
-        lines.append(f"  {s.name:<32} {kinds[s.kind]:<8} {default}"
+        lines.append(f'  {s.name:<32} {kinds[s.kind]:<8} {default}'
                      f"{'  (read-only)' if s.read_only else ''}")
     if managed:
         lines.append(f"  {'autostart':<32} {'bool':<8} False  (read-only; configure and "
