@@ -34,6 +34,7 @@ import numpy as np
 from ..physics.effects import load_plugin
 from ..physics.model import model_effects, parse_effects
 from ..workbench.discovery import SYMBOL_TO_NAME
+from ..workbench.io import natural_key
 from ..physics.parameters import (PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, MaterialParameters,
                                   ParameterError, load_yaml)
 
@@ -44,7 +45,8 @@ __all__ = ['HelpFormatter', 'Progress', 'say', 'natural_key', 'fmt_time_s', 'par
            'add_model_file_args', 'recording_effects_wanted', 'estimate_values']
 
 MATERIAL_KEYS = tuple(MaterialParameters.__dataclass_fields__)
-LENGTH_UNITS_M = {'m': 1.0, 'mm': 1e-3, 'um': 1e-6, 'µm': 1e-6, 'μm': 1e-6}
+#: Length units and how many of each make a metre (dividing keeps 360 um exactly 0.00036 m).
+PER_METRE = {'m': 1.0, 'mm': 1e3, 'um': 1e6, 'µm': 1e6, 'μm': 1e6}
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -120,25 +122,6 @@ class Progress:
             self._print('done')
 
 
-_NUMBER = re.compile(r'\d+(?:[.p]\d+)?')
-
-
-def natural_key(path) -> tuple:
-    """
-    Sort key that orders embedded numbers numerically ('1Hz' < '2p5Hz' < '13Hz').
-
-    Simulate writes decimal points as 'p' (``slim_1p53Hz``).
-    """
-    text = str(path)
-    parts: list = []
-    pos = 0
-    for m in _NUMBER.finditer(text):
-        parts += [(0, text[pos:m.start()]), (1, float(m.group().replace('p', '.')))]
-        pos = m.end()
-    parts.append((0, text[pos:]))
-    return tuple(parts)
-
-
 def fmt_time_s(t: float) -> str:
     """Return a time with sensible precision: 4 significant digits, no float noise."""
     return f'{float(t):.4g}'
@@ -168,10 +151,10 @@ def parse_geometry(text: str, name: str = '', flag: str = '--geometry') -> Geome
     values = []
     for part in parts:
         m = re.fullmatch(r'([-+0-9.eE]+)\s*([a-zµμ]*)', part)
-        if not m or m.group(2) not in ('', *LENGTH_UNITS_M):
+        if not m or m.group(2) not in ('', *PER_METRE):
             raise ParameterError(f'{flag}: cannot read {part!r}; use metres or a unit '
-                                 f'{sorted(LENGTH_UNITS_M)}, e.g. 22mm,7mm,360um')
-        values.append(float(m.group(1)) * LENGTH_UNITS_M.get(m.group(2) or 'm'))
+                                 f'{sorted(PER_METRE)}, e.g. 22mm,7mm,360um')
+        values.append(float(m.group(1)) / PER_METRE[m.group(2) or 'm'])
     return Geometry(*values, name=name)
 
 

@@ -18,7 +18,7 @@ from ..physics.model import SensorModel
 from ..physics.parameters import PAPER_SAMPLES, ParameterError
 from .args import (Progress, add_data_args, add_model_args, add_model_file_args, add_output_args,
                    effects_from_args, estimate_values, fmt_time_s, load_data, material_from_args,
-                   parse_geometry, parse_samples, renamed_flag, say, write_json)
+                   natural_key, parse_geometry, parse_samples, renamed_flag, say, write_json)
 
 __all__ = ['add_parsers', 'read_estimate', 'estimate_accuracy', 'ESTIMATE_FORMAT']
 
@@ -368,7 +368,8 @@ def _cmd_import(args) -> int:
             f'--current-gain must be a positive transimpedance in V/A, got {gain!r}'
         )
     geometry = parse_geometry(args.geometry, args.sample or '') if args.geometry else None
-    written = import_lab_files([Path(p) for p in args.files], Path(args.out), geometry=geometry,
+    files = sorted((Path(p) for p in args.files), key=natural_key)   # 1Hz before 13Hz
+    written = import_lab_files(files, Path(args.out), geometry=geometry,
                                meta=Path(args.meta) if args.meta else None,
                                columns=_parse_columns(args.columns),
                                current_gain_a_per_v=None if gain is None else 1.0 / gain,
