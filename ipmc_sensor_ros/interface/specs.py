@@ -494,6 +494,8 @@ def markdown_table(specs: Iterable[Spec]) -> str:
             default = '[]'
         elif s.kind is str:
             default = f'"{s.default}"'
+        elif s.kind is bool:
+            default = str(s.default).lower()
         else:
             default = f'{s.default:g}' if s.kind is float else str(s.default)
         fmt = '{:g}' if s.kind is float else '{}'
