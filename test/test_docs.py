@@ -1,11 +1,11 @@
 # SPDX-License-Identifier: Apache-2.0
-"""
+r"""
 Documents that run: the commands of README.md and docs/*.md are executed or checked.
 
 Convention, for every document:
 
 ``` ```console ```
-    Runnable.  Lines starting with ``$ `` are commands (a trailing ``\\`` continues one);
+    Runnable.  Lines starting with ``$ `` are commands (a trailing ``\`` continues one);
     other lines are sample output and are not checked.  The blocks of one document run in
     order in one empty temporary directory that holds links to the repository's ``config/``,
     ``examples/`` and ``test/data/`` (so ``config/estimator.yaml`` works as in a checkout),
@@ -76,7 +76,7 @@ def _commands(body: str) -> list[str]:
 
 
 def _workdir(tmp: Path, domain: int) -> dict:
-    """The directory the commands run in, and their environment."""
+    """Prepare the directory the commands run in; return their environment."""
     for name in ('config', 'examples'):
         (tmp / name).symlink_to(ROOT / name)
     (tmp / 'test').mkdir()

@@ -57,7 +57,7 @@ def test_sensor_effect_under_recording_is_refused(tmp_path):
     doc = yaml.safe_load(path.read_text())
     doc['provenance']['recording_effects'].append({'name': 'beam_inertia'})
     path.write_text(yaml.safe_dump(doc))
-    with pytest.raises(ParameterError, match="m.yaml: provenance.recording_effects: "
+    with pytest.raises(ParameterError, match='m.yaml: provenance.recording_effects: '
                                              "'beam_inertia' is a property of the sensor"):
         load_model(path)
 

@@ -87,7 +87,7 @@ def test_binary_model_file_stops_the_node_with_one_line(tmp_path):
 
 
 def _slow_model_file(path: Path) -> Path:
-    """A valid model file just under the size limit whose provenance takes seconds to parse."""
+    """Write a valid model file under the size limit whose provenance takes seconds to parse."""
     text = save_model(path, SensorModel(PAPER_SAMPLES['slim'])).read_text()
     notes = ''.join(f'  - {{a: {k}, b: [1.5, 2.5, x{k}]}}\n' for k in range(26_000))
     path.write_text(text + '  notes:\n' + notes)

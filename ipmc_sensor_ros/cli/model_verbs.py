@@ -134,7 +134,7 @@ def _save_params(path: Path, groups, data, res) -> list[Path]:
 
 def _free_names(args, fit_eff) -> tuple[str, ...]:
     """
-    The ``--free`` names with the parameters of the fitted ``--effects`` added, once each.
+    Return the ``--free`` names with the parameters of the fitted ``--effects``, once each.
 
     An effect parameter named alone (``delay_s``) and qualified (``time_delay.delay_s``) is
     one parameter.
@@ -347,7 +347,7 @@ def _cmd_diagnose(args) -> int:
 
 
 def _data_files(data) -> list[str]:
-    """The files (and bags) a model was fitted on, in natural order, for its provenance."""
+    """Return the files (and bags) a model was fitted on, in natural order (provenance)."""
     return sorted({str(d.path) for d in data}, key=natural_key)
 
 
