@@ -88,7 +88,7 @@ def test_binary_file_gives_one_line_naming_it(tmp_path, capsys):
 
 
 def test_params_view_names_the_fitted_values_without_anchors(tmp_path):
-    from ipmc_sensor_ros.cli.model_verbs import params_file_doc, params_file_text
+    from ipmc_sensor_ros.cli.saved_models import params_file_doc, params_file_text
 
     saved = ModelFile.from_model(FITTED)
     text = params_file_text(params_file_doc(saved, SLIM, 999.9999999999991))

@@ -67,6 +67,40 @@ def test_signal_while_the_node_is_built_ends_it_at_once():
     assert code == 0 and time.monotonic() - t0 < 3.0
 
 
+def test_signal_while_params_files_are_read_ends_at_once(tmp_path, monkeypatch):
+    stop = threading.Event()
+
+    def slow_read(path, what):              # a large params file being parsed
+        while not stop.wait(0.01):
+            pass
+        raise AssertionError('not interrupted')
+
+    params = tmp_path / 'p.yaml'
+    params.write_text('/**:\n  ros__parameters: {}\n')
+    monkeypatch.setattr(runner, 'read_yaml', slow_read)
+    threading.Timer(10.0, stop.set).start()
+    threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGTERM)).start()
+    t0 = time.monotonic()
+    try:
+        code = runner.run(_never, 'ipmc_estimator',
+                          ['ipmc_estimator', '--ros-args', '--params-file', str(params)])
+    finally:
+        stop.set()
+    assert code == 0 and time.monotonic() - t0 < 3.0
+
+
+def test_oversized_params_file_is_refused_by_name(tmp_path, capsys):
+    big = tmp_path / 'big.yaml'
+    with open(big, 'wb') as f:
+        f.truncate(50 * 1024 ** 2)
+    t0 = time.monotonic()
+    assert runner.run(_never, 'ipmc_estimator',
+                      ['ipmc_estimator', '--ros-args', '--params-file', str(big)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert time.monotonic() - t0 < 2.0
+    assert len(err.splitlines()) == 1 and 'big.yaml' in err and 'more than the limit' in err
+
+
 def _node_process(tmp_path, model_file: Path, *extra: str):
     env = dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN), PYTHONPATH=str(ROOT))
     return subprocess.Popen(
@@ -98,13 +132,13 @@ def _slow_model_file(path: Path) -> Path:
 def test_sigterm_while_loading_a_model_file_ends_the_node_promptly(tmp_path):
     model = _slow_model_file(tmp_path / 'slow.yaml')
     assert model.stat().st_size < 1_000_000
-    proc = _node_process(tmp_path, model)
+    proc = _node_process(tmp_path, model, '-r', '__node:=slow_model_loader')
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=DOMAIN)
     try:
         probe = rclpy.create_node('startup_probe', context=ctx)
         end = time.monotonic() + 60
-        while 'ipmc_estimator' not in probe.get_node_names() and time.monotonic() < end:
+        while 'slow_model_loader' not in probe.get_node_names() and time.monotonic() < end:
             time.sleep(0.05)      # the node exists: it is now reading its parameters and model
         assert proc.poll() is None, proc.communicate()[0]
         proc.send_signal(signal.SIGTERM)

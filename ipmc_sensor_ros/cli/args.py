@@ -10,6 +10,8 @@ Flag vocabulary (the same name means the same thing in every verb)
     ``--effects``    extra effects added to the base model
     ``--plugin``     Python file defining more effects
     ``--params``     material YAML or a ROS 2 params file of the nodes
+    ``--model-file`` a saved model (:mod:`.saved_models`); ``--apply-recording-effects``
+                     also applies its calibration's offset and channel delay
     ``--set``        override one material parameter
     ``--free``       parameters estimated from the data (fit, track, diagnose)
     ``--geometry``   sample geometry 'L,W,T' (metres, or with units mm/um)
@@ -18,6 +20,7 @@ Flag vocabulary (the same name means the same thing in every verb)
     ``--json``       output FILE with the verb's numbers as JSON
     ``--report``     output DIRECTORY for index.html and PNG plots
     ``--save``       output FILE: ROS 2 params file for the nodes
+    ``--save-model`` output FILE: the whole fitted model (ipmc-model/1)
 """
 from __future__ import annotations
 
@@ -41,8 +44,7 @@ from ..physics.parameters import (PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, Mat
 __all__ = ['HelpFormatter', 'Progress', 'say', 'natural_key', 'fmt_time_s', 'param_names',
            'parse_geometry', 'material_from_args', 'load_material', 'effects_from_args',
            'load_data', 'add_model_args', 'add_data_args', 'add_output_args', 'write_json',
-           'report_dir', 'parse_samples', 'renamed_flag', 'SYMBOL_TO_NAME',
-           'add_model_file_args', 'recording_effects_wanted', 'estimate_values']
+           'report_dir', 'parse_samples', 'renamed_flag', 'SYMBOL_TO_NAME']
 
 MATERIAL_KEYS = tuple(MaterialParameters.__dataclass_fields__)
 #: Length units and how many of each make a metre (dividing keeps 360 um exactly 0.00036 m).
@@ -189,41 +191,11 @@ def load_material(path) -> MaterialParameters:
     return load_yaml(path)[0]
 
 
-def _model_file(args):
-    """
-    Return the saved model of ``--model-file`` (None without it); with ``--params`` it is refused.
-
-    Two sources of the material, nothing chosen silently.  The file is read once per
-    command; its notices and what happens to its recording effects are printed then.
-    """
-    path = getattr(args, 'model_file', None)
-    if not path:
-        return None
-    if getattr(args, 'params', None):
-        raise ParameterError(f'--model-file {path} and --params {args.params} both give the '
-                             'material: use one')
-    saved = getattr(args, '_saved_model', None)
-    if saved is None:
-        from ..physics.modelfile import load_model
-
-        saved = load_model(path)
-        args._saved_model = saved
-        for notice in saved.notices:
-            say(f'notice: {notice}')
-        note = saved.recording_note(recording_effects_wanted(args))
-        if note:
-            say(('WARNING: ' if recording_effects_wanted(args) else '') + note)
-    return saved
-
-
-def recording_effects_wanted(args) -> bool:
-    """Return True if ``--apply-recording-effects`` was given."""
-    return bool(getattr(args, 'apply_recording_effects', False))
-
-
 def material_from_args(args) -> MaterialParameters:
     material = PAPER_PARAMETERS
-    saved = _model_file(args)
+    from .saved_models import saved_model
+
+    saved = saved_model(args)
     if saved is not None:
         material = saved.material
     elif getattr(args, 'params', None):
@@ -240,8 +212,10 @@ def effects_from_args(args) -> tuple:
     for plugin in getattr(args, 'plugin', None) or []:
         names = load_plugin(plugin)
         say(f"plugin {plugin}: effects {', '.join(names)}")
+    from .saved_models import recording_effects_wanted, saved_model
+
     extra = getattr(args, 'effects', '') or ''
-    saved = _model_file(args)
+    saved = saved_model(args)
     if saved is None:
         if recording_effects_wanted(args):
             raise ParameterError('--apply-recording-effects applies the recording effects of '
@@ -254,40 +228,6 @@ def effects_from_args(args) -> tuple:
             raise ParameterError(f"--effects: '{e.name}' is already in --model-file "
                                  f'{args.model_file} (with its fitted values)')
     return tuple(base) + tuple(added)
-
-
-def estimate_values(values: dict, explicit: set[str], args) -> tuple[dict, set[str]]:
-    """
-    Node parameter values for ``estimate`` with ``--model-file`` (unchanged without it).
-
-    The model file gives the model and the material (``--params`` may still give the filter
-    settings, but no model or material value: two sources are refused, naming both); a data
-    header whose material disagrees with the file is then a conflict ``--prefer`` decides.
-    Returns (values, names given explicitly).
-    """
-    from ..interface.specs import MATERIAL_NAMES
-    from ..physics.modelfile import RECORDING_PARAMETER, load_model
-
-    path = getattr(args, 'model_file', None)
-    if not path:
-        if recording_effects_wanted(args):
-            raise ParameterError('--apply-recording-effects applies the recording effects of '
-                                 'a --model-file; no --model-file given')
-        return values, explicit
-    given = sorted(explicit & (set(MATERIAL_NAMES) | {'model', 'effects', 'model_file'}))
-    if given:
-        raise ParameterError(f'--model-file {path} and --params {args.params} both define the '
-                             f'model ({", ".join(given)}): use one')
-    saved = load_model(path)
-    for notice in saved.notices:
-        say(f'notice: {notice}')
-    note = saved.recording_note(recording_effects_wanted(args))
-    if note:
-        say(('WARNING: ' if recording_effects_wanted(args) else '') + note)
-    out = dict(values, model_file=str(path))
-    out[RECORDING_PARAMETER] = recording_effects_wanted(args)
-    out.update({k: v for k, v in saved.material.to_dict().items() if k in MATERIAL_NAMES})
-    return out, explicit | set(MATERIAL_NAMES)
 
 
 def _expand(paths) -> list[Path]:
@@ -353,23 +293,14 @@ def add_model_args(p: argparse.ArgumentParser, *, effects: bool = True) -> None:
                             "'time_delay(delay_s=0.002),nonlinearity' (see: ipmc-model effects)")
         g.add_argument('--plugin', action='append', metavar='FILE',
                        help='Python file defining more effects (repeatable)')
+    from .saved_models import add_model_file_args
+
     add_model_file_args(g)
     g.add_argument('--params', metavar='FILE',
                    help="material YAML ('material:') or a ROS 2 params file of the nodes "
                         "(default: the paper's Tables 1-2)")
     g.add_argument('--set', action='append', metavar='NAME=VALUE',
                    help='override a material parameter, e.g. --set d=3e-11 (repeatable)')
-
-
-def add_model_file_args(g) -> None:
-    """``--model-file`` and ``--apply-recording-effects`` (every verb that takes a model)."""
-    g.add_argument('--model-file', metavar='FILE',
-                   help='a saved model (ipmc-model/1 YAML from --save-model): its sensor effects '
-                        'with their values and its material replace --model and --params')
-    g.add_argument('--apply-recording-effects', action='store_true',
-                   help="also apply the model file's recording effects (offset, drift, channel "
-                        'delay of the calibration records); for those records only: the '
-                        'estimator learns its own offset')
 
 
 def add_data_args(p: argparse.ArgumentParser) -> None:

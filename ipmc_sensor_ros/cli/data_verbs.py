@@ -16,9 +16,10 @@ import numpy as np
 from ..physics.beam import FIDELITIES
 from ..physics.model import SensorModel
 from ..physics.parameters import PAPER_SAMPLES, ParameterError
-from .args import (Progress, add_data_args, add_model_args, add_model_file_args, add_output_args,
-                   effects_from_args, estimate_values, fmt_time_s, load_data, material_from_args,
-                   natural_key, parse_geometry, parse_samples, renamed_flag, say, write_json)
+from .args import (Progress, add_data_args, add_model_args, add_output_args, effects_from_args,
+                   fmt_time_s, load_data, material_from_args, natural_key, parse_geometry,
+                   parse_samples, renamed_flag, say, write_json)
+from .saved_models import add_model_file_args, estimate_values
 
 __all__ = ['add_parsers', 'read_estimate', 'estimate_accuracy', 'ESTIMATE_FORMAT']
 

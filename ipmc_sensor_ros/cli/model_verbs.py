@@ -6,23 +6,19 @@ Each verb: parse -> call the workbench -> print a summary -> optional JSON and r
 """
 from __future__ import annotations
 
-import datetime
 from pathlib import Path
 
 from ..physics.model import SensorModel
-from ..physics.parameters import MaterialParameters, ParameterError
-from ..workbench.measurements import round_rate_hz
+from ..physics.parameters import ParameterError
 from .args import (Progress, add_data_args, add_model_args, add_output_args, effects_from_args,
-                   load_data, material_from_args, natural_key, param_names, renamed_flag,
-                   report_dir, say, write_json)
+                   load_data, material_from_args, param_names, renamed_flag, report_dir, say,
+                   write_json)
+from .saved_models import data_files, print_saved, with_recording_flag, write_params_files
 
-__all__ = ['add_parsers', 'params_file_doc', 'params_file_text']
+__all__ = ['add_parsers']
 
 FREE_HELP = ('parameters estimated from the data, comma list of symbols d, alpha0, C-, kappa_e, '
              'Y, r0, T or full names')
-#: physical constants of MaterialParameters that are not node parameters
-_NOT_NODE_PARAMS = ('faraday_constant_c_per_mol', 'gas_constant_j_per_mol_k',
-                    'one_minus_anion_volume_fraction')
 
 
 def _records(args, with_data: bool = False):
@@ -42,94 +38,6 @@ def _records(args, with_data: bool = False):
 
 def _model_text(data, material, effects) -> str:
     return SensorModel(data[0].geometry, material, effects).describe()
-
-
-# ---------------------------------------------------------------------------
-def _effect_text(spec) -> str:
-    """``name(p=v, ...)`` with every digit of the fitted values (not the 6 of format_effect)."""
-    if not spec.values:
-        return spec.name
-    return f"{spec.name}({', '.join(f'{k}={v!r}' for k, v in spec.values)})"
-
-
-def params_file_doc(model, geometry, sample_rate_hz: float | None = None) -> dict:
-    """
-    ROS 2 params for both nodes, under ``/**/<node>`` (any namespace): a view of ``model``.
-
-    ``model`` is a :class:`~ipmc_sensor_ros.physics.modelfile.ModelFile`: its sensor effects
-    and material, with ``geometry`` and the measured sample rate.  Its recording effects are
-    not node parameters (the node learns its own offset); nothing else is added.
-    """
-    material = model.material.to_dict()
-    constants = {k: v for k, v in material.items() if k in _NOT_NODE_PARAMS}
-    if constants != {k: getattr(MaterialParameters(), k) for k in constants}:
-        raise ParameterError(f'the model changes physical constants {sorted(constants)}, which '
-                             'are not node parameters: use --save-model and model_file')
-    params = {'length_m': geometry.length_m, 'width_m': geometry.width_m,
-              'thickness_m': geometry.thickness_m}
-    params.update({k: v for k, v in material.items() if k not in _NOT_NODE_PARAMS})
-    if sample_rate_hz:
-        params['sample_rate_hz'] = round_rate_hz(sample_rate_hz)
-    names = [e.name for e in model.effects]
-    params['model'] = 'h2' if 'surface_resistance' in names else 'h1'
-    extra = [_effect_text(e) for e in model.effects if e.name != 'surface_resistance']
-    if extra:
-        params['effects'] = extra
-    return {'/**/ipmc_estimator': {'ros__parameters': params},
-            '/**/ipmc_simulator': {'ros__parameters': dict(params)}}
-
-
-def params_file_text(doc: dict) -> str:
-    """YAML text of a params file as rcl reads it: plain, no anchors or aliases."""
-    import yaml
-
-    class _Plain(yaml.SafeDumper):
-        def ignore_aliases(self, data) -> bool:
-            return True
-
-    return yaml.dump(doc, Dumper=_Plain, sort_keys=False)
-
-
-def _save_params(path: Path, groups, data, res) -> list[Path]:
-    """
-    One params file per sample geometry (``NAME_<sample>.yaml`` when several).
-
-    The fitted model (:func:`params_file_doc`), with each sample's known header values.
-    """
-    from ..physics.modelfile import ModelFile
-    from ..workbench.io import TimeSeries
-
-    fitted = ModelFile.from_model(effects=res.effects, material=res.material)
-    written = []
-    for g in groups:
-        out = path if len(groups) == 1 else path.with_name(f'{path.stem}_{g.name}{path.suffix}')
-        known = {k: v for k, v in g.known.items()
-                 if k not in res.free and k in MaterialParameters.__dataclass_fields__}
-        view = ModelFile(fitted.effects, fitted.material.replace(**known),
-                         fitted.recording_effects)
-        rates = {d.sample_rate_hz for d in data
-                 if isinstance(d, TimeSeries) and d.geometry == g.geometry}
-        doc = params_file_doc(view, g.geometry, rates.pop() if len(rates) == 1 else None)
-        sources = sorted({Path(p.source).name for p in g.points if getattr(p, 'source', '')},
-                         key=natural_key)
-        head = [
-            '# Written by ipmc-model fit on '
-            f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC',
-            f'# sample {g.name}: geometry from the data; fitted model {view.name}',
-            f"# fitted: {', '.join(res.free)}; chi2/dof {res.chi2:.4g}/{res.dof}",
-            f"# data: {', '.join(sources[:12])}{' ...' if len(sources) > 12 else ''}",
-        ]
-        if view.recording_effects:
-            head.append('# not node parameters (recording effects of the calibration): '
-                        + ', '.join(_effect_text(e) for e in view.recording_effects))
-        head.append('# use: ros2 run ipmc_sensor_ros ipmc_estimator --ros-args --params-file '
-                    'THIS_FILE')
-        try:
-            out.write_text('\n'.join(head) + '\n' + params_file_text(doc), encoding='utf-8')
-        except OSError as exc:
-            raise ParameterError(f'{out}: cannot write: {exc.strerror or exc}') from None
-        written.append(out)
-    return written
 
 
 def _free_names(args, fit_eff) -> tuple[str, ...]:
@@ -190,17 +98,17 @@ def _cmd_fit(args) -> int:
         from ..physics.modelfile import save_model
 
         save_model(args.save_model, effects=res.effects, material=res.material,
-                   tool='ipmc-model fit', data_files=_data_files(data), ci95=res.ci95,
+                   tool='ipmc-model fit', data_files=data_files(data), ci95=res.ci95,
                    error={'chi2': res.chi2, 'dof': res.dof, 'p_value': res.p_value})
-        _print_saved(args.save_model)
+        print_saved(args.save_model)
     if args.save:
-        for path in _save_params(Path(args.save), groups, data, res):
+        for path in write_params_files(Path(args.save), groups, data, res):
             print(f'saved node parameters (the fitted model; key /**/ipmc_estimator, geometry '
                   f'included) to {path}')
     if args.save_material:
         save_yaml(args.save_material, res.material)
         print(f'saved fitted material to {args.save_material}')
-    print(_with_recording_flag(
+    print(with_recording_flag(
         'next: ' + (next_command('compare', args.data, args.save_model)
                     if res.adequate or args.save_model
                     else next_command('diagnose', args.data, None, f'--model {args.model}')),
@@ -330,13 +238,13 @@ def _cmd_diagnose(args) -> int:
 
         final = diag.final or diag.baseline
         save_model(args.save_model, diag.final_model, tool='ipmc-model diagnose',
-                   data_files=_data_files(data),
+                   data_files=data_files(data),
                    error={'held_out': final.error, 'noise_floor': diag.noise_floor},
                    extra={'missing_effects': diag.missing_effects, 'explained': diag.explained,
                           'mains_lines': [d for d in diag.interference if d.get('removable')]})
-        _print_saved(args.save_model)
-    print(_with_recording_flag(diagnosis_next_command(diag, args.data, args.save_model,
-                                                      args.model), args.save_model))
+        print_saved(args.save_model)
+    line = diagnosis_next_command(diag, args.data, args.save_model, args.model)
+    print(with_recording_flag(line, args.save_model))
     write_json(args.json, diag.to_json())
     rd = report_dir(args.report)
     if rd:
@@ -344,35 +252,6 @@ def _cmd_diagnose(args) -> int:
 
         print(f'report: {diagnose_report(rd, diag)}')
     return 0
-
-
-def _data_files(data) -> list[str]:
-    """Return the files (and bags) a model was fitted on, in natural order (provenance)."""
-    return sorted({str(d.path) for d in data}, key=natural_key)
-
-
-def _print_saved(path) -> None:
-    """Say what a saved model holds: the sensor, and what stays with the calibration records."""
-    from ..physics.modelfile import load_model
-
-    saved = load_model(path)
-    print(f'saved the whole model to {path}: {saved.name}')
-    if saved.recording_effects:
-        print('  ' + saved.recording_note(False))
-
-
-def _with_recording_flag(line: str, model_path) -> str:
-    """
-    Return the printed next command, with ``--apply-recording-effects`` if it needs it.
-
-    The next command compares the saved model with the records it was fitted on, whose
-    recording effects (offset, channel delay) it must then include.
-    """
-    from ..physics.modelfile import RECORDING_FLAG, load_model
-
-    if model_path and '--model-file' in line and load_model(model_path).recording_effects:
-        return f'{line} {RECORDING_FLAG}'
-    return line
 
 
 def _add_settle(p) -> None:

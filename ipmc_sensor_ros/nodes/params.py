@@ -37,7 +37,7 @@ __all__ = ['ParameterError', 'Spec', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_
            'params_files', 'check_unknown_overrides', 'section_matches', 'params_file_sections',
            'create_publisher', 'create_subscription', 'check_qos_overrides',
            'qos_overriding_options', 'destroy_io', 'parameter_overrides', 'log_model_files',
-           'node_help', 'ros_arguments']
+           'node_help', 'ros_arguments', 'wants_help']
 
 _TYPES = {float: ParameterType.PARAMETER_DOUBLE, int: ParameterType.PARAMETER_INTEGER,
           str: ParameterType.PARAMETER_STRING, bool: ParameterType.PARAMETER_BOOL,
@@ -57,6 +57,24 @@ def descriptor(spec: Spec) -> ParameterDescriptor:
         d.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high),
                                         step=1)]
     return d
+
+
+def wants_help(args: Iterable[str]) -> bool:
+    """
+    Return True if ``-h`` or ``--help`` is among the non-ROS arguments of a process.
+
+    The ROS part (``--ros-args ... [--]``) is skipped without asking rcl, which would parse
+    every params file it names first.
+    """
+    in_ros = False
+    for a in list(args)[1:]:
+        if a == '--ros-args':
+            in_ros = True
+        elif a == '--' and in_ros:
+            in_ros = False
+        elif not in_ros and a in ('-h', '--help'):
+            return True
+    return False
 
 
 def ros_arguments(args: Iterable[str]) -> list[str]:

@@ -37,6 +37,7 @@ Teardown
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import signal
@@ -46,10 +47,9 @@ import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
-from rclpy.utilities import remove_ros_args
 
 from ..physics.parameters import read_yaml
-from .params import ParameterError, node_help, params_files, ros_arguments
+from .params import ParameterError, node_help, params_files, ros_arguments, wants_help
 
 __all__ = ['run', 'make_executor', 'executor_name', 'spin_until_signalled']
 
@@ -150,7 +150,7 @@ def run(node_factory, name: str, args=None) -> int:
     printed on one line naming the parameter (no traceback) and gives 2.
     """
     args = list(sys.argv if args is None else args)
-    if {'-h', '--help'} & set(remove_ros_args(args)[1:]):
+    if wants_help(args):
         print(node_help(name))
         return 0
     # A shell starts background jobs with SIGINT ignored, and Python keeps an
@@ -164,43 +164,56 @@ def run(node_factory, name: str, args=None) -> int:
             signal.signal(s, handler)
 
 
-def _build(node_factory, args):
+@contextlib.contextmanager
+def _interruptible():
     """
-    Return ``node_factory(cli_args=<the process's ROS arguments>)``; a signal interrupts it.
+    Let a SIGINT/SIGTERM raise :class:`_InterruptedStart` inside the block (see ``_on_signal``).
 
-    The node sees the arguments rcl parsed for it (params files, ``-p``, remaps) as its own
-    ``cli_args``.  While it is built (model files read, filter designed) a SIGINT/SIGTERM
-    raises at once instead of waiting for the build to end.
+    For the start: params files read, the node built (model files parsed, filter designed).
     """
+    if _SIGNALLED:
+        raise _InterruptedStart(min(_SIGNALLED))
     _STARTING[0] = True
     try:
-        if _SIGNALLED:
-            raise _InterruptedStart(min(_SIGNALLED))
-        return node_factory(cli_args=ros_arguments(args))
+        yield
     finally:
         _STARTING[0] = False
 
 
-def _run(node_factory, name: str, args) -> int:
+def _init(name: str, args) -> int | None:
+    """Read the params files and init rclpy; return an exit code if the node must not start."""
     try:
         # rcl reports a params file it cannot parse as an RCLError traceback (exit 1)
-        # without the line: read each file first for a one-line file:line error
-        for path in params_files(args):
-            read_yaml(path, 'parameters file')
+        # without the line: read each file first (size-limited) for a one-line file:line error
+        with _interruptible():
+            for path in params_files(args):
+                read_yaml(path, 'parameters file')
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except _InterruptedStart:
+        return 0
     except (ParameterError, RCLError) as exc:
         text = str(exc)
         if isinstance(exc, RCLError):  # "...Error: <what> at line_num 3, at /src/parse.c:435, ..."
             text = re.sub(r',? at /\S+:\d+', '', text).replace('failed to initialize rcl: ', '')
         print(f"{name}: invalid parameters file: {' '.join(text.split())}", file=sys.stderr)
         return 2
+    return None
+
+
+def _run(node_factory, name: str, args) -> int:
+    early = _init(name, args)
+    if early is not None:
+        return early
     executor = node = None
     code = 0
     try:
         # The executor exists before the node logs "ready", so a signal sent on that
         # line finds a complete executor.
         executor = make_executor()
-        node = _build(node_factory, args)
+        with _interruptible():
+            # the node gets the arguments rcl parsed for it (params files, -p, remaps) as
+            # its own cli_args
+            node = node_factory(cli_args=ros_arguments(args))
         node.get_logger().debug(f'executor: {type(executor).__name__}')
         executor.add_node(node)
         spin_until_signalled(executor, node.context)
