@@ -161,3 +161,41 @@ def test_node_starts_on_the_saved_params_with_the_fitted_corner(calibrated):
     assert effects == [f'amplifier_bandwidth(corner_hz={corner!r})']
     assert parameter_value_to_python(got['diffusivity_m2_per_s']) == \
         fitted.material.diffusivity_m2_per_s
+
+
+def _rcl_parse(path: Path, node_name: str) -> dict:
+    """Return the parameters rcl's own params-file parser gives ``node_name`` from ``path``."""
+    import rclpy
+
+    ctx = rclpy.context.Context()
+    rclpy.init(context=ctx, args=[], domain_id=int(os.environ.get('ROS_DOMAIN_ID', '0') or 0))
+    try:
+        node = rclpy.create_node(node_name, context=ctx, use_global_arguments=False,
+                                 cli_args=['--ros-args', '--params-file', str(path)],
+                                 start_parameter_services=False, enable_rosout=False,
+                                 automatically_declare_parameters_from_overrides=True)
+        values = {n: p.value for n, p in node.get_parameters_by_prefix('').items()}
+        node.destroy_node()
+        return values
+    finally:
+        rclpy.try_shutdown(context=ctx)
+
+
+@pytest.mark.ros
+def test_rcl_parses_the_saved_params_for_both_nodes(calibrated, tmp_path):
+    pytest.importorskip('rclpy')
+    from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+    fitted = load_model(calibrated / 'm.yaml')
+    corner = dict(fitted.effects[-1].values)['corner_hz']
+    for node in ('ipmc_estimator', 'ipmc_simulator'):
+        got = _rcl_parse(calibrated / 'node.yaml', node)
+        assert got['effects'] == [f'amplifier_bandwidth(corner_hz={corner!r})'], node
+        assert got['model'] == 'h2' and got['sample_rate_hz'] == 1000.0
+    # the control: the same content with a YAML alias, as PyYAML writes shared lists, is refused
+    text = (calibrated / 'node.yaml').read_text()
+    aliased = tmp_path / 'aliased.yaml'
+    aliased.write_text(text.replace('    effects:\n', '    effects: &id001\n', 1)
+                       .rsplit('    effects:', 1)[0] + '    effects: *id001\n')
+    with pytest.raises(_rclpy.RCLInvalidROSArgsError, match='aliasing'):
+        _rcl_parse(aliased, 'ipmc_simulator')
