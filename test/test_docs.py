@@ -260,6 +260,15 @@ def test_generated_parts_are_current():
     assert not stale, f'regenerate with `python scripts/gen_docs.py`: {stale}'
 
 
+def test_documented_block_columns_are_the_codes():
+    from ipmc_sensor_ros.interface.blocks import current_columns, estimate_columns
+
+    for doc in (ROOT / 'README.md', ROOT / 'docs' / 'ros_interface.md'):
+        text = doc.read_text(encoding='utf-8')
+        for columns in (current_columns(1), estimate_columns(1)):
+            assert f'`{columns}`' in text, f'{doc.name}: the block columns are now {columns}'
+
+
 def test_readme_is_a_front_door():
     text = (ROOT / 'README.md').read_text(encoding='utf-8')
     assert len(text.splitlines()) <= 250

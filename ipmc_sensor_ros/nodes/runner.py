@@ -64,7 +64,12 @@ except ImportError:  # pragma: no cover
     from rclpy.impl.implementation_singleton import rclpy_implementation as _impl
     RCLError = _impl.RCLError
 
-_SHUTDOWN = (KeyboardInterrupt, ExternalShutdownException)
+
+class _InterruptedStart(Exception):
+    """A signal arrived while the node was being built."""
+
+
+_SHUTDOWN = (KeyboardInterrupt, ExternalShutdownException, _InterruptedStart)
 
 
 def executor_name() -> str:
@@ -100,10 +105,6 @@ _SIGNALLED: set = set()
 _STARTING = [False]
 
 
-class _InterruptedStart(Exception):
-    """A signal arrived while the node was being built."""
-
-
 def _on_signal(signum, frame) -> None:
     _SIGNALLED.add(signum)
     if _STARTING[0]:       # reading a model file or designing a filter: stop it now
@@ -115,14 +116,17 @@ def _on_signal(signum, frame) -> None:
 SPIN_PERIOD_S = 0.1
 
 
-def spin_until_signalled(executor, context=None) -> None:
+def spin_until_signalled(executor, context=None, node=None) -> None:
     """
     Spin ``executor`` until SIGINT/SIGTERM was received or the context shut down.
 
-    A loop of ``spin_once`` (see the module docstring for why not ``spin``); an
-    exception raised by a callback propagates out of it.
+    Also until ``node`` says it is ``finalized`` (a managed node after the ``shutdown``
+    transition: the executable then ends, exit status 0).  A loop of ``spin_once`` (see the
+    module docstring for why not ``spin``); an exception raised by a callback propagates out
+    of it.
     """
-    while not _SIGNALLED and not _stopping(context):
+    while (not _SIGNALLED and not _stopping(context)
+           and not getattr(node, 'finalized', False)):
         executor.spin_once(timeout_sec=SPIN_PERIOD_S)
 
 
@@ -216,8 +220,8 @@ def _run(node_factory, name: str, args) -> int:
             node = node_factory(cli_args=ros_arguments(args))
         node.get_logger().debug(f'executor: {type(executor).__name__}')
         executor.add_node(node)
-        spin_until_signalled(executor, node.context)
-    except (*_SHUTDOWN, _InterruptedStart):
+        spin_until_signalled(executor, node.context, node)
+    except _SHUTDOWN:
         pass
     except (ParameterError, ParameterException) as exc:
         if not _SIGNALLED:
