@@ -643,8 +643,8 @@ def test_sim_time_drives_the_simulator_and_stamps(harness):
 def test_docs_parameter_tables_match_the_declared_parameters():
     from ipmc_sensor_ros.nodes.simulator_node import _OWN_SPECS
 
-    doc = (ROOT / 'README.md').read_text()
-    # Generated from the specs: regenerate with params.markdown_table if this fails.
+    doc = (ROOT / 'docs' / 'ros_interface.md').read_text()
+    # Generated from the specs: regenerate with python scripts/gen_docs.py if this fails.
     assert P.markdown_table(ESTIMATOR_SPECS) in doc
     assert P.markdown_table(_OWN_SPECS) in doc
 

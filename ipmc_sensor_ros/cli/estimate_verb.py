@@ -20,6 +20,7 @@ from ..estimation.limits import beyond_limit, deflection_limit_m
 from ..physics.parameters import ParameterError
 from .args import Progress, fmt_time_s, load_data, say, write_json
 from .outputs import printable, write_complete
+from .saved_models import estimate_values
 
 __all__ = ['cmd_estimate', 'read_estimate', 'estimate_accuracy', 'EstimatorCache',
            'ESTIMATE_FORMAT', 'WRITE_CHUNK_ROWS']
@@ -254,7 +255,8 @@ def _estimate_one(args, path: Path, base: dict, explicit: set, cache: EstimatorC
 
     data = _read_one(args, path)
     src = printable(data.path)
-    values = _resolve_values(data, base, explicit, args.params, args.prefer)
+    values = _resolve_values(data, base, explicit, args.params or args.model_file,
+                             args.prefer)
     current = _checked_current(data)
     estimator = cache.get(values)
     model_text = estimator.model.describe()
@@ -356,6 +358,7 @@ def cmd_estimate(args) -> int:
     base = (config.load_params_file(args.params) if args.params
             else config.defaults(config.ESTIMATOR_SPECS))
     explicit = _explicit_params(args.params) if args.params else set()
+    base, explicit = estimate_values(base, explicit, args)
     paths = _estimate_inputs(args)
     cache = EstimatorCache()
     summary, failed = [], []

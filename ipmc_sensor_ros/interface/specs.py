@@ -33,7 +33,7 @@ __all__ = ['Spec', 'ParameterError', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_
            'ARRAY_SPECS', 'MAX_CHANNELS', 'channel_values', 'build_channel_estimators',
            'defaults', 'load_params_file', 'build_model', 'build_estimator', 'check_choice',
            'check_values', 'markdown_table', 'FRAME_ID_PATTERN', 'DIAGNOSTICS_SPECS',
-           'STREAM_DIAGNOSTICS_SPECS']
+           'STREAM_DIAGNOSTICS_SPECS', 'model_file_summary']
 
 
 @dataclass(frozen=True)
@@ -92,6 +92,10 @@ MODEL_SPECS = (
          "diagnose --save-model'): its base, effects with their fitted values and its material "
          "replace 'model', 'effects' and the material parameters, which must then keep their "
          "defaults ('' = none)", read_only=True, max_length=4096),
+    Spec('apply_recording_effects', False, bool, 'also apply the recording effects of '
+         "'model_file' (offset and its drift, channel delay: properties of the calibration "
+         'records, not of the sensor; off: the estimator learns its own offset)',
+         read_only=True),
     Spec('plugins', [], list, 'Python files defining more effects (Effect subclasses, see the '
          "README's plugin API): arbitrary code, loaded once at start-up (sha256 logged), "
          'never re-read; they cannot replace a built-in effect', read_only=True),
@@ -194,7 +198,8 @@ ESTIMATOR_SPECS = ESTIMATOR_SPECS + ARRAY_SPECS
 
 #: Parameters whose change needs a new reduction (the sensor model changes).
 MODEL_KEYS = GEOMETRY_NAMES + MATERIAL_NAMES + ('model', 'effects', 'model_file',
-                                                'reduction_order', 'band_low_hz', 'band_high_hz')
+                                                'apply_recording_effects', 'reduction_order',
+                                                'band_low_hz', 'band_high_hz')
 #: Parameters whose change needs a new filter on the same reduction.
 FILTER_KEYS = ('sample_rate_hz', 'leak_corner_hz', 'offset_corner_hz', 'estimator', 'mains_hz',
                'current_noise_a')
@@ -252,23 +257,43 @@ def _model_from_file(values: Mapping[str, Any], geometry: Geometry) -> SensorMod
     """
     Return the model of ``model_file`` for ``geometry``.
 
-    The file and the parameters are two sources of the same values: a model, effect or
-    material parameter that differs from its default is refused (naming both), never
-    silently overridden.
+    The file and the parameters are two sources of the same values: a model or effect
+    parameter that differs from its default, or a material parameter that differs from its
+    default and from the file's value, is refused (naming both), never silently overridden.
+    The file's recording effects are applied only with ``apply_recording_effects``.
     """
     from ..physics.modelfile import load_model
 
     path = values['model_file']
     saved = load_model(path)
     spec_default = {s.name: s.default for s in MODEL_SPECS + MATERIAL_SPECS}
+    in_file = saved.material.to_dict()
     for name in ('model', 'effects') + MATERIAL_NAMES:
-        if values[name] != spec_default[name]:
+        if values[name] != spec_default[name] and values[name] != in_file.get(name):
             raise ParameterError(
                 f"parameter '{name}' = {short_repr(values[name])} and "
                 f"model_file {path} both define the model: leave '{name}' at "
                 f'its default ({short_repr(spec_default[name])}) or drop model_file'
             )
-    return saved.sensor_model(geometry)
+    return saved.sensor_model(geometry, recording=bool(values.get('apply_recording_effects')))
+
+
+def model_file_summary(values: Mapping[str, Any]) -> list[str]:
+    """
+    Return the lines a node logs about its model files (none without ``model_file``).
+
+    What the file holds, where it came from, and whether its recording effects are applied
+    (with the warning when they are), plus the notices of reading it.
+    """
+    from ..physics.modelfile import load_model
+
+    files = [values.get('model_file') or ''] + list(values.get('model_files') or ())
+    lines = []
+    for path in dict.fromkeys(f for f in files if f):
+        saved = load_model(path)
+        lines.extend(saved.notices)
+        lines.append(saved.summary(bool(values.get('apply_recording_effects'))))
+    return lines
 
 
 def check_values(values: Mapping[str, Any], specs: Iterable[Spec] | None = None) -> None:
@@ -478,6 +503,8 @@ def markdown_table(specs: Iterable[Spec]) -> str:
             default = '[]'
         elif s.kind is str:
             default = f'"{s.default}"'
+        elif s.kind is bool:
+            default = str(s.default).lower()
         else:
             default = f'{s.default:g}' if s.kind is float else str(s.default)
         fmt = '{:g}' if s.kind is float else '{}'

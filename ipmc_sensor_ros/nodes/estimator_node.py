@@ -111,6 +111,7 @@ class EstimatorNode(Node):
         for path, (digest, names) in C.load_plugins(self._values['plugins']).items():
             self.get_logger().info(f"plugin {path} (sha256 {digest}): effects {', '.join(names)}; "
                                    'loaded once, not re-read')
+        P.log_model_files(self, self._values)
         self._model_key = C.model_key(self._values)
         self._pending: tuple | None = None
         self._built_values = self._values      # the values the running filter was built from
