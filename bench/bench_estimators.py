@@ -77,7 +77,7 @@ def run_estimator(record: Record, causal: bool = True, estimator: str = 'kalman'
     (:class:`~ipmc_sensor_ros.estimation.stream.StreamEstimator`, fed block by block as
     :func:`~ipmc_sensor_ros.estimation.stream.estimate_record` does, so the published std of
     each block can be read; ``block_samples`` 1: the node's one-sample path, ``feed_one``).
-    ``causal=False`` asks for the offline smoothed estimate: None while there is none.
+    ``causal=False``: the offline smoothed estimate, as ``ipmc-model estimate`` makes it.
     """
     from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
     from ipmc_sensor_ros.physics.model import SensorModel
@@ -103,21 +103,19 @@ def _causal(record: Record, est, block_samples: int) -> Estimate:
         end = min(k + block_samples, t.size)
         if end - k == 1:
             res = stream.feed_one(float(t[k]), float(i[k]))
-            if res is False:
-                res = stream.feed(t[k:end], i[k:end])
-            elif res is not None:
-                res = (np.array([res[0]]), np.array([res[1]]))
-            std = np.array([est.std_m])
-        else:
-            res = stream.feed(t[k:end], i[k:end])
-            std = np.asarray(est.last_std_m, dtype=float)
-        if res is None:               # today a block is estimated whole or not at all
+            if res is not None:
+                index.append(np.array([k]))
+                t_out.append(np.array([res[0]]))
+                w_out.append(np.array([res[1]]))
+                std_out.append(np.array([est.std_m]))
             continue
-        n = res[0].size
-        index.append(np.arange(k, end))
+        res = stream.feed(t[k:end], i[k:end])
+        if res is None:
+            continue
+        index.append(k + np.flatnonzero(stream.accepted))      # rows refused one by one
         t_out.append(res[0])
         w_out.append(res[1])
-        std_out.append(std if std.size == n else np.full(n, std[-1] if std.size else np.nan))
+        std_out.append(stream.last_std_m)
     cpu = time.process_time() - cpu0
     cat = (lambda parts, dtype=float: np.concatenate(parts) if parts
            else np.zeros(0, dtype=dtype))
@@ -127,15 +125,16 @@ def _causal(record: Record, est, block_samples: int) -> Estimate:
 
 def _smoothed(record: Record, est, block_samples: int) -> Estimate:
     """The offline smoothed estimate of the rows the stream keeps (as ``ipmc-model estimate``)."""
-    from ipmc_sensor_ros.estimation.stream import smooth_record
+    from ipmc_sensor_ros.estimation.stream import estimate_record, smooth_record
 
     fresh = est.rebuilt()
-    causal = _causal(record, est, block_samples)
-    rows = causal.row_index
     cpu0 = time.process_time()
-    t_out, w, std = smooth_record(fresh, record.time_s[rows], record.current_a[rows])
-    cpu = time.process_time() - cpu0 + causal.cpu_s
-    return Estimate(rows, t_out, w, std, causal.rows_given, int(rows.size), cpu)
+    _, _, stream = estimate_record(est, record.time_s, record.current_a, max_gap_s=0.1,
+                                   block_samples=block_samples, source=record.name)
+    rows = np.flatnonzero(stream.kept)
+    t_out, w, std = smooth_record(fresh, stream, record.time_s, record.current_a)
+    cpu = time.process_time() - cpu0
+    return Estimate(rows, t_out, w, std, int(record.time_s.size), int(rows.size), cpu)
 
 
 def _scores(record: Record, estimate: Estimate | None) -> dict:

@@ -232,7 +232,7 @@ def test_a_file_name_that_is_not_utf8_is_estimated_and_shown_escaped(tmp_path, c
     out_dir = tmp_path / 'o'
     assert _estimate(os.fsdecode(src), '--out', out_dir) == 0
     out = capsys.readouterr().out
-    assert 'caf\\xe9.csv: 3000 estimates' in out
+    assert 'caf\\xe9.csv: 3000 rows, 3000 estimated' in out
     written = os.listdir(os.fsencode(out_dir))
     assert written == [b'caf\xe9.estimate.csv']
     head = (out_dir / os.fsdecode(written[0])).read_bytes()[:200].decode()

@@ -11,8 +11,10 @@ from ..physics.beam import FIDELITIES
 from ..physics.model import SensorModel
 from ..physics.parameters import PAPER_SAMPLES, ParameterError
 from .args import (Progress, add_data_args, add_model_args, add_output_args, effects_from_args,
-                   material_from_args, parse_geometry, parse_samples, renamed_flag, write_json)
+                   material_from_args, natural_key, parse_geometry, parse_samples, renamed_flag,
+                   write_json)
 from .estimate_verb import ESTIMATE_FORMAT, cmd_estimate, estimate_accuracy, read_estimate
+from .saved_models import add_model_file_args
 
 __all__ = ['add_parsers', 'read_estimate', 'estimate_accuracy', 'ESTIMATE_FORMAT']
 
@@ -122,7 +124,8 @@ def _cmd_import(args) -> int:
             f'--current-gain must be a positive transimpedance in V/A, got {gain!r}'
         )
     geometry = parse_geometry(args.geometry, args.sample or '') if args.geometry else None
-    written = import_lab_files([Path(p) for p in args.files], Path(args.out), geometry=geometry,
+    files = sorted((Path(p) for p in args.files), key=natural_key)   # 1Hz before 13Hz
+    written = import_lab_files(files, Path(args.out), geometry=geometry,
                                meta=Path(args.meta) if args.meta else None,
                                columns=_parse_columns(args.columns),
                                current_gain_a_per_v=None if gain is None else 1.0 / gain,
@@ -185,6 +188,7 @@ def add_parsers(sub, formatter) -> None:
         help='ROS 2 params file of the estimator node (config/estimator.yaml); values it '
         'does not set come from the data header (geometry) or the node defaults',
     )
+    add_model_file_args(p)
     p.add_argument('--prefer', choices=('none', 'header', 'params'), default='none',
                    help='which wins when the data header and --params give different geometry or '
                         'material values (none: stop with an error naming both)')

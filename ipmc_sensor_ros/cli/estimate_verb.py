@@ -20,6 +20,7 @@ from ..estimation.limits import beyond_limit, deflection_limit_m
 from ..physics.parameters import ParameterError
 from .args import Progress, fmt_time_s, load_data, say, write_json
 from .outputs import printable, write_complete
+from .saved_models import estimate_values
 
 __all__ = ['cmd_estimate', 'read_estimate', 'estimate_accuracy', 'EstimatorCache',
            'ESTIMATE_FORMAT', 'WRITE_CHUNK_ROWS']
@@ -250,18 +251,20 @@ def _run(args, estimator, data, current, values, src):
     fresh = estimator.rebuilt() if not args.causal else None
     t_out, w, stream = estimate_record(estimator, data.time_s, current,
                                        max_gap_s=float(values['max_gap_s']), source=src)
-    std = stream.std if hasattr(stream, 'std') else np.full(t_out.size, np.nan)
+    std = stream.record_std_m
     if fresh is not None and stream.kept.any():
-        t_out, w, std = smooth_record(fresh, np.asarray(data.time_s)[stream.kept],
-                                      current[stream.kept], float(values['max_gap_s']))
+        t_out, w, std = smooth_record(fresh, stream, data.time_s, current)
     return t_out, w, std, stream
 
 
 def _estimate_one(args, path: Path, base: dict, explicit: set, cache: EstimatorCache) -> dict:
     """Estimate one input and write its output; returns its summary row."""
+    from ..estimation.accounting import record_summary
+
     data = _read_one(args, path)
     src = printable(data.path)
-    values = _resolve_values(data, base, explicit, args.params, args.prefer)
+    values = _resolve_values(data, base, explicit, args.params or args.model_file,
+                             args.prefer)
     current = _checked_current(data)
     estimator = cache.get(values)
     model_text = estimator.model.describe()
@@ -287,9 +290,11 @@ def _estimate_one(args, path: Path, base: dict, explicit: set, cache: EstimatorC
     flags = beyond_limit(w, limit_m)
     out, note = _write_output(args, data, values, model_text, stream.counters['resets'],
                               t_out, current, w, measured, (flags, limit_m), std)
-    row = {'source': src, 'out': printable(out), 'samples': int(t_out.size),
+    # rows given, estimated and refused per reason (estimation/accounting.py)
+    rows, rows_text = record_summary(stream.counters)
+    row = {'source': src, 'out': printable(out), 'samples': int(t_out.size), **rows,
            'resets': stream.counters['resets'],
-           'samples_beyond_limit': int(np.count_nonzero(flags))}
+           'samples_beyond_limit': int(np.count_nonzero(flags)), 'rows_text': rows_text}
     if row['samples_beyond_limit']:
         note += (f"; {row['samples_beyond_limit']} estimate(s) beyond the geometric limit "
                  f'|w| > L/2 = {limit_m:g} m (not '
@@ -326,7 +331,7 @@ def _write_output(args, data, values, model_text, resets, t_out, current, w, mea
 def _estimate_line(row: dict, values: dict, estimator, t_out, w, measured) -> str:
     """Return the printed line of one estimated input (and put its accuracy in ``row``)."""
     resets = row['resets']
-    msg = f"{row['source']}: {t_out.size} estimates -> {row['out']}"
+    msg = f"{row['source']}: {row.pop('rows_text')} -> {row['out']}"
     if resets:
         msg += (f"; {resets} filter reset(s) at time gaps > {values['max_gap_s']} s "
                 'or backward jumps')
@@ -356,6 +361,7 @@ def cmd_estimate(args) -> int:
     base = (config.load_params_file(args.params) if args.params
             else config.defaults(config.ESTIMATOR_SPECS))
     explicit = _explicit_params(args.params) if args.params else set()
+    base, explicit = estimate_values(base, explicit, args)
     paths = _estimate_inputs(args)
     cache = EstimatorCache()
     summary, failed = [], []

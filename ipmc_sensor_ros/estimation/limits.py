@@ -49,7 +49,9 @@ def beyond_limit(deflection_m, limit_m: float):
     """
     if isinstance(deflection_m, float):
         return 0.0 if -limit_m <= deflection_m <= limit_m else 1.0
-    return (np.abs(np.asarray(deflection_m, dtype=float)) > limit_m).astype(float)
+    w = np.asarray(deflection_m, dtype=float)
+    # no estimate (a refused sample of an array: NaN) has no flag either
+    return np.where(np.isnan(w), np.nan, (np.abs(w) > limit_m).astype(float))
 
 
 class LimitCheck:

@@ -10,6 +10,12 @@ block / none; z = +-inf beyond the limit of :mod:`~ipmc_sensor_ros.estimation.li
 ``estimator/counters`` (JSON, 1 Hz) and ``/diagnostics``.  Parameter changes are validated by
 building the new estimator and applied without an output jump.  README "ROS 2 interface".
 
+One source per stream: the node follows one publisher of ``current`` (its GID from the message
+info; :class:`~ipmc_sensor_ros.interface.sources.SourceSelector`), counts and names the others it
+ignores, counts the followed publisher's messages that never arrived (sequence numbers) and those
+the middleware reports lost, and switches to another publisher once the followed one has been
+silent for ``stale_after_s``.
+
 ``channels`` > 1 (a sensor array): N-column blocks through
 :class:`~ipmc_sensor_ros.estimation.array.ArrayStream` (one stream core per channel), points on
 ``ch<c>/deflection``, one /diagnostics status per channel; README "Sensor arrays".
@@ -42,9 +48,11 @@ from ..errors import DataError, IpmcError
 from ..physics.parameters import short_repr
 from . import params as P
 from ..interface.blocks import current_columns, estimate_columns, unpack_columns
+from ..interface.sources import SourceSelector
 from .messages import (CURRENT_COLUMNS, BlockPacker, OneSampleCodec, PointCodec,
                        claimed_samples, one_sample, unpack_block)
 from .diagnostics import DiagnosticsPublisher
+from .sources import FollowedSource, subscribe_followed
 from .runner import run
 
 __all__ = ['EstimatorNode', 'ESTIMATOR_SPECS', 'COUNTER_NAMES', 'PUBLISH_POINTS', 'main']
@@ -103,6 +111,7 @@ class EstimatorNode(Node):
         for path, (digest, names) in C.load_plugins(self._values['plugins']).items():
             self.get_logger().info(f"plugin {path} (sha256 {digest}): effects {', '.join(names)}; "
                                    'loaded once, not re-read')
+        P.log_model_files(self, self._values)
         self._model_key = C.model_key(self._values)
         self._pending: tuple | None = None
         self._built_values = self._values      # the values the running filter was built from
@@ -117,7 +126,10 @@ class EstimatorNode(Node):
         rules = dict(max_gap_s=float(self._values['max_gap_s']),
                      max_block_samples=int(self._values['max_block_samples']), source=topic,
                      now_s=lambda: self.get_clock().now().nanoseconds * 1e-9,
-                     warn=lambda text: logger.warning(text, throttle_duration_sec=1.0))
+                     warn=logger.warning,          # the stream bounds what it says
+                     rate_tolerance=float(self._values['rate_tolerance']))
+        self._source = FollowedSource(self, SourceSelector(float(self._values['stale_after_s'])),
+                                      lambda: self._array or self._stream, self._lock)
         self._array = None
         if self._channels == 1:
             self._stream = StreamEstimator(estimator, **rules)
@@ -134,9 +146,11 @@ class EstimatorNode(Node):
         qos = P.make_qos(self._values)
         # raw: bytes in, so that one-sample blocks never become message objects (README
         # "Benchmarks": rclpy's conversion of a Float64MultiArray costs more than the estimate)
-        self._sub = P.create_subscription(
-            self, Float64MultiArray, 'current', self._on_current_raw, qos, raw=True
-        )
+        self._sub = subscribe_followed(self, Float64MultiArray, 'current',
+                                       self._on_current_message, qos,
+                                       self._source.on_message_lost)
+        self._source.topic = self._sub.topic_name
+        self._source.selector.forget()
         self._pub_block = P.create_publisher(self, Float64MultiArray, 'deflection/block', qos)
         self._packer = BlockPacker(estimate_columns(self._channels))
         self._one_in = OneSampleCodec(CURRENT_COLUMNS)
@@ -211,6 +225,8 @@ class EstimatorNode(Node):
             out['samples_beyond_limit'] = self._limits[channel].count
             out.update(stream.estimator.status())
             out['deflection_limit_m'] = self._limits[channel].limit_m
+            out.update(stream.status())
+            out.update(self._source.status())
         if out['offset_a'] is not None:
             out['estimated_offset_a'] = out['offset_a']   # the filter's own offset (kalman)
         return out
@@ -245,17 +261,23 @@ class EstimatorNode(Node):
         return self._stream.last_warning
 
     # -- data path: unpack -> stream core -> publish ----------------------------
+    def _on_current_message(self, raw, info=None) -> None:
+        """Subscription callback: follow one publisher (module docstring), then the data path."""
+        raw, info = FollowedSource.unpack(raw, info)
+        if info is None or self._source.admit(info):
+            self._on_current_raw(raw)
+
     def _on_current_raw(self, raw: bytes) -> None:
         """
-        Subscription callback (serialised message).
+        Take one serialised message (the data path).
 
         A one-sample current block is read from its bytes and its estimate written as bytes
         (:class:`OneSampleCodec`); anything else is deserialised and takes :meth:`_on_current`.
         """
         if self._array is None:
             one = self._one_in.decode(raw)
-            if one is not None and self._feed_one(*one):
-                return
+            if one is not None:
+                return self._feed_one(*one)
         try:
             msg = deserialize_message(raw, Float64MultiArray)
         except Exception as exc:  # bytes that are no Float64MultiArray: counted, never fatal
@@ -269,8 +291,8 @@ class EstimatorNode(Node):
         if self._array is not None:
             return self._on_current_array(msg)
         one = one_sample(msg)
-        if one and self._feed_one(*one):
-            return
+        if one:
+            return self._feed_one(*one)
         with self._lock:
             if self._rebuilt is not None:
                 self._apply_rebuilt()
@@ -281,32 +303,25 @@ class EstimatorNode(Node):
                 return
             out = self._stream.feed(block.times_s, block.values, claimed=claimed_samples(msg))
             if out is not None:
-                self._diagnostics.observe(block.values)
+                self._diagnostics.observe(block.values[self._stream.accepted])
                 t, w = out
                 est = self._stream.estimator
                 flags = self._limits[0].flags(est, w)
                 self._publish(self._packer.pack(t, w, est.last_std_m, flags),
                               t, w, t.size)
 
-    def _feed_one(self, time_s: float, current_a: float) -> bool:
-        """
-        Estimate one timed sample on the stream core's lean path; publish it as bytes.
-
-        False (nothing touched) when the sample needs the general path.
-        """
+    def _feed_one(self, time_s: float, current_a: float) -> None:
+        """Estimate one timed sample (:meth:`StreamEstimator.feed_one`); publish it as bytes."""
         with self._lock:
             if self._rebuilt is not None:
                 self._apply_rebuilt()
             out = self._stream.feed_one(time_s, current_a)
-            if out is False:
-                return False
-            self._diagnostics.observe_one(current_a)
             if out is not None:
+                self._diagnostics.observe_one(current_a)
                 t, w = out
                 est = self._stream.estimator
                 flag = self._limits[0].flag_one(est, w)
                 self._publish(self._one_out.encode(t, w, est.std_m, flag), t, w, 1)
-            return True
 
     def _publish(self, block_msg: Float64MultiArray, times, deflections, n: int) -> None:
         """
@@ -362,12 +377,13 @@ class EstimatorNode(Node):
             if out is None:
                 return
             t, w, std, has = out
-            one = t.size == 1   # observe_one: no numpy per sample (40 -> 6 us)
+            one = table.shape[0] == 1   # observe_one: no numpy per sample (40 -> 6 us)
             for c in np.flatnonzero(has).tolist():
                 if one:
                     self._diagnostics.observe_one(float(table[0, c]), self._channel_names[c])
                 else:
-                    self._diagnostics.observe(table[:, c], channel=self._channel_names[c])
+                    self._diagnostics.observe(table[array.channels[c].accepted, c],
+                                              channel=self._channel_names[c])
             flags = np.full(w.shape, np.nan)
             for c in np.flatnonzero(has).tolist():
                 flags[:, c] = self._limits[c].flags(array.channels[c].estimator, w[:, c])
@@ -394,6 +410,7 @@ class EstimatorNode(Node):
     # -- periodic -------------------------------------------------------------
     def _on_timer(self) -> None:
         self._ticks += 1
+        self._diagnostics.follow_rate(self._stream.sample_rate_hz)
         counters = self._status()
         if self._array is not None:
             counters = dict(self._array.totals(), channels=list(counters.values()))
@@ -450,8 +467,10 @@ class EstimatorNode(Node):
             self._pending = None
             old = self._values
             self._values = values
-            (self._stream if self._array is None else self._array).max_gap_s = float(
-                values['max_gap_s'])
+            for ch in (self._array.channels if self._array is not None else (self._stream,)):
+                ch.max_gap_s = float(values['max_gap_s'])
+                ch.rate_tolerance = float(values['rate_tolerance'])
+            self._source.selector.stale_after_s = float(values['stale_after_s'])
             self._changed.update(p.name for p in parameters)
             if (key != self._model_key or self._wanted is not None or self._builder is not None
                     or self._rebuilt is not None):

@@ -405,6 +405,9 @@ def read_bag(path: PathLike, current_topic: str = 'current',
         side_geometry, known, extra = _read_sidecar(where, sidecar_path, geometry is None)
         if geometry is None:
             geometry = side_geometry
+        elif side_geometry is not None and side_geometry.name and not getattr(geometry, 'name',
+                                                                              ''):
+            geometry = geometry.replace(name=side_geometry.name)   # the sample's name
     if geometry is None:
         raise DataFormatError(where, None, 'no geometry: pass geometry= or put an '
                               f"{SIDECAR_NAME} sidecar with 'geometry: {{length_m, width_m, "
