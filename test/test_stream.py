@@ -245,7 +245,7 @@ def test_kalman_node_learns_the_offset_at_rest_and_publishes_its_uncertainty():
     from ipmc_sensor_ros.interface.blocks import ESTIMATE_COLUMNS
     from ipmc_sensor_ros.nodes.messages import unpack_block
 
-    node = DirectNode(publish_points='none', estimator='kalman', mains_hz=50)
+    node = DirectNode(publish_points='none', estimator='kalman', mains_hz='50')
     try:
         node.node._pub_block.publish = lambda m: node.published.append(
             unpack_block(m, ESTIMATE_COLUMNS))

@@ -37,9 +37,11 @@ class Recorder:
         self.log = [] if log is None else log
         self.std_m = 0.0
         self.delay_s = 0.0
+        self.last_std_m = np.zeros(0)
 
     def process(self, time_s, current_a, steps=None):
         self.log.extend(('sample', t, s) for t, s in zip(time_s.tolist(), steps.tolist()))
+        self.last_std_m = np.zeros(len(time_s))
         return time_s, np.asarray(current_a, float)
 
     def process_one(self, time_s, current_a, steps=1):
@@ -89,6 +91,22 @@ def _daq(rate_hz, n, jitter=0.0, seed=0):
     rng = np.random.default_rng(seed)
     stamps = T0 + t + rng.uniform(-jitter, jitter, n) / rate_hz
     return stamps, w, periodic_response(model, w, rate_hz)
+
+
+def _reference_amplitude(rate_hz, currents):
+    """
+    The estimator's own amplitude on the same currents with exact stamps at their true rate.
+
+    What the stream's timing must not change: the tests below compare with it, so they judge the
+    stream, not the estimator (whose amplitude on a record that moves from its first sample is
+    its own business: docs/estimator.md).
+    """
+    values = C.defaults(C.ESTIMATOR_SPECS)
+    values['sample_rate_hz'] = float(rate_hz)
+    stream = StreamEstimator(C.build_estimator(values))
+    stamps = T0 + np.arange(len(currents)) / rate_hz
+    t, w = stream.feed(stamps, np.asarray(currents))
+    return _amplitude(t, w)
 
 
 def _node_run(stamps, currents, **params):
@@ -318,9 +336,9 @@ def test_jittered_1khz_stream_is_estimated_whole_at_full_amplitude(jitter):
     stamps, w_true, i = _daq(FS, 10_000, jitter=jitter, seed=9)
     c, t, w, _ = _node_run(stamps, i)
     assert c['samples_out'] == 10_000 and c['samples_rejected'] == 0 and c['resets'] == 0
-    # the estimator's amplitude on unjittered stamps is 1.001 (measured); 1 % allows for the
-    # 2-s settling of the fit window
-    assert abs(_amplitude(t, w) - 1.0) < 0.01
+    # against the same estimator on exact stamps: the jitter, taken on the grid, changes the
+    # amplitude by less than 1 % (the time error of a sample is within +-25 % of a period)
+    assert abs(_amplitude(t, w) / _reference_amplitude(FS, i) - 1.0) < 0.01
 
 
 def test_one_duplicated_stamp_neither_resets_nor_shifts_the_estimate():
@@ -345,8 +363,9 @@ def test_an_off_rate_daq_is_estimated_at_its_true_rate(rate_hz):
     assert c['samples_rejected'] < RELOCK_MIN_SAMPLES and c['rate_rebuilds'] == 1
     assert abs(stream.sample_rate_hz / rate_hz - 1.0) < RATE_FOLLOW_FRACTION
     # a relative rate error is the same relative amplitude error (the sensor
-    # differentiates): 0.6 % is under a third of the 2 % mismatch
-    assert abs(_amplitude(t, w) - 1.0) < 0.006
+    # differentiates): 0.6 % is under a third of the 2 % mismatch; the reference is the same
+    # estimator on exact stamps at the true rate
+    assert abs(_amplitude(t, w) / _reference_amplitude(rate_hz, i) - 1.0) < 0.006
 
 
 def test_estimate_record_is_the_live_stream():

@@ -45,9 +45,9 @@ from .mains import MainsFilter, detect_lines
 
 __all__ = ['DeflectionEstimator', 'ESTIMATORS', 'leak_transient_s']
 
-#: Corner of the running mean of T(w) - w while the Kalman core moves, Hz (time constant 8 s):
-#: many periods of a 1 Hz crank, while a 0.2 s move to a hold shifts it by 2.5 % of its gap.
-NONLINEAR_MEAN_CORNER_HZ = 0.02
+#: Corner of the running mean of T(w) - w while the Kalman core moves, Hz (time constant 32 s):
+#: many periods of a 1 Hz crank, while a 0.2 s move to a hold shifts it by 0.6 % of its gap.
+NONLINEAR_MEAN_CORNER_HZ = 0.005
 
 
 def leak_transient_s(corner_hz: float) -> float:

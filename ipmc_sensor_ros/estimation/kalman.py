@@ -121,6 +121,11 @@ class KalmanEstimator:
         return self._filter.model.line_hz
 
     def reset(self) -> None:
+        """Start afresh: the nominal lines (the measured ones are measured again) and the prior."""
+        nominal = () if self.mains_hz == 0.0 else self._nominal()
+        if self.model.fundamentals_hz != tuple(nominal):
+            self._filter = self._new_filter(StateSpaceModel(self.reduced, self.config,
+                                                            self.sample_rate_hz, nominal))
         self._state = self._filter.initial_state()
         self._recent = np.zeros(self._check_n)
         self._first_rest_n = None

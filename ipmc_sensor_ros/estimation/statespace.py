@@ -182,7 +182,7 @@ class StateSpaceModel:
         s[self.ia] = s[self.iu] * 2 * math.pi * cfg.motion_bandwidth_hz
         s[self.ib] = cfg.offset_prior_a
         s[self.ib + 1] = cfg.offset_drift_a_per_s
-        s[self.il:] = cfg.offset_prior_a
+        s[self.il:] = cfg.line_prior_a
         return s
 
     # -- measurement rows (scaled states) ----------------------------------------------------

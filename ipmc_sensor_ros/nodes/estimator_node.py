@@ -307,7 +307,7 @@ class EstimatorNode(Node):
                 t, w = out
                 est = self._stream.estimator
                 flags = self._limits[0].flags(est, w)
-                self._publish(self._packer.pack(t, w, est.last_std_m, flags),
+                self._publish(self._packer.pack(t, w, self._stream.last_std_m, flags),
                               t, w, t.size)
 
     def _feed_one(self, time_s: float, current_a: float) -> None:
