@@ -81,7 +81,8 @@ def test_output_keeps_measured_and_names_the_estimate(short_run, tmp_path):
     assert main(['estimate', str(short_run), '--out', str(tmp_path)]) == 0   # a directory works
     est = read_estimate(tmp_path / 'short_5Hz.estimate.csv')
     measured = read_timeseries(short_run / 'short_5Hz.csv')
-    assert set(est) == {'time_s', 'current_A', 'deflection_estimate_m', 'deflection_estimate_std_m',
+    assert set(est) == {'time_s', 'current_A', 'deflection_estimate_m',
+                        'deflection_estimate_std_m',
                         'deflection_m', 'deflection_beyond_limit'}
     assert np.array_equal(est['deflection_m'], measured.deflection_m)
     assert np.array_equal(est['time_s'], measured.time_s)               # exact round trip

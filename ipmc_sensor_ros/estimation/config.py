@@ -99,15 +99,16 @@ def _check(self) -> None:
             raise ParameterError(f"parameter '{s.name}' must be {what} in [{s.low:g}, {s.high:g}]"
                                  f'{unit}, got {value!r}')
     if not self.motion_corner_hz < self.motion_bandwidth_hz:
-        raise ParameterError(f"parameter 'motion_corner_hz' ({self.motion_corner_hz:g} Hz) must be "
-                             f"below 'motion_bandwidth_hz' ({self.motion_bandwidth_hz:g} Hz)")
+        raise ParameterError(f"parameter 'motion_corner_hz' ({self.motion_corner_hz:g} Hz) must "
+                             f"be below 'motion_bandwidth_hz' ({self.motion_bandwidth_hz:g} Hz)")
 
 
 def _replace(self, **changes):
     """Return a copy with ``changes`` (validated)."""
     unknown = sorted(set(changes) - set(CONFIG_FIELDS))
     if unknown:
-        raise ParameterError(f'unknown estimator setting(s) {unknown}; known: {list(CONFIG_FIELDS)}')
+        raise ParameterError(f'unknown estimator setting(s) {unknown}; known: '
+                             f'{list(CONFIG_FIELDS)}')
     return dataclasses.replace(self, **changes)
 
 

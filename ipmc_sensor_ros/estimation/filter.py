@@ -20,8 +20,9 @@ R, the white-noise variance per sample, is measured on the current: the third di
 i_k - 3 i_{k-1} + 3 i_{k-2} - i_{k-3} has variance 20 R for white noise and passes a current
 at f only as (2 sin(pi f / fs))^6 (4e-6 at 20 Hz, 0.06 at 150 Hz, at 1 kHz), so its square / 20,
 averaged over ``NOISE_AVERAGE_S`` (weights normalised, so the first differences already give
-R; ``current_noise_a`` until then), is R.  Differences across a bridged gap are skipped.  The state is held in scaled units (x / scale) so that every entry of P is
-O(1) whatever the sensor (deflections of mm, currents of nA).
+R; ``current_noise_a`` until then), is R.  Differences across a bridged gap are skipped.
+The state is held in scaled units (x / scale) so that every entry of P is O(1) whatever the
+sensor (deflections of mm, currents of nA).
 
 :class:`FilterState` is the whole state (what save/restore keeps); :meth:`KalmanFilter.run`
 returns the new one and never changes the old.  Pass ``record`` to keep what the smoother
@@ -170,7 +171,7 @@ class KalmanFilter:
         n = len(y)
         st = [1] * n if steps is None else np.asarray(steps, dtype=np.int64).tolist()
         m, rest = self.model, self.rest
-        iw, ih, ib, il = m.iw, m.ih, m.ib, m.il
+        iw, ih, ib = m.iw, m.ih, m.ib
         sw, sb = float(m.scale[iw]), float(m.scale[ib])
         c, hold, rows, alpha, rot = m.c, m.hold_variance, self._rest_rows, self._alpha, self._rot
         nw = rest.n
@@ -248,7 +249,8 @@ class KalmanFilter:
             elif contiguous < 3:
                 contiguous += 1
             else:
-                d = yk - 3.0 * win[(pos - 2) % nw] + 3.0 * win[(pos - 3) % nw] - win[(pos - 4) % nw]
+                d = (yk - 3.0 * win[(pos - 2) % nw] + 3.0 * win[(pos - 3) % nw]
+                     - win[(pos - 4) % nw])
                 value = d * d / 20.0
                 if weight:
                     value = min(value, NOISE_CLIP * noise)

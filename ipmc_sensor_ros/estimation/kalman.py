@@ -193,7 +193,7 @@ class KalmanEstimator:
         y = np.asarray(current_a, dtype=float)
         line = self.model.line_hz
         if self.mains_hz != 0.0:
-                line = measure_line(y, self.sample_rate_hz, self._nominal(),
+            line = measure_line(y, self.sample_rate_hz, self._nominal(),
                                 self.config.line_harmonics)[0]
         filt = self._new_filter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,
                                                 line))

@@ -50,7 +50,8 @@ def rts_backward(filt: KalmanFilter, rec: ForwardRecord, end=None):
         last = n - 1
     for k in range(last, -1, -1):
         if k < n - 1:
-            xp_next, Pp_next, step_next = rec.x_pred[k + 1], rec.P_pred[k + 1], int(rec.steps[k + 1])
+            xp_next, Pp_next = rec.x_pred[k + 1], rec.P_pred[k + 1]
+            step_next = int(rec.steps[k + 1])
         F, _ = filt.model.discrete(step_next)
         J = np.linalg.solve(Pp_next, F @ rec.P_post[k]).T
         x_next = rec.x_post[k] + J @ (x_next - xp_next)

@@ -426,6 +426,7 @@ class StreamEstimator(StreamAccounts):
         self.record_std_m, self.record_steps = out_s[:n_out], steps[:n_out]
         return out_t[:n_out], out_w[:n_out], kept
 
+
 def estimate_record(estimator: DeflectionEstimator, time_s, current_a, *, max_gap_s: float = 0.1,
                     block_samples: int = 1000, source: str = 'record'):
     """
