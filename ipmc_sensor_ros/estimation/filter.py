@@ -51,7 +51,7 @@ NOISE_CLIP = 25.0
 NOISE_FLOOR_A = 1e-12
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class FilterState:
     """Everything the filter carries from one sample to the next (scaled units)."""
 
@@ -158,26 +158,29 @@ class KalmanFilter:
 
     # -- the recursion ---------------------------------------------------------------------------
     def run(self, state: FilterState, current_a, steps=None, record: ForwardRecord | None = None,
-            offset: int = 0):
+            offset: int = 0, copy: bool = True):
         """
         Filter ``current_a`` (A) from ``state``; return (new state, w, std, still).
 
         ``steps[k]``: sample periods from the sample before (None: all 1).  ``record``: filled
         at rows ``offset + k`` for the smoother.  The loop keeps its state in local variables
         and builds the returned :class:`FilterState` once; a block and single samples run the
-        same statements.
+        same statements.  ``copy=False``: the new state reuses ``state``'s buffers (for an
+        owner that drops the old state; ``state`` itself is then no longer valid).
         """
-        y = np.asarray(current_a, dtype=float).tolist()
+        y = current_a if isinstance(current_a, list) else np.asarray(current_a, float).tolist()
         n = len(y)
-        st = [1] * n if steps is None else np.asarray(steps, dtype=np.int64).tolist()
+        st = ([1] * n if steps is None else steps if isinstance(steps, list)
+              else np.asarray(steps, dtype=np.int64).tolist())
         m, rest = self.model, self.rest
         iw, ih, ib = m.iw, m.ih, m.ib
         sw, sb = float(m.scale[iw]), float(m.scale[ib])
         c, hold, rows, alpha, rot = m.c, m.hold_variance, self._rest_rows, self._alpha, self._rot
         nw = rest.n
-        x, P = state.x.copy(), state.P.copy()
-        win, sums = state.window.copy(), state.line_sums.copy()
-        phase, phases = state.phase.copy(), state.phases.copy()
+        x, P, win, sums, phase, phases = (state.x, state.P, state.window, state.line_sums,
+                                          state.phase, state.phases)
+        if copy:
+            x, P, win, sums, phase, phases = (a.copy() for a in (x, P, win, sums, phase, phases))
         count, pos, total, total_sq = (state.window_count, state.window_pos, state.total,
                                        state.total_sq)
         noise, weight = state.noise_var_a2, state.noise_weight
@@ -211,13 +214,13 @@ class KalmanFilter:
             count = min(count + 1, nw)
             b, pb = float(x[ib]) * sb, float(P[ib, ib]) * sb * sb
             if rot.size and count == nw:     # this sample less the window's fit of the lines
-                r = yk - 2.0 / nw * float(np.sum((sums * np.conj(phase)).real))
+                r = yk - 2.0 / nw * float(np.vdot(phase, sums).real)
             else:
                 r = yk
             ok, cusum = rest.sample_ok(r, b, pb, noise, cusum)
             quiet = quiet + 1 if ok else 0
             if count == nw:
-                energy = 2.0 / nw * float(np.sum(np.abs(sums) ** 2)) if rot.size else 0.0
+                energy = 2.0 / nw * float(np.vdot(sums, sums).real) if rot.size else 0.0
                 was_still = still
                 still = quiet >= nw and rest.still(total, total_sq, energy, b,
                                                    float(P[ib, ib]) * sb * sb, noise)
@@ -229,7 +232,8 @@ class KalmanFilter:
             else:
                 still = release = False
             if samples:
-                P = F @ P @ F.T + Q
+                P = F @ P @ F.T
+                P = 0.5 * (P + P.T) + Q     # symmetric to the bit (the updates keep it so)
             if release:
                 P[ih, ih] += hold
                 moved = moved and not still
@@ -237,12 +241,12 @@ class KalmanFilter:
                 j = offset + k
                 record.x_pred[j], record.P_pred[j] = x, P
                 record.steps[j], record.still[j] = sk, still
-            # the update with the current
+            # the update with the current (P - g g' with g = P c / sqrt(S): symmetric exactly)
             Pc = P @ c
             S = float(c @ Pc) + noise
-            K = Pc / S
-            x = x + K * (yk - float(c @ x))
-            P = P - np.outer(K, Pc)
+            x = x + Pc * ((yk - float(c @ x)) / S)
+            g = Pc / math.sqrt(S)
+            P = P - g[:, None] * g
             # the measured noise: third difference of r (module docstring)
             if sk != 1:
                 contiguous = 0
@@ -260,10 +264,10 @@ class KalmanFilter:
             if still:                   # the rest pseudo-measurements (velocity, ... = 0)
                 for row_c, var in rows:
                     Pc = P @ row_c
-                    K = Pc / (float(row_c @ Pc) + var)
-                    x = x - K * float(row_c @ x)
-                    P = P - np.outer(K, Pc)
-            P = 0.5 * (P + P.T)
+                    S = float(row_c @ Pc) + var
+                    x = x - Pc * (float(row_c @ x) / S)
+                    g = Pc / math.sqrt(S)
+                    P = P - g[:, None] * g
             if record is not None:
                 record.x_post[offset + k], record.P_post[offset + k] = x, P
             samples += 1

@@ -140,7 +140,8 @@ class KalmanEstimator:
             # cut where the line check falls due (a fixed sample count, however cut)
             due = self._next_check(self._state.samples)
             b = min(y.size, a + due - self._state.samples)
-            self._state, w, s, still = self._filter.run(self._state, y[a:b], st[a:b])
+            self._state, w, s, still = self._filter.run(self._state, y[a:b], st[a:b],
+                                                        copy=False)
             self._remember(y[a:b], still)
             parts.append((w, s, still))
             a = b
@@ -151,9 +152,18 @@ class KalmanEstimator:
         return Estimate(*(np.concatenate(p) for p in zip(*parts)))
 
     def estimate_one(self, current_a: float, steps: int = 1) -> tuple[float, float]:
-        est = self.estimate(np.array([current_a], dtype=float),
-                            None if steps == 1 else np.array([steps]))
-        return float(est.deflection_m[0]), float(est.std_m[0])
+        """One sample through the same recursion (:meth:`estimate` without its arrays)."""
+        n = self._state.samples
+        if n + 1 == self._next_check(n):
+            est = self.estimate(np.array([current_a], dtype=float),
+                                None if steps == 1 else np.array([steps]))
+            return float(est.deflection_m[0]), float(est.std_m[0])
+        self._state, w, s, still = self._filter.run(self._state, [float(current_a)],
+                                                    [int(steps)], copy=False)
+        self._recent[n % self._check_n] = current_a
+        if self._first_rest_n is None and still[0]:
+            self._first_rest_n = n
+        return float(w[0]), float(s[0])
 
     def _remember(self, y: np.ndarray, still: np.ndarray) -> None:
         """Keep the last check window of current; note the first rest."""
