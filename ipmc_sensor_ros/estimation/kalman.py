@@ -128,6 +128,7 @@ class KalmanEstimator:
                                                             self.sample_rate_hz, nominal))
         self._state = self._filter.initial_state()
         self._recent = np.zeros(self._check_n)
+        self._grid = 0           # sample periods since the start (bridged ones included)
         self._first_rest_n = None
 
     # -- streaming ------------------------------------------------------------------------
@@ -142,7 +143,7 @@ class KalmanEstimator:
             b = min(y.size, a + due - self._state.samples)
             self._state, w, s, still = self._filter.run(self._state, y[a:b], st[a:b],
                                                         copy=False)
-            self._remember(y[a:b], still)
+            self._remember(y[a:b], st[a:b], still)
             parts.append((w, s, still))
             a = b
             if self._state.samples == due:
@@ -160,25 +161,35 @@ class KalmanEstimator:
             return float(est.deflection_m[0]), float(est.std_m[0])
         self._state, w, s, still = self._filter.run(self._state, [float(current_a)],
                                                     [int(steps)], copy=False)
-        self._recent[n % self._check_n] = current_a
+        for _ in range(int(steps)):     # a bridged slot holds the next value (line check)
+            self._recent[self._grid % self._check_n] = current_a
+            self._grid += 1
         if self._first_rest_n is None and still[0]:
             self._first_rest_n = n
         return float(w[0]), float(s[0])
 
-    def _remember(self, y: np.ndarray, still: np.ndarray) -> None:
-        """Keep the last check window of current; note the first rest."""
+    def _remember(self, y: np.ndarray, steps: np.ndarray, still: np.ndarray) -> None:
+        """
+        Keep the last check window of current on the sample grid; note the first rest.
+
+        A bridged slot holds the value of the sample after it, so the line check sees the
+        hum's phase where it was (a dropped burst does not shift the rest of the window).
+        """
         n = self._check_n
         end = self._state.samples
         if self._first_rest_n is None and still.any():
             self._first_rest_n = end - y.size + int(np.argmax(still))
-        idx = (np.arange(end - y.size, end)) % n
-        self._recent[idx[-n:]] = y[-n:]
+        dense = np.repeat(y, steps)[-n:]
+        idx = np.arange(self._grid + int(steps.sum()) - dense.size,
+                        self._grid + int(steps.sum())) % n
+        self._recent[idx] = dense
+        self._grid += int(steps.sum())
 
     def _check_line(self) -> None:
         if self.mains_hz == 0.0:
             return
-        seen = min(self._state.samples, self._check_n)
-        recent = np.roll(self._recent, -(self._state.samples % self._check_n))[-seen:]
+        seen = min(self._grid, self._check_n)
+        recent = np.roll(self._recent, -(self._grid % self._check_n))[-seen:]
         f_line, _ = measure_line(recent, self.sample_rate_hz, self._nominal(),
                                  self.config.line_harmonics)
         old = self.model.fundamentals_hz
@@ -213,7 +224,8 @@ class KalmanEstimator:
     # -- state ------------------------------------------------------------------------------
     def get_state(self) -> dict:
         return {'filter': self._state.copy(), 'line_hz': self.model.fundamentals_hz,
-                'recent': self._recent.copy(), 'first_rest_n': self._first_rest_n}
+                'recent': self._recent.copy(), 'grid': self._grid,
+                'first_rest_n': self._first_rest_n}
 
     def set_state(self, state: dict) -> None:
         try:
@@ -229,6 +241,7 @@ class KalmanEstimator:
             raise ParameterError('state was saved from a different estimator design')
         self._state = fs.copy()
         self._recent = recent.copy()
+        self._grid = int(state.get('grid', fs.samples))
         self._first_rest_n = state.get('first_rest_n')
 
     def rebuilt(self, reduced: ReducedModel | None = None, recent_input=None,
@@ -250,12 +263,16 @@ class KalmanEstimator:
                                                           self.model.fundamentals_hz))
         new._state = carry_state(self._filter, new._filter, self._state)
         new._first_rest_n = self._first_rest_n
+        if new._check_n == self._check_n:
+            new._recent, new._grid = self._recent.copy(), self._grid
         return new
 
     def continue_from(self, old: 'KalmanEstimator', recent_input=None) -> None:
         """Take over ``old``'s stream state (deflection, offset, lines, ...)."""
         self._state = carry_state(old._filter, self._filter, old._state)
         self._first_rest_n = old._first_rest_n
+        if old._check_n == self._check_n:
+            self._recent, self._grid = old._recent.copy(), old._grid
 
     # -- reporting -----------------------------------------------------------------------
     def status(self) -> dict:
