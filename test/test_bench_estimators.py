@@ -39,7 +39,8 @@ def test_quick_run_prints_the_table_and_writes_json(tmp_path):
         assert 0 < r['causal_bound'] < 0.1 and r['nrmse'] > 0
         assert math.isclose(r['ratio'], r['nrmse'] / r['causal_bound'])
         assert 0 < r['rows_estimated'] <= r['rows_given'] and r['cpu_us_per_row'] > 0
-        assert r['smoothed_nrmse'] is None            # no smoother behind the adapter yet
+        assert 0 < r['noncausal_bound'] <= r['causal_bound']   # hindsight never hurts
+        assert math.isclose(r['smoothed_ratio'], r['smoothed_nrmse'] / r['noncausal_bound'])
         assert r['ok'] == (r['nrmse'] <= max(2 * r['causal_bound'], 0.01)
                            and r['rows_estimated'] == r['rows_given'])
 
@@ -51,7 +52,11 @@ def test_adapter_aligns_rows_and_reports_std():
     assert est.row_index.size == est.deflection_m.size == est.std_m.size == est.rows_estimated
     assert np.all(np.diff(est.row_index) > 0) and est.row_index[-1] < est.rows_given
     assert np.all(np.isfinite(est.deflection_m)) and np.all(est.std_m > 0)
-    assert run_estimator(record, causal=False) is None       # smoother: not yet
+    smooth = run_estimator(record, causal=False)              # as `ipmc-model estimate`
+    assert np.array_equal(smooth.row_index, est.row_index)
+    assert np.all(np.isfinite(smooth.deflection_m)) and np.all(smooth.std_m > 0)
+    # hindsight narrows the uncertainty: the smoothed std never exceeds the causal one
+    assert np.all(smooth.std_m <= est.std_m * (1 + 1e-9))
 
 
 def test_one_sample_path_equals_blocks():

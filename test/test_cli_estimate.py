@@ -14,6 +14,7 @@ import yaml
 
 from ipmc_sensor_ros.cli.data_verbs import read_estimate
 from ipmc_sensor_ros.cli.main import main
+from ipmc_sensor_ros.estimation.config import EstimatorConfig
 from ipmc_sensor_ros.workbench.io import TimeSeries, read_timeseries, write_timeseries
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -95,8 +96,8 @@ def test_kalman_is_compared_from_when_it_learned_the_level(short_run, tmp_path, 
     """
     The record starts mid-motion (w = 2 mm at t = 0): no estimator can know that level.
 
-    The Kalman learns it over about five time constants of motion_corner_hz (0.8 s at 1 Hz)
-    and is compared from then on (``settling``).  1 % noise: bound 3 %.
+    The Kalman learns it over about five time constants of motion_corner_hz (0.08 s at the
+    default 10 Hz) and is compared from then on (``settling``).  1 % noise: bound 3 %.
     """
     params = tmp_path / 'kalman.yaml'
     params.write_text(yaml.safe_dump(
@@ -110,14 +111,17 @@ def test_kalman_is_compared_from_when_it_learned_the_level(short_run, tmp_path, 
     assert row['nrmse'] < 0.03
     record_s = 6.0
     used = float(out.split(' s (after the first ')[0].rsplit('over ', 1)[1])
-    assert used == pytest.approx(record_s - 5 / (2 * np.pi), abs=0.01)
+    corner_hz = EstimatorConfig().motion_corner_hz
+    # abs 0.01 s: the span is printed to 4 significant figures and the first row is t = 0
+    assert used == pytest.approx(record_s - 5 / (2 * np.pi * corner_hz), abs=0.01)
 
 
 def test_short_record_still_reports_accuracy(short_run, tmp_path, capsys):
-    """A 1.5 s record still gets its NRMSE, after the 0.8 s the estimator needs to settle."""
+    """A 1.5 s record still gets its NRMSE, after the time the estimator needs to settle."""
     assert main(['estimate', str(short_run / 'brief'), '--out', str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert 'NRMSE' in out and 'after the first 0.7958 s' in out
+    settle_s = 5 / (2 * np.pi * EstimatorConfig().motion_corner_hz)
+    assert 'NRMSE' in out and f'after the first {settle_s:.4g} s' in out
     value = float(out.split('NRMSE ')[1].split()[0])
     assert value < 0.05        # 1 % noise; a short record leaves a little more of the transient
 

@@ -351,8 +351,9 @@ def test_an_estimate_beyond_the_geometry_is_flagged_and_diagnostics_go_error(
                           and node.count_publishers('/deflection/block') == 1, 'the node',
                           check=child.alive)
         client.spin_for(0.5)       # the node's writers matched with our readers
-        for a in range(0, k.size, 100):
-            pub.publish(pack_block(1000.0 + k[a:a + 100] / FS, current[a:a + 100]))
+        # 70-sample blocks: their last samples walk through the crank's 0.2 s cycle
+        for a in range(0, k.size, 70):
+            pub.publish(pack_block(1000.0 + k[a:a + 70] / FS, current[a:a + 70]))
         client.spin_until(lambda: sum(len(b) for b in blocks) == k.size
                           and len(points) == len(blocks), 'the estimates', check=child.alive)
         client.spin_until(lambda: any(s.level == DiagnosticStatus.ERROR for s in diagnostics),

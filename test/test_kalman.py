@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.linalg import expm
 
 from ipmc_sensor_ros.errors import ParameterError
 from ipmc_sensor_ros.estimation.config import CONFIG_FIELDS, EstimatorConfig
@@ -11,6 +12,7 @@ from ipmc_sensor_ros.estimation.filter import KalmanFilter
 from ipmc_sensor_ros.estimation.kalman import KalmanEstimator
 from ipmc_sensor_ros.estimation.smoother import smooth
 from ipmc_sensor_ros.estimation.statespace import StateSpaceModel
+from ipmc_sensor_ros.lti.discretize import van_loan
 from ipmc_sensor_ros.lti.reduction import reduce_model_parts
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
@@ -208,3 +210,27 @@ def test_config_is_one_table_with_units_and_ranges():
     assert len(CONFIG_FIELDS) == len(set(CONFIG_FIELDS))
     for name in CONFIG_FIELDS:
         assert name in (EstimatorConfig.__doc__ or '')
+
+
+def test_long_gaps_are_chained_exactly(reduced):
+    """
+    A span of m periods is exp(A m T) with the noise integral Q_m of that span.
+
+    Q_m is checked by its Lyapunov identity A Q_m + Q_m A' = F Q F' - Q, which holds for any
+    span; a single Van Loan ``expm`` over the span already loses it at 100 ms (the sensor's
+    fastest pole, ~3800 rad/s, puts exp(+|A| T) ~ 1e167 in its block).
+    """
+    ssm = StateSpaceModel(reduced, EstimatorConfig(), FS)
+    A, Q = ssm.continuous
+    s = ssm.scale
+    for steps in (2, 7, 100, int(FS)):
+        F_c, Qd_c = ssm.discrete(steps)
+        F, Qd = F_c * s[:, None] / s[None, :], Qd_c * np.outer(s, s)
+        # 1e-9 of the largest entry: a few dozen rounding errors of the chained products
+        np.testing.assert_allclose(F, expm(A * steps / FS), rtol=0,
+                                   atol=1e-9 * np.max(np.abs(F)))
+        lhs, rhs = A @ Qd + Qd @ A.T, F @ Q @ F.T - Q
+        assert np.max(np.abs(lhs - rhs)) < 1e-9 * np.max(np.abs(Q))
+    two = van_loan(A, Q, 2 / FS)[1]                   # short spans: Van Loan is exact too
+    assert np.allclose(ssm.discrete(2)[1] * np.outer(s, s), two, rtol=0,
+                       atol=1e-9 * np.max(np.abs(two)))

@@ -255,7 +255,7 @@ def test_configure_with_a_bad_parameter_fails_naming_it_and_stays_unconfigured(
     assert node.estimator is not before and node.estimator.config.motion_corner_hz == 2.0
     assert client.transition(Transition.TRANSITION_ACTIVATE)
     # an active node takes a valid change too and keeps estimating
-    assert node.set_parameters([Parameter('leak_corner_hz', value=0.03)])[0].successful
+    assert node.set_parameters([Parameter('motion_rms_m', value=2e-3)])[0].successful
     _send_all(client, node, crank_messages(0.2))
     assert client.estimates().size == 200
 

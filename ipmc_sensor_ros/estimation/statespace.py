@@ -36,7 +36,8 @@ where the tip is held: its prior is released (:attr:`StateSpaceModel.hold_varian
 is measured equal to w.
 
 Exact discretisation (Van Loan; :func:`~ipmc_sensor_ros.lti.discretize.van_loan`) for one
-and for ``m`` sample periods (bridged samples); states are scaled to O(1) for the filter's
+sample period, chained by doubling for ``m`` periods (bridged samples; a single ``expm``
+over a long gap overflows); states are scaled to O(1) for the filter's
 arithmetic (:attr:`StateSpaceModel.scale`).
 """
 from __future__ import annotations
@@ -48,7 +49,7 @@ import numpy as np
 from scipy.linalg import solve_discrete_lyapunov
 
 from ..errors import ParameterError
-from ..lti.discretize import van_loan
+from ..lti.discretize import chain, van_loan
 from ..lti.reduction import ReducedModel
 from .config import EstimatorConfig
 
@@ -224,16 +225,36 @@ class StateSpaceModel:
 
     # -- discretisation and priors -------------------------------------------------------------
     def discrete(self, steps: int = 1) -> tuple[np.ndarray, np.ndarray]:
-        """(F, Qd) over ``steps`` sample periods, in scaled states (exact; Van Loan)."""
+        """
+        (F, Qd) over ``steps`` sample periods, in scaled states.
+
+        One period by Van Loan; longer spans chained from powers of two of it
+        (:func:`~ipmc_sensor_ros.lti.discretize.chain`, exact) so a long bridged gap
+        cannot overflow.
+        """
         cache = self.__dict__.setdefault('_discrete', {})
         if steps not in cache:
             if len(cache) >= 64:        # bridged gaps of many lengths: keep the cache small
                 cache.pop(next(iter(cache)))
-            A, Q = self.continuous
-            F, Qd = van_loan(A, Q, steps / self.sample_rate_hz)
-            s = self.scale
-            cache[steps] = (F * s[None, :] / s[:, None], Qd / np.outer(s, s))
+            cache[steps] = self._chained(steps)
         return cache[steps]
+
+    def _chained(self, steps: int) -> tuple[np.ndarray, np.ndarray]:
+        """(F, Qd) over ``steps`` >= 1 periods from the doubled one-period transition."""
+        powers = self.__dict__.get('_powers')
+        if powers is None:
+            A, Q = self.continuous
+            F, Qd = van_loan(A, Q, 1.0 / self.sample_rate_hz)
+            s = self.scale
+            powers = self.__dict__['_powers'] = [(F * s[None, :] / s[:, None],
+                                                  Qd / np.outer(s, s))]
+        out = None
+        for bit in range(steps.bit_length()):
+            if bit == len(powers):
+                powers.append(chain(powers[-1], powers[-1]))
+            if steps >> bit & 1:
+                out = powers[bit] if out is None else chain(out, powers[bit])
+        return out
 
     def prior(self) -> tuple[np.ndarray, np.ndarray]:
         """

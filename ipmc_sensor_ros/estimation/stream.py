@@ -410,7 +410,7 @@ class StreamEstimator(StreamAccounts):
         i = np.asarray(current_a, float)
         kept = np.zeros(t.size, dtype=bool)
         out_t, out_w, out_s = np.empty(t.size), np.empty(t.size), np.empty(t.size)
-        steps = np.empty(t.size, dtype=np.int64)
+        steps = np.empty(t.size, dtype=np.int32)     # a gap is bridged only up to max_gap_s
         n_out = 0
         for k in range(0, t.size, block_samples):
             end = min(k + block_samples, t.size)
