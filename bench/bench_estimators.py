@@ -92,7 +92,7 @@ def run_estimator(record: Record, causal: bool = True, estimator: str = 'kalman'
 
 
 def _causal(record: Record, est, block_samples: int) -> Estimate:
-    """The live estimate: the stream rules, block by block (1: the one-sample path)."""
+    """Return the live estimate: the stream rules, block by block (1: the one-sample path)."""
     from ipmc_sensor_ros.estimation.stream import StreamEstimator
 
     stream = StreamEstimator(est, max_gap_s=0.1, source=record.name)
@@ -124,7 +124,7 @@ def _causal(record: Record, est, block_samples: int) -> Estimate:
 
 
 def _smoothed(record: Record, est, block_samples: int) -> Estimate:
-    """The offline smoothed estimate of the rows the stream keeps (as ``ipmc-model estimate``)."""
+    """Return the offline smoothed estimate of the kept rows (as ``ipmc-model estimate``)."""
     from ipmc_sensor_ros.estimation.stream import estimate_record, smooth_record
 
     fresh = est.rebuilt()

@@ -23,7 +23,8 @@ def _peak_writing(tmp_path, rows):
     path = tmp_path / f'{rows}.estimate.csv'
     flagged = (np.zeros(rows), 0.011)
     tracemalloc.start()
-    _write_estimate(path, data, values, 'h2', None, 0, t, i, w, w, flagged)
+    _write_estimate(path, data, values, 'h2', None, 0, t, i, w, w, flagged,
+                    np.full(rows, 1e-6), False)
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     back = read_estimate(path)

@@ -95,7 +95,7 @@ def _daq(rate_hz, n, jitter=0.0, seed=0):
 
 def _reference_amplitude(rate_hz, currents):
     """
-    The estimator's own amplitude on the same currents with exact stamps at their true rate.
+    Return the estimator's own amplitude on the same currents with exact stamps at their true rate.
 
     What the stream's timing must not change: the tests below compare with it, so they judge the
     stream, not the estimator (whose amplitude on a record that moves from its first sample is

@@ -245,7 +245,7 @@ def _checked_current(data) -> np.ndarray:
 
 
 def _run(args, estimator, data, current, values, src):
-    """(times, deflection, std, stream): the live filter, smoothed unless ``--causal``."""
+    """Return (times, deflection, std, stream): the live filter, smoothed unless ``--causal``."""
     from ..estimation.stream import estimate_record, smooth_record
 
     fresh = estimator.rebuilt() if not args.causal else None

@@ -153,7 +153,7 @@ class DeflectionEstimator:
 
     @property
     def plain(self) -> bool:
-        """True when no effect acts around the core (:meth:`process_one` goes straight to it)."""
+        """Tell whether no effect acts around the core (:meth:`process_one` calls it directly)."""
         return not (self._current_inv or self._deflection_inv or self._material_at is not None
                     or self.mains.sos.shape[0])
 

@@ -151,7 +151,7 @@ class KalmanFilter:
         return float(state.x[m.iw] * s), math.sqrt(max(float(state.P[m.iw, m.iw]), 0.0)) * s
 
     def offset(self, state: FilterState) -> tuple[float, float]:
-        """(current offset, its standard deviation) of a state, A."""
+        """Return (current offset, its standard deviation) of a state, A."""
         m = self.model
         s = m.scale[m.ib]
         return float(state.x[m.ib] * s), math.sqrt(max(float(state.P[m.ib, m.ib]), 0.0)) * s

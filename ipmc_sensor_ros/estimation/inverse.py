@@ -342,7 +342,7 @@ class InverseEstimator:
         return self.process_one(current_a), math.nan
 
     def smooth(self, current_a, steps=None):
-        """The leaky inverse has no smoother: the causal estimate from a fresh start."""
+        """Return the causal estimate from a fresh start (the leaky inverse has no smoother)."""
         fresh = InverseEstimator(self.reduced, self.sample_rate_hz,
                                  leak_corner_hz=self.leak_corner_hz,
                                  offset_corner_hz=self.offset_corner_hz,

@@ -1,7 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
 """
-The Kalman deflection estimator: model (:mod:`.statespace`), filter (:mod:`.filter`),
-smoother (:mod:`.smoother`) and the mains line measured from the data (:mod:`.lines`).
+The Kalman deflection estimator.
+
+It joins the model (:mod:`.statespace`), filter (:mod:`.filter`), smoother
+(:mod:`.smoother`) and the mains line measured from the data (:mod:`.lines`).
 
 :class:`KalmanEstimator` implements :class:`~.core.EstimatorCore`.  It owns one
 :class:`~.filter.FilterState` and advances it sample by sample; a block and single samples
@@ -89,7 +91,7 @@ class KalmanEstimator:
         self.reset()
 
     def _new_filter(self, model: StateSpaceModel) -> KalmanFilter:
-        """The filter for ``model``; its rest test fits the nominal lines until one is modelled."""
+        """Build the filter for ``model``; its rest test fits the nominal lines until one is."""
         from .statespace import line_frequencies_hz
 
         nominal = () if self.mains_hz == 0.0 else self._nominal()
@@ -101,7 +103,7 @@ class KalmanEstimator:
         return NOMINAL_LINES_HZ if self.mains_hz == 'auto' else (self.mains_hz,)
 
     def _next_check(self, samples: int) -> int:
-        """The sample count of the next line measurement after ``samples``."""
+        """Return the sample count of the next line measurement after ``samples``."""
         if samples < self._first_n:
             return self._first_n
         return self._first_n + ((samples - self._first_n) // self._check_n + 1) * self._check_n
@@ -117,7 +119,7 @@ class KalmanEstimator:
 
     @property
     def line_hz(self) -> float:
-        """The mains fundamental in the model now, Hz (0: none)."""
+        """Mains fundamental in the model now, Hz (0: none)."""
         return self._filter.model.line_hz
 
     def reset(self) -> None:

@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
 """
-Measure the mains line in a stretch of current: is there hum, and at what frequency?
+Measure the mains line in a stretch of current: is there hum, and at what frequency.
 
 The estimator models the hum as states (:mod:`.statespace`) at a line frequency measured
 from the data (``mains_hz: auto``: near 50 or 60 Hz; ``50``/``60``: near that one).  Grids

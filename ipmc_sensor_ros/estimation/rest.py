@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
 """
-The rest test: is the sensor still over the last ``rest_window_s``?
+The rest test: whether the sensor is still over the last ``rest_window_s``.
 
 A still sensor's current is its offset, the mains lines and white noise (H(0) = 0: a held
 deflection gives no current).  Over the window's N samples of r = i - lines (the lines as
@@ -80,10 +80,18 @@ class RestTest:
 
         Parameters
         ----------
-        total, total_sq : sum of r and of r^2 over the window, A and A^2.
-        line_energy : energy of the window's least-squares mains lines, A^2.
-        offset_a, offset_var_a2 : the filter's offset and its variance.
-        noise_var_a2 : the measured white-noise variance per sample, A^2.
+        total : float
+            Sum of r over the window, A.
+        total_sq : float
+            Sum of r^2 over the window, A^2.
+        line_energy : float
+            Energy of the window's least-squares mains lines, A^2.
+        offset_a : float
+            The filter's offset, A.
+        offset_var_a2 : float
+            Its variance, A^2.
+        noise_var_a2 : float
+            The measured white-noise variance per sample, A^2.
 
         """
         n = self.n

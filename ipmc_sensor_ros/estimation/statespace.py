@@ -143,7 +143,7 @@ class StateSpaceModel:
     # -- continuous model ---------------------------------------------------------------
     @functools.cached_property
     def continuous(self) -> tuple[np.ndarray, np.ndarray]:
-        """(A, Q): x' = A x + xi with E[xi xi'] = Q delta (intensities)."""
+        """Continuous (A, Q): x' = A x + xi with E[xi xi'] = Q delta (intensities)."""
         cfg = self.config
         ar, br, _, _ = self.sensor
         n, nx = self.n_sensor, self.size
