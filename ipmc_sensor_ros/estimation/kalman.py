@@ -91,7 +91,7 @@ class KalmanEstimator:
         self.reset()
 
     def _new_filter(self, model: StateSpaceModel) -> KalmanFilter:
-        """Build the filter for ``model``; its rest test fits the nominal lines until one is."""
+        """Build the filter; its rest test fits the nominal lines until one is modelled."""
         from .statespace import line_frequencies_hz
 
         nominal = () if self.mains_hz == 0.0 else self._nominal()
