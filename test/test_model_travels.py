@@ -14,8 +14,9 @@ reduction.  Checked:
 * ``fit --save-model m.yaml`` -> ``estimate field.csv --model-file m.yaml``: raw NRMSE
   within 1.2x of the same estimate with the true model;
 * a model file holding the calibration's offset and drift (as ``diagnose --save-model``
-  writes it) gives the same estimate unless ``--apply-recording-effects`` is asked for, and
-  then a worse one.
+  writes it) gives the same estimate unless ``--apply-recording-effects`` is asked for; then
+  the estimate changes, and the Kalman estimator's offset state (issue 27) takes up the
+  wrong offset instead of carrying it for the whole record.
 """
 from __future__ import annotations
 
@@ -109,7 +110,11 @@ def test_calibration_offset_is_not_carried_to_the_field(calibrated, field, capsy
                          '--apply-recording-effects')
     assert 'WARNING' in capsys.readouterr().err
     print(f'raw NRMSE with the calibration offset applied {applied:.3f}, without {plain:.3f}')
-    assert applied > 2 * plain
+    assert applied != pytest.approx(plain, rel=1e-6)  # applied: the estimate changed
+    # the offset and its drift are filter states: a wrong calibration offset is learned away in
+    # the first seconds, so it costs little on 90 s (measured 1.05x); 1.5x would mean the
+    # wrong offset is carried through the record (the old estimator's failure: > 2x)
+    assert applied < 1.5 * plain
 
 
 def _start_node(params: Path, domain: int):
