@@ -75,7 +75,7 @@ def run_estimator(record: Record, causal: bool = True, estimator: str = 'kalman'
     Today's public API: ``DeflectionEstimator(SensorModel.named(...), sample_rate_hz)`` with
     its defaults, behind the stream rules of ``ipmc-model estimate``
     (:class:`~ipmc_sensor_ros.estimation.stream.StreamEstimator`, fed block by block as
-    :func:`~ipmc_sensor_ros.estimation.stream.estimate_record` does, so the published std of
+    :func:`~ipmc_sensor_ros.estimation.records.estimate_record` does, so the published std of
     each block can be read; ``block_samples`` 1: the node's one-sample path, ``feed_one``).
     ``causal=False``: the offline smoothed estimate, as ``ipmc-model estimate`` makes it.
     """
@@ -125,7 +125,7 @@ def _causal(record: Record, est, block_samples: int) -> Estimate:
 
 def _smoothed(record: Record, est, block_samples: int) -> Estimate:
     """Return the offline smoothed estimate of the kept rows (as ``ipmc-model estimate``)."""
-    from ipmc_sensor_ros.estimation.stream import estimate_record, smooth_record
+    from ipmc_sensor_ros.estimation.records import estimate_record, smooth_record
 
     fresh = est.rebuilt()
     cpu0 = time.process_time()

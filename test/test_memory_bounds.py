@@ -19,7 +19,7 @@ from scipy.signal import detrend
 
 from ipmc_sensor_ros.cli.data_verbs import estimate_accuracy
 from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
-from ipmc_sensor_ros.estimation.stream import estimate_record
+from ipmc_sensor_ros.estimation.records import estimate_record
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
 from ipmc_sensor_ros.simulation import sensor

@@ -14,8 +14,8 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from conftest import DirectNode
 from ipmc_sensor_ros.errors import DataError
 from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
-from ipmc_sensor_ros.estimation.stream import (COUNTER_NAMES, MAX_STAMP_S, StreamEstimator,
-                                               estimate_record)
+from ipmc_sensor_ros.estimation.records import estimate_record
+from ipmc_sensor_ros.estimation.stream import COUNTER_NAMES, MAX_STAMP_S, StreamEstimator
 from ipmc_sensor_ros.nodes.messages import pack_block
 
 FS = 1000.0

@@ -374,7 +374,7 @@ def test_estimate_record_is_the_live_stream():
     i[2000] = np.nan
     values = C.defaults(C.ESTIMATOR_SPECS)
     values['estimator'] = 'leaky'
-    from ipmc_sensor_ros.estimation.stream import estimate_record
+    from ipmc_sensor_ros.estimation.records import estimate_record
     t_off, w_off, off = estimate_record(C.build_estimator(values), stamps, i, block_samples=300)
     live = StreamEstimator(C.build_estimator(values))
     res = [live.feed_one(t, x) for t, x in zip(stamps.tolist(), i.tolist())]

@@ -246,7 +246,7 @@ def _checked_current(data) -> np.ndarray:
 
 def _run(args, estimator, data, current, values, src):
     """Return (times, deflection, std, stream): the live filter, smoothed unless ``--causal``."""
-    from ..estimation.stream import estimate_record, smooth_record
+    from ..estimation.records import estimate_record, smooth_record
 
     fresh = estimator.rebuilt() if not args.causal else None
     t_out, w, stream = estimate_record(estimator, data.time_s, current,

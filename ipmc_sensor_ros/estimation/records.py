@@ -1,0 +1,84 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+Whole records offline with the live stream's rules: ``ipmc-model estimate``, bag replay, benches.
+
+:func:`estimate_record` feeds a record to a :class:`~.stream.StreamEstimator` in blocks
+(:func:`run_record`), so refusals, bridged gaps and new runs are decided exactly as live;
+:func:`smooth_record` then smooths each run the stream began from a fresh start, with the
+sample periods the stream handed the filter.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .deflection import DeflectionEstimator
+from .stream import StreamEstimator
+from .timebase import START
+
+__all__ = ['run_record', 'estimate_record', 'smooth_record']
+
+
+def run_record(stream: StreamEstimator, time_s, current_a, block_samples: int = 1000):
+    """
+    Feed a whole record (offline) to ``stream`` in blocks of ``block_samples``.
+
+    Returns (output times, deflection, kept): ``kept`` marks the input samples that have
+    an estimate (refused or dropped ones have none; see the stream's counters).  The rules
+    are the live ones: a jump back by more than ``max_gap_s`` starts a new run, as a bag loop
+    does live.  Per kept sample it also keeps ``record_std_m`` (the published standard
+    deviation) and ``record_steps`` (the sample periods handed to the filter; 0 where a new
+    run began), which :func:`smooth_record` reuses.
+    """
+    t = np.asarray(time_s, float)
+    i = np.asarray(current_a, float)
+    kept = np.zeros(t.size, dtype=bool)
+    out_t, out_w, out_s = np.empty(t.size), np.empty(t.size), np.empty(t.size)
+    steps = np.empty(t.size, dtype=np.int32)     # a gap is bridged only up to max_gap_s
+    n_out = 0
+    for k in range(0, t.size, block_samples):
+        end = min(k + block_samples, t.size)
+        res = stream.feed(t[k:end], i[k:end])
+        if res is not None:
+            m = res[0].size
+            out_t[n_out:n_out + m] = res[0]
+            out_w[n_out:n_out + m] = res[1]
+            out_s[n_out:n_out + m] = stream.last_std_m if stream.last_std_m.size == m else np.nan
+            steps[n_out:n_out + m] = stream.codes[stream.accepted]
+            n_out += m
+            kept[k:end] = stream.accepted
+    stream.record_std_m, stream.record_steps = out_s[:n_out], steps[:n_out]
+    return out_t[:n_out], out_w[:n_out], kept
+
+
+def estimate_record(estimator: DeflectionEstimator, time_s, current_a, *, max_gap_s: float = 0.1,
+                    block_samples: int = 1000, source: str = 'record'):
+    """
+    Offline estimate of a whole record with the live stream's rules.
+
+    :func:`run_record`. Returns (output times, deflection, stream) — the
+    stream's ``counters`` say how many samples were refused (per reason) and how often it
+    reset. Only samples with an estimate are returned: ``stream.kept`` marks them in the input.
+    """
+    stream = StreamEstimator(estimator, max_gap_s=max_gap_s,
+                             max_block_samples=max(block_samples, 1), source=source)
+    t, w, stream.kept = run_record(stream, time_s, current_a, block_samples=block_samples)
+    return t, w, stream
+
+
+def smooth_record(estimator: DeflectionEstimator, stream: StreamEstimator, time_s, current_a):
+    """
+    Offline smoothed estimate of the samples ``stream`` kept: (times, deflection, std).
+
+    ``stream`` ran the record (:func:`estimate_record`); its decisions are reused, not made
+    again: each run it began is smoothed from a fresh start (:meth:`DeflectionEstimator.smooth`)
+    with the sample periods it handed the filter (missing samples bridged).
+    """
+    t = np.asarray(time_s, float)[stream.kept]
+    i = np.asarray(current_a, float)[stream.kept]
+    steps = stream.record_steps
+    cuts = [int(k) for k in np.flatnonzero(steps == START) if k > 0]
+    out = [estimator.smooth(t[a:b], i[a:b], np.maximum(steps[a:b], 1))
+           for a, b in zip([0, *cuts], [*cuts, t.size]) if b > a]
+    if not out:
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    return tuple(np.concatenate(p) for p in zip(*out))
