@@ -25,7 +25,9 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 
+from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
 from ipmc_sensor_ros.estimation.kalman import KalmanEstimator
+from ipmc_sensor_ros.estimation.stream import StreamEstimator
 from ipmc_sensor_ros.nodes import params as P
 from ipmc_sensor_ros.nodes.estimator_node import ESTIMATOR_SPECS, EstimatorNode
 from ipmc_sensor_ros.nodes.messages import (
@@ -425,6 +427,33 @@ def test_last_of_block_points_and_counters_topic_under_sim_time(harness):
     assert last['samples_in'] == 500 and last['node'] == '/ipmc_estimator'
 
 
+def test_smoothed_output_is_the_stream_cores_with_each_sample_once(harness):
+    h = harness(overrides={'publish_points': 'none', 'smoothed_lag_s': 0.05})
+    smoothed = []
+    h.tester.create_subscription(
+        Float64MultiArray, 'deflection/smoothed/block',
+        lambda m: smoothed.append(unpack_block(m, ESTIMATE_COLUMNS)),
+        P.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'}))
+    t, _, i = crank_record(1.0)
+    core = StreamEstimator(DeflectionEstimator(MODEL, FS, smoothed_lag_s=0.05))
+    expected = []
+    for k in range(0, 1000, 70):
+        h.send(pack_block(t[k:k + 70], i[k:k + 70]))
+        core.feed(t[k:k + 70], i[k:k + 70])
+        out = core.pop_smoothed()
+        expected += [] if out is None else [out]
+    want_t = np.concatenate([e[0] for e in expected])
+    h.spin_until(lambda: sum(len(b) for b in smoothed) == want_t.size)
+    got = np.concatenate([b.values for b in smoothed])
+    # the node is a thin shell around the stream core: the same numbers, the same samples
+    assert np.array_equal(np.concatenate([b.times_s for b in smoothed]), want_t)
+    assert np.max(np.abs(got - np.concatenate([e[1] for e in expected]))) <= 1e-12
+    std = np.concatenate([b.extra[:, 0] for b in smoothed])
+    assert np.max(np.abs(std - np.concatenate([e[2] for e in expected]))) <= 1e-12
+    # 1000 samples, lag 50: all but the last 50 to 99 are out, the oldest first
+    assert 900 < want_t.size <= 950 and want_t[0] == t[0]
+
+
 def test_invalid_parameter_changes_are_refused_with_reason(harness, reduced):
     h = harness(overrides={'publish_points': 'none'})
     before = h.node.estimator
@@ -501,7 +530,8 @@ def test_invalid_startup_parameters_raise_naming_the_parameter():
         for name, value, needle in [('length_m', -1.0, 'length_m'),
                                     ('youngs_modulus_pa', -5.0, 'youngs_modulus_pa'),
                                     ('effects', ['warp_drive'], 'warp_drive'),
-                                    ('publish_points', 'all', 'publish_points')]:
+                                    ('publish_points', 'all', 'publish_points'),
+                                    ('smoothed_lag_s', -1.0, 'smoothed_lag_s')]:
             with pytest.raises((P.ParameterError, ParameterException)) as err:
                 EstimatorNode(context=ctx, parameter_overrides=[Parameter(name, value=value)])
             assert needle in str(err.value)

@@ -58,6 +58,9 @@ class Recorder:
     def continue_from(self, old):
         pass
 
+    def pop_smoothed(self, flush=False):
+        return None                 # no smoothed output (smoothed_lag_s 0)
+
     def steps(self) -> list[int]:
         return [e[2] for e in self.log if e[0] == 'sample']
 

@@ -362,6 +362,8 @@ def cmd_estimate(args) -> int:
             else config.defaults(config.ESTIMATOR_SPECS))
     explicit = _explicit_params(args.params) if args.params else set()
     base, explicit = estimate_values(base, explicit, args)
+    # a node output like publish_points: offline, the whole record is smoothed (or --causal)
+    base = dict(base, smoothed_lag_s=0.0)
     paths = _estimate_inputs(args)
     cache = EstimatorCache()
     summary, failed = [], []

@@ -49,6 +49,9 @@ class EstimatorCore(Protocol):
     def smooth(self, current_a: np.ndarray, steps: np.ndarray | None = None) -> Estimate:
         """Offline estimate of a whole record from a fresh start (non-causal where it can)."""
 
+    def pop_smoothed(self, flush: bool = False) -> Estimate | None:
+        """Return the fixed-lag smoothed estimates ready since the last call (None: none)."""
+
     def reset(self) -> None:
         """Start afresh (the state of a new stream)."""
 

@@ -22,12 +22,16 @@ handles the model's other effects around the core, per block:
   ``update_s`` seconds of data time for the material at that time, each reduction
   warm-started from the previous one; the new core continues from the old one's state.
 
+``smoothed_lag_s`` > 0 (Kalman core): :meth:`DeflectionEstimator.pop_smoothed` returns the
+output smoothed with that lag (:mod:`.fixed_lag`), with the output times of its samples.
+
 Time in the effect hooks runs from the first sample after construction or the last
 :meth:`reset`.  An effect that transforms without defining the inverse is refused with
 :class:`~ipmc_sensor_ros.physics.parameters.ParameterError`.
 """
 from __future__ import annotations
 
+from collections import deque
 from typing import Sequence
 
 import numpy as np
@@ -91,7 +95,8 @@ class DeflectionEstimator:
                  config: EstimatorConfig | None = None, mains_hz='auto',
                  leak_corner_hz: float | None = None, offset_corner_hz: float | None = None,
                  prewarp_hz: float | None = None, update_s: float = 5.0,
-                 reduced: ReducedModel | None = None, history_s: float = 0.5):
+                 reduced: ReducedModel | None = None, history_s: float = 0.5,
+                 smoothed_lag_s: float = 0.0):
         if estimator not in ESTIMATORS:
             raise ParameterError(f"parameter 'estimator' must be one of {ESTIMATORS}, got "
                                  f'{estimator!r}')
@@ -102,6 +107,10 @@ class DeflectionEstimator:
         self.reduction_order = int(reduction_order)
         self.band_hz = (float(band_hz[0]), float(band_hz[1]))
         self.update_s = float(update_s)
+        self.smoothed_lag_s = float(smoothed_lag_s)
+        # output times of the samples the core holds for its lag; what is smoothed, with times
+        self._lag_times = deque() if self.smoothed_lag_s else None
+        self._smoothed: list[tuple] = []
         self.delay_s = float(model.delay_s())
         compiled = model.compiled
         compiled.require_inverse()
@@ -130,7 +139,11 @@ class DeflectionEstimator:
                 raise ParameterError(f'parameter(s) {given} apply to estimator "leaky" only '
                                      '(the Kalman estimator learns the offset and holds levels '
                                      'itself)')
-            return KalmanEstimator(reduced, sample_rate_hz, self.config, self.mains_hz)
+            return KalmanEstimator(reduced, sample_rate_hz, self.config, self.mains_hz,
+                                   self.smoothed_lag_s)
+        if self.smoothed_lag_s:
+            raise ParameterError("parameter 'smoothed_lag_s' applies to estimator 'kalman' only "
+                                 '(the leaky inverse has no smoother)')
         args = dict(self._leaky_args)
         if args['leak_corner_hz'] is None:
             args['leak_corner_hz'] = DEFAULT_LEAK_CORNER_HZ
@@ -191,6 +204,7 @@ class DeflectionEstimator:
 
     def reset(self) -> None:
         """Zero the core and restart the effects' time origin."""
+        self._collect_smoothed(flush=True)
         if self._material_at is not None:
             self._diffusive = None
             self.core = self._new_core(self._reduce(self.model), self.core.sample_rate_hz)
@@ -223,13 +237,16 @@ class DeflectionEstimator:
         if self._t0 is None:
             self._t0 = float(t[0])
         elapsed = t - self._t0 if (self._current_inv or self._material_at is not None) else None
+        t_out = t - self.delay_s if self.delay_s else t
+        if self._lag_times is not None:
+            self._lag_times.extend(t_out.tolist())
         i = self.mains.process(i)
         for eff, values in reversed(self._current_inv):
             i = eff.inverse_output_transform(elapsed, i, self.model, values)
         est = self._run_core(elapsed, i, steps)
         w = self._undo_input_transforms(est)
         self.last_std_m, self.last_still = est.std_m, est.still
-        return (t - self.delay_s if self.delay_s else t), w
+        return t_out, w
 
     def _run_core(self, elapsed, i: np.ndarray, steps) -> Estimate:
         if self._material_at is None:
@@ -246,10 +263,7 @@ class DeflectionEstimator:
         w = est.deflection_m
         if not self._deflection_inv:
             return w
-        w_prime = w + self._bias_m
-        w = w_prime
-        for eff, values in reversed(self._deflection_inv):
-            w = np.asarray(eff.inverse_input_transform(w, self.model, values), dtype=float)
+        w_prime, w = self._inverse_input(w)
         gap = (w_prime - w)[~est.still]
         corner = getattr(self.core, 'leak_corner_hz', NONLINEAR_MEAN_CORNER_HZ)
         a = float(np.exp(-2 * np.pi * corner / self.sample_rate_hz))
@@ -257,6 +271,35 @@ class DeflectionEstimator:
             avg, self._bias_zi = lfilter([1 - a], [1, -a], gap, zi=self._bias_zi)
             self._bias_m = float(avg[-1])
         return w
+
+    def _inverse_input(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return (w + m, the input transforms undone on it): module docstring."""
+        w_prime = w + self._bias_m
+        w = w_prime
+        for eff, values in reversed(self._deflection_inv):
+            w = np.asarray(eff.inverse_input_transform(w, self.model, values), dtype=float)
+        return w_prime, w
+
+    def pop_smoothed(self, flush: bool = False):
+        """
+        Return (output times, deflection, std) smoothed with ``smoothed_lag_s``, since last asked.
+
+        None when nothing is ready.  ``flush``: also the samples held for their lag, smoothed
+        with the data there is (this estimator is being replaced).
+        """
+        self._collect_smoothed(flush)
+        if not self._smoothed:
+            return None
+        parts, self._smoothed = self._smoothed, []
+        return parts[0] if len(parts) == 1 else tuple(np.concatenate(p) for p in zip(*parts))
+
+    def _collect_smoothed(self, flush: bool) -> None:
+        est = self.core.pop_smoothed(flush)
+        if est is None:
+            return
+        times = np.array([self._lag_times.popleft() for _ in range(est.deflection_m.size)])
+        w = self._inverse_input(est.deflection_m)[1] if self._deflection_inv else est.deflection_m
+        self._smoothed.append((times, w, est.std_m))
 
     def process_one(self, time_s: float, current_a: float, steps: int = 1) -> tuple[float, float]:
         """
@@ -271,13 +314,16 @@ class DeflectionEstimator:
             return float(t_out[0]), float(w[0])
         if self._t0 is None:
             self._t0 = float(time_s)
+        t_out = time_s - self.delay_s if self.delay_s else float(time_s)
+        if self._lag_times is not None:
+            self._lag_times.append(t_out)
         w, std = self.core.estimate_one(current_a, steps)
         self.last_std_m = np.array([std])
         end = self._history_end
         self._history[end] = current_a
         self._history_end = (end + 1) % self._history.size
         self._history_n = min(self._history_n + 1, self._history.size)
-        return (time_s - self.delay_s if self.delay_s else float(time_s)), w
+        return t_out, w
 
     def smooth(self, time_s, current_a, steps=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """
@@ -319,6 +365,7 @@ class DeflectionEstimator:
     def _follow_drift(self, material) -> None:
         """Rebuild the core for the drifted ``material`` (its state carried over)."""
         drifted = self.model.with_material(material)
+        self._collect_smoothed(flush=True)
         self.core = self.core.rebuilt(self._reduce(drifted), self.recent_input)
 
     def rebuilt(self, model: SensorModel | None = None, reduced: ReducedModel | None = None,
@@ -330,7 +377,8 @@ class DeflectionEstimator:
         settings.  ``self`` is untouched if the new design is invalid.
         """
         kwargs = dict(self._leaky_args)
-        kwargs.update(config=self.config, mains_hz=self.mains_hz)
+        kwargs.update(config=self.config, mains_hz=self.mains_hz,
+                      smoothed_lag_s=self.smoothed_lag_s)
         kwargs.update(changes)
         fs = kwargs.pop('sample_rate_hz', self.sample_rate_hz)
         new = DeflectionEstimator(

@@ -26,7 +26,8 @@ sensor (deflections of mm, currents of nA).
 
 :class:`FilterState` is the whole state (what save/restore keeps); :meth:`KalmanFilter.run`
 returns the new one and never changes the old.  Pass ``record`` to keep what the smoother
-needs (:mod:`.smoother`).
+needs (:mod:`.smoother`, :mod:`.fixed_lag`).  :func:`carry_state` maps a state onto another
+model of the same sensor (a line measured, a new design).
 """
 from __future__ import annotations
 
@@ -38,7 +39,8 @@ import numpy as np
 from .rest import RestTest
 from .statespace import StateSpaceModel
 
-__all__ = ['FilterState', 'KalmanFilter', 'ForwardRecord', 'NOISE_AVERAGE_S', 'NOISE_FLOOR_A']
+__all__ = ['FilterState', 'KalmanFilter', 'ForwardRecord', 'carry_state', 'NOISE_AVERAGE_S',
+           'NOISE_FLOOR_A']
 
 #: Averaging time of the measured noise variance, s: long against one sample, short against a
 #: record (the noise is known within a second of the start).
@@ -277,3 +279,55 @@ class KalmanFilter:
         new = FilterState(x, P, noise, win, count, pos, still, samples, contiguous, weight,
                           sums, phase, phases, total, total_sq, moved, quiet, cusum)
         return new, out_w, out_s, out_still
+
+
+def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> FilterState:
+    """
+    Map a filter state onto another model of the same sensor family.
+
+    States with a physical meaning in both (deflection, velocity, acceleration, working
+    point, offset, drift, each line state whose frequency is within 1 Hz of one of the old
+    model, and the charge states when the sensor is the same) are carried with their
+    covariance; a different sensor's charge states are set to their steady value for the
+    current velocity (x_R = -u / p_i) with their prior covariance; new line states start from
+    their prior.
+    """
+    mo, mn = old.model, new.model
+    x_old = state.x * mo.scale
+    init = new.initial_state()
+    x, P = init.x * mn.scale, init.P * np.outer(mn.scale, mn.scale)
+    P_old = state.P * np.outer(mo.scale, mo.scale)
+    src = list(range(mo.iw, mo.il))
+    dst = list(range(mn.iw, mn.il))
+    for k, f in enumerate(mn.lines_hz):
+        near = [j for j, g in enumerate(mo.lines_hz) if abs(g - f) < 1.0]
+        if near:
+            src += [mo.il + 2 * near[0], mo.il + 2 * near[0] + 1]
+            dst += [mn.il + 2 * k, mn.il + 2 * k + 1]
+    same_sensor = np.array_equal(np.diag(mo.sensor[0]), np.diag(mn.sensor[0]))
+    if same_sensor:                   # only the lines changed: the charge states carry too
+        src = list(range(mo.n_sensor)) + src
+        dst = list(range(mn.n_sensor)) + dst
+    x[dst] = x_old[src]
+    P[np.ix_(dst, dst)] = P_old[np.ix_(src, src)]
+    if not same_sensor:
+        x[:mn.n_sensor] = -x[mn.iu] / np.diag(mn.sensor[0])
+        P[:mn.n_sensor, dst] = 0.0
+        P[dst, :mn.n_sensor] = 0.0
+    out = replace(init, x=x / mn.scale, P=P / np.outer(mn.scale, mn.scale),
+                  noise_var_a2=state.noise_var_a2, samples=state.samples,
+                  contiguous=state.contiguous, noise_weight=state.noise_weight,
+                  still=state.still, moved=state.moved, quiet=state.quiet, cusum=state.cusum)
+    if state.window.size != new.rest.n:
+        return replace(out, still=False, moved=True)    # the rest test's window restarts
+    # the window carries over; its sliding DFT is recomputed for the new model's rest lines
+    # (the window's samples taken as consecutive, the newest with phase 1)
+    n = state.window.size
+    age = (state.window_pos - 1 - np.arange(n)) % n       # slot of the sample j periods ago
+    phases = np.ones((n, len(new.rest_lines_hz)), complex)
+    phases[age] = new.rotation[None, :] ** -np.arange(n)[:, None]
+    sums = state.window @ phases
+    return replace(out, window=state.window.copy(), window_count=state.window_count,
+                   window_pos=state.window_pos, total=state.total, total_sq=state.total_sq,
+                   line_sums=sums, phase=np.ones(len(new.rest_lines_hz), complex),
+                   phases=phases)

@@ -227,6 +227,10 @@ class InverseEstimator:
             self._process_small([0.0] * (int(steps) - 1))
         return self.process_one(current_a), math.nan
 
+    def pop_smoothed(self, flush: bool = False) -> None:
+        """Return None: the leaky inverse has no fixed-lag smoother."""
+        return None
+
     def smooth(self, current_a, steps=None):
         """Return the causal estimate from a fresh start (the leaky inverse has no smoother)."""
         fresh = InverseEstimator(self.reduced, self.sample_rate_hz,

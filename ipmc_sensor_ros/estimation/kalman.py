@@ -12,19 +12,22 @@ measured every ``LINE_CHECK_S`` of data on the last ``LINE_CHECK_S`` of current,
 sample counts (so the result does not depend on how the stream is cut into blocks); when it
 appears, or moves by more than ``LINE_RETUNE_HZ``, the model is rebuilt with line states at
 the measured frequency and the filter state carried over.
+
+``smoothed_lag_s`` > 0 also smooths the live output with that lag
+(:class:`~.fixed_lag.FixedLagSmoother` on the filter's own forward record):
+:meth:`KalmanEstimator.pop_smoothed` returns what is ready, oldest first.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import replace
-
 import numpy as np
 
 from ..errors import ParameterError
 from ..lti.reduction import ReducedModel
 from .config import EstimatorConfig
 from .core import Estimate
-from .filter import FilterState, KalmanFilter
+from .filter import FilterState, ForwardRecord, KalmanFilter, carry_state
+from .fixed_lag import MAX_LAG_SAMPLES, FixedLagSmoother
 from .lines import NOMINAL_LINES_HZ, measure_line
 from .smoother import smooth
 from .statespace import StateSpaceModel
@@ -71,23 +74,30 @@ class KalmanEstimator:
         Priors and rest test (defaults documented there).
     mains_hz : 'auto', 0, 50 or 60
         Mains line handling (module docstring).
+    smoothed_lag_s : float, optional
+        Lag of the fixed-lag smoothed output, s (0: none; module docstring).
 
     """
 
     name = 'kalman'
 
     def __init__(self, reduced: ReducedModel, sample_rate_hz: float,
-                 config: EstimatorConfig | None = None, mains_hz='auto'):
+                 config: EstimatorConfig | None = None, mains_hz='auto',
+                 smoothed_lag_s: float = 0.0):
         self.reduced = reduced
         self.config = config or EstimatorConfig()
         self.mains_hz = parse_mains(mains_hz)
         fs = float(sample_rate_hz)
+        self.smoothed_lag_s = float(smoothed_lag_s)
+        self._lag = _lag_smoother(self.smoothed_lag_s, fs)
+        self._smoothed: list[Estimate] = []
         # until measured: a line at each nominal frequency (hum at the start must not be
         # taken for an offset), then the measured one
         nominal_line = () if self.mains_hz == 0.0 else self._nominal()
         self._check_n = max(64, int(round(LINE_CHECK_S * fs)))
         self._first_n = max(64, int(round(LINE_FIRST_S * fs)))
         self._filter = self._new_filter(StateSpaceModel(reduced, self.config, fs, nominal_line))
+        self._state: FilterState | None = None
         self.reset()
 
     def _new_filter(self, model: StateSpaceModel) -> KalmanFilter:
@@ -124,6 +134,8 @@ class KalmanEstimator:
 
     def reset(self) -> None:
         """Start afresh: the nominal lines (the measured ones are measured again) and the prior."""
+        if self._state is not None:
+            self._flush_lag()
         nominal = () if self.mains_hz == 0.0 else self._nominal()
         if self.model.fundamentals_hz != tuple(nominal):
             self._filter = self._new_filter(StateSpaceModel(self.reduced, self.config,
@@ -143,8 +155,11 @@ class KalmanEstimator:
             # cut where the line check falls due (a fixed sample count, however cut)
             due = self._next_check(self._state.samples)
             b = min(y.size, a + due - self._state.samples)
+            rec = None if self._lag is None else ForwardRecord.empty(b - a, self.model.size)
             self._state, w, s, still = self._filter.run(self._state, y[a:b], st[a:b],
-                                                        copy=False)
+                                                        record=rec, copy=False)
+            if rec is not None:
+                self._keep(self._lag.push(self._filter, rec))
             self._remember(y[a:b], st[a:b], still)
             parts.append((w, s, still))
             a = b
@@ -157,7 +172,7 @@ class KalmanEstimator:
     def estimate_one(self, current_a: float, steps: int = 1) -> tuple[float, float]:
         """One sample through the same recursion (:meth:`estimate` without its arrays)."""
         n = self._state.samples
-        if n + 1 == self._next_check(n):
+        if n + 1 == self._next_check(n) or self._lag is not None:
             est = self.estimate(np.array([current_a], dtype=float),
                                 None if steps == 1 else np.array([steps]))
             return float(est.deflection_m[0]), float(est.std_m[0])
@@ -200,10 +215,37 @@ class KalmanEstimator:
         if not f_line and (len(old) < 2 or self._state.samples > self._first_n):
             return        # no line: keep what is modelled (the nominal pair only at the start)
         f_line = f_line or ()
+        self._flush_lag()           # the forward record is the old model's
         model = StateSpaceModel(self.reduced, self.config, self.sample_rate_hz, f_line)
         filt = self._new_filter(model)
         self._state = carry_state(self._filter, filt, self._state)
         self._filter = filt
+
+    # -- fixed-lag output -------------------------------------------------------------------
+    def _keep(self, est: Estimate | None) -> None:
+        if est is not None and est.deflection_m.size:
+            self._smoothed.append(est)
+
+    def _flush_lag(self) -> None:
+        if self._lag is not None:
+            self._keep(self._lag.flush(self._filter))
+
+    def pop_smoothed(self, flush: bool = False) -> Estimate | None:
+        """
+        Return the fixed-lag smoothed estimates ready since the last call, oldest first.
+
+        One per sample filtered, in order, each exactly once (``smoothed_lag_s`` > 0; else
+        None).  ``flush``: also those held for their lag, smoothed with the data there is
+        (before this estimator is replaced).
+        """
+        if flush:
+            self._flush_lag()
+        if not self._smoothed:
+            return None
+        parts, self._smoothed = self._smoothed, []
+        if len(parts) == 1:
+            return parts[0]
+        return Estimate(*(np.concatenate(p) for p in zip(*parts)))
 
     # -- offline --------------------------------------------------------------------------
     def smooth(self, current_a, steps=None) -> Estimate:
@@ -241,6 +283,7 @@ class KalmanEstimator:
                                                             self.sample_rate_hz, line))
         if fs.x.shape != (self.model.size,) or recent.shape != self._recent.shape:
             raise ParameterError('state was saved from a different estimator design')
+        self._flush_lag()
         self._state = fs.copy()
         self._recent = recent.copy()
         self._grid = int(state.get('grid', fs.samples))
@@ -257,9 +300,10 @@ class KalmanEstimator:
         fs = float(changes.pop('sample_rate_hz', self.sample_rate_hz))
         config = changes.pop('config', self.config)
         mains = changes.pop('mains_hz', self.mains_hz)
+        lag_s = changes.pop('smoothed_lag_s', self.smoothed_lag_s)
         if changes:
             raise ParameterError(f'cannot rebuild the Kalman estimator with {sorted(changes)}')
-        new = KalmanEstimator(reduced or self.reduced, fs, config, mains)
+        new = KalmanEstimator(reduced or self.reduced, fs, config, mains, lag_s)
         if new.mains_hz == self.mains_hz:
             new._filter = new._new_filter(StateSpaceModel(new.reduced, config, fs,
                                                           self.model.fundamentals_hz))
@@ -298,53 +342,15 @@ class KalmanEstimator:
                 'no rest yet: five time constants of motion_corner_hz')
 
 
-def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> FilterState:
-    """
-    Map a filter state onto another model of the same sensor family.
-
-    States with a physical meaning in both (deflection, velocity, acceleration, working
-    point, offset, drift, each line state whose frequency is within 1 Hz of one of the old
-    model, and the charge states when the sensor is the same) are carried with their
-    covariance; a different sensor's charge states are set to their steady value for the
-    current velocity (x_R = -u / p_i) with their prior covariance; new line states start from
-    their prior.
-    """
-    mo, mn = old.model, new.model
-    x_old = state.x * mo.scale
-    init = new.initial_state()
-    x, P = init.x * mn.scale, init.P * np.outer(mn.scale, mn.scale)
-    P_old = state.P * np.outer(mo.scale, mo.scale)
-    src = list(range(mo.iw, mo.il))
-    dst = list(range(mn.iw, mn.il))
-    for k, f in enumerate(mn.lines_hz):
-        near = [j for j, g in enumerate(mo.lines_hz) if abs(g - f) < 1.0]
-        if near:
-            src += [mo.il + 2 * near[0], mo.il + 2 * near[0] + 1]
-            dst += [mn.il + 2 * k, mn.il + 2 * k + 1]
-    same_sensor = np.array_equal(np.diag(mo.sensor[0]), np.diag(mn.sensor[0]))
-    if same_sensor:                   # only the lines changed: the charge states carry too
-        src = list(range(mo.n_sensor)) + src
-        dst = list(range(mn.n_sensor)) + dst
-    x[dst] = x_old[src]
-    P[np.ix_(dst, dst)] = P_old[np.ix_(src, src)]
-    if not same_sensor:
-        x[:mn.n_sensor] = -x[mn.iu] / np.diag(mn.sensor[0])
-        P[:mn.n_sensor, dst] = 0.0
-        P[dst, :mn.n_sensor] = 0.0
-    out = replace(init, x=x / mn.scale, P=P / np.outer(mn.scale, mn.scale),
-                  noise_var_a2=state.noise_var_a2, samples=state.samples,
-                  contiguous=state.contiguous, noise_weight=state.noise_weight,
-                  still=state.still, moved=state.moved, quiet=state.quiet, cusum=state.cusum)
-    if state.window.size != new.rest.n:
-        return replace(out, still=False, moved=True)    # the rest test's window restarts
-    # the window carries over; its sliding DFT is recomputed for the new model's rest lines
-    # (the window's samples taken as consecutive, the newest with phase 1)
-    n = state.window.size
-    age = (state.window_pos - 1 - np.arange(n)) % n       # slot of the sample j periods ago
-    phases = np.ones((n, len(new.rest_lines_hz)), complex)
-    phases[age] = new.rotation[None, :] ** -np.arange(n)[:, None]
-    sums = state.window @ phases
-    return replace(out, window=state.window.copy(), window_count=state.window_count,
-                   window_pos=state.window_pos, total=state.total, total_sq=state.total_sq,
-                   line_sums=sums, phase=np.ones(len(new.rest_lines_hz), complex),
-                   phases=phases)
+def _lag_smoother(lag_s: float, sample_rate_hz: float) -> FixedLagSmoother | None:
+    """Return the fixed-lag smoother of ``smoothed_lag_s`` (None: 0), checked."""
+    if not (math.isfinite(lag_s) and lag_s >= 0.0):
+        raise ParameterError(f"parameter 'smoothed_lag_s' must be >= 0 s, got {lag_s!r}")
+    if lag_s == 0.0:
+        return None
+    n = max(1, int(round(lag_s * sample_rate_hz)))
+    if n > MAX_LAG_SAMPLES:
+        raise ParameterError(f"parameter 'smoothed_lag_s' = {lag_s:g} s is {n} samples at "
+                             f'{sample_rate_hz:g} Hz; at most {MAX_LAG_SAMPLES} (the memory of '
+                             'its covariances)')
+    return FixedLagSmoother(n)

@@ -21,6 +21,9 @@ run; the node only unpacks messages, calls :meth:`StreamEstimator.feed` (a block
 * **rate**: measured from the stamps (``measured_rate_hz``); off ``sample_rate_hz`` by more
   than ``rate_tolerance`` it is reported once; the filter is rebuilt at the measured rate
   (bumpless) whenever the two differ by more than ``RATE_FOLLOW_FRACTION`` (``rate_rebuilds``);
+* **smoothed output** (``smoothed_lag_s`` > 0): :meth:`StreamEstimator.pop_smoothed` returns
+  each estimated sample once more, smoothed with that lag, in order; an estimator replaced
+  hands over what it holds first;
 * **messages**: a block longer than ``max_block_samples`` (``too_long``) or one that cannot be
   read (``malformed``, :meth:`reject`) is refused whole;
 * **accounting** (:class:`~ipmc_sensor_ros.estimation.accounting.StreamAccounts`): every
@@ -103,6 +106,7 @@ class StreamEstimator(StreamAccounts):
         self._filter_hz = self.nominal_rate_hz      # rate the filter is (to be) built for
         self._rate_reported = False
         self._stamp_floor_s: float | None = None    # output stamps must pass it (delay grew)
+        self._smoothed: list[tuple] = []    # smoothed by estimators replaced (pop_smoothed)
 
     # -- configuration --------------------------------------------------------------
     @property
@@ -149,15 +153,27 @@ class StreamEstimator(StreamAccounts):
             self.counters['resets'] += 1
             self._say(f'filter rebuilt without continuity on {self.source} '
                       f'({type(exc).__name__}): filter reset')
+        self._hand_over(new)
+
+    def _hand_over(self, new: DeflectionEstimator) -> None:
+        """Make ``new`` the estimator; what the old one smoothed goes out first."""
+        done = self.estimator.pop_smoothed(flush=True)
+        if done is not None:
+            self._smoothed.append(done)
         self.estimator = new
 
-    def restart(self) -> None:
-        """
-        Begin a new stream: filter reset.
+    def pop_smoothed(self):
+        """Return (output times, deflection, std) smoothed with a lag since last asked, or None."""
+        ready = self.estimator.pop_smoothed()
+        parts, self._smoothed = self._smoothed + ([ready] if ready is not None else []), []
+        if not parts:
+            return None
+        t, w, std = (np.concatenate(p) for p in zip(*parts))
+        ok = np.isfinite(w)             # a non-finite estimate's samples were dropped live
+        return (t, w, std) if ok.all() else (t[ok], w[ok], std[ok])
 
-        Previous sample times forgotten (not counted as a reset; e.g. a managed
-        node activated again).
-        """
+    def restart(self) -> None:
+        """Begin a new stream (a managed node activated again): filter reset, stamps forgotten."""
         self.estimator.reset()
         self.timebase.forget()
         self._refused_since = 0
@@ -189,7 +205,7 @@ class StreamEstimator(StreamAccounts):
     def _follow_rate(self, hz: float) -> None:
         """Rebuild the filter at ``hz`` (bumpless); on failure keep the old one and say why."""
         try:
-            self.estimator = self.estimator.rebuilt(sample_rate_hz=hz)
+            self._hand_over(self.estimator.rebuilt(sample_rate_hz=hz))
         except Exception as exc:  # an unusable rate must not stop the stream
             self._say(f'could not rebuild the filter at the measured {hz:.6g} Hz on '
                       f'{self.source}: {type(exc).__name__}: {exc}')
@@ -312,7 +328,7 @@ class StreamEstimator(StreamAccounts):
             return None
         try:
             current = _as_block(currents, self.max_block_samples)
-            t = self._times(times, current.size)
+            t = self.timebase.block_times(times, current.size, self._now_s())
         except DataError as exc:
             self.reject(n_claimed, str(exc))
             return None
@@ -332,9 +348,8 @@ class StreamEstimator(StreamAccounts):
         """
         Output stamps strictly increase: withhold estimates stamped at or before the floor.
 
-        After ``time_delay`` grew by d, the first estimates (stamped ``t - delay``) fall on
-        instants already published (within rounding: less than half a period after the last
-        stamp); they are counted in ``samples_dropped``, not published.
+        After ``time_delay`` grew, the first estimates (stamped ``t - delay``) fall on instants
+        already published (to within half a period): counted in ``samples_dropped``.
         """
         keep = t_out > self._stamp_floor_s + 0.5 / self.sample_rate_hz
         withheld = int(t_out.size - np.count_nonzero(keep))
@@ -351,17 +366,6 @@ class StreamEstimator(StreamAccounts):
             return None
         self._stamp_floor_s = None
         return t_out[keep], w[keep]
-
-    def _times(self, times, n: int) -> np.ndarray:
-        """Return the sample times of a block (continued on the grid when ``times`` is None)."""
-        if times is None:
-            tb = self.timebase
-            start = self._now_s() if tb.last_s is None else tb.last_s + tb.period_s
-            return start + np.arange(n) * tb.period_s
-        t = np.asarray(times, dtype=float)
-        if t.shape != (n,):
-            raise DataError(f'{t.size} sample times for {n} samples')
-        return t
 
     def _filter(self, t, current, codes, cuts):
         """Run the filter over the accepted samples, resetting and rebuilding where decided."""

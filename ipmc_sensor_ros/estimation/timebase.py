@@ -59,6 +59,8 @@ import math
 
 import numpy as np
 
+from ..errors import DataError
+
 __all__ = ['Timebase', 'grid_slot', 'fit_line', 'MAX_STAMP_S', 'JITTER_FRACTION',
            'RATE_WINDOW_S', 'FIRST_WINDOW_SAMPLES', 'RELOCK_MIN_SAMPLES', 'SIGNIFICANCE',
            'DRIFT_MARGIN', 'MAX_WINDOW_SAMPLES',
@@ -180,6 +182,16 @@ class Timebase:
         self.last_s = None
 
     # -- the rule for one stamp -----------------------------------------------------
+    def block_times(self, times, n: int, now_s: float) -> np.ndarray:
+        """Return a block's sample times (None: continued on the grid, or from ``now_s``)."""
+        if times is None:
+            start = now_s if self.last_s is None else self.last_s + self.period_s
+            return start + np.arange(n) * self.period_s
+        t = np.asarray(times, dtype=float)
+        if t.shape != (n,):
+            raise DataError(f'{t.size} sample times for {n} samples')
+        return t
+
     def admit(self, t: float) -> int:
         """
         Decide stamp ``t`` (s): steps >= 1 (accepted), ``START`` (accepted, first of a run).

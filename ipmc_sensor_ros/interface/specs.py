@@ -175,6 +175,10 @@ ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
          'run (filter reset)', low=1e-6, high=1e6),
     Spec('publish_points', 'per_sample', str, "deflection PointStamped output: 'per_sample', "
          "'last_of_block' or 'none'", choices=PUBLISH_POINTS),
+    Spec('smoothed_lag_s', 0.0, float, "estimator 'kalman': also publish the deflection "
+         "smoothed with this lag on 'deflection/smoothed/block' (fixed-lag Rauch-Tung-Striebel "
+         'on the filter; each sample goes out between the lag and twice it after it was '
+         'measured), s; 0 = off', low=0.0, high=60.0, read_only=True),
     Spec('max_block_samples', 100_000, int, 'largest accepted input block, samples',
          low=1, high=MAX_BLOCK_SAMPLES, read_only=True),
 ) + tuple(
@@ -337,7 +341,8 @@ def build_estimator(
                                    leak_corner_hz=leak if leak > 0.0 else None,
                                    offset_corner_hz=offset if offset > 0.0 else None,
                                    reduced=reduced, estimator=values['estimator'],
-                                   mains_hz=values['mains_hz'], config=config)
+                                   mains_hz=values['mains_hz'], config=config,
+                                   smoothed_lag_s=float(values['smoothed_lag_s']))
     except ParameterError:
         raise
     except Exception as exc:  # numerics of an extreme but in-range combination

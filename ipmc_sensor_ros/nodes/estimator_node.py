@@ -7,8 +7,10 @@ stream: values, times, gaps, resets, counters) -> publish: ``deflection/block``
 (``time_s,deflection_m,deflection_std_m,deflection_beyond_limit``, one per accepted input
 message), ``deflection`` (``PointStamped`` (L, 0, w) in the clamp frame: per sample / last of
 block / none; z = +-inf beyond the limit of :mod:`~ipmc_sensor_ros.estimation.limits`),
-``estimator/counters`` (JSON, 1 Hz) and ``/diagnostics``.  Parameter changes are validated by
-building the new estimator and applied without an output jump.  README "ROS 2 interface".
+``deflection/smoothed/block`` (the same columns, smoothed with ``smoothed_lag_s``; only
+when it is > 0), ``estimator/counters`` (JSON, 1 Hz) and ``/diagnostics``.  Parameter
+changes are validated by building the new estimator and applied without an output jump.
+README "ROS 2 interface".
 
 One source per stream: the node follows one publisher of ``current`` (its GID from the message
 info; :class:`~ipmc_sensor_ros.interface.sources.SourceSelector`), counts and names the others it
@@ -100,6 +102,9 @@ class EstimatorNode(Node):
             if self._channels == 1 and self._values['model_files']:
                 raise P.ParameterError("parameter 'model_files' is for channels > 1; with one "
                                        "channel use 'model_file'")
+            if self._channels > 1 and self._values['smoothed_lag_s']:
+                raise P.ParameterError("parameter 'smoothed_lag_s' is for one channel; a sensor "
+                                       'array (channels > 1) has no smoothed output')
             estimators = C.build_channel_estimators(self._values)
             estimator = estimators[0]
             self._reduced = ({C.model_key(C.channel_values(self._values, c)): e.reduced
@@ -161,6 +166,9 @@ class EstimatorNode(Node):
                             P.create_publisher(self, PointMsg, f'ch{c}/deflection', qos)
                             for c in range(self._channels)]
         self._pub_point = self._pub_points[0]
+        self._pub_smoothed = (P.create_publisher(self, Float64MultiArray,
+                                                 'deflection/smoothed/block', qos)
+                              if self._values['smoothed_lag_s'] else None)
         P.check_qos_overrides(self)
         self._pub_counters = self.create_publisher(String, 'estimator/counters', P.COUNTERS_QOS)
         self._diagnostics = DiagnosticsPublisher(
@@ -172,7 +180,7 @@ class EstimatorNode(Node):
     def _close_io(self) -> None:
         """Destroy what :meth:`_open_io` created (the stream core and its counters stay)."""
         P.destroy_io(self, ('_timer', '_diagnostics', '_sub', '_pub_block', '_pub_points',
-                            '_pub_counters'))
+                            '_pub_smoothed', '_pub_counters'))
         self._pub_point = None
 
     def _ready_text(self) -> str:
@@ -309,6 +317,8 @@ class EstimatorNode(Node):
                 flags = self._limits[0].flags(est, w)
                 self._publish(self._packer.pack(t, w, self._stream.last_std_m, flags),
                               t, w, t.size)
+            if self._pub_smoothed is not None:
+                self._publish_smoothed()
 
     def _feed_one(self, time_s: float, current_a: float) -> None:
         """Estimate one timed sample (:meth:`StreamEstimator.feed_one`); publish it as bytes."""
@@ -322,6 +332,8 @@ class EstimatorNode(Node):
                 est = self._stream.estimator
                 flag = self._limits[0].flag_one(est, w)
                 self._publish(self._one_out.encode(t, w, est.std_m, flag), t, w, 1)
+            if self._pub_smoothed is not None:
+                self._publish_smoothed()
 
     def _publish(self, block_msg: Float64MultiArray, times, deflections, n: int) -> None:
         """
@@ -352,6 +364,21 @@ class EstimatorNode(Node):
                 f'could not publish deflection points: {short_repr(str(exc))}',
                 throttle_duration_sec=1.0,
             )
+
+    def _publish_smoothed(self) -> None:
+        """Publish what the stream smoothed with ``smoothed_lag_s`` (a block, when ready)."""
+        out = self._stream.pop_smoothed()
+        if out is None:
+            return
+        t, w, std = out
+        flags = self._limits[0].flags(self._stream.estimator, w)
+        try:
+            self._pub_smoothed.publish(self._packer.pack(t, w, std, flags))
+        except Exception as exc:  # a second view of samples counted already: as the points
+            self._stream.counters['messages_unpublished'] += 1
+            self.get_logger().warning(
+                f'could not publish smoothed deflection: {short_repr(str(exc))}',
+                throttle_duration_sec=1.0)
 
     def _publish_point(self, time_s: float, deflection_m: float, channel: int = 0) -> None:
         key = (float(self._values['length_m']), self._values['frame_id'])
