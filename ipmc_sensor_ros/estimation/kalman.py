@@ -20,6 +20,7 @@ the measured frequency and the filter state carried over.
 from __future__ import annotations
 
 import math
+
 import numpy as np
 
 from ..errors import ParameterError
