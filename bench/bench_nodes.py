@@ -188,22 +188,25 @@ def bench_node_cpu(smoke: bool = False) -> list[dict]:
 
 def bench_estimator_cost(smoke: bool = False) -> list[dict]:
     """
-    Node CPU per message with ``estimator: kalman`` against ``estimator: leaky``.
+    Node CPU per message with ``estimator: kalman`` against the bytes pass-through and ``leaky``.
 
-    The issue-14 cost rule ("within 2x in the node benchmark"): the same harness as
-    :func:`bench_node_cpu` (driver and node, whole-process CPU per message handled), one
-    fresh process per estimator, at a robot DAQ's 1 kHz in 1- and 100-sample messages, at
-    4000 one-sample messages/s and at 10 kHz in 1000-sample messages (the Kalman cannot be
-    designed at 500 kHz, the rate of :func:`bench_node_cpu`'s block row).
+    The same harness as :func:`bench_node_cpu` (driver and node, whole-process CPU per message
+    handled), one fresh process per node, at a robot DAQ's 1 kHz in 1- and 100-sample
+    messages, at 4000 one-sample messages/s and at 10 kHz in 1000-sample messages.  Issue 27
+    asks the one-sample node to sustain 0.75 x the pass-through's rate: where the node is
+    CPU-bound that is a CPU ratio to the pass-through of at most 1 / 0.75 = 1.33.
     """
     rows = []
     for n, rate in ((1, 1000.0), (1, 4000.0), (100, 10.0), (1000, 10.0)):
-        cost = _cpu_per_message(('leaky', 'kalman'), n, rate, 1.0 if smoke else 10.0)
+        cost = _cpu_per_message(('passthrough', 'leaky', 'kalman'), n, rate,
+                                1.0 if smoke else 10.0)
         rows.append({'benchmark': f'estimator node CPU per message, kalman, {n}-sample messages '
                                   f'at {rate:.0f} msg/s ({n * rate:.0f} samples/s)',
                      'value': cost['kalman'], 'unit': 'us/msg',
-                     'baseline': f"estimator: leaky {cost['leaky']:.0f} us/msg",
-                     'ratio': cost['kalman'] / cost['leaky'], 'target': '<= 2'})
+                     'baseline': f"pass-through {cost['passthrough']:.0f} us/msg, leaky "
+                                 f"{cost['leaky']:.0f} us/msg",
+                     'ratio': cost['kalman'] / cost['passthrough'],
+                     'target': '<= 1.33' if n == 1 else '-'})
     return rows
 
 
