@@ -1,0 +1,56 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+The motion before a record: the periodic continuation of a periodic stimulus.
+
+The model predicts each record from rest (the deflection held at its first value before the
+first sample), and the ``settle_s`` left out at the start covers the sensor's own memory (its
+poles lie at K ~ 72 1/s and beyond, eq. 31).  A correction C(s) can remember much longer: an
+AC coupling at 0.2 Hz has a time constant of 0.8 s, and from rest its prediction is off by a
+transient of ~ f_c/f of the signal for seconds -- which a fit of C(s) would bend its corner to
+absorb.  For a periodic stimulus in steady state (a crank running before the recording
+started) the motion before the record is its periodic continuation, ``w(t) = w(t mod P)`` for
+``t < 0``: :func:`with_history` prepends it (cubic-spline samples of the first period), so the
+prediction enters the record in steady state.  The samples used are the record's own: the
+prepended ones are never fitted or scored.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from ..freqresp import fundamental_response
+
+__all__ = ['PERIODIC_TOLERANCE', 'with_history']
+
+#: the stimulus counts as periodic when w(t + P) differs from w(t) by at most this fraction
+#: of its RMS (a crank in steady state repeats to the deflection sensor's noise, well under
+#: 1 %; a motion that speeds up or stops does not)
+PERIODIC_TOLERANCE = 0.02
+
+
+def with_history(rec, history_s: float):
+    """Return ``rec`` with ``history_s`` seconds of periodic continuation before it, or None."""
+    t = np.asarray(rec.time_s, float)
+    w = np.asarray(rec.deflection_m, float)
+    y = np.asarray(rec.current_a, float)
+    try:
+        period = 1.0 / fundamental_response(t, w, y).frequency_hz
+    except ValueError:
+        return None
+    tt = t - t[0]
+    if period >= tt[-1] or history_s <= 0:
+        return None
+    spline = CubicSpline(tt, w)
+    inside = tt + period <= tt[-1]
+    scale = float(np.std(w)) or 1.0
+    if np.sqrt(np.mean((spline(tt[inside] + period) - w[inside]) ** 2)) > \
+            PERIODIC_TOLERANCE * scale:
+        return None
+    dt = tt[-1] / (t.size - 1)
+    th = np.arange(-int(np.ceil(history_s / dt)), 0) * dt
+    phase = np.mod(th, period)
+    return replace(rec, time_s=np.concatenate([t[0] + th, t]),
+                   deflection_m=np.concatenate([spline(phase), w]),
+                   current_a=np.concatenate([CubicSpline(tt, y)(phase), y]))

@@ -1,0 +1,118 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+The order of the stages of a diagnosis.
+
+0. Mains lines are found in what the starting model leaves of the measured current and
+   removed (:mod:`.residual`, :mod:`.lines`).
+1. The baseline (the given model, its free material and ``fit_effects`` parameters) is fitted
+   to the line-free records and scored; the noise floor is measured.
+2. The offset test (:mod:`.offset_test`) names ``current_offset`` when the mean residual
+   current is significant.
+3. Stepwise forward search (:mod:`.forward`) with the backward and swap checks after each
+   addition, then the exchange pass when it ended above the floor (:mod:`.exchange`); once
+   more if the exchange left the budget unspent above the floor, with replaced effects
+   offered again (an amplifier pole that replaced a 3.3 ms delay as its tie, beside surface
+   resistance, blocked the delay's return).
+4. Outside the catalog (:mod:`.outside`): when the search ends above the floor, or a named
+   effect is implausible, a low-order correction C(s) is fitted and each named catalog effect
+   is checked against it.
+5. The verdict: each named effect with the test that keeps it (:mod:`.significance`);
+   ``explained`` when the final held-out error is at most ``explained_factor`` x floor + 0.001.
+"""
+from __future__ import annotations
+
+from ...physics.effects import EFFECTS, get_effect
+from ..timefit import FitSpec, prepare
+from .fitting import evaluate, held_out, make_folds
+from .forward import forward_search
+from .exchange import exchange_pass
+from .offset_test import add_offset
+from .outside import is_correction, outside_stage
+from .ranking import baseline_starts
+from .residual import noise_floor, remove_lines
+from .significance import membership
+from .state import SearchState
+from .verdict import Diagnosis
+
+__all__ = ['run_search']
+
+
+def _pool(records, settings) -> list[str]:
+    present = set(records[0].model.effect_names)
+    names = settings.candidates if settings.candidates is not None else [
+        n for n in EFFECTS if not is_correction(n)]
+    return [n for n in names if n not in present]
+
+
+def _start(records, settings, priors, say) -> SearchState:
+    """Lines out, baseline fitted and scored, noise floor measured (stages 0 and 1)."""
+    s = settings
+    spec = FitSpec(s.free_material, tuple((e, p.name) for e in s.fit_effects
+                                          for p in get_effect(e).parameters))
+    prepared = prepare(records, settle_s=s.settle_s)
+    folds, cv = make_folds(prepared, s.n_folds)
+    starts = baseline_starts(spec, priors, records[0].model)
+    say('fitting baseline')
+    cleaned, lines, line_test, fit = remove_lines(records, prepared, spec, starts, folds, s,
+                                                  priors)
+    if fit is not None and cleaned is prepared:     # no line: the fit is the baseline's
+        baseline = held_out(prepared, fit, folds, s.fold_nfev)
+    else:
+        baseline = evaluate(cleaned, spec, [fit.x] if fit is not None else starts, folds,
+                            s.fold_nfev, priors=priors)
+    prepared = cleaned
+    baseline.params = {**baseline.params, **{f'{e}.{n}': baseline.fit.effect_values[e][n]
+                                             for e, n in spec.effect_params}}
+    state = SearchState(s, prepared, folds, cv, spec, priors, _pool(records, s), say,
+                        noise_floor=noise_floor(prepared), baseline=baseline, lines=lines,
+                        line_test=line_test)
+    state.adopt(baseline)
+    return state
+
+
+def _search(state) -> None:
+    """Offset test, forward search with its checks, exchange pass (stages 2 and 3)."""
+    add_offset(state)
+    for completion in (False, True):
+        if completion and (len(state.chosen) >= state.settings.max_effects
+                           or state.at_floor()):
+            break
+        n_steps = len(state.steps)
+        forward_search(state, completion)
+        if completion and len(state.steps) == n_steps:
+            break                   # nothing added: the exchange pass would repeat itself
+        exchange_pass(state)
+
+
+def _reason(state, missing, explained) -> str:
+    base, cur, floor = state.baseline, state.current, state.noise_floor
+    if missing:
+        return (f"adding {', '.join(missing)} lowers the held-out error {base.error:.4f} -> "
+                f'{cur.error:.4f} ({base.error / cur.error:.2f}x)'
+                + ('' if explained else f'; the residual stays above the noise floor '
+                   f'{floor:.4f}: something else is missing too'))
+    if explained:
+        return (f'baseline error {base.error:.4f} is at the noise floor ({floor:.4f}) and no '
+                'effect improves it significantly: nothing is missing')
+    return (f'baseline error {base.error:.4f} is above the noise floor {floor:.4f} and no '
+            'catalog effect explains it')
+
+
+def run_search(records, settings, priors, say) -> Diagnosis:
+    """Run the stages of the module docstring; return the verdict."""
+    state = _start(records, settings, priors, say)
+    _search(state)
+    if settings.correction:
+        outside_stage(state)
+    state.kept_by = membership(state)
+    missing = [e for e, _ in state.chosen]
+    explained = bool(state.current.error <= state.explained_threshold)
+    return Diagnosis(baseline=state.baseline, candidates=state.first_ranking,
+                     noise_floor=state.noise_floor,
+                     missing_effect=missing[0] if missing else None, explained=explained,
+                     reason=_reason(state, missing, explained),
+                     ties=state.first_ties + state.late_ties, prepared=state.prepared,
+                     cv=state.cv, steps=state.steps, missing_effects=missing,
+                     final=state.current, interference=state.lines,
+                     offset_test=state.offset, line_test=state.line_test,
+                     kept_by=state.kept_by, correction=state.correction)
