@@ -54,8 +54,9 @@ class Truth:
     delay_s: float = 0.0
     offset_a: float = 0.0
     drift_a_per_s: float = 0.0
-    outside: tuple | None = None          # ('high_pass', f_c) | ('lag', f_z, f_p) | ('resonance', f_n, zeta)
-    material_scale: dict = field(default_factory=dict)   # material name -> factor on Tables 1-2
+    #: ('high_pass', f_c) | ('lag', f_z, f_p) | ('resonance', f_n, zeta), Hz
+    outside: tuple | None = None
+    material_scale: dict = field(default_factory=dict)   # material name -> factor on Table 2
     hum_rel: float = 0.0
     hum_hz: float = 50.0                  # the grid's actual frequency (off nominal)
     noise_rel: float = 0.01
@@ -142,8 +143,8 @@ def _hum(t, truth: Truth, scale, rng):
 
 def _current(t_run, w_run, geometry, truth: Truth, rate_hz):
     """Exact linear convolution of the run's deflection with H * chain, by FFT (no wrap)."""
-    material = PAPER_PARAMETERS.replace(**truth.material_scale) if truth.material_scale else \
-        PAPER_PARAMETERS
+    material = PAPER_PARAMETERS.replace(**{k: getattr(PAPER_PARAMETERS, k) * f
+                                           for k, f in truth.material_scale.items()})
     n = 1 << int(np.ceil(np.log2(2 * t_run.size)))
     f = np.fft.rfftfreq(n, 1.0 / rate_hz)
     s = 2j * np.pi * f
@@ -187,3 +188,75 @@ def make_records(truth: Truth, seed: int, *, model_effects=('surface_resistance'
             i = np.round(i / step) * step
             out.append(Record(f'{name}_{f:g}Hz', name, model, t, w, i))
     return out
+
+
+#: catalog effects drawn beside hum, a small offset or a factor from outside the catalog, with
+#: their ranges (inside each effect's plausible range, large enough to be seen in 1 % noise
+#: over a 1-20 Hz sweep); 'surface_resistance' means: data from H2, model H1
+ONE_OR_TWO = ('amplifier_bandwidth', 'time_delay', 'current_offset', 'surface_resistance')
+OUTSIDE_KINDS = ('high_pass', 'lag', 'resonance')
+
+
+def _draw_effects(rng, names, truth: Truth) -> None:
+    """Put ``names`` into ``truth`` with seeded values (surface resistance is always in it)."""
+    for name in names:
+        if name == 'amplifier_bandwidth':
+            truth.amplifier_hz = float(np.exp(rng.uniform(np.log(30.0), np.log(300.0))))
+        elif name == 'time_delay':
+            truth.delay_s = float(np.exp(rng.uniform(np.log(5e-4), np.log(5e-3))))
+        elif name == 'current_offset':
+            truth.offset_a = float(rng.choice([-1, 1]) * rng.uniform(1e-7, 5e-7))
+
+
+def _material(rng) -> dict:
+    """A sample that is not the paper's: alpha0, d, kappa_e each within a factor 1.25 of it."""
+    return {n: float(np.exp(rng.uniform(-0.22, 0.22)))
+            for n in ('charge_stress_coupling_j_per_c', 'diffusivity_m2_per_s',
+                      'permittivity_f_per_m')}
+
+
+def scenario(kind: str, seed: int):
+    """
+    Records of one seeded scenario of the discovery study: ``(records, truth, expected)``.
+
+    ``kind``: ``hum`` (3-5 % hum at 50 or 60 Hz +-0.3 Hz on a sweep where it is a drive
+    harmonic, one or two catalog effects), ``null`` (nothing missing, no hum), ``offset``
+    (a 5-20 nA offset beside one or two effects, 2 % noise: the offset test is significant, its
+    BIC test is not always), or one of :data:`OUTSIDE_KINDS` (a factor outside the catalog on
+    top of one catalog effect).  ``expected``: the catalog effects a diagnosis should name.
+    Every record's sample differs from the paper's (:func:`_material`).
+    """
+    rng = np.random.default_rng(20_000 + 1000 * (['hum', 'null', 'offset', *OUTSIDE_KINDS]
+                                                 .index(kind)) + seed)
+    truth = Truth(material_scale=_material(rng))
+    kw = {}
+    if kind == 'hum':
+        names = rng.choice(ONE_OR_TWO, size=int(rng.integers(1, 3)), replace=False)
+        nominal = float(rng.choice([50.0, 60.0]))
+        truth.hum_hz = nominal + float(rng.uniform(-0.3, 0.3))
+        truth.hum_rel = float(rng.uniform(0.03, 0.05))
+        kw['frequencies_hz'] = DRIVE_HARMONIC_SWEEP_HZ
+    elif kind == 'null':
+        names = []
+    elif kind == 'offset':
+        names = list(rng.choice(ONE_OR_TWO[:2] + ONE_OR_TWO[3:], size=int(rng.integers(1, 3)),
+                                replace=False))
+        truth.noise_rel = 0.02
+    else:
+        names = [str(rng.choice(ONE_OR_TWO))]
+        if kind == 'high_pass':
+            truth.outside = ('high_pass', float(np.exp(rng.uniform(np.log(0.2), np.log(2.0)))))
+        elif kind == 'lag':
+            pole = float(np.exp(rng.uniform(np.log(2.0), np.log(8.0))))
+            truth.outside = ('lag', pole * float(rng.uniform(2.0, 4.0)), pole)
+        else:
+            truth.outside = ('resonance', float(np.exp(rng.uniform(np.log(3.0), np.log(8.0)))),
+                             float(rng.uniform(0.2, 0.5)))
+    names = [str(n) for n in names]
+    _draw_effects(rng, names, truth)
+    if kind == 'offset':
+        truth.offset_a = float(rng.choice([-1, 1]) * np.exp(rng.uniform(np.log(5e-9),
+                                                                        np.log(20e-9))))
+        names.append('current_offset')
+    model = () if 'surface_resistance' in names else ('surface_resistance',)
+    return make_records(truth, seed, model_effects=model, **kw), truth, set(names)

@@ -281,7 +281,8 @@ def _cmd_diagnose(args) -> int:
                    error={'held_out': diag.final.error, 'noise_floor': diag.noise_floor},
                    extra={'missing_effects': diag.missing_effects, 'explained': diag.explained})
         print(f'saved the whole model to {args.save_model}')
-    print(diagnosis_next_command(diag, args.data, args.save_model, args.model))
+    plugin = _save_plugin(args, diag)
+    print(diagnosis_next_command(diag, args.data, args.save_model, args.model, plugin))
     write_json(args.json, diag.to_json())
     rd = report_dir(args.report)
     if rd:
@@ -289,6 +290,21 @@ def _cmd_diagnose(args) -> int:
 
         print(f'report: {diagnose_report(rd, diag)}')
     return 0
+
+
+def _save_plugin(args, diag) -> str | None:
+    """Write the correction C(s) as a plugin (``--save-plugin``); its path, or None."""
+    if not args.save_plugin:
+        return None
+    if diag.correction is None:
+        say(f'--save-plugin {args.save_plugin}: no correction C(s) was fitted (the named '
+            'effects explain the data, or none helps): nothing written')
+        return None
+    from ..workbench.discovery.plugin import write_plugin
+
+    name = write_plugin(args.save_plugin, diag.correction, data_files=args.data)
+    print(f"saved the correction C(s) as effect '{name}' to {args.save_plugin}")
+    return args.save_plugin
 
 
 def _add_settle(p) -> None:
@@ -377,6 +393,9 @@ def add_parsers(sub, formatter) -> None:
     p.add_argument('--save-model', metavar='FILE',
                    help='write the final model (effects with fitted values, material, provenance) '
                         'as ipmc-model/1 YAML')
+    p.add_argument('--save-plugin', metavar='FILE',
+                   help='write the correction C(s) fitted outside the catalog as an effect '
+                        'plugin (Python), to load with --plugin FILE')
     _add_settle(p)
     add_output_args(p)
     p.set_defaults(func=_cmd_diagnose)

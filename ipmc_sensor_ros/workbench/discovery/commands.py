@@ -91,14 +91,18 @@ def next_command(verb: str, data: Sequence[str], model_file: str | None, extra: 
     return ' '.join(shlex.quote(p) for p in parts) + (f' {extra}' if extra else '')
 
 
-def diagnosis_next_command(
-    diag, data: Sequence[str], model_file: str | None, base: str = 'h1'
-) -> str:
+def diagnosis_next_command(diag, data: Sequence[str], model_file: str | None,
+                           base: str = 'h1', plugin_file: str | None = None) -> str:
     """
-    Return what to run after a diagnosis: check the saved model on the data (compare), or.
+    Return what to run after a diagnosis.
 
-    Without a saved model, re-run with the named effects fitted.
+    With a saved correction plugin: diagnose again with it; with a saved model: check it on
+    the data (compare); otherwise fit the named effects.
     """
+    if plugin_file:
+        return ('next (the correction C(s) as a candidate effect): '
+                + next_command('diagnose', data, None, f'--model {base} --plugin '
+                               + shlex.quote(str(plugin_file))))
     if model_file:
         return 'next: ' + next_command('compare', data, model_file)
     if diag.missing_effects:

@@ -27,8 +27,8 @@ def _tie_or_swap(state, name, shape, alt, alt_shape, cand) -> bool:
     cur, tol = state.current, state.settings.tie_tol
     # a tie whichever BIC is lower (e.g. delay + beam inertia vs amplifier + beam inertia,
     # 0.6 % apart); a swap only with the lower BIC and held-out error
-    if cand.error <= (1 + tol) * cur.error and (cand.error >= cur.error
-                                                 or cand.fit.bic >= cur.fit.bic):
+    if cand.error <= (1 + tol) * cur.error and (
+            cand.error >= cur.error or cand.fit.bic >= cur.fit.bic):
         state.late_ties.append(f'{alt} instead of {name} (held-out error {cand.error:.4f} vs '
                                f'{cur.error:.4f}, dBIC {cand.fit.bic - cur.fit.bic:+.0f})')
     if not (cand.error < cur.error and cand.fit.bic < cur.fit.bic):

@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
 """
-Mains lines: the part of the current at 50/60 Hz and harmonics that the deflection does not explain.
+Mains lines: the current at 50/60 Hz and harmonics that the deflection does not explain.
 
 Procedure (:func:`find_mains_lines`)
 ------------------------------------
@@ -31,7 +31,12 @@ Procedure (:func:`find_mains_lines`)
    probability that a record **without** hum shows any line of either family at most
    ``false_alarm`` (summed over the lines).  What the model misses near a line raises the level
    and makes the test conservative.
-5. With ``mains='auto'`` both families are tested and the one with the larger detected power is
+5. **Hum or the sensor's own response?**  A line that its measured frequency cannot tell from
+   a harmonic of the drive (:func:`on_drive_harmonic`) may be what the model misses there (a
+   nonlinear sensor responds at the odd harmonics of a crank, whose deflection has none); it
+   counts as hum only when the same line shows off every drive harmonic in another record of
+   the campaign (mains couples into all of them alike).
+6. With ``mains='auto'`` both families are tested and the one with the larger detected power is
    kept.  Removing a line subtracts its fitted sinusoid from the whole record.
 """
 from __future__ import annotations
@@ -41,7 +46,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..freqresp import _coarse_frequency, harmonic_fit
+from ..freqresp import fundamental_response, harmonic_fit
 
 __all__ = ['MainsLine', 'MAINS_SEARCH_HZ', 'LEVEL_BAND_HZ', 'parse_mains', 'find_mains_lines',
            'line_threshold', 'summarize_lines']
@@ -70,6 +75,8 @@ class MainsLine:
     z: float                     # amplitude / its standard error
     nominal_hz: float
     z_threshold: float           # the test's threshold for this record
+    cos_a: float = 0.0           # the fitted sinusoid: cos_a cos(2 pi f t) + sin_a sin(2 pi f t)
+    sin_a: float = 0.0
 
     def to_json(self) -> dict:
         return dict(self.__dict__)
@@ -142,24 +149,40 @@ def _measured_mains(r, f_mains, fs):
     return float(cand[k])
 
 
-def _stimulus_harmonics(t, w, max_harmonics: int = 20) -> list[float]:
+def _drive(t, w, max_harmonics: int = 20) -> tuple[float | None, list[float]]:
     """
-    Frequencies of the drive harmonics (at most ``max_harmonics``) carrying deflection content.
+    The drive's fundamental (refined) and its harmonics carrying deflection content.
 
-    From a least-squares harmonic fit of the deflection; none for a non-periodic stimulus.
+    Harmonics up to ``max_harmonics`` with at least 1e-4 of the fundamental's amplitude in a
+    least-squares harmonic fit of the deflection; ``(None, [])`` for a non-periodic stimulus.
     """
+    try:
+        f0 = fundamental_response(t, w, w).frequency_hz
+    except ValueError:
+        return None, []
     fs = (t.size - 1) / (t[-1] - t[0])
-    f0 = _coarse_frequency(t, w, fs)
-    if not f0 > 0 or f0 * (t[-1] - t[0]) < 2:
-        return []
     k_max = min(int(0.45 * fs / f0), max_harmonics)
-    if k_max < 1:
-        return []
+    if k_max < 1 or f0 * (t[-1] - t[0]) < 2:
+        return None, []
     phasors, resid, _ = harmonic_fit(t, w, f0, k_max)
     if np.var(resid) > 0.1 * np.var(w):
-        return []              # not periodic: the harmonics do not explain the deflection
+        return None, []        # not periodic: the harmonics do not explain the deflection
     amps = np.abs(phasors)
-    return [(k + 1) * f0 for k in np.flatnonzero(amps >= 1e-4 * amps[0])]
+    return f0, [(k + 1) * f0 for k in np.flatnonzero(amps >= 1e-4 * amps[0])]
+
+
+def on_drive_harmonic(f, z, f0, span_s) -> bool:
+    """
+    True when a line at ``f`` cannot be told from a harmonic of the drive by its frequency.
+
+    Within 3 standard errors of its measured frequency, ``sqrt(6) / (2 pi z T)`` (the
+    Cramer-Rao bound of a sinusoid whose amplitude is z standard errors), or a tenth of a
+    resolution cell, of some k f0.
+    """
+    if f0 is None:
+        return False
+    k = max(1, round(f / f0))
+    return abs(f - k * f0) <= max(3 * np.sqrt(6) / (2 * np.pi * z * span_s), 0.1 / span_s)
 
 
 def _orders(fs, families, n_harmonics):
@@ -195,25 +218,30 @@ def _family(t, r, drive, f_mains, n_harmonics, orders, false_alarm):
     return out
 
 
-def _record_lines(rec, pred, keep, f_mains, families, n_harmonics, false_alarm):
-    """The detected lines of one record and their sum over the whole record."""
+def _record_rows(rec, pred, keep, f_mains, families, n_harmonics, false_alarm):
+    """A record's lines that pass the test: ``[(row, ambiguous), ...]`` (:func:`_family` rows)."""
+    t = (np.asarray(rec.time_s, float) - rec.time_s[0])[keep]
+    r = (np.asarray(rec.current_a, float) - pred)[keep]
+    w = getattr(rec, 'deflection_m', None)
+    f0, drive = _drive(t, np.asarray(w, float)[keep]) if w is not None else (None, [])
+    orders = _orders((t.size - 1) / (t[-1] - t[0]), families, n_harmonics)
+    rows = _family(t, r, drive, f_mains, n_harmonics, orders, false_alarm)
+    return [(row, on_drive_harmonic(row[0], row[4], f0, t[-1] - t[0]))
+            for row in rows if row[4] >= row[5]]
+
+
+def _line_sum(rec, keep, rows):
+    """The MainsLine of accepted rows and their sum over the whole record."""
     t_all = np.asarray(rec.time_s, float) - rec.time_s[0]
     y = np.asarray(rec.current_a, float)
-    t, r = t_all[keep], (y - pred)[keep]
-    w = getattr(rec, 'deflection_m', None)
-    drive = _stimulus_harmonics(t, np.asarray(w, float)[keep]) if w is not None else []
-    orders = _orders((t.size - 1) / (t[-1] - t[0]), families, n_harmonics)
-    rows = [row for row in _family(t, r, drive, f_mains, n_harmonics, orders, false_alarm)
-            if row[4] >= row[5]]
-    line_sum = np.zeros_like(y)
     rms_y = float(np.std(y[keep])) or 1.0
-    lines = []
+    total, lines = np.zeros_like(y), []
     for f, nominal, ca, cb, z, u in rows:
-        line_sum += ca * np.cos(2 * np.pi * f * t_all) + cb * np.sin(2 * np.pi * f * t_all)
+        total += ca * np.cos(2 * np.pi * f * t_all) + cb * np.sin(2 * np.pi * f * t_all)
         amp = float(np.hypot(ca, cb))
         lines.append(MainsLine(rec.path, float(f), amp, amp / np.sqrt(2) / rms_y, z,
-                               float(nominal), u))
-    return lines, line_sum
+                               float(nominal), u, float(ca), float(cb)))
+    return lines, total
 
 
 def find_mains_lines(records: Sequence, predictions: Sequence[np.ndarray],
@@ -234,8 +262,16 @@ def find_mains_lines(records: Sequence, predictions: Sequence[np.ndarray],
     families = (50.0, 60.0) if mains == 'auto' else (mains,)
     best = ([], zeros, 0.0)
     for f_mains in families:
-        found = [_record_lines(rec, pred, keep, f_mains, families, n_harmonics, false_alarm)
-                 for rec, pred, keep in zip(records, predictions, keeps)]
+        per_record = [_record_rows(rec, pred, keep, f_mains, families, n_harmonics,
+                                   false_alarm)
+                      for rec, pred, keep in zip(records, predictions, keeps)]
+        # a line on a drive harmonic may be the sensor's own response there; it is hum when
+        # the same line shows, off every drive harmonic, in another record (mains couples
+        # into every record of a campaign alike)
+        clear = {row[1] for rows in per_record for row, ambiguous in rows if not ambiguous}
+        found = [_line_sum(rec, keep, [row for row, ambiguous in rows
+                                       if not ambiguous or row[1] in clear])
+                 for rec, keep, rows in zip(records, keeps, per_record)]
         power = sum(float(np.sum(f ** 2)) for _, f in found)
         if power > best[2]:
             best = ([ln for lines, _ in found for ln in lines], [f for _, f in found], power)

@@ -9,9 +9,11 @@ implausible:
    parameters is fitted as a factor of the current model (all records and samples, every free
    parameter refitted; corners started across the records' band).  Periodic records get their
    periodic history (:mod:`.history`), :data:`HISTORY_TIME_CONSTANTS` time constants of the
-   slowest corner started from, so that a slow C(s) enters each record in steady state.  An order is taken when its
-   best structure lowers the BIC by ``min_delta_bic`` below the best lower order (or the model
-   without correction).
+   slowest corner started from, so that a slow C(s) enters each record in steady state.  An
+   order is taken when its best structure lowers the BIC by ``min_delta_bic`` below the best
+   lower order (or the model without correction).
+   C(s) must also pass the rule of a step of the search: lower the held-out error by the
+   needed gain (:meth:`~.state.SearchState.needed_gain`).
 2. **The named effects against C(s).**  A catalog effect stays named only when it is plausible,
    its own test (:mod:`.significance`) is significant beside C(s), and it is better than C(s)
    grown by as many parameters as it has: the model without it, with the best structure that
@@ -175,15 +177,14 @@ def _failing(state, best, band):
             return name, f'not significant beside the correction C(s) ({describe(test)})'
         rival = _rival(state, best, name, band)
         if rival is not None and rival.fit.bic <= best.fit.bic - level:
-            return name, (f"a correction C(s) with as many parameters fits better "
-                          f"({'+'.join(rival.structure)}: BIC {rival.fit.bic - best.fit.bic:+.0f})")
+            grown = '+'.join(rival.structure)
+            return name, ('a correction C(s) with as many parameters fits better '
+                          f'({grown}: BIC {rival.fit.bic - best.fit.bic:+.0f})')
     return None
 
 
 def _result(state, best, tried) -> Correction:
-    """Score C(s) and turn its fit into a :class:`Correction` with 95 % intervals."""
-    with registered([best.structure]):
-        best = state.score(best)
+    """Turn the scored fit of C(s) into a :class:`Correction` with 95 % intervals."""
     n = len(best.shape)
     cov = best.fit.covariance
     sd = np.sqrt(np.clip(np.diag(cov)[-n:], 0, None)) if cov is not None else np.full(n, np.nan)
@@ -207,6 +208,10 @@ def outside_stage(state) -> None:
         best, tried = select_correction(view, view.current, band)
         if best is None:
             return
+        with registered([best.structure]):
+            best = view.score(best)
+        if best.error > (1 - state.needed_gain(state.current.error)) * state.current.error:
+            return              # not significant by the held-out error: no correction
         failing = _failing(view, best, band)
         if failing is None:
             state.correction = _result(view, best, tried)

@@ -63,7 +63,7 @@ def start_grid(effect_name: str, shape: Sequence[str], priors: dict) -> list[lis
 
 
 def baseline_starts(spec: FitSpec, priors: dict, model) -> list[np.ndarray]:
-    """Return the start of the baseline fit: the model's material, its effects' values or priors."""
+    """Return the baseline fit's start: the model's material, its effects' values or priors."""
     from .fitting import parameter
 
     x = [np.log(getattr(model.material, n)) for n in spec.material]

@@ -2,10 +2,12 @@
 """
 The line-free residual: mains lines out of the records, then the noise floor.
 
-* :func:`remove_lines` fits the starting model to the records as measured, predicts each
-  record's current from its deflection, finds the mains lines in what the prediction leaves
-  (:mod:`.lines`) and subtracts them; every later fit, the noise floor and ``explained`` see
-  the line-free records.
+* :func:`detect_lines` predicts each record's current from its deflection with a model fitted
+  to the records as measured and finds the mains lines in what the prediction leaves
+  (:mod:`.lines`); :func:`clean` subtracts them.  Every later fit, the noise floor and
+  ``explained`` see the line-free records.  :mod:`.search` looks for the lines again under
+  the final model and searches once more when a strong line comes or goes
+  (:func:`lines_changed`).
 * :func:`noise_floor`: the held-out error a perfect model would have,
   ``sqrt(sum sigma_r^2 n_r / sum ||y_r - mean y_r||^2)`` over the records' kept samples, with
   ``sigma_r`` the measured noise RMS (:func:`~ipmc_sensor_ros.workbench.metrics.noise_rms`).
@@ -16,11 +18,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..timefit import predict, prepare
-from .fitting import evaluate
-from .lines import MAINS_SEARCH_HZ, find_mains_lines, parse_mains, summarize_lines
+from ..timefit import FitSpec, predict, prepare
+from .fitting import evaluate, make_folds
+from .lines import MAINS_SEARCH_HZ, find_mains_lines, parse_mains
 
-__all__ = ['noise_floor', 'remove_lines']
+__all__ = ['noise_floor', 'detect_lines', 'clean', 'line_test', 'lines_changed', 'mains_lines']
 
 
 def noise_floor(prepared) -> float:
@@ -30,27 +32,77 @@ def noise_floor(prepared) -> float:
     return float(np.sqrt(num / den))
 
 
-def remove_lines(records, prepared, spec, starts, folds, settings, priors):
+def detect_lines(records, prepared, models, settings):
     """
-    Return ``(prepared, lines, line_test, fit)`` for the line-free records.
+    Mains lines of the measured records under ``models`` (one per record): ``(lines, fitted)``.
 
-    ``prepared``: the records as measured; ``fit``: the starting model (``spec`` from
-    ``starts``) fitted to them, whose prediction is subtracted before the lines are looked
-    for (None with ``mains`` off).  Without lines the measured records are returned as they
-    are.
+    ``prepared``: the records as measured; each record's current is predicted from its
+    deflection by its model and the lines are looked for in what that leaves
+    (:func:`~.lines.find_mains_lines`).
     """
-    mains = parse_mains(settings.mains)
-    if mains is None:
-        return prepared, [], {}, None
-    fit = evaluate(prepared, spec, starts, folds, settings.fold_nfev, priors=priors,
-                   scored=False)
-    predictions = [predict(p, m) for p, m in zip(prepared, fit.fit.models)]
-    lines, fitted = find_mains_lines(records, predictions, [p.keep for p in prepared], mains,
-                                     false_alarm=settings.line_false_alarm)
-    test = {'false_alarm_per_record': settings.line_false_alarm, 'mains': mains,
-            'search_hz': MAINS_SEARCH_HZ, 'lines_found': len(lines)}
-    if not lines:
-        return prepared, [], test, fit
+    predictions = [predict(p, m) for p, m in zip(prepared, models)]
+    return find_mains_lines(records, predictions, [p.keep for p in prepared],
+                            parse_mains(settings.mains), false_alarm=settings.line_false_alarm)
+
+
+def clean(records, prepared, fitted, settle_s):
+    """The prepared line-free records (``prepared`` itself when no line was found)."""
+    if not any(np.any(f) for f in fitted):
+        return prepared
     cleaned = [replace(r, current_a=np.asarray(r.current_a, float) - f) if np.any(f) else r
                for r, f in zip(records, fitted)]
-    return prepare(cleaned, settle_s=settings.settle_s), summarize_lines(lines), test, fit
+    return prepare(cleaned, settle_s=settle_s)
+
+
+def line_test(settings, lines) -> dict:
+    """What the JSON says about the line test: its false-alarm rate and what it found."""
+    if parse_mains(settings.mains) is None:
+        return {}
+    return {'false_alarm_per_record': settings.line_false_alarm,
+            'mains': parse_mains(settings.mains), 'search_hz': MAINS_SEARCH_HZ,
+            'lines_found': len(lines)}
+
+
+def lines_changed(before, after, factor: float = 2.0) -> bool:
+    """
+    True when a line changed by ``factor`` x its test threshold in standard errors.
+
+    A line found in one list only counts with its whole amplitude.  Lines found under the
+    starting model and under the final one differ where the starting model's error stood at a
+    drive harmonic (a missing nonlinearity puts current at the odd harmonics of a crank, whose
+    deflection has none); a line near its threshold that comes and goes changes the records by
+    less than the noise.
+    """
+    a = {(ln.record, ln.nominal_hz): ln for ln in before}
+    b = {(ln.record, ln.nominal_hz): ln for ln in after}
+    for key in set(a) | set(b):
+        x, y = a.get(key), b.get(key)
+        ref = x or y
+        se = ref.amplitude_a / ref.z
+        dc = (x.cos_a if x else 0.0) - (y.cos_a if y else 0.0)
+        ds = (x.sin_a if x else 0.0) - (y.sin_a if y else 0.0)
+        if np.hypot(dc, ds) >= factor * ref.z_threshold * se:
+            return True
+    return False
+
+
+def mains_lines(records, mains='auto', **settings):
+    """
+    Return ``(lines, cleaned records)``: the mains lines of records under their own model.
+
+    As the diagnosis first finds them (:func:`detect_lines`): the records' model with its free
+    material (``settings``: fields of :class:`~.settings.Settings`) fitted to the records, the
+    lines looked for in what its prediction leaves.  ``lines``: :class:`~.lines.MainsLine`.
+    """
+    from .ranking import baseline_starts
+    from .settings import Settings
+
+    s = Settings.from_kwargs({**settings, 'mains': mains})
+    spec = FitSpec(s.free_material)
+    prepared = prepare(records, settle_s=s.settle_s)
+    folds, _ = make_folds(prepared, s.n_folds)
+    starts = baseline_starts(spec, {}, records[0].model)
+    fit = evaluate(prepared, spec, starts, folds, s.fold_nfev, scored=False)
+    lines, fitted = detect_lines(records, prepared, fit.fit.models, s)
+    return lines, [replace(r, current_a=np.asarray(r.current_a, float) - f)
+                   for r, f in zip(records, fitted)]

@@ -3,7 +3,9 @@
 The order of the stages of a diagnosis.
 
 0. Mains lines are found in what the starting model leaves of the measured current and
-   removed (:mod:`.residual`, :mod:`.lines`).
+   removed (:mod:`.residual`, :mod:`.lines`).  After stage 3 they are looked for again under
+   the final model; when a strong line comes or goes (the starting model's error stood at a
+   drive harmonic), stages 0-3 run again with the final model's lines.
 1. The baseline (the given model, its free material and ``fit_effects`` parameters) is fitted
    to the line-free records and scored; the noise floor is measured.
 2. The offset test (:mod:`.offset_test`) names ``current_offset`` when the mean residual
@@ -21,6 +23,8 @@ The order of the stages of a diagnosis.
 """
 from __future__ import annotations
 
+import numpy as np
+
 from ...physics.effects import EFFECTS, get_effect
 from ..timefit import FitSpec, prepare
 from .fitting import evaluate, held_out, make_folds
@@ -29,7 +33,8 @@ from .exchange import exchange_pass
 from .offset_test import add_offset
 from .outside import is_correction, outside_stage
 from .ranking import baseline_starts
-from .residual import noise_floor, remove_lines
+from .lines import parse_mains, summarize_lines
+from .residual import clean, detect_lines, line_test, lines_changed, noise_floor
 from .significance import membership
 from .state import SearchState
 from .verdict import Diagnosis
@@ -44,28 +49,37 @@ def _pool(records, settings) -> list[str]:
     return [n for n in names if n not in present]
 
 
-def _start(records, settings, priors, say) -> SearchState:
-    """Lines out, baseline fitted and scored, noise floor measured (stages 0 and 1)."""
+def _start(records, raw, settings, priors, say, given=None) -> SearchState:
+    """
+    Lines out, baseline fitted and scored, noise floor measured (stages 0 and 1).
+
+    ``raw``: the records as measured, prepared; ``given``: ``(lines, fitted)`` found already
+    (under a final model), else they are found under the baseline fitted to ``raw``.
+    """
     s = settings
     spec = FitSpec(s.free_material, tuple((e, p.name) for e in s.fit_effects
                                           for p in get_effect(e).parameters))
-    prepared = prepare(records, settle_s=s.settle_s)
-    folds, cv = make_folds(prepared, s.n_folds)
+    folds, cv = make_folds(raw, s.n_folds)
     starts = baseline_starts(spec, priors, records[0].model)
     say('fitting baseline')
-    cleaned, lines, line_test, fit = remove_lines(records, prepared, spec, starts, folds, s,
-                                                  priors)
-    if fit is not None and cleaned is prepared:     # no line: the fit is the baseline's
-        baseline = held_out(prepared, fit, folds, s.fold_nfev)
+    fit, lines, fitted = None, [], [np.zeros(p.t.size) for p in raw]
+    if given is not None:
+        lines, fitted = given
+    elif parse_mains(s.mains) is not None:
+        fit = evaluate(raw, spec, starts, folds, s.fold_nfev, priors=priors, scored=False)
+        lines, fitted = detect_lines(records, raw, fit.fit.models, s)
+    prepared = clean(records, raw, fitted, s.settle_s)
+    if fit is not None and prepared is raw:         # no line: the fit is the baseline's
+        baseline = held_out(raw, fit, folds, s.fold_nfev)
     else:
-        baseline = evaluate(cleaned, spec, [fit.x] if fit is not None else starts, folds,
+        baseline = evaluate(prepared, spec, [fit.x] if fit is not None else starts, folds,
                             s.fold_nfev, priors=priors)
-    prepared = cleaned
     baseline.params = {**baseline.params, **{f'{e}.{n}': baseline.fit.effect_values[e][n]
                                              for e, n in spec.effect_params}}
     state = SearchState(s, prepared, folds, cv, spec, priors, _pool(records, s), say,
-                        noise_floor=noise_floor(prepared), baseline=baseline, lines=lines,
-                        line_test=line_test)
+                        noise_floor=noise_floor(prepared), baseline=baseline,
+                        lines=summarize_lines(lines), line_test=line_test(s, lines))
+    state.line_rows = lines
     state.adopt(baseline)
     return state
 
@@ -100,8 +114,16 @@ def _reason(state, missing, explained) -> str:
 
 def run_search(records, settings, priors, say) -> Diagnosis:
     """Run the stages of the module docstring; return the verdict."""
-    state = _start(records, settings, priors, say)
+    raw = prepare(records, settle_s=settings.settle_s)
+    state = _start(records, raw, settings, priors, say)
     _search(state)
+    if parse_mains(settings.mains) is not None:
+        final = detect_lines(records, raw, state.current.fit.models, settings)
+        if lines_changed(state.line_rows, final[0]):
+            say('the lines under the final model differ from those under the baseline: '
+                'searching again on the records without them')
+            state = _start(records, raw, settings, priors, say, given=final)
+            _search(state)
     if settings.correction:
         outside_stage(state)
     state.kept_by = membership(state)

@@ -46,6 +46,7 @@ class SearchState:
     offset: dict = field(default_factory=dict)
     lines: list = field(default_factory=list)
     line_test: dict = field(default_factory=dict)
+    line_rows: list = field(default_factory=list)     # the MainsLine of every record
     kept_by: dict = field(default_factory=dict)
     correction: object | None = None
 
