@@ -89,8 +89,8 @@ def _search(state) -> None:
     add_offset(state)
     for completion in (False, True):
         if completion and (len(state.chosen) >= state.settings.max_effects
-                           or state.at_floor()):
-            break
+                           or state.at_floor() or not state.replaced):
+            break               # (nothing replaced: the pass would repeat the last step)
         n_steps = len(state.steps)
         forward_search(state, completion)
         if completion and len(state.steps) == n_steps:
