@@ -260,3 +260,24 @@ def scenario(kind: str, seed: int):
         names.append('current_offset')
     model = () if 'surface_resistance' in names else ('surface_resistance',)
     return make_records(truth, seed, model_effects=model, **kw), truth, set(names)
+
+
+def write_records(records, out_dir) -> list:
+    """Write records as ipmc-timeseries/1 files (one per record) into ``out_dir``; the paths."""
+    from pathlib import Path
+
+    from ipmc_sensor_ros.workbench.formats import write_timeseries
+    from ipmc_sensor_ros.workbench.measurements import TimeSeries
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for r in records:
+        rate = (r.time_s.size - 1) / (r.time_s[-1] - r.time_s[0])
+        paths.append(out / f"{r.path.replace('.', 'p')}.csv")
+        write_timeseries(paths[-1], TimeSeries(path='', sample=r.sample,
+                                               geometry=r.model.geometry, known={},
+                                               sample_rate_hz=float(rate), time_s=r.time_s,
+                                               current_a=r.current_a,
+                                               deflection_m=r.deflection_m))
+    return paths

@@ -91,22 +91,6 @@ def test_fit_frees_effect_parameter_and_saves_model(data, tmp_path, capsys):
     assert 'add it with --effects time_delay' in capsys.readouterr().err
 
 
-RIG = '''# SPDX-License-Identifier: Apache-2.0
-"""Test truth: an AC-coupled amplifier, a first-order high-pass (not in the catalog)."""
-import numpy as np
-
-from ipmc_sensor_ros.physics.effects import Effect, EffectParameter
-
-
-class RigHighPass(Effect):
-    name = 'rig_high_pass'
-    parameters = (EffectParameter('corner_hz', 'Hz', 0.5, 0.01, 100.0, (0.01, 100.0), 'f_c'),)
-
-    def factor(self, s, model, values):
-        return s / (s + 2 * np.pi * values['corner_hz'])
-'''
-
-
 def _doc_commands():
     """The ``ipmc-model`` lines of the shell blocks of docs/discovery.md."""
     text = (Path(__file__).resolve().parents[1] / 'docs' / 'discovery.md').read_text()
@@ -116,29 +100,29 @@ def _doc_commands():
 
 
 @pytest.fixture
-def rig_unloaded():
+def plugin_unloaded():
     from ipmc_sensor_ros.physics.effects import EFFECTS
 
     yield
-    for name in ('rig_high_pass', 'ac_coupling'):
-        EFFECTS.pop(name, None)
+    EFFECTS.pop('ac_coupling', None)
 
 
-def test_documented_outside_loop_runs_as_shown(tmp_path, monkeypatch, capsys, rig_unloaded):
+def test_documented_outside_loop_runs_as_shown(tmp_path, monkeypatch, plugin_unloaded):
     """
     docs/discovery.md's loop on records with a 0.5 Hz AC coupling the catalog does not hold.
 
-    diagnose names no catalog effect for it, fits C(s) (a high-pass within its interval of
-    0.5 Hz), saves it as a plugin; diagnose with the plugin names it and ends at the floor.
+    Records made apart from the code (bench.discovery_records: exact H2 by FFT with a
+    pre-roll, a sample off the paper's values).  diagnose names no catalog effect for the
+    coupling, fits C(s) (a high-pass whose interval holds 0.5 Hz) and saves it as a plugin;
+    diagnose with the plugin names it and ends at the floor.
     """
-    monkeypatch.chdir(tmp_path)
-    (tmp_path / 'rig.py').write_text(RIG)
-    assert main(['simulate', '--out', 'data', '--model', 'h2', '--plugin', 'rig.py',
-                 '--effects', 'rig_high_pass(corner_hz=0.5)', '--samples', 'slim,short',
-                 '--frequencies', '1,2,5', '--duration', '4', '--seed', '4']) == 0
-    from ipmc_sensor_ros.physics.effects import EFFECTS
+    from bench.discovery_records import Truth, make_records, write_records
 
-    EFFECTS.pop('rig_high_pass')            # the diagnosis must not know the truth
+    monkeypatch.chdir(tmp_path)
+    truth = Truth(outside=('high_pass', 0.5),
+                  material_scale={'charge_stress_coupling_j_per_c': 1.1})
+    write_records(make_records(truth, 4, frequencies_hz=(1.0, 2.0, 5.0), duration_s=4.0),
+                  'data')
     commands = _doc_commands()
     assert len(commands) == 2, commands
     for cmd in commands:

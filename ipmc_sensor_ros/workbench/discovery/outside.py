@@ -91,13 +91,22 @@ def _band_hz(state) -> tuple[float, float]:
 
 
 def history_view(state, band):
-    """The state on the records with their periodic history, its current model refitted there."""
+    """
+    The state on records with a longer periodic history, its current model refitted there.
+
+    :data:`HISTORY_TIME_CONSTANTS` time constants of the slowest corner a fit starts from; the
+    state itself when its records hold that much already.
+    """
     history_s = min(HISTORY_MAX_S, HISTORY_TIME_CONSTANTS / (2 * np.pi * band[0] / 5))
+    if all(p.t[p.keep][0] - p.t[0] >= history_s + state.settings.settle_s
+           for p in state.prepared):
+        return state
     prepared = []
     for p in state.prepared:
         rec = with_history(p.rec, history_s)
-        extra = 0.0 if rec is None else rec.time_s[0] - p.rec.time_s[0]
-        prepared.append(prepare([rec or p.rec], settle_s=state.settings.settle_s - extra)[0])
+        start = float(p.t[p.keep][0])
+        use = rec or p.rec
+        prepared.append(prepare([use], settle_s=start - float(use.time_s[0]))[0])
     view = replace(state, prepared=prepared,
                    folds=make_folds(prepared, state.settings.n_folds)[0])
     cur = state.current

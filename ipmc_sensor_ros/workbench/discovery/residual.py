@@ -18,8 +18,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..timefit import FitSpec, predict, prepare
+from ..timefit import FitSpec, predict
 from .fitting import evaluate, make_folds
+from .history import history_samples, prepare_with_history
 from .lines import MAINS_SEARCH_HZ, find_mains_lines, parse_mains
 
 __all__ = ['noise_floor', 'detect_lines', 'clean', 'line_test', 'lines_changed', 'mains_lines']
@@ -36,13 +37,17 @@ def detect_lines(records, prepared, models, settings):
     """
     Mains lines of the measured records under ``models`` (one per record): ``(lines, fitted)``.
 
-    ``prepared``: the records as measured; each record's current is predicted from its
-    deflection by its model and the lines are looked for in what that leaves
-    (:func:`~.lines.find_mains_lines`).
+    ``prepared``: the records as measured (:func:`~.history.prepare_with_history`); each
+    record's current is predicted from its deflection by its model and the lines are looked
+    for in what that leaves (:func:`~.lines.find_mains_lines`).
     """
-    predictions = [predict(p, m) for p, m in zip(prepared, models)]
-    return find_mains_lines(records, predictions, [p.keep for p in prepared],
-                            parse_mains(settings.mains), false_alarm=settings.line_false_alarm)
+    predictions, keeps = [], []
+    for p, m, rec in zip(prepared, models, records):
+        n = history_samples(p, rec)
+        predictions.append(predict(p, m)[n:])
+        keeps.append(p.keep[n:])
+    return find_mains_lines(records, predictions, keeps, parse_mains(settings.mains),
+                            false_alarm=settings.line_false_alarm)
 
 
 def clean(records, prepared, fitted, settle_s):
@@ -51,7 +56,7 @@ def clean(records, prepared, fitted, settle_s):
         return prepared
     cleaned = [replace(r, current_a=np.asarray(r.current_a, float) - f) if np.any(f) else r
                for r, f in zip(records, fitted)]
-    return prepare(cleaned, settle_s=settle_s)
+    return prepare_with_history(cleaned, settle_s)
 
 
 def line_test(settings, lines) -> dict:
@@ -99,7 +104,7 @@ def mains_lines(records, mains='auto', **settings):
 
     s = Settings.from_kwargs({**settings, 'mains': mains})
     spec = FitSpec(s.free_material)
-    prepared = prepare(records, settle_s=s.settle_s)
+    prepared = prepare_with_history(records, s.settle_s)
     folds, _ = make_folds(prepared, s.n_folds)
     starts = baseline_starts(spec, {}, records[0].model)
     fit = evaluate(prepared, spec, starts, folds, s.fold_nfev, scored=False)

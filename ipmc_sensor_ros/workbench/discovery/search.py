@@ -7,7 +7,8 @@ The order of the stages of a diagnosis.
    the final model; when a strong line comes or goes (the starting model's error stood at a
    drive harmonic), stages 0-3 run again with the final model's lines.
 1. The baseline (the given model, its free material and ``fit_effects`` parameters) is fitted
-   to the line-free records and scored; the noise floor is measured.
+   to the line-free records and scored; the noise floor is measured.  Periodic records are
+   predicted with the periodic history their FFT holds (:mod:`.history`).
 2. The offset test (:mod:`.offset_test`) names ``current_offset`` when the mean residual
    current is significant.
 3. Stepwise forward search (:mod:`.forward`) with the backward and swap checks after each
@@ -26,14 +27,15 @@ from __future__ import annotations
 import numpy as np
 
 from ...physics.effects import EFFECTS, get_effect
-from ..timefit import FitSpec, prepare
+from ..timefit import FitSpec
+from .exchange import exchange_pass
 from .fitting import evaluate, held_out, make_folds
 from .forward import forward_search
-from .exchange import exchange_pass
+from .history import prepare_with_history
+from .lines import parse_mains, summarize_lines
 from .offset_test import add_offset
 from .outside import is_correction, outside_stage
 from .ranking import baseline_starts
-from .lines import parse_mains, summarize_lines
 from .residual import clean, detect_lines, line_test, lines_changed, noise_floor
 from .significance import membership
 from .state import SearchState
@@ -114,7 +116,7 @@ def _reason(state, missing, explained) -> str:
 
 def run_search(records, settings, priors, say) -> Diagnosis:
     """Run the stages of the module docstring; return the verdict."""
-    raw = prepare(records, settle_s=settings.settle_s)
+    raw = prepare_with_history(records, settings.settle_s)
     state = _start(records, raw, settings, priors, say)
     _search(state)
     if parse_mains(settings.mains) is not None:
