@@ -61,17 +61,6 @@ class Truth:
     hum_hz: float = 50.0                  # the grid's actual frequency (off nominal)
     noise_rel: float = 0.01
 
-    def named(self) -> set[str]:
-        """Catalog effects a diagnosis should name (from the model under test)."""
-        out = set()
-        if self.amplifier_hz:
-            out.add('amplifier_bandwidth')
-        if self.delay_s:
-            out.add('time_delay')
-        if self.offset_a or self.drift_a_per_s:
-            out.add('current_offset')
-        return out
-
 
 def h2_paper(s, material, geometry, surface_resistance=True):
     """

@@ -26,8 +26,8 @@ from dataclasses import replace
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from ..freqresp import fundamental_response
 from ..timefit import prepare
+from .drive import drive_of
 
 #: the prediction's return to zero after a record (:func:`~ipmc_sensor_ros.workbench.timefit.
 #: prepare`'s ``pad_s``), s
@@ -42,15 +42,19 @@ __all__ = ['PERIODIC_TOLERANCE', 'with_history', 'free_history_s', 'prepare_with
 PERIODIC_TOLERANCE = 0.02
 
 
-def with_history(rec, history_s: float):
-    """Return ``rec`` with ``history_s`` seconds of periodic continuation before it, or None."""
+def with_history(rec, history_s: float, drive=None):
+    """
+    Return ``rec`` with ``history_s`` seconds of periodic continuation before it, or None.
+
+    ``drive``: the record's :class:`~.drive.Drive` (found here when not given).
+    """
+    drive = drive or drive_of(rec)
+    if drive.frequency_hz is None:
+        return None
+    period = 1.0 / drive.frequency_hz
     t = np.asarray(rec.time_s, float)
     w = np.asarray(rec.deflection_m, float)
     y = np.asarray(rec.current_a, float)
-    try:
-        period = 1.0 / fundamental_response(t, w, y).frequency_hz
-    except ValueError:
-        return None
     tt = t - t[0]
     if period >= tt[-1] or history_s <= 0:
         return None
@@ -76,17 +80,18 @@ def free_history_s(rec) -> float:
     return max(0, (1 << int(np.ceil(np.log2(used)))) - used - 1) / fs
 
 
-def prepare_with_history(records, settle_s: float, history_s=None) -> list:
+def prepare_with_history(records, settle_s: float, drives=None) -> list:
     """
-    Prepare each record for fitting, periodic ones with a periodic history before them.
+    Prepare each record for fitting, periodic ones with the history their FFT holds.
 
-    ``history_s``: per record (None: :func:`free_history_s`).  The samples kept for fitting
-    and scoring are those of the record after ``settle_s``, whatever the history.
+    :func:`free_history_s` of periodic continuation (``drives``: the records'
+    :class:`~.drive.Drive`, found here when not given).  The samples kept for fitting and
+    scoring are those of the record after ``settle_s``, whatever the history.
     """
     out = []
     for k, rec in enumerate(records):
-        h = free_history_s(rec) if history_s is None else history_s[k]
-        longer = with_history(rec, h) if h > 0 else None
+        h = free_history_s(rec)
+        longer = with_history(rec, h, drives[k] if drives else None) if h > 0 else None
         start = float(rec.time_s[0]) + settle_s
         use = longer or rec
         out.append(prepare([use], settle_s=start - float(use.time_s[0]))[0])

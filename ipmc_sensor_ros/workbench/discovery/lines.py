@@ -46,7 +46,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..freqresp import fundamental_response, harmonic_fit
+from .drive import drive_of
 
 __all__ = ['MainsLine', 'MAINS_SEARCH_HZ', 'LEVEL_BAND_HZ', 'parse_mains', 'find_mains_lines',
            'line_threshold', 'summarize_lines']
@@ -149,28 +149,6 @@ def _measured_mains(r, f_mains, fs):
     return float(cand[k])
 
 
-def _drive(t, w, max_harmonics: int = 20) -> tuple[float | None, list[float]]:
-    """
-    The drive's fundamental (refined) and its harmonics carrying deflection content.
-
-    Harmonics up to ``max_harmonics`` with at least 1e-4 of the fundamental's amplitude in a
-    least-squares harmonic fit of the deflection; ``(None, [])`` for a non-periodic stimulus.
-    """
-    try:
-        f0 = fundamental_response(t, w, w).frequency_hz
-    except ValueError:
-        return None, []
-    fs = (t.size - 1) / (t[-1] - t[0])
-    k_max = min(int(0.45 * fs / f0), max_harmonics)
-    if k_max < 1 or f0 * (t[-1] - t[0]) < 2:
-        return None, []
-    phasors, resid, _ = harmonic_fit(t, w, f0, k_max)
-    if np.var(resid) > 0.1 * np.var(w):
-        return None, []        # not periodic: the harmonics do not explain the deflection
-    amps = np.abs(phasors)
-    return f0, [(k + 1) * f0 for k in np.flatnonzero(amps >= 1e-4 * amps[0])]
-
-
 def on_drive_harmonic(f, z, f0, span_s) -> bool:
     """
     True when a line at ``f`` cannot be told from a harmonic of the drive by its frequency.
@@ -218,15 +196,13 @@ def _family(t, r, drive, f_mains, n_harmonics, orders, false_alarm):
     return out
 
 
-def _record_rows(rec, pred, keep, f_mains, families, n_harmonics, false_alarm):
+def _record_rows(rec, pred, keep, drive, f_mains, families, n_harmonics, false_alarm):
     """A record's lines that pass the test: ``[(row, ambiguous), ...]`` (:func:`_family` rows)."""
     t = (np.asarray(rec.time_s, float) - rec.time_s[0])[keep]
     r = (np.asarray(rec.current_a, float) - pred)[keep]
-    w = getattr(rec, 'deflection_m', None)
-    f0, drive = _drive(t, np.asarray(w, float)[keep]) if w is not None else (None, [])
     orders = _orders((t.size - 1) / (t[-1] - t[0]), families, n_harmonics)
-    rows = _family(t, r, drive, f_mains, n_harmonics, orders, false_alarm)
-    return [(row, on_drive_harmonic(row[0], row[4], f0, t[-1] - t[0]))
+    rows = _family(t, r, list(drive.harmonics_hz), f_mains, n_harmonics, orders, false_alarm)
+    return [(row, on_drive_harmonic(row[0], row[4], drive.frequency_hz, t[-1] - t[0]))
             for row in rows if row[4] >= row[5]]
 
 
@@ -246,25 +222,27 @@ def _line_sum(rec, keep, rows):
 
 def find_mains_lines(records: Sequence, predictions: Sequence[np.ndarray],
                      keeps: Sequence[np.ndarray], mains='auto', n_harmonics: int = 10,
-                     false_alarm: float = 1e-4):
+                     false_alarm: float = 1e-4, drives=None):
     """
     Detect mains lines in every record from the model residual (module docstring).
 
     ``records``: objects with ``path``, ``time_s``, ``current_a`` and ``deflection_m``;
     ``predictions``: the current the model predicts from each record's deflection; ``keeps``:
-    the samples to use (after the settle time).  Returns ``(lines, fitted)``: the detected
-    lines and, per record, the fitted line sum to subtract from the whole record.
+    the samples to use (after the settle time); ``drives``: their :class:`~.drive.Drive`
+    (found here when not given).  Returns ``(lines, fitted)``: the detected lines and, per
+    record, the fitted line sum to subtract from the whole record.
     """
     mains = parse_mains(mains)
     zeros = [np.zeros(np.asarray(r.current_a).size) for r in records]
     if mains is None:
         return [], zeros
     families = (50.0, 60.0) if mains == 'auto' else (mains,)
+    drives = drives or [drive_of(rec) for rec in records]
     best = ([], zeros, 0.0)
     for f_mains in families:
-        per_record = [_record_rows(rec, pred, keep, f_mains, families, n_harmonics,
+        per_record = [_record_rows(rec, pred, keep, drive, f_mains, families, n_harmonics,
                                    false_alarm)
-                      for rec, pred, keep in zip(records, predictions, keeps)]
+                      for rec, pred, keep, drive in zip(records, predictions, keeps, drives)]
         # a line on a drive harmonic may be the sensor's own response there; it is hum when
         # the same line shows, off every drive harmonic, in another record (mains couples
         # into every record of a campaign alike)

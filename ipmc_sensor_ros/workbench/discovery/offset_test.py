@@ -17,30 +17,32 @@ import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
 from ..timefit import predict
+from .drive import drive_of
 
 __all__ = ['offset_test', 'add_offset']
 
 OFFSET = 'current_offset'
 
 
-def _whole_periods(p, t, r):
+def _whole_periods(p, t, r, drive=None):
     """The residual over whole stimulus periods (all of it for a non-periodic stimulus)."""
-    from ..freqresp import fundamental_response
-
-    try:
-        f0 = fundamental_response(t, p.w[p.keep], p.y[p.keep]).frequency_hz
-    except ValueError:
+    f0 = (drive or drive_of(p.rec)).frequency_hz
+    if f0 is None:
         return r
     n_per = int((t[-1] - t[0]) * f0)
     return r[t < t[0] + n_per / f0] if n_per >= 1 else r
 
 
-def offset_test(prepared, models) -> dict:
-    """Mean residual over whole stimulus periods per record; chi-square of the z-scores."""
+def offset_test(prepared, models, drives=None) -> dict:
+    """
+    Mean residual over whole stimulus periods per record; chi-square of the z-scores.
+
+    ``drives``: the records' :class:`~.drive.Drive` (found here when not given).
+    """
     zs, means, ns = [], [], []
-    for p, m in zip(prepared, models):
+    for k, (p, m) in enumerate(zip(prepared, models)):
         t, r = p.t[p.keep], (p.y - predict(p, m))[p.keep]
-        r = _whole_periods(p, t, r)
+        r = _whole_periods(p, t, r, drives[k] if drives else None)
         zs.append(float(np.mean(r) / (p.sigma / np.sqrt(r.size))))
         means.append(float(np.mean(r)))
         ns.append(r.size)
@@ -53,7 +55,7 @@ def add_offset(state) -> None:
     """Run the offset test on the current model; add ``current_offset`` when it is significant."""
     if OFFSET not in state.pool or state.settings.max_effects == 0:
         return
-    state.offset = offset_test(state.prepared, state.current.fit.models)
+    state.offset = offset_test(state.prepared, state.current.fit.models, state.drives)
     if state.offset['p_value'] >= state.settings.offset_p:
         return
     state.say('mean current found: fitting current_offset')

@@ -102,8 +102,8 @@ def history_view(state, band):
            for p in state.prepared):
         return state
     prepared = []
-    for p in state.prepared:
-        rec = with_history(p.rec, history_s)
+    for p, drive in zip(state.prepared, state.drives):
+        rec = with_history(p.rec, history_s, drive)
         start = float(p.t[p.keep][0])
         use = rec or p.rec
         prepared.append(prepare([use], settle_s=start - float(use.time_s[0]))[0])

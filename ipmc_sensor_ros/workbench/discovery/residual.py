@@ -19,6 +19,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..timefit import FitSpec, predict
+from .drive import drive_of
 from .fitting import evaluate, make_folds
 from .history import history_samples, prepare_with_history
 from .lines import MAINS_SEARCH_HZ, find_mains_lines, parse_mains
@@ -33,7 +34,7 @@ def noise_floor(prepared) -> float:
     return float(np.sqrt(num / den))
 
 
-def detect_lines(records, prepared, models, settings):
+def detect_lines(records, prepared, models, settings, drives=None):
     """
     Mains lines of the measured records under ``models`` (one per record): ``(lines, fitted)``.
 
@@ -47,16 +48,16 @@ def detect_lines(records, prepared, models, settings):
         predictions.append(predict(p, m)[n:])
         keeps.append(p.keep[n:])
     return find_mains_lines(records, predictions, keeps, parse_mains(settings.mains),
-                            false_alarm=settings.line_false_alarm)
+                            false_alarm=settings.line_false_alarm, drives=drives)
 
 
-def clean(records, prepared, fitted, settle_s):
+def clean(records, prepared, fitted, settle_s, drives=None):
     """The prepared line-free records (``prepared`` itself when no line was found)."""
     if not any(np.any(f) for f in fitted):
         return prepared
     cleaned = [replace(r, current_a=np.asarray(r.current_a, float) - f) if np.any(f) else r
                for r, f in zip(records, fitted)]
-    return prepare_with_history(cleaned, settle_s)
+    return prepare_with_history(cleaned, settle_s, drives)
 
 
 def line_test(settings, lines) -> dict:
@@ -104,10 +105,11 @@ def mains_lines(records, mains='auto', **settings):
 
     s = Settings.from_kwargs({**settings, 'mains': mains})
     spec = FitSpec(s.free_material)
-    prepared = prepare_with_history(records, s.settle_s)
+    drives = [drive_of(r) for r in records]
+    prepared = prepare_with_history(records, s.settle_s, drives)
     folds, _ = make_folds(prepared, s.n_folds)
     starts = baseline_starts(spec, {}, records[0].model)
     fit = evaluate(prepared, spec, starts, folds, s.fold_nfev, scored=False)
-    lines, fitted = detect_lines(records, prepared, fit.fit.models, s)
+    lines, fitted = detect_lines(records, prepared, fit.fit.models, s, drives)
     return lines, [replace(r, current_a=np.asarray(r.current_a, float) - f)
                    for r, f in zip(records, fitted)]

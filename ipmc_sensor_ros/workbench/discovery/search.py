@@ -28,6 +28,7 @@ import numpy as np
 
 from ...physics.effects import EFFECTS, get_effect
 from ..timefit import FitSpec
+from .drive import drive_of
 from .exchange import exchange_pass
 from .fitting import evaluate, held_out, make_folds
 from .forward import forward_search
@@ -51,12 +52,13 @@ def _pool(records, settings) -> list[str]:
     return [n for n in names if n not in present]
 
 
-def _start(records, raw, settings, priors, say, given=None) -> SearchState:
+def _start(records, raw, drives, settings, priors, say, given=None) -> SearchState:
     """
     Lines out, baseline fitted and scored, noise floor measured (stages 0 and 1).
 
-    ``raw``: the records as measured, prepared; ``given``: ``(lines, fitted)`` found already
-    (under a final model), else they are found under the baseline fitted to ``raw``.
+    ``raw``: the records as measured, prepared; ``drives``: their drives; ``given``: ``(lines,
+    fitted)`` found already (under a final model), else found under the baseline fitted to
+    ``raw``.
     """
     s = settings
     spec = FitSpec(s.free_material, tuple((e, p.name) for e in s.fit_effects
@@ -69,8 +71,8 @@ def _start(records, raw, settings, priors, say, given=None) -> SearchState:
         lines, fitted = given
     elif parse_mains(s.mains) is not None:
         fit = evaluate(raw, spec, starts, folds, s.fold_nfev, priors=priors, scored=False)
-        lines, fitted = detect_lines(records, raw, fit.fit.models, s)
-    prepared = clean(records, raw, fitted, s.settle_s)
+        lines, fitted = detect_lines(records, raw, fit.fit.models, s, drives)
+    prepared = clean(records, raw, fitted, s.settle_s, drives)
     if fit is not None and prepared is raw:         # no line: the fit is the baseline's
         baseline = held_out(raw, fit, folds, s.fold_nfev)
     else:
@@ -81,7 +83,7 @@ def _start(records, raw, settings, priors, say, given=None) -> SearchState:
     state = SearchState(s, prepared, folds, cv, spec, priors, _pool(records, s), say,
                         noise_floor=noise_floor(prepared), baseline=baseline,
                         lines=summarize_lines(lines), line_test=line_test(s, lines))
-    state.line_rows = lines
+    state.line_rows, state.drives = lines, drives
     state.adopt(baseline)
     return state
 
@@ -116,15 +118,16 @@ def _reason(state, missing, explained) -> str:
 
 def run_search(records, settings, priors, say) -> Diagnosis:
     """Run the stages of the module docstring; return the verdict."""
-    raw = prepare_with_history(records, settings.settle_s)
-    state = _start(records, raw, settings, priors, say)
+    drives = [drive_of(r) for r in records]
+    raw = prepare_with_history(records, settings.settle_s, drives)
+    state = _start(records, raw, drives, settings, priors, say)
     _search(state)
     if parse_mains(settings.mains) is not None:
-        final = detect_lines(records, raw, state.current.fit.models, settings)
+        final = detect_lines(records, raw, state.current.fit.models, settings, drives)
         if lines_changed(state.line_rows, final[0]):
             say('the lines under the final model differ from those under the baseline: '
                 'searching again on the records without them')
-            state = _start(records, raw, settings, priors, say, given=final)
+            state = _start(records, raw, drives, settings, priors, say, given=final)
             _search(state)
     if settings.correction:
         outside_stage(state)

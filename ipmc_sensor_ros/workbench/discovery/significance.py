@@ -45,7 +45,8 @@ def own_test(state, name: str, base=None):
     if k > 0:
         test['p_value'] = float(chi2_dist.sf(max(delta_chi2, 0.0), k))
     if name == OFFSET:
-        ot = offset_test(with_models(state.prepared, wo.fit.models), wo.fit.models)
+        ot = offset_test(with_models(state.prepared, wo.fit.models), wo.fit.models,
+                         state.drives)
         if ot['p_value'] < s.offset_p or not test['significant']:
             test = {'test': 'offset chi-square', **ot, 'level': s.offset_p,
                     'significant': ot['p_value'] < s.offset_p}

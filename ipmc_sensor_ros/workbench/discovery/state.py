@@ -47,6 +47,7 @@ class SearchState:
     lines: list = field(default_factory=list)
     line_test: dict = field(default_factory=dict)
     line_rows: list = field(default_factory=list)     # the MainsLine of every record
+    drives: list = field(default_factory=list)        # the Drive of every record
     kept_by: dict = field(default_factory=dict)
     correction: object | None = None
 
