@@ -87,10 +87,14 @@ def plugin_rerun(recs, diag, path, name):
 
     write_plugin(path, diag.correction, name=name)
     load_plugin(path)
-    catalog = [n for n in EFFECTS if not n.startswith(('correction_', 'measured_'))
-               and n not in PLUGIN_NAMES]
+    catalog = catalog_names()
     PLUGIN_NAMES.add(name)
     return diagnose(recs, candidates=catalog + [name])
+
+
+def catalog_names() -> list[str]:
+    """The catalog's effects (and plugins loaded by the user), not this study's plugins."""
+    return [n for n in EFFECTS if n not in PLUGIN_NAMES]
 
 
 def judge_scenario(kind, recs, truth, expected, diag, tmp_dir, seed):
@@ -191,7 +195,7 @@ def run_independent(groups, seeds, null_seeds, out, tmp_dir):
             for seed in range(null_seeds if group == 'null_daq' else seeds):
                 recs, truth, expected = scenario(kind, seed)
                 t0, c0 = time.perf_counter(), _cpu_s()
-                diag = diagnose(recs)
+                diag = diagnose(recs, candidates=catalog_names())
                 ok, notes = judge_scenario(kind, recs, truth, expected, diag, tmp_dir, seed)
                 dt, cpu = time.perf_counter() - t0, _cpu_s() - c0
                 _write(out, [group, f"{kind}:{'+'.join(sorted(expected)) or '-'}", seed,

@@ -15,10 +15,11 @@ addition is followed by the backward check (:mod:`.backward`) and the swap check
 from __future__ import annotations
 
 from .backward import backward_check
-from .exchange import swap_check
+from .exchange import exchange_pass, swap_check
+from .offset_test import add_offset
 from .ranking import merge_shapes, rank, shapes
 
-__all__ = ['forward_search', 'forward_step']
+__all__ = ['forward_search', 'forward_step', 'catalog_search']
 
 
 def _score_step(state, items):
@@ -96,3 +97,23 @@ def forward_search(state, completion: bool) -> None:
             excluded |= state.replaced
         if not forward_step(state, excluded):
             break
+
+
+def catalog_search(state) -> None:
+    """
+    The offset test, then the forward search and its checks, then the exchange pass.
+
+    Once more when the exchange left the budget unspent above the floor, with the effects a
+    swap had replaced offered again (an amplifier pole that replaced a 3.3 ms delay as its
+    tie, beside surface resistance, blocked the delay's return).
+    """
+    add_offset(state)
+    for completion in (False, True):
+        if completion and (len(state.chosen) >= state.settings.max_effects
+                           or state.at_floor() or not state.replaced):
+            break               # (nothing replaced: the pass would repeat the last step)
+        n_steps = len(state.steps)
+        forward_search(state, completion)
+        if completion and len(state.steps) == n_steps:
+            break                   # nothing added: the exchange pass would repeat itself
+        exchange_pass(state)

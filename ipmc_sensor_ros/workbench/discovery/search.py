@@ -17,8 +17,8 @@ The order of the stages of a diagnosis.
    offered again (an amplifier pole that replaced a 3.3 ms delay as its tie, beside surface
    resistance, blocked the delay's return).
 4. Outside the catalog (:mod:`.outside`): when the search ends above the floor, or a named
-   effect is implausible, a low-order correction C(s) is fitted and each named catalog effect
-   is checked against it.
+   effect is implausible, a low-order correction C(s) is fitted, and stages 2-3 run again with
+   it in the model: the catalog effects named are those significant beside C(s).
 5. The verdict: each named effect with the test that keeps it (:mod:`.significance`);
    ``explained`` when the final held-out error is at most ``explained_factor`` x floor + 0.001.
 """
@@ -28,14 +28,13 @@ import numpy as np
 
 from ...physics.effects import EFFECTS, get_effect
 from ..timefit import FitSpec
+from .correction_fit import is_correction
 from .drive import drive_of
-from .exchange import exchange_pass
 from .fitting import evaluate, held_out, make_folds
-from .forward import forward_search
+from .forward import catalog_search
 from .history import prepare_with_history
 from .lines import parse_mains, summarize_lines
-from .offset_test import add_offset
-from .outside import is_correction, outside_stage
+from .outside import outside_stage
 from .ranking import baseline_starts
 from .residual import clean, detect_lines, line_test, lines_changed, noise_floor
 from .significance import membership
@@ -88,20 +87,6 @@ def _start(records, raw, drives, settings, priors, say, given=None) -> SearchSta
     return state
 
 
-def _search(state) -> None:
-    """Offset test, forward search with its checks, exchange pass (stages 2 and 3)."""
-    add_offset(state)
-    for completion in (False, True):
-        if completion and (len(state.chosen) >= state.settings.max_effects
-                           or state.at_floor() or not state.replaced):
-            break               # (nothing replaced: the pass would repeat the last step)
-        n_steps = len(state.steps)
-        forward_search(state, completion)
-        if completion and len(state.steps) == n_steps:
-            break                   # nothing added: the exchange pass would repeat itself
-        exchange_pass(state)
-
-
 def _reason(state, missing, explained) -> str:
     base, cur, floor = state.baseline, state.current, state.noise_floor
     if missing:
@@ -121,17 +106,18 @@ def run_search(records, settings, priors, say) -> Diagnosis:
     drives = [drive_of(r) for r in records]
     raw = prepare_with_history(records, settings.settle_s, drives)
     state = _start(records, raw, drives, settings, priors, say)
-    _search(state)
+    catalog_search(state)
     if parse_mains(settings.mains) is not None:
         final = detect_lines(records, raw, state.current.fit.models, settings, drives)
         if lines_changed(state.line_rows, final[0]):
             say('the lines under the final model differ from those under the baseline: '
                 'searching again on the records without them')
             state = _start(records, raw, drives, settings, priors, say, given=final)
-            _search(state)
+            catalog_search(state)
     if settings.correction:
         outside_stage(state)
-    state.kept_by = membership(state)
+    if not state.correction:
+        state.kept_by = membership(state)
     missing = [e for e, _ in state.chosen]
     explained = bool(state.current.error <= state.explained_threshold)
     return Diagnosis(baseline=state.baseline, candidates=state.first_ranking,
