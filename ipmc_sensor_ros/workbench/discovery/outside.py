@@ -17,8 +17,8 @@ implausible:
    holds C(s)'s elements and that many more, in the model without the effect -- does not beat
    it by ``min_delta_bic``.  An effect that fails is dropped (a step).
 4. **The result** (:class:`~.correction.Correction`): C(s)'s values with 95 % intervals from the
-   covariance of a fit run to convergence (every parameter refitted with the named effects;
-   :data:`CONVERGED_NFEV`), the held-out error of
+   covariance of a fit run to convergence from three starts (every parameter refitted with the
+   named effects; :func:`_converged`), the held-out error of
    the named effects times C(s) against the floor.  The verdict's effects, and what keeps each
    (:mod:`.significance`), are those of the search beside C(s); its final model is theirs
    without C(s), fitted to the records.
@@ -106,11 +106,29 @@ def _drop_failing(inner, structure, band) -> None:
             inner.adopt(wo)
 
 
+def _converged(inner):
+    """
+    The current model fitted to convergence, the best of three starts.
+
+    Its values, the baseline's material with them, and the records' nominal material with
+    them: a material parameter can trade with a corner of C(s) (d with a lag's pole) and hold
+    a fit that stopped early in the wrong valley.
+    """
+    cur = inner.current
+    n_mat = len(cur.spec.material)
+    nominal = np.log([getattr(inner.prepared[0].rec.model.material, n)
+                      for n in cur.spec.material])
+    starts = [cur.x, np.concatenate([inner.baseline.x[:n_mat], cur.x[n_mat:]]),
+              np.concatenate([nominal, cur.x[n_mat:]])]
+    fits = [evaluate(inner.prepared, cur.spec, [x], inner.folds, inner.settings.fold_nfev,
+                     priors=inner.priors, max_nfev=CONVERGED_NFEV, scored=False)
+            for x in starts]
+    return inner.score(min(fits, key=lambda c: c.fit.chi2))
+
+
 def _result(inner, structure, tried) -> Correction:
     """C(s)'s values and 95 % intervals from the model beside which the search ended."""
-    cur = inner.current
-    cand = evaluate(inner.prepared, cur.spec, [cur.x], inner.folds, inner.settings.fold_nfev,
-                    priors=inner.priors, max_nfev=CONVERGED_NFEV)
+    cand = _converged(inner)
     inner.adopt(cand)
     name = correction_name(structure)
     n_mat = len(cand.spec.material)
