@@ -6,8 +6,11 @@ Runs when the search ends above the noise floor (beyond ``stop_factor``) or a na
 implausible:
 
 1. **C(s)** (:mod:`.correction_fit`) is fitted as a factor of the model the search ended with,
+   less the named effects whose values are implausible (stand-ins: a 4 Hz amplifier pole),
    its order by BIC; it must also lower the held-out error as a step of the search must
    (:meth:`~.state.SearchState.needed_gain`), else nothing is reported.
+   An element of C(s) that a catalog effect is, at a value plausible for it (a low-pass that
+   an amplifier's bandwidth could be, a delay), is left to the catalog (:data:`TWINS`).
 2. **Search again beside C(s).**  The baseline times C(s) (its parameters free) starts a new
    search (offset test, forward, backward, swap and exchange) on the same records: a catalog
    effect is named only when it is significant beside C(s).  The stand-ins of the first search
@@ -15,10 +18,13 @@ implausible:
 3. **Better than C(s) of as many parameters.**  Each effect named beside C(s) stays only when
    it is plausible and C(s) grown by as many parameters as it has -- the best structure that
    holds C(s)'s elements and that many more, in the model without the effect -- does not beat
-   it by ``min_delta_bic``.  An effect that fails is dropped (a step).
-4. **The result** (:class:`~.correction.Correction`): C(s)'s values with 95 % intervals from the
-   covariance of a fit run to convergence from three starts (every parameter refitted with the
-   named effects; :func:`_converged`), the held-out error of
+   it by ``min_delta_bic``.  An effect that fails is dropped (a step).  C(s) is then chosen
+   again on top of the effects named beside it; when its structure changes, steps 2-3 run
+   again (at most :data:`MAX_ROUNDS` times).
+4. **The result** (:class:`~.correction.Correction`): C(s)'s values from a fit run to
+   convergence from three starts (every parameter refitted with the named effects;
+   :func:`_converged`) with 95 % profile-likelihood intervals (:mod:`.interval`), the
+   held-out error of
    the named effects times C(s) against the floor.  The verdict's effects, and what keeps each
    (:mod:`.significance`), are those of the search beside C(s); its final model is theirs
    without C(s), fitted to the records.
@@ -29,16 +35,23 @@ from dataclasses import replace
 
 import numpy as np
 
+from ...physics.effects import get_effect
 from ..timefit import FitSpec
 from .correction import ELEMENTS, Correction, correction_name, structures
 from .correction_fit import (ALPHA0, band_hz, fit_structures, history_view, registered,
                              select_correction)
 from .fitting import evaluate, with_models
 from .forward import catalog_search
+from .interval import profile_interval
 from .offset_test import OFFSET
 from .significance import membership
 
-__all__ = ['outside_stage', 'CONVERGED_NFEV']
+__all__ = ['outside_stage', 'CONVERGED_NFEV', 'TWINS', 'MAX_ROUNDS']
+
+#: elements of C(s) that a catalog effect is: element -> (effect, parameter)
+TWINS = {'low_pass': ('amplifier_bandwidth', 'corner_hz'), 'delay': ('time_delay', 'delay_s')}
+#: C(s) is chosen again on top of the effects named beside it, at most this many times
+MAX_ROUNDS = 3
 
 #: function evaluations of the last fit, whose covariance gives the intervals (the search's
 #: fits stop at 60: enough to rank candidates, not always to converge with three corners)
@@ -134,12 +147,10 @@ def _result(inner, structure, tried) -> Correction:
     n_mat = len(cand.spec.material)
     values, ci = {}, {}
     for k, (e, p) in enumerate(cand.spec.effect_params):
-        if e != name:
-            continue
-        x = cand.x[n_mat + k]
-        sd = float(np.sqrt(max(cand.fit.covariance[n_mat + k, n_mat + k], 0.0)))
-        values[p] = float(np.exp(x))
-        ci[p] = (float(np.exp(x - 1.96 * sd)), float(np.exp(x + 1.96 * sd)))
+        if e == name:
+            inner.say(f'correction C(s): profile interval of {p}')
+            values[p] = float(np.exp(cand.x[n_mat + k]))
+            ci[p] = profile_interval(inner, cand, name, p)
     return Correction(tuple(structure), values, ci, cand.error, inner.noise_floor,
                       cand.fit.bic - inner.without(name).fit.bic, tried,
                       tuple(e for e, _ in inner.chosen))
@@ -160,22 +171,87 @@ def _adopt_inner(state, inner, best, structure) -> None:
     state.adopt(state.score(state.refit_set(state.chosen)) if state.chosen else state.baseline)
 
 
+def _drop_implausible(state) -> None:
+    """Drop named effects with implausible fitted values until none is left (stand-ins)."""
+    while True:
+        bad = [(n, sh) for n, sh in state.chosen
+               if any(f.startswith(f'{n}/') for f in state.current.flags)]
+        if not bad:
+            return
+        name, shape = bad[0]
+        flags = [f for f in state.current.flags if f.startswith(f'{name}/')]
+        wo = state.score(state.without(name))
+        state.record(name, 'dropped', wo, 'implausible (' + '; '.join(flags) + '): the '
+                     'correction C(s) is fitted without it')
+        state.chosen.remove((name, shape))
+        state.adopt(wo)
+
+
+def _strip_twins(view, best, band):
+    """
+    C(s) less its elements that a catalog effect is, at a value plausible for that effect.
+
+    A low-pass whose corner an amplifier's bandwidth could be, a delay a channel skew could
+    be: the catalog effect is the same factor, and a tie goes to the catalog (the search
+    beside C(s) finds it if it is significant).  Returns the refitted smaller C(s), ``best``
+    itself when nothing is stripped, or None when nothing is left.
+    """
+    name = correction_name(best.structure)
+    values = best.fit.effect_values[name]
+    keep = tuple(e for e in best.structure if not (
+        e in TWINS and _plausible(TWINS[e], values[ELEMENTS[e][0].name])))
+    if keep == best.structure:
+        return best
+    if not keep or keep == ('gain',):
+        return None
+    base = view.without(name, best)
+    return fit_structures(view, base, [keep], band, values)[0]
+
+
+def _plausible(twin, value) -> bool:
+    effect, param = twin
+    lo, hi = next(p.typical for p in get_effect(effect).parameters if p.name == param)
+    return lo <= value <= hi
+
+
+def _select(state, view, base, band):
+    """C(s) on top of ``base``, twins stripped, scored; None unless it passes a step's rule."""
+    best, tried = select_correction(view, base, band)
+    if best is None:
+        return None, tried
+    with registered([best.structure]):
+        best = _strip_twins(view, best, band)
+    if best is None:
+        return None, tried
+    with registered([best.structure]):
+        best = view.score(best)
+    gain = state.needed_gain(state.current.error)
+    return (best if best.error <= (1 - gain) * state.current.error else None), tried
+
+
 def outside_stage(state) -> None:
     """Run the stage (module docstring) when the search ended above the floor."""
     if not _triggered(state):
         return
+    _drop_implausible(state)
     band = band_hz(state)
     view = history_view(state, band)
-    best, tried = select_correction(view, view.current, band)
+    best, tried = _select(state, view, view.current, band)
     if best is None:
         return
+    for round_ in range(MAX_ROUNDS):
+        with registered([best.structure]):
+            state.say(f"correction C(s) = {' * '.join(best.structure)}: searching beside it")
+            inner = _beside(view, best)
+            catalog_search(inner)
+            _drop_failing(inner, best.structure, band)
+            catalog = inner.without(correction_name(best.structure))
+        if round_ == MAX_ROUNDS - 1:
+            break
+        again, more = _select(state, view, catalog, band)
+        if again is None or again.structure == best.structure:
+            break
+        best, tried = again, tried + more
     with registered([best.structure]):
-        best = view.score(best)
-        if best.error > (1 - state.needed_gain(state.current.error)) * state.current.error:
-            return              # not significant by the held-out error: no correction
-        state.say(f"correction C(s) = {' * '.join(best.structure)}: searching again beside it")
-        inner = _beside(view, best)
-        catalog_search(inner)
-        _drop_failing(inner, best.structure, band)
         state.correction = _result(inner, best.structure, tried)
         _adopt_inner(state, inner, best, best.structure)
