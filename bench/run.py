@@ -11,11 +11,12 @@ import argparse
 import platform
 import sys
 
-from bench import bench_arrays, bench_core, bench_nodes, bench_workbench
+from bench import (bench_arrays, bench_batch, bench_core, bench_estimators, bench_nodes,
+                   bench_workbench)
 
 SUITES = [bench_core.bench_estimator, bench_core.bench_model, bench_core.bench_field,
-          bench_workbench.bench_workbench,
-          bench_nodes.bench_nodes, bench_arrays.bench_arrays]
+          bench_workbench.bench_workbench, bench_batch.bench_batch,
+          bench_nodes.bench_nodes, bench_arrays.bench_arrays, bench_estimators.bench_scenarios]
 
 
 def main(argv=None) -> int:

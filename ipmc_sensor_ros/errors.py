@@ -26,7 +26,16 @@ class ParameterError(IpmcError):
 
 
 class DataError(IpmcError):
-    """Input data (samples, times, message layout) that break a rule of the stream."""
+    """
+    Input data (samples, times, message layout) that break a rule of the stream.
+
+    ``index`` (optional): 0-based index of the offending sample in the block checked, so
+    that a caller reading a file can name its line.
+    """
+
+    def __init__(self, *args, index: int | None = None) -> None:
+        super().__init__(*args)
+        self.index = index
 
 
 class DataFormatError(DataError):

@@ -89,13 +89,16 @@ def test_bad_value_in_one_channel_is_accounted_there_only():
     table[110, 1] = np.nan            # in the second block, channel 1 only
     assert array.feed(t[:100], table[:100])[3].all()
     _, w, std, has = array.feed(t[100:], table[100:])
-    assert has.tolist() == [True, False, True]
-    assert np.isnan(w[:, 1]).all() and np.isfinite(w[:, [0, 2]]).all()
+    assert has.tolist() == [True, True, True]
+    # that sample of channel 1 only is refused: NaN in its column, nothing else
+    assert np.isnan(w[10, 1]) and np.isfinite(np.delete(w, 10, axis=0)).all()
+    assert np.isfinite(w[:, [0, 2]]).all()
     per = array.counters()
-    assert per[1]['samples_rejected'] == 50 and per[1]['messages_rejected'] == 1
+    assert per[1]['samples_rejected'] == per[1]['rejected_non_finite'] == 1
+    assert per[1]['messages_rejected'] == 0
     assert per[0]['samples_rejected'] == per[2]['samples_rejected'] == 0
     assert per[0]['samples_out'] == per[2]['samples_out'] == 150
-    assert per[1]['samples_out'] == 100
+    assert per[1]['samples_out'] == 149
     assert array.totals()['samples_in'] == 3 * 150
     assert array.check_invariant()
     # the other channels ran on as if channel 1 did not exist
@@ -104,12 +107,13 @@ def test_bad_value_in_one_channel_is_accounted_there_only():
     np.testing.assert_array_equal(w[:, 2], single.feed(t[100:], table[100:, 2])[1])
 
 
-def test_bad_time_rejects_every_channel():
+def test_bad_stamp_refuses_that_sample_in_every_channel():
     array = ArrayStream(C.build_channel_estimators(_values(channels=2)))
     t = np.arange(20) / FS
-    t[5] = t[4]                       # not strictly increasing
-    assert array.feed(t, _currents(20, 2)) is None
-    assert [p['samples_rejected'] for p in array.counters()] == [20, 20]
+    t[5] = t[4]                       # a duplicated stamp
+    t_out, w, _, has = array.feed(t, _currents(20, 2))
+    assert has.all() and t_out.size == 19 and np.isfinite(w).all()
+    assert [p['rejected_duplicate_stamp'] for p in array.counters()] == [1, 1]
     assert array.check_invariant()
 
 
@@ -141,7 +145,8 @@ def test_column_labels():
     assert current_columns(3) == 'time_s,current_ch0_A,current_ch1_A,current_ch2_A'
     assert deflection_columns(2) == 'time_s,deflection_ch0_m,deflection_ch1_m'
     assert estimate_columns(2) == ('time_s,deflection_ch0_m,deflection_std_ch0_m,'
-                                   'deflection_ch1_m,deflection_std_ch1_m')
+                                   'deflection_beyond_limit_ch0,deflection_ch1_m,'
+                                   'deflection_std_ch1_m,deflection_beyond_limit_ch1')
 
 
 # -- 2. the node in process ---------------------------------------------------------------------
@@ -187,7 +192,7 @@ def test_node_array_blocks_match_the_core(array_node):
     n = 1200
     t = 50.0 + np.arange(n) / FS
     table = _currents(n, channels)
-    table[650, 2] = np.inf            # channel 2 of the block 600..800 is rejected there only
+    table[650, 2] = np.inf            # that sample of channel 2 is refused, there only
     for k in range(0, n, 200):
         a.send(t[k:k + 200], table[k:k + 200])
     a.send(t[:1], table[:1])          # time jumps back: a reset in every channel (not a rule)
@@ -200,25 +205,28 @@ def test_node_array_blocks_match_the_core(array_node):
     for k, (times, out) in zip(range(0, n, 200), a.blocks):
         r_t, r_w, r_std, r_has = ref.feed(t[k:k + 200], table[k:k + 200])
         np.testing.assert_array_equal(times, r_t)
-        np.testing.assert_array_equal(out[:, 0::2], r_w)     # deflection columns
-        np.testing.assert_array_equal(out[:, 1::2], r_std)   # kalman: the filter's std
-    assert np.isnan(a.blocks[3][1][:, 4]).all() and np.isfinite(a.blocks[3][1][:, 0]).all()
+        np.testing.assert_array_equal(out[:, 0::3], r_w)     # deflection columns
+        np.testing.assert_array_equal(out[:, 1::3], r_std)   # kalman: the filter's std
+        # flags: within L/2 where there is an estimate, NaN where the sample was refused
+        np.testing.assert_array_equal(out[:, 2::3], np.where(np.isnan(r_w), np.nan, 0.0))
+    column = a.blocks[3][1][:, 6]             # channel 2 of the block 600..800
+    assert np.isnan(column[50]) and np.isfinite(np.delete(column, 50)).all()
+    assert np.isfinite(a.blocks[3][1][:, 0]).all()
     per = a.node.channel_counters()
     # the wrong-layout message is counted as the rows of this array its payload fills:
     # ceil(4 values / 4 columns) = 1
-    assert [p['samples_rejected'] for p in per] == [1, 1, 201]
-    assert [p['messages_rejected'] for p in per] == [1, 1, 2]
-    assert [p['samples_out'] for p in per] == [n + 2, n + 2, n - 198]
-    # every channel resets on the jump back; channel 2 also after its rejected block (its
-    # filter missed 200 ms > max_gap_s of current), as a single sensor would
-    assert [p['resets'] for p in per] == [1, 1, 2], per
+    assert [p['samples_rejected'] for p in per] == [1, 1, 2]
+    assert [p['messages_rejected'] for p in per] == [1, 1, 1]
+    assert [p['samples_out'] for p in per] == [n + 2, n + 2, n + 1]
+    # every channel starts a new run on the jump back (1.2 s > max_gap_s)
+    assert [p['resets'] for p in per] == [1, 1, 1], per
     assert a.node.array.check_invariant()
     assert a.node.counters()['samples_in'] == 3 * (n + 3)
     # counters topic: totals plus one entry per channel
     a.node._on_timer()
     msg = a.counters_json[-1]
     assert msg['samples_in'] == 3 * (n + 3) and len(msg['channels']) == channels
-    assert msg['channels'][2]['samples_rejected'] == 201
+    assert msg['channels'][2]['samples_rejected'] == 2
     # /diagnostics: the node's aggregate plus one status per channel
     diag = a.node._diagnostics.update(a.node._status())
     names = [s.name for s in diag.status]
@@ -226,7 +234,7 @@ def test_node_array_blocks_match_the_core(array_node):
     assert names == [node_name] + [f'{node_name}: {a.node.input_topic} ch{c}'
                                    for c in range(channels)]
     values = {kv.key: kv.value for kv in diag.status[3].values}
-    assert values['samples_rejected'] == '201'
+    assert values['samples_rejected'] == '2'
 
 
 def test_node_array_parameter_change_reaches_every_channel(array_node):
@@ -235,9 +243,10 @@ def test_node_array_parameter_change_reaches_every_channel(array_node):
     a = array_node(2)
     t = np.arange(100) / FS
     a.send(t, _currents(100, 2))
-    result = a.node.set_parameters([Parameter('leak_corner_hz', value=0.05)])[0]
+    result = a.node.set_parameters([Parameter('motion_corner_hz', value=0.5)])[0]
     assert result.successful, result.reason
-    assert [ch.estimator.inverse.leak_corner_hz for ch in a.node.array.channels] == [0.05, 0.05]
+    assert [ch.estimator.config.motion_corner_hz
+            for ch in a.node.array.channels] == [0.5, 0.5]
     # a model change is rebuilt off the data path, then swapped into every channel
     result = a.node.set_parameters([Parameter('length_m', value=0.03)])[0]
     assert result.successful, result.reason
@@ -317,7 +326,7 @@ def test_simulator_array_to_estimator_array_over_dds(tmp_path, monkeypatch):
     w_t = np.concatenate([b[1] for b in truth])
     np.testing.assert_array_equal(t_e, t_t)          # the same sample times, in order
     last = t_e >= t_e[-1] - 20.0
-    errors = [nrmse(w_e[last, 2 * c], w_t[last, c]) for c in range(channels)]
+    errors = [nrmse(w_e[last, 3 * c], w_t[last, c]) for c in range(channels)]
     print(f'array of {channels} over DDS: NRMSE per channel {np.round(errors, 4).tolist()}')
     assert max(errors) < 0.05, errors
     # the channels are different signals (0.1 s apart on a 1 Hz crank): a swapped column fails

@@ -75,7 +75,8 @@ def test_replay_into_live_node_equals_offline_and_loop_resets(tmp_path):
     bag = _simulate_bag(tmp_path, 'sqlite3')
     params = ROOT / 'config' / 'estimator.yaml'
     assert (
-        main(['estimate', str(bag), '--out', str(tmp_path / 'est'), '--params', str(params)]) == 0
+        main(['estimate', str(bag), '--out', str(tmp_path / 'est'), '--params', str(params),
+              '--causal']) == 0
     )
     offline = read_estimate(tmp_path / 'est' / f'{bag.name}.estimate.csv')
 

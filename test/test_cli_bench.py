@@ -55,6 +55,7 @@ def test_bench_sink_reads_rows_and_last_time_from_the_serialised_block():
 
     t = 1234.5 + np.arange(7) / 1000.0
     assert block_rows_and_last_time(serialize_message(pack_block(t, np.sin(t)))) == (7, t[-1])
-    for rows in (1, 3):        # the estimator's 3 columns (odd labels and padding)
-        msg = BlockPacker(estimate_columns(1)).pack(t[:rows], t[:rows] * 2, t[:rows] * 3)
+    for rows in (1, 3):        # the estimator's 4 columns (odd labels and padding)
+        msg = BlockPacker(estimate_columns(1)).pack(t[:rows], t[:rows] * 2, t[:rows] * 3,
+                                                    0.0 * t[:rows])
         assert block_rows_and_last_time(serialize_message(msg)) == (rows, t[rows - 1])

@@ -52,10 +52,13 @@ def test_diagnose_saves_model_and_prints_next_command(data, tmp_path, capsys):
     verdict = json.loads(js.read_text())['verdict']
     assert verdict['missing_effects'][0] == 'time_delay' and verdict['explained']
     saved = load_model(model_file)
-    delay = dict(next(e for e in saved.effects if e.name == 'time_delay').values)['delay_s']
+    # a channel delay belongs to the recording: kept with the calibration, not the sensor
+    delay = dict(next(e for e in saved.recording_effects
+                      if e.name == 'time_delay').values)['delay_s']
     assert delay == pytest.approx(2e-3, rel=0.05)       # fitted, not the catalog's 1 ms
     last = out.strip().splitlines()[-1]
     assert last.startswith('next: ipmc-model compare') and '--model-file' in last
+    assert last.endswith('--apply-recording-effects')   # the same records: their delay too
     argv = shlex.split(last[len('next: '):])[1:]
     js2 = tmp_path / 'c.json'
     assert main(argv + ['--json', str(js2)]) == 0       # the printed command runs as printed
@@ -85,7 +88,7 @@ def test_fit_frees_effect_parameter_and_saves_model(data, tmp_path, capsys):
     out = capsys.readouterr().out
     assert 'time_delay.delay_s' in out and 'model adequate' in out
     saved = load_model(model_file)
-    assert dict(saved.effects[-1].values)['delay_s'] == pytest.approx(2e-3, rel=0.05)
+    assert dict(saved.recording_effects[-1].values)['delay_s'] == pytest.approx(2e-3, rel=0.05)
     # an effect parameter of an effect not in the model: a one-line error naming the fix
     assert main(['fit', str(data), '--model', 'h2', '--free', 'd,delay_s']) == 2
     assert 'add it with --effects time_delay' in capsys.readouterr().err

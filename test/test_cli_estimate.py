@@ -14,6 +14,7 @@ import yaml
 
 from ipmc_sensor_ros.cli.data_verbs import read_estimate
 from ipmc_sensor_ros.cli.main import main
+from ipmc_sensor_ros.estimation.config import EstimatorConfig
 from ipmc_sensor_ros.workbench.io import TimeSeries, read_timeseries, write_timeseries
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -81,7 +82,9 @@ def test_output_keeps_measured_and_names_the_estimate(short_run, tmp_path):
     assert main(['estimate', str(short_run), '--out', str(tmp_path)]) == 0   # a directory works
     est = read_estimate(tmp_path / 'short_5Hz.estimate.csv')
     measured = read_timeseries(short_run / 'short_5Hz.csv')
-    assert set(est) == {'time_s', 'current_A', 'deflection_estimate_m', 'deflection_m'}
+    assert set(est) == {'time_s', 'current_A', 'deflection_estimate_m',
+                        'deflection_estimate_std_m',
+                        'deflection_m', 'deflection_beyond_limit'}
     assert np.array_equal(est['deflection_m'], measured.deflection_m)
     assert np.array_equal(est['time_s'], measured.time_s)               # exact round trip
     assert not np.allclose(est['deflection_estimate_m'], est['deflection_m'])
@@ -93,10 +96,8 @@ def test_kalman_is_compared_from_when_it_learned_the_level(short_run, tmp_path, 
     """
     The record starts mid-motion (w = 2 mm at t = 0): no estimator can know that level.
 
-    The leaky forgets it within 5 / (2 pi f_leak) and is compared after that (here: the whole
-    record, detrended).  The Kalman's floor corner would make that 800 s; it learns the level
-    from whole periods after ~1 s and is compared from then on.  Compared whole, its first
-    second (level unknown, then centred) gave 37 %.  1 % noise: bound 3 % as for the leaky.
+    The Kalman learns it over about five time constants of motion_corner_hz (0.08 s at the
+    default 10 Hz) and is compared from then on (``settling``).  1 % noise: bound 3 %.
     """
     params = tmp_path / 'kalman.yaml'
     params.write_text(yaml.safe_dump(
@@ -105,17 +106,22 @@ def test_kalman_is_compared_from_when_it_learned_the_level(short_run, tmp_path, 
     assert main(['estimate', str(short_run / 'short_5Hz.csv'), '--params', str(params),
                  '--out', str(tmp_path / 'k'), '--json', str(js)]) == 0
     out = capsys.readouterr().out
-    assert 'level learned then' in out
+    assert 'five time constants of motion_corner_hz' in out
     row = json.loads(js.read_text())[0]
     assert row['nrmse'] < 0.03
-    assert 3.0 < float(out.split(' s (after the first ')[0].rsplit('over ', 1)[1]) < 5.5
+    record_s = 6.0
+    used = float(out.split(' s (after the first ')[0].rsplit('over ', 1)[1])
+    corner_hz = EstimatorConfig().motion_corner_hz
+    # abs 0.01 s: the span is printed to 4 significant figures and the first row is t = 0
+    assert used == pytest.approx(record_s - 5 / (2 * np.pi * corner_hz), abs=0.01)
 
 
 def test_short_record_still_reports_accuracy(short_run, tmp_path, capsys):
-    """1.5 s is far shorter than the 80 s leak transient; the NRMSE is reported anyway."""
+    """A 1.5 s record still gets its NRMSE, after the time the estimator needs to settle."""
     assert main(['estimate', str(short_run / 'brief'), '--out', str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert 'NRMSE' in out and 'whole record' in out
+    settle_s = 5 / (2 * np.pi * EstimatorConfig().motion_corner_hz)
+    assert 'NRMSE' in out and f'after the first {settle_s:.4g} s' in out
     value = float(out.split('NRMSE ')[1].split()[0])
     assert value < 0.05        # 1 % noise; a short record leaves a little more of the transient
 
@@ -155,7 +161,8 @@ def test_current_only_input(short_run, tmp_path, capsys):
     assert main(['estimate', str(only), '--out', str(tmp_path / 'o')]) == 0
     assert 'accuracy not reported' in capsys.readouterr().out
     assert set(read_estimate(tmp_path / 'o' / 'current_only.estimate.csv')) == {
-        'time_s', 'current_A', 'deflection_estimate_m'}
+        'time_s', 'current_A', 'deflection_estimate_m', 'deflection_estimate_std_m',
+        'deflection_beyond_limit'}
     # verbs that need a deflection skip it with a line; only current-only files -> clear error
     assert main(['compare', str(only.parent)]) == 2
     err = capsys.readouterr().err

@@ -34,23 +34,58 @@ def test_error_when_no_data_ever():
     assert h.level == ERROR and 'since start' in h.message
 
 
-def test_warn_on_new_rejections_resets_gaps_only_while_they_happen():
+def test_warn_on_malformed_messages_resets_gaps_only_while_they_happen():
     mon = HealthMonitor(FS)
     mon.evaluate(_counters(1000), 1.0)
-    h = mon.evaluate(_counters(2000, messages_rejected=2, resets=1, gaps=1), 2.0)
+    h = mon.evaluate(_counters(2000, rejected_malformed=2, resets=1, gaps=1), 2.0)
     assert h.level == WARN
-    for text in ('2 message(s) rejected', '1 filter reset(s)', '1 time gap(s)'):
+    for text in ('2 sample(s) in malformed message(s) rejected', '1 filter reset(s)',
+                 '1 time gap(s)'):
         assert text in h.message
     # same totals one second later: nothing new, back to OK
-    assert mon.evaluate(_counters(3000, messages_rejected=2, resets=1, gaps=1), 3.0).level == OK
+    assert mon.evaluate(_counters(3000, rejected_malformed=2, resets=1, gaps=1), 3.0).level == OK
+
+
+def test_warn_when_the_lost_or_refused_fraction_exceeds_its_limit():
+    mon = HealthMonitor(FS, HealthLimits(loss_warn_fraction=0.01))
+    mon.evaluate(_counters(1000), 1.0)
+    # 5 lost slots and 5 refused samples in 1000: 0.5 %, within 1 %
+    h = mon.evaluate(_counters(2000, samples_lost=5, samples_rejected=5,
+                               rejected_duplicate_stamp=5), 2.0)
+    assert h.level == OK, h.message
+    # 30 slots without a sample (bridged gaps), 20 duplicated and 5 non-finite samples
+    h = mon.evaluate(_counters(3000, samples_lost=35, samples_rejected=30,
+                               rejected_duplicate_stamp=25, rejected_non_finite=5), 3.0)
+    assert h.level == WARN
+    assert '2.91 % of the data lost before the node (30 sample slot(s)' in h.message
+    assert '2.5 % of the samples refused (duplicate_stamp 20, non_finite 5' in h.message
+    # messages that never arrived (sequence numbers) count as lost too
+    h = mon.evaluate(_counters(4000, samples_lost=35, samples_rejected=30, messages_lost=50,
+                               rejected_duplicate_stamp=25, rejected_non_finite=5), 4.0)
+    assert h.level == WARN and '50 message(s) that never arrived' in h.message
+
+
+def test_warn_naming_the_publishers_ignored():
+    mon = HealthMonitor(FS)
+    mon.evaluate(_counters(1000), 1.0)
+    h = mon.evaluate({**_counters(2000, messages_ignored=1000),
+                      'ignored_publishers': '/rogue_daq (gid 01.0f): 1000',
+                      'followed_publisher': '/daq (gid 01.0e)'}, 2.0)
+    assert h.level == WARN and '/rogue_daq (gid 01.0f): 1000' in h.message
+    assert 'following /daq (gid 01.0e)' in h.message
 
 
 def test_warn_on_rate_off_sample_rate():
     mon = HealthMonitor(FS, HealthLimits(rate_tolerance=0.05))
     mon.evaluate(_counters(1000), 1.0)
     h = mon.evaluate(_counters(1900), 2.0)       # 900 Hz: 10 % low
-    assert h.level == WARN and 'sample rate 900 Hz, expected 1000 Hz' in h.message
+    assert h.level == WARN and 'sample rate 900 Hz (received per second), expected 1000 Hz' \
+        in h.message
     assert mon.evaluate(_counters(2880), 3.0).level == OK      # 980 Hz: within 5 %
+    # the rate the stream measured from the stamps wins (a bag replayed at 2x is no mismatch)
+    h = mon.evaluate({**_counters(4880), 'measured_rate_hz': 700.0}, 4.0)
+    assert h.level == WARN and 'sample rate 700 Hz (measured from the stamps)' in h.message
+    assert mon.evaluate({**_counters(6880), 'measured_rate_hz': 1001.0}, 5.0).level == OK
 
 
 def test_done_source_is_not_stale():

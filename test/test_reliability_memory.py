@@ -10,7 +10,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ipmc_sensor_ros.cli.data_verbs import WRITE_CHUNK_ROWS, _write_estimate, read_estimate
+from ipmc_sensor_ros.cli.estimate_verb import WRITE_CHUNK_ROWS, _write_estimate, read_estimate
 
 
 def _peak_writing(tmp_path, rows):
@@ -21,8 +21,10 @@ def _peak_writing(tmp_path, rows):
     values = {'length_m': 0.022, 'width_m': 0.007, 'thickness_m': 3.6e-4,
               'sample_rate_hz': 1000.0}
     path = tmp_path / f'{rows}.estimate.csv'
+    flagged = (np.zeros(rows), 0.011)
     tracemalloc.start()
-    _write_estimate(path, data, values, 'h2', None, 0, t, i, w, w)
+    _write_estimate(path, data, values, 'h2', None, 0, t, i, w, w, flagged,
+                    np.full(rows, 1e-6), False)
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     back = read_estimate(path)

@@ -79,9 +79,10 @@ def test_data_keeps_the_old_filter_until_the_rebuild_is_swapped_in(nodes):
 
 def test_filter_only_change_is_applied_at_once(nodes):
     d = nodes()
-    assert d.node.set_parameters([Parameter('leak_corner_hz', value=0.02)])[0].successful
+    # a filter setting (not the sensor's model): no new reduction, the filter is rebuilt at once
+    assert d.node.set_parameters([Parameter('motion_corner_hz', value=4.0)])[0].successful
     assert d.node._builder is None and d.node.rebuilds == 1
-    assert d.node.stream.estimator.inverse.leak_corner_hz == 0.02
+    assert d.node.stream.estimator.core.config.motion_corner_hz == 4.0
 
 
 def test_changes_faster_than_a_build_still_land(nodes, monkeypatch):

@@ -66,7 +66,7 @@ def test_colcon_install_layout(workspace, monkeypatch):
 
 
 @pytest.mark.parametrize('exe,config,override,echo', [
-    ('ipmc_estimator', 'estimator.yaml', 'leak_corner_hz:=0.02', 'leak corner 0.02 Hz'),
+    ('ipmc_estimator', 'estimator.yaml', 'sample_rate_hz:=500.0', 'fs = 500.0 Hz'),
     ('ipmc_simulator', 'simulator.yaml', 'motor_frequency_hz:=5.0', 'motor_frequency_hz=5,'),
 ])
 def test_ros2_run_starts_and_exits_zero_on_sigint(workspace, tmp_path, monkeypatch, exe, config,

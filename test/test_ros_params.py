@@ -44,7 +44,8 @@ def test_other_nodes_keys_in_wildcard_section_warn_but_typo_for_this_node_fails(
                                                                                 tmp_path):
     node, args = _node(context, tmp_path, '/**:\n  ros__parameters:\n    block_size: 10\n')
     P.check_unknown_overrides(node, SPECS, args, default_name='ipmc_estimator')  # no raise
-    assert 'block_size' not in node._parameter_overrides
+    P.declare(node, SPECS)
+    assert not node.has_parameter('block_size')          # warned about, never declared
     node.destroy_node()
     node, args = _node(context, tmp_path, 'ipmc_estimator:\n  ros__parameters:\n    gian: 1.0\n')
     with pytest.raises(P.ParameterError, match='gian'):

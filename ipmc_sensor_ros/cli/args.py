@@ -10,6 +10,8 @@ Flag vocabulary (the same name means the same thing in every verb)
     ``--effects``    extra effects added to the base model
     ``--plugin``     Python file defining more effects
     ``--params``     material YAML or a ROS 2 params file of the nodes
+    ``--model-file`` a saved model (:mod:`.saved_models`); ``--apply-recording-effects``
+                     also applies its calibration's offset and channel delay
     ``--set``        override one material parameter
     ``--free``       parameters estimated from the data (fit, track, diagnose)
     ``--geometry``   sample geometry 'L,W,T' (metres, or with units mm/um)
@@ -18,6 +20,7 @@ Flag vocabulary (the same name means the same thing in every verb)
     ``--json``       output FILE with the verb's numbers as JSON
     ``--report``     output DIRECTORY for index.html and PNG plots
     ``--save``       output FILE: ROS 2 params file for the nodes
+    ``--save-model`` output FILE: the whole fitted model (ipmc-model/1)
 """
 from __future__ import annotations
 
@@ -34,6 +37,7 @@ import numpy as np
 from ..physics.effects import load_plugin
 from ..physics.model import model_effects, parse_effects
 from ..workbench.discovery import SYMBOL_TO_NAME
+from ..workbench.io import natural_key
 from ..physics.parameters import (PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, MaterialParameters,
                                   ParameterError, load_yaml)
 
@@ -43,7 +47,8 @@ __all__ = ['HelpFormatter', 'Progress', 'say', 'natural_key', 'fmt_time_s', 'par
            'report_dir', 'parse_samples', 'renamed_flag', 'SYMBOL_TO_NAME']
 
 MATERIAL_KEYS = tuple(MaterialParameters.__dataclass_fields__)
-LENGTH_UNITS_M = {'m': 1.0, 'mm': 1e-3, 'um': 1e-6, 'µm': 1e-6, 'μm': 1e-6}
+#: Length units and how many of each make a metre (dividing keeps 360 um exactly 0.00036 m).
+PER_METRE = {'m': 1.0, 'mm': 1e3, 'um': 1e6, 'µm': 1e6, 'μm': 1e6}
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -119,25 +124,6 @@ class Progress:
             self._print('done')
 
 
-_NUMBER = re.compile(r'\d+(?:[.p]\d+)?')
-
-
-def natural_key(path) -> tuple:
-    """
-    Sort key that orders embedded numbers numerically ('1Hz' < '2p5Hz' < '13Hz').
-
-    Simulate writes decimal points as 'p' (``slim_1p53Hz``).
-    """
-    text = str(path)
-    parts: list = []
-    pos = 0
-    for m in _NUMBER.finditer(text):
-        parts += [(0, text[pos:m.start()]), (1, float(m.group().replace('p', '.')))]
-        pos = m.end()
-    parts.append((0, text[pos:]))
-    return tuple(parts)
-
-
 def fmt_time_s(t: float) -> str:
     """Return a time with sensible precision: 4 significant digits, no float noise."""
     return f'{float(t):.4g}'
@@ -167,10 +153,10 @@ def parse_geometry(text: str, name: str = '', flag: str = '--geometry') -> Geome
     values = []
     for part in parts:
         m = re.fullmatch(r'([-+0-9.eE]+)\s*([a-zµμ]*)', part)
-        if not m or m.group(2) not in ('', *LENGTH_UNITS_M):
+        if not m or m.group(2) not in ('', *PER_METRE):
             raise ParameterError(f'{flag}: cannot read {part!r}; use metres or a unit '
-                                 f'{sorted(LENGTH_UNITS_M)}, e.g. 22mm,7mm,360um')
-        values.append(float(m.group(1)) * LENGTH_UNITS_M.get(m.group(2) or 'm'))
+                                 f'{sorted(PER_METRE)}, e.g. 22mm,7mm,360um')
+        values.append(float(m.group(1)) / PER_METRE[m.group(2) or 'm'])
     return Geometry(*values, name=name)
 
 
@@ -205,26 +191,11 @@ def load_material(path) -> MaterialParameters:
     return load_yaml(path)[0]
 
 
-def _model_file(args):
-    """
-    Return the saved model of ``--model-file`` (None without it); with ``--params`` it is refused.
-
-    Two sources of the material, nothing chosen silently.
-    """
-    path = getattr(args, 'model_file', None)
-    if not path:
-        return None
-    if getattr(args, 'params', None):
-        raise ParameterError(f'--model-file {path} and --params {args.params} both give the '
-                             'material: use one')
-    from ..physics.modelfile import load_model
-
-    return load_model(path)
-
-
 def material_from_args(args) -> MaterialParameters:
     material = PAPER_PARAMETERS
-    saved = _model_file(args)
+    from .saved_models import saved_model
+
+    saved = saved_model(args)
     if saved is not None:
         material = saved.material
     elif getattr(args, 'params', None):
@@ -241,11 +212,16 @@ def effects_from_args(args) -> tuple:
     for plugin in getattr(args, 'plugin', None) or []:
         names = load_plugin(plugin)
         say(f"plugin {plugin}: effects {', '.join(names)}")
+    from .saved_models import recording_effects_wanted, saved_model
+
     extra = getattr(args, 'effects', '') or ''
-    saved = _model_file(args)
+    saved = saved_model(args)
     if saved is None:
+        if recording_effects_wanted(args):
+            raise ParameterError('--apply-recording-effects applies the recording effects of '
+                                 'a --model-file; no --model-file given')
         return model_effects(args.model, extra)
-    base = parse_effects(saved.effects)
+    base = saved.effects_for(recording_effects_wanted(args))
     added = parse_effects(extra)
     for e in added:
         if e.name in {b.name for b in base}:
@@ -317,9 +293,9 @@ def add_model_args(p: argparse.ArgumentParser, *, effects: bool = True) -> None:
                             "'time_delay(delay_s=0.002),nonlinearity' (see: ipmc-model effects)")
         g.add_argument('--plugin', action='append', metavar='FILE',
                        help='Python file defining more effects (repeatable)')
-    g.add_argument('--model-file', metavar='FILE',
-                   help='a saved model (ipmc-model/1 YAML from --save-model): its effects with '
-                        'their values and its material replace --model and --params')
+    from .saved_models import add_model_file_args
+
+    add_model_file_args(g)
     g.add_argument('--params', metavar='FILE',
                    help="material YAML ('material:') or a ROS 2 params file of the nodes "
                         "(default: the paper's Tables 1-2)")

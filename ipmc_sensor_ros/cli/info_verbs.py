@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Verbs about the model itself: ``reduce``, ``eq55``, ``effects``, ``example``, ``figures``."""
+"""Verbs about the model: ``info``, ``reduce``, ``eq55``, ``effects``, ``example``, ``figures``."""
 from __future__ import annotations
 
 import json
@@ -189,7 +189,30 @@ def _cmd_figures(args) -> int:
     return 0
 
 
+def _cmd_info(args) -> int:
+    """Show what a model file holds: the sensor, the calibration's recording effects, origin."""
+    from ..physics.modelfile import load_model
+
+    for plugin in args.plugin or []:
+        load_plugin(plugin)
+    saved = load_model(args.model_file)
+    print(saved.describe())
+    doc = saved.to_doc()
+    doc['notices'] = list(saved.notices)
+    write_json(args.json, doc)
+    return 0
+
+
 def add_parsers(sub, formatter) -> None:
+    p = sub.add_parser('info', formatter_class=formatter,
+                       help='show a saved model file: the sensor, the recording effects of its '
+                            'calibration, where it came from')
+    p.add_argument('model_file', metavar='MODEL_FILE', help='ipmc-model/1 YAML (--save-model)')
+    p.add_argument('--plugin', action='append', metavar='FILE',
+                   help='Python file defining effects the model uses (repeatable)')
+    add_output_args(p, report=False)
+    p.set_defaults(func=_cmd_info)
+
     p = sub.add_parser(
         'reduce',
         formatter_class=formatter,

@@ -24,9 +24,10 @@ estimate data, fit and test models, find missing physics.
 Lab data, start to finish:
   ipmc-model import run*.csv --meta run.json --out data/
   ipmc-model compare data/ --report rep/      (is the paper's H2 good enough?)
-  ipmc-model diagnose data/ --report diag/    (which effect is missing?)
-  ipmc-model fit data/ --save node.yaml       (calibrated node parameters)
-  ipmc-model estimate data/ --params node.yaml --out est/
+  ipmc-model diagnose data/ --save-model m.yaml   (which effect is missing?)
+  ipmc-model info m.yaml                      (the sensor; the calibration's offset, delay)
+  ipmc-model estimate field/ --model-file m.yaml --out est/
+  ipmc-model fit data/ --effects amplifier_bandwidth --save node.yaml   (node parameters)
 
 Every verb prints its results; most also take --json FILE and --report DIR.
 'ipmc-model VERB --help' lists a verb's flags with their defaults."""

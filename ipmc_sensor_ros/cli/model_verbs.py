@@ -6,22 +6,19 @@ Each verb: parse -> call the workbench -> print a summary -> optional JSON and r
 """
 from __future__ import annotations
 
-import datetime
 from pathlib import Path
 
-from ..physics.model import SensorModel, format_effect, parse_model_name
-from ..physics.parameters import MaterialParameters, ParameterError
+from ..physics.model import SensorModel
+from ..physics.parameters import ParameterError
 from .args import (Progress, add_data_args, add_model_args, add_output_args, effects_from_args,
                    load_data, material_from_args, param_names, renamed_flag, report_dir, say,
                    write_json)
+from .saved_models import data_files, print_saved, with_recording_flag, write_params_files
 
-__all__ = ['add_parsers', 'params_file_doc']
+__all__ = ['add_parsers']
 
 FREE_HELP = ('parameters estimated from the data, comma list of symbols d, alpha0, C-, kappa_e, '
              'Y, r0, T or full names')
-#: physical constants of MaterialParameters that are not node parameters
-_NOT_NODE_PARAMS = ('faraday_constant_c_per_mol', 'gas_constant_j_per_mol_k',
-                    'one_minus_anion_volume_fraction')
 
 
 def _records(args, with_data: bool = False):
@@ -43,61 +40,23 @@ def _model_text(data, material, effects) -> str:
     return SensorModel(data[0].geometry, material, effects).describe()
 
 
-# ---------------------------------------------------------------------------
-def params_file_doc(material: MaterialParameters, geometry, base: str, extra_effects,
-                    sample_rate_hz: float | None = None) -> dict:
-    """ROS 2 params file contents for both nodes, under ``/**/<node>`` (any namespace)."""
-    params = {'length_m': geometry.length_m, 'width_m': geometry.width_m,
-              'thickness_m': geometry.thickness_m}
-    params.update({k: v for k, v in material.to_dict().items() if k not in _NOT_NODE_PARAMS})
-    if sample_rate_hz:
-        params['sample_rate_hz'] = float(sample_rate_hz)
-    params['model'] = base
-    params['effects'] = [format_effect(e) for e in extra_effects] or ['']
-    return {'/**/ipmc_estimator': {'ros__parameters': params},
-            '/**/ipmc_simulator': {'ros__parameters': dict(params)}}
+def _free_names(args, fit_eff) -> tuple[str, ...]:
+    """
+    Return the ``--free`` names with the parameters of the fitted ``--effects``, once each.
 
+    An effect parameter named alone (``delay_s``) and qualified (``time_delay.delay_s``) is
+    one parameter.
+    """
+    from ..workbench.discovery import effect_free_names, free_names
 
-def _save_params(path: Path, groups, data, res, args, effects) -> list[Path]:
-    """One params file per sample geometry (``NAME_<sample>.yaml`` when several)."""
-    import yaml
-
-    from ..workbench.io import TimeSeries
-
-    base = args.model.strip().lower()
-    extra = effects[len(parse_model_name(base)[1]):]
-    written = []
-    for g in groups:
-        out = path if len(groups) == 1 else path.with_name(f'{path.stem}_{g.name}{path.suffix}')
-        material = res.material.replace(
-            **{
-                k: v
-                for k, v in g.known.items()
-                if k not in res.free and k in MaterialParameters.__dataclass_fields__
-            }
-        )
-        rates = {
-            d.sample_rate_hz
-            for d in data
-            if isinstance(d, TimeSeries) and d.geometry == g.geometry
-        }
-        doc = params_file_doc(
-            material, g.geometry, base, extra, rates.pop() if len(rates) == 1 else None
-        )
-        sources = sorted({Path(p.source).name for p in g.points if getattr(p, 'source', '')})
-        head = [
-            '# Written by ipmc-model fit on '
-            f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC',
-            f'# sample {g.name}: geometry from the data; model {base}'
-            + (' + ' + ', '.join(doc['/**/ipmc_estimator']['ros__parameters']['effects'])
-               if extra else ''),
-            f"# fitted: {', '.join(res.free)}; chi2/dof {res.chi2:.4g}/{res.dof}",
-            f"# data: {', '.join(sources[:12])}{' ...' if len(sources) > 12 else ''}",
-            '# use: ros2 run ipmc_sensor_ros ipmc_estimator --ros-args --params-file THIS_FILE',
-        ]
-        out.write_text('\n'.join(head) + '\n' + yaml.safe_dump(doc, sort_keys=False))
-        written.append(out)
-    return written
+    qualified = effect_free_names(fit_eff, frequency_domain=True)
+    short = {q.split('.', 1)[1]: q for q in qualified}
+    free = []
+    for name in free_names(args.free) + qualified:
+        name = short.get(name, name)
+        if name not in free:
+            free.append(name)
+    return tuple(free)
 
 
 def _cmd_fit(args) -> int:
@@ -105,16 +64,14 @@ def _cmd_fit(args) -> int:
     from ..workbench.data import groups_from
     from ..workbench.freqfit import fit_parameters
 
-    from ..workbench.discovery import (acts_on_transfer, effect_free_names, effects_to_fit,
-                                       free_names, next_command)
+    from ..workbench.discovery import acts_on_transfer, effects_to_fit, next_command
 
     effects = effects_from_args(args)
     material = material_from_args(args)
     data = load_data(args)
     groups = groups_from(data)
     fit_eff = effects_to_fit(args.effects)
-    free = free_names(args.free)
-    free += tuple(n for n in effect_free_names(fit_eff, frequency_domain=True) if n not in free)
+    free = _free_names(args, fit_eff)
     for e in fit_eff:
         if not acts_on_transfer(e):
             say(f'{e}: kept at its catalog values (a frequency-response fit cannot see it; '
@@ -141,18 +98,21 @@ def _cmd_fit(args) -> int:
         from ..physics.modelfile import save_model
 
         save_model(args.save_model, effects=res.effects, material=res.material,
-                   tool='ipmc-model fit', data_files=args.data, ci95=res.ci95,
+                   tool='ipmc-model fit', data_files=data_files(data), ci95=res.ci95,
                    error={'chi2': res.chi2, 'dof': res.dof, 'p_value': res.p_value})
-        print(f'saved the whole model to {args.save_model}')
+        print_saved(args.save_model)
     if args.save:
-        for path in _save_params(Path(args.save), groups, data, res, args, effects):
-            print(f'saved node parameters (key /**/ipmc_estimator, geometry included) to {path}')
+        for path in write_params_files(Path(args.save), groups, data, res):
+            print(f'saved node parameters (the fitted model; key /**/ipmc_estimator, geometry '
+                  f'included) to {path}')
     if args.save_material:
         save_yaml(args.save_material, res.material)
         print(f'saved fitted material to {args.save_material}')
-    print('next: ' + (next_command('compare', args.data, args.save_model)
-                      if res.adequate or args.save_model
-                      else next_command('diagnose', args.data, None, f'--model {args.model}')))
+    print(with_recording_flag(
+        'next: ' + (next_command('compare', args.data, args.save_model)
+                    if res.adequate or args.save_model
+                    else next_command('diagnose', args.data, None, f'--model {args.model}')),
+        args.save_model))
     rd = report_dir(args.report)
     if rd:
         from ..workbench.report import fit_report
@@ -276,13 +236,17 @@ def _cmd_diagnose(args) -> int:
     if args.save_model:
         from ..physics.modelfile import save_model
 
+        final = diag.final or diag.baseline
         save_model(args.save_model, diag.final_model, tool='ipmc-model diagnose',
-                   data_files=args.data,
-                   error={'held_out': diag.final.error, 'noise_floor': diag.noise_floor},
-                   extra={'missing_effects': diag.missing_effects, 'explained': diag.explained})
-        print(f'saved the whole model to {args.save_model}')
-    plugin = _save_plugin(args, diag)
-    print(diagnosis_next_command(diag, args.data, args.save_model, args.model, plugin))
+                   data_files=data_files(data),
+                   error={'held_out': final.error, 'noise_floor': diag.noise_floor},
+                   extra={'missing_effects': diag.missing_effects, 'explained': diag.explained,
+                          'mains_lines': [{'frequency_hz': d['frequency_hz'],
+                                           'level': d['level']} for d in diag.interference]})
+        print_saved(args.save_model)
+    plugin = _save_plugin(args, diag, data)
+    line = diagnosis_next_command(diag, args.data, args.save_model, args.model, plugin)
+    print(with_recording_flag(line, args.save_model))
     write_json(args.json, diag.to_json())
     rd = report_dir(args.report)
     if rd:
@@ -292,7 +256,7 @@ def _cmd_diagnose(args) -> int:
     return 0
 
 
-def _save_plugin(args, diag) -> str | None:
+def _save_plugin(args, diag, data) -> str | None:
     """Write the correction C(s) as a plugin (``--save-plugin``); its path, or None."""
     if not args.save_plugin:
         return None
@@ -302,7 +266,7 @@ def _save_plugin(args, diag) -> str | None:
         return None
     from ..workbench.discovery.plugin import write_plugin
 
-    name = write_plugin(args.save_plugin, diag.correction, data_files=args.data)
+    name = write_plugin(args.save_plugin, diag.correction, data_files=data_files(data))
     print(f"saved the correction C(s) as effect '{name}' to {args.save_plugin}")
     return args.save_plugin
 

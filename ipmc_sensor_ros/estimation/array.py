@@ -8,9 +8,11 @@ with the shared times to its own :class:`~ipmc_sensor_ros.estimation.stream.Stre
 every time, value, gap and reset rule is the one of a single sensor (it lives in ``stream.py``
 only) and each channel's output is bit-identical to a single-sensor run on the same data.
 Accounting is per channel: each channel keeps the counters of
-:data:`~ipmc_sensor_ros.estimation.stream.COUNTER_NAMES` with their invariant; a bad value in one
-channel (NaN, ``|i| > 1 A``) rejects that channel's samples only, while a bad time rejects the
-block in every channel (every channel counts it). :meth:`ArrayStream.totals` sums the channels.
+:data:`~ipmc_sensor_ros.estimation.stream.COUNTER_NAMES` with their invariants; a bad value in one
+channel (NaN, ``|i| > 1 A``) refuses that channel's sample only, while a bad stamp refuses the
+sample in every channel and a message that cannot be read is refused whole (every channel
+counts them). An output row carries NaN in a channel that has no estimate for it.
+:meth:`ArrayStream.totals` sums the channels.
 """
 from __future__ import annotations
 
@@ -54,7 +56,7 @@ class ArrayStream:
     ----------
     estimators : sequence of DeflectionEstimator
         One per channel (:func:`check_array_estimators`).
-    max_gap_s, max_block_samples, now_s, warn
+    max_gap_s, max_block_samples, now_s, warn, rate_tolerance
         As for :class:`StreamEstimator` (shared by the channels).
     source : str
         Topic or file; channel ``c`` is named ``"<source> ch<c>"`` in its messages.
@@ -64,12 +66,13 @@ class ArrayStream:
     def __init__(self, estimators: Sequence[DeflectionEstimator], *, max_gap_s: float = 0.1,
                  max_block_samples: int = MAX_BLOCK_SAMPLES, source: str = 'current',
                  now_s: Callable[[], float] | None = None,
-                 warn: Callable[[str], None] | None = None):
+                 warn: Callable[[str], None] | None = None, rate_tolerance: float = 0.05):
         check_array_estimators(estimators)
         self.source = source
         self.channels = [StreamEstimator(e, max_gap_s=max_gap_s,
                                          max_block_samples=max_block_samples,
-                                         source=f'{source} ch{c}', now_s=now_s, warn=warn)
+                                         source=f'{source} ch{c}', now_s=now_s, warn=warn,
+                                         rate_tolerance=rate_tolerance)
                          for c, e in enumerate(estimators)]
 
     def __len__(self) -> int:
@@ -120,6 +123,11 @@ class ArrayStream:
         for ch in self.channels:
             ch.reject(n_samples, reason)
 
+    def count(self, name: str, n: int = 1, text: str = '') -> None:
+        """Count a source event in every channel (:meth:`StreamEstimator.count`)."""
+        for k, ch in enumerate(self.channels):
+            ch.count(name, n, text if k == 0 else '')
+
     def unpublished(self, n_samples: int, reason: str, has_estimate: Sequence[bool]) -> None:
         """
         Count an output block that could not be delivered.
@@ -159,30 +167,33 @@ class ArrayStream:
                            f'{len(self.channels)}): one column per channel')
             return None
         n = table.shape[0]
-        if n == 1 and times is not None and claimed in (None, 1):   # the lean path, same result
+        if n == 1 and times is not None and claimed in (None, 1):   # the one-sample path
             return self.feed_one(float(np.asarray(times, dtype=float).ravel()[0]),
                                  table[0].tolist())
-        w = np.full((n, len(self.channels)), np.nan)
+        k = len(self.channels)
+        t_all = np.full(n, np.nan)
+        w = np.full((n, k), np.nan)
         std = np.full_like(w, np.nan)
-        has = np.zeros(len(self.channels), dtype=bool)
-        t_out = None
+        has = np.zeros(k, dtype=bool)
+        rows = np.zeros(n, dtype=bool)
         for c, ch in enumerate(self.channels):
             out = ch.feed(times, table[:, c], claimed=claimed)
             if out is None:
                 continue
-            t_out, w[:, c] = out
-            std[:, c] = ch.estimator.std_m
+            mask = ch.accepted
+            t_all[mask], w[mask, c] = out
+            std[mask, c] = ch.estimator.std_m
             has[c] = True
-        if t_out is None:
+            rows |= mask
+        if not has.any():
             return None
-        return t_out, w, std, has
+        return t_all[rows], w[rows], std[rows], has
 
     def feed_one(self, time_s: float, currents: Sequence[float]):
         """
         One timed sample of every channel: as :meth:`feed` with ``n = 1``.
 
-        Each channel takes :meth:`StreamEstimator.feed_one` (the lean path, identical results)
-        or, when that declines, :meth:`StreamEstimator.feed`.
+        Each channel takes :meth:`StreamEstimator.feed_one`.
         """
         k = len(self.channels)
         if len(currents) != k:
@@ -193,18 +204,10 @@ class ArrayStream:
         has = np.zeros(k, dtype=bool)
         t_out = None
         for c, (ch, i) in enumerate(zip(self.channels, currents)):
-            out = ch.feed_one(time_s, i)
-            if out is False:
-                out = ch.feed(np.array([time_s]), np.array([i], dtype=float))
-                if out is None:
-                    continue
-                t_c, w_c = float(out[0][0]), float(out[1][0])
-            elif out is None:
+            out = ch.feed_one(time_s, float(i))
+            if out is None:
                 continue
-            else:
-                t_c, w_c = out
-            t_out = t_c
-            w[0, c] = w_c
+            t_out, w[0, c] = out
             std[0, c] = ch.estimator.std_m
             has[c] = True
         if t_out is None:

@@ -311,6 +311,52 @@ class InverseEstimator:
         self._zi_list = None
         self._zi_array = value
 
+    # -- the estimator-core interface (:class:`~.core.EstimatorCore`) ------------------------
+    name = 'leaky'
+
+    def estimate(self, current_a, steps=None):
+        """
+        Filter a block; return an :class:`~.core.Estimate` (std NaN, never at rest).
+
+        A sample ``steps[k] > 1`` periods after the one before is preceded by ``steps[k] - 1``
+        zero-current samples (the leaky inverse has no prediction model: a missing sample is
+        taken as no charge flowing).
+        """
+        from .core import Estimate
+
+        x = np.asarray(current_a, dtype=float)
+        if steps is not None and np.any(np.asarray(steps) > 1):
+            st = np.asarray(steps, dtype=np.int64)
+            idx = np.cumsum(st) - st[0]
+            padded = np.zeros(int(idx[-1]) + 1)
+            padded[idx] = x
+            w = self.process(padded)[idx]
+        else:
+            w = self.process(x)
+        return Estimate(w, np.full(w.size, np.nan), np.zeros(w.size, dtype=bool))
+
+    def estimate_one(self, current_a: float, steps: int = 1) -> tuple[float, float]:
+        """One sample: (deflection, NaN); :meth:`process_one` after ``steps - 1`` zeros."""
+        if steps > 1:
+            self._process_small([0.0] * (int(steps) - 1))
+        return self.process_one(current_a), math.nan
+
+    def smooth(self, current_a, steps=None):
+        """Return the causal estimate from a fresh start (the leaky inverse has no smoother)."""
+        fresh = InverseEstimator(self.reduced, self.sample_rate_hz,
+                                 leak_corner_hz=self.leak_corner_hz,
+                                 offset_corner_hz=self.offset_corner_hz,
+                                 prewarp_hz=self.prewarp_hz, channels=self.channels)
+        return fresh.estimate(current_a, steps)
+
+    def status(self) -> dict:
+        return {'estimator': self.name, 'offset_a': None, 'offset_std_a': None,
+                'at_rest': False, 'deflection_std_m': None, 'noise_a': None}
+
+    def settling(self) -> tuple[float, str]:
+        """Five time constants of the leak: it has forgotten the unknown starting level."""
+        return 5.0 / (2 * math.pi * self.leak_corner_hz), 'leak transient'
+
     def process_sample(self, current_a: float) -> float:
         """One sample of a single-channel estimator (alias of :meth:`process_one`)."""
         return self.process_one(current_a)

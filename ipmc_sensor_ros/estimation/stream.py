@@ -3,29 +3,39 @@
 The stream core: sample blocks in, deflection blocks out, with every rule of a live stream.
 
 :class:`StreamEstimator` is what the estimator node, ``ipmc-model estimate`` and bag replay
-run; the node only unpacks messages, calls :meth:`StreamEstimator.feed` and publishes.  It owns
+run; the node only unpacks messages, calls :meth:`StreamEstimator.feed` (a block) or
+:meth:`StreamEstimator.feed_one` (a one-sample message) and publishes.  Every rule decides one
+*sample*, so the result does not depend on how the stream is cut into messages:
 
-* **value rules** (:func:`validate_block`): a block is 1-D, non-empty, at most
-  ``max_block_samples`` long, finite and within ``|i| <= MAX_ABS_CURRENT_A``;
-* **time rules** (:meth:`StreamEstimator.check_times`): sample times strictly increasing, finite,
-  within ``[0, MAX_STAMP_S]`` (``builtin_interfaces/Time.sec`` is int32), and a median period
-  within ``PERIOD_TOLERANCE`` of ``1/sample_rate_hz``; a block (also of one sample) may not start
-  less than ``(1 - PERIOD_TOLERANCE)/fs`` after the previous valid sample (a stream faster than
-  ``sample_rate_hz`` is refused, however it is cut into messages); blocks without times (1-D
-  messages) continue the previous time at ``1/fs`` (or start at ``now_s()``) and obey the same
-  range rule;
-* **continuity rules**: time stepping back between blocks (a new run, a bag loop) or a gap longer
-  than ``max_gap_s`` resets the filter (the missing current is unknown); a shorter gap is bridged
-  (the filter runs on, counted in ``gaps_bridged``); a gap inside a block is treated as if the
-  block had been cut there (the result does not depend on how the stream is cut into messages);
-* **accounting**: the counters of :data:`COUNTER_NAMES` with the invariant
-  ``samples_in == samples_out + samples_rejected + samples_dropped + samples_unpublished``.
-  Rejected blocks never touch filter state; a non-finite estimate drops the block and resets;
-  an estimate that could not be delivered (:meth:`StreamEstimator.unpublished`, output
-  back-pressure) is counted, and neither resets nor changes the filter.
+* **values**: a current that is not finite or has ``|i| > MAX_ABS_CURRENT_A`` is refused
+  (that sample only);
+* **time** (:mod:`~ipmc_sensor_ros.estimation.timebase`): samples are taken at their stamps,
+  on the nearest slot of a grid that follows them (jitter up to 25 % of the period).  The
+  slots since the previous accepted sample are the ``steps`` handed to the filter
+  (``DeflectionEstimator.process(time_s, current_a, steps)``): missing samples and gaps up to
+  ``max_gap_s`` are bridged by its prediction (``gaps_bridged``, ``samples_lost``).  A
+  duplicated stamp, a stamp behind the previous one by at most ``max_gap_s`` or on the previous
+  sample's slot is refused (that sample; no reset).  A longer gap (``gaps``) or jump back (a
+  bag loop, a new run) starts a new run: filter reset (``resets``).  The output time of a
+  sample is its stamp (minus a model delay);
+* **rate**: measured from the stamps (``measured_rate_hz``); off ``sample_rate_hz`` by more
+  than ``rate_tolerance`` it is reported once; the filter is rebuilt at the measured rate
+  (bumpless) whenever the two differ by more than ``RATE_FOLLOW_FRACTION`` (``rate_rebuilds``);
+* **messages**: a block longer than ``max_block_samples`` (``too_long``) or one that cannot be
+  read (``malformed``, :meth:`reject`) is refused whole;
+* **accounting** (:class:`~ipmc_sensor_ros.estimation.accounting.StreamAccounts`): every
+  sample counted once, as estimated, refused (per reason), dropped or undelivered; a refused
+  sample never touches the filter; a non-finite estimate drops its samples and resets; an
+  estimate that could not be delivered (:meth:`~StreamAccounts.unpublished`) is counted and
+  changes nothing.  The node counts its source events here too (other publishers ignored,
+  messages lost before it; :mod:`~ipmc_sensor_ros.interface.sources`).
 
-Every rule lives here once; a rule violation is a :class:`~ipmc_sensor_ros.errors.DataError`
-whose text names the rule, the values and (``source``) the topic or file.
+One rule per sample: :meth:`StreamEstimator.feed_one` applies it to one sample;
+:meth:`StreamEstimator.feed` applies it to a block, running its leading samples that are
+accepted without a refusal or a new run through the same grid expression in numpy
+(:meth:`~ipmc_sensor_ros.estimation.timebase.Timebase.admit_plain`).  Rule violations are
+named in ``last_rejection`` / ``last_warning`` with the values and (``source``) the topic or
+file.
 """
 from __future__ import annotations
 
@@ -35,78 +45,34 @@ from typing import Callable
 import numpy as np
 
 from ..errors import DataError
+from .accounting import (COUNTER_NAMES, MAX_ABS_CURRENT_A, MAX_BLOCK_SAMPLES, REJECT_REASONS,
+                         StreamAccounts, _as_block, validate_block)
 from .deflection import DeflectionEstimator
+from .timebase import (JITTER_FRACTION, MAX_STAMP_S, NON_FINITE, OUT_OF_RANGE, RATE_WINDOW_S,
+                       START, Timebase)
 
-__all__ = ['StreamEstimator', 'validate_block', 'COUNTER_NAMES', 'MAX_ABS_CURRENT_A',
-           'MAX_BLOCK_SAMPLES', 'MAX_STAMP_S', 'PERIOD_TOLERANCE', 'estimate_record']
+__all__ = ['StreamEstimator', 'validate_block', 'COUNTER_NAMES', 'REJECT_REASONS',
+           'MAX_ABS_CURRENT_A', 'MAX_BLOCK_SAMPLES', 'MAX_STAMP_S', 'JITTER_FRACTION',
+           'RATE_WINDOW_S', 'RATE_FOLLOW_FRACTION', 'estimate_record', 'smooth_record']
 
-#: Largest block accepted by default (samples).
-MAX_BLOCK_SAMPLES = 1_000_000
-
-#: Largest plausible sensing current, A (IPMC currents are nA..uA; 1 A means a wiring or
-#: unit error).
-MAX_ABS_CURRENT_A = 1.0
-
-#: Largest representable stamp (``builtin_interfaces/Time.sec`` is int32), s.
-MAX_STAMP_S = 2.0 ** 31 - 1.0
-
-#: Relative tolerance of a sample period against ``1/sample_rate_hz``.
-PERIOD_TOLERANCE = 0.01
-
-#: A step between blocks longer than this many periods is a gap (bridged or, beyond
-#: ``max_gap_s``, a reset).
-GAP_PERIODS = 1.5
-
-#: Counters kept per stream; see the module docstring for the invariant.
-COUNTER_NAMES = ('messages_in', 'samples_in', 'samples_out', 'samples_rejected',
-                 'messages_rejected', 'samples_dropped', 'samples_unpublished',
-                 'messages_unpublished', 'resets', 'gaps', 'gaps_bridged')
+#: The filter is rebuilt at the measured rate when it differs from the filter's by more than
+#: this fraction.  The sensor differentiates, so a relative rate error is the same relative
+#: amplitude error: 0.2 % is a fifth of the 1 % accuracy the estimator is held to, and 20
+#: times the ~100 ppm a DAQ crystal is off the host clock (which never causes a rebuild).
+RATE_FOLLOW_FRACTION = 0.002
 
 
-def validate_block(values, max_samples: int = MAX_BLOCK_SAMPLES,
-                   max_abs_current_a: float = MAX_ABS_CURRENT_A) -> np.ndarray:
-    """
-    Check a block of current samples before it touches filter state.
-
-    Returns a float64 1-D array, or raises :class:`~ipmc_sensor_ros.errors.DataError` saying why
-    (empty, too long, non-finite or implausibly large values).  Rejecting the whole block, rather
-    than patching samples, keeps the filter state clean and the sample accounting exact.
-    """
-    try:
-        x = np.asarray(values, dtype=float)
-    except (TypeError, ValueError):
-        raise DataError('current block is not numeric') from None
-    if x.ndim != 1:
-        raise DataError(f'current block must be 1-D, got shape {x.shape}')
-    if x.size == 0:
-        raise DataError('current block is empty')
-    if x.size > max_samples:
-        raise DataError(f'current block has {x.size} samples, more than the limit {max_samples}')
-    if float(np.max(np.abs(x))) <= max_abs_current_a:   # one pass; NaN makes it False
-        return x
-    finite = np.isfinite(x)
-    if not finite.all():
-        raise DataError(f'current block has {int((~finite).sum())} non-finite sample(s) '
-                        f'(first at index {int(np.argmin(finite))})')
-    k = int(np.argmax(np.abs(x) > max_abs_current_a))
-    raise DataError(f'current block has |i| > {max_abs_current_a} A at index {k} '
-                    f'({x[k]!r} A): not a sensing current')
-
-
-def _no_log(text: str) -> None:
-    return None
-
-
-class StreamEstimator:
+class StreamEstimator(StreamAccounts):
     """
     Stream rules and accounting around a :class:`DeflectionEstimator` (module docstring).
 
     Parameters
     ----------
     estimator : DeflectionEstimator
-        The model-aware filter; replaced bumplessly with :meth:`replace_estimator`.
+        The model-aware filter; replaced bumplessly with :meth:`replace_estimator`.  Its
+        sample rate is the nominal one (``sample_rate_hz``).
     max_gap_s : float
-        Longest gap bridged without a reset, s.
+        Longest gap (or jump back) bridged without a reset, s.
     max_block_samples : int
         Longest block accepted.
     source : str
@@ -114,42 +80,69 @@ class StreamEstimator:
     now_s : callable, optional
         Time of a block without sample times when nothing came before (the node's clock).
     warn : callable, optional
-        Receives the text of every reset, dropped block and rejection (the node logs it).
+        Receives the text of every reset, refusal and rate report (the node logs it).
+    rate_tolerance : float
+        Relative rate mismatch reported (``rate_tolerance`` of the diagnostics).
 
     """
 
     def __init__(self, estimator: DeflectionEstimator, *, max_gap_s: float = 0.1,
                  max_block_samples: int = MAX_BLOCK_SAMPLES, source: str = 'current',
                  now_s: Callable[[], float] | None = None,
-                 warn: Callable[[str], None] | None = None):
+                 warn: Callable[[str], None] | None = None, rate_tolerance: float = 0.05):
         if not (math.isfinite(max_gap_s) and max_gap_s > 0.0):
             raise DataError(f'max_gap_s must be > 0 s, got {max_gap_s!r}')
+        super().__init__(source, warn)
         self.estimator = estimator
-        self.max_gap_s = float(max_gap_s)
         self.max_block_samples = int(max_block_samples)
-        self.source = source
+        self.rate_tolerance = float(rate_tolerance)
         self._now_s = now_s or (lambda: 0.0)
-        self._warn = warn or _no_log
-        self.counters: dict[str, int] = dict.fromkeys(COUNTER_NAMES, 0)
-        self.last_rejection = ''
-        self.last_warning = ''
-        self.last_time_s: float | None = None   # last sample fed to the filter
-        self._last_valid_s: float | None = None  # last well-formed sample time seen (period rule)
-        self._fs = float(estimator.sample_rate_hz)
+        self.nominal_rate_hz = float(estimator.sample_rate_hz)
+        self.timebase = Timebase(1.0 / self.nominal_rate_hz, max_gap_s)
+        self.accepted = np.zeros(0, dtype=bool)   # input samples of the last feed with output
+        self._filter_hz = self.nominal_rate_hz      # rate the filter is (to be) built for
+        self._rate_reported = False
+        self._stamp_floor_s: float | None = None    # output stamps must pass it (delay grew)
 
     # -- configuration --------------------------------------------------------------
     @property
     def sample_rate_hz(self) -> float:
-        return self._fs
+        """Return the rate the filter runs at (the measured one once it is followed), Hz."""
+        return float(self.estimator.sample_rate_hz)
+
+    @property
+    def measured_rate_hz(self) -> float | None:
+        """Return the rate measured from the stamps (None before a full window), Hz."""
+        p = self.timebase.measured
+        return None if p is None else 1.0 / p
+
+    @property
+    def max_gap_s(self) -> float:
+        return self.timebase.max_gap_s
+
+    @max_gap_s.setter
+    def max_gap_s(self, value: float) -> None:
+        self.timebase.max_gap_s = float(value)
+
+    @property
+    def last_time_s(self) -> float | None:
+        """Return the stamp of the last accepted sample, s."""
+        return self.timebase.last_s
 
     def replace_estimator(self, new: DeflectionEstimator) -> None:
         """
         Swap in ``new`` (parameter change); its output continues from the old one's.
 
-        Should the hand-over itself fail, ``new`` starts afresh and that is counted as a
-        reset.
+        ``new``'s rate is the nominal one; a measured rate the filter follows is kept.  Should
+        the hand-over itself fail, ``new`` starts afresh and that is counted as a reset.
         """
+        self.nominal_rate_hz = float(new.sample_rate_hz)
+        old = self.estimator
+        if self.last_time_s is not None and new.delay_s > old.delay_s:
+            self._stamp_floor_s = self.last_time_s - old.delay_s   # the last output stamp
         try:
+            if abs(self._filter_hz / new.sample_rate_hz - 1.0) > RATE_FOLLOW_FRACTION:
+                new = new.rebuilt(sample_rate_hz=self._filter_hz)
             new.continue_from(self.estimator)
         except Exception as exc:  # never lose the stream over a hand-over
             new.reset()
@@ -157,7 +150,6 @@ class StreamEstimator:
             self._say(f'filter rebuilt without continuity on {self.source} '
                       f'({type(exc).__name__}): filter reset')
         self.estimator = new
-        self._fs = float(new.sample_rate_hz)
 
     def restart(self) -> None:
         """
@@ -167,101 +159,131 @@ class StreamEstimator:
         node activated again).
         """
         self.estimator.reset()
-        self.last_time_s = self._last_valid_s = None
+        self.timebase.forget()
+        self._refused_since = 0
+        self._stamp_floor_s = None
 
-    def check_invariant(self) -> bool:
-        c = self.counters
-        return c['samples_in'] == (c['samples_out'] + c['samples_rejected'] + c['samples_dropped']
-                                   + c['samples_unpublished'])
+    def status(self) -> dict:
+        """Return the stream's time state for counters and diagnostics (JSON-able)."""
+        return {'measured_rate_hz': self.measured_rate_hz, 'filter_rate_hz': self.sample_rate_hz,
+                'grid_period_s': self.timebase.period_s}
 
-    # -- events -------------------------------------------------------------------------
-    def _say(self, text: str) -> None:
-        self.last_warning = text
-        self._warn(text)
+    def _rate_action(self) -> float | None:
+        """Judge a freshly measured rate: report a mismatch once; return a rate to follow."""
+        self.timebase.fresh = False
+        hz = self.measured_rate_hz
+        off = hz / self.nominal_rate_hz - 1.0
+        if abs(off) > self.rate_tolerance:
+            if not self._rate_reported:
+                self._say(f'measured sample rate {hz:.6g} Hz on {self.source} is {off:+.2%} off '
+                          f'sample_rate_hz = {self.nominal_rate_hz:g} Hz (rate_tolerance '
+                          f'{self.rate_tolerance:g}): estimating at the measured rate')
+            self._rate_reported = True
+        else:
+            self._rate_reported = False
+        if abs(hz / self._filter_hz - 1.0) > RATE_FOLLOW_FRACTION:
+            self._filter_hz = hz
+            return hz
+        return None
 
-    def reject(self, n_samples: int, reason: str) -> None:
-        """Count a message of ``n_samples`` claimed samples as received and rejected."""
-        c = self.counters
-        c['messages_in'] += 1
-        c['samples_in'] += n_samples
-        c['messages_rejected'] += 1
-        c['samples_rejected'] += n_samples
-        self.last_rejection = reason
-        self._say(f'rejected message on {self.source} ({n_samples} sample(s)): {reason}')
-
-    def unpublished(self, n_samples: int, reason: str) -> None:
-        """
-        Move ``n_samples`` just counted as ``samples_out`` to ``samples_unpublished``.
-
-        The estimate exists (the filter ran) but could not be delivered. No reset.
-        """
-        c = self.counters
-        c['samples_out'] -= n_samples
-        c['samples_unpublished'] += n_samples
-        c['messages_unpublished'] += 1
-        self._say(f'could not publish {n_samples} estimate(s) from {self.source}: {reason}')
-
-    def _reset(self, text: str) -> None:
-        self.estimator.reset()
-        self.counters['resets'] += 1
-        self._say(text)
-
-    # -- rules --------------------------------------------------------------------------
-    def check_times(self, times: np.ndarray | None, n: int) -> np.ndarray:
-        """
-        Sample times of a block of ``n`` samples, checked (or inferred when ``None``).
-
-        Raises :class:`~ipmc_sensor_ros.errors.DataError` naming the rule broken.
-        """
-        fs = self._fs
-        if times is None:
-            start = self._now_s() if self.last_time_s is None else self.last_time_s + 1.0 / fs
-            times = start + np.arange(n) / fs
-        elif times.size != n:
-            raise DataError(f'{times.size} sample times for {n} samples')
-        # strictly increasing with finite ends implies all finite and within the ends
-        # (NaN fails 'dt > 0'), so the range is checked on the first and last time only
-        dt = np.diff(times)
-        if not (dt > 0.0).all():
-            if not np.all(np.isfinite(times)):
-                raise DataError('sample times contain non-finite values')
-            k = int(np.argmax(~(dt > 0.0)))
-            raise DataError(f'sample times are not strictly increasing (index {k + 1}: '
-                            f'{times[k + 1]!r} s after {times[k]!r} s)')
-        first, last = float(times[0]), float(times[-1])
-        if not (math.isfinite(first) and math.isfinite(last)):
-            raise DataError('sample times contain non-finite values')
-        if first < 0.0 or last > MAX_STAMP_S:
-            raise DataError(f'sample times must lie in [0, {MAX_STAMP_S:.0f}] s '
-                            f'(got {first!r} .. {last!r} s)')
-        if n >= 2:
-            period = float(np.median(dt))
-            if abs(period * fs - 1.0) > PERIOD_TOLERANCE:
-                raise DataError(f'median sample period {period:.6g} s does not match '
-                                f'sample_rate_hz = {fs:g} Hz (1/fs = {1.0 / fs:.6g} s, '
-                                f'tolerance {PERIOD_TOLERANCE:.0%})')
-        previous, self._last_valid_s = self._last_valid_s, last
-        if previous is not None and 0.0 < (first - previous) * fs < 1.0 - PERIOD_TOLERANCE:
-            raise DataError(f'sample at {first!r} s only {first - previous:.6g} s after the '
-                            f'previous one at {previous!r} s: faster than sample_rate_hz = '
-                            f'{fs:g} Hz (1/fs = {1.0 / fs:.6g} s)')
-        return times
-
-    def _continuity(self, first_time_s: float) -> None:
-        """Reset on a backward jump or a long gap; count a bridged gap."""
-        if self.last_time_s is None:
+    def _follow_rate(self, hz: float) -> None:
+        """Rebuild the filter at ``hz`` (bumpless); on failure keep the old one and say why."""
+        try:
+            self.estimator = self.estimator.rebuilt(sample_rate_hz=hz)
+        except Exception as exc:  # an unusable rate must not stop the stream
+            self._say(f'could not rebuild the filter at the measured {hz:.6g} Hz on '
+                      f'{self.source}: {type(exc).__name__}: {exc}')
             return
-        step = first_time_s - self.last_time_s
-        if step <= 0.0:
-            self._reset(f'time jumped back by {-step:.6g} s on {self.source}: filter reset')
-        elif step > self.max_gap_s:
-            self.counters['gaps'] += 1
-            self._reset(f'gap of {step:.6g} s (> max_gap_s = {self.max_gap_s:g} s) on '
-                        f'{self.source}: filter reset')
-        elif step * self._fs > GAP_PERIODS:
-            self.counters['gaps_bridged'] += 1
+        self.counters['rate_rebuilds'] += 1
+
+    # -- the rule for one sample ----------------------------------------------------
+    def _admit(self, t: float, i: float) -> int:
+        """
+        Decide one sample (module docstring): steps >= 1, ``START`` (0) or -1 (refused).
+
+        Everything is counted here; a run's start is counted and said (:meth:`_begin_run`).
+        """
+        if -MAX_ABS_CURRENT_A <= i <= MAX_ABS_CURRENT_A:
+            code = self.timebase.admit(t)
+        else:
+            code = OUT_OF_RANGE if math.isfinite(i) else NON_FINITE
+        if code > 0:
+            if code > 1:
+                self._bridged(code, self._refused_since)
+            self._refused_since = 0
+            return code
+        if code == START:
+            self._refused_since = 0
+            self._begin_run()
+            return START
+        self._refuse(code, t, i)
+        return -1
+
+    def _admit_block(self, t: np.ndarray, i: np.ndarray):
+        """
+        :meth:`_admit` for every sample of a block, the plain runs of samples in numpy.
+
+        Returns (codes, rate cuts): per sample steps >= 1, 0 (START) or -1, and the
+        ``(index, rate)`` after which the filter follows a measured rate.
+        """
+        n = t.size
+        codes = np.empty(n, dtype=np.int64)
+        cuts = []
+        tb = self.timebase
+        ok = (i >= -MAX_ABS_CURRENT_A) & (i <= MAX_ABS_CURRENT_A)
+        bad = np.flatnonzero(~ok).tolist() + [n]
+        b = k = 0
+        while k < n:
+            plain = tb.admit_plain(t, k, bad[b]) if k < bad[b] else ()
+            if len(plain):
+                m = len(plain)
+                codes[k:k + m] = plain
+                for j in np.flatnonzero(plain > 1).tolist():   # rare: a Python loop
+                    self._bridged(int(plain[j]), self._refused_since if j == 0 else 0)
+                self._refused_since = 0
+                k += m
+            else:
+                b += k == bad[b]
+                codes[k] = self._admit(float(t[k]), float(i[k]))
+                k += 1
+            if tb.fresh:
+                hz = self._rate_action()
+                if hz is not None:
+                    cuts.append((k - 1, hz))
+        return codes, cuts
 
     # -- data path ----------------------------------------------------------------------
+    def feed_one(self, time_s: float, current_a: float):
+        """
+        One timed sample (a one-sample message): ``(time_out, deflection)`` as floats.
+
+        ``None`` when the sample was refused or its estimate dropped (counted, with
+        ``last_rejection`` / ``last_warning`` saying why).  The same rule as :meth:`feed`.
+        """
+        c = self.counters
+        c['messages_in'] += 1
+        c['samples_in'] += 1
+        code = self._admit(time_s, current_a)
+        if code < 0:
+            c['messages_rejected'] += 1
+            return None
+        est = self.estimator
+        if code == START:
+            est.reset()
+        t_out, w = est.process_one(time_s, current_a, code or 1)
+        if self.timebase.fresh:
+            hz = self._rate_action()
+            if hz is not None:
+                self._follow_rate(hz)
+        if not math.isfinite(w):
+            self._drop(1)
+            return None
+        c['samples_out'] += 1
+        if self._stamp_floor_s is not None:
+            kept = self._past_floor(np.array([t_out]), np.array([w]))
+            return None if kept is None else (float(kept[0][0]), float(kept[1][0]))
+        return t_out, w
+
     def feed(self, times, currents, claimed: int | None = None):
         """
         Estimate one block.
@@ -269,7 +291,7 @@ class StreamEstimator:
         Parameters
         ----------
         times : array_like or None
-            Sample times, s (``None``: continue the stream at ``1/fs``).
+            Sample times, s (``None``: continue the stream on its grid).
         currents : array_like
             Sensing current, A.
         claimed : int, optional
@@ -278,111 +300,130 @@ class StreamEstimator:
 
         Returns
         -------
-        (time_s, deflection_m) arrays, or ``None`` when the block was rejected or dropped
-        (counted, with ``last_rejection`` / ``last_warning`` saying why).
+        (time_s, deflection_m) arrays of the accepted samples (:attr:`accepted` marks them in
+        the input), or ``None`` when none was (counted, ``last_rejection`` says why).
 
         """
+        n_claimed = claimed if claimed is not None else int(np.size(currents))
+        self.accepted = np.zeros(0, dtype=bool)
+        if np.size(currents) > self.max_block_samples:
+            self.reject(n_claimed, f'block of {np.size(currents)} samples, more than the limit '
+                                   f'{self.max_block_samples} (max_block_samples)', 'too_long')
+            return None
         try:
-            current = validate_block(currents, max_samples=self.max_block_samples)
-            t = self.check_times(None if times is None else np.asarray(times, dtype=float),
-                                 current.size)
+            current = _as_block(currents, self.max_block_samples)
+            t = self._times(times, current.size)
         except DataError as exc:
-            n = claimed if claimed is not None else int(np.size(currents))
-            self.reject(n, str(exc))
+            self.reject(n_claimed, str(exc))
             return None
         c = self.counters
         c['messages_in'] += 1
         c['samples_in'] += current.size
-        # a gap inside a block obeys the rules of a gap between blocks
-        cuts = np.flatnonzero(np.diff(t) * self._fs > GAP_PERIODS) + 1 if t.size > 1 else ()
-        if len(cuts):
-            parts = []
-            for a, b in zip([0, *cuts], [*cuts, t.size]):
-                self._continuity(float(t[a]))
-                parts.append(self.estimator.process(t[a:b], current[a:b]))
-                self.last_time_s = float(t[b - 1])
-            t_out = np.concatenate([p[0] for p in parts])
-            w = np.concatenate([p[1] for p in parts])
-        else:
-            self._continuity(float(t[0]))
-            t_out, w = self.estimator.process(t, current)
-        if not np.all(np.isfinite(w)):
-            self.estimator.reset()
-            c['samples_dropped'] += current.size
-            c['resets'] += 1
-            self._say(f'non-finite estimate on {self.source}: block dropped, filter reset')
+        codes, cuts = self._admit_block(t, current)
+        t_out, w = self._filter(t, current, codes, cuts)
+        if t_out is None:
+            c['messages_rejected'] += 1
             return None
-        self.last_time_s = float(t[-1])
-        c['samples_out'] += current.size
+        if self._stamp_floor_s is not None:
+            return self._past_floor(t_out, w)
         return t_out, w
 
-    def feed_one(self, time_s: float, current_a: float):
+    def _past_floor(self, t_out: np.ndarray, w: np.ndarray):
         """
-        One timed sample on the lean path: ``(time_out, deflection)`` as floats.
+        Output stamps strictly increase: withhold estimates stamped at or before the floor.
 
-        ``None`` if the estimate was non-finite (dropped and counted, as :meth:`feed` does);
-        ``False`` — having touched nothing — when the sample needs the general path
-        (:meth:`feed`: a rule to enforce, a reset, a gap, or effects around the filter).
-        Identical results and counters to :meth:`feed` (tested).
+        After ``time_delay`` grew by d, the first estimates (stamped ``t - delay``) fall on
+        instants already published (within rounding: less than half a period after the last
+        stamp); they are counted in ``samples_dropped``, not published.
         """
-        t, i = time_s, current_a
-        # NaN fails every comparison, so non-finite values leave through the general path
-        if not (0.0 <= t <= MAX_STAMP_S and -MAX_ABS_CURRENT_A <= i <= MAX_ABS_CURRENT_A):
-            return False
-        last = self.last_time_s
-        if last is None or self._last_valid_s != last:
-            return False
-        step = (t - last) * self._fs
-        if not (1.0 - PERIOD_TOLERANCE <= step <= GAP_PERIODS and t - last <= self.max_gap_s):
-            return False
-        est = self.estimator
-        if not est.plain:
-            return False
-        t_out, w = est.process_one(t, i)
-        c = self.counters
-        c['messages_in'] += 1
-        c['samples_in'] += 1
-        if not math.isfinite(w):
-            est.reset()
-            c['samples_dropped'] += 1
-            c['resets'] += 1
-            self._say(f'non-finite estimate on {self.source}: block dropped, filter reset')
-            self._last_valid_s = t
+        keep = t_out > self._stamp_floor_s + 0.5 / self.sample_rate_hz
+        withheld = int(t_out.size - np.count_nonzero(keep))
+        if withheld:
+            c = self.counters
+            c['samples_out'] -= withheld
+            c['samples_dropped'] += withheld
+            if self.accepted.size:
+                self.accepted[np.flatnonzero(self.accepted)[~keep]] = False
+            self._say(f'time_delay grew on {self.source}: {withheld} estimate(s) stamped at or '
+                      f'before the last published one ({self._stamp_floor_s!r} s) not published '
+                      '(output stamps strictly increase)')
+        if not keep.any():
             return None
-        self.last_time_s = self._last_valid_s = t
-        c['samples_out'] += 1
-        return t_out, w
+        self._stamp_floor_s = None
+        return t_out[keep], w[keep]
+
+    def _times(self, times, n: int) -> np.ndarray:
+        """Return the sample times of a block (continued on the grid when ``times`` is None)."""
+        if times is None:
+            tb = self.timebase
+            start = self._now_s() if tb.last_s is None else tb.last_s + tb.period_s
+            return start + np.arange(n) * tb.period_s
+        t = np.asarray(times, dtype=float)
+        if t.shape != (n,):
+            raise DataError(f'{t.size} sample times for {n} samples')
+        return t
+
+    def _filter(self, t, current, codes, cuts):
+        """Run the filter over the accepted samples, resetting and rebuilding where decided."""
+        events = sorted([(int(k), 1, None) for k in np.flatnonzero(codes == START)]
+                        + [(k + 1, 0, hz) for k, hz in cuts])
+        accepted = codes >= 0
+        parts = []
+        start = 0
+        for stop, kind, hz in events + [(t.size, 2, None)]:
+            sel = np.flatnonzero(accepted[start:stop]) + start
+            if sel.size:
+                t_out, w = self.estimator.process(t[sel], current[sel], np.maximum(codes[sel], 1))
+                if np.all(np.isfinite(w)):
+                    parts.append((t_out, w, self.estimator.last_std_m))
+                    self.counters['samples_out'] += sel.size
+                else:
+                    accepted[sel] = False
+                    self._drop(sel.size)
+            if kind == 1:
+                self.estimator.reset()
+            elif kind == 0:
+                self._follow_rate(hz)
+            start = stop
+        self.accepted = accepted
+        self.codes = codes
+        if not parts:
+            self.last_std_m = np.zeros(0)
+            return None, None
+        self.last_std_m = np.concatenate([p[2] for p in parts])
+        if len(parts) == 1:
+            return parts[0][:2]
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
 
     def run_record(self, time_s, current_a, block_samples: int = 1000):
         """
         Feed a whole record (offline) in blocks of ``block_samples``.
 
-        Cut also where time does not increase (a record may hold several concatenated runs:
-        each is a new run, as a bag loop is live). Returns (output times, deflection, kept):
-        ``kept`` marks the input samples that have an estimate (rejected or dropped blocks have
-        none; see :attr:`counters`).
+        Returns (output times, deflection, kept): ``kept`` marks the input samples that have
+        an estimate (refused or dropped ones have none; see :attr:`counters`).  The rules are
+        the live ones: a jump back by more than ``max_gap_s`` starts a new run, as a bag loop
+        does live.  Per kept sample it also keeps ``record_std_m`` (the published standard
+        deviation) and ``record_steps`` (the sample periods handed to the filter; 0 where a new
+        run began), which :func:`smooth_record` reuses.
         """
         t = np.asarray(time_s, float)
         i = np.asarray(current_a, float)
         kept = np.zeros(t.size, dtype=bool)
-        cuts = list(np.flatnonzero(~(np.diff(t) > 0.0)) + 1) + [t.size]
-        # estimates go straight into record-length arrays (a list of per-block arrays
-        # joined at the end held them twice)
-        out_t, out_w = np.empty(t.size), np.empty(t.size)
-        n_out, start = 0, 0
-        for stop in cuts:
-            for k in range(start, stop, block_samples):
-                end = min(k + block_samples, stop)
-                res = self.feed(t[k:end], i[k:end])
-                if res is not None:
-                    m = res[0].size
-                    out_t[n_out:n_out + m] = res[0]
-                    out_w[n_out:n_out + m] = res[1]
-                    n_out += m
-                    kept[k:end] = True
-            start = stop
-        if n_out == 0:
-            return np.zeros(0), np.zeros(0), kept
+        out_t, out_w, out_s = np.empty(t.size), np.empty(t.size), np.empty(t.size)
+        steps = np.empty(t.size, dtype=np.int32)     # a gap is bridged only up to max_gap_s
+        n_out = 0
+        for k in range(0, t.size, block_samples):
+            end = min(k + block_samples, t.size)
+            res = self.feed(t[k:end], i[k:end])
+            if res is not None:
+                m = res[0].size
+                out_t[n_out:n_out + m] = res[0]
+                out_w[n_out:n_out + m] = res[1]
+                out_s[n_out:n_out + m] = self.last_std_m if self.last_std_m.size == m else np.nan
+                steps[n_out:n_out + m] = self.codes[self.accepted]
+                n_out += m
+                kept[k:end] = self.accepted
+        self.record_std_m, self.record_steps = out_s[:n_out], steps[:n_out]
         return out_t[:n_out], out_w[:n_out], kept
 
 
@@ -392,10 +433,29 @@ def estimate_record(estimator: DeflectionEstimator, time_s, current_a, *, max_ga
     Offline estimate of a whole record with the live stream's rules.
 
     :meth:`StreamEstimator.run_record`. Returns (output times, deflection, stream) — the
-    stream's ``counters`` say how many samples were rejected and how often it reset. Only
-    samples with an estimate are returned: ``stream.kept`` marks them in the input.
+    stream's ``counters`` say how many samples were refused (per reason) and how often it
+    reset. Only samples with an estimate are returned: ``stream.kept`` marks them in the input.
     """
     stream = StreamEstimator(estimator, max_gap_s=max_gap_s,
                              max_block_samples=max(block_samples, 1), source=source)
     t, w, stream.kept = stream.run_record(time_s, current_a, block_samples=block_samples)
     return t, w, stream
+
+
+def smooth_record(estimator: DeflectionEstimator, stream: StreamEstimator, time_s, current_a):
+    """
+    Offline smoothed estimate of the samples ``stream`` kept: (times, deflection, std).
+
+    ``stream`` ran the record (:func:`estimate_record`); its decisions are reused, not made
+    again: each run it began is smoothed from a fresh start (:meth:`DeflectionEstimator.smooth`)
+    with the sample periods it handed the filter (missing samples bridged).
+    """
+    t = np.asarray(time_s, float)[stream.kept]
+    i = np.asarray(current_a, float)[stream.kept]
+    steps = stream.record_steps
+    cuts = [int(k) for k in np.flatnonzero(steps == START) if k > 0]
+    out = [estimator.smooth(t[a:b], i[a:b], np.maximum(steps[a:b], 1))
+           for a, b in zip([0, *cuts], [*cuts, t.size]) if b > a]
+    if not out:
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    return tuple(np.concatenate(p) for p in zip(*out))

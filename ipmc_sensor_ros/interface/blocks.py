@@ -28,8 +28,8 @@ from ..errors import DataError
 from ..physics.parameters import short_repr
 
 __all__ = ['DataError', 'SAMPLE_LABEL', 'CURRENT_COLUMNS', 'DEFLECTION_COLUMNS',
-           'ESTIMATE_COLUMNS', 'current_columns', 'deflection_columns', 'estimate_columns',
-           'unpack_columns', 'unpack_pairs']
+           'ESTIMATE_COLUMNS', 'ESTIMATE_COLUMNS_UNFLAGGED', 'current_columns',
+           'deflection_columns', 'estimate_columns', 'unpack_columns', 'unpack_pairs']
 
 #: Label of the row dimension.
 SAMPLE_LABEL = 'sample'
@@ -37,9 +37,12 @@ SAMPLE_LABEL = 'sample'
 CURRENT_COLUMNS = 'time_s,current_A'
 #: Column label of deflection blocks: seconds, metres.
 DEFLECTION_COLUMNS = 'time_s,deflection_m'
-#: Column label of the estimator's output blocks: seconds, metres, and the standard deviation
-#: of each estimate, metres.
-ESTIMATE_COLUMNS = 'time_s,deflection_m,deflection_std_m'
+#: Column label of the estimator's output blocks: seconds, metres, the standard deviation
+#: of each estimate, metres, and its flag ``deflection_beyond_limit`` (1.0 when |w| exceeds
+#: what the geometry allows, else 0.0: :mod:`ipmc_sensor_ros.estimation.limits`).
+ESTIMATE_COLUMNS = 'time_s,deflection_m,deflection_std_m,deflection_beyond_limit'
+#: The estimator's output without the flag column, as recorded bags may hold it (read only).
+ESTIMATE_COLUMNS_UNFLAGGED = 'time_s,deflection_m,deflection_std_m'
 
 
 def current_columns(channels: int = 1) -> str:
@@ -70,13 +73,14 @@ def estimate_columns(channels: int = 1) -> str:
     Column label of the estimator's output blocks for ``channels`` sensors.
 
     One channel: :data:`ESTIMATE_COLUMNS`; several: ``time_s,deflection_ch0_m,
-    deflection_std_ch0_m,deflection_ch1_m,...`` (a deflection and its standard deviation per
-    channel, metres; NaN where that channel has no estimate for the block).
+    deflection_std_ch0_m,deflection_beyond_limit_ch0,deflection_ch1_m,...`` (a deflection,
+    its standard deviation, metres, and its flag per channel; NaN where that channel has no
+    estimate for the block).
     """
     if channels == 1:
         return ESTIMATE_COLUMNS
-    return 'time_s,' + ','.join(f'deflection_ch{c}_m,deflection_std_ch{c}_m'
-                                for c in range(channels))
+    return 'time_s,' + ','.join(f'deflection_ch{c}_m,deflection_std_ch{c}_m,'
+                                f'deflection_beyond_limit_ch{c}' for c in range(channels))
 
 
 def _data(msg) -> np.ndarray:

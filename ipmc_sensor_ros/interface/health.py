@@ -12,11 +12,21 @@ diagnostic_aggregator).  The ROS publisher is
 
 Rules (evaluated on the change of the counters since the previous evaluation):
 
-* ERROR: no new sample for ``stale_after_s`` (or none at all since start);
-* WARN: messages rejected, filter resets, time gaps, samples dropped;
-  measured sample rate off ``sample_rate_hz`` by more than
-  ``rate_tolerance`` (relative; only over intervals of >= 1 s with data);
-  the estimated current offset above ``offset_warn_a``; a mains line
+* ERROR: no new sample for ``stale_after_s`` (or none at all since start); an estimate
+  beyond what the geometry allows (``samples_beyond_limit`` rose:
+  :mod:`ipmc_sensor_ros.estimation.limits`);
+* WARN: filter resets, time gaps longer than ``max_gap_s``, samples dropped, malformed or
+  oversized messages, a switch of the followed publisher, messages of other publishers
+  ignored (named), messages the middleware reports lost;
+* WARN: more than ``loss_warn_fraction`` of the samples of the period lost before the node
+  (grid slots without a sample in the stamps, bridged gaps included, and messages of the
+  followed publisher that never arrived, from its sequence numbers) or refused by the stream
+  rules (duplicate or late stamps, non-finite values, ...; the count per reason is named);
+* WARN: measured sample rate off ``sample_rate_hz`` by more than ``rate_tolerance``
+  (relative): the rate the stream measured from the stamps (``measured_rate_hz`` in the
+  status) where there is one, else the samples per second of steady clock over intervals of
+  >= 1 s with data;
+* WARN: the estimated current offset above ``offset_warn_a``; a mains line
   (``line_frequencies_hz``) above ``line_warn_fraction`` of the current's RMS.
 
 :class:`CurrentStatistics` estimates the offset and the mains line from the
@@ -57,13 +67,15 @@ class HealthLimits:
     offset_window_s: float = 10.0
     line_warn_fraction: float = 0.05
     line_frequencies_hz: tuple[float, ...] = (50.0, 60.0)
+    loss_warn_fraction: float = 0.01
 
 
 def limits_from_values(values: Mapping[str, Any]) -> HealthLimits:
     """:class:`HealthLimits` from parameter values (names of :data:`DIAGNOSTICS_SPECS`)."""
     kw = {name: float(values[name]) for name in ('stale_after_s', 'rate_tolerance',
                                                  'offset_warn_a', 'offset_window_s',
-                                                 'line_warn_fraction') if name in values}
+                                                 'line_warn_fraction', 'loss_warn_fraction')
+          if name in values}
     return HealthLimits(**kw)
 
 
@@ -211,8 +223,14 @@ class HealthMonitor:
 
     """
 
-    WARN_COUNTERS = (('messages_rejected', 'message(s) rejected'), ('resets', 'filter reset(s)'),
-                     ('gaps', 'time gap(s)'), ('samples_dropped', 'sample(s) dropped'))
+    WARN_COUNTERS = (('resets', 'filter reset(s)'),
+                     ('gaps', 'time gap(s) longer than max_gap_s'),
+                     ('samples_dropped', 'sample(s) dropped'),
+                     ('rejected_malformed', 'sample(s) in malformed message(s) rejected'),
+                     ('rejected_too_long', 'sample(s) in message(s) over max_block_samples '
+                                           'rejected'),
+                     ('source_switches', 'switch(es) to another publisher'),
+                     ('messages_lost_reported', 'message(s) reported lost by the middleware'))
 
     def __init__(self, sample_rate_hz: float | None, limits: HealthLimits = HealthLimits(),
                  samples_key: str = 'samples_in'):
@@ -253,17 +271,18 @@ class HealthMonitor:
             errors.append('no data for ' + (f'{since:.1f} s' if self._last_data_s is not None
                                             else f'{since:.1f} s since start')
                           + f' (stale_after_s {lim.stale_after_s:g})')
+        beyond = delta.get('samples_beyond_limit', 0) if self._prev is not None else \
+            int(status.get('samples_beyond_limit', 0))
+        if beyond > 0:
+            errors.append(f'{beyond} estimate(s) beyond the geometric limit |w| > '
+                          f"{_text(status.get('deflection_limit_m'))} m: not physically "
+                          'possible (offset drift, wrong model or geometry?)')
         if self._prev is not None:
             for key, text in self.WARN_COUNTERS:
                 if delta.get(key, 0) > 0:
                     warnings.append(f'{delta[key]} {text}')
-        if dt is not None and dt >= 0.999 and new > 0 and self.sample_rate_hz and not done \
-                and prev.get(self.samples_key, 0) > 0:
-            rate = new / dt
-            values['measured_rate_hz'] = f'{rate:.6g}'
-            if abs(rate / self.sample_rate_hz - 1.0) > lim.rate_tolerance:
-                warnings.append(f'sample rate {rate:.4g} Hz, expected {self.sample_rate_hz:g} Hz'
-                                f' (rate_tolerance {lim.rate_tolerance:g})')
+            warnings += _fraction_warnings(delta, status, lim.loss_warn_fraction)
+        warnings += self._rate_warnings(status, values, dt, new, done, prev)
         offset = status.get('estimated_offset_a')
         if statistics is not None:
             if offset is None and statistics.window_filled():
@@ -294,6 +313,49 @@ class HealthMonitor:
         if warnings:
             return Health(WARN, '; '.join(warnings), values)
         return Health(OK, 'done' if done else 'OK', values)
+
+    def _rate_warnings(self, status, values, dt, new, done, prev) -> list[str]:
+        """Return the rate warning: the stream's measured rate, else samples per second."""
+        expected, tol = self.sample_rate_hz, self.limits.rate_tolerance
+        if not expected or done:
+            return []
+        rate = status.get('measured_rate_hz')
+        if rate is not None:
+            what = 'measured from the stamps'
+        elif dt is not None and dt >= 0.999 and new > 0 and prev.get(self.samples_key, 0) > 0:
+            rate, what = new / dt, 'received per second'
+            values['measured_rate_hz'] = f'{rate:.6g}'
+        else:
+            return []
+        if abs(rate / expected - 1.0) <= tol:
+            return []
+        return [f'sample rate {rate:.4g} Hz ({what}), expected {expected:g} Hz '
+                f'(rate_tolerance {tol:g})']
+
+
+def _fraction_warnings(delta: Mapping[str, int], status: Mapping[str, Any],
+                       limit: float) -> list[str]:
+    """Return the warnings of samples lost, refused or ignored over the period (module doc)."""
+    out = []
+    n_in, lost = delta.get('samples_in', 0), delta.get('samples_lost', 0)
+    m_in, m_lost = delta.get('messages_in', 0), delta.get('messages_lost', 0)
+    frac = max(lost / (n_in + lost) if lost else 0.0, m_lost / (m_in + m_lost) if m_lost else 0.0)
+    if frac > limit:
+        out.append(f'{100.0 * frac:.3g} % of the data lost before the node ({lost} sample '
+                   f'slot(s) without a sample, {m_lost} message(s) that never arrived; '
+                   f'loss_warn_fraction {limit:g})')
+    refused = delta.get('samples_rejected', 0)
+    if n_in and refused / n_in > limit:
+        why = ', '.join(f'{k[len("rejected_"):]} {v}' for k, v in delta.items()
+                        if k.startswith('rejected_') and v > 0)
+        out.append(f'{100.0 * refused / n_in:.3g} % of the samples refused ({why}; '
+                   f'loss_warn_fraction {limit:g})')
+    ignored = delta.get('messages_ignored', 0)
+    if ignored > 0:
+        out.append(f'{ignored} message(s) of other publishers ignored '
+                   f"({status.get('ignored_publishers') or 'unnamed'}): one source per stream, "
+                   f"following {status.get('followed_publisher') or 'the first heard'}")
+    return out
 
 
 def _text(value: Any) -> str:

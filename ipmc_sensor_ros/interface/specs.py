@@ -19,8 +19,8 @@ from typing import Any, Iterable, Mapping, Sequence
 
 from ..errors import ParameterError
 from ..estimation.deflection import ESTIMATORS, DeflectionEstimator
+from ..estimation.config import CONFIG_FIELDS, SETTINGS, EstimatorConfig
 from ..estimation.inverse import DEFAULT_LEAK_CORNER_HZ
-from ..estimation.kalman import DEFAULT_CURRENT_NOISE_A, KALMAN_LEAK_CORNER_HZ
 from ..estimation.stream import MAX_BLOCK_SAMPLES
 from ..physics.effects import load_plugins  # noqa: F401 (re-exported for the node)
 from ..physics.model import BASES, SensorModel
@@ -32,7 +32,8 @@ __all__ = ['Spec', 'ParameterError', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_
            'QOS_SPECS', 'ESTIMATOR_SPECS', 'PUBLISH_POINTS', 'MATERIAL_NAMES', 'GEOMETRY_NAMES',
            'ARRAY_SPECS', 'MAX_CHANNELS', 'channel_values', 'build_channel_estimators',
            'defaults', 'load_params_file', 'build_model', 'build_estimator', 'check_choice',
-           'check_values', 'markdown_table', 'FRAME_ID_PATTERN', 'DIAGNOSTICS_SPECS']
+           'check_values', 'markdown_table', 'FRAME_ID_PATTERN', 'DIAGNOSTICS_SPECS',
+           'STREAM_DIAGNOSTICS_SPECS', 'model_file_summary']
 
 
 @dataclass(frozen=True)
@@ -91,6 +92,10 @@ MODEL_SPECS = (
          "diagnose --save-model'): its base, effects with their fitted values and its material "
          "replace 'model', 'effects' and the material parameters, which must then keep their "
          "defaults ('' = none)", read_only=True, max_length=4096),
+    Spec('apply_recording_effects', False, bool, 'also apply the recording effects of '
+         "'model_file' (offset and its drift, channel delay: properties of the calibration "
+         'records, not of the sensor; off: the estimator learns its own offset)',
+         read_only=True),
     Spec('plugins', [], list, 'Python files defining more effects (Effect subclasses, see the '
          "README's plugin API): arbitrary code, loaded once at start-up (sha256 logged), "
          'never re-read; they cannot replace a built-in effect', read_only=True),
@@ -129,6 +134,14 @@ DIAGNOSTICS_SPECS = (
          "amplitude exceeds this fraction of the current's RMS", low=0.0, high=10.0),
 )
 
+#: Diagnostics parameters of a stream of samples the node receives (the estimator's input).
+STREAM_DIAGNOSTICS_SPECS = (
+    Spec('loss_warn_fraction', 0.01, float, 'diagnostics: WARN when more than this fraction '
+         'of the samples of a diagnostics period (1 s) was lost before the node (gaps in the '
+         'stamps, bridged ones included; messages of the followed publisher that never '
+         'arrived) or refused by the stream rules', low=0.0, high=1.0),
+)
+
 
 ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
     Spec('reduction_order', 4, int, 'order n of the stable reduction of R(s) = H(s)/s',
@@ -137,35 +150,40 @@ ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
          low=1e-4, high=1e5),
     Spec('band_high_hz', 50.0, float, 'upper edge of the reduction fit band, Hz',
          low=1e-4, high=1e5),
-    Spec('sample_rate_hz', 1000.0, float, 'sample rate of the current the filter is designed '
-         'for, Hz; blocks whose median sample period differs by more than 1 % are rejected',
-         low=1.0, high=1e6, read_only=True),
-    Spec('estimator', 'kalman', str, "'leaky': the leaky inverse of the reduced model; "
-         "'kalman': offset-aware Kalman filter with a rest detector (learns the DAQ offset, "
-         'holds the deflection at rest, publishes its standard deviation)',
-         choices=ESTIMATORS, read_only=True),
-    Spec('leak_corner_hz', 0.0, float, 'leak corner f_c, Hz (time constant 1/(2 pi f_c) of the '
-         f"initial-condition and held-step decay); 0 = the estimator's default "
-         f'({DEFAULT_LEAK_CORNER_HZ:g} Hz leaky, {KALMAN_LEAK_CORNER_HZ:g} Hz kalman)',
-         low=0.0, high=1e4),
+    Spec('sample_rate_hz', 1000.0, float, 'nominal sample rate of the current, Hz; the rate '
+         'is measured from the stamps, a mismatch beyond rate_tolerance is reported and the '
+         'filter runs at the measured rate', low=1.0, high=1e6, read_only=True),
+    Spec('estimator', 'kalman', str, "'kalman': the state-space Kalman filter (sensor, motion "
+         'about a working point, current offset and drift, mains lines; rest as a '
+         "measurement; publishes its standard deviation); 'leaky': the leaky inverse of the "
+         'reduced model, a simple baseline without uncertainty', choices=ESTIMATORS,
+         read_only=True),
+    Spec('leak_corner_hz', 0.0, float, "estimator 'leaky' only: leak corner f_c, Hz (time "
+         'constant 1/(2 pi f_c) of the initial-condition and held-step decay); 0 = '
+         f'{DEFAULT_LEAK_CORNER_HZ:g} Hz', low=0.0, high=1e4),
     Spec('offset_corner_hz', 0.0, float, "estimator 'leaky' only: corner of the current-offset "
          'tracker, Hz (0 = off)', low=0.0, high=1e4),
-    Spec('current_noise_a', DEFAULT_CURRENT_NOISE_A, float, "estimator 'kalman': white-noise "
-         'RMS of the DAQ current per sample, A (the filter measures it at rest and never '
-         'assumes less)', low=1e-15, high=1e-3),
-    Spec('mains_hz', 0, int, 'notch the mains line and its harmonics from the current before '
-         'the filter: 0 (off), 50 or 60 Hz; a line found while off is reported',
-         low=0, high=60, choices=(0, 50, 60)),
+    Spec('mains_hz', 'auto', str, "mains hum: 'auto' measures a line near 50 or 60 Hz in the "
+         "data and models it (line states at the measured frequency); '50' or '60' measures "
+         "near that one; '0' = no hum model (the leaky baseline notches '50'/'60' and ignores "
+         "'auto')", choices=('auto', '0', '50', '60')),
     Spec('frame_id', 'ipmc_clamp', str, 'frame of the deflection points: origin at the '
          'clamp, x along the beam to the tip, z in the bending direction',
          pattern=FRAME_ID_PATTERN, max_length=128),
-    Spec('max_gap_s', 0.1, float, 'largest time gap between consecutive samples bridged '
-         'without a filter reset, s', low=1e-6, high=1e6),
+    Spec('max_gap_s', 0.1, float, 'largest time gap between consecutive samples bridged by '
+         'the filter without a reset, s; a longer gap, or a stamp further back, starts a new '
+         'run (filter reset)', low=1e-6, high=1e6),
     Spec('publish_points', 'per_sample', str, "deflection PointStamped output: 'per_sample', "
          "'last_of_block' or 'none'", choices=PUBLISH_POINTS),
     Spec('max_block_samples', 100_000, int, 'largest accepted input block, samples',
          low=1, high=MAX_BLOCK_SAMPLES, read_only=True),
-) + QOS_SPECS + DIAGNOSTICS_SPECS
+) + tuple(
+    # every setting of the Kalman estimator, from its one table (estimation/config.py)
+    Spec(st.name, st.default, type(st.default),
+         f"estimator 'kalman': {st.text}" + (f', {st.unit}' if st.unit else ''),
+         low=st.low, high=st.high)
+    for st in SETTINGS
+) + QOS_SPECS + DIAGNOSTICS_SPECS + STREAM_DIAGNOSTICS_SPECS
 
 #: Largest sensor array one node handles.
 MAX_CHANNELS = 256
@@ -184,10 +202,11 @@ ESTIMATOR_SPECS = ESTIMATOR_SPECS + ARRAY_SPECS
 
 #: Parameters whose change needs a new reduction (the sensor model changes).
 MODEL_KEYS = GEOMETRY_NAMES + MATERIAL_NAMES + ('model', 'effects', 'model_file',
-                                                'reduction_order', 'band_low_hz', 'band_high_hz')
+                                                'apply_recording_effects', 'reduction_order',
+                                                'band_low_hz', 'band_high_hz')
 #: Parameters whose change needs a new filter on the same reduction.
-FILTER_KEYS = ('sample_rate_hz', 'leak_corner_hz', 'offset_corner_hz', 'estimator', 'mains_hz',
-               'current_noise_a')
+FILTER_KEYS = ('sample_rate_hz', 'leak_corner_hz', 'offset_corner_hz', 'estimator',
+               'mains_hz') + CONFIG_FIELDS
 
 
 def model_key(values: Mapping[str, Any]) -> tuple:
@@ -242,23 +261,43 @@ def _model_from_file(values: Mapping[str, Any], geometry: Geometry) -> SensorMod
     """
     Return the model of ``model_file`` for ``geometry``.
 
-    The file and the parameters are two sources of the same values: a model, effect or
-    material parameter that differs from its default is refused (naming both), never
-    silently overridden.
+    The file and the parameters are two sources of the same values: a model or effect
+    parameter that differs from its default, or a material parameter that differs from its
+    default and from the file's value, is refused (naming both), never silently overridden.
+    The file's recording effects are applied only with ``apply_recording_effects``.
     """
     from ..physics.modelfile import load_model
 
     path = values['model_file']
     saved = load_model(path)
     spec_default = {s.name: s.default for s in MODEL_SPECS + MATERIAL_SPECS}
+    in_file = saved.material.to_dict()
     for name in ('model', 'effects') + MATERIAL_NAMES:
-        if values[name] != spec_default[name]:
+        if values[name] != spec_default[name] and values[name] != in_file.get(name):
             raise ParameterError(
                 f"parameter '{name}' = {short_repr(values[name])} and "
                 f"model_file {path} both define the model: leave '{name}' at "
                 f'its default ({short_repr(spec_default[name])}) or drop model_file'
             )
-    return saved.sensor_model(geometry)
+    return saved.sensor_model(geometry, recording=bool(values.get('apply_recording_effects')))
+
+
+def model_file_summary(values: Mapping[str, Any]) -> list[str]:
+    """
+    Return the lines a node logs about its model files (none without ``model_file``).
+
+    What the file holds, where it came from, and whether its recording effects are applied
+    (with the warning when they are), plus the notices of reading it.
+    """
+    from ..physics.modelfile import load_model
+
+    files = [values.get('model_file') or ''] + list(values.get('model_files') or ())
+    lines = []
+    for path in dict.fromkeys(f for f in files if f):
+        saved = load_model(path)
+        lines.extend(saved.notices)
+        lines.append(saved.summary(bool(values.get('apply_recording_effects'))))
+    return lines
 
 
 def check_values(values: Mapping[str, Any], specs: Iterable[Spec] | None = None) -> None:
@@ -292,13 +331,13 @@ def build_estimator(
                                  f'({band[1]}) must satisfy low < high')
         offset = float(values['offset_corner_hz'])
         leak = float(values['leak_corner_hz'])
+        config = EstimatorConfig(**{name: values[name] for name in CONFIG_FIELDS})
         return DeflectionEstimator(model, float(values['sample_rate_hz']),
                                    reduction_order=int(values['reduction_order']), band_hz=band,
                                    leak_corner_hz=leak if leak > 0.0 else None,
                                    offset_corner_hz=offset if offset > 0.0 else None,
                                    reduced=reduced, estimator=values['estimator'],
-                                   mains_hz=int(values['mains_hz']),
-                                   current_noise_a=float(values['current_noise_a']))
+                                   mains_hz=values['mains_hz'], config=config)
     except ParameterError:
         raise
     except Exception as exc:  # numerics of an extreme but in-range combination
@@ -468,6 +507,8 @@ def markdown_table(specs: Iterable[Spec]) -> str:
             default = '[]'
         elif s.kind is str:
             default = f'"{s.default}"'
+        elif s.kind is bool:
+            default = str(s.default).lower()
         else:
             default = f'{s.default:g}' if s.kind is float else str(s.default)
         fmt = '{:g}' if s.kind is float else '{}'

@@ -20,7 +20,7 @@ import math
 import numpy as np
 import scipy.signal as sig
 
-__all__ = ['default_prewarp_hz', 'tustin_sos', 'van_loan']
+__all__ = ['chain', 'default_prewarp_hz', 'tustin_sos', 'van_loan']
 
 
 def default_prewarp_hz(sample_rate_hz: float, band_high_hz: float | None = None) -> float:
@@ -60,3 +60,17 @@ def van_loan(ac: np.ndarray, qc: np.ndarray, dt: float):
     ad = e[n:, n:].T
     qd = ad @ e[:n, n:]
     return ad, 0.5 * (qd + qd.T)
+
+
+def chain(first: tuple[np.ndarray, np.ndarray], then: tuple[np.ndarray, np.ndarray]):
+    """
+    (A_d, Q_d) of ``first`` followed by ``then``: A_2 A_1 and A_2 Q_1 A_2^T + Q_2.
+
+    Exact for the same continuous model (the state transition's semigroup property), so a
+    long span is built by doubling one sample period instead of one ``expm`` over the span,
+    whose Van Loan block holds exp(-A T) and overflows once |A| T nears 700.
+    """
+    a1, q1 = first
+    a2, q2 = then
+    qd = a2 @ q1 @ a2.T + q2
+    return a2 @ a1, 0.5 * (qd + qd.T)

@@ -100,6 +100,19 @@ class DiagnosticsPublisher:
         if stats is not None:
             stats.observe_one(current_a)
 
+    def follow_rate(self, sample_rate_hz: float) -> None:
+        """
+        Take the current at ``sample_rate_hz`` from now on (a stream that follows its rate).
+
+        The offset and mains-line estimates of a changed rate start afresh; the rate check
+        keeps the nominal rate it was built with.
+        """
+        for channel, stats in self._stats.items():
+            if abs(stats.sample_rate_hz / sample_rate_hz - 1.0) > 1e-3:
+                self._stats[channel] = CurrentStatistics(
+                    sample_rate_hz, self._limits.offset_window_s,
+                    self._limits.line_frequencies_hz)
+
     def update(self, status: Mapping[str, Any]) -> DiagnosticArray:
         """
         Evaluate ``status`` (``{channel: dict}`` or one dict) and publish.

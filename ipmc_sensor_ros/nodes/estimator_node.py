@@ -4,10 +4,17 @@ ROS 2 node ``ipmc_estimator``: sensing current (A) in, tip deflection (m) out.
 
 Unpack -> :class:`~ipmc_sensor_ros.estimation.stream.StreamEstimator` (every rule of the
 stream: values, times, gaps, resets, counters) -> publish: ``deflection/block``
-(``time_s,deflection_m,deflection_std_m``, one per accepted input message), ``deflection``
-(``PointStamped`` (L, 0, w) in the clamp frame: per sample / last of block / none),
+(``time_s,deflection_m,deflection_std_m,deflection_beyond_limit``, one per accepted input
+message), ``deflection`` (``PointStamped`` (L, 0, w) in the clamp frame: per sample / last of
+block / none; z = +-inf beyond the limit of :mod:`~ipmc_sensor_ros.estimation.limits`),
 ``estimator/counters`` (JSON, 1 Hz) and ``/diagnostics``.  Parameter changes are validated by
 building the new estimator and applied without an output jump.  README "ROS 2 interface".
+
+One source per stream: the node follows one publisher of ``current`` (its GID from the message
+info; :class:`~ipmc_sensor_ros.interface.sources.SourceSelector`), counts and names the others it
+ignores, counts the followed publisher's messages that never arrived (sequence numbers) and those
+the middleware reports lost, and switches to another publisher once the followed one has been
+silent for ``stale_after_s``.
 
 ``channels`` > 1 (a sensor array): N-column blocks through
 :class:`~ipmc_sensor_ros.estimation.array.ArrayStream` (one stream core per channel), points on
@@ -16,6 +23,7 @@ building the new estimator and applied without an output jump.  README "ROS 2 in
 from __future__ import annotations
 
 import json
+import math
 import sys
 import threading
 import time
@@ -32,16 +40,19 @@ from std_msgs.msg import Float64MultiArray, String
 
 from ..interface import specs as C
 from ..estimation.deflection import DeflectionEstimator
-from ..estimation.inverse import InverseEstimator
+from ..estimation.core import EstimatorCore
 from ..estimation.array import ArrayStream, check_array_estimators
+from ..estimation.limits import LimitCheck
 from ..estimation.stream import COUNTER_NAMES, StreamEstimator
 from ..errors import DataError, IpmcError
 from ..physics.parameters import short_repr
 from . import params as P
 from ..interface.blocks import current_columns, estimate_columns, unpack_columns
+from ..interface.sources import SourceSelector
 from .messages import (CURRENT_COLUMNS, BlockPacker, OneSampleCodec, PointCodec,
                        claimed_samples, one_sample, unpack_block)
 from .diagnostics import DiagnosticsPublisher
+from .sources import FollowedSource, subscribe_followed
 from .runner import run
 
 __all__ = ['EstimatorNode', 'ESTIMATOR_SPECS', 'COUNTER_NAMES', 'PUBLISH_POINTS', 'main']
@@ -100,6 +111,7 @@ class EstimatorNode(Node):
         for path, (digest, names) in C.load_plugins(self._values['plugins']).items():
             self.get_logger().info(f"plugin {path} (sha256 {digest}): effects {', '.join(names)}; "
                                    'loaded once, not re-read')
+        P.log_model_files(self, self._values)
         self._model_key = C.model_key(self._values)
         self._pending: tuple | None = None
         self._built_values = self._values      # the values the running filter was built from
@@ -114,7 +126,10 @@ class EstimatorNode(Node):
         rules = dict(max_gap_s=float(self._values['max_gap_s']),
                      max_block_samples=int(self._values['max_block_samples']), source=topic,
                      now_s=lambda: self.get_clock().now().nanoseconds * 1e-9,
-                     warn=lambda text: logger.warning(text, throttle_duration_sec=1.0))
+                     warn=logger.warning,          # the stream bounds what it says
+                     rate_tolerance=float(self._values['rate_tolerance']))
+        self._source = FollowedSource(self, SourceSelector(float(self._values['stale_after_s'])),
+                                      lambda: self._array or self._stream, self._lock)
         self._array = None
         if self._channels == 1:
             self._stream = StreamEstimator(estimator, **rules)
@@ -122,6 +137,7 @@ class EstimatorNode(Node):
             self._array = ArrayStream(estimators, **rules)
             self._stream = self._array.channels[0]
             self._in_columns = current_columns(self._channels)
+        self._limits = [LimitCheck() for _ in range(self._channels)]
         self._channel_names = ((topic,) if self._array is None else
                                tuple(f'{topic} ch{c}' for c in range(self._channels)))
 
@@ -130,9 +146,11 @@ class EstimatorNode(Node):
         qos = P.make_qos(self._values)
         # raw: bytes in, so that one-sample blocks never become message objects (README
         # "Benchmarks": rclpy's conversion of a Float64MultiArray costs more than the estimate)
-        self._sub = P.create_subscription(
-            self, Float64MultiArray, 'current', self._on_current_raw, qos, raw=True
-        )
+        self._sub = subscribe_followed(self, Float64MultiArray, 'current',
+                                       self._on_current_message, qos,
+                                       self._source.on_message_lost)
+        self._source.topic = self._sub.topic_name
+        self._source.selector.forget()
         self._pub_block = P.create_publisher(self, Float64MultiArray, 'deflection/block', qos)
         self._packer = BlockPacker(estimate_columns(self._channels))
         self._one_in = OneSampleCodec(CURRENT_COLUMNS)
@@ -162,7 +180,7 @@ class EstimatorNode(Node):
         r = estimator.reduced
         return (f'ready: {estimator.model.describe()} model, order {r.order} reduction '
                 f'over {r.band_hz[0]}-{r.band_hz[1]} Hz, fs = {estimator.sample_rate_hz} Hz, '
-                f'leak corner {estimator.inverse.leak_corner_hz} Hz; '
+                f'{estimator.estimator} estimator, mains {estimator.mains_hz}; '
                 f"listening on {self.resolve_topic_name('current')}"
                 + (f' ({self._channels} channels)' if self._array is not None else ''))
 
@@ -201,9 +219,14 @@ class EstimatorNode(Node):
             return {name: self._status(ch)
                     for name, ch in zip(self._channel_names, self._array.channels)}
         stream = stream or self._stream
+        channel = 0 if self._array is None else self._array.channels.index(stream)
         with self._lock:
             out = dict(stream.counters)
+            out['samples_beyond_limit'] = self._limits[channel].count
             out.update(stream.estimator.status())
+            out['deflection_limit_m'] = self._limits[channel].limit_m
+            out.update(stream.status())
+            out.update(self._source.status())
         if out['offset_a'] is not None:
             out['estimated_offset_a'] = out['offset_a']   # the filter's own offset (kalman)
         return out
@@ -214,10 +237,10 @@ class EstimatorNode(Node):
         return self._stream
 
     @property
-    def estimator(self) -> InverseEstimator:
-        """Return the discrete inverse filter currently in use (replaced on parameter changes)."""
+    def estimator(self) -> EstimatorCore:
+        """Return the estimator core currently in use (replaced on parameter changes)."""
         self.settle()
-        return self._stream.estimator.inverse
+        return self._stream.estimator.core
 
     @property
     def deflection_estimator(self) -> DeflectionEstimator:
@@ -238,17 +261,23 @@ class EstimatorNode(Node):
         return self._stream.last_warning
 
     # -- data path: unpack -> stream core -> publish ----------------------------
+    def _on_current_message(self, raw, info=None) -> None:
+        """Subscription callback: follow one publisher (module docstring), then the data path."""
+        raw, info = FollowedSource.unpack(raw, info)
+        if info is None or self._source.admit(info):
+            self._on_current_raw(raw)
+
     def _on_current_raw(self, raw: bytes) -> None:
         """
-        Subscription callback (serialised message).
+        Take one serialised message (the data path).
 
         A one-sample current block is read from its bytes and its estimate written as bytes
         (:class:`OneSampleCodec`); anything else is deserialised and takes :meth:`_on_current`.
         """
         if self._array is None:
             one = self._one_in.decode(raw)
-            if one is not None and self._feed_one(*one):
-                return
+            if one is not None:
+                return self._feed_one(*one)
         try:
             msg = deserialize_message(raw, Float64MultiArray)
         except Exception as exc:  # bytes that are no Float64MultiArray: counted, never fatal
@@ -262,8 +291,8 @@ class EstimatorNode(Node):
         if self._array is not None:
             return self._on_current_array(msg)
         one = one_sample(msg)
-        if one and self._feed_one(*one):
-            return
+        if one:
+            return self._feed_one(*one)
         with self._lock:
             if self._rebuilt is not None:
                 self._apply_rebuilt()
@@ -274,28 +303,25 @@ class EstimatorNode(Node):
                 return
             out = self._stream.feed(block.times_s, block.values, claimed=claimed_samples(msg))
             if out is not None:
-                self._diagnostics.observe(block.values)
+                self._diagnostics.observe(block.values[self._stream.accepted])
                 t, w = out
-                std = np.full(t.size, self._stream.estimator.std_m)
-                self._publish(self._packer.pack(t, w, std), t, w, t.size)
+                est = self._stream.estimator
+                flags = self._limits[0].flags(est, w)
+                self._publish(self._packer.pack(t, w, self._stream.last_std_m, flags),
+                              t, w, t.size)
 
-    def _feed_one(self, time_s: float, current_a: float) -> bool:
-        """
-        Estimate one timed sample on the stream core's lean path; publish it as bytes.
-
-        False (nothing touched) when the sample needs the general path.
-        """
+    def _feed_one(self, time_s: float, current_a: float) -> None:
+        """Estimate one timed sample (:meth:`StreamEstimator.feed_one`); publish it as bytes."""
         with self._lock:
             if self._rebuilt is not None:
                 self._apply_rebuilt()
             out = self._stream.feed_one(time_s, current_a)
-            if out is False:
-                return False
-            self._diagnostics.observe_one(current_a)
             if out is not None:
+                self._diagnostics.observe_one(current_a)
                 t, w = out
-                self._publish(self._one_out.encode(t, w, self._stream.estimator.std_m), t, w, 1)
-            return True
+                est = self._stream.estimator
+                flag = self._limits[0].flag_one(est, w)
+                self._publish(self._one_out.encode(t, w, est.std_m, flag), t, w, 1)
 
     def _publish(self, block_msg: Float64MultiArray, times, deflections, n: int) -> None:
         """
@@ -331,6 +357,9 @@ class EstimatorNode(Node):
         key = (float(self._values['length_m']), self._values['frame_id'])
         if self._points is None or self._points.key != key:
             self._points = PointCodec(*key)
+        limit = self._limits[channel].limit_m
+        if not -limit <= deflection_m <= limit:     # REP 117: out of range is +-inf
+            deflection_m = math.copysign(math.inf, deflection_m)
         self._pub_points[channel].publish(self._points.encode(time_s, deflection_m))
 
     def _on_current_array(self, msg: Float64MultiArray) -> None:
@@ -348,13 +377,17 @@ class EstimatorNode(Node):
             if out is None:
                 return
             t, w, std, has = out
-            one = t.size == 1   # observe_one: no numpy per sample (40 -> 6 us)
+            one = table.shape[0] == 1   # observe_one: no numpy per sample (40 -> 6 us)
             for c in np.flatnonzero(has).tolist():
                 if one:
                     self._diagnostics.observe_one(float(table[0, c]), self._channel_names[c])
                 else:
-                    self._diagnostics.observe(table[:, c], channel=self._channel_names[c])
-            cols = [a for c in range(self._channels) for a in (w[:, c], std[:, c])]
+                    self._diagnostics.observe(table[array.channels[c].accepted, c],
+                                              channel=self._channel_names[c])
+            flags = np.full(w.shape, np.nan)
+            for c in np.flatnonzero(has).tolist():
+                flags[:, c] = self._limits[c].flags(array.channels[c].estimator, w[:, c])
+            cols = [a for c in range(self._channels) for a in (w[:, c], std[:, c], flags[:, c])]
             try:
                 self._pub_block.publish(self._packer.pack(t, *cols))
             except Exception as exc:  # back-pressure: counted per channel, never a reset
@@ -377,6 +410,7 @@ class EstimatorNode(Node):
     # -- periodic -------------------------------------------------------------
     def _on_timer(self) -> None:
         self._ticks += 1
+        self._diagnostics.follow_rate(self._stream.sample_rate_hz)
         counters = self._status()
         if self._array is not None:
             counters = dict(self._array.totals(), channels=list(counters.values()))
@@ -433,8 +467,10 @@ class EstimatorNode(Node):
             self._pending = None
             old = self._values
             self._values = values
-            (self._stream if self._array is None else self._array).max_gap_s = float(
-                values['max_gap_s'])
+            for ch in (self._array.channels if self._array is not None else (self._stream,)):
+                ch.max_gap_s = float(values['max_gap_s'])
+                ch.rate_tolerance = float(values['rate_tolerance'])
+            self._source.selector.stale_after_s = float(values['stale_after_s'])
             self._changed.update(p.name for p in parameters)
             if (key != self._model_key or self._wanted is not None or self._builder is not None
                     or self._rebuilt is not None):

@@ -19,11 +19,20 @@ inactive                  built, no topics; parameter changes validated and appl
                           the plain node (two phases)
 activate                  creates the subscription, the (lifecycle) publishers, the timers
                           and /diagnostics
-deactivate                publishes a last /diagnostics status "inactive" and destroys the
+deactivate                stops taking input, waits up to ``FLUSH_TIMEOUT_S`` for reliable
+                          subscribers to acknowledge the estimates already published,
+                          publishes a last /diagnostics status "inactive" and destroys the
                           topics and timers; the stream core (counters, filter state) stays
-cleanup / shutdown /      destroy the topics and release the model and the filter
-error processing
+cleanup / error           destroy the topics and release the model and the filter
+processing
+shutdown                  as cleanup, then finalized: the executable ends (exit status 0)
 ========================  ===================================================================
+
+Transitions and data callbacks are serialised by one lock, and a data callback takes its
+input only while the node is active: a message the middleware had already queued when
+deactivate closed the subscription is not taken (not counted, as any message sent to an
+inactive node), so no callback ever meets a half-built or half-torn node, and
+``samples_out`` counts only estimates handed to the publishers of an active node.
 
 Parameter ``autostart`` (bool, default false, managed nodes only): at start-up the node
 configures and activates itself (as nav2's lifecycle manager does with ``autostart``), for
@@ -49,10 +58,12 @@ from __future__ import annotations
 
 import sys
 import threading
+import time
 from typing import Any
 
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from . import params as P
@@ -67,6 +78,9 @@ __all__ = ['ManagedEstimatorNode', 'ManagedSimulatorNode', 'main_estimator', 'ma
 SUCCESS = TransitionCallbackReturn.SUCCESS
 FAILURE = TransitionCallbackReturn.FAILURE
 ERROR = TransitionCallbackReturn.ERROR
+
+#: Longest wait of deactivate for reliable subscribers to acknowledge what was published, s.
+FLUSH_TIMEOUT_S = 1.0
 
 #: The managed nodes' own parameter (read once, at start-up).
 AUTOSTART_SPEC = Spec('autostart', False, bool,
@@ -98,6 +112,8 @@ class ManagedMixin:
         LifecycleNode.__init__(self, node_name or self._DEFAULT_NAME, **kwargs)
         self._lock = threading.RLock()
         self._configured = False
+        self._taking = False                 # active: data callbacks take input
+        self.finalized = False               # shut down: the executable ends (runner.run)
         for name in self._BUILT:
             setattr(self, name, None)
         P.check_unknown_overrides(self, self._SPECS, kwargs.get('cli_args'),
@@ -122,73 +138,79 @@ class ManagedMixin:
         """Return True in the inactive and active states (model and filter built)."""
         return self._configured
 
-    # -- transitions ------------------------------------------------------------------
+    # -- transitions (each holds the lock: no data callback runs meanwhile) ------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Build the model and the filter; FAILURE (one-line reason logged) on bad parameters."""
-        try:
-            self._configure()
-        except Exception as exc:  # any failure to build refuses the transition, never a crash
-            self._release()
-            self.get_logger().error(f'configure failed: {_one_line(exc)}')
-            return FAILURE
-        self._configured = True
+        with self._lock:
+            try:
+                self._configure()
+            except Exception as exc:  # any failure to build refuses the transition, never a crash
+                self._release()
+                self.get_logger().error(f'configure failed: {_one_line(exc)}')
+                return FAILURE
+            self._configured = True
         self.get_logger().info('configured (inactive): ' + self._ready_text())
         return SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Create the topics, timers and /diagnostics; FAILURE (reason logged) if they fail."""
-        try:
-            self._open_io()
-        except Exception as exc:  # e.g. an unknown qos_overrides.* parameter
-            self._close_io()
-            self.get_logger().error(f'activate failed: {_one_line(exc)}')
-            return FAILURE
-        try:
-            self._on_activated()
-            super().on_activate(state)        # enables the lifecycle publishers
-        except Exception as exc:  # error processing follows (module docstring)
-            self.get_logger().error(f'activate failed: {_one_line(exc)}; error processing')
-            return ERROR
-        self._fault = None
+        with self._lock:
+            try:
+                self._open_io()
+            except Exception as exc:  # e.g. an unknown qos_overrides.* parameter
+                self._close_io()
+                self.get_logger().error(f'activate failed: {_one_line(exc)}')
+                return FAILURE
+            try:
+                self._on_activated()
+                super().on_activate(state)        # enables the lifecycle publishers
+            except Exception as exc:  # error processing follows (module docstring)
+                self.get_logger().error(f'activate failed: {_one_line(exc)}; error processing')
+                return ERROR
+            self._fault = None
+            self._taking = True
         self.get_logger().info('active')
         return SUCCESS
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """
-        Say "inactive" on /diagnostics, then destroy the topics and timers.
+        Stop taking input, flush the outputs, say "inactive" on /diagnostics, close the topics.
 
         ERROR (-> error processing) after a data callback's error or if this fails.
         """
-        try:
-            super().on_deactivate(state)
-            diagnostics = getattr(self, '_diagnostics', None)
-            if diagnostics is not None:
-                diagnostics.announce('error: ' + self._fault if self._fault else
-                                     'inactive (lifecycle): no input taken, nothing published')
-            self._on_deactivated()
-            self._close_io()
-        except Exception as exc:  # error processing follows (module docstring)
-            self.get_logger().error(f'deactivate failed: {_one_line(exc)}; error processing')
-            return ERROR
-        if self._fault:
-            return ERROR
+        with self._lock:
+            self._taking = False
+            try:
+                self._flush()
+                super().on_deactivate(state)
+                diagnostics = getattr(self, '_diagnostics', None)
+                if diagnostics is not None:
+                    diagnostics.announce('error: ' + self._fault if self._fault else
+                                         'inactive (lifecycle): no input taken, nothing published')
+                self._on_deactivated()
+                self._close_io()
+            except Exception as exc:  # error processing follows (module docstring)
+                self.get_logger().error(f'deactivate failed: {_one_line(exc)}; error processing')
+                return ERROR
+            if self._fault:
+                return ERROR
         self.get_logger().info('inactive')
         return SUCCESS
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Release the model and the filter (back to unconfigured); ERROR if that fails."""
-        try:
-            self._close_io()
-            self._release()
-        except Exception as exc:  # error processing follows (module docstring)
-            self.get_logger().error(f'cleanup failed: {_one_line(exc)}; error processing')
+        if not self._release_all('cleanup'):
             return ERROR
         self.get_logger().info('cleaned up (unconfigured)')
         return SUCCESS
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Release everything (finalized)."""
-        return self.on_cleanup(state)
+        """Release everything (finalized); the executable then ends (:func:`runner.run`)."""
+        if not self._release_all('shutdown'):
+            return ERROR
+        self.finalized = True
+        self.get_logger().info('shut down (finalized): released; the process ends')
+        return SUCCESS
 
     def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
         """
@@ -196,15 +218,41 @@ class ManagedMixin:
 
         SUCCESS takes the node to unconfigured; FAILURE, if the release fails, to finalized.
         """
-        self._fault = None
-        try:
-            self._close_io()
-            self._release()
-        except Exception as exc:  # noqa: BLE001 - finalized, never a crash
-            self.get_logger().error(f'error processing failed: {_one_line(exc)}; finalized')
-            return FAILURE
+        with self._lock:
+            self._fault = None
+            self._taking = False
+            try:
+                self._close_io()
+                self._release()
+            except Exception as exc:  # noqa: BLE001 - finalized, never a crash
+                self.get_logger().error(f'error processing failed: {_one_line(exc)}; finalized')
+                self.finalized = True
+                return FAILURE
         self.get_logger().error('error processed: released, unconfigured')
         return SUCCESS
+
+    def _release_all(self, what: str) -> bool:
+        """Close the topics, release the model (cleanup, shutdown); False (logged) on failure."""
+        with self._lock:
+            self._taking = False
+            try:
+                self._close_io()
+                self._release()
+            except Exception as exc:  # error processing follows (module docstring)
+                self.get_logger().error(f'{what} failed: {_one_line(exc)}; error processing')
+                return False
+        return True
+
+    def _flush(self) -> None:
+        """Wait (at most :data:`FLUSH_TIMEOUT_S`) until reliable subscribers have the output."""
+        end = time.monotonic() + FLUSH_TIMEOUT_S
+        for publisher in self._output_publishers():
+            left = max(end - time.monotonic(), 0.0)
+            publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))
+
+    def _output_publishers(self) -> list:
+        """Return the data publishers to flush on deactivate (subclass hook)."""
+        return []
 
     # -- helpers ----------------------------------------------------------------------
     def _autostart(self) -> None:
@@ -223,8 +271,11 @@ class ManagedMixin:
         The transition runs from a one-shot timer, out of the callback (whose topic it
         destroys); until then further calls are dropped.
         """
-        if self._fault is not None:
-            return
+        with self._lock:
+            if self._taking and self._fault is None:
+                self._call_guarded(callback, name, *args)
+
+    def _call_guarded(self, callback, name: str, *args) -> None:
         try:
             callback(*args)
         except Exception as exc:  # a bug or a broken device while active: never a crash
@@ -290,6 +341,10 @@ class ManagedEstimatorNode(ManagedMixin, EstimatorNode, LifecycleNode):
 
     def _on_current_raw(self, raw) -> None:
         self._guarded(super()._on_current_raw, 'current subscription', raw)
+
+    def _output_publishers(self) -> list:
+        return [p for p in [getattr(self, '_pub_block', None),
+                            *(getattr(self, '_pub_points', None) or ())] if p is not None]
 
     def _on_timer(self) -> None:
         self._guarded(super()._on_timer, 'status timer')

@@ -22,7 +22,13 @@ Signals
     process spinning forever in 4 of 5 runs (EventsExecutor; also seen with
     SingleThreadedExecutor), the context never shut down, and in 10 of 12 runs it
     raised ``RCLError`` ("the given context is not valid") out of the executor's
-    wait-set set-up.
+    wait-set set-up.  While the node is being built (parameters read, model files parsed,
+    the filter designed) the handler raises instead, so a signal ends a slow start at once
+    (exit 0), rather than after it.
+
+Help
+    ``-h`` / ``--help`` among the non-ROS arguments prints the node's usage and parameters
+    and exits 0 without starting rclpy.
 
 Teardown
     executor, node, context are destroyed in that order; there is no ``os._exit``
@@ -31,6 +37,7 @@ Teardown
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import signal
@@ -42,7 +49,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
 from ..physics.parameters import read_yaml
-from .params import ParameterError, params_files
+from .params import ParameterError, node_help, params_files, ros_arguments, wants_help
 
 __all__ = ['run', 'make_executor', 'executor_name', 'spin_until_signalled']
 
@@ -57,7 +64,12 @@ except ImportError:  # pragma: no cover
     from rclpy.impl.implementation_singleton import rclpy_implementation as _impl
     RCLError = _impl.RCLError
 
-_SHUTDOWN = (KeyboardInterrupt, ExternalShutdownException)
+
+class _InterruptedStart(Exception):
+    """A signal arrived while the node was being built."""
+
+
+_SHUTDOWN = (KeyboardInterrupt, ExternalShutdownException, _InterruptedStart)
 
 
 def executor_name() -> str:
@@ -89,26 +101,36 @@ def _stopping(context=None) -> bool:
 _SIGNALLED: set = set()
 
 
+#: True while the node is being built (parameters read, model files parsed, filter designed).
+_STARTING = [False]
+
+
 def _on_signal(signum, frame) -> None:
     _SIGNALLED.add(signum)
+    if _STARTING[0]:       # reading a model file or designing a filter: stop it now
+        _STARTING[0] = False
+        raise _InterruptedStart(signum)
 
 
 #: Longest wait of one ``spin_once`` call, s: the bound on the exit delay after a signal.
 SPIN_PERIOD_S = 0.1
 
 
-def spin_until_signalled(executor, context=None) -> None:
+def spin_until_signalled(executor, context=None, node=None) -> None:
     """
     Spin ``executor`` until SIGINT/SIGTERM was received or the context shut down.
 
-    A loop of ``spin_once`` (see the module docstring for why not ``spin``); an
-    exception raised by a callback propagates out of it.
+    Also until ``node`` says it is ``finalized`` (a managed node after the ``shutdown``
+    transition: the executable then ends, exit status 0).  A loop of ``spin_once`` (see the
+    module docstring for why not ``spin``); an exception raised by a callback propagates out
+    of it.
     """
-    while not _SIGNALLED and not _stopping(context):
+    while (not _SIGNALLED and not _stopping(context)
+           and not getattr(node, 'finalized', False)):
         executor.spin_once(timeout_sec=SPIN_PERIOD_S)
 
 
-def _report_configuration_error(name: str, exc: Exception) -> None:
+def _report_configuration_error(name: str, exc: Exception, args) -> None:
     text = str(exc)
     hint = ''
     if "type 'INTEGER'" in text and "expecting type 'DOUBLE'" in text:
@@ -116,7 +138,7 @@ def _report_configuration_error(name: str, exc: Exception) -> None:
     elif 'out of range' in text and any(f'Parameter {n} out of range' in text
                                         for n in ('length_m', 'width_m', 'thickness_m')):
         hint = ' (lengths are in metres: is it in millimetres?)'
-    files = params_files()
+    files = params_files(args)
     source = f" (parameters files: {', '.join(files)})" if files and not any(
         f in text for f in files) else ''
     print(f'{name}: invalid parameter: {exc}{hint}{source}', file=sys.stderr)
@@ -131,6 +153,10 @@ def run(node_factory, name: str, args=None) -> int:
     A signal at any moment gives 0 without a traceback.  A configuration error is
     printed on one line naming the parameter (no traceback) and gives 2.
     """
+    args = list(sys.argv if args is None else args)
+    if wants_help(args):
+        print(node_help(name))
+        return 0
     # A shell starts background jobs with SIGINT ignored, and Python keeps an
     # inherited SIG_IGN: restore the default so SIGINT always stops the node.
     _SIGNALLED.clear()
@@ -142,34 +168,64 @@ def run(node_factory, name: str, args=None) -> int:
             signal.signal(s, handler)
 
 
-def _run(node_factory, name: str, args) -> int:
+@contextlib.contextmanager
+def _interruptible():
+    """
+    Let a SIGINT/SIGTERM raise :class:`_InterruptedStart` inside the block (see ``_on_signal``).
+
+    For the start: params files read, the node built (model files parsed, filter designed).
+    """
+    if _SIGNALLED:
+        raise _InterruptedStart(min(_SIGNALLED))
+    _STARTING[0] = True
+    try:
+        yield
+    finally:
+        _STARTING[0] = False
+
+
+def _init(name: str, args) -> int | None:
+    """Read the params files and init rclpy; return an exit code if the node must not start."""
     try:
         # rcl reports a params file it cannot parse as an RCLError traceback (exit 1)
-        # without the line: read each file first for a one-line file:line error
-        for path in params_files(args):
-            read_yaml(path, 'parameters file')
+        # without the line: read each file first (size-limited) for a one-line file:line error
+        with _interruptible():
+            for path in params_files(args):
+                read_yaml(path, 'parameters file')
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except _InterruptedStart:
+        return 0
     except (ParameterError, RCLError) as exc:
         text = str(exc)
         if isinstance(exc, RCLError):  # "...Error: <what> at line_num 3, at /src/parse.c:435, ..."
             text = re.sub(r',? at /\S+:\d+', '', text).replace('failed to initialize rcl: ', '')
         print(f"{name}: invalid parameters file: {' '.join(text.split())}", file=sys.stderr)
         return 2
+    return None
+
+
+def _run(node_factory, name: str, args) -> int:
+    early = _init(name, args)
+    if early is not None:
+        return early
     executor = node = None
     code = 0
     try:
         # The executor exists before the node logs "ready", so a signal sent on that
         # line finds a complete executor.
         executor = make_executor()
-        node = node_factory()
+        with _interruptible():
+            # the node gets the arguments rcl parsed for it (params files, -p, remaps) as
+            # its own cli_args
+            node = node_factory(cli_args=ros_arguments(args))
         node.get_logger().debug(f'executor: {type(executor).__name__}')
         executor.add_node(node)
-        spin_until_signalled(executor, node.context)
+        spin_until_signalled(executor, node.context, node)
     except _SHUTDOWN:
         pass
     except (ParameterError, ParameterException) as exc:
         if not _SIGNALLED:
-            _report_configuration_error(name, exc)
+            _report_configuration_error(name, exc, args)
             code = 2
     except RCLError:
         if not _stopping():

@@ -93,6 +93,7 @@ class SimulatorNode(Node):
             self._sim = self._sims[0]
         except (ParameterError, ParameterError) as exc:
             raise P.ParameterError(str(exc)) from None
+        P.log_model_files(self, v)
         self._fs = float(v['sample_rate_hz'])
         self._block = int(v['block_size'])
         self._rtf = float(v['realtime_factor'])

@@ -46,6 +46,7 @@ from ..interface.blocks import (
     CURRENT_COLUMNS,
     DEFLECTION_COLUMNS,
     ESTIMATE_COLUMNS,
+    ESTIMATE_COLUMNS_UNFLAGGED,
     SAMPLE_LABEL,
     unpack_columns,
 )
@@ -103,8 +104,8 @@ def _unpack_block(msg, label: str) -> tuple[np.ndarray, np.ndarray]:
     estimate and its standard deviation); its first value column is the deflection.
     """
     if label == DEFLECTION_LABEL and msg.layout.dim and len(msg.layout.dim) == 2 \
-            and msg.layout.dim[1].label == ESTIMATE_COLUMNS:
-        label = ESTIMATE_COLUMNS
+            and msg.layout.dim[1].label in (ESTIMATE_COLUMNS, ESTIMATE_COLUMNS_UNFLAGGED):
+        label = msg.layout.dim[1].label
     times, table = unpack_columns(msg, label, values_only_ok=False)
     return times, table[:, 0]
 
@@ -404,6 +405,9 @@ def read_bag(path: PathLike, current_topic: str = 'current',
         side_geometry, known, extra = _read_sidecar(where, sidecar_path, geometry is None)
         if geometry is None:
             geometry = side_geometry
+        elif side_geometry is not None and side_geometry.name and not getattr(geometry, 'name',
+                                                                              ''):
+            geometry = geometry.replace(name=side_geometry.name)   # the sample's name
     if geometry is None:
         raise DataFormatError(where, None, 'no geometry: pass geometry= or put an '
                               f"{SIDECAR_NAME} sidecar with 'geometry: {{length_m, width_m, "

@@ -334,14 +334,43 @@ def _where_it_fails(recs: list[RecordComparison]) -> dict:
         floors = [r.noise_floor for r in recs if k < len(r.windows)]
         by_time.append(_error_cell(f'window {k + 1}/{n_w}', errs, floors))
     amps = [(w['amplitude_m'], w['error'], r.noise_floor) for r in recs for w in r.windows]
-    by_amp = []
-    if amps:
-        a = np.array([x[0] for x in amps])
-        qs = np.unique(np.quantile(a, [0, 1 / 3, 2 / 3, 1]))
-        for lo, hi in zip(qs[:-1], qs[1:]):
-            sel = [x for x in amps if lo <= x[0] <= hi]
-            if sel:
-                by_amp.append(_error_cell(f'{lo * 1e3:.3g}-{hi * 1e3:.3g} mm',
-                                          [x[1] for x in sel], [x[2] for x in sel]))
+    by_amp = [_error_cell(label, [x[1] for x in sel], [x[2] for x in sel])
+              for label, sel in amplitude_bins(amps)]
     return {'frequency_band': by_band, 'sample': by_sample, 'time_window': by_time,
             'amplitude': by_amp}
+
+
+#: Amplitudes within this fraction of each other fall in one bin of the failure breakdown.
+AMPLITUDE_RESOLUTION = 0.05
+
+
+def _mm(value_m: float) -> str:
+    return f'{value_m * 1e3:.3g}'
+
+
+def amplitude_bins(items) -> list[tuple[str, list]]:
+    """
+    Split ``(amplitude_m, ...)`` items into up to three bins at their terciles.
+
+    Each item lands in exactly one bin (``[lo, hi)``, the last one closed).  Edges closer than
+    :data:`AMPLITUDE_RESOLUTION` of the largest amplitude are merged, so records driven at one
+    amplitude form one bin labelled by that amplitude (``2 mm``), never ``2-2 mm``.
+    """
+    if not items:
+        return []
+    a = np.array([x[0] for x in items], float)
+    edges = [float(e) for e in np.quantile(a, [0, 1 / 3, 2 / 3, 1])]
+    kept = [edges[0]]
+    for e in edges[1:]:
+        if e - kept[-1] > AMPLITUDE_RESOLUTION * edges[-1]:
+            kept.append(e)
+    if len(kept) == 1:
+        return [(f'{_mm(kept[0])} mm', list(items))]
+    kept[-1] = edges[-1]
+    out = []
+    for k, (lo, hi) in enumerate(zip(kept[:-1], kept[1:])):
+        last = k == len(kept) - 2
+        sel = [x for x in items if lo <= x[0] < hi or (last and x[0] == hi)]
+        if sel:
+            out.append((f'{_mm(lo)}-{_mm(hi)} mm', sel))
+    return out

@@ -10,7 +10,7 @@ from ..physics.model import SensorModel
 from ..physics.parameters import MaterialParameters
 from .freqfit import FitGroup
 from .freqresp import FrequencyPoint, fundamental_response
-from .measurements import FrequencyResponseData, TimeSeries
+from .measurements import FrequencyResponseData, TimeSeries, sample_label
 from .timefit import Record
 
 __all__ = ['material_for', 'records_from', 'groups_from', 'frf_points']
@@ -37,7 +37,7 @@ def records_from(series: Sequence[TimeSeries], material: MaterialParameters,
         if ts.deflection_m is None:
             raise ValueError(f'{ts.path}: no deflection column: cannot compare or fit')
         model = SensorModel(ts.geometry, material_for(ts, material), effects)
-        out.append(Record(ts.path, ts.sample or ts.geometry.name or 'sample', model,
+        out.append(Record(ts.path, sample_label(ts), model,
                           ts.time_s, ts.deflection_m, ts.current_a))
     return out
 
@@ -74,7 +74,7 @@ def groups_from(data: Sequence, min_periods: int = 2) -> list[FitGroup]:
     """
     groups: dict[tuple, FitGroup] = {}
     for d in data:
-        key = (d.sample or d.geometry.name, d.geometry.length_m, d.geometry.width_m,
+        key = (sample_label(d), d.geometry.length_m, d.geometry.width_m,
                d.geometry.thickness_m, tuple(sorted(d.known.items())))
         g = groups.setdefault(key, FitGroup(d.geometry, [], dict(d.known), name=key[0]))
         if isinstance(d, FrequencyResponseData):

@@ -394,6 +394,14 @@ def _read_rows(source: TextSource, header: _Header, check, max_rows) -> list[np.
     return data
 
 
+def incomplete_notes(path, source: TextSource) -> tuple[str, ...]:
+    """Return the note of a last line without a line end, not read (:mod:`.textread`)."""
+    if source.incomplete_line is None:
+        return ()
+    return (f'{path}:{source.incomplete_line}: last line has no line end (file still being '
+            'written?): not read',)
+
+
 def _fmt(x: float) -> str:
     return repr(float(x))
 
@@ -434,7 +442,9 @@ def _timeseries_from(path, source: TextSource, header: _Header, max_rows) -> Tim
     return TimeSeries(path=str(path), sample=sample, geometry=geometry, known=known,
                       sample_rate_hz=rate, time_s=t, current_a=current,
                       deflection_m=deflection, extra=extra,
-                      deflection_alignment='exact' if deflection is not None else None)
+                      deflection_alignment='exact' if deflection is not None else None,
+                      first_row_line=header.column_line + 1,
+                      notes=incomplete_notes(path, source))
 
 
 def read_timeseries(path: PathLike, *, max_bytes: int | None = MAX_BYTES,

@@ -147,41 +147,45 @@ class FitResult:
         lines.append(f"{'parameter':<32} {'estimate':>12} {'95% CI':>27}  note")
         for name in self.free:
             lo, hi = self.ci95[name]
-            note = []
-            if name in self.not_identifiable:
-                note.append('NOT IDENTIFIABLE alone')
-            if name in self.at_bound:
-                note.append('at bound')
+            note = 'at bound' if name in self.at_bound else ''
             lines.append(f'{name:<32} {self.estimates[name]:>12.4g} [{lo:>11.4g}, {hi:>11.4g}]  '
-                         f"{'; '.join(note)}")
+                         f'{note}')
         if len(self.free) > 1:
             lines.append('correlation:')
             for k, name in enumerate(self.free):
                 row = ' '.join(f'{c:+.3f}' for c in self.correlation[k])
                 lines.append(f'  {SYMBOLS.get(name, name):>8} {row}')
-        lines.append(
-            'identifiability (SVD of the scaled Jacobian; combinations of the free parameters):'
-        )
+        lines.append('identifiability (SVD of the scaled Jacobian; combinations of the free '
+                     'parameters; sensitivity = change of the ln-response per e-fold change):')
         for comb in self.identifiability:
             lines.append(
                 f"  {comb['expression']:<44} sd(ln) = {comb['sd_log']:.3g}, sensitivity "
-                f"{comb['sensitivity']:.3g}  "
-                f"{'determined' if comb['determined'] else 'NOT determined by these data'}"
+                f"{comb['sensitivity']:.3g}  {'determined' if comb['determined'] else 'NOT'}"
             )
         for comb in self.named_combinations:
             lines.append(
                 f"  {comb['name']:<44} = {comb['value']:.5g}, sd(ln) = {comb['sd_log']:.3g}  "
-                f"{'determined' if comb['determined'] else 'NOT determined'}"
+                f"{'determined' if comb['determined'] else 'NOT'}"
             )
-        if self.not_identifiable:
-            lines.append(
-                'WARNING: '
-                + ', '.join(SYMBOLS.get(n, n) for n in self.not_identifiable)
-                + ' cannot be estimated separately from these data; report the determined '
-                'combinations above, or fix some of them from independent measurements.'
-            )
+        lines.append(self.identifiability_text())
         lines.append(self.adequacy_text())
         return '\n'.join(lines)
+
+    def identifiability_text(self) -> str:
+        """One verdict: which parameters the data determine, and which only in combination."""
+        names = [SYMBOLS.get(n, n) for n in self.free]
+        if not self.not_identifiable:
+            return ('identifiability: every free parameter is determined by these data '
+                    '(each CI above stands on its own)')
+        alone = [SYMBOLS.get(n, n) for n in self.free if n not in self.not_identifiable]
+        shared = [SYMBOLS.get(n, n) for n in self.not_identifiable]
+        n_det = sum(c['determined'] for c in self.identifiability)
+        return (f'identifiability: these data determine {n_det} of {len(names)} combinations '
+                f"(marked determined above){'; ' + ', '.join(alone) + ' alone' if alone else ''};"
+                f" {', '.join(shared)} take part in a combination they do not determine (NOT: "
+                'too weak an effect on the response, or too uncertain), so their CIs hold only '
+                'if the model is exact: quote the determined combinations, or fix one of them '
+                'from an independent measurement')
 
 
 def model_for_group(material: MaterialParameters, group: FitGroup, free: Sequence[str],

@@ -51,7 +51,7 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 
 from ..physics.parameters import Geometry, MaterialParameters, ParameterError
-from .formats import KNOWN_KEYS, write_timeseries
+from .formats import KNOWN_KEYS, incomplete_notes, write_timeseries
 from .measurements import DataFormatError, PathLike, TimeSeries
 from .textread import (MAX_BYTES, MAX_ROWS, TextSource, increasing_check, parse_number,
                        read_table)
@@ -456,7 +456,7 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
     return TimeSeries(path=str(path), sample=name, geometry=geo, known=known,
                       sample_rate_hz=1.0 / float(np.median(steps)), time_s=t,
                       current_a=picked['current'], deflection_m=picked.get('deflection'),
-                      extra=extra)
+                      extra=extra, notes=incomplete_notes(path, source))
 
 
 def import_lab_files(paths: Iterable[PathLike], out_dir: PathLike, *,
@@ -483,6 +483,8 @@ def import_lab_files(paths: Iterable[PathLike], out_dir: PathLike, *,
             raise DataFormatError(dst, None, 'output exists; remove it or pass overwrite')
     series = [import_lab_file(p, **options) for p in paths]
     for src, ts in zip(paths, series):
+        for note in ts.notes if notice is not None else ():
+            notice(note)
         if notice is not None and 'text_encoding' in ts.extra:
             notice(f"{src}: not UTF-8 text: read as {ts.extra['text_encoding']} (Windows "
                    'Western); check the units and names it printed')

@@ -18,9 +18,34 @@ import numpy as np
 from ..physics.parameters import Geometry
 from ..errors import DataFormatError
 
-__all__ = ['DataFormatError', 'TimeSeries', 'FrequencyResponseData', 'PathLike']
+__all__ = ['DataFormatError', 'TimeSeries', 'FrequencyResponseData', 'PathLike',
+           'RATE_DIGITS', 'round_rate_hz', 'geometry_label', 'sample_label']
 
 PathLike = Union[str, Path]
+
+#: Significant digits kept of a sample rate (1 ppb: a DAQ clock is specified to ppm, while
+#: 1/median(dt) of float time stamps carries float noise, e.g. 999.9999999999991 Hz).
+RATE_DIGITS = 9
+
+
+def round_rate_hz(rate_hz: float) -> float:
+    """Return a (measured) sample rate rounded to :data:`RATE_DIGITS` significant digits."""
+    return float(f'{float(rate_hz):.{RATE_DIGITS}g}')
+
+
+def geometry_label(geometry: Geometry) -> str:
+    """Name of an unnamed sample from its geometry, L x W x T in mm: ``22x7x0.36mm``."""
+    return 'x'.join(f'{v * 1e3:.4g}' for v in (geometry.length_m, geometry.width_m,
+                                               geometry.thickness_m)) + 'mm'
+
+
+def sample_label(data) -> str:
+    """
+    Return the label of a record's sample: its name, else its geometry's name, else the geometry.
+
+    Two unnamed samples of different geometry never share a label.
+    """
+    return str(getattr(data, 'sample', '') or data.geometry.name or geometry_label(data.geometry))
 
 
 # ---------------------------------------------------------------------------
@@ -52,6 +77,10 @@ class TimeSeries:
     extra : unrecognised header keys (text values) / sidecar ``extra``.
     deflection_alignment : ``"exact"`` (measured at the sample times),
         ``"linear"`` (interpolated from other times, bags only) or None.
+    first_row_line : 1-based line of the first data row of a text file (rows are
+        contiguous: sample k is on line ``first_row_line + k``); None for bags.
+    notes : what the reader left out and why, one line each naming the place (e.g. an
+        incomplete last line of a file still being written).
     """
 
     path: str
@@ -64,6 +93,8 @@ class TimeSeries:
     deflection_m: np.ndarray | None = None
     extra: dict = field(default_factory=dict)
     deflection_alignment: str | None = None
+    first_row_line: int | None = None
+    notes: tuple = ()
 
     def __post_init__(self) -> None:
         if not isinstance(self.geometry, Geometry):
@@ -81,15 +112,26 @@ class TimeSeries:
         if self.deflection_alignment not in (None, 'exact', 'linear'):
             raise ValueError(f"deflection_alignment must be 'exact', 'linear' or None, "
                              f'got {self.deflection_alignment!r}')
-        object.__setattr__(self, 'sample_rate_hz', float(self.sample_rate_hz))
+        object.__setattr__(self, 'sample_rate_hz', round_rate_hz(self.sample_rate_hz))
         object.__setattr__(self, 'known', {str(k): float(v) for k, v in self.known.items()})
         object.__setattr__(self, 'extra', dict(self.extra))
         object.__setattr__(self, 'path', str(self.path))
         object.__setattr__(self, 'sample', str(self.sample))
 
     @property
+    def label(self) -> str:
+        """Return the sample's name, else its geometry's (:func:`sample_label`)."""
+        return sample_label(self)
+
+    @property
     def n_samples(self) -> int:
         return int(self.time_s.size)
+
+    def where(self, k: int) -> str:
+        """Return where sample ``k`` is: ``path:line`` in a text file, else path and time."""
+        if self.first_row_line is not None:
+            return f'{self.path}:{self.first_row_line + int(k)}'
+        return f'{self.path}: sample {int(k)} (t = {float(self.time_s[k])!r} s)'
 
     @property
     def has_deflection(self) -> bool:
@@ -142,6 +184,11 @@ class FrequencyResponseData:
         object.__setattr__(self, 'extra', dict(self.extra))
         object.__setattr__(self, 'path', str(self.path))
         object.__setattr__(self, 'sample', str(self.sample))
+
+    @property
+    def label(self) -> str:
+        """Return the sample's name, else its geometry's (:func:`sample_label`)."""
+        return sample_label(self)
 
     @property
     def gain_std(self) -> np.ndarray | None:

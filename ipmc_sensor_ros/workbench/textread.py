@@ -13,6 +13,12 @@ by line, which gives the exact error (file:line, column, cell).
 
 Numbers are ASCII decimals only (``[+-]digits[.digits][e[+-]digits]``):
 Unicode digits, underscores, NaN and Inf are refused.
+
+A data row is a line with its line end.  A last line without one is a row still being
+written (a recorder appending to the file, or a copy taken mid-write: ``-6.937703375`` cut
+from ``-6.9377033751e-07`` is still a number) and is not read: the complete rows are, and
+:attr:`TextSource.incomplete_line` names the line so the reader can say so.  A file written
+without a final line end loses its last row, named, never a row with a wrong value.
 """
 from __future__ import annotations
 
@@ -126,6 +132,8 @@ class TextSource:
         self._offset = 0  # file offset of _buf[0]
         self._eof = False
         self.lineno = 0
+        #: 1-based line of a last data line without a line end, not read (module docstring)
+        self.incomplete_line: int | None = None
 
     def __enter__(self) -> 'TextSource':
         return self
@@ -212,10 +220,16 @@ class TextSource:
                 self._fill()
             if not self._buf:
                 return
-            cut = len(self._buf) if self._eof else self._buf.rfind(b'\n') + 1
+            cut = self._buf.rfind(b'\n') + 1
+            if self._eof and cut < len(self._buf):
+                tail = self._buf[cut:]
+                self._check(tail, self.lineno + self._buf.count(b'\n', 0, cut) + 1)
+                if tail.strip():
+                    self.incomplete_line = self.lineno + self._buf.count(b'\n', 0, cut) + 1
+                self._buf = self._buf[:cut]
+                if not cut:
+                    return
             raw = self._buf[:cut]
-            if not raw.endswith(b'\n'):
-                raw += b'\n'
             self._check(raw, self.lineno + 1)
             first = self.lineno + 1
             self._buf = self._buf[cut:]

@@ -1,0 +1,106 @@
+# SPDX-License-Identifier: Apache-2.0
+r"""
+How the command line writes its outputs and names files.
+
+* **Complete or absent**: an output is written under a temporary name in a private
+  directory beside it and appears under its final name only once complete, so an error
+  (or a signal) never leaves an empty or half-written output behind.
+* **Created exclusively**: without ``--overwrite`` an output that exists is never replaced;
+  the second writer (another run, or a second input of the same name in one run) refuses,
+  naming the output and what wrote it first.  Appearing under the final name is atomic
+  (``link`` for a file, ``rename`` onto a missing name for a bag directory), so two runs
+  started together cannot both win.
+* **Any file name**: names that are not UTF-8 (a Latin-1 ``é`` from an old instrument PC)
+  are handled as bytes and shown with escapes (``caf\xe9.csv``), never an encoding error.
+"""
+from __future__ import annotations
+
+import datetime
+import os
+import shutil
+from pathlib import Path
+from typing import Callable
+
+from ..physics.parameters import ParameterError
+
+__all__ = ['printable', 'write_complete', 'first_writer']
+
+
+def printable(text) -> str:
+    r"""
+    Return ``text`` (a str or a path) safe to print and to write into a UTF-8 file.
+
+    Bytes of a file name that are not UTF-8 (held by Python as surrogates) are shown as
+    ``\xNN`` escapes.
+    """
+    return str(text).encode('utf-8', 'surrogateescape').decode('utf-8', 'backslashreplace')
+
+
+def first_writer(path: Path) -> str:
+    """Say what wrote ``path``: its ``# source:`` header line (if any) and its time."""
+    when = datetime.datetime.fromtimestamp(path.stat().st_mtime).isoformat(timespec='seconds')
+    source = ''
+    if path.is_file():
+        with open(path, 'rb') as f:
+            for raw in f.read(4096).splitlines()[:12]:
+                line = raw.decode('utf-8', 'backslashreplace')
+                if line.startswith('# source: '):
+                    source = f'from {line[10:]} '
+                    break
+    return f'{source}at {when}'
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    elif path.exists() or path.is_symlink():
+        path.unlink()
+
+
+def write_complete(final: Path, write: Callable[[Path], None], overwrite: bool) -> str:
+    """
+    Write an output by ``write(path)`` and give it its final name (module docstring).
+
+    Returns '' or, with ``overwrite``, a note naming what was replaced.  ParameterError
+    naming ``final`` and its first writer when it exists and ``overwrite`` is false.
+    """
+    if final.exists() and not overwrite:
+        raise _exists(final)
+    made = [p for p in (final.parent, *final.parent.parents) if not p.exists()]
+    final.parent.mkdir(parents=True, exist_ok=True)
+    scratch = final.parent / f'.ipmc-partial-{os.getpid()}'
+    scratch.mkdir(exist_ok=True)
+    part = scratch / final.name
+    done = False
+    try:
+        write(part)
+        note = f'replaced {printable(final)} (written {first_writer(final)})' \
+            if final.exists() else ''
+        if overwrite:
+            if part.is_dir():
+                _remove(final)
+            os.replace(part, final)
+        elif part.is_dir():
+            try:
+                os.rename(part, final)      # fails onto a non-empty directory
+            except OSError:
+                raise _exists(final) from None
+        else:
+            try:
+                os.link(part, final)        # never replaces an existing name
+            except FileExistsError:
+                raise _exists(final) from None
+        done = True
+        return note
+    finally:
+        _remove(part)
+        for folder in [scratch] + ([] if done else made):   # directories made for nothing
+            try:
+                folder.rmdir()
+            except OSError:
+                pass
+
+
+def _exists(final: Path) -> ParameterError:
+    return ParameterError(f'{printable(final)}: exists, written {first_writer(final)}; not '
+                          'replaced (pass --overwrite to replace it, or choose another --out)')

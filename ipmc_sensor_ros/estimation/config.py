@@ -1,0 +1,133 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+Every tuning number of the Kalman deflection estimator, named, with its unit and its reason.
+
+:data:`SETTINGS` is the one table: name, default, unit, range and the reason for the default.
+:class:`EstimatorConfig` (a frozen dataclass built from it) is the estimator's one
+configuration object; the node parameters and ``ipmc-model estimate`` flags are generated
+from the same table (:mod:`~ipmc_sensor_ros.interface.specs`), so names, units and ranges
+agree everywhere.  The model the settings parametrise is :mod:`.statespace`;
+``docs/estimator.md`` says what each assumes.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import NamedTuple
+
+from ..errors import ParameterError
+
+__all__ = ['EstimatorConfig', 'SETTINGS', 'Setting', 'CONFIG_FIELDS']
+
+
+class Setting(NamedTuple):
+    """One setting: name, default, unit, allowed range (inclusive) and meaning + reason."""
+
+    name: str
+    default: float
+    unit: str
+    low: float
+    high: float
+    text: str
+
+
+SETTINGS = (
+    Setting('motion_rms_m', 1e-3, 'm', 1e-7, 1.0,
+            "RMS of the tip's motion about its working point in the prior: the paper's crank "
+            'moves the tip +-2 mm; a scale, not a limit'),
+    Setting('motion_corner_hz', 10.0, 'Hz', 1e-3, 100.0,
+            "corner of the motion's deflection spectrum about its working point: below it the "
+            "velocity's power falls as f^2, so a steady current is offset, not motion; an "
+            'unknown offset is learned while moving, and the causal estimate loses least to it '
+            '(10 Hz, inside the 1-20 Hz band of the paper, measured best on the scenarios)'),
+    Setting('motion_bandwidth_hz', 50.0, 'Hz', 0.1, 1e4,
+            'upper corner of the motion spectrum (third order above it): above the 1-20 Hz band '
+            'and a 30 Hz free vibration'),
+    Setting('working_point_walk_m', 1e-6, 'm/sqrt(s)', 0.0, 1.0,
+            'random walk of the working point while moving: the stimulus, not drift, moves it; '
+            'a rest sets it where the tip is held'),
+    Setting('start_level_m', 10e-6, 'm', 1e-9, 1.0,
+            'RMS of the working point at the start: a sensor at rest when the estimator '
+            'starts is at its rest position'),
+    Setting('offset_prior_a', 30e-9, 'A', 1e-15, 1e-3,
+            'RMS of the current offset before it is learned: DAQ and amplifier offsets are nA '
+            'to tens of nA; while it is unknown a moving estimate loses a few percent of its '
+            'amplitude, so the prior is not wider than offsets are'),
+    Setting('offset_walk_a', 1e-12, 'A/sqrt(s)', 0.0, 1e-6,
+            'random walk of the offset: small, since every offset change assumed while moving '
+            'is a deflection ramp the sensor cannot show (H(0) = 0)'),
+    Setting('offset_drift_a_per_s', 0.05e-9, 'A/s', 0.0, 1e-3,
+            "RMS of the offset's drift rate before it is learned: 3 nA a minute, a DAQ "
+            'warming up; a short rest cannot tell a larger drift from noise'),
+    Setting('offset_drift_walk_a_per_s', 1e-13, 'A/s/sqrt(s)', 0.0, 1e-6,
+            "random walk of the offset's drift rate: thermal drift changing over minutes"),
+    Setting('line_prior_a', 1e-6, 'A', 1e-15, 1e-3,
+            'RMS of each mains-line component before it is learned: hum near mains wiring '
+            'reaches a microampere'),
+    Setting('line_walk_a', 1e-9, 'A/sqrt(s)', 0.0, 1e-3,
+            'random walk of each mains-line component: a hum changing over seconds and a line '
+            'frequency measured to ~0.01 Hz'),
+    Setting('line_harmonics', 3, '', 1, 5,
+            'mains harmonics modelled: the line, its second and its third'),
+    Setting('current_noise_a', 20e-9, 'A', 1e-15, 1e-3,
+            'white noise RMS per sample assumed until measured (the filter measures it within '
+            'a second)'),
+    Setting('rest_velocity_m_s', 1e-6, 'm/s', 1e-12, 1.0,
+            "RMS velocity of a tip at rest (the rest pseudo-measurement's std): a hold creeps "
+            'less than 4 um in 4 s'),
+    Setting('rest_window_s', 0.2, 's', 1e-3, 60.0,
+            'window of the rest test: five periods of the slowest crank of the paper'),
+    Setting('rest_false_alarm', 1e-6, '', 1e-15, 0.5,
+            'probability that the rest test calls a still window moving (chi-square level)'),
+)
+
+#: Names of the settings, in order (node parameters and CLI flags use the same names).
+CONFIG_FIELDS = tuple(s.name for s in SETTINGS)
+_BY_NAME = {s.name: s for s in SETTINGS}
+
+
+def _check(self) -> None:
+    for s in SETTINGS:
+        value = getattr(self, s.name)
+        integer = isinstance(s.default, int)
+        ok = (not isinstance(value, bool) and isinstance(value, (int, float))
+              and (not integer or isinstance(value, int)) and math.isfinite(value)
+              and s.low <= value <= s.high)
+        if not ok:
+            what = 'an integer' if integer else 'a number'
+            unit = f' {s.unit}' if s.unit else ''
+            raise ParameterError(f"parameter '{s.name}' must be {what} in [{s.low:g}, {s.high:g}]"
+                                 f'{unit}, got {value!r}')
+    if not self.motion_corner_hz < self.motion_bandwidth_hz:
+        raise ParameterError(f"parameter 'motion_corner_hz' ({self.motion_corner_hz:g} Hz) must "
+                             f"be below 'motion_bandwidth_hz' ({self.motion_bandwidth_hz:g} Hz)")
+
+
+def _replace(self, **changes):
+    """Return a copy with ``changes`` (validated)."""
+    unknown = sorted(set(changes) - set(CONFIG_FIELDS))
+    if unknown:
+        raise ParameterError(f'unknown estimator setting(s) {unknown}; known: '
+                             f'{list(CONFIG_FIELDS)}')
+    return dataclasses.replace(self, **changes)
+
+
+def _doc() -> str:
+    lines = ['Settings of the Kalman deflection estimator (generated from :data:`SETTINGS`).', '',
+             'Attributes', '----------']
+    for s in SETTINGS:
+        lines += [f'{s.name} : {type(s.default).__name__}',
+                  f'    {s.text} [{s.unit or "1"}; default {s.default:g}].']
+    return '\n'.join(lines)
+
+
+EstimatorConfig = dataclasses.make_dataclass(
+    'EstimatorConfig', [(s.name, type(s.default), dataclasses.field(default=s.default))
+                        for s in SETTINGS],
+    frozen=True, namespace={'__post_init__': _check, 'replace': _replace, '__doc__': _doc(),
+                            '__module__': __name__})
+
+
+def setting(name: str) -> Setting:
+    """Return the :class:`Setting` called ``name``."""
+    return _BY_NAME[name]

@@ -1,0 +1,279 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+The Kalman filter on :class:`~.statespace.StateSpaceModel`: explicit state in, state out.
+
+One recursion per sample, the same for a block and a single sample (a block is a loop over
+its samples; there is no second implementation)::
+
+    predict   x- = F_m x,  P- = F_m P F_m' + Q_m       (m = sample periods since the last
+                                                         sample: missing samples bridged)
+    rest test on the window of r = i - lines(x-)        (:mod:`.rest`)
+    update    nu = i - c x-,  S = c P- c' + R,  K = P- c' / S,  x = x- + K nu,
+              P = P- - K S K'
+    at rest   velocity = 0, acceleration = 0, motion current = 0 (pseudo-measurements,
+              :mod:`.rest`); working point = w (its prior released first when the tip
+              moved since the working point was last set:
+              :attr:`~.statespace.StateSpaceModel.hold_variance`; a record that starts at
+              rest keeps the starting working point, its rest position)
+
+R, the white-noise variance per sample, is measured on the current: the third difference
+i_k - 3 i_{k-1} + 3 i_{k-2} - i_{k-3} has variance 20 R for white noise and passes a current
+at f only as (2 sin(pi f / fs))^6 (4e-6 at 20 Hz, 0.06 at 150 Hz, at 1 kHz), so its square / 20,
+averaged over ``NOISE_AVERAGE_S`` (weights normalised, so the first differences already give
+R; ``current_noise_a`` until then), is R.  Differences across a bridged gap are skipped.
+The state is held in scaled units (x / scale) so that every entry of P is O(1) whatever the
+sensor (deflections of mm, currents of nA).
+
+:class:`FilterState` is the whole state (what save/restore keeps); :meth:`KalmanFilter.run`
+returns the new one and never changes the old.  Pass ``record`` to keep what the smoother
+needs (:mod:`.smoother`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .rest import RestTest
+from .statespace import StateSpaceModel
+
+__all__ = ['FilterState', 'KalmanFilter', 'ForwardRecord', 'NOISE_AVERAGE_S', 'NOISE_FLOOR_A']
+
+#: Averaging time of the measured noise variance, s: long against one sample, short against a
+#: record (the noise is known within a second of the start).
+NOISE_AVERAGE_S = 1.0
+#: One sample counts at most this many times the measured variance in the noise average (a
+#: step in the current moves the measured noise by at most this, not by its square).
+NOISE_CLIP = 25.0
+#: The measured noise stays above this, A RMS (below any DAQ's noise; a noise-free record would
+#: otherwise drive the gain to infinity).
+NOISE_FLOOR_A = 1e-12
+
+
+@dataclass(slots=True)
+class FilterState:
+    """Everything the filter carries from one sample to the next (scaled units)."""
+
+    x: np.ndarray
+    P: np.ndarray
+    noise_var_a2: float
+    window: np.ndarray = field(repr=False)
+    window_count: int = 0
+    window_pos: int = 0
+    still: bool = False
+    samples: int = 0
+    contiguous: int = 0
+    noise_weight: float = 0.0
+    line_sums: np.ndarray = field(default=None, repr=False)
+    phase: np.ndarray = field(default=None, repr=False)
+    phases: np.ndarray = field(default=None, repr=False)
+    total: float = 0.0
+    total_sq: float = 0.0
+    moved: bool = False
+    quiet: int = 0
+    cusum: tuple = (0.0, 0.0)
+
+    def copy(self) -> 'FilterState':
+        return replace(self, x=self.x.copy(), P=self.P.copy(), window=self.window.copy(),
+                       line_sums=self.line_sums.copy(), phase=self.phase.copy(),
+                       phases=self.phases.copy())
+
+
+@dataclass
+class ForwardRecord:
+    """Per-sample predictions and updates of a forward pass (what the RTS smoother needs)."""
+
+    x_pred: np.ndarray
+    P_pred: np.ndarray
+    x_post: np.ndarray
+    P_post: np.ndarray
+    steps: np.ndarray
+    still: np.ndarray
+
+    @classmethod
+    def empty(cls, n: int, nx: int) -> 'ForwardRecord':
+        return cls(np.empty((n, nx)), np.empty((n, nx, nx)), np.empty((n, nx)),
+                   np.empty((n, nx, nx)), np.empty(n, dtype=np.int64), np.empty(n, dtype=bool))
+
+
+class KalmanFilter:
+    """
+    The recursion of the module docstring for ``model``.
+
+    Parameters
+    ----------
+    model : StateSpaceModel
+        The model (sensor, motion, offset, lines).
+    rest_lines_hz : sequence of float, optional
+        Lines the rest test fits in its window (default: the model's): a hum the model has no
+        states for yet must not hide a rest.
+
+    """
+
+    def __init__(self, model: StateSpaceModel, rest_lines_hz=None):
+        self.model = model
+        cfg = model.config
+        lines = tuple(model.lines_hz if rest_lines_hz is None or model.lines_hz
+                      else rest_lines_hz)
+        self.rest_lines_hz = lines
+        self.rest = RestTest.design(cfg.rest_window_s, model.sample_rate_hz,
+                                    cfg.rest_false_alarm, len(lines))
+        # one step of each line's phasor e^{-i W_k / fs} (sliding DFT of the rest window)
+        self._rot = np.exp(-2j * np.pi * np.asarray(lines) / model.sample_rate_hz)
+        self._alpha = 1.0 / (NOISE_AVERAGE_S * model.sample_rate_hz)
+        s = model.scale
+        self._anchor = np.zeros(model.size)
+        self._anchor[model.iw], self._anchor[model.ih] = s[model.iw], -s[model.ih]
+        v2, m2 = model.rest_variances
+        anchor_var = (cfg.rest_velocity_m_s / model.sample_rate_hz) ** 2
+        accel = np.zeros(model.size)
+        accel[model.ia] = model.scale[model.ia]
+        self._rest_rows = ((model.c_velocity, v2), (accel, v2 * model.sample_rate_hz ** 2),
+                           (model.c_motion, m2), (self._anchor, anchor_var))
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """One sample's turn e^{-i W_k / fs} of each rest-test line."""
+        return self._rot
+
+    def initial_state(self) -> FilterState:
+        x, P = self.model.prior()
+        k = len(self.rest_lines_hz)
+        return FilterState(x, P, self.model.config.current_noise_a ** 2,
+                           np.zeros(self.rest.n), line_sums=np.zeros(k, complex),
+                           phase=np.ones(k, complex), phases=np.ones((self.rest.n, k), complex))
+
+    def deflection(self, state: FilterState) -> tuple[float, float]:
+        """(w, its standard deviation) of a state, m."""
+        m = self.model
+        s = m.scale[m.iw]
+        return float(state.x[m.iw] * s), math.sqrt(max(float(state.P[m.iw, m.iw]), 0.0)) * s
+
+    def offset(self, state: FilterState) -> tuple[float, float]:
+        """Return (current offset, its standard deviation) of a state, A."""
+        m = self.model
+        s = m.scale[m.ib]
+        return float(state.x[m.ib] * s), math.sqrt(max(float(state.P[m.ib, m.ib]), 0.0)) * s
+
+    # -- the recursion ---------------------------------------------------------------------------
+    def run(self, state: FilterState, current_a, steps=None, record: ForwardRecord | None = None,
+            offset: int = 0, copy: bool = True):
+        """
+        Filter ``current_a`` (A) from ``state``; return (new state, w, std, still).
+
+        ``steps[k]``: sample periods from the sample before (None: all 1).  ``record``: filled
+        at rows ``offset + k`` for the smoother.  The loop keeps its state in local variables
+        and builds the returned :class:`FilterState` once; a block and single samples run the
+        same statements.  ``copy=False``: the new state reuses ``state``'s buffers (for an
+        owner that drops the old state; ``state`` itself is then no longer valid).
+        """
+        y = current_a if isinstance(current_a, list) else np.asarray(current_a, float).tolist()
+        n = len(y)
+        st = ([1] * n if steps is None else steps if isinstance(steps, list)
+              else np.asarray(steps, dtype=np.int64).tolist())
+        m, rest = self.model, self.rest
+        iw, ih, ib = m.iw, m.ih, m.ib
+        sw, sb = float(m.scale[iw]), float(m.scale[ib])
+        c, hold, rows, alpha, rot = m.c, m.hold_variance, self._rest_rows, self._alpha, self._rot
+        nw = rest.n
+        x, P, win, sums, phase, phases = (state.x, state.P, state.window, state.line_sums,
+                                          state.phase, state.phases)
+        if copy:
+            x, P, win, sums, phase, phases = (a.copy() for a in (x, P, win, sums, phase, phases))
+        count, pos, total, total_sq = (state.window_count, state.window_pos, state.total,
+                                       state.total_sq)
+        noise, weight = state.noise_var_a2, state.noise_weight
+        samples, contiguous, still, moved, quiet = (state.samples, state.contiguous, state.still,
+                                                    state.moved, state.quiet)
+        cusum = state.cusum
+        out_w, out_s, out_still = np.empty(n), np.empty(n), np.empty(n, dtype=bool)
+        F, Q = m.discrete(1)
+        last_steps = 1
+        for k in range(n):
+            yk, sk = y[k], st[k]
+            if sk != last_steps:
+                F, Q = m.discrete(sk)
+                last_steps = sk
+            if samples:
+                x = F @ x
+                if rot.size:
+                    phase = phase * (rot if sk == 1 else rot ** sk)
+            # the rest window holds the current; its sliding DFT fits the lines (rest.py)
+            old = win[pos]
+            if rot.size:
+                sums += yk * phase - old * phases[pos]
+                phases[pos] = phase
+            win[pos] = yk
+            total += yk - old
+            total_sq += yk * yk - old * old
+            pos += 1
+            if pos == nw:               # exact sums once per window (no drift of the running ones)
+                pos = 0
+                total, total_sq = float(win.sum()), float(win @ win)
+            count = min(count + 1, nw)
+            b, pb = float(x[ib]) * sb, float(P[ib, ib]) * sb * sb
+            if rot.size and count == nw:     # this sample less the window's fit of the lines
+                r = yk - 2.0 / nw * float(np.vdot(phase, sums).real)
+            else:
+                r = yk
+            ok, cusum = rest.sample_ok(r, b, pb, noise, cusum)
+            quiet = quiet + 1 if ok else 0
+            if count == nw:
+                energy = 2.0 / nw * float(np.vdot(sums, sums).real) if rot.size else 0.0
+                was_still = still
+                still = quiet >= nw and rest.still(total, total_sq, energy, b,
+                                                   float(P[ib, ib]) * sb * sb, noise)
+                # the working point is released when the tip leaves a rest (the centre of the
+                # coming motion is unknown) and when a new hold begins (it is where the tip is
+                # held); a record that starts at rest keeps its rest position until it moves
+                release = was_still != still and (not still or moved)
+                moved = moved or not still
+            else:
+                still = release = False
+            if samples:
+                P = F @ P @ F.T
+                P = 0.5 * (P + P.T) + Q     # symmetric to the bit (the updates keep it so)
+            if release:
+                P[ih, ih] += hold
+                moved = moved and not still
+            if record is not None:
+                j = offset + k
+                record.x_pred[j], record.P_pred[j] = x, P
+                record.steps[j], record.still[j] = sk, still
+            # the update with the current (P - g g' with g = P c / sqrt(S): symmetric exactly)
+            Pc = P @ c
+            S = float(c @ Pc) + noise
+            x = x + Pc * ((yk - float(c @ x)) / S)
+            g = Pc / math.sqrt(S)
+            P = P - g[:, None] * g
+            # the measured noise: third difference of r (module docstring)
+            if sk != 1:
+                contiguous = 0
+            elif contiguous < 3:
+                contiguous += 1
+            else:
+                d = (yk - 3.0 * win[(pos - 2) % nw] + 3.0 * win[(pos - 3) % nw]
+                     - win[(pos - 4) % nw])
+                value = d * d / 20.0
+                if weight:
+                    value = min(value, NOISE_CLIP * noise)
+                weight = (1.0 - alpha) * weight
+                noise = max((weight * noise + value) / (weight + 1.0), NOISE_FLOOR_A ** 2)
+                weight += 1.0
+            if still:                   # the rest pseudo-measurements (velocity, ... = 0)
+                for row_c, var in rows:
+                    Pc = P @ row_c
+                    S = float(row_c @ Pc) + var
+                    x = x - Pc * (float(row_c @ x) / S)
+                    g = Pc / math.sqrt(S)
+                    P = P - g[:, None] * g
+            if record is not None:
+                record.x_post[offset + k], record.P_post[offset + k] = x, P
+            samples += 1
+            out_w[k] = x[iw] * sw
+            out_s[k] = math.sqrt(max(P[iw, iw], 0.0)) * sw
+            out_still[k] = still
+        new = FilterState(x, P, noise, win, count, pos, still, samples, contiguous, weight,
+                          sums, phase, phases, total, total_sq, moved, quiet, cusum)
+        return new, out_w, out_s, out_still

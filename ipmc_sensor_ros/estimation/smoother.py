@@ -1,0 +1,92 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+Fixed-interval Rauch-Tung-Striebel smoother on the filter of :mod:`.filter`.
+
+Backward over a forward pass (Rauch, Tung & Striebel 1965)::
+
+    J_k   = P+_k F_{k+1}' (P-_{k+1})^-1
+    x^s_k = x+_k + J_k (x^s_{k+1} - x-_{k+1})
+    P^s_k = P+_k + J_k (P^s_{k+1} - P-_{k+1}) J_k'
+
+``F_{k+1}`` is the transition into sample k+1 (``steps`` periods); a rest sample's release of
+the working point is part of its P- (:mod:`.filter`), so the rests need nothing special.
+
+Memory stays bounded for records of any length: the forward pass keeps its state every
+``chunk`` samples only, and the backward pass re-runs the filter one chunk at a time (the
+filter is deterministic, so the re-run is the same pass) to get that chunk's P+ and P-.
+The smoothed estimate is never worse than the filtered one in the model's own terms
+(P^s <= P+); a fixed-lag smoother is the same backward pass over the last samples.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .filter import FilterState, ForwardRecord, KalmanFilter
+
+__all__ = ['smooth', 'rts_backward', 'CHUNK_SAMPLES']
+
+#: Samples re-run and smoothed at a time (2 x 4096 covariances of a 15-state model: ~15 MB).
+CHUNK_SAMPLES = 4096
+
+
+def rts_backward(filt: KalmanFilter, rec: ForwardRecord, end=None):
+    """
+    Smooth one forward record; return (x^s, P^s diagonal of w) in scaled units.
+
+    ``end``: (x^s, P^s, x-, P-, steps) of the sample after the record (None: the record ends
+    the data).
+    """
+    n = rec.x_post.shape[0]
+    xs = np.empty_like(rec.x_post)
+    pw = np.empty(n)
+    iw = filt.model.iw
+    if end is None:
+        x_next, P_next = rec.x_post[-1], rec.P_post[-1]
+        xs[-1], pw[-1] = x_next, P_next[iw, iw]
+        last = n - 2
+        xp_next, Pp_next, step_next = rec.x_pred[-1], rec.P_pred[-1], int(rec.steps[-1])
+    else:
+        x_next, P_next, xp_next, Pp_next, step_next = end
+        last = n - 1
+    for k in range(last, -1, -1):
+        if k < n - 1:
+            xp_next, Pp_next = rec.x_pred[k + 1], rec.P_pred[k + 1]
+            step_next = int(rec.steps[k + 1])
+        F, _ = filt.model.discrete(step_next)
+        J = np.linalg.solve(Pp_next, F @ rec.P_post[k]).T
+        x_next = rec.x_post[k] + J @ (x_next - xp_next)
+        P_next = rec.P_post[k] + J @ (P_next - Pp_next) @ J.T
+        xs[k], pw[k] = x_next, P_next[iw, iw]
+    return xs, pw, (x_next, P_next)
+
+
+def smooth(filt: KalmanFilter, state: FilterState, current_a, steps=None,
+           chunk: int = CHUNK_SAMPLES):
+    """
+    Smooth a whole record from ``state``; return (w, std, final filter state).
+
+    ``w`` and ``std`` are the smoothed deflection and its standard deviation, m.
+    """
+    y = np.asarray(current_a, dtype=float)
+    n = y.size
+    st = np.ones(n, dtype=np.int64) if steps is None else np.asarray(steps, dtype=np.int64)
+    starts = list(range(0, n, chunk))
+    checkpoints = []
+    s = state
+    for a in starts:                      # forward: keep the state at each chunk's start
+        checkpoints.append(s)
+        s, _, _, _ = filt.run(s, y[a:a + chunk], st[a:a + chunk])
+    final = s
+    w = np.empty(n)
+    pw = np.empty(n)
+    end = None
+    scale = filt.model.scale[filt.model.iw]
+    for a, s0 in zip(reversed(starts), reversed(checkpoints)):
+        b = min(a + chunk, n)
+        rec = ForwardRecord.empty(b - a, filt.model.size)
+        filt.run(s0, y[a:b], st[a:b], record=rec)
+        xs, pwc, (x_first, P_first) = rts_backward(filt, rec, end)
+        w[a:b] = xs[:, filt.model.iw] * scale
+        pw[a:b] = pwc
+        end = (x_first, P_first, rec.x_pred[0], rec.P_pred[0], int(rec.steps[0]))
+    return w, np.sqrt(np.maximum(pw, 0.0)) * scale, final

@@ -1,0 +1,279 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+The estimator's state-space model: sensor, motion, offset and mains lines in one state.
+
+Continuous time; the sensor from :class:`~ipmc_sensor_ros.lti.reduction.ReducedModel`,
+H_n(s) = s R_n(s) (eq. 45 reduced as in :mod:`~ipmc_sensor_ros.lti.reduction`; eq. 31 for
+H1)::
+
+    x_R' = A_R x_R + B_R u             R_n = C_R (s - A_R)^-1 B_R + D_R, driven by the tip
+                                       velocity u: the sensor measures the rate of charge,
+                                       so H(0) = 0 and a constant deflection gives no current
+    w'   = u,  u' = g                  tip deflection w (m), velocity u, acceleration g
+    g'   = -a^2 f (w - h) - (a^2 + 2af) u - (2a + f) g + xi_g
+                                       motion about the working point h: a third-order
+                                       process, deflection spectrum q / ((W^2 + f^2)
+                                       (W^2 + a^2)^2), f = 2 pi motion_corner_hz, a = 2 pi
+                                       motion_bandwidth_hz, q from motion_rms_m
+                                       (:func:`motion_intensity`); smooth (continuous
+                                       acceleration), so a sample's current is predicted
+                                       from the last ones and a mains line, persistent,
+                                       is told from motion within a few cycles
+    h'   = xi_h                        working point (random walk, working_point_walk_m)
+    b'   = d + xi_b                    current offset, A (random walk, offset_walk_a)
+    d'   = xi_d                        its drift, A/s (offset_drift_walk_a_per_s)
+    l_k' = W_k [[0, -1], [1, 0]] l_k + xi_l
+                                       mains line k (in phase, quadrature), W_k = 2 pi k
+                                       f_line, k = 1..line_harmonics below 0.45 fs
+    i    = C_R x_R + D_R u + b + sum_k l_k[0] + n          measured current, n white
+
+The motion is *bounded* about the working point: a bounded deflection carries no mean
+current, so the offset is the long-run mean of the current even while the sensor moves
+(slower excursions than ``motion_corner_hz`` are told from an offset change by the priors
+only).  At rest (:mod:`.rest`) the velocity and the motion's current are measured to be zero
+(pseudo-measurements), which tells offset from motion exactly, and the working point is
+where the tip is held: its prior is released (:attr:`StateSpaceModel.hold_variance`) and it
+is measured equal to w.
+
+Exact discretisation (Van Loan; :func:`~ipmc_sensor_ros.lti.discretize.van_loan`) for one
+sample period, chained by doubling for ``m`` periods (bridged samples; a single ``expm``
+over a long gap overflows); states are scaled to O(1) for the filter's
+arithmetic (:attr:`StateSpaceModel.scale`).
+"""
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+from scipy.linalg import solve_discrete_lyapunov
+
+from ..errors import ParameterError
+from ..lti.discretize import chain, van_loan
+from ..lti.reduction import ReducedModel
+from .config import EstimatorConfig
+
+__all__ = ['StateSpaceModel', 'modal_realisation', 'line_frequencies_hz']
+
+#: At a rest sample the working point's prior is widened to this many ``motion_rms_m`` before it
+#: is measured equal to the held deflection: wide enough that the held level, not the old
+#: working point, decides (a 1e-4 relative pull), narrow enough for well-conditioned algebra.
+HOLD_RELEASE = 100.0
+
+
+def modal_realisation(reduced: ReducedModel):
+    """
+    Return R_n(s) = D + sum_i r_i / (s - p_i) (distinct real poles) as (A, B, C, D).
+
+    A diagonal realisation: each state is a first-order lag of the velocity.
+    """
+    z = np.real(np.asarray(reduced.zeros_rad_s))
+    p = np.real(np.asarray(reduced.poles_rad_s))
+    k = float(reduced.gain)
+    gaps = np.abs(np.subtract.outer(p, p)) + np.eye(p.size) * 1e300
+    if p.size > 1 and np.min(gaps) < 1e-9 * np.max(np.abs(p)):
+        raise ParameterError('reduced model has repeated poles; the estimator needs distinct '
+                             'poles (choose another reduction_order)')
+    if z.size > p.size:
+        raise ParameterError(f'reduced model has more zeros ({z.size}) than poles ({p.size}); '
+                             'the estimator needs a proper R_n(s)')
+    r = np.array([k * np.prod(pi - z) / np.prod([pi - pj for pj in p if pj != pi]) for pi in p])
+    d = k if z.size == p.size else 0.0      # strictly proper with an amplifier pole
+    return np.diag(p), np.ones(p.size), r, d
+
+
+def motion_intensity(a: float, f: float, rms_m: float) -> float:
+    """
+    White-noise intensity q that gives w the variance rms_m^2 through 1/((s + f)(s + a)^2).
+
+    Var w = q / (2 pi) int dW / ((W^2 + f^2)(W^2 + a^2)^2) = q (2a + f) / (4 a^3 f (a + f)^2)
+    (partial fractions; f, a in rad/s).
+    """
+    return rms_m ** 2 * 4 * a ** 3 * f * (a + f) ** 2 / (2 * a + f)
+
+
+def line_frequencies_hz(line_hz: float, sample_rate_hz: float, harmonics: int) -> tuple:
+    """Return the mains line and its harmonics below 0.45 fs (none for ``line_hz`` 0), Hz."""
+    if not line_hz:
+        return ()
+    return tuple(k * line_hz for k in range(1, harmonics + 1)
+                 if k * line_hz < 0.45 * sample_rate_hz)
+
+
+class StateSpaceModel:
+    """
+    The model of the module docstring for one sensor, sample rate and mains line.
+
+    Parameters
+    ----------
+    reduced : ReducedModel
+        The sensor's reduced model R_n.
+    config : EstimatorConfig
+        Motion, offset and line priors.
+    sample_rate_hz : float
+        Nominal sample rate, Hz.
+    line_hz : float or tuple of float
+        Mains fundamental(s) in the model, Hz (0 or (): no line states; several while the line
+        is not yet measured, e.g. (50, 60)).
+
+    """
+
+    def __init__(self, reduced: ReducedModel, config: EstimatorConfig, sample_rate_hz: float,
+                 line_hz=0.0):
+        fs = float(sample_rate_hz)
+        if not (math.isfinite(fs) and fs > 0):
+            raise ParameterError(f"parameter 'sample_rate_hz' must be > 0 Hz, got "
+                                 f'{sample_rate_hz!r}')
+        if config.motion_bandwidth_hz >= fs / 2:
+            raise ParameterError(
+                f"parameter 'motion_bandwidth_hz' = {config.motion_bandwidth_hz:g} Hz must be "
+                f'below the Nyquist frequency {fs / 2:g} Hz')
+        self.reduced, self.config, self.sample_rate_hz = reduced, config, fs
+        self.fundamentals_hz = tuple(float(f) for f in np.atleast_1d(line_hz) if f)
+        self.line_hz = self.fundamentals_hz[0] if len(self.fundamentals_hz) == 1 else 0.0
+        self.lines_hz = tuple(f for f0 in self.fundamentals_hz
+                              for f in line_frequencies_hz(f0, fs, config.line_harmonics))
+        self.sensor = modal_realisation(reduced)
+        n = self.n_sensor = reduced.order
+        self.iw, self.iu, self.ia, self.ih, self.ib = n, n + 1, n + 2, n + 3, n + 4
+        self.il = n + 6
+        self.size = n + 6 + 2 * len(self.lines_hz)
+        self.r0 = abs(float(np.real(reduced.charge_response(np.array([0.0]))[0])))
+
+    # -- continuous model ---------------------------------------------------------------
+    @functools.cached_property
+    def continuous(self) -> tuple[np.ndarray, np.ndarray]:
+        """Continuous (A, Q): x' = A x + xi with E[xi xi'] = Q delta (intensities)."""
+        cfg = self.config
+        ar, br, _, _ = self.sensor
+        n, nx = self.n_sensor, self.size
+        a_m = 2 * math.pi * cfg.motion_bandwidth_hz
+        f_m = 2 * math.pi * cfg.motion_corner_hz
+        A = np.zeros((nx, nx))
+        Q = np.zeros((nx, nx))
+        A[:n, :n] = ar
+        A[:n, self.iu] = br
+        A[self.iw, self.iu] = 1.0
+        A[self.iu, self.ia] = 1.0
+        # (s + f)(s + a)^2 = s^3 + (2a + f) s^2 + (a^2 + 2af) s + a^2 f, acting on w - h
+        A[self.ia, self.iw] = -a_m * a_m * f_m
+        A[self.ia, self.ih] = a_m * a_m * f_m
+        A[self.ia, self.iu] = -(a_m * a_m + 2 * a_m * f_m)
+        A[self.ia, self.ia] = -(2 * a_m + f_m)
+        Q[self.ia, self.ia] = motion_intensity(a_m, f_m, cfg.motion_rms_m)
+        Q[self.ih, self.ih] = cfg.working_point_walk_m ** 2
+        A[self.ib, self.ib + 1] = 1.0
+        Q[self.ib, self.ib] = cfg.offset_walk_a ** 2
+        Q[self.ib + 1, self.ib + 1] = cfg.offset_drift_walk_a_per_s ** 2
+        for k, f in enumerate(self.lines_hz):
+            j = self.il + 2 * k
+            A[j, j + 1], A[j + 1, j] = -2 * math.pi * f, 2 * math.pi * f
+            Q[j, j] = Q[j + 1, j + 1] = cfg.line_walk_a ** 2
+        return A, Q
+
+    @functools.cached_property
+    def scale(self) -> np.ndarray:
+        """Typical size of each state (the filter works in x / scale), SI units."""
+        cfg = self.config
+        s = np.empty(self.size)
+        s[:self.n_sensor] = cfg.motion_rms_m * 2 * math.pi * cfg.motion_bandwidth_hz / np.abs(
+            np.diag(self.sensor[0]))
+        s[self.iw] = s[self.ih] = cfg.motion_rms_m
+        s[self.iu] = cfg.motion_rms_m * 2 * math.pi * cfg.motion_bandwidth_hz
+        s[self.ia] = s[self.iu] * 2 * math.pi * cfg.motion_bandwidth_hz
+        s[self.ib] = cfg.offset_prior_a
+        s[self.ib + 1] = cfg.offset_drift_a_per_s
+        s[self.il:] = cfg.line_prior_a
+        return s
+
+    # -- measurement rows (scaled states) ----------------------------------------------------
+    @functools.cached_property
+    def c(self) -> np.ndarray:
+        """Row of the measured current (A per unit scaled state)."""
+        _, _, cr, dr = self.sensor
+        c = np.zeros(self.size)
+        c[:self.n_sensor] = cr
+        c[self.iu] = dr
+        c[self.ib] = 1.0
+        c[self.il::2] = 1.0
+        return c * self.scale
+
+    @functools.cached_property
+    def c_motion(self) -> np.ndarray:
+        """Row of the motion's current (the current less offset and lines)."""
+        c = self.c.copy()
+        c[self.ib:] = 0.0
+        return c
+
+    @functools.cached_property
+    def c_velocity(self) -> np.ndarray:
+        """Row of the tip velocity."""
+        c = np.zeros(self.size)
+        c[self.iu] = self.scale[self.iu]
+        return c
+
+    @functools.cached_property
+    def rest_variances(self) -> tuple[float, float]:
+        """Variances of the rest pseudo-measurements: velocity (m/s)^2, motion current A^2."""
+        v2 = self.config.rest_velocity_m_s ** 2
+        return v2, v2 * self.r0 ** 2
+
+    @property
+    def hold_variance(self) -> float:
+        """Scaled variance added to the working point at a rest sample (releases its prior)."""
+        return HOLD_RELEASE ** 2
+
+    # -- discretisation and priors -------------------------------------------------------------
+    def discrete(self, steps: int = 1) -> tuple[np.ndarray, np.ndarray]:
+        """
+        (F, Qd) over ``steps`` sample periods, in scaled states.
+
+        One period by Van Loan; longer spans chained from powers of two of it
+        (:func:`~ipmc_sensor_ros.lti.discretize.chain`, exact) so a long bridged gap
+        cannot overflow.
+        """
+        cache = self.__dict__.setdefault('_discrete', {})
+        if steps not in cache:
+            if len(cache) >= 64:        # bridged gaps of many lengths: keep the cache small
+                cache.pop(next(iter(cache)))
+            cache[steps] = self._chained(steps)
+        return cache[steps]
+
+    def _chained(self, steps: int) -> tuple[np.ndarray, np.ndarray]:
+        """(F, Qd) over ``steps`` >= 1 periods from the doubled one-period transition."""
+        powers = self.__dict__.get('_powers')
+        if powers is None:
+            A, Q = self.continuous
+            F, Qd = van_loan(A, Q, 1.0 / self.sample_rate_hz)
+            s = self.scale
+            powers = self.__dict__['_powers'] = [(F * s[None, :] / s[:, None],
+                                                  Qd / np.outer(s, s))]
+        out = None
+        for bit in range(steps.bit_length()):
+            if bit == len(powers):
+                powers.append(chain(powers[-1], powers[-1]))
+            if steps >> bit & 1:
+                out = powers[bit] if out is None else chain(out, powers[bit])
+        return out
+
+    def prior(self) -> tuple[np.ndarray, np.ndarray]:
+        """
+        (x0, P0), scaled: the motion stationary about a working point known to start_level_m.
+
+        Offset and lines unknown to ``offset_prior_a``.
+        """
+        cfg = self.config
+        nx = self.size
+        F, Q = self.discrete(1)
+        P0 = np.zeros((nx, nx))
+        motion = np.r_[np.arange(self.n_sensor), self.iw, self.iu, self.ia]
+        P0[np.ix_(motion, motion)] = solve_discrete_lyapunov(F[np.ix_(motion, motion)],
+                                                             Q[np.ix_(motion, motion)])
+        h = (cfg.start_level_m / self.scale[self.ih]) ** 2
+        P0[self.ih, self.ih] = h
+        P0[self.iw, self.iw] += h
+        P0[self.iw, self.ih] = P0[self.ih, self.iw] = h
+        P0[self.ib, self.ib] = 1.0
+        P0[self.ib + 1, self.ib + 1] = 1.0
+        P0[self.il:, self.il:] = np.eye(nx - self.il)
+        return np.zeros(nx), P0

@@ -1,0 +1,105 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+Small defects of the command line, each at its rule (issue 28).
+
+* ``fit --effects time_delay --free ...,delay_s``: one parameter, not "listed twice";
+* unnamed samples are labelled by their geometry, named bags by their sidecar's name;
+* a measured sample rate is kept to 9 significant digits (no 999.9999999999991);
+* file lists in natural order (1Hz before 13Hz) in saved files and printed lists;
+* compare's amplitude bins never read ``2-2 mm``;
+* ``--geometry 360um`` is 0.00036 m exactly.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ipmc_sensor_ros.cli.args import parse_geometry
+from ipmc_sensor_ros.cli.main import main
+from ipmc_sensor_ros.workbench.compare import amplitude_bins
+from ipmc_sensor_ros.workbench.io import read_any
+from ipmc_sensor_ros.workbench.measurements import TimeSeries, round_rate_hz
+
+LAB = Path(__file__).resolve().parent / 'data' / 'lab'
+
+
+@pytest.fixture(scope='module')
+def sweep(tmp_path_factory):
+    out = tmp_path_factory.mktemp('sweep')
+    assert main(['simulate', '--out', str(out), '--samples', 'slim', '--frequencies', '1,13,2',
+                 '--duration', '3', '--effects', 'time_delay(delay_s=0.002)']) == 0
+    return out
+
+
+def test_fit_frees_an_effect_parameter_named_alone_once(sweep, tmp_path, capsys):
+    js = tmp_path / 'f.json'
+    assert main(['fit', str(sweep), '--effects', 'time_delay', '--free', 'alpha0,d,delay_s',
+                 '--json', str(js)]) == 0
+    assert json.loads(js.read_text())['free'] == [
+        'charge_stress_coupling_j_per_c', 'diffusivity_m2_per_s', 'time_delay.delay_s']
+
+
+def test_saved_params_list_the_data_in_natural_order(sweep, tmp_path):
+    saved = tmp_path / 'node.yaml'
+    assert main(['fit', str(sweep), '--free', 'alpha0', '--save', str(saved)]) == 0
+    data_line = next(ln for ln in saved.read_text().splitlines() if ln.startswith('# data:'))
+    assert data_line == '# data: slim_1Hz.csv, slim_2Hz.csv, slim_13Hz.csv'
+
+
+def test_import_prints_files_in_natural_order(tmp_path, capsys):
+    src = (LAB / 'labview_slim_5Hz.csv').read_text(encoding='utf-8')
+    for f in ('13', '1', '2'):
+        (tmp_path / f'run_{f}Hz.csv').write_text(src, encoding='utf-8')
+    files = sorted(str(p) for p in tmp_path.glob('run_*.csv'))     # as a shell glob lists them
+    assert main(['import', *files, '--geometry', '22mm,7mm,360um', '--out',
+                 str(tmp_path / 'out')]) == 0
+    wrote = [ln.rsplit('/', 1)[-1] for ln in capsys.readouterr().out.splitlines()
+             if ln.startswith('wrote ')]
+    assert wrote == ['run_1Hz.csv', 'run_2Hz.csv', 'run_13Hz.csv']
+
+
+def test_unnamed_sample_is_labelled_by_its_geometry(tmp_path):
+    assert main(['import', str(LAB / 'labview_slim_5Hz.csv'), '--geometry', '22mm,7mm,360um',
+                 '--out', str(tmp_path)]) == 0
+    js = tmp_path / 'c.json'
+    assert main(['compare', str(tmp_path / 'labview_slim_5Hz.csv'), '--json', str(js)]) == 0
+    assert json.loads(js.read_text())['records'][0]['sample'] == '22x7x0.36mm'
+
+
+def test_bag_sample_named_by_its_sidecar_also_with_geometry_flag(tmp_path):
+    assert main(['simulate', '--out', str(tmp_path), '--samples', 'slim', '--frequencies', '5',
+                 '--duration', '2', '--format', 'bag']) == 0
+    js = tmp_path / 'c.json'
+    assert main(['compare', str(tmp_path / 'slim_5Hz'), '--geometry', '22mm,7mm,360um',
+                 '--json', str(js)]) == 0
+    assert json.loads(js.read_text())['records'][0]['sample'] == 'slim'
+
+
+def test_measured_sample_rate_is_rounded_to_nine_digits(tmp_path):
+    rate = 1.0 / float(np.median(np.diff(np.arange(6000) / 1000.0)))
+    assert rate != 1000.0 and round_rate_hz(rate) == 1000.0
+    assert round_rate_hz(1234.56789012345) == 1234.56789      # real digits are kept
+    assert main(['import', str(LAB / 'labview_slim_5Hz.csv'), '--geometry', '22mm,7mm,360um',
+                 '--out', str(tmp_path)]) == 0
+    text = (tmp_path / 'labview_slim_5Hz.csv').read_text()
+    assert '# sample_rate_hz: 1000.0\n' in text and '# thickness_m: 0.00036\n' in text
+    ts = read_any(tmp_path / 'labview_slim_5Hz.csv')
+    assert TimeSeries(ts.path, '', ts.geometry, {}, rate, ts.time_s,
+                      ts.current_a).sample_rate_hz == 1000.0
+
+
+def test_amplitude_bins_never_repeat_an_edge():
+    same = [(2e-3, 0.1), (2.0000001e-3, 0.1), (2e-3, 0.2)]
+    assert [label for label, _ in amplitude_bins(same)] == ['2 mm']
+    spread = [(a * 1e-3, 0.1) for a in (0.5, 0.6, 1.0, 1.1, 2.0, 2.0)]
+    bins = amplitude_bins(spread)
+    assert sum(len(sel) for _, sel in bins) == len(spread)      # each window in one bin
+    assert all(lo != hi for lo, hi in (label[:-3].split('-') for label, _ in bins))
+
+
+def test_geometry_in_micrometres_is_exact():
+    g = parse_geometry('22mm,7mm,360um')
+    assert (g.length_m, g.width_m, g.thickness_m) == (0.022, 0.007, 0.00036)
