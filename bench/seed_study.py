@@ -186,23 +186,32 @@ def _write(out, fields):
     print(line, end='', flush=True)
 
 
-def run_independent(groups, seeds, null_seeds, out, tmp_dir):
+def independent_plan(groups, seeds, null_seeds, seed_first=False):
+    """``(group, kind, seed)`` of the independent groups, group by group or seed by seed."""
+    combos = [(g, k) for g, kinds in INDEPENDENT.items() if g in groups for k in kinds]
+
+    def n_seeds(group):
+        return null_seeds if group == 'null_daq' else seeds
+
+    if seed_first:      # every (group, kind) gets its first seed before any gets a second
+        return [(g, k, s) for s in range(max(seeds, null_seeds)) for g, k in combos
+                if s < n_seeds(g)]
+    return [(g, k, s) for g, k in combos for s in range(n_seeds(g))]
+
+
+def run_independent(groups, seeds, null_seeds, out, tmp_dir, seed_first=False):
     """The independent groups (module docstring), one TSV line per seed."""
-    for group, kinds in INDEPENDENT.items():
-        if group not in groups:
-            continue
-        for kind in kinds:
-            for seed in range(null_seeds if group == 'null_daq' else seeds):
-                recs, truth, expected = scenario(kind, seed)
-                t0, c0 = time.perf_counter(), _cpu_s()
-                diag = diagnose(recs, candidates=catalog_names())
-                ok, notes = judge_scenario(kind, recs, truth, expected, diag, tmp_dir, seed)
-                dt, cpu = time.perf_counter() - t0, _cpu_s() - c0
-                _write(out, [group, f"{kind}:{'+'.join(sorted(expected)) or '-'}", seed,
-                             int(ok), '+'.join(diag.missing_effects) or '-',
-                             '|'.join(diag.ties) or '-',
-                             f'{diag.final.error / diag.noise_floor:.4f}', f'{dt:.1f}',
-                             f'{cpu:.1f}', int(ok), notes])
+    for group, kind, seed in independent_plan(groups, seeds, null_seeds, seed_first):
+        recs, truth, expected = scenario(kind, seed)
+        t0, c0 = time.perf_counter(), _cpu_s()
+        diag = diagnose(recs, candidates=catalog_names())
+        ok, notes = judge_scenario(kind, recs, truth, expected, diag, tmp_dir, seed)
+        dt, cpu = time.perf_counter() - t0, _cpu_s() - c0
+        _write(out, [group, f"{kind}:{'+'.join(sorted(expected)) or '-'}", seed,
+                     int(ok), '+'.join(diag.missing_effects) or '-',
+                     '|'.join(diag.ties) or '-',
+                     f'{diag.final.error / diag.noise_floor:.4f}', f'{dt:.1f}',
+                     f'{cpu:.1f}', int(ok), notes])
 
 
 def run(groups, seeds, null_seeds, out, seed_first=False, first_seed=0, drift='all'):
@@ -261,7 +270,8 @@ def main(argv=None) -> int:
     ap.add_argument('--only', default='null,pairs,triples,lookalike,' + ','.join(INDEPENDENT))
     ap.add_argument('--out', default='seed_study.tsv')
     ap.add_argument('--seed-first', action='store_true',
-                    help='loop seeds outside combinations (broad coverage of a partial run)')
+                    help='loop seeds outside combinations and groups (broad coverage of a partial '
+                         'run)')
     ap.add_argument('--first-seed', type=int, default=0,
                     help='seeds first-seed .. seeds-1 (to continue a partial run)')
     ap.add_argument('--drift', choices=('all', 'only', 'none'), default='all',
@@ -277,7 +287,7 @@ def main(argv=None) -> int:
             args.drift)
         with tempfile.TemporaryDirectory() as tmp:
             run_independent(groups, args.seeds, args.null_seeds, args.out,
-                            args.plugin_dir or tmp)
+                            args.plugin_dir or tmp, args.seed_first)
     print(table(args.out))
     return 0
 
