@@ -92,7 +92,7 @@ def h2_paper(s, material, geometry, surface_resistance=True):
 
 
 def chain_factor(s, truth: Truth):
-    """The signal chain's and the outside factors' product at ``s`` (rad/s)."""
+    """Return the signal chain's and the outside factors' product at ``s`` (rad/s)."""
     s = np.asarray(s, complex)
     out = np.exp(-s * truth.delay_s)
     if truth.amplifier_hz:
@@ -198,7 +198,7 @@ def _draw_effects(rng, names, truth: Truth) -> None:
 
 
 def _material(rng) -> dict:
-    """A sample that is not the paper's: alpha0, d, kappa_e each within a factor 1.25 of it."""
+    """Return a sample off the paper's: alpha0, d, kappa_e each within a factor 1.25 of it."""
     return {n: float(np.exp(rng.uniform(-0.22, 0.22)))
             for n in ('charge_stress_coupling_j_per_c', 'diffusivity_m2_per_s',
                       'permittivity_f_per_m')}
@@ -206,7 +206,7 @@ def _material(rng) -> dict:
 
 def scenario(kind: str, seed: int):
     """
-    Records of one seeded scenario of the discovery study: ``(records, truth, expected)``.
+    Return records of one seeded scenario of the discovery study: ``(records, truth, expected)``.
 
     ``kind``: ``hum`` (3-5 % hum at 50 or 60 Hz +-0.3 Hz on a sweep where it is a drive
     harmonic, one or two catalog effects), ``null`` (nothing missing, no hum), ``offset``

@@ -71,7 +71,7 @@ PLUGIN_NAMES: set = set()
 
 
 def _corners(truth) -> dict:
-    """The true corner(s) of an outside factor, by the correction's parameter names."""
+    """Return the true corner(s) of an outside factor, by the correction's parameter names."""
     kind, *pars = truth.outside
     if kind == 'high_pass':
         return {'high_pass_corner_hz': pars[0]}
@@ -93,7 +93,7 @@ def plugin_rerun(recs, diag, path, name):
 
 
 def catalog_names() -> list[str]:
-    """The catalog's effects (and plugins loaded by the user), not this study's plugins."""
+    """Return the catalog's effects (and plugins loaded by the user), not this study's plugins."""
     return [n for n in EFFECTS if n not in PLUGIN_NAMES]
 
 
@@ -200,7 +200,7 @@ def independent_plan(groups, seeds, null_seeds, seed_first=False):
 
 
 def run_independent(groups, seeds, null_seeds, out, tmp_dir, seed_first=False):
-    """The independent groups (module docstring), one TSV line per seed."""
+    """Return the independent groups (module docstring), one TSV line per seed."""
     for group, kind, seed in independent_plan(groups, seeds, null_seeds, seed_first):
         recs, truth, expected = scenario(kind, seed)
         t0, c0 = time.perf_counter(), _cpu_s()

@@ -95,7 +95,7 @@ def test_fit_frees_effect_parameter_and_saves_model(data, tmp_path, capsys):
 
 
 def _doc_commands():
-    """The ``ipmc-model`` lines of the shell blocks of docs/discovery.md."""
+    """Return the ``ipmc-model`` lines of the shell blocks of docs/discovery.md."""
     text = (Path(__file__).resolve().parents[1] / 'docs' / 'discovery.md').read_text()
     blocks = text.split('```sh')[1:]
     return [ln.strip() for b in blocks for ln in b.split('```')[0].splitlines()

@@ -81,7 +81,7 @@ def structures(order: int, with_gain: bool) -> list[tuple[str, ...]]:
 
 
 def correction_name(structure) -> str:
-    """Internal effect name of a structure, e.g. ``correction_high_pass_delay``."""
+    """Return the internal effect name of a structure, e.g. ``correction_high_pass_delay``."""
     return PREFIX + '_'.join(e for e in structure if e != 'gain') + (
         '_gain' if 'gain' in structure else '')
 
@@ -107,7 +107,7 @@ def _zpk(structure, v) -> tuple[list, list, float]:
 
 
 def correction_class(structure, name: str | None = None) -> type:
-    """An Effect subclass for ``structure`` (module docstring); not registered."""
+    """Return an Effect subclass for ``structure`` (module docstring); not registered."""
     structure = tuple(structure)
     params = tuple(p for e in structure for p in ELEMENTS[e])
 
@@ -154,7 +154,7 @@ class Correction:
     model_effects: tuple = ()     # the catalog effects it was fitted with
 
     def words(self) -> str:
-        """The elements in physical words with their 95 % intervals."""
+        """Return the elements in physical words with their 95 % intervals."""
         v, ci, out = self.values, self.ci95, []
 
         def iv(name, unit='Hz', scale=1.0):
@@ -186,7 +186,7 @@ class Correction:
         return '; '.join(out)
 
     def sentence(self) -> str:
-        """What it is and how far it takes the error (the verdict's line)."""
+        """Return what it is and how far it takes the error (the verdict's line)."""
         return (f'{self.words()} (95 % intervals); explains the residual to '
                 f'{self.error / self.noise_floor:.2f}x the noise floor (held-out error '
                 f'{self.error:.4f}, BIC {self.delta_bic:+.0f})')

@@ -38,7 +38,7 @@ ALPHA0 = 'charge_stress_coupling_j_per_c'
 
 
 def is_correction(name: str) -> bool:
-    """True for the internal effects of C(s)."""
+    """Return True for the internal effects of C(s)."""
     return name.startswith(PREFIX)
 
 
@@ -77,7 +77,7 @@ def band_hz(state) -> tuple[float, float]:
 
 def history_view(state, band):
     """
-    The state on records with a longer periodic history, its current model refitted there.
+    Return the state on records with a longer periodic history, its current model refitted there.
 
     :data:`HISTORY_TIME_CONSTANTS` time constants of the slowest corner a fit starts from; the
     state itself when its records hold that much already.
@@ -101,7 +101,7 @@ def history_view(state, band):
 
 
 def starts(structure, band) -> list[list[float]]:
-    """Starting points (fit space): corners across the band, a few dampings and delays."""
+    """Return starting points (fit space): corners across the band, a few dampings and delays."""
     lo, hi = band
     corners = np.log(np.geomspace(lo / 5, hi * 5, 4))
     grids = {'low_pass': [[c] for c in corners], 'high_pass': [[c] for c in corners],
@@ -115,7 +115,7 @@ def starts(structure, band) -> list[list[float]]:
 
 
 def _known_start(names, known, band) -> list[float]:
-    """A start from known values (a smaller correction's), the rest from the band's middle."""
+    """Return a start from known values (a smaller correction's), the rest mid-band."""
     middle = {'resonance_damping_ratio': 0.2, 'correction_delay_s': 1e-3, 'correction_gain': 1.0}
     return [float(np.log(known.get(n, middle.get(n, np.sqrt(band[0] * band[1])))))
             for n in names]

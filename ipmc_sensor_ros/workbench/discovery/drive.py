@@ -31,7 +31,7 @@ class Drive:
 
 def drive_of(rec, max_harmonics: int = 20) -> Drive:
     """
-    The drive of ``rec`` (``time_s``, ``deflection_m``), from its deflection alone.
+    Return the drive of ``rec`` (``time_s``, ``deflection_m``), from its deflection alone.
 
     The fundamental from :func:`~ipmc_sensor_ros.workbench.freqresp.fundamental_response`
     (refined by a harmonic fit); the harmonics up to ``max_harmonics`` below 0.45 of the rate

@@ -68,7 +68,7 @@ def swap_check(state) -> None:
 
 
 def _best_exchange(state):
-    """The best significant exchange of one chosen effect (but the offset), or None."""
+    """Return the best significant exchange of one chosen effect (but the offset), or None."""
     s = state.settings
     best = None
     for name, shape in [c for c in state.chosen if c[0] != OFFSET]:

@@ -38,7 +38,7 @@ def _score_step(state, items):
 
 
 def _passes(state, c) -> bool:
-    """The significance rule of a step: held-out gain and BIC drop against the current model."""
+    """Return the rule of a step: held-out gain and BIC drop against the current model."""
     cur = state.current
     return (c.held_out and c.error <= (1 - state.needed_gain(cur.error)) * cur.error
             and c.fit.bic <= cur.fit.bic - state.settings.min_delta_bic)
@@ -101,7 +101,7 @@ def forward_search(state, completion: bool) -> None:
 
 def catalog_search(state) -> None:
     """
-    The offset test, then the forward search and its checks, then the exchange pass.
+    Return the offset test, then the forward search and its checks, then the exchange pass.
 
     Once more when the exchange left the budget unspent above the floor, with the effects a
     swap had replaced offered again (an amplifier pole that replaced a 3.3 ms delay as its

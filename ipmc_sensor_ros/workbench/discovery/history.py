@@ -99,5 +99,5 @@ def prepare_with_history(records, settle_s: float, drives=None) -> list:
 
 
 def history_samples(p, rec) -> int:
-    """Samples of history in front of ``rec`` in its prepared record ``p``."""
+    """Return the samples of history in front of ``rec`` in its prepared record ``p``."""
     return p.t.size - np.asarray(rec.time_s).size

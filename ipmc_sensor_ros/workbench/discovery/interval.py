@@ -41,7 +41,7 @@ def _profile_chi2(state, cand, effect, param, value, start, spec):
 
 
 def profile_interval(state, cand, effect: str, param: str) -> tuple[float, float]:
-    """The 95 % profile interval of a log-scale ``effect.param`` of ``cand`` (docstring)."""
+    """Return the 95 % profile interval of a log-scale ``effect.param`` of ``cand`` (docstring)."""
     n_mat = len(cand.spec.material)
     k = n_mat + cand.spec.effect_params.index((effect, param))
     spec = FitSpec(cand.spec.material,

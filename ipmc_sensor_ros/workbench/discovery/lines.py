@@ -100,7 +100,7 @@ def parse_mains(value) -> float | str | None:
 
 def line_threshold(nu: int, span_s: float, orders, false_alarm: float) -> float:
     """
-    The z threshold of a record's lines (module docstring, 4).
+    Return the z threshold of a record's lines (module docstring, 4).
 
     ``nu``: bins of the level estimate; ``span_s``: record length T; ``orders``: the harmonic
     numbers m of every line tested in the record (both families).  Solves
@@ -120,7 +120,7 @@ def line_threshold(nu: int, span_s: float, orders, false_alarm: float) -> float:
 
 
 def _sinusoids(t, freqs):
-    """A column of ones, then cosine/sine pairs at ``freqs``."""
+    """Return a column of ones, then cosine/sine pairs at ``freqs``."""
     cols = [np.ones_like(t)]
     for f in freqs:
         cols += [np.cos(2 * np.pi * f * t), np.sin(2 * np.pi * f * t)]
@@ -128,7 +128,7 @@ def _sinusoids(t, freqs):
 
 
 def _measured_mains(r, f_mains, fs):
-    """The record's mains fundamental near ``f_mains``, Hz (module docstring, 2)."""
+    """Return the record's mains fundamental near ``f_mains``, Hz (module docstring, 2)."""
     r = r - r.mean()
     nfft = 1 << int(np.ceil(np.log2(8 * r.size)))
     power = np.abs(np.fft.rfft(r, nfft)) ** 2
@@ -151,7 +151,7 @@ def _measured_mains(r, f_mains, fs):
 
 def on_drive_harmonic(f, z, f0, span_s) -> bool:
     """
-    True when a line at ``f`` cannot be told from a harmonic of the drive by its frequency.
+    Return True when a line at ``f`` cannot be told from a harmonic of the drive by its frequency.
 
     Within 3 standard errors of its measured frequency, ``sqrt(6) / (2 pi z T)`` (the
     Cramer-Rao bound of a sinusoid whose amplitude is z standard errors), or a tenth of a
@@ -197,7 +197,7 @@ def _family(t, r, drive, f_mains, n_harmonics, orders, false_alarm):
 
 
 def _record_rows(rec, pred, keep, drive, f_mains, families, n_harmonics, false_alarm):
-    """A record's lines that pass the test: ``[(row, ambiguous), ...]`` (:func:`_family` rows)."""
+    """Return the lines that pass the test: ``[(row, ambiguous), ...]`` (:func:`_family` rows)."""
     t = (np.asarray(rec.time_s, float) - rec.time_s[0])[keep]
     r = (np.asarray(rec.current_a, float) - pred)[keep]
     orders = _orders((t.size - 1) / (t[-1] - t[0]), families, n_harmonics)
@@ -207,7 +207,7 @@ def _record_rows(rec, pred, keep, drive, f_mains, families, n_harmonics, false_a
 
 
 def _line_sum(rec, keep, rows):
-    """The MainsLine of accepted rows and their sum over the whole record."""
+    """Return the MainsLine of accepted rows and their sum over the whole record."""
     t_all = np.asarray(rec.time_s, float) - rec.time_s[0]
     y = np.asarray(rec.current_a, float)
     rms_y = float(np.std(y[keep])) or 1.0

@@ -25,7 +25,7 @@ OFFSET = 'current_offset'
 
 
 def _whole_periods(p, t, r, drive=None):
-    """The residual over whole stimulus periods (all of it for a non-periodic stimulus)."""
+    """Return the residual over whole stimulus periods (all of it for a non-periodic stimulus)."""
     f0 = (drive or drive_of(p.rec)).frequency_hz
     if f0 is None:
         return r

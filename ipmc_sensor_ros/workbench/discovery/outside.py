@@ -64,7 +64,7 @@ def _triggered(state) -> bool:
 
 
 def _beside(view, best):
-    """A fresh search state whose baseline is the view's baseline times ``best``'s C(s)."""
+    """Return a fresh search state whose baseline is the view's baseline times ``best``'s C(s)."""
     name = correction_name(best.structure)
     values = best.fit.effect_values[name]
     base = view.baseline
@@ -121,7 +121,7 @@ def _drop_failing(inner, structure, band) -> None:
 
 def _converged(inner):
     """
-    The current model fitted to convergence, the best of three starts.
+    Return the current model fitted to convergence, the best of three starts.
 
     Its values, the baseline's material with them, and the records' nominal material with
     them: a material parameter can trade with a corner of C(s) (d with a lag's pole) and hold
@@ -157,7 +157,7 @@ def _result(inner, structure, tried) -> Correction:
 
 
 def _adopt_inner(state, inner, best, structure) -> None:
-    """The verdict's effects, steps and ties become those of the search beside C(s)."""
+    """Make the verdict's effects, steps and ties those of the search beside C(s)."""
     cname = correction_name(structure)
     state.record(cname, 'added', best,
                  f'the catalog left the held-out error at {state.current.error:.4f} '

@@ -45,7 +45,7 @@ _EQUATION = {'gain': 'g', 'low_pass': '1/(1 + s/w_p)', 'high_pass': 's/(s + w_c)
 
 
 def plugin_name(structure, path=None) -> str:
-    """The plugin's effect name: the file's stem if an identifier, else ``measured_<elements>``."""
+    """Return the effect name: the file's stem if an identifier, else ``measured_<elements>``."""
     stem = Path(path).stem if path is not None else ''
     if stem.isidentifier() and not keyword.iskeyword(stem):
         return stem
@@ -63,7 +63,7 @@ def _parameter_code(c: Correction, name: str) -> str:
 
 def plugin_source(c: Correction, name: str, data_files=(),
                   tool: str = 'ipmc-model diagnose') -> str:
-    """The Python source of the plugin of ``c`` defining effect ``name`` (module docstring)."""
+    """Return the Python source of the plugin of ``c`` defining ``name`` (module docstring)."""
     cls = ''.join(part.capitalize() for part in name.split('_')) or 'Correction'
     stamp = f'{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC'
     files = ', '.join(str(f) for f in data_files) or 'the records given'

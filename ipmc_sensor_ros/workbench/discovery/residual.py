@@ -52,7 +52,7 @@ def detect_lines(records, prepared, models, settings, drives=None):
 
 
 def clean(records, prepared, fitted, settle_s, drives=None):
-    """The prepared line-free records (``prepared`` itself when no line was found)."""
+    """Return the prepared line-free records (``prepared`` itself when no line was found)."""
     if not any(np.any(f) for f in fitted):
         return prepared
     cleaned = [replace(r, current_a=np.asarray(r.current_a, float) - f) if np.any(f) else r
@@ -61,7 +61,7 @@ def clean(records, prepared, fitted, settle_s, drives=None):
 
 
 def line_test(settings, lines) -> dict:
-    """What the JSON says about the line test: its false-alarm rate and what it found."""
+    """Return what the JSON says about the line test: its false-alarm rate and what it found."""
     if parse_mains(settings.mains) is None:
         return {}
     return {'false_alarm_per_record': settings.line_false_alarm,
@@ -71,7 +71,7 @@ def line_test(settings, lines) -> dict:
 
 def lines_changed(before, after, factor: float = 2.0) -> bool:
     """
-    True when a line changed by ``factor`` x its test threshold in standard errors.
+    Return True when a line changed by ``factor`` x its test threshold in standard errors.
 
     A line found in one list only counts with its whole amplitude.  Lines found under the
     starting model and under the final one differ where the starting model's error stood at a

@@ -54,6 +54,7 @@ class Settings:
     correction : fit a low-order correction C(s) when the catalog leaves the search above
         the floor (:mod:`.outside`).
     max_correction_order : most parameters of C(s) (3).
+
     """
 
     free_material: tuple = DEFAULT_FREE_MATERIAL

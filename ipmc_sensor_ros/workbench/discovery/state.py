@@ -65,7 +65,7 @@ class SearchState:
 
     # -- fitting helpers bound to this state ------------------------------------------------
     def job(self, base: Candidate | None = None) -> Job:
-        """A :class:`~.fitting.Job` adding effects to ``base`` (default: the current model)."""
+        """Return a :class:`~.fitting.Job` adding effects to ``base`` (default: current)."""
         base = base or self.current
         s = self.settings
         return Job(with_models(self.prepared, base.fit.models), base.spec, base.x, self.folds,
@@ -81,13 +81,13 @@ class SearchState:
                                              self.settings.fold_nfev)
 
     def without(self, name: str, base: Candidate | None = None) -> Candidate:
-        """The current model (or ``base``) without effect ``name``, refitted, not scored."""
+        """Return the current model (or ``base``) without effect ``name``, refitted, not scored."""
         base = base or self.current
         return without(with_models(self.prepared, base.fit.models), base, name, self.folds,
                        self.settings.fold_nfev, self.priors)
 
     def refit_set(self, effects) -> Candidate:
-        """The baseline with ``effects`` ((name, shape), ...) added one by one, not scored."""
+        """Return the baseline with ``effects`` ((name, shape), ...) added, not scored."""
         return refit_set(self.prepared, self.baseline, effects, self.folds,
                          self.settings.fold_nfev, self.priors)
 
@@ -104,7 +104,7 @@ class SearchState:
         return min(self.settings.min_gain, 0.5 * excess / error)
 
     def at_floor(self, c: Candidate | None = None) -> bool:
-        """True when the held-out error is within ``stop_factor`` of the noise floor."""
+        """Return True when the held-out error is within ``stop_factor`` of the noise floor."""
         return (c or self.current).error <= self.settings.stop_factor * self.noise_floor
 
     @property

@@ -121,7 +121,7 @@ class Diagnosis:
         }
 
     def summary(self) -> str:
-        """The verdict as text (:func:`~.summary.summary_text`)."""
+        """Return the verdict as text (:func:`~.summary.summary_text`)."""
         from .summary import summary_text
 
         return summary_text(self)
