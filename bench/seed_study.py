@@ -34,7 +34,8 @@ by FFT with a pre-roll, DAQ habits, a sample that is not the paper's), :func:`ju
   (``--save-plugin``, loaded again) brings the held-out error to at most 1.2x the floor.
 
 Each finished seed appends a line to ``--out`` (TSV: wall and CPU seconds, the CPU time
-including the worker pool's), so a partial run is usable.
+including the worker pool's), so a partial run is usable; a rerun with the same ``--out``
+skips the seeds of the independent groups it already holds.
 """
 from __future__ import annotations
 
@@ -199,9 +200,21 @@ def independent_plan(groups, seeds, null_seeds, seed_first=False):
     return [(g, k, s) for g, k in combos for s in range(n_seeds(g))]
 
 
+def _done(out) -> set:
+    """Return the ``(group, kind, seed)`` of the independent groups already in ``out``."""
+    if not os.path.exists(out):
+        return set()
+    with open(out) as fh:
+        rows = [ln.rstrip('\n').split('\t') for ln in fh]
+    return {(f[0], f[1].split(':')[0], int(f[2])) for f in rows[1:] if f[0] in INDEPENDENT}
+
+
 def run_independent(groups, seeds, null_seeds, out, tmp_dir, seed_first=False):
-    """Return the independent groups (module docstring), one TSV line per seed."""
+    """Run the independent groups (module docstring), one TSV line per seed not in ``out``."""
+    done = _done(out)
     for group, kind, seed in independent_plan(groups, seeds, null_seeds, seed_first):
+        if (group, kind, seed) in done:
+            continue
         recs, truth, expected = scenario(kind, seed)
         t0, c0 = time.perf_counter(), _cpu_s()
         diag = diagnose(recs, candidates=catalog_names())
