@@ -8,7 +8,9 @@ implausible:
 1. **C(s)** (:mod:`.correction_fit`) is fitted as a factor of the model the search ended with,
    less the named effects whose values are implausible (stand-ins: a 4 Hz amplifier pole),
    its order by BIC; it must also lower the held-out error as a step of the search must
-   (:meth:`~.state.SearchState.needed_gain`), else nothing is reported.
+   (:meth:`~.state.SearchState.needed_gain`), else nothing is reported and the implausible
+   effects stay named as they were (a delay just past its plausible range that holds an
+   amplifier's lag is still the best account of the data the catalog has).
    An element of C(s) that a catalog effect is, at a value plausible for it (a low-pass that
    an amplifier's bandwidth could be, a delay), is left to the catalog (:data:`TWINS`).
 2. **Search again beside C(s).**  The baseline times C(s) (its parameters free) starts a new
@@ -233,11 +235,15 @@ def outside_stage(state) -> None:
     """Run the stage (module docstring) when the search ended above the floor."""
     if not _triggered(state):
         return
+    before = (list(state.chosen), state.current, len(state.steps))
     _drop_implausible(state)
     band = band_hz(state)
     view = history_view(state, band)
     best, tried = _select(state, view, view.current, band)
-    if best is None:
+    if best is None:        # no C(s) stands for the dropped effects: they stay, as named
+        state.chosen, current, n_steps = before
+        del state.steps[n_steps:]
+        state.adopt(current)
         return
     for round_ in range(MAX_ROUNDS):
         with registered([best.structure]):
