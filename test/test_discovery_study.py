@@ -40,9 +40,8 @@ def test_an_implausible_effect_stays_when_no_correction_replaces_it():
     """
     Hum seed 2: a 4.5 ms delay behind a 235 Hz amplifier fits as one 5.1 ms delay.
 
-    Past time_delay's plausible 5 ms, so the outside stage drops it to fit C(s); the best C(s)
-    (a low-pass and a delay, both at values the catalog effects hold) is left to the catalog,
-    so no correction is fitted and the delay must stay named: without it the error is 34x the
+    Past time_delay's plausible 5 ms, so the outside stage drops it to fit C(s); no C(s)
+    comes out of that stage, so the delay must stay named: without it the error is 34x the
     floor, with it at the floor.
     """
     recs, _, _ = scenario('hum', 2)
