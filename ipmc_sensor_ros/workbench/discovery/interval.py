@@ -10,12 +10,14 @@ chi^2, minimised over every other parameter, stays within ``3.84 s^2`` of its mi
 the 95 % point of chi^2 with one degree of freedom; ``s^2 = max(1, chi^2/dof)`` as for the
 covariance).  It is found by stepping out from the optimum in the log of the parameter, 1, 2,
 4, ... times its quadratic standard deviation, refitting the rest from the previous step, and
-interpolating where the profile crosses the level (:func:`profile_interval`).
+interpolating where the profile crosses the level (:func:`profile_interval`); the steps stop
+at the parameter's bounds, and an interval that does not close before a bound ends there.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ...physics.effects import get_effect
 from ..timefit import FitSpec, fit_model
 from .fitting import fit_vector, with_models
 
@@ -50,13 +52,18 @@ def profile_interval(state, cand, effect: str, param: str) -> tuple[float, float
     level = PROFILE_DELTA_CHI2 * max(1.0, cand.fit.chi2 / dof)
     sd = float(np.sqrt(max(cand.fit.covariance[k, k], 0.0))) or 1e-3
     x0 = float(cand.x[k])
+    par = next(q for q in get_effect(effect).parameters if q.name == param)
     ends = []
-    for sign in (-1.0, 1.0):
+    for sign, bound in ((-1.0, np.log(par.lower)), (1.0, np.log(par.upper))):
         prev_x, prev_d, start = x0, 0.0, np.delete(cand.x, k)
         end = None
         for step in range(PROFILE_STEPS):
+            if prev_x == bound:
+                break       # the interval reaches the parameter's bound
             x = x0 + sign * sd * 2 ** step
-            chi2, start = _profile_chi2(state, cand, effect, param, np.exp(x), start, spec)
+            x = max(x, bound) if sign < 0 else min(x, bound)
+            value = float(np.clip(np.exp(x), par.lower, par.upper))     # exp(log) rounding
+            chi2, start = _profile_chi2(state, cand, effect, param, value, start, spec)
             d = chi2 - cand.fit.chi2
             if d >= level:
                 end = prev_x + (x - prev_x) * (level - prev_d) / max(d - prev_d, 1e-12)
