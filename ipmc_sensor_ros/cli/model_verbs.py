@@ -241,9 +241,11 @@ def _cmd_diagnose(args) -> int:
                    data_files=data_files(data),
                    error={'held_out': final.error, 'noise_floor': diag.noise_floor},
                    extra={'missing_effects': diag.missing_effects, 'explained': diag.explained,
-                          'mains_lines': [d for d in diag.interference if d.get('removable')]})
+                          'mains_lines': [{'frequency_hz': d['frequency_hz'],
+                                           'level': d['level']} for d in diag.interference]})
         print_saved(args.save_model)
-    line = diagnosis_next_command(diag, args.data, args.save_model, args.model)
+    plugin = _save_plugin(args, diag, data)
+    line = diagnosis_next_command(diag, args.data, args.save_model, args.model, plugin)
     print(with_recording_flag(line, args.save_model))
     write_json(args.json, diag.to_json())
     rd = report_dir(args.report)
@@ -252,6 +254,21 @@ def _cmd_diagnose(args) -> int:
 
         print(f'report: {diagnose_report(rd, diag)}')
     return 0
+
+
+def _save_plugin(args, diag, data) -> str | None:
+    """Write the correction C(s) as a plugin (``--save-plugin``); its path, or None."""
+    if not args.save_plugin:
+        return None
+    if diag.correction is None:
+        say(f'--save-plugin {args.save_plugin}: no correction C(s) was fitted (the named '
+            'effects explain the data, or none helps): nothing written')
+        return None
+    from ..workbench.discovery.plugin import write_plugin
+
+    name = write_plugin(args.save_plugin, diag.correction, data_files=data_files(data))
+    print(f"saved the correction C(s) as effect '{name}' to {args.save_plugin}")
+    return args.save_plugin
 
 
 def _add_settle(p) -> None:
@@ -340,6 +357,9 @@ def add_parsers(sub, formatter) -> None:
     p.add_argument('--save-model', metavar='FILE',
                    help='write the final model (effects with fitted values, material, provenance) '
                         'as ipmc-model/1 YAML')
+    p.add_argument('--save-plugin', metavar='FILE',
+                   help='write the correction C(s) fitted outside the catalog as an effect '
+                        'plugin (Python), to load with --plugin FILE')
     _add_settle(p)
     add_output_args(p)
     p.set_defaults(func=_cmd_diagnose)

@@ -363,6 +363,9 @@ class ModelFit:
     n_params: int
     success: bool
     flags: list[str] = field(default_factory=list)
+    #: covariance of the fit-space parameters (logs of log-scale ones) from the Jacobian at the
+    #: optimum, (J^T J)^-1 scaled by chi^2/dof when that exceeds 1; None without free parameters
+    covariance: np.ndarray | None = None
 
     @property
     def bic(self) -> float:
@@ -483,5 +486,8 @@ def fit_model(
             if not par.typical[0] <= val <= par.typical[1]:
                 flags.append(f'{name} = {val:.4g} {par.unit} outside plausible range '
                              f'[{par.typical[0]:g}, {par.typical[1]:g}]')
-    return ModelFit(ms, ms[0].material, ev, float(2 * best.cost), n_rows, int(best.x.size),
-                    bool(best.success), flags)
+    chi2 = float(2 * best.cost)
+    scale = max(1.0, chi2 / max(n_rows - best.x.size, 1))
+    cov = np.linalg.pinv(best.jac.T @ best.jac) * scale
+    return ModelFit(ms, ms[0].material, ev, chi2, n_rows, int(best.x.size), bool(best.success),
+                    flags, cov)

@@ -4,8 +4,7 @@ What :func:`~ipmc_sensor_ros.workbench.diagnose.diagnose` returns: candidates, s
 
 :class:`Candidate` (one fitted model and its held-out error), :class:`Step` (one move of the
 stepwise search: added, dropped or swapped, with the fitted values and the ties) and
-:class:`Diagnosis` (the verdict with its JSON and text forms).  The search itself lives in
-:mod:`~ipmc_sensor_ros.workbench.diagnose`.
+:class:`Diagnosis` (the verdict with its JSON form; its text form is :mod:`.summary`).
 """
 from __future__ import annotations
 
@@ -13,13 +12,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .timefit import FitSpec, ModelFit, PreparedRecord
+from ..timefit import FitSpec, ModelFit, PreparedRecord
 
 __all__ = ['Candidate', 'Step', 'Diagnosis']
 
 
 @dataclass
 class Candidate:
+    """One fitted model: its error (held-out when ``held_out``), fit, parameters and flags."""
+
     effect: str | None
     error: float
     fold_errors: list[float]
@@ -67,6 +68,8 @@ class Step:
 
 @dataclass
 class Diagnosis:
+    """The verdict: the named effects, what keeps each, the lines, the correction C(s)."""
+
     baseline: Candidate
     candidates: list[Candidate]          # first step's ranking
     noise_floor: float
@@ -81,6 +84,9 @@ class Diagnosis:
     final: Candidate | None = None
     interference: list[dict] = field(default_factory=list)
     offset_test: dict = field(default_factory=dict)
+    line_test: dict = field(default_factory=dict)
+    kept_by: dict = field(default_factory=dict)
+    correction: object | None = None      # :class:`~.correction.Correction` or None
 
     @property
     def final_model(self):
@@ -99,65 +105,23 @@ class Diagnosis:
             'final': {**final.to_json(), 'model': final.fit.models[0].describe()},
             'noise_floor': self.noise_floor,
             'cross_validation': self.cv,
-            'interference': [d for d in self.interference if d.get('removable')],
-            'interference_not_separable': [d for d in self.interference if not d.get('removable')],
+            'interference': self.interference,
+            'line_test': self.line_test,
             'offset_test': self.offset_test,
+            'correction': self.correction.to_json() if self.correction is not None else None,
             'verdict': {
                 'missing_effects': self.missing_effects,
                 'missing_effect': self.missing_effect,
                 'explained': self.explained,
                 'reason': self.reason,
                 'ties': self.ties,
+                'kept_by': self.kept_by,
                 'error': final.error,
             },
         }
 
     def summary(self) -> str:
-        lines = [f'baseline {self.baseline.fit.models[0].describe()}: held-out error '
-                 f'{self.baseline.error:.4f} (noise floor {self.noise_floor:.4f}; {self.cv})']
-        for d in self.interference:
-            if d.get('removable'):
-                lines.append(
-                    f"interference: {d['frequency_hz']:g} Hz line (measured "
-                    f"{d['measured_hz'][0]:.3f}-{d['measured_hz'][1]:.3f} Hz), level "
-                    f"{d['level']:.3g} of the signal RMS in {d['records']} record(s): removed "
-                    'before fitting'
-                )
-        if self.offset_test:
-            ot = self.offset_test
-            lines.append(f"offset test: mean residual current {ot['mean_a'] * 1e9:.3g} nA, chi2 "
-                         f"{ot['chi2']:.1f}/{ot['dof']} (p = {ot['p_value']:.2g})")
-        lines.append(
-            f"first step: {'rank':>4} {'effect':<24} {'error':>8} {'x better':>8} {'dBIC':>10}  "
-            'params / flags'
-        )
-        for k, c in enumerate(self.candidates, 1):
-            ratio = self.baseline.error / c.error if c.error > 0 else float('inf')
-            params = ', '.join(f'{n}={v:.4g}' for n, v in c.params.items())
-            flags = ('  [' + '; '.join(c.flags) + ']') if c.flags else ''
-            mark = ' ' if c.held_out else '*'
-            lines.append(f'            {k:>4} {c.effect:<24} {c.error:8.4f}{mark}{ratio:7.2f} '
-                         f'{c.fit.bic - self.baseline.fit.bic:10.1f}  {params}{flags}')
-        if any(not c.held_out for c in self.candidates):
-            lines.append(
-                '            (* in-sample error: the BIC rule already rejects it, '
-                'not cross-validated)'
-            )
-        for k, s in enumerate(self.steps, 1):
-            vals = '; '.join(f'{e}: ' + ', '.join(f'{n}={v:.4g}' for n, v in vs.items())
-                             for e, vs in s.values.items() if e != 'material')
-            lines.append(
-                f'step {k}: {s.action} {s.effect}: held-out error {s.error:.4f}  ({vals})'
-            )
-            for t in s.ties:
-                lines.append(
-                    f"        tie: {t['effect']} (error {t['error']:.4f}, "
-                    f"dBIC {t['delta_bic']:+.0f}"
-                    f"{', implausible' if t['flags'] else ''}): "
-                    + ', '.join(f'{n}={v:.4g}' for n, v in t['params'].items())
-                )
-        lines.append(f"verdict: missing effects = {self.missing_effects or 'none'}; explained = "
-                     f'{self.explained} ({self.reason})')
-        if self.ties:
-            lines.append('ties (indistinguishable on these data): ' + ', '.join(self.ties))
-        return '\n'.join(lines)
+        """Return the verdict as text (:func:`~.summary.summary_text`)."""
+        from .summary import summary_text
+
+        return summary_text(self)

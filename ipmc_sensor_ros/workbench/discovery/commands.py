@@ -8,22 +8,17 @@ Glue of the discovery loop for the command line: which names are fitted, what to
   effect parameters (``delay_s``, or ``time_delay.delay_s`` when ambiguous):
   :func:`free_names`.
 * The printed verdict ends with the exact next command: :func:`next_command`.
-* Data headers may give priors of effect parameters (``amplifier_bandwidth_hz``,
-  ``time_delay_s``, ``current_offset_a`` or ``effect.parameter``):
-  :func:`priors_from_headers`; ``diagnose`` starts there and flags a fit more than
-  3x away as implausible.
+* Data headers may give priors of effect parameters: :mod:`.priors`.
 """
 from __future__ import annotations
 
 import shlex
 from typing import Sequence
 
-from ..physics.effects import EFFECTS, get_effect
-from ..physics.model import parse_effects
+from ...physics.effects import get_effect
+from ...physics.model import parse_effects
 
 __all__ = [
-    'PRIOR_KEYS',
-    'priors_from_headers',
     'SYMBOL_TO_NAME',
     'free_names',
     'effects_to_fit',
@@ -83,7 +78,7 @@ def effect_free_names(effects: Sequence[str], frequency_domain: bool = False) ->
 
 def acts_on_transfer(name: str) -> bool:
     """Return True if effect ``name`` changes H(s) (overrides ``factor``)."""
-    from ..physics.effects import Effect
+    from ...physics.effects import Effect
 
     return type(get_effect(name)).factor is not Effect.factor
 
@@ -96,14 +91,18 @@ def next_command(verb: str, data: Sequence[str], model_file: str | None, extra: 
     return ' '.join(shlex.quote(p) for p in parts) + (f' {extra}' if extra else '')
 
 
-def diagnosis_next_command(
-    diag, data: Sequence[str], model_file: str | None, base: str = 'h1'
-) -> str:
+def diagnosis_next_command(diag, data: Sequence[str], model_file: str | None,
+                           base: str = 'h1', plugin_file: str | None = None) -> str:
     """
-    Return what to run after a diagnosis: check the saved model on the data (compare), or.
+    Return what to run after a diagnosis.
 
-    Without a saved model, re-run with the named effects fitted.
+    With a saved correction plugin: diagnose again with it; with a saved model: check it on
+    the data (compare); otherwise fit the named effects.
     """
+    if plugin_file:
+        return ('next (the correction C(s) as a candidate effect): '
+                + next_command('diagnose', data, None, f'--model {base} --plugin '
+                               + shlex.quote(str(plugin_file))))
     if model_file:
         return 'next: ' + next_command('compare', data, model_file)
     if diag.missing_effects:
@@ -118,30 +117,3 @@ def diagnosis_next_command(
             'to keep them): ' + ' '.join(shlex.quote(p) for p in cmd)
         )
     return 'next: ' + next_command('compare', data, None, f'--model {base}')
-
-
-#: data-header keys that give a prior value of an effect parameter
-PRIOR_KEYS = {'amplifier_bandwidth_hz': ('amplifier_bandwidth', 'corner_hz'),
-              'time_delay_s': ('time_delay', 'delay_s'),
-              'current_offset_a': ('current_offset', 'offset_a')}
-
-
-def priors_from_headers(series: Sequence) -> dict[tuple[str, str], float]:
-    """
-    Effect-parameter priors from data headers; the first file giving a key wins.
-
-    Keys: ``extra`` keys of :data:`PRIOR_KEYS` or ``effect.parameter``.
-    """
-    out: dict[tuple[str, str], float] = {}
-    for ts in series:
-        for key, raw in getattr(ts, 'extra', {}).items():
-            target = PRIOR_KEYS.get(key) or (tuple(key.split('.', 1)) if '.' in key else None)
-            if target is None or target[0] not in EFFECTS:
-                continue
-            try:
-                out.setdefault(target, float(raw))
-            except (TypeError, ValueError):
-                raise ValueError(
-                    f"{ts.path}: header key '{key}' must be a number, got {raw!r}"
-                ) from None
-    return out

@@ -1,0 +1,263 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+Outside the catalog: characterise what the named effects leave, then search again beside it.
+
+Runs when the search ends above the noise floor (beyond ``stop_factor``) or a named effect is
+implausible:
+
+1. **C(s)** (:mod:`.correction_fit`) is fitted as a factor of the model the search ended with,
+   less the named effects whose values are implausible (stand-ins: a 4 Hz amplifier pole),
+   its order by BIC; it must also lower the held-out error as a step of the search must
+   (:meth:`~.state.SearchState.needed_gain`), else nothing is reported and the implausible
+   effects stay named as they were (a delay just past its plausible range that holds an
+   amplifier's lag is still the best account of the data the catalog has).
+   An element of C(s) that a catalog effect is, at a value plausible for it (a low-pass that
+   an amplifier's bandwidth could be, a delay), is left to the catalog (:data:`TWINS`).
+2. **Search again beside C(s).**  The baseline times C(s) (its parameters free) starts a new
+   search (offset test, forward, backward, swap and exchange) on the same records: a catalog
+   effect is named only when it is significant beside C(s).  The stand-ins of the first search
+   (a delay for an AC coupling's phase lead, a 13 Hz amplifier pole for a lag network) are not.
+3. **Better than C(s) of as many parameters.**  Each effect named beside C(s) stays only when
+   it is plausible and C(s) grown by as many parameters as it has -- the best structure that
+   holds C(s)'s elements and that many more, in the model without the effect -- does not beat
+   it by ``min_delta_bic``.  An effect that fails is dropped (a step).  C(s) is then chosen
+   again on top of the effects named beside it; when its structure changes, steps 2-3 run
+   again (at most :data:`MAX_ROUNDS` times).
+4. **The result** (:class:`~.correction.Correction`): C(s)'s values from a fit run to
+   convergence from three starts (every parameter refitted with the named effects;
+   :func:`_converged`) with 95 % profile-likelihood intervals (:mod:`.interval`), the
+   held-out error of
+   the named effects times C(s) against the floor.  The verdict's effects, and what keeps each
+   (:mod:`.significance`), are those of the search beside C(s); its final model is theirs
+   without C(s), fitted to the records.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ...physics.effects import get_effect
+from ..timefit import FitSpec
+from .correction import ELEMENTS, Correction, correction_name, structures
+from .correction_fit import (ALPHA0, band_hz, fit_structures, history_view, registered,
+                             select_correction)
+from .fitting import evaluate, with_models
+from .forward import catalog_search
+from .interval import profile_interval
+from .offset_test import OFFSET
+from .significance import membership
+
+__all__ = ['outside_stage', 'CONVERGED_NFEV', 'TWINS', 'MAX_ROUNDS']
+
+#: elements of C(s) that a catalog effect is: element -> (effect, parameter)
+TWINS = {'low_pass': ('amplifier_bandwidth', 'corner_hz'), 'delay': ('time_delay', 'delay_s')}
+#: C(s) is chosen again on top of the effects named beside it, at most this many times
+MAX_ROUNDS = 3
+
+#: function evaluations of the last fit, whose covariance gives the intervals (the search's
+#: fits stop at 60: enough to rank candidates, not always to converge with three corners)
+CONVERGED_NFEV = 300
+
+
+def _triggered(state) -> bool:
+    implausible = any(f.split('/')[0] in state.names() for f in state.current.flags)
+    return implausible or not state.at_floor()
+
+
+def _beside(view, best):
+    """Return a fresh search state whose baseline is the view's baseline times ``best``'s C(s)."""
+    name = correction_name(best.structure)
+    values = best.fit.effect_values[name]
+    base = view.baseline
+    spec = FitSpec(base.spec.material, base.spec.effect_params
+                   + tuple((name, p) for p in best.shape))
+    models = [m.with_effect(name, **values) for m in base.fit.models]
+    x0 = np.concatenate([base.x, best.x[-len(best.shape):]])
+    start = evaluate(with_models(view.prepared, models), spec, [x0], view.folds,
+                     view.settings.fold_nfev, priors=view.priors)
+    inner = replace(view, baseline=start, chosen=[], steps=[], first_ranking=[],
+                    first_ties=[], late_ties=[], replaced=set(), offset={}, kept_by={})
+    inner.adopt(start)
+    return inner
+
+
+def _rival(inner, name, structure, band):
+    """C(s) grown by the parameters of ``name``, in the model without ``name`` (or None)."""
+    k = sum(1 for e, _ in inner.current.spec.effect_params if e == name)
+    order = sum(len(ELEMENTS[e]) for e in structure) + k
+    if k == 0 or order > inner.settings.max_correction_order:
+        return None
+    grown = [st for st in structures(order, ALPHA0 not in inner.settings.free_material)
+             if set(structure) <= set(st)]
+    if not grown:
+        return None
+    cname = correction_name(structure)
+    known = inner.current.fit.effect_values[cname]
+    base = inner.without(cname, inner.without(name))
+    cands = fit_structures(inner, base, grown, band, known)
+    return min(cands, key=lambda c: c.fit.bic)
+
+
+def _drop_failing(inner, structure, band) -> None:
+    """Drop each effect named beside C(s) that is implausible or C(s) grown beats (step 3)."""
+    for name, shape in list(inner.chosen):
+        if name == OFFSET:
+            continue
+        why = None
+        if any(f.startswith(f'{name}/') for f in inner.current.flags):
+            why = 'implausible beside the correction C(s)'
+        else:
+            rival = _rival(inner, name, structure, band)
+            if rival is not None and (rival.fit.bic
+                                      <= inner.current.fit.bic - inner.settings.min_delta_bic):
+                why = ('a correction C(s) with as many parameters fits better '
+                       f"({'+'.join(rival.structure)}: BIC "
+                       f'{rival.fit.bic - inner.current.fit.bic:+.0f})')
+        if why:
+            wo = inner.score(inner.without(name))
+            inner.record(name, 'dropped', wo, why)
+            inner.chosen.remove((name, shape))
+            inner.adopt(wo)
+
+
+def _converged(inner):
+    """
+    Return the current model fitted to convergence, the best of three starts.
+
+    Its values, the baseline's material with them, and the records' nominal material with
+    them: a material parameter can trade with a corner of C(s) (d with a lag's pole) and hold
+    a fit that stopped early in the wrong valley.
+    """
+    cur = inner.current
+    n_mat = len(cur.spec.material)
+    nominal = np.log([getattr(inner.prepared[0].rec.model.material, n)
+                      for n in cur.spec.material])
+    starts = [cur.x, np.concatenate([inner.baseline.x[:n_mat], cur.x[n_mat:]]),
+              np.concatenate([nominal, cur.x[n_mat:]])]
+    fits = [evaluate(inner.prepared, cur.spec, [x], inner.folds, inner.settings.fold_nfev,
+                     priors=inner.priors, max_nfev=CONVERGED_NFEV, scored=False)
+            for x in starts]
+    return inner.score(min(fits, key=lambda c: c.fit.chi2))
+
+
+def _result(inner, structure, tried) -> Correction:
+    """C(s)'s values and 95 % intervals from the model beside which the search ended."""
+    cand = _converged(inner)
+    inner.adopt(cand)
+    name = correction_name(structure)
+    n_mat = len(cand.spec.material)
+    values, ci = {}, {}
+    for k, (e, p) in enumerate(cand.spec.effect_params):
+        if e == name:
+            inner.say(f'correction C(s): profile interval of {p}')
+            values[p] = float(np.exp(cand.x[n_mat + k]))
+            ci[p] = profile_interval(inner, cand, name, p)
+    return Correction(tuple(structure), values, ci, cand.error, inner.noise_floor,
+                      cand.fit.bic - inner.without(name).fit.bic, tried,
+                      tuple(e for e, _ in inner.chosen))
+
+
+def _adopt_inner(state, inner, best, structure) -> None:
+    """Make the verdict's effects, steps and ties those of the search beside C(s)."""
+    cname = correction_name(structure)
+    state.record(cname, 'added', best,
+                 f'the catalog left the held-out error at {state.current.error:.4f} '
+                 f'({state.current.error / state.noise_floor:.2f}x the floor): C(s) = '
+                 f"{' * '.join(structure)} fitted, searching again beside it")
+    state.steps.extend(inner.steps)
+    state.late_ties.extend([f'{t} (beside C(s))' for t in inner.first_ties] + inner.late_ties)
+    state.chosen = list(inner.chosen)
+    state.offset = inner.offset or state.offset
+    state.kept_by = membership(inner)
+    state.adopt(state.score(state.refit_set(state.chosen)) if state.chosen else state.baseline)
+
+
+def _drop_implausible(state) -> None:
+    """Drop named effects with implausible fitted values until none is left (stand-ins)."""
+    while True:
+        bad = [(n, sh) for n, sh in state.chosen
+               if any(f.startswith(f'{n}/') for f in state.current.flags)]
+        if not bad:
+            return
+        name, shape = bad[0]
+        flags = [f for f in state.current.flags if f.startswith(f'{name}/')]
+        wo = state.score(state.without(name))
+        state.record(name, 'dropped', wo, 'implausible (' + '; '.join(flags) + '): the '
+                     'correction C(s) is fitted without it')
+        state.chosen.remove((name, shape))
+        state.adopt(wo)
+
+
+def _strip_twins(view, best, band):
+    """
+    C(s) less its elements that a catalog effect is, at a value plausible for that effect.
+
+    A low-pass whose corner an amplifier's bandwidth could be, a delay a channel skew could
+    be: the catalog effect is the same factor, and a tie goes to the catalog (the search
+    beside C(s) finds it if it is significant).  Returns the refitted smaller C(s), ``best``
+    itself when nothing is stripped, or None when nothing is left.
+    """
+    name = correction_name(best.structure)
+    values = best.fit.effect_values[name]
+    keep = tuple(e for e in best.structure if not (
+        e in TWINS and _plausible(TWINS[e], values[ELEMENTS[e][0].name])))
+    if keep == best.structure:
+        return best
+    if not keep or keep == ('gain',):
+        return None
+    base = view.without(name, best)
+    return fit_structures(view, base, [keep], band, values)[0]
+
+
+def _plausible(twin, value) -> bool:
+    effect, param = twin
+    lo, hi = next(p.typical for p in get_effect(effect).parameters if p.name == param)
+    return lo <= value <= hi
+
+
+def _select(state, view, base, band):
+    """C(s) on top of ``base``, twins stripped, scored; None unless it passes a step's rule."""
+    best, tried = select_correction(view, base, band)
+    if best is None:
+        return None, tried
+    with registered([best.structure]):
+        best = _strip_twins(view, best, band)
+    if best is None:
+        return None, tried
+    with registered([best.structure]):
+        best = view.score(best)
+    gain = state.needed_gain(state.current.error)
+    return (best if best.error <= (1 - gain) * state.current.error else None), tried
+
+
+def outside_stage(state) -> None:
+    """Run the stage (module docstring) when the search ended above the floor."""
+    if not _triggered(state):
+        return
+    before = (list(state.chosen), state.current, len(state.steps))
+    _drop_implausible(state)
+    band = band_hz(state)
+    view = history_view(state, band)
+    best, tried = _select(state, view, view.current, band)
+    if best is None:        # no C(s) stands for the dropped effects: they stay, as named
+        state.chosen, current, n_steps = before
+        del state.steps[n_steps:]
+        state.adopt(current)
+        return
+    for round_ in range(MAX_ROUNDS):
+        with registered([best.structure]):
+            state.say(f"correction C(s) = {' * '.join(best.structure)}: searching beside it")
+            inner = _beside(view, best)
+            catalog_search(inner)
+            _drop_failing(inner, best.structure, band)
+            catalog = inner.without(correction_name(best.structure))
+        if round_ == MAX_ROUNDS - 1:
+            break
+        again, more = _select(state, view, catalog, band)
+        if again is None or again.structure == best.structure:
+            break
+        best, tried = again, tried + more
+    with registered([best.structure]):
+        state.correction = _result(inner, best.structure, tried)
+        _adopt_inner(state, inner, best, best.structure)

@@ -1,0 +1,145 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+The parts of the discovery package, each on its own (no diagnosis runs here).
+
+Records come from :mod:`bench.discovery_records` (exact H2 by FFT with a pre-roll, written from
+the paper, not the package's prediction code), or are pure noise where a rate is measured.
+"""
+import numpy as np
+import pytest
+
+from bench.discovery_records import (DRIVE_HARMONIC_SWEEP_HZ, Truth, crank_deflection, h2_paper,
+                                     make_records)
+from ipmc_sensor_ros.physics.effects import EFFECTS, load_plugin
+from ipmc_sensor_ros.physics.parameters import PAPER_PARAMETERS, PAPER_SAMPLES
+from ipmc_sensor_ros.physics.sensing import h2
+from ipmc_sensor_ros.workbench.discovery.correction import (Correction, correction_class,
+                                                            structures)
+from ipmc_sensor_ros.workbench.discovery.history import with_history
+from ipmc_sensor_ros.workbench.discovery.lines import _family, _orders, line_threshold
+from ipmc_sensor_ros.workbench.discovery.plugin import write_plugin
+from ipmc_sensor_ros.workbench.discovery.residual import mains_lines
+
+
+def test_independent_h2_agrees_with_the_package():
+    """Two implementations of eq. 45 written apart agree (1e-10: rounding of sums of ~1e3)."""
+    s = 2j * np.pi * np.geomspace(1e-2, 500, 60)
+    for geometry in PAPER_SAMPLES.values():
+        assert np.allclose(h2_paper(s, PAPER_PARAMETERS, geometry),
+                           h2(s, PAPER_PARAMETERS, geometry), rtol=1e-10, atol=0)
+
+
+def test_line_test_false_alarm_rate_on_white_noise():
+    """
+    The stated per-record rate holds on records without hum (both families, all harmonics).
+
+    400 records of 5.5 s at 1 kHz at a stated rate of 0.05: the count is binomial, and the
+    bound (Bonferroni over lines, Rice's count of the frequency search) makes the true rate
+    lower; 0.05 + 3 standard deviations of the count (0.033) may not be exceeded.
+    """
+    rng = np.random.default_rng(7)
+    t = np.arange(5500) / 1000.0
+    orders = _orders(1000.0, (50.0, 60.0), 10)
+    hits = 0
+    for _ in range(400):
+        r = rng.normal(0.0, 1.0, t.size)
+        rows = [row for f_mains in (50.0, 60.0)
+                for row in _family(t, r, [], f_mains, 10, orders, 0.05)]
+        hits += any(z >= u for *_, z, u in rows)
+    assert hits / 400 <= 0.05 + 3 * np.sqrt(0.05 * 0.95 / 400)
+
+
+def test_line_threshold_grows_with_the_search_and_the_record():
+    base = line_threshold(50, 5.5, [1, 2, 3, 4], 1e-4)
+    assert 5.0 < base < 7.0           # sqrt(2 ln(N / 1e-4)) for N of a few hundred looks
+    assert line_threshold(50, 120.0, [1, 2, 3, 4], 1e-4) > base   # a longer search
+    assert line_threshold(50, 5.5, [1, 2, 3, 4], 1e-6) > base     # a stricter rate
+    assert line_threshold(10, 5.5, [1, 2, 3, 4], 1e-4) > base     # a noisier level estimate
+
+
+def test_hum_on_drive_harmonics_is_found_in_every_record_and_removed():
+    """50.1 Hz hum at 4 % on a sweep where 50 Hz is the 50th, 25th, 10th and 5th harmonic."""
+    truth = Truth(hum_rel=0.04, hum_hz=50.1)
+    recs = make_records(truth, 5, samples=('slim',), frequencies_hz=DRIVE_HARMONIC_SWEEP_HZ)
+    lines, cleaned = mains_lines(recs)
+    at_50 = {ln.record for ln in lines if ln.nominal_hz == 50.0}
+    assert at_50 == {r.path for r in recs}
+    for ln in lines:                  # measured to a thousandth of a hertz per harmonic
+        assert ln.frequency_hz == pytest.approx(ln.nominal_hz / 50.0 * 50.1, abs=5e-3)
+    assert mains_lines(cleaned)[0] == []
+
+
+def test_records_without_hum_show_no_line():
+    recs = make_records(Truth(), 11, frequencies_hz=DRIVE_HARMONIC_SWEEP_HZ)
+    assert mains_lines(recs)[0] == []
+
+
+def test_a_response_at_a_drive_harmonic_alone_is_not_taken_for_hum():
+    """
+    Current at exactly 3 x 20 Hz in the 20 Hz records only: a nonlinear sensor, not mains.
+
+    A crank's deflection has no third harmonic, so the model predicts nothing there; the line
+    sits on a drive harmonic and no record off the harmonics shows it.
+    """
+    recs = make_records(Truth(), 12, frequencies_hz=(2.0, 7.0, 20.0))
+    for r in recs:
+        if r.path.endswith('_20Hz'):
+            r.current_a = r.current_a + 0.01 * np.std(r.current_a) * np.cos(
+                2 * np.pi * 60.0 * r.time_s + 0.3)
+    assert mains_lines(recs)[0] == []
+
+
+def test_history_is_the_periodic_continuation():
+    rec = make_records(Truth(), 1, samples=('slim',), frequencies_hz=(3.0,))[0]
+    longer = with_history(rec, 2.0)
+    n = longer.time_s.size - rec.time_s.size
+    assert longer.time_s[n] == rec.time_s[0] and longer.time_s[0] == pytest.approx(-2.0, abs=1e-3)
+    # the prepended motion is the crank's own: compare with a period earlier in the record
+    # (cubic spline of a 3 Hz crank at 1 kHz: error ~ (w dt)^4, under 1e-6 of the amplitude)
+    period = 1 / 3.0
+    inside = (longer.time_s < 0) & (longer.time_s + 2 * period < rec.time_s[-1])
+    later = np.interp(longer.time_s[inside] + np.ceil(2.0 / period) * period, rec.time_s,
+                      rec.deflection_m)
+    amp = np.max(np.abs(rec.deflection_m))
+    assert np.max(np.abs(longer.deflection_m[inside] - later)) < 2e-3 * amp   # linear interp
+    chirp = type(rec)(rec.path, rec.sample, rec.model, rec.time_s,
+                      crank_deflection(rec.time_s ** 2 / 3, 1.0), rec.current_a)
+    assert with_history(chirp, 2.0) is None
+
+
+@pytest.fixture
+def unregister():
+    names = []
+    yield names
+    for name in names:
+        EFFECTS.pop(name, None)
+
+
+@pytest.mark.parametrize('structure', structures(1, False) + structures(2, False)
+                         + structures(3, True))
+def test_plugin_file_is_the_correction_it_was_written_from(structure, tmp_path, unregister):
+    """The written plugin's factor equals the fitted correction's, and its zpk is exact."""
+    cls = correction_class(structure)
+    values = {p.name: p.default * (1.7 if 'damping' not in p.name else 1.0)
+              for p in cls.parameters}
+    c = Correction(tuple(structure), values, {k: (v / 2, v * 2) for k, v in values.items()},
+                   0.01, 0.01, -100.0)
+    name = write_plugin(tmp_path / f"p_{'_'.join(structure)}.py", c)
+    unregister.append(name)
+    assert load_plugin(tmp_path / f"p_{'_'.join(structure)}.py") == [name]
+    plugin = EFFECTS[name]
+    assert {p.name: p.default for p in plugin.parameters} == values
+    s = 2j * np.pi * np.geomspace(0.05, 500, 40)
+    ours, theirs = cls().factor(s, None, values), plugin.factor(s, None, values)
+    assert np.allclose(theirs, ours, rtol=1e-12)
+    z, p, k = plugin.rational(None, values)
+    rational = k * np.prod(s[:, None] - z, axis=1) / np.prod(s[:, None] - p, axis=1)
+    assert np.allclose(rational * np.exp(-s * plugin.delay_s(values)), theirs, rtol=1e-12)
+
+
+def test_correction_words_carry_the_interval():
+    c = Correction(('high_pass',), {'high_pass_corner_hz': 0.50011},
+                   {'high_pass_corner_hz': (0.49976, 0.50046)}, 0.0100, 0.0100, -9.5e6)
+    text = c.sentence()
+    assert 'first-order high-pass, corner 0.50011 Hz [0.49976, 0.50046]' in text
+    assert 'AC-coupled' in text and '1.00x the noise floor' in text
