@@ -25,7 +25,7 @@ __all__ = ['run_lagged', 'main']
 
 
 def run_lagged(record: Record, lag_s: float, block_samples: int = 1000) -> Estimate:
-    """The live (lag 0) or fixed-lag output of the default Kalman estimator on ``record``."""
+    """Return the live (lag 0) or fixed-lag output of the default Kalman estimator."""
     from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
     from ipmc_sensor_ros.estimation.stream import StreamEstimator
     from ipmc_sensor_ros.physics.model import SensorModel
