@@ -98,6 +98,12 @@ class ForwardRecord:
         return cls(np.empty((n, nx)), np.empty((n, nx, nx)), np.empty((n, nx)),
                    np.empty((n, nx, nx)), np.empty(n, dtype=np.int64), np.empty(n, dtype=bool))
 
+    def rows(self, start: int, stop: int) -> 'ForwardRecord':
+        """Return the record of samples ``start`` to ``stop`` (views, not copies)."""
+        return ForwardRecord(self.x_pred[start:stop], self.P_pred[start:stop],
+                             self.x_post[start:stop], self.P_post[start:stop],
+                             self.steps[start:stop], self.still[start:stop])
+
 
 class KalmanFilter:
     """

@@ -41,11 +41,6 @@ class FixedLagSmoother:
         self._parts: list[ForwardRecord] = []
         self._held = 0
 
-    @property
-    def held(self) -> int:
-        """Return the samples filtered and not yet smoothed out."""
-        return self._held
-
     def push(self, filt: KalmanFilter, record: ForwardRecord) -> Estimate | None:
         """
         Add the forward record of the samples just filtered; return those now smoothed.
@@ -57,9 +52,7 @@ class FixedLagSmoother:
         a, n = 0, record.x_post.shape[0]
         while a < n:
             b = min(n, a + 2 * self.lag - self._held)
-            self._parts.append(record if (a, b) == (0, n) else ForwardRecord(
-                record.x_pred[a:b], record.P_pred[a:b], record.x_post[a:b], record.P_post[a:b],
-                record.steps[a:b], record.still[a:b]))
+            self._parts.append(record if (a, b) == (0, n) else record.rows(a, b))
             self._held += b - a
             a = b
             if self._held == 2 * self.lag:
@@ -72,10 +65,6 @@ class FixedLagSmoother:
         """Smooth everything held with the data there is (a reset, a new model, the end)."""
         return self._emit(filt, keep=0) if self._held else None
 
-    def clear(self) -> None:
-        """Drop what is held (its estimates are not wanted)."""
-        self._parts, self._held = [], 0
-
     def _emit(self, filt: KalmanFilter, keep: int) -> Estimate:
         rec = self._parts[0] if len(self._parts) == 1 else ForwardRecord(
             *(np.concatenate(arrays) for arrays in zip(*(
@@ -87,8 +76,6 @@ class FixedLagSmoother:
         scale = float(m.scale[m.iw])
         out = Estimate(xs[:n_out, m.iw] * scale, np.sqrt(np.maximum(pw[:n_out], 0.0)) * scale,
                        rec.still[:n_out].copy())
-        self._parts = [ForwardRecord(rec.x_pred[n_out:], rec.P_pred[n_out:], rec.x_post[n_out:],
-                                     rec.P_post[n_out:], rec.steps[n_out:],
-                                     rec.still[n_out:])] if keep else []
+        self._parts = [rec.rows(n_out, n_out + keep)] if keep else []
         self._held = keep
         return out

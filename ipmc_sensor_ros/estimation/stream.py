@@ -328,7 +328,7 @@ class StreamEstimator(StreamAccounts):
             return None
         try:
             current = _as_block(currents, self.max_block_samples)
-            t = self.timebase.block_times(times, current.size, self._now_s())
+            t = self.timebase.block_times(times, current.size, self._now_s)
         except DataError as exc:
             self.reject(n_claimed, str(exc))
             return None

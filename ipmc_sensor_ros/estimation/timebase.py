@@ -182,10 +182,10 @@ class Timebase:
         self.last_s = None
 
     # -- the rule for one stamp -----------------------------------------------------
-    def block_times(self, times, n: int, now_s: float) -> np.ndarray:
-        """Return a block's sample times (None: continued on the grid, or from ``now_s``)."""
+    def block_times(self, times, n: int, now_s) -> np.ndarray:
+        """Return a block's sample times (None: continued on the grid, or from ``now_s()``)."""
         if times is None:
-            start = now_s if self.last_s is None else self.last_s + self.period_s
+            start = now_s() if self.last_s is None else self.last_s + self.period_s
             return start + np.arange(n) * self.period_s
         t = np.asarray(times, dtype=float)
         if t.shape != (n,):
