@@ -587,3 +587,32 @@ def test_managed_sensor_array_equals_the_plain_node(managed_estimator, tmp_path,
     assert node.channel_counters() == ref_counters
     assert ref_counters[1]['samples_rejected'] == 1 \
         and ref_counters[0]['samples_rejected'] == 0
+
+
+def test_deactivate_publishes_the_samples_the_smoother_still_holds(managed_estimator):
+    """
+    With ``smoothed_lag_s``, deactivate sends the held samples before the topics close.
+
+    Every accepted sample comes out once on ``deflection/smoothed/block``, in order, the
+    last ones smoothed with the data there is (as a reset does).
+    """
+    client, node = managed_estimator(smoothed_lag_s=0.2, publish_points='none')
+    smoothed = []
+    client.node.create_subscription(
+        Float64MultiArray, 'deflection/smoothed/block',
+        lambda m: smoothed.append(unpack_block(m, ESTIMATE_COLUMNS)), QOS)
+    assert client.transition(Transition.TRANSITION_CONFIGURE)
+    assert client.transition(Transition.TRANSITION_ACTIVATE)
+    client.spin_until(lambda: client.publishers('/deflection/smoothed/block') == 1,
+                      'the smoothed publisher')
+    _send_all(client, node, crank_messages(0.8))
+    live_t = np.concatenate([b.times_s for b in client.blocks])
+    client.spin_for(0.2)
+    # the first line check (0.5 s) flushes; the 0.3 s after it, under 2 x 0.2 s, are held
+    held = live_t.size - sum(b.times_s.size for b in smoothed)
+    assert held > 0
+    assert client.transition(Transition.TRANSITION_DEACTIVATE)
+    client.spin_until(lambda: sum(b.times_s.size for b in smoothed) >= live_t.size,
+                      'the held samples')
+    np.testing.assert_array_equal(np.concatenate([b.times_s for b in smoothed]), live_t)
+    assert all(np.all(np.isfinite(b.values)) for b in smoothed)

@@ -162,9 +162,9 @@ class StreamEstimator(StreamAccounts):
             self._smoothed.append(done)
         self.estimator = new
 
-    def pop_smoothed(self):
-        """Return (output times, deflection, std) smoothed with a lag since last asked, or None."""
-        ready = self.estimator.pop_smoothed()
+    def pop_smoothed(self, flush: bool = False):
+        """Return (times, deflection, std) smoothed since last asked (``flush``: all), or None."""
+        ready = self.estimator.pop_smoothed(flush)
         parts, self._smoothed = self._smoothed + ([ready] if ready is not None else []), []
         if not parts:
             return None

@@ -365,9 +365,13 @@ class EstimatorNode(Node):
                 throttle_duration_sec=1.0,
             )
 
-    def _publish_smoothed(self) -> None:
-        """Publish what the stream smoothed with ``smoothed_lag_s`` (a block, when ready)."""
-        out = self._stream.pop_smoothed()
+    def _publish_smoothed(self, flush: bool = False) -> None:
+        """
+        Publish what the stream smoothed with ``smoothed_lag_s`` (a block, when ready).
+
+        ``flush``: also the samples held for their lag (the stream ends: deactivate).
+        """
+        out = self._stream.pop_smoothed(flush)
         if out is None:
             return
         t, w, std = out

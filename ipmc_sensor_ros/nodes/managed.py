@@ -181,6 +181,7 @@ class ManagedMixin:
         with self._lock:
             self._taking = False
             try:
+                self._drain()
                 self._flush()
                 super().on_deactivate(state)
                 diagnostics = getattr(self, '_diagnostics', None)
@@ -253,6 +254,9 @@ class ManagedMixin:
     def _output_publishers(self) -> list:
         """Return the data publishers to flush on deactivate (subclass hook)."""
         return []
+
+    def _drain(self) -> None:
+        """Publish what is held back for later on deactivate (subclass hook)."""
 
     # -- helpers ----------------------------------------------------------------------
     def _autostart(self) -> None:
@@ -344,7 +348,13 @@ class ManagedEstimatorNode(ManagedMixin, EstimatorNode, LifecycleNode):
 
     def _output_publishers(self) -> list:
         return [p for p in [getattr(self, '_pub_block', None),
+                            getattr(self, '_pub_smoothed', None),
                             *(getattr(self, '_pub_points', None) or ())] if p is not None]
+
+    def _drain(self) -> None:
+        """Publish the samples the smoother still holds for their lag (each once, in order)."""
+        if getattr(self, '_pub_smoothed', None) is not None:
+            self._publish_smoothed(flush=True)
 
     def _on_timer(self) -> None:
         self._guarded(super()._on_timer, 'status timer')
