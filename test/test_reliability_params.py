@@ -91,7 +91,7 @@ def test_changes_faster_than_a_build_still_land(nodes, monkeypatch):
     import threading
     import time
 
-    from ipmc_sensor_ros.nodes import estimator_node as E
+    from ipmc_sensor_ros.nodes import live_params as E
 
     direct = nodes()
     node = direct.node

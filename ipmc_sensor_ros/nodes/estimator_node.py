@@ -9,7 +9,8 @@ message), ``deflection`` (``PointStamped`` (L, 0, w) in the clamp frame: per sam
 block / none; z = +-inf beyond the limit of :mod:`~ipmc_sensor_ros.estimation.limits`),
 ``deflection/smoothed/block`` (the same columns, smoothed with ``smoothed_lag_s``; only
 when it is > 0), ``estimator/counters`` (JSON, 1 Hz) and ``/diagnostics``.  Parameter
-changes are validated by building the new estimator and applied without an output jump.
+changes are validated by building the new estimator and applied without an output jump
+(:mod:`.live_params`).
 README "ROS 2 interface".
 
 One source per stream: the node follows one publisher of ``current`` (its GID from the message
@@ -20,7 +21,8 @@ silent for ``stale_after_s``.
 
 ``channels`` > 1 (a sensor array): N-column blocks through
 :class:`~ipmc_sensor_ros.estimation.array.ArrayStream` (one stream core per channel), points on
-``ch<c>/deflection``, one /diagnostics status per channel; README "Sensor arrays".
+``ch<c>/deflection``, one /diagnostics status per channel (:mod:`.array_path`); README
+"Sensor arrays".
 """
 from __future__ import annotations
 
@@ -28,15 +30,12 @@ import json
 import math
 import sys
 import threading
-import time
 from typing import Any
 
 import numpy as np
-from rcl_interfaces.msg import SetParametersResult
 from geometry_msgs.msg import PointStamped as PointMsg
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64MultiArray, String
 
@@ -49,11 +48,13 @@ from ..estimation.stream import COUNTER_NAMES, StreamEstimator
 from ..errors import DataError, IpmcError
 from ..physics.parameters import short_repr
 from . import params as P
-from ..interface.blocks import current_columns, estimate_columns, unpack_columns
+from ..interface.blocks import current_columns, estimate_columns
 from ..interface.sources import SourceSelector
 from .messages import (CURRENT_COLUMNS, BlockPacker, OneSampleCodec, PointCodec,
                        claimed_samples, one_sample, unpack_block)
 from .diagnostics import DiagnosticsPublisher
+from .array_path import ArrayPath
+from .live_params import LiveParameters
 from .sources import FollowedSource, subscribe_followed
 from .runner import run
 
@@ -63,13 +64,10 @@ PUBLISH_POINTS = C.PUBLISH_POINTS
 
 ESTIMATOR_SPECS = C.ESTIMATOR_SPECS
 
-#: A model rebuild starts once no parameter change arrived for this long, s (coalescing).
-REBUILD_QUIET_S = 0.1
-
 _ERRORS = (IpmcError,)  # every deliberate error of the package names the parameter
 
 
-class EstimatorNode(Node):
+class EstimatorNode(LiveParameters, ArrayPath, Node):
     """
     The estimator node (module docstring).
 
@@ -117,14 +115,7 @@ class EstimatorNode(Node):
             self.get_logger().info(f"plugin {path} (sha256 {digest}): effects {', '.join(names)}; "
                                    'loaded once, not re-read')
         P.log_model_files(self, self._values)
-        self._model_key = C.model_key(self._values)
-        self._pending: tuple | None = None
-        self._built_values = self._values      # the values the running filter was built from
-        self._wanted: dict | None = None       # accepted values awaiting a rebuild
-        self._rebuilt: tuple | None = None     # (values, estimator) built, not yet swapped in
-        self._builder: threading.Thread | None = None
-        self._changed: set[str] = set()
-        self.rebuilds = 0                      #: filters swapped in after parameter changes
+        self._init_live_parameters()
         self._ticks = 0
         logger = self.get_logger()
         topic = self.resolve_topic_name('current')
@@ -204,18 +195,6 @@ class EstimatorNode(Node):
             if self._array is not None:
                 return self._array.totals()
             return dict(self._stream.counters)
-
-    def channel_counters(self) -> list[dict[str, int]]:
-        """Return copies of the counters of every channel (one for a single sensor)."""
-        with self._lock:
-            if self._array is not None:
-                return self._array.counters()
-            return [dict(self._stream.counters)]
-
-    @property
-    def array(self) -> ArrayStream | None:
-        """Return the sensor-array core when ``channels`` > 1, else None."""
-        return self._array
 
     def _status(self, stream: StreamEstimator | None = None) -> dict:
         """
@@ -393,51 +372,6 @@ class EstimatorNode(Node):
             deflection_m = math.copysign(math.inf, deflection_m)
         self._pub_points[channel].publish(self._points.encode(time_s, deflection_m))
 
-    def _on_current_array(self, msg: Float64MultiArray) -> None:
-        """Estimate a sensor array's block: unpack N columns, :class:`ArrayStream`, publish."""
-        with self._lock:
-            if self._rebuilt is not None:
-                self._apply_rebuilt()
-            array = self._array
-            try:
-                times, table = unpack_columns(msg, self._in_columns, values_only_ok=False)
-            except DataError as exc:
-                array.reject(claimed_samples(msg, self._channels + 1), str(exc))
-                return
-            out = array.feed(times, table)
-            if out is None:
-                return
-            t, w, std, has = out
-            one = table.shape[0] == 1   # observe_one: no numpy per sample (40 -> 6 us)
-            for c in np.flatnonzero(has).tolist():
-                if one:
-                    self._diagnostics.observe_one(float(table[0, c]), self._channel_names[c])
-                else:
-                    self._diagnostics.observe(table[array.channels[c].accepted, c],
-                                              channel=self._channel_names[c])
-            flags = np.full(w.shape, np.nan)
-            for c in np.flatnonzero(has).tolist():
-                flags[:, c] = self._limits[c].flags(array.channels[c].estimator, w[:, c])
-            cols = [a for c in range(self._channels) for a in (w[:, c], std[:, c], flags[:, c])]
-            try:
-                self._pub_block.publish(self._packer.pack(t, *cols))
-            except Exception as exc:  # back-pressure: counted per channel, never a reset
-                array.unpublished(t.size, short_repr(str(exc)), has)
-                return
-            mode = self._values['publish_points']
-            if mode == 'none':
-                return
-            rows = range(t.size) if mode == 'per_sample' else (t.size - 1,)
-            try:
-                for c in np.flatnonzero(has).tolist():
-                    for k in rows:
-                        self._publish_point(float(t[k]), float(w[k, c]), c)
-            except Exception as exc:  # the block went out; points are a convenience view
-                self._stream.counters['messages_unpublished'] += 1
-                self.get_logger().warning(
-                    f'could not publish deflection points: {short_repr(str(exc))}',
-                    throttle_duration_sec=1.0)
-
     # -- periodic -------------------------------------------------------------
     def _on_timer(self) -> None:
         self._ticks += 1
@@ -449,165 +383,6 @@ class EstimatorNode(Node):
             self.get_logger().info(f'waiting for data on {self._sub.topic_name}')
         counters['node'] = self.get_fully_qualified_name()
         self._pub_counters.publish(String(data=json.dumps(counters)))
-
-    # -- parameters -------------------------------------------------------------
-    def _on_set_parameters(self, parameters) -> SetParametersResult:
-        """
-        Validate a change; nothing is applied here.
-
-        Every value is checked and the estimator is built on the current reduction (cheap);
-        a model change must also give a finite, non-zero response over the band.  Any failure,
-        whatever the exception, refuses the change with a one-line reason.  The new reduction
-        itself is built later, off the data path (:meth:`_rebuild_worker`).
-        """
-        with self._lock:
-            self._pending = None
-            values = dict(self._values)
-            for p in parameters:
-                if p.name not in values:
-                    continue
-                if p.value is None:
-                    return SetParametersResult(successful=False,
-                                               reason=f"parameter '{p.name}' cannot be unset")
-                values[p.name] = list(p.value) if isinstance(values[p.name], list) else p.value
-            try:
-                key = C.model_key(values)
-                new = self._build(values, validate=True)
-                if key != self._model_key:
-                    band = np.geomspace(values['band_low_hz'], values['band_high_hz'], 64)
-                    h = np.array([e.model.frequency_response(band)
-                                  for e in (new if isinstance(new, list) else [new])])
-                    if not np.all(np.isfinite(h)) or not np.all(np.abs(h) > 0):
-                        raise P.ParameterError('these parameter values give a non-finite or '
-                                               'zero sensor response over the band')
-            except Exception as exc:  # a remote call must never kill the node
-                text = ' '.join(str(exc).split())
-                text = text if len(text) <= 300 else text[:300] + '...'
-                if not isinstance(exc, _ERRORS):
-                    text = f'{type(exc).__name__}: {text}'
-                return SetParametersResult(successful=False, reason=text)
-            self._pending = (values, key, new)
-            return SetParametersResult(successful=True)
-
-    def _on_parameters_set(self, parameters) -> None:
-        """Apply a validated change: a filter change at once, a model change once rebuilt."""
-        with self._lock:
-            if self._pending is None:
-                return
-            values, key, new = self._pending
-            self._pending = None
-            old = self._values
-            self._values = values
-            for ch in (self._array.channels if self._array is not None else (self._stream,)):
-                ch.max_gap_s = float(values['max_gap_s'])
-                ch.rate_tolerance = float(values['rate_tolerance'])
-            self._source.selector.stale_after_s = float(values['stale_after_s'])
-            self._changed.update(p.name for p in parameters)
-            if (key != self._model_key or self._wanted is not None or self._builder is not None
-                    or self._rebuilt is not None):
-                self._wanted = values        # coalesced: only the latest values are built
-                if self._builder is None:
-                    self._builder = threading.Thread(target=self._rebuild_worker, daemon=True)
-                    self._builder.start()
-            elif C.filter_key(values) != C.filter_key(old):
-                self._swap(new)
-                self._built_values = values
-                self._log_rebuilt()
-
-    def _rebuild_worker(self) -> None:
-        """
-        Build the reduction of the latest accepted values off the executor thread.
-
-        Changes arriving within :data:`REBUILD_QUIET_S` of each other are built once; the data
-        path keeps the old filter meanwhile (no input is lost to a long build) and swaps at its
-        next message (:meth:`_apply_rebuilt`).  A build that fails despite validation reverts
-        the parameters to the last built values, with an error naming the failure.
-        """
-        while True:
-            while True:
-                with self._lock:
-                    seen = self._wanted
-                time.sleep(REBUILD_QUIET_S)
-                with self._lock:
-                    if self._wanted is seen:
-                        self._wanted = None
-                        break
-            if seen is None:
-                with self._lock:
-                    self._builder = None
-                return
-            try:
-                new, error = self._build(seen), None
-            except Exception as exc:  # noqa: B902 - reverted below, never fatal
-                new, error = None, exc
-            with self._lock:
-                if new is not None:
-                    # swapped in even when newer values arrived meanwhile: a peer changing
-                    # parameters faster than a build takes must not starve every rebuild
-                    self._rebuilt = (seen, new)
-                    if self._wanted is not None:
-                        continue               # then build the newer values
-                    self._builder = None
-                    return
-                if self._wanted is not None:
-                    continue                   # a failed build superseded by newer values
-                self._builder = None
-                old = self._built_values
-                self._rebuilt = None
-            self.get_logger().error(
-                f'parameter change could not be built, reverted: {short_repr(str(error))}')
-            self.set_parameters([Parameter(k, value=old[k]) for k in C.MODEL_KEYS
-                                 if old[k] != seen[k]])
-            return
-
-    def _build(self, values, validate: bool = False):
-        """
-        Build the estimator of ``values``: one, or a list for a sensor array.
-
-        ``validate``: reuse the running reductions (a cheap check of the values; the new
-        reduction is built later, off the data path).
-        """
-        if self._array is None:
-            return C.build_estimator(values, self._reduced if validate else None)
-        reduced = ({C.model_key(C.channel_values(values, c)): ch.estimator.reduced
-                    for c, ch in enumerate(self._array.channels)} if validate else None)
-        new = C.build_channel_estimators(values, reduced)
-        check_array_estimators(new)
-        return new
-
-    def _swap(self, new) -> None:
-        """Swap in ``new`` (:meth:`_build`), continuing each channel's output."""
-        if self._array is None:
-            self._stream.replace_estimator(new)
-        else:
-            self._array.replace_estimators(new)
-
-    def _apply_rebuilt(self) -> None:
-        """Swap in a filter the worker has built (caller holds the lock)."""
-        values, new = self._rebuilt
-        self._rebuilt = None
-        self._swap(new)
-        self._reduced = (new.reduced if self._array is None else
-                         {C.model_key(C.channel_values(values, c)): e.reduced
-                          for c, e in enumerate(new)})
-        self._model_key = C.model_key(values)
-        self._built_values = values
-        self._log_rebuilt()
-
-    def _log_rebuilt(self) -> None:
-        self.rebuilds += 1
-        self.get_logger().info('parameters changed: filter rebuilt ('
-                               + ', '.join(sorted(self._changed)) + ')')
-        self._changed.clear()
-
-    def settle(self, timeout_s: float = 60.0) -> None:
-        """Wait for a pending model rebuild and apply it (in-process use and tests)."""
-        builder = self._builder
-        if builder is not None:
-            builder.join(timeout_s)
-        with self._lock:
-            if self._rebuilt is not None:
-                self._apply_rebuilt()
 
 
 def main(args=None) -> int:
