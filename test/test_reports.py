@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from ipmc_sensor_ros.workbench.compare import compare_records
-from ipmc_sensor_ros.workbench.report import (compare_report, diagnose_report, residual_lines,
-                                              track_report, worst_first)
+from ipmc_sensor_ros.workbench.plots import residual_lines, worst_first
+from ipmc_sensor_ros.workbench.report import compare_report, diagnose_report, track_report
 from ipmc_sensor_ros.workbench.scenarios import crank_slider_campaign
 from ipmc_sensor_ros.workbench.track import TrackPoint
 

@@ -89,7 +89,8 @@ def reproduce_figures(out_dir: Path | None, seed: int = 0) -> dict:
         np.degrees(np.angle(hsh[-1] / hs[-1]))
     )
     if out_dir is not None:
-        from .report import plot_bode, write_report
+        from .plots import plot_bode
+        from .report import write_report
 
         slim_models = {
             'h1 fit': fits['h1'].frequency_response,
