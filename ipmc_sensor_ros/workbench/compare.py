@@ -42,10 +42,11 @@ from .blas import single_threaded_blas
 from .freqresp import FrequencyPoint, fundamental_response
 from .metrics import fit_percent, noise_rms
 
-__all__ = ['RecordComparison', 'Comparison', 'compare_records', 'FREQUENCY_BANDS_HZ']
+__all__ = ['RecordComparison', 'Comparison', 'compare_records', 'FREQUENCY_BANDS_HZ', 'BOUND99']
 
 FREQUENCY_BANDS_HZ = ((0.0, 2.0), (2.0, 5.0), (5.0, 10.0), (10.0, 20.0), (20.0, np.inf))
-_BOUND99 = 2.576
+#: Two-sided 99 % quantile of N(0, 1): a white residual's correlation stays in +-BOUND99/sqrt(N).
+BOUND99 = 2.576
 
 
 #: Samples per piece when the velocity is differentiated piecewise (:func:`_gradient`).
@@ -228,7 +229,7 @@ def _compare_records(records, model_for, settle_s, max_lag, n_windows, transfer_
         xl = np.arange(-max_lag, max_lag + 1)
         ccf = _xcorr_normalised(centred, vel, xl)
         del centred, vel
-        bound = _BOUND99 / np.sqrt(resid.size)
+        bound = BOUND99 / np.sqrt(resid.size)
         mag_err = ph_err = mag_sd = ph_sd = None
         hm = None
         if point is not None:

@@ -26,11 +26,11 @@ from typing import Sequence
 
 import numpy as np
 
+from .compare import BOUND99
+
 __all__ = ['plot_bode', 'worst_first', 'plot_time_overlay', 'plot_residual_correlation',
            'plot_residual_spectrum', 'residual_lines', 'plot_failure_map', 'plot_track',
-           'plot_error_bars', 'BOUND99']
-
-BOUND99 = 2.576  # two-sided 99 % quantile of N(0, 1): band of a white residual's correlation
+           'plot_error_bars']
 
 
 def _plt():
