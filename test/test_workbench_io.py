@@ -398,7 +398,7 @@ def _raw_current_bag(bag, payloads, geometry_sidecar=True):
     """Write ``payloads`` (CDR bytes) on /current, stamped 1 ms apart, with a sidecar."""
     from rosbags.rosbag2 import Writer
 
-    from ipmc_sensor_ros.workbench.bags import MULTIARRAY_TYPE, _typestore
+    from ipmc_sensor_ros.workbench.bagtopics import MULTIARRAY_TYPE, _typestore
 
     with Writer(bag, version=8) as writer:
         conn = writer.add_connection('/current', MULTIARRAY_TYPE, typestore=_typestore())

@@ -2,6 +2,11 @@
 """
 rosbag2 bags in and out of the workbench (read with ``rosbags``; no rclpy needed).
 
+Holds the bag as a whole: :func:`read_bag` (open a bag directory or storage
+file, pick its topics, attach the geometry), the ``ipmc.yaml`` sidecar, and
+:func:`write_bag`.  The messages of one topic (types, decoding, validation,
+alignment of the deflection to the current) are read by :mod:`.bagtopics`.
+
 Bags (rosbag2, read with ``rosbags``)
 =====================================
 ``read_bag`` accepts a bag directory (with ``metadata.yaml``) or a single
@@ -33,8 +38,6 @@ leading ``/``.
 """
 from __future__ import annotations
 
-import array
-import functools
 import re
 import shutil
 from pathlib import Path
@@ -42,202 +45,26 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ..interface.blocks import (
-    CURRENT_COLUMNS,
-    DEFLECTION_COLUMNS,
-    ESTIMATE_COLUMNS,
-    ESTIMATE_COLUMNS_UNFLAGGED,
-    SAMPLE_LABEL,
-    unpack_columns,
-)
-from ..interface.cdr import OneSampleCodec
+from ..interface.blocks import SAMPLE_LABEL
 from ..physics.parameters import Geometry, MaterialParameters, ParameterError
-from .formats import _fmt
+from .bagtopics import (
+    _align,
+    _describe_topics,
+    _find_topic,
+    _read_topic,
+    _topic_key,
+    _typestore,
+    CURRENT_LABEL,
+    DEFLECTION_LABEL,
+    MULTIARRAY_TYPE,
+    POINT_STAMPED_TYPE,
+)
 from .measurements import DataFormatError, PathLike, TimeSeries
 
-__all__ = ['CURRENT_LABEL', 'DEFLECTION_LABEL', 'MULTIARRAY_TYPE', 'POINT_STAMPED_TYPE',
-           'read_bag', 'write_bag']
+__all__ = ['read_bag', 'write_bag']
 
-#: Column label (dim[1].label) of current and deflection blocks in bags.
-CURRENT_LABEL = CURRENT_COLUMNS
-DEFLECTION_LABEL = DEFLECTION_COLUMNS
-MULTIARRAY_TYPE = 'std_msgs/msg/Float64MultiArray'
-POINT_STAMPED_TYPE = 'geometry_msgs/msg/PointStamped'
 SIDECAR_NAME = 'ipmc.yaml'
 _SIDECAR_KEYS = ('geometry', 'material', 'extra', 'model')
-
-
-# ---------------------------------------------------------------------------
-# Bags
-# ---------------------------------------------------------------------------
-@functools.lru_cache(maxsize=None)
-def _typestore():
-    from rosbags.typesys import Stores, get_typestore
-
-    return get_typestore(Stores.ROS2_JAZZY)
-
-
-def _topic_key(name: str) -> str:
-    return name.strip().lstrip('/')
-
-
-def _find_topic(where: str, topics: Mapping[str, Any], wanted: str):
-    """(name, info) of ``wanted`` in the bag (leading '/' optional), or None."""
-    matches = [name for name in topics if _topic_key(name) == _topic_key(wanted)]
-    if len(matches) > 1:
-        raise DataFormatError(where, None, f'ambiguous: the bag has both {matches}', topic=wanted)
-    return (matches[0], topics[matches[0]]) if matches else None
-
-
-def _describe_topics(topics: Mapping[str, Any]) -> str:
-    if not topics:
-        return 'the bag has no topics'
-    return 'the bag has: ' + ', '.join(f'{name} ({info.msgtype}, {info.msgcount} msgs)'
-                                       for name, info in sorted(topics.items()))
-
-
-def _unpack_block(msg, label: str) -> tuple[np.ndarray, np.ndarray]:
-    """
-    Return the times and values of a block message; ValueError (DataError) describing a bad layout.
-
-    A deflection topic may also hold the estimator's output (``ESTIMATE_COLUMNS``: the
-    estimate and its standard deviation); its first value column is the deflection.
-    """
-    if label == DEFLECTION_LABEL and msg.layout.dim and len(msg.layout.dim) == 2 \
-            and msg.layout.dim[1].label in (ESTIMATE_COLUMNS, ESTIMATE_COLUMNS_UNFLAGGED):
-        label = msg.layout.dim[1].label
-    times, table = unpack_columns(msg, label, values_only_ok=False)
-    return times, table[:, 0]
-
-
-def _read_topic(where: str, reader, name: str, info, label: str,
-                quantity: str) -> tuple[np.ndarray, np.ndarray]:
-    """All (time, value) samples of one topic, in time order, validated."""
-    store = _typestore()
-    msgtype = info.msgtype
-    allowed = (
-        (MULTIARRAY_TYPE,) if quantity == 'current' else (MULTIARRAY_TYPE, POINT_STAMPED_TYPE)
-    )
-    if msgtype not in allowed:
-        raise DataFormatError(where, None, f'has message type {msgtype!r}; expected '
-                              + ' or '.join(repr(a) for a in allowed), topic=name)
-    times: list[np.ndarray] = []
-    values: list[np.ndarray] = []
-    count = 0
-    prev_end: float | None = None
-    # one-sample blocks (a DAQ driver's message per sample) are read from their bytes into
-    # flat arrays: deserialising each cost ~55 us and kept two small arrays per sample
-    one = OneSampleCodec(label) if msgtype == MULTIARRAY_TYPE else None
-    run_t, run_v = array.array('d'), array.array('d')
-    run_first = 0
-
-    def flush() -> None:
-        """Check the one-sample run as the general path checks a message; keep it."""
-        nonlocal prev_end, run_t, run_v
-        if not run_t:
-            return
-        t, v = np.array(run_t), np.array(run_v)
-        run_t, run_v = array.array('d'), array.array('d')
-        bad = ~(np.isfinite(t) & np.isfinite(v))
-        if bad.any():
-            k = int(np.argmax(bad))
-            raise DataFormatError(where, None, f'message {run_first + k}, sample 0: NaN/Inf '
-                                  f'(time {_fmt(t[k])}, {quantity} {_fmt(v[k])})', topic=name)
-        before = np.concatenate(([-np.inf if prev_end is None else prev_end], t[:-1]))
-        late = t <= before
-        if late.any():
-            k = int(np.argmax(late))
-            raise DataFormatError(where, None, f'message {run_first + k} starts at '
-                                  f"{_fmt(t[k])} s, not after the previous message's last "
-                                  f'sample at {_fmt(before[k])} s (blocks overlap or are out of '
-                                  'order)', topic=name)
-        prev_end = float(t[-1])
-        times.append(t)
-        values.append(v)
-
-    for conn, _stamp, raw in reader.messages(connections=info.connections):
-        count += 1
-        if one is not None:
-            row = one.decode(raw)
-            if row is not None:
-                if not run_t:
-                    run_first = count
-                run_t.append(row[0])
-                run_v.append(row[1])
-                continue
-            flush()
-        try:
-            msg = store.deserialize_cdr(raw, conn.msgtype)
-        except Exception as exc:  # corrupt payload: any decoder failure
-            raise DataFormatError(where, None, f'message {count}: cannot deserialize '
-                                  f'{conn.msgtype}: {type(exc).__name__}: {exc}',
-                                  topic=name) from exc
-        if msgtype == POINT_STAMPED_TYPE:
-            t = np.array([msg.header.stamp.sec + msg.header.stamp.nanosec / 1e9])
-            v = np.array([float(msg.point.z)])
-        else:
-            try:
-                t, v = _unpack_block(msg, label)
-            except ValueError as exc:
-                raise DataFormatError(where, None, f'message {count}: {exc}', topic=name) from None
-        bad = ~(np.isfinite(t) & np.isfinite(v))
-        if bad.any():
-            k = int(np.argmax(bad))
-            raise DataFormatError(where, None, f'message {count}, sample {k}: NaN/Inf '
-                                  f'(time {_fmt(t[k])}, {quantity} {_fmt(v[k])})', topic=name)
-        if msgtype == MULTIARRAY_TYPE and t.size:
-            steps = np.diff(t)
-            if (steps <= 0).any():
-                k = int(np.argmax(steps <= 0)) + 1
-                raise DataFormatError(where, None, f'message {count}, sample {k}: time '
-                                      f'{_fmt(t[k])} s is not after {_fmt(t[k - 1])} s (sample '
-                                      'times must be strictly increasing)', topic=name)
-            if prev_end is not None and t[0] <= prev_end:
-                raise DataFormatError(
-                    where,
-                    None,
-                    f'message {count} starts at {_fmt(t[0])} s, not '
-                    "after the previous message's last sample at "
-                    f'{_fmt(prev_end)} s (blocks overlap or are out of order)',
-                    topic=name,
-                )
-            prev_end = float(t[-1])
-        times.append(t)
-        values.append(v)
-    flush()
-    if count != info.msgcount and info.msgcount:
-        raise DataFormatError(where, None, f'the bag lists {info.msgcount} messages but only '
-                              f'{count} could be read (truncated bag?)', topic=name)
-    t = np.concatenate(times) if times else np.empty(0)
-    v = np.concatenate(values) if values else np.empty(0)
-    if msgtype == POINT_STAMPED_TYPE and t.size:
-        order = np.argsort(t, kind='stable')
-        t, v = t[order], v[order]
-        dup = np.diff(t) == 0
-        if dup.any():
-            k = int(np.argmax(dup))
-            raise DataFormatError(where, None, f'two samples with the same stamp {_fmt(t[k])} s',
-                                  topic=name)
-    return t, v
-
-
-def _align(where: str, name: str, tc: np.ndarray, td: np.ndarray,
-           vd: np.ndarray) -> tuple[np.ndarray, str]:
-    """Deflection at the current times ``tc``: exact match or linear interpolation."""
-    if td.size == 0:
-        raise DataFormatError(where, None, 'has no deflection samples', topic=name)
-    tol = 1e-9 + 4.0 * float(np.spacing(max(abs(tc).max(), abs(td).max())))
-    idx = np.clip(np.searchsorted(td, tc), 1, max(td.size - 1, 1))
-    lo = np.clip(idx - 1, 0, td.size - 1)
-    hi = np.clip(idx, 0, td.size - 1)
-    nearest = np.where(np.abs(td[lo] - tc) <= np.abs(td[hi] - tc), lo, hi)
-    if np.all(np.abs(td[nearest] - tc) <= tol):
-        return vd[nearest].copy(), 'exact'
-    if td.size < 2 or td[0] > tc[0] + tol or td[-1] < tc[-1] - tol:
-        raise DataFormatError(where, None, f'deflection covers {_fmt(td[0])}..{_fmt(td[-1])} s '
-                              f'but the current covers {_fmt(tc[0])}..{_fmt(tc[-1])} s: cannot '
-                              'align without extrapolating (trim the recording)', topic=name)
-    return np.interp(tc, td, vd), 'linear'
 
 
 def _yaml_line(text: str, keys: Sequence[str]) -> int | None:

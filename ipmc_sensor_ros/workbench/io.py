@@ -9,7 +9,8 @@ modules, re-exported here:
 * :mod:`.measurements`: :class:`TimeSeries`, :class:`FrequencyResponseData`,
   :class:`DataFormatError`;
 * :mod:`.formats`: ``ipmc-timeseries/1`` and ``ipmc-frf/1`` text files;
-* :mod:`.bags`: rosbag2 bags (sqlite3 or mcap);
+* :mod:`.bags`: rosbag2 bags (sqlite3 or mcap), their topics' messages in
+  :mod:`.bagtopics`;
 * :mod:`.labimport`: free-form lab exports (LabVIEW-style headers, units in
   column names) converted to ``ipmc-timeseries/1``;
 * :mod:`.textread`: the streaming reader under both (regular files only,
@@ -21,8 +22,9 @@ import re
 from pathlib import Path
 from typing import Iterable, Mapping, NamedTuple
 
-from .bags import (CURRENT_LABEL, DEFLECTION_LABEL, MULTIARRAY_TYPE, POINT_STAMPED_TYPE,
-                   _typestore, read_bag, write_bag)
+from .bags import read_bag, write_bag
+from .bagtopics import (CURRENT_LABEL, DEFLECTION_LABEL, MULTIARRAY_TYPE, POINT_STAMPED_TYPE,
+                        _typestore)
 from .formats import (FRF_COLUMNS, FRF_FORMAT, GEOMETRY_KEYS, KNOWN_KEYS, TIMESERIES_COLUMNS,
                       TIMESERIES_COLUMNS_NO_DEFLECTION, TIMESERIES_FORMAT, read_frf, read_text,
                       read_timeseries, write_frf, write_timeseries)
