@@ -52,7 +52,7 @@ from ..interface.blocks import (
 )
 from ..interface.cdr import OneSampleCodec
 from ..physics.parameters import Geometry, MaterialParameters, ParameterError
-from .formats import _fmt
+from .formatread import _fmt
 from .measurements import DataFormatError, PathLike, TimeSeries
 
 __all__ = ['CURRENT_LABEL', 'DEFLECTION_LABEL', 'MULTIARRAY_TYPE', 'POINT_STAMPED_TYPE',
