@@ -27,7 +27,7 @@ from ..interface.blocks import (
     unpack_columns,
 )
 from ..interface.cdr import OneSampleCodec
-from .formats import _fmt
+from .formatread import _fmt
 from .measurements import DataFormatError
 
 __all__ = ['CURRENT_LABEL', 'DEFLECTION_LABEL', 'MULTIARRAY_TYPE', 'POINT_STAMPED_TYPE']

@@ -51,7 +51,8 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 
 from ..physics.parameters import Geometry, MaterialParameters, ParameterError
-from .formats import KNOWN_KEYS, incomplete_notes, write_timeseries
+from .formatread import incomplete_notes
+from .formats import KNOWN_KEYS, write_timeseries
 from .measurements import DataFormatError, PathLike, TimeSeries
 from .textread import (MAX_BYTES, MAX_ROWS, TextSource, increasing_check, parse_number,
                        read_table)
