@@ -27,37 +27,29 @@ A lab file is free text, then one column-header line, then numeric rows::
   mV for a current measured as a transimpedance-amplifier voltage, which needs
   ``current_gain_a_per_v``.  A column without a unit is refused, never
   guessed.  The deflection column is optional (current-only records).
-* Geometry (free length L, width W, total thickness 2h) comes from
-  ``geometry`` (``"22mm,7mm,360um"``, a :class:`Geometry`, or a mapping in
-  metres) and/or a run-metadata file ``meta`` (JSON or YAML) with
-  ``length_mm``/``width_mm``/``thickness_um`` (any length unit suffix, or
-  values like ``"22 mm"``; optionally under ``geometry:``) and/or the file's
-  free-text header: a line such as ``Length: 22 mm``, ``thickness = 0.36 mm``
-  or ``Width [mm]: 7`` (English or German part names, :data:`HEADER_GEOMETRY_NAMES`;
-  ``:`` or ``=``; the unit after the value or in brackets; several parts on one line
-  separated by ``;`` or tabs).  When two sources give a value and they differ,
-  the import is refused naming both.
+* Geometry (free length L, width W, total thickness 2h) comes from the
+  ``geometry`` argument, a run-metadata file ``meta`` and/or header lines
+  such as ``Length: 22 mm``; two sources that differ are refused (see
+  :mod:`.labmeta`).
 """
 from __future__ import annotations
 
-import json
 import math
-import os
 import re
-import stat
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from ..physics.parameters import Geometry, MaterialParameters, ParameterError
+from ..physics.parameters import MaterialParameters, ParameterError
 from .formatread import incomplete_notes
 from .formats import KNOWN_KEYS, write_timeseries
+from .labmeta import _GEOMETRY_PARTS, _geometry, _header_geometry, _read_meta
 from .measurements import DataFormatError, PathLike, TimeSeries
 from .textread import (MAX_BYTES, MAX_ROWS, TextSource, increasing_check, parse_number,
                        read_table)
-from .units import (CURRENT_UNITS, LENGTH_UNITS, TIME_UNITS, VOLTAGE_UNITS, decimal_to_si,
-                    parse_length, split_unit, to_si, unit_factor)
+from .units import (CURRENT_UNITS, LENGTH_UNITS, TIME_UNITS, VOLTAGE_UNITS, split_unit, to_si,
+                    unit_factor)
 
 __all__ = ['import_lab_file', 'import_lab_files', 'parse_columns_spec', 'ROLE_NAMES']
 
@@ -68,7 +60,6 @@ ROLE_NAMES = {
     'current': ('current', 'i', 'strom'),
 }
 _ROLE_UNITS = {'time': TIME_UNITS, 'deflection': LENGTH_UNITS, 'current': CURRENT_UNITS}
-_GEOMETRY_PARTS = ('length', 'width', 'thickness')
 #: Encoding of a lab export that is not UTF-8: Windows' Western code page, in which LabVIEW and
 #: spreadsheet exports on European lab PCs write 'µA' or 'Länge'.  Said in the output file
 #: (``text_encoding``) and by ``ipmc-model import``.
@@ -213,151 +204,6 @@ def _factor(path, line: int, role: str, cell: str, unit: str | None,
         raise DataFormatError(path, line, f'column {cell!r} ({role}): unit {unit!r} is not a '
                               f"unit of {role}; units: {', '.join(_ROLE_UNITS[role])}")
     return factor
-
-
-#: Largest run-metadata file read, bytes.
-MAX_META_BYTES = 1 << 20
-
-
-def _read_meta(meta: PathLike) -> dict:
-    p = Path(meta)
-    try:
-        st = os.stat(p)
-        if not stat.S_ISREG(st.st_mode) or st.st_size > MAX_META_BYTES:
-            raise DataFormatError(meta, None, f'run metadata must be a regular file of at most '
-                                  f'{MAX_META_BYTES} bytes')
-        text = p.read_text(encoding='utf-8')
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DataFormatError(meta, None, f'cannot read run metadata: {exc}') from None
-    try:
-        if p.suffix.lower() == '.json':
-            data = json.loads(text)
-        else:
-            import yaml
-
-            data = yaml.safe_load(text)
-    except ValueError as exc:  # json.JSONDecodeError and yaml.YAMLError are ValueErrors or not
-        raise DataFormatError(meta, getattr(exc, 'lineno', None),
-                              f'run metadata is not valid JSON: {exc}') from None
-    except Exception as exc:  # yaml.YAMLError
-        mark = getattr(exc, 'problem_mark', None)
-        raise DataFormatError(meta, mark.line + 1 if mark else None,
-                              f'run metadata is not valid YAML: '
-                              f"{getattr(exc, 'problem', None) or exc}") from None
-    if not isinstance(data, dict):
-        raise DataFormatError(meta, None, 'run metadata must be a mapping (JSON object)')
-    return data
-
-
-def _meta_geometry(meta: PathLike, data: dict) -> dict[str, tuple[float, str]]:
-    """Map part -> (metres, 'key: value as written') from run metadata."""
-    source = data.get('geometry', data)
-    if not isinstance(source, dict):
-        raise DataFormatError(meta, None, "'geometry' in run metadata must be a mapping")
-    out: dict[str, tuple[float, str]] = {}
-    for key, value in source.items():
-        part, _, unit = str(key).partition('_')
-        if part not in _GEOMETRY_PARTS:
-            continue
-        try:
-            if unit:
-                factor = unit_factor(unit, LENGTH_UNITS)
-                if (
-                    factor is None
-                    or isinstance(value, bool)
-                    or not isinstance(value, (int, float))
-                ):
-                    raise ValueError(f'expected a number in {unit!r}, a length unit')
-                metres = decimal_to_si(value, factor)
-            elif isinstance(value, str):
-                metres = parse_length(value)
-            else:
-                raise ValueError("give the unit: length_mm: 22 or length: '22 mm'")
-        except ValueError as exc:
-            raise DataFormatError(meta, None, f'run metadata {key}: {value!r}: {exc}') from None
-        if part in out:
-            raise DataFormatError(meta, None, f'run metadata gives the {part} twice '
-                                  f'({out[part][1]} and {key}: {value})')
-        out[part] = (metres, f'{key}: {value}')
-    return out
-
-
-#: Names of the geometry parts in a free-text header (English and, like the column names,
-#: German: 'Länge: 22 mm').
-HEADER_GEOMETRY_NAMES = {'length': 'length', 'länge': 'length', 'laenge': 'length',
-                         'width': 'width', 'breite': 'width',
-                         'thickness': 'thickness', 'dicke': 'thickness', 'stärke': 'thickness'}
-#: A geometry line of a free-text header: part name, optional [unit], ':' or '=', value, unit.
-_HEADER_GEOMETRY = re.compile(
-    r'^\W*(' + '|'.join(HEADER_GEOMETRY_NAMES) + r')\s*(?:[\[(]\s*([^\])]+?)\s*[\])])?\s*[:=]\s*'
-    r'([-+]?\d+(?:[.,]\d+)?(?:[eE][-+]?\d+)?)\s*([A-Za-zµμ]*)\s*[;,]?\s*$', re.IGNORECASE)
-
-
-def _header_geometry(path, notes) -> dict[str, tuple[float, str]]:
-    """Map part -> (metres, 'file:line: text') from header lines such as ``Length: 22 mm``."""
-    out: dict[str, tuple[float, str]] = {}
-    for line, text in notes:
-        for piece in re.split(r'[;\t]', text) if ';' in text or '\t' in text else [text]:
-            m = _HEADER_GEOMETRY.match(piece.strip())
-            if not m:
-                continue
-            part, unit = HEADER_GEOMETRY_NAMES[m.group(1).lower()], m.group(2) or m.group(4)
-            where = f'{path}:{line}: {piece.strip()}'
-            try:
-                metres = parse_length(f'{m.group(3).replace(",", ".")} {unit}')
-            except ValueError as exc:
-                raise DataFormatError(path, line, f'header {part}: {exc}') from None
-            if part in out and not math.isclose(out[part][0], metres, rel_tol=1e-9):
-                raise DataFormatError(path, line, f'the header gives the {part} twice '
-                                      f'({out[part][1]} and {piece.strip()})')
-            out[part] = (metres, where)
-    return out
-
-
-def _flag_geometry(geometry) -> dict[str, tuple[float, str]]:
-    if isinstance(geometry, Geometry):
-        return {p: (getattr(geometry, f'{p}_m'), f"{p}_m={getattr(geometry, f'{p}_m')!r}")
-                for p in _GEOMETRY_PARTS}
-    if isinstance(geometry, Mapping):
-        return {p: (float(geometry[f'{p}_m']), f"{p}_m={geometry[f'{p}_m']!r}")
-                for p in _GEOMETRY_PARTS if f'{p}_m' in geometry}
-    parts = [s.strip() for s in str(geometry).split(',')]
-    if len(parts) != 3:
-        raise ValueError(f'geometry {geometry!r}: expected length,width,thickness with units, '
-                         'e.g. 22mm,7mm,360um')
-    return {p: (parse_length(v), v) for p, v in zip(_GEOMETRY_PARTS, parts)}
-
-
-def _geometry(path, geometry, meta, meta_data: dict, sample: str, notes) -> Geometry:
-    try:
-        flag = _flag_geometry(geometry) if geometry is not None else {}
-    except (ValueError, KeyError) as exc:
-        raise DataFormatError(path, None, f'geometry argument: {exc}') from None
-    sources = (('the geometry argument', flag),
-               (f'run metadata {meta}', _meta_geometry(meta, meta_data) if meta is not None
-                else {}),
-               ('the file header', _header_geometry(path, notes)))
-    values = {}
-    for part in _GEOMETRY_PARTS:
-        given = [(name, got[part]) for name, got in sources if part in got]
-        for name, (metres, text) in given[1:]:
-            first, (first_m, first_text) = given[0]
-            if not math.isclose(metres, first_m, rel_tol=1e-9):
-                raise DataFormatError(path, None, f'{part} conflict: {first} says {first_text} '
-                                      f'({first_m!r} m) but {name} says {text} ({metres!r} m); '
-                                      'fix one of them')
-        if given:
-            values[part] = given[0][1][0]
-    missing = [p for p in _GEOMETRY_PARTS if p not in values]
-    if missing:
-        raise DataFormatError(path, None, f"no {', '.join(missing)}: give the geometry "
-                              '(--geometry 22mm,7mm,360um, i.e. length,width,thickness), a run '
-                              'metadata file (--meta) with length_mm, width_mm, thickness_um, '
-                              "or header lines such as 'Length: 22 mm'")
-    try:
-        return Geometry(values['length'], values['width'], values['thickness'], name=sample)
-    except ParameterError as exc:
-        raise DataFormatError(path, None, f'geometry out of physical range: {exc}') from None
 
 
 def _one_line(text: Any) -> str:
