@@ -19,8 +19,9 @@ inactive                  built, no topics; parameter changes validated and appl
                           the plain node (two phases)
 activate                  creates the subscription, the (lifecycle) publishers, the timers
                           and /diagnostics
-deactivate                stops taking input, waits up to ``FLUSH_TIMEOUT_S`` for reliable
-                          subscribers to acknowledge the estimates already published,
+deactivate                stops taking input, publishes the samples the smoother still
+                          holds (``smoothed_lag_s``), waits up to ``FLUSH_TIMEOUT_S`` for
+                          reliable subscribers to acknowledge the estimates published,
                           publishes a last /diagnostics status "inactive" and destroys the
                           topics and timers; the stream core (counters, filter state) stays
 cleanup / error           destroy the topics and release the model and the filter
