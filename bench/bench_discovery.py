@@ -25,7 +25,7 @@ After the fit speed-up (one model per sample per evaluation, residual rows from 
 spectrum; one 16-record fit 14.6 -> 3.6 s, same chi2), 2026-11-23: a two-effect 16-record
 diagnosis 9-20 CPU s (worker pool included), three effects 17 CPU s; drying 163 CPU s
 (508 s wall at load 10-18), explained, 1.058x floor: the 20 s target for it is not met.
-Row matrix for long records and cubic interpolation of smooth H in log f (timefit), node
+Row matrix for long records and cubic interpolation of smooth H in log f (timepredict), node
 responses only between their neighbours (pipeline), 2026-11-23, load 4-5, nice 10:
 ``--drying-only`` prints cpu_seconds 19.0 for the diagnosis (wall 16.8 s); 22.6 CPU s for
 the whole process (``/usr/bin/time -v`` user+sys, data generation included); same verdict,

@@ -3,7 +3,7 @@
 Discovery test records made independently of the code under test.
 
 Nothing here imports the package's prediction code (``simulation``, ``lti``, ``physics.sensing``,
-``workbench.timefit``'s predictor): the transfer functions are written from the paper and the
+``workbench.timepredict``): the transfer functions are written from the paper and the
 textbooks, the current is the exact linear convolution of the deflection by FFT, and the
 record is cut from a longer run.  Only the model *under test* (the
 :class:`~ipmc_sensor_ros.physics.model.SensorModel` each record carries) and the paper's
@@ -33,7 +33,7 @@ import numpy as np
 
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_PARAMETERS, PAPER_SAMPLES
-from ipmc_sensor_ros.workbench.timefit import Record
+from ipmc_sensor_ros.workbench.timepredict import Record
 
 __all__ = ['Truth', 'h2_paper', 'chain_factor', 'crank_deflection', 'make_records',
            'SWEEP_HZ', 'DRIVE_HARMONIC_SWEEP_HZ']

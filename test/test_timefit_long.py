@@ -3,7 +3,7 @@
 Long records in the time-domain fit: the row-matrix path gives the per-bin path's results.
 
 The 30-minute drying record of ``bench/bench_discovery.py --drying-only`` is fitted through
-``timefit._row_matrix`` (issue 15 speed target); here a 400 s record (32,768 FFT bins, above
+``timepredict._row_matrix`` (issue 15 speed target); here a 400 s record (32,768 FFT bins, above
 ``ROW_MATRIX_ABOVE``) with a drifting diffusivity is fitted both ways.
 """
 import numpy as np
@@ -13,7 +13,8 @@ from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
 from ipmc_sensor_ros.simulation.sensor import predict_current
 from ipmc_sensor_ros.simulation.stimuli import CrankSlider
-from ipmc_sensor_ros.workbench.timefit import FitSpec, Record, fit_model, predict, prepare
+from ipmc_sensor_ros.workbench.timefit import FitSpec, fit_model
+from ipmc_sensor_ros.workbench.timepredict import Record, predict, prepare
 
 
 def _drifting_record():
@@ -65,7 +66,7 @@ def test_lightly_damped_mode_in_band_keeps_per_bin_path():
     more accurate one there (measured 6e-4 against 1.1e-3 of the signal RMS for the row
     matrix).  Bound 1e-3: a tenth of 1 % noise.
     """
-    from ipmc_sensor_ros.workbench.timefit import _smooth_on_grid, _transfer_on_grid
+    from ipmc_sensor_ros.workbench.timepredict import _smooth_on_grid, _transfer_on_grid
 
     rec, _ = _drifting_record()
     model = SensorModel.named(

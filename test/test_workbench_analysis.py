@@ -196,7 +196,7 @@ def test_fast_fit_prediction_matches_exact_prediction(effects):
     near a beam resonance).
     """
     from ipmc_sensor_ros.simulation.sensor import predict_current
-    from ipmc_sensor_ros.workbench.timefit import Record, predict, prepare
+    from ipmc_sensor_ros.workbench.timepredict import Record, predict, prepare
 
     model = SensorModel.named('h2', PAPER_SAMPLES['short'], extra_effects=effects)
     t = np.arange(6000) / FS
@@ -246,13 +246,13 @@ def test_aperiodic_record_has_no_fundamental_and_a_white_noise_floor():
                 'amplifier_bandwidth(corner_hz=20)', 'time_delay(delay_s=0.004)'])
 def test_row_matrix_prediction_matches_exact_prediction(effects):
     """
-    Long records predict their fit rows through the row matrix (timefit._row_matrix).
+    Long records predict their fit rows through the row matrix (timepredict._row_matrix).
 
     It must equal the exact FFT prediction to far below the noise: 1e-5 relative, the
     tolerance of the per-bin path above (measured 5e-9..5e-7 relative).
     """
     from ipmc_sensor_ros.simulation.sensor import predict_current
-    from ipmc_sensor_ros.workbench.timefit import Record, predict, prepare
+    from ipmc_sensor_ros.workbench.timepredict import Record, predict, prepare
 
     fs = 100.0
     model = SensorModel.named('h2', PAPER_SAMPLES['short'], extra_effects=effects)

@@ -33,7 +33,7 @@ def magnitude_flags(records: Sequence, model_for=None) -> list[str]:
     Return flags for records whose magnitudes are implausible.
 
     Records: objects with ``path``, ``time_s``, ``deflection_m``, ``current_a`` and
-    ``model``, :class:`~.timefit.Record`, or give ``model_for(record)``.
+    ``model``, :class:`~.timepredict.Record`, or give ``model_for(record)``.
     """
     from .freqresp import fundamental_response
 

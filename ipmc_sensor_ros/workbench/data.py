@@ -11,7 +11,7 @@ from ..physics.parameters import MaterialParameters
 from .freqfit import FitGroup
 from .freqresp import FrequencyPoint, fundamental_response
 from .measurements import FrequencyResponseData, TimeSeries, sample_label
-from .timefit import Record
+from .timepredict import Record
 
 __all__ = ['material_for', 'records_from', 'groups_from', 'frf_points']
 

@@ -19,7 +19,7 @@ from .discovery.priors import priors_from_headers
 from .discovery.ranking import SHAPES
 from .discovery.settings import DEFAULT_FREE_MATERIAL, Settings
 from .discovery.verdict import Candidate, Diagnosis, Step
-from .timefit import Record
+from .timepredict import Record
 
 __all__ = ['diagnose', 'Diagnosis', 'Candidate', 'Step', 'Settings', 'DEFAULT_FREE_MATERIAL',
            'priors_from_headers', 'SHAPES']

@@ -220,7 +220,7 @@ def diagnose_report(out_dir: Path, diag) -> Path:
     from types import SimpleNamespace
 
     from .compare import fit_percent
-    from .timefit import predict
+    from .timepredict import predict
 
     labels = ['baseline (' + diag.baseline.fit.models[0].describe() + ')'] + \
         [f'+ {c.effect}' for c in diag.candidates]

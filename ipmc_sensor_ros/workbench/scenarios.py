@@ -23,7 +23,7 @@ from ..physics.model import SensorModel
 from ..physics.parameters import PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, MaterialParameters
 from ..simulation.sensor import predict_current
 from ..simulation.stimuli import CrankSlider
-from .timefit import Record
+from .timepredict import Record
 
 __all__ = [
     'crank_slider_campaign',

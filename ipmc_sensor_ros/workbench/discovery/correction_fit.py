@@ -20,7 +20,7 @@ from dataclasses import replace
 import numpy as np
 
 from ...physics.effects import EFFECTS, register_effect
-from ..timefit import prepare
+from ..timepredict import prepare
 from .correction import ELEMENTS, PREFIX, correction_class, correction_name, structures
 from .fitting import evaluate, make_folds, with_models
 from .history import with_history

@@ -17,7 +17,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ..timefit import FitSpec, ModelFit, PreparedRecord, fit_model, predict
+from ..timefit import FitSpec, ModelFit, fit_model
+from ..timepredict import PreparedRecord, predict
 from .priors import PRIOR_FACTOR
 from .ranking import start_grid
 from .verdict import Candidate

@@ -26,10 +26,10 @@ from dataclasses import replace
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from ..timefit import prepare
+from ..timepredict import prepare
 from .drive import drive_of
 
-#: the prediction's return to zero after a record (:func:`~ipmc_sensor_ros.workbench.timefit.
+#: the prediction's return to zero after a record (:func:`~ipmc_sensor_ros.workbench.timepredict.
 #: prepare`'s ``pad_s``), s
 PAD_S = 1.0
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
-from ..timefit import predict
+from ..timepredict import predict
 from .drive import drive_of
 
 __all__ = ['offset_test', 'add_offset']

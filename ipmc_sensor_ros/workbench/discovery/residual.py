@@ -18,7 +18,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..timefit import FitSpec, predict
+from ..timefit import FitSpec
+from ..timepredict import predict
 from .drive import drive_of
 from .fitting import evaluate, make_folds
 from .history import history_samples, prepare_with_history

@@ -12,7 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..timefit import FitSpec, ModelFit, PreparedRecord
+from ..timefit import FitSpec, ModelFit
+from ..timepredict import PreparedRecord
 
 __all__ = ['Candidate', 'Step', 'Diagnosis']
 
