@@ -12,27 +12,9 @@ Here:
   each residual divided by its measured standard uncertainty;
 * many files and sample geometries are fitted jointly (geometric scalability);
 * the result carries 95 % confidence intervals, the correlation matrix and an
-  **identifiability report** from the SVD of the scaled Jacobian.
-
-Identifiability
----------------
-Let J be the Jacobian of the weighted residuals with respect to
-``theta = ln(parameters)``, ``J = U S V^T``.  The covariance of theta is
-``s^2 V S^-2 V^T`` (s^2 = reduced chi-square, so the intervals widen when the
-model does not fit within the stated uncertainty), so the combination
-``v_k . theta`` -- the power-law product ``prod p_j^{v_kj}`` -- has standard
-deviation ``s / S_k``.  The report lists the combinations from the SVD of the *unweighted*
-sensitivity matrix (derivatives of ln|H| and phase), each with its
-sensitivity (RMS response change per e-fold change) and its sd from the
-covariance.  A combination is "determined" only if its sd is at most
-``sd_threshold`` (0.3, about +/-35 % at 1 sigma) **and** its sensitivity is at
-least ``min_sensitivity`` (1 %): with very clean data the statistics alone
-would "determine" directions that act only through sub-percent terms, far
-below any model's accuracy.  With the paper's model, |beta h| >> 1 makes
-``H ~ (h sqrt(d)/alpha0) / sqrt(s + K) - (d/alpha0) / (s + K)``: only
-``sqrt(d)/alpha0`` and ``K ~ d C- / kappa_e`` are well determined (the second
-term is ~1/(beta h) ~ 0.4 % of the first), so a four-parameter fit of
-d, C-, kappa_e, alpha0 is ill-posed and the report says so.
+  **identifiability report** from the SVD of the scaled Jacobian
+  (:mod:`.identifiability` derives them and explains when a combination of
+  parameters counts as determined).
 """
 from __future__ import annotations
 
@@ -48,6 +30,8 @@ from ..physics.effects import EFFECTS, get_effect
 from ..physics.model import EffectSpec, SensorModel, parse_effects
 from ..physics.parameters import PAPER_PARAMETERS, Geometry, MaterialParameters, ParameterError
 from .freqresp import FrequencyPoint
+from .identifiability import (confidence_intervals, covariance, named_combinations,
+                              not_identifiable, svd_combinations, SYMBOLS)
 
 __all__ = ['FitGroup', 'FitResult', 'fit_parameters', 'FITTABLE', 'SYMBOLS', 'model_for_group',
            'resolve_effect_parameter', 'effect_parameter_names', 'ADEQUACY_P']
@@ -59,26 +43,6 @@ ADEQUACY_P = 1e-3
 FITTABLE = ('temperature_k', 'youngs_modulus_pa', 'surface_resistance_ohm', 'diffusivity_m2_per_s',
             'anion_concentration_mol_per_m3', 'permittivity_f_per_m',
             'charge_stress_coupling_j_per_c')
-#: Physical combinations worth reporting (exponents of ln-parameters).  Y and
-#: alpha0 enter H only as Y/alpha0 (eq. 31); sqrt(d)/alpha0 and K set H1 when
-#: |beta h| >> 1 (eq. 51); kappa_e r0 sets the surface-resistance line (eq. 42).
-NAMED_COMBINATIONS = {
-    'sqrt(d)/alpha0': {'diffusivity_m2_per_s': 0.5, 'charge_stress_coupling_j_per_c': -1.0},
-    'K = F^2 d C-/(kappa_e R T) [1/s]': {
-        'diffusivity_m2_per_s': 1.0,
-        'anion_concentration_mol_per_m3': 1.0,
-        'permittivity_f_per_m': -1.0,
-        'temperature_k': -1.0,
-    },
-    'Y/alpha0': {'youngs_modulus_pa': 1.0, 'charge_stress_coupling_j_per_c': -1.0},
-    'kappa_e r0': {'permittivity_f_per_m': 1.0, 'surface_resistance_ohm': 1.0},
-}
-
-#: Short physics symbols for reports.
-SYMBOLS = {'temperature_k': 'T', 'youngs_modulus_pa': 'Y', 'surface_resistance_ohm': 'r0',
-           'diffusivity_m2_per_s': 'd', 'anion_concentration_mol_per_m3': 'C-',
-           'permittivity_f_per_m': 'kappa_e', 'charge_stress_coupling_j_per_c': 'alpha0',
-           'one_minus_anion_volume_fraction': '(1-C-dV)'}
 
 
 @dataclass
@@ -245,47 +209,56 @@ def _wrap(angle):
     return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi
 
 
-def _combination_text(vector: np.ndarray, free: Sequence[str]) -> str:
-    v = vector / np.max(np.abs(vector))
-    parts = []
-    for coef, name in zip(v, free):
-        if abs(coef) < 0.05:
-            continue
-        sym = SYMBOLS.get(name, name)
-        parts.append(sym if abs(coef - 1) < 0.025 else f'{sym}^{coef:.2f}')
-    return ' * '.join(parts) if parts else '(none)'
+class _ParameterMap:
+    """The fit vector theta: each entry's name and scale, and the model it stands for."""
+
+    def __init__(self, free: tuple[str, ...], keys: list, is_log: np.ndarray,
+                 material: MaterialParameters, effects: tuple):
+        self.free, self.keys, self.is_log = free, keys, is_log
+        self.material, self.effects = material, effects
+        self.mat_free = tuple(k for k in keys if isinstance(k, str))
+
+    def values_at(self, theta) -> dict[str, float]:
+        """Parameter values (exp of log-scale entries) by qualified name."""
+        return {n: float(np.exp(v)) if lg else float(v)
+                for n, v, lg in zip(self.free, theta, self.is_log)}
+
+    def material_at(self, theta) -> MaterialParameters:
+        """Material parameters with the free ones set from ``theta``."""
+        vals = self.values_at(theta)
+        return self.material.replace(**{n: vals[n] for n in self.mat_free})
+
+    def effects_at(self, theta) -> tuple:
+        """Effect specifications with the free effect parameters set from ``theta``."""
+        vals = self.values_at(theta)
+        out = []
+        for e in self.effects:
+            d = e.as_dict()
+            d.update(
+                {
+                    k[1]: vals[f'{k[0]}.{k[1]}']
+                    for k in self.keys
+                    if not isinstance(k, str) and k[0] == e.name
+                }
+            )
+            out.append(EffectSpec(e.name, tuple(sorted(d.items()))))
+        return tuple(out)
 
 
-def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
-                   material: MaterialParameters = PAPER_PARAMETERS,
-                   effects: tuple = ('surface_resistance',), *,
-                   bounds_factor: float = 1e3, sd_floor: float = 1e-6,
-                   sd_threshold: float = 0.3, min_sensitivity: float = 0.01) -> FitResult:
-    """
-    Fit ``free`` parameters to the frequency points of ``groups`` (see module doc).
-
-    ``material`` supplies the initial values and the fixed parameters;
-    ``bounds_factor`` bounds each free parameter to [p0/b, p0*b].
-    ``sd_floor`` floors the per-point uncertainties (ln units and radians).
-    A combination counts as determined when its sd(ln) <= ``sd_threshold`` and
-    an e-fold change of it moves the modelled response by at least
-    ``min_sensitivity`` (RMS of ln-magnitude and phase, i.e. 1 % by default):
-    a combination the response hardly depends on is only "determined" through
-    effects smaller than any model's accuracy, so we do not trust it.
-    """
-    free = tuple(free)
-    if not free:
-        raise ParameterError('no parameter to fit: give at least one of ' + ', '.join(FITTABLE))
-    effects = parse_effects(effects)
+def _resolve_free(free: tuple[str, ...], effects: tuple) -> tuple[list, tuple[str, ...]]:
+    """Keys (material name or (effect, parameter)) and qualified names of ``free``."""
     keys: list = []                     # material name, or (effect, parameter)
     for name in free:
         keys.append(name if name in FITTABLE else resolve_effect_parameter(name, effects))
     free = tuple(k if isinstance(k, str) else f'{k[0]}.{k[1]}' for k in keys)
     if len(set(free)) != len(free):
         raise ParameterError(f'parameter listed twice in {list(free)}')
-    if not groups or not any(g.points for g in groups):
-        raise ParameterError('no frequency points to fit')
-    mat_free = tuple(k for k in keys if isinstance(k, str))
+    return keys, free
+
+
+def _start_and_bounds(keys: list, material: MaterialParameters, effects: tuple,
+                      bounds_factor: float):
+    """Start vector theta0, its bounds and which entries are logarithms."""
     is_log = []
     theta0, lower, upper = [], [], []
     for k in keys:
@@ -306,8 +279,11 @@ def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
         theta0.append(v0)
         lower.append(lo)
         upper.append(hi)
-    theta0, lower, upper = np.array(theta0), np.array(lower), np.array(upper)
-    is_log = np.array(is_log)
+    return np.array(theta0), np.array(lower), np.array(upper), np.array(is_log)
+
+
+def _weighted_data(groups: Sequence[FitGroup], sd_floor: float):
+    """Per group (group, f, ln|H|, phase, sd_ln, sd_phase), and all sds in residual order."""
     data = []
     for g in groups:
         f = np.array([p.frequency_hz for p in g.points])
@@ -316,119 +292,102 @@ def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
         sdp = np.maximum([p.sd_phase_rad for p in g.points], sd_floor)
         data.append((g, f, np.log(np.abs(h)), np.angle(h), sdm, sdp))
     sd_rows = np.concatenate([np.concatenate([d[4], d[5]]) for d in data])
+    return data, sd_rows
 
-    def values_at(theta):
-        return {n: float(np.exp(v)) if lg else float(v) for n, v, lg in zip(free, theta, is_log)}
 
-    def material_at(theta):
-        vals = values_at(theta)
-        return material.replace(**{n: vals[n] for n in mat_free})
-
-    def effects_at(theta):
-        vals = values_at(theta)
-        out = []
-        for e in effects:
-            d = e.as_dict()
-            d.update(
-                {
-                    k[1]: vals[f'{k[0]}.{k[1]}']
-                    for k in keys
-                    if not isinstance(k, str) and k[0] == e.name
-                }
-            )
-            out.append(EffectSpec(e.name, tuple(sorted(d.items()))))
-        return tuple(out)
-
+def _residual_function(pmap: _ParameterMap, data: list):
+    """Weighted residuals of ln|H| and phase as a function of theta (1e6 where undefined)."""
     def residual(theta):
         try:
-            mat = material_at(theta)
-            effs = effects_at(theta)
+            mat = pmap.material_at(theta)
+            effs = pmap.effects_at(theta)
         except ParameterError:
             return np.full(2 * sum(d[1].size for d in data), 1e6)
         out = []
         for g, f, lm, ph, sdm, sdp in data:
-            hm = model_for_group(mat, g, free, effs).frequency_response(f)
+            hm = model_for_group(mat, g, pmap.free, effs).frequency_response(f)
             out.append((np.log(np.abs(hm)) - lm) / sdm)
             out.append(_wrap(np.angle(hm) - ph) / sdp)
         r = np.concatenate(out)
         return np.where(np.isfinite(r), r, 1e6)
+    return residual
 
+
+def _optimise(residual, theta0: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+              is_log: np.ndarray):
+    """Bounded trust-region-reflective least squares from theta0 moved just inside the bounds."""
     theta0 = np.clip(theta0, lower + 1e-9 * (upper - lower), upper - 1e-9 * (upper - lower))
-    sol = least_squares(
+    return least_squares(
         residual,
         theta0,
         bounds=(lower, upper),
         method='trf',
         x_scale=np.where(is_log, 1.0, np.maximum(np.abs(upper - lower) * 1e-3, 1e-30)),
         diff_step=1e-6,
-        max_nfev=200 * (len(free) + 1),
+        max_nfev=200 * (len(theta0) + 1),
     )
-    theta = sol.x
-    jac = sol.jac
-    r = sol.fun
-    n_res = r.size
-    dof = max(n_res - len(free), 1)
-    chi2 = float(r @ r)
-    s2 = max(chi2 / dof, 1.0) if dof > 0 else 1.0
-    cov = s2 * np.linalg.pinv(jac.T @ jac, rcond=1e-15)
-    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
-    with np.errstate(invalid='ignore', divide='ignore'):
-        corr = cov / np.outer(sd, sd)
-    corr = np.nan_to_num(corr)
-    # Structural sensitivity: derivative of the model's ln-response itself (not
-    # divided by the uncertainty), RMS over all points, per e-fold change.
-    sens_jac = jac * sd_rows[:, None]
-    _, sv, vt = np.linalg.svd(sens_jac / np.sqrt(sens_jac.shape[0]), full_matrices=False)
-    combos = []
-    for k in range(len(sv)):
-        sd_k = float(np.sqrt(max(vt[k] @ cov @ vt[k], 0.0)))
-        combos.append({'exponents': {n: float(c) for n, c in zip(free, vt[k])},
-                       'expression': _combination_text(vt[k], free), 'sd_log': sd_k,
-                       'sensitivity': float(sv[k]),
-                       'determined': bool(sd_k <= sd_threshold and sv[k] >= min_sensitivity)})
-    # A parameter is not identifiable alone if its marginal sd is large or it takes
-    # part in a combination the data do not determine.
-    not_ident = []
-    for j, (n, s_j) in enumerate(zip(free, sd)):
-        in_null = any(not c['determined'] and abs(vt[k, j]) > 0.1 * np.max(np.abs(vt[k]))
-                      for k, c in enumerate(combos))
-        if s_j > sd_threshold or in_null:
-            not_ident.append(n)
-    named = []
-    for cname, expo in NAMED_COMBINATIONS.items():
-        vec = np.array([expo.get(n, 0.0) for n in free])
-        if np.count_nonzero(vec) < 2:
-            continue
-        fixed = [SYMBOLS[n] for n in expo if n not in free]
-        sd_c = float(np.sqrt(max(vec @ cov @ vec, 0.0)))
-        fitted = material_at(theta)
-        value = fitted.k_rate_per_s if cname.startswith('K') else \
-            float(np.exp(sum(expo[n] * np.log(getattr(fitted, n)) for n in expo)))
-        named.append({'name': cname + (f" (with {', '.join(fixed)} fixed)" if fixed else ''),
-                      'exponents': {n: expo[n] for n in expo if n in free}, 'value': value,
-                      'sd_log': sd_c, 'determined': bool(sd_c <= sd_threshold)})
-    at_bound = [n for n, v, lo, hi in zip(free, theta, lower, upper)
-                if v - lo < 1e-3 * max(1.0, hi - lo) or hi - v < 1e-3 * max(1.0, hi - lo)]
-    est = values_at(theta)
-    with np.errstate(over='ignore'):
-        ci = {n: ((float(np.exp(v - 1.96 * s)), float(np.exp(v + 1.96 * s))) if lg
-                  else (float(v - 1.96 * s), float(v + 1.96 * s)))
-              for n, v, s, lg in zip(free, theta, sd, is_log)}
+
+
+def _at_bound(free: Sequence[str], theta, lower, upper) -> list[str]:
+    """Names of the parameters within 0.1 % of the bound span (at least 1e-3) of a bound."""
+    return [n for n, v, lo, hi in zip(free, theta, lower, upper)
+            if v - lo < 1e-3 * max(1.0, hi - lo) or hi - v < 1e-3 * max(1.0, hi - lo)]
+
+
+def _result(sol, pmap: _ParameterMap, sd_rows: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+            sd_threshold: float, min_sensitivity: float) -> FitResult:
+    """Estimates, intervals, correlation and identifiability at the optimum ``sol``."""
+    theta, free = sol.x, pmap.free
+    chi2, dof, cov, sd, corr = covariance(sol.jac, sol.fun, len(free))
+    combos, vt = svd_combinations(sol.jac, sd_rows, cov, free, sd_threshold, min_sensitivity)
+    fitted = pmap.material_at(theta)
     return FitResult(
-        material=material_at(theta),
-        effects=effects_at(theta),
+        material=fitted,
+        effects=pmap.effects_at(theta),
         free=free,
-        estimates=est,
-        ci95=ci,
+        estimates=pmap.values_at(theta),
+        ci95=confidence_intervals(free, theta, sd, pmap.is_log),
         sd_log={n: float(s) for n, s in zip(free, sd)},
         correlation=corr,
         chi2=chi2,
         dof=dof,
         identifiability=combos,
-        named_combinations=named,
-        not_identifiable=not_ident,
+        named_combinations=named_combinations(cov, free, fitted, sd_threshold),
+        not_identifiable=not_identifiable(free, sd, vt, combos, sd_threshold),
         success=bool(sol.success),
         message=str(sol.message),
-        at_bound=at_bound,
-        residuals=r,
+        at_bound=_at_bound(free, theta, lower, upper),
+        residuals=sol.fun,
     )
+
+
+def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
+                   material: MaterialParameters = PAPER_PARAMETERS,
+                   effects: tuple = ('surface_resistance',), *,
+                   bounds_factor: float = 1e3, sd_floor: float = 1e-6,
+                   sd_threshold: float = 0.3, min_sensitivity: float = 0.01) -> FitResult:
+    """
+    Fit ``free`` parameters to the frequency points of ``groups`` (see module doc).
+
+    ``material`` supplies the initial values and the fixed parameters;
+    ``bounds_factor`` bounds each free parameter to [p0/b, p0*b].
+    ``sd_floor`` floors the per-point uncertainties (ln units and radians).
+    A combination counts as determined when its sd(ln) <= ``sd_threshold`` and
+    an e-fold change of it moves the modelled response by at least
+    ``min_sensitivity`` (RMS of ln-magnitude and phase, i.e. 1 % by default):
+    a combination the response hardly depends on is only "determined" through
+    effects smaller than any model's accuracy, so we do not trust it
+    (see :mod:`.identifiability`).
+    """
+    free = tuple(free)
+    if not free:
+        raise ParameterError('no parameter to fit: give at least one of ' + ', '.join(FITTABLE))
+    effects = parse_effects(effects)
+    keys, free = _resolve_free(free, effects)
+    if not groups or not any(g.points for g in groups):
+        raise ParameterError('no frequency points to fit')
+    theta0, lower, upper, is_log = _start_and_bounds(keys, material, effects, bounds_factor)
+    pmap = _ParameterMap(free, keys, is_log, material, effects)
+    data, sd_rows = _weighted_data(groups, sd_floor)
+    sol = _optimise(_residual_function(pmap, data), theta0, lower, upper, is_log)
+    return _result(sol, pmap, sd_rows, lower, upper, sd_threshold, min_sensitivity)
