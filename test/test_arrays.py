@@ -21,6 +21,7 @@ import pytest
 from ipmc_sensor_ros.errors import ParameterError
 from ipmc_sensor_ros.estimation.array import ArrayStream
 from ipmc_sensor_ros.estimation.stream import StreamEstimator
+from ipmc_sensor_ros.interface import builders as B
 from ipmc_sensor_ros.interface import specs as C
 from ipmc_sensor_ros.interface.blocks import (current_columns, deflection_columns,
                                               estimate_columns, unpack_columns)
@@ -54,9 +55,9 @@ def test_array_equals_single_channel_runs():
     times[1700:] += 0.05              # a bridged gap (50 ms < max_gap_s)
     times[2500:] += 1.0               # a gap beyond max_gap_s: a reset
     table = _currents(n, channels)
-    ests = C.build_channel_estimators(_values(channels=channels))
+    ests = B.build_channel_estimators(_values(channels=channels))
     array = ArrayStream(ests)
-    singles = [StreamEstimator(C.build_estimator(_values(), ests[0].reduced))
+    singles = [StreamEstimator(B.build_estimator(_values(), ests[0].reduced))
                for _ in range(channels)]
     cuts = [0, 1, 7, 250, 251, 900, 1700, 2222, 2500, 2999, n]   # one-sample blocks included
     for a, b in zip(cuts[:-1], cuts[1:]):
@@ -82,7 +83,7 @@ def test_array_equals_single_channel_runs():
 
 def test_bad_value_in_one_channel_is_accounted_there_only():
     channels = 3
-    ests = C.build_channel_estimators(_values(channels=channels))
+    ests = B.build_channel_estimators(_values(channels=channels))
     array = ArrayStream(ests)
     t = np.arange(150) / FS
     table = _currents(150, channels)
@@ -102,13 +103,13 @@ def test_bad_value_in_one_channel_is_accounted_there_only():
     assert array.totals()['samples_in'] == 3 * 150
     assert array.check_invariant()
     # the other channels ran on as if channel 1 did not exist
-    single = StreamEstimator(C.build_estimator(_values(), ests[0].reduced))
+    single = StreamEstimator(B.build_estimator(_values(), ests[0].reduced))
     single.feed(t[:100], table[:100, 2])
     np.testing.assert_array_equal(w[:, 2], single.feed(t[100:], table[100:, 2])[1])
 
 
 def test_bad_stamp_refuses_that_sample_in_every_channel():
-    array = ArrayStream(C.build_channel_estimators(_values(channels=2)))
+    array = ArrayStream(B.build_channel_estimators(_values(channels=2)))
     t = np.arange(20) / FS
     t[5] = t[4]                       # a duplicated stamp
     t_out, w, _, has = array.feed(t, _currents(20, 2))
@@ -118,15 +119,15 @@ def test_bad_stamp_refuses_that_sample_in_every_channel():
 
 
 def test_model_files_per_channel(tmp_path):
-    base = C.build_model(_values())
+    base = B.build_model(_values())
     soft = base.with_material(dataclasses.replace(
         base.material, youngs_modulus_pa=0.5 * base.material.youngs_modulus_pa))
     path = tmp_path / 'soft.yaml'
     save_model(path, soft)
     v = _values(channels=3, model_files=['', str(path), ''])
-    ests = C.build_channel_estimators(v)
-    ref_soft = C.build_estimator(_values(model_file=str(path)))
-    ref_node = C.build_estimator(_values(), ests[0].reduced)
+    ests = B.build_channel_estimators(v)
+    ref_soft = B.build_estimator(_values(model_file=str(path)))
+    ref_node = B.build_estimator(_values(), ests[0].reduced)
     t = np.arange(500) / FS
     i = _currents(500, 1)[:, 0]
     outs = [e.process(t, i)[1] for e in ests]
@@ -135,9 +136,9 @@ def test_model_files_per_channel(tmp_path):
     # a softer beam (E halved) bends further for the same charge: the channels must differ
     assert np.max(np.abs(outs[1] - outs[0])) > 0.1 * np.max(np.abs(outs[0]))
     with pytest.raises(ParameterError, match="'model_files' has 2 entries for channels = 3"):
-        C.build_channel_estimators(_values(channels=3, model_files=['', '']))
+        B.build_channel_estimators(_values(channels=3, model_files=['', '']))
     with pytest.raises(ParameterError, match="'model_files' entry 1"):
-        C.build_channel_estimators(_values(channels=2, model_files=['', str(tmp_path / 'no')]))
+        B.build_channel_estimators(_values(channels=2, model_files=['', str(tmp_path / 'no')]))
 
 
 def test_column_labels():
@@ -200,7 +201,7 @@ def test_node_array_blocks_match_the_core(array_node):
     a.send(t[1:2], table[1:2])
     a.d.send(pack_block(t[2:4], table[2:4, 0]))          # 'time_s,current_A': wrong layout
     assert len(a.blocks) == 8
-    ref = ArrayStream([C.build_estimator(_values(), a.node.deflection_estimator.reduced)
+    ref = ArrayStream([B.build_estimator(_values(), a.node.deflection_estimator.reduced)
                        for _ in range(channels)])
     for k, (times, out) in zip(range(0, n, 200), a.blocks):
         r_t, r_w, r_std, r_has = ref.feed(t[k:k + 200], table[k:k + 200])

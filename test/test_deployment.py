@@ -279,15 +279,15 @@ def test_two_runs_with_the_same_out_never_lose_rows_silently(tmp_path, capsys):
 
 
 def test_the_estimator_is_built_once_for_a_directory_of_one_model(tmp_path, monkeypatch):
-    from ipmc_sensor_ros.interface import specs
+    from ipmc_sensor_ros.interface import builders
 
     src = tmp_path / 'in'
     src.mkdir()
     for k in range(5):
         _record(src / f'r{k}.csv', rows=100, seed=k)
     built = []
-    real = specs.build_estimator
-    monkeypatch.setattr(specs, 'build_estimator', lambda *a, **kw: built.append(1) or
+    real = builders.build_estimator
+    monkeypatch.setattr(builders, 'build_estimator', lambda *a, **kw: built.append(1) or
                         real(*a, **kw))
     assert _estimate(src, '--out', tmp_path / 'o') == 0
     assert len(built) == 1

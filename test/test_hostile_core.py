@@ -85,6 +85,7 @@ def test_hydration_drift_with_offset_tracker_gives_no_nan():
 
 # -- defect 2: every numeric parameter has a range; failures are one line ----------------
 
+from ipmc_sensor_ros.interface import builders as B                   # noqa: E402
 from ipmc_sensor_ros.interface import specs as C                      # noqa: E402
 from ipmc_sensor_ros.physics import effects as E                      # noqa: E402
 from ipmc_sensor_ros.physics.parameters import ParameterError, read_yaml   # noqa: E402
@@ -98,7 +99,7 @@ def test_extreme_material_values_are_refused_naming_the_parameter(name, value):
     values = C.defaults(C.ESTIMATOR_SPECS)
     values[name] = value
     with pytest.raises(ValueError, match=name):
-        C.build_estimator(values)
+        B.build_estimator(values)
 
 
 def test_every_numeric_spec_has_a_range():
@@ -156,10 +157,10 @@ def test_plugin_is_executed_once_and_cannot_replace_a_builtin(tmp_path):
         "class Counted(Effect):\n    name = 'counted_effect_t'\n")
     try:
         values = {**C.defaults(C.ESTIMATOR_SPECS), 'plugins': [str(plugin)]}
-        C.build_model(values)
+        B.build_model(values)
         plugin.write_text("raise RuntimeError('swapped file must not run')\n")
-        C.build_model(values)
-        C.build_model({**values, 'frame_id': 'other'})
+        B.build_model(values)
+        B.build_model({**values, 'frame_id': 'other'})
         assert counter.read_text() == 'x'
         digest, names = E.loaded_plugins()[str(plugin.resolve())]
         assert len(digest) == 64 and names == ('counted_effect_t',)
@@ -210,16 +211,16 @@ def test_utf16_params_file_is_read_and_errors_name_the_file(tmp_path):
 def test_duplicated_effect_parameter_and_unicode_digits_are_refused():
     values = C.defaults(C.ESTIMATOR_SPECS)
     with pytest.raises(ValueError, match='twice'):
-        C.build_model({**values, 'effects': ['time_delay(delay_s=0.001, delay_s=0.002)']})
+        B.build_model({**values, 'effects': ['time_delay(delay_s=0.001, delay_s=0.002)']})
     with pytest.raises(ValueError, match='delay_s'):
-        C.build_model({**values, 'effects': ['time_delay(delay_s=\u0660.\u0660\u0660\u0662)']})
+        B.build_model({**values, 'effects': ['time_delay(delay_s=\u0660.\u0660\u0660\u0662)']})
 
 
 def test_offset_corner_above_nyquist_is_refused_like_the_leak_corner():
     values = {**C.defaults(C.ESTIMATOR_SPECS), 'sample_rate_hz': 100.0, 'offset_corner_hz': 60.0,
               'estimator': 'leaky'}
     with pytest.raises(ValueError, match='offset_corner_hz.*Nyquist'):
-        C.build_estimator(values)
+        B.build_estimator(values)
 
 
 def test_estimate_to_bag_with_huge_time_origin_is_one_line_and_leaves_no_bag(tmp_path, capsys):

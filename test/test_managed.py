@@ -32,6 +32,7 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray
 
 from conftest import TEST_DOMAIN, DirectNode
+from ipmc_sensor_ros.interface import builders as B
 from ipmc_sensor_ros.interface import specs as C
 from ipmc_sensor_ros.interface.blocks import current_columns, estimate_columns, unpack_columns
 from ipmc_sensor_ros.nodes import params as P
@@ -545,7 +546,7 @@ def test_managed_sensor_array_equals_the_plain_node(managed_estimator, tmp_path,
                                                     per_channel_models):
     overrides = {'channels': channels}
     if per_channel_models:      # channel 1 and 3: a softer beam, from a model file
-        base = C.build_model(C.defaults(C.ESTIMATOR_SPECS))
+        base = B.build_model(C.defaults(C.ESTIMATOR_SPECS))
         soft = base.with_material(dataclasses.replace(
             base.material, youngs_modulus_pa=0.5 * base.material.youngs_modulus_pa))
         save_model(tmp_path / 'soft.yaml', soft)

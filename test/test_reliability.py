@@ -19,6 +19,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
+from ipmc_sensor_ros.interface import builders
 from ipmc_sensor_ros.interface import specs as config
 from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
 from ipmc_sensor_ros.estimation.inverse import InverseEstimator, leak_tradeoff
@@ -259,7 +260,7 @@ def test_bad_params_file_offline_names_key_and_file(tmp_path, body, needle):
 
 def test_shipped_config_files_load():
     values = config.load_params_file(ROOT / 'config' / 'estimator.yaml')
-    assert values['sample_rate_hz'] == 1000.0 and config.build_estimator(values) is not None
+    assert values['sample_rate_hz'] == 1000.0 and builders.build_estimator(values) is not None
 
 
 # ---------------------------------------------------------------------------

@@ -38,6 +38,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, String
 
 from ipmc_sensor_ros.estimation.stream import StreamEstimator
+from ipmc_sensor_ros.interface import builders as B
 from ipmc_sensor_ros.interface import specs as C
 from ipmc_sensor_ros.nodes.messages import ESTIMATE_COLUMNS
 
@@ -322,7 +323,7 @@ def _check(run):
     assert np.allclose(t[k_seen], times, rtol=0, atol=1e-9)
     values = {s.name: s.default for s in C.ESTIMATOR_SPECS}
     values['effects'], values['plugins'] = [], []
-    ref = StreamEstimator(C.build_estimator(values))
+    ref = StreamEstimator(B.build_estimator(values))
     out = ref.feed(t[k_seen], i[k_seen])
     assert out is not None and out[1].size == times.size
     ref_w = out[1]

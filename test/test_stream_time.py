@@ -17,6 +17,7 @@ from conftest import DirectNode
 from ipmc_sensor_ros.estimation.stream import (COUNTER_NAMES, RATE_FOLLOW_FRACTION,
                                                StreamEstimator)
 from ipmc_sensor_ros.estimation.timebase import RELOCK_MIN_SAMPLES, Timebase, grid_slot
+from ipmc_sensor_ros.interface import builders as B
 from ipmc_sensor_ros.interface import specs as C
 from ipmc_sensor_ros.nodes.messages import pack_block
 from ipmc_sensor_ros.physics.model import SensorModel
@@ -106,7 +107,7 @@ def _reference_amplitude(rate_hz, currents):
     """
     values = C.defaults(C.ESTIMATOR_SPECS)
     values['sample_rate_hz'] = float(rate_hz)
-    stream = StreamEstimator(C.build_estimator(values))
+    stream = StreamEstimator(B.build_estimator(values))
     stamps = T0 + np.arange(len(currents)) / rate_hz
     t, w = stream.feed(stamps, np.asarray(currents))
     return _amplitude(t, w)
@@ -378,8 +379,8 @@ def test_estimate_record_is_the_live_stream():
     values = C.defaults(C.ESTIMATOR_SPECS)
     values['estimator'] = 'leaky'
     from ipmc_sensor_ros.estimation.records import estimate_record
-    t_off, w_off, off = estimate_record(C.build_estimator(values), stamps, i, block_samples=300)
-    live = StreamEstimator(C.build_estimator(values))
+    t_off, w_off, off = estimate_record(B.build_estimator(values), stamps, i, block_samples=300)
+    live = StreamEstimator(B.build_estimator(values))
     res = [live.feed_one(t, x) for t, x in zip(stamps.tolist(), i.tolist())]
     kept = np.array([r is not None for r in res])
     assert np.array_equal(kept, off.kept) and kept.sum() == 3998

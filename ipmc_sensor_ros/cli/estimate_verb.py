@@ -195,14 +195,14 @@ class EstimatorCache:
         self.builds = 0        #: estimators built (not copies)
 
     def get(self, values: dict):
-        """Return a fresh estimator of ``values`` (``interface.specs.build_estimator``)."""
+        """Return a fresh estimator of ``values`` (``interface.builders.build_estimator``)."""
         import copy
 
-        from ..interface import specs as config
+        from ..interface import builders
 
         key = repr(sorted(values.items()))
         if key not in self._built:
-            self._built[key] = config.build_estimator(values)
+            self._built[key] = builders.build_estimator(values)
             self.builds += 1
         return copy.deepcopy(self._built[key])
 

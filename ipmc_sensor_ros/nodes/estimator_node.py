@@ -39,6 +39,7 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64MultiArray, String
 
+from ..interface import builders as B
 from ..interface import specs as C
 from ..estimation.deflection import DeflectionEstimator
 from ..estimation.core import EstimatorCore
@@ -103,9 +104,9 @@ class EstimatorNode(LiveParameters, ArrayPath, Node):
             if self._channels > 1 and self._values['smoothed_lag_s']:
                 raise P.ParameterError("parameter 'smoothed_lag_s' is for one channel; a sensor "
                                        'array (channels > 1) has no smoothed output')
-            estimators = C.build_channel_estimators(self._values)
+            estimators = B.build_channel_estimators(self._values)
             estimator = estimators[0]
-            self._reduced = ({C.model_key(C.channel_values(self._values, c)): e.reduced
+            self._reduced = ({C.model_key(B.channel_values(self._values, c)): e.reduced
                               for c, e in enumerate(estimators)} if self._channels > 1
                              else estimator.reduced)
             check_array_estimators(estimators)

@@ -24,6 +24,7 @@ from rclpy.parameter import Parameter
 
 from ..errors import IpmcError
 from ..estimation.array import check_array_estimators
+from ..interface import builders as B
 from ..interface import specs as C
 from ..physics.parameters import short_repr
 from . import params as P
@@ -167,10 +168,10 @@ class LiveParameters:
         reduction is built later, off the data path).
         """
         if self._array is None:
-            return C.build_estimator(values, self._reduced if validate else None)
-        reduced = ({C.model_key(C.channel_values(values, c)): ch.estimator.reduced
+            return B.build_estimator(values, self._reduced if validate else None)
+        reduced = ({C.model_key(B.channel_values(values, c)): ch.estimator.reduced
                     for c, ch in enumerate(self._array.channels)} if validate else None)
-        new = C.build_channel_estimators(values, reduced)
+        new = B.build_channel_estimators(values, reduced)
         check_array_estimators(new)
         return new
 
@@ -187,7 +188,7 @@ class LiveParameters:
         self._rebuilt = None
         self._swap(new)
         self._reduced = (new.reduced if self._array is None else
-                         {C.model_key(C.channel_values(values, c)): e.reduced
+                         {C.model_key(B.channel_values(values, c)): e.reduced
                           for c, e in enumerate(new)})
         self._model_key = C.model_key(values)
         self._built_values = values

@@ -27,8 +27,8 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityP
 from ..interface.specs import (GEOMETRY_NAMES, GEOMETRY_SPECS, MATERIAL_NAMES, MATERIAL_SPECS,
                                MODEL_SPECS, QOS_SPECS, ParameterError, Spec, check_choice,
                                markdown_table)
-from ..interface.specs import build_model as build_sensor_model
-from ..interface.specs import model_file_summary as build_model_file_summary
+from ..interface.builders import build_model as build_sensor_model
+from ..interface.builders import model_file_summary as build_model_file_summary
 from ..physics.parameters import read_yaml
 
 __all__ = ['ParameterError', 'Spec', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_SPECS',
