@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 from geometry_msgs.msg import PointStamped as PointMsg
 from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64MultiArray, String
@@ -363,6 +364,19 @@ class EstimatorNode(LiveParameters, ArrayPath, Node):
             self.get_logger().warning(
                 f'could not publish smoothed deflection: {short_repr(str(exc))}',
                 throttle_duration_sec=1.0)
+
+    def _drain(self) -> None:
+        """Publish the samples the smoother still holds for their lag (the stream ends here)."""
+        pub = getattr(self, '_pub_smoothed', None)
+        if pub is not None and self._stream is not None:
+            with self._lock:
+                self._publish_smoothed(flush=True)
+            pub.wait_for_all_acked(Duration(nanoseconds=int(P.FLUSH_TIMEOUT_S * 1e9)))
+
+    def destroy_node(self) -> None:
+        """Publish the samples the smoother still holds (:meth:`_drain`), then destroy the node."""
+        self._drain()
+        super().destroy_node()
 
     def _publish_point(self, time_s: float, deflection_m: float, channel: int = 0) -> None:
         key = (float(self._values['length_m']), self._values['frame_id'])

@@ -20,7 +20,7 @@ inactive                  built, no topics; parameter changes validated and appl
 activate                  creates the subscription, the (lifecycle) publishers, the timers
                           and /diagnostics
 deactivate                stops taking input, publishes the samples the smoother still
-                          holds (``smoothed_lag_s``), waits up to ``FLUSH_TIMEOUT_S`` for
+                          holds (``smoothed_lag_s``), waits up to ``params.FLUSH_TIMEOUT_S`` for
                           reliable subscribers to acknowledge the estimates published,
                           publishes a last /diagnostics status "inactive" and destroys the
                           topics and timers; the stream core (counters, filter state) stays
@@ -79,9 +79,6 @@ __all__ = ['ManagedEstimatorNode', 'ManagedSimulatorNode', 'main_estimator', 'ma
 SUCCESS = TransitionCallbackReturn.SUCCESS
 FAILURE = TransitionCallbackReturn.FAILURE
 ERROR = TransitionCallbackReturn.ERROR
-
-#: Longest wait of deactivate for reliable subscribers to acknowledge what was published, s.
-FLUSH_TIMEOUT_S = 1.0
 
 #: The managed nodes' own parameter (read once, at start-up).
 AUTOSTART_SPEC = Spec('autostart', False, bool,
@@ -246,8 +243,8 @@ class ManagedMixin:
         return True
 
     def _flush(self) -> None:
-        """Wait (at most :data:`FLUSH_TIMEOUT_S`) until reliable subscribers have the output."""
-        end = time.monotonic() + FLUSH_TIMEOUT_S
+        """Wait (at most ``params.FLUSH_TIMEOUT_S``) until reliable subscribers have the output."""
+        end = time.monotonic() + P.FLUSH_TIMEOUT_S
         for publisher in self._output_publishers():
             left = max(end - time.monotonic(), 0.0)
             publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))
@@ -257,7 +254,10 @@ class ManagedMixin:
         return []
 
     def _drain(self) -> None:
-        """Publish what is held back for later on deactivate (subclass hook)."""
+        """Publish what the node holds back for later (its own ``_drain``, if it has one)."""
+        drain = getattr(super(), '_drain', None)
+        if drain is not None:
+            drain()
 
     # -- helpers ----------------------------------------------------------------------
     def _autostart(self) -> None:
@@ -316,7 +316,8 @@ class ManagedMixin:
         return super().destroy_publisher(publisher)
 
     def destroy_node(self) -> None:
-        """Release the topics and the model, then destroy the node."""
+        """Publish what is held back, release the topics and the model, destroy the node."""
+        self._drain()
         self._close_io()
         self._release()
         super().destroy_node()
@@ -351,11 +352,6 @@ class ManagedEstimatorNode(ManagedMixin, EstimatorNode, LifecycleNode):
         return [p for p in [getattr(self, '_pub_block', None),
                             getattr(self, '_pub_smoothed', None),
                             *(getattr(self, '_pub_points', None) or ())] if p is not None]
-
-    def _drain(self) -> None:
-        """Publish the samples the smoother still holds for their lag (each once, in order)."""
-        if getattr(self, '_pub_smoothed', None) is not None:
-            self._publish_smoothed(flush=True)
 
     def _on_timer(self) -> None:
         self._guarded(super()._on_timer, 'status timer')
