@@ -327,11 +327,11 @@ def read(node, specs: Iterable[Spec]) -> dict[str, Any]:
     return out
 
 
-#: QoS of the JSON counters topics: reliable, keep the last one for late joiners.
 #: Longest wait for reliable subscribers to acknowledge what was published when a stream ends
 #: (deactivate, node shutdown), s: long enough for loopback DDS, short enough not to hang.
 FLUSH_TIMEOUT_S = 1.0
 
+#: QoS of the JSON counters topics: reliable, keep the last one for late joiners.
 COUNTERS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                           reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
