@@ -427,13 +427,19 @@ def test_last_of_block_points_and_counters_topic_under_sim_time(harness):
     assert last['samples_in'] == 500 and last['node'] == '/ipmc_estimator'
 
 
-def test_smoothed_output_is_the_stream_cores_with_each_sample_once(harness):
-    h = harness(overrides={'publish_points': 'none', 'smoothed_lag_s': 0.05})
+def _record_smoothed(h) -> list:
+    """Return the list the tester fills with the node's ``deflection/smoothed/block`` blocks."""
     smoothed = []
     h.tester.create_subscription(
         Float64MultiArray, 'deflection/smoothed/block',
         lambda m: smoothed.append(unpack_block(m, ESTIMATE_COLUMNS)),
         P.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'}))
+    return smoothed
+
+
+def test_smoothed_output_is_the_stream_cores_with_each_sample_once(harness):
+    h = harness(overrides={'publish_points': 'none', 'smoothed_lag_s': 0.05})
+    smoothed = _record_smoothed(h)
     t, _, i = crank_record(1.0)
     core = StreamEstimator(DeflectionEstimator(MODEL, FS, smoothed_lag_s=0.05))
     expected = []
@@ -457,11 +463,7 @@ def test_smoothed_output_is_the_stream_cores_with_each_sample_once(harness):
 def test_node_shutdown_publishes_the_samples_the_smoother_still_holds(harness):
     """Destroying the node (SIGINT, the end of a launch) sends the held samples first."""
     h = harness(overrides={'publish_points': 'none', 'smoothed_lag_s': 0.05})
-    smoothed = []
-    h.tester.create_subscription(
-        Float64MultiArray, 'deflection/smoothed/block',
-        lambda m: smoothed.append(unpack_block(m, ESTIMATE_COLUMNS)),
-        P.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'}))
+    smoothed = _record_smoothed(h)
     t, _, i = crank_record(0.3)
     for k in range(0, 300, 70):
         h.send(pack_block(t[k:k + 70], i[k:k + 70]))
