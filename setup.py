@@ -28,10 +28,10 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'ipmc_estimator = ipmc_sensor_ros.nodes.estimator_node:main',
-            'ipmc_simulator = ipmc_sensor_ros.nodes.simulator_node:main',
-            'ipmc_estimator_managed = ipmc_sensor_ros.nodes.managed:main_estimator',
-            'ipmc_simulator_managed = ipmc_sensor_ros.nodes.managed:main_simulator',
+            'ipmc_estimator = ipmc_sensor_ros.nodes.entry:estimator',
+            'ipmc_simulator = ipmc_sensor_ros.nodes.entry:simulator',
+            'ipmc_estimator_managed = ipmc_sensor_ros.nodes.entry:estimator_managed',
+            'ipmc_simulator_managed = ipmc_sensor_ros.nodes.entry:simulator_managed',
             'ipmc-model = ipmc_sensor_ros.cli.main:main',
         ],
     },

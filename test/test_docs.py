@@ -84,10 +84,10 @@ def _workdir(tmp: Path, domain: int) -> dict:
     bin_dir = tmp / '.bin'
     bin_dir.mkdir()
     entry = {'ipmc-model': 'ipmc_sensor_ros.cli.main:main',
-             'ipmc_estimator': 'ipmc_sensor_ros.nodes.estimator_node:main',
-             'ipmc_simulator': 'ipmc_sensor_ros.nodes.simulator_node:main',
-             'ipmc_estimator_managed': 'ipmc_sensor_ros.nodes.managed:main_estimator',
-             'ipmc_simulator_managed': 'ipmc_sensor_ros.nodes.managed:main_simulator'}
+             'ipmc_estimator': 'ipmc_sensor_ros.nodes.entry:estimator',
+             'ipmc_simulator': 'ipmc_sensor_ros.nodes.entry:simulator',
+             'ipmc_estimator_managed': 'ipmc_sensor_ros.nodes.entry:estimator_managed',
+             'ipmc_simulator_managed': 'ipmc_sensor_ros.nodes.entry:simulator_managed'}
     for exe, target in entry.items():          # as setup.py's console_scripts
         module, func = target.split(':')
         script = bin_dir / exe

@@ -617,3 +617,23 @@ def test_deactivate_publishes_the_samples_the_smoother_still_holds(managed_estim
                       'the held samples')
     np.testing.assert_array_equal(np.concatenate([b.times_s for b in smoothed]), live_t)
     assert all(np.all(np.isfinite(b.values)) for b in smoothed)
+
+
+@pytest.mark.parametrize('delay_s', [0.2, 0.6, 1.0])
+def test_sigterm_while_the_executable_starts_exits_zero(delay_s, tmp_path):
+    """A signal while Python still imports the node (before the runner owns it) exits 0."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(random.randint(150, 200)),
+               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_LOG_DIR=str(tmp_path))
+    proc = subprocess.Popen(      # as the console script ipmc_estimator (setup.py)
+        [sys.executable, '-c', 'import sys; from ipmc_sensor_ros.nodes.entry import estimator; '
+         'sys.exit(estimator())'],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, text=True)
+    time.sleep(delay_s)
+    proc.send_signal(signal.SIGTERM)
+    try:
+        out, _ = proc.communicate(timeout=20.0)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        pytest.fail('no exit within 20 s of SIGTERM:\n' + proc.communicate()[0])
+    assert proc.returncode == 0, out
+    assert 'Traceback' not in out, out
