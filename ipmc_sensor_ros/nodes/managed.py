@@ -316,11 +316,18 @@ class ManagedMixin:
         return super().destroy_publisher(publisher)
 
     def destroy_node(self) -> None:
-        """Publish what is held back, release the topics and the model, destroy the node."""
+        """
+        Publish what is held back, release the topics and the model, destroy the node.
+
+        rclpy's ``destroy_node`` leaves the lifecycle state machine (its ``transition_event``
+        publisher) to the garbage collector; it is destroyed here, or a node that is still
+        referenced stays on the graph as a ghost after its context has shut down.
+        """
         self._drain()
         self._close_io()
         self._release()
         super().destroy_node()
+        self._state_machine.destroy_when_not_in_use()
 
 
 class ManagedEstimatorNode(ManagedMixin, EstimatorNode, LifecycleNode):
