@@ -16,7 +16,7 @@ import subprocess
 import sys
 import time
 
-from bench.bench_nodes import _cpu_seconds, _env, stop_trial
+from bench.bench_nodes import process_cpu_s, stop_trial, trial_env
 
 CHANNELS = 16
 FS = 1000.0
@@ -72,7 +72,7 @@ def _array_trial(n: int, duration: float) -> dict:
     from ipmc_sensor_ros.nodes.runner import make_executor
 
     domain = random.randint(201, 232)
-    env = _env(domain)
+    env = trial_env(domain)
     proc = subprocess.Popen(
         [sys.executable, '-m', 'ipmc_sensor_ros.nodes.estimator_node', '--ros-args',
          '-p', f'channels:={CHANNELS}', '-p', 'publish_points:=none', '-p', 'max_gap_s:=1.0'],
@@ -100,9 +100,9 @@ def _array_trial(n: int, duration: float) -> dict:
     end = time.monotonic() + duration + 60
     while driver.poll() is None and time.monotonic() < end:
         if cpu_start is None and received[0]:
-            cpu_start, wall_start = _cpu_seconds(proc.pid), time.monotonic()
+            cpu_start, wall_start = process_cpu_s(proc.pid), time.monotonic()
         ex.spin_once(timeout_sec=0.01)
-    cpu_end, wall_end = _cpu_seconds(proc.pid), time.monotonic()
+    cpu_end, wall_end = process_cpu_s(proc.pid), time.monotonic()
     deadline = time.monotonic() + 3
     while time.monotonic() < deadline:
         ex.spin_once(timeout_sec=0.01)

@@ -38,7 +38,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from bench.seed_study import _cpu_s
+from bench.seed_study import cpu_s_with_children
 
 import numpy as np
 
@@ -117,9 +117,9 @@ def run_drying(duration_s=1800.0, rate_hz=100.0):
         )
     finally:
         EFFECTS.pop('bench_drying_truth', None)
-    t0, c0 = time.perf_counter(), _cpu_s()
+    t0, c0 = time.perf_counter(), cpu_s_with_children()
     d = diagnose(recs, progress=lambda m: print('   ', m, flush=True))
-    dt, cpu = time.perf_counter() - t0, _cpu_s() - c0
+    dt, cpu = time.perf_counter() - t0, cpu_s_with_children() - c0
     print(d.summary())
     return {
         'explained': d.explained,

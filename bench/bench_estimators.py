@@ -42,7 +42,7 @@ import numpy as np
 from bench.bounds import record_bounds
 from bench.scenarios import build, names, QUICK, Record
 
-__all__ = ['Estimate', 'run_estimator', 'judge', 'main']
+__all__ = ['Estimate', 'run_estimator', 'estimate_scores', 'judge', 'main']
 
 #: Rows sampled before this are not judged (start-up), s.
 AFTER_S = 1.0
@@ -137,7 +137,7 @@ def _smoothed(record: Record, est, block_samples: int) -> Estimate:
     return Estimate(rows, t_out, w, std, int(record.time_s.size), int(rows.size), cpu)
 
 
-def _scores(record: Record, estimate: Estimate | None) -> dict:
+def estimate_scores(record: Record, estimate: Estimate | None) -> dict:
     """NRMSE after AFTER_S and +-2 sigma coverage of ``estimate`` (None: NaN)."""
     if estimate is None or estimate.rows_estimated == 0:
         return {'nrmse': math.nan, 'coverage': math.nan}
@@ -157,7 +157,7 @@ def judge(record: Record, estimators=('kalman',), block_samples: int = 1000) -> 
     for name in estimators:
         live = run_estimator(record, True, name, block_samples)
         smooth = run_estimator(record, False, name, block_samples)
-        s_live, s_smooth = _scores(record, live), _scores(record, smooth)
+        s_live, s_smooth = estimate_scores(record, live), estimate_scores(record, smooth)
         rows.append({
             'scenario': record.name, 'seed': record.seed, 'class': record.tags[0],
             'estimator': name, 'stationary': record.stationary,

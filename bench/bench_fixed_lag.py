@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from bench.bench_estimators import _scores, Estimate, parse_seeds, run_estimator
+from bench.bench_estimators import Estimate, estimate_scores, parse_seeds, run_estimator
 from bench.scenarios import build, QUICK, Record
 
 __all__ = ['run_lagged', 'main']
@@ -68,7 +68,7 @@ def main(argv=None) -> int:
             rec = build(name.strip(), seed)
             runs = [run_lagged(rec, lag) for lag in [0.0] + lags]
             whole = run_estimator(rec, causal=False)
-            cells = [f"{100 * _scores(rec, r)['nrmse']:.2f} %" for r in runs + [whole]]
+            cells = [f"{100 * estimate_scores(rec, r)['nrmse']:.2f} %" for r in runs + [whole]]
             cpu = [1e6 * r.cpu_s / r.rows_given for r in runs]
             print(f'| {name} | {seed} | ' + ' | '.join(cells)
                   + f' | {cpu[0]:.0f} / {max(cpu[1:]):.0f} |', flush=True)

@@ -114,7 +114,7 @@ NODE_CPU = r"""
 import os, sys, time, random, subprocess
 import rclpy
 from rclpy.parameter import Parameter
-from bench.bench_nodes import DRIVER, PASSTHROUGH_CLASS, _env
+from bench.bench_nodes import DRIVER, PASSTHROUGH_CLASS, trial_env
 from ipmc_sensor_ros.nodes.runner import make_executor
 kind, rate, n, duration = sys.argv[1], float(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4])
 domain = random.randint(201, 232)
@@ -135,7 +135,7 @@ else:
 ex = make_executor()
 ex.add_node(node)
 drv = subprocess.Popen([sys.executable, "-c", DRIVER, str(rate), str(n), str(duration),
-                        str(rate * n), repr(time.time() - 100.0)], env=_env(domain),
+                        str(rate * n), repr(time.time() - 100.0)], env=trial_env(domain),
                        stdout=subprocess.PIPE, text=True)
 while handled() == 0 and drv.poll() is None:
     ex.spin_once(timeout_sec=0.05)
@@ -250,7 +250,8 @@ def bench_node_rate_two_process(smoke: bool = False, duration: float = 10.0) -> 
             'ratio': e / p if p else float('nan'), 'target': '>= 0.9; >= 22500 msg/s'}
 
 
-def _env(domain: int) -> dict:
+def trial_env(domain: int) -> dict:
+    """Return the environment of a trial's processes: this checkout, ``domain``, loopback."""
     return dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(domain),
                 ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
 
@@ -264,8 +265,8 @@ def _run_once(kind: str, rate: float, n: int, duration: float) -> dict:
     """
     import json
 
-    code = ('import json, sys; from bench.bench_nodes import _trial; '
-            f"print('RESULT ' + json.dumps(_trial({kind!r}, {rate!r}, {n!r}, {duration!r})))")
+    code = ('import json, sys; from bench.bench_nodes import run_trial; '
+            f"print('RESULT ' + json.dumps(run_trial({kind!r}, {rate!r}, {n!r}, {duration!r})))")
     res = subprocess.run(
         [sys.executable, '-c', code],
         cwd=str(ROOT),
@@ -281,7 +282,7 @@ def _run_once(kind: str, rate: float, n: int, duration: float) -> dict:
             'latency_median_ms': float('nan'), 'latency_p99_ms': float('nan')}
 
 
-def _cpu_seconds(pid: int) -> float:
+def process_cpu_s(pid: int) -> float:
     """User + system CPU time of a process so far, s (Linux /proc)."""
     try:
         fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
@@ -334,7 +335,14 @@ def block_rows_and_last_time(raw: bytes) -> tuple[int, float]:
     return rows, struct.unpack_from('<d', raw, len(raw) - 8 * columns)[0]
 
 
-def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
+def run_trial(kind: str, rate: float, n: int, duration: float) -> dict:
+    """
+    Run one three-process trial: the ``kind`` node, the driver at ``rate`` msg/s, this sink.
+
+    ``kind`` is ``'estimator'`` or ``'passthrough'``; ``n`` samples per message for
+    ``duration`` s.  Returns what was sent and received, the rate the driver achieved, the
+    node's CPU fraction while data flowed and the latency (median, p99) in ms.
+    """
     import numpy as np
     import rclpy
     from std_msgs.msg import Float64MultiArray
@@ -343,7 +351,7 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
 
     fs = rate * n
     domain = random.randint(201, 232)
-    env = _env(domain)
+    env = trial_env(domain)
     if kind == 'estimator':
         node_cmd = [sys.executable, '-m', 'ipmc_sensor_ros.nodes.estimator_node', '--ros-args',
                     '-p', f'sample_rate_hz:={fs:.1f}', '-p', 'publish_points:=none',
@@ -373,7 +381,7 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
         received[0] += rows
         latencies.append(now - last)
         if len(latencies) % 256 == 1:
-            node_cpu.append((time.monotonic(), _cpu_seconds(proc.pid)))
+            node_cpu.append((time.monotonic(), process_cpu_s(proc.pid)))
 
     # raw: the sink counts from the serialised bytes, so it is not the bottleneck
     sub = sink.create_subscription(Float64MultiArray, 'deflection/block', on_block, qos,
@@ -400,7 +408,7 @@ def _trial(kind: str, rate: float, n: int, duration: float) -> dict:
     deadline = time.monotonic() + 3
     while time.monotonic() < deadline:
         ex.spin_once(timeout_sec=0.01)
-    node_cpu.append((time.monotonic(), _cpu_seconds(proc.pid)))
+    node_cpu.append((time.monotonic(), process_cpu_s(proc.pid)))
     # the node's CPU while data flowed (first to last block received, sampled every 256
     # blocks): not the driver's start-up, its 1 s wait and 2 s linger, nor the 3 s tail
     flow = node_cpu[:-1] if len(node_cpu) > 2 else node_cpu

@@ -174,7 +174,7 @@ def campaign_kwargs(hidden) -> dict:
     return {}
 
 
-def _cpu_s():
+def cpu_s_with_children():
     """CPU seconds of this process and its reaped children (the diagnosis' worker pool)."""
     t = os.times()
     return t.user + t.system + t.children_user + t.children_system
@@ -216,10 +216,10 @@ def run_independent(groups, seeds, null_seeds, out, tmp_dir, seed_first=False):
         if (group, kind, seed) in done:
             continue
         recs, truth, expected = scenario(kind, seed)
-        t0, c0 = time.perf_counter(), _cpu_s()
+        t0, c0 = time.perf_counter(), cpu_s_with_children()
         diag = diagnose(recs, candidates=catalog_names())
         ok, notes = judge_scenario(kind, recs, truth, expected, diag, tmp_dir, seed)
-        dt, cpu = time.perf_counter() - t0, _cpu_s() - c0
+        dt, cpu = time.perf_counter() - t0, cpu_s_with_children() - c0
         _write(out, [group, f"{kind}:{'+'.join(sorted(expected)) or '-'}", seed,
                      int(ok), '+'.join(diag.missing_effects) or '-',
                      '|'.join(diag.ties) or '-',
@@ -244,9 +244,9 @@ def run(groups, seeds, null_seeds, out, seed_first=False, first_seed=0, drift='a
                      'seconds', 'cpu_seconds', 'ok_with_ties', 'notes'])
     for group, hidden, seed in plan:
         recs, _ = hidden_effects_campaign(hidden, seed, **campaign_kwargs(hidden))
-        t0, c0 = time.perf_counter(), _cpu_s()
+        t0, c0 = time.perf_counter(), cpu_s_with_children()
         diag = diagnose(recs)
-        dt, cpu = time.perf_counter() - t0, _cpu_s() - c0
+        dt, cpu = time.perf_counter() - t0, cpu_s_with_children() - c0
         ok = judge(group, hidden, diag)
         ok_tie = ok or (group in ('pairs', 'triples') and judge_with_ties(hidden, diag))
         _write(out, [group, '+'.join(hidden) or '-', seed, int(ok),

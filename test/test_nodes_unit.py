@@ -696,12 +696,12 @@ def test_sim_time_drives_the_simulator_and_stamps(harness):
 
 
 def test_docs_parameter_tables_match_the_declared_parameters():
-    from ipmc_sensor_ros.nodes.simulator_node import _OWN_SPECS
+    from ipmc_sensor_ros.interface.simulator import SIMULATOR_OWN_SPECS
 
     doc = (ROOT / 'docs' / 'ros_interface.md').read_text()
     # Generated from the specs: regenerate with python scripts/gen_docs.py if this fails.
     assert P.markdown_table(ESTIMATOR_SPECS) in doc
-    assert P.markdown_table(_OWN_SPECS) in doc
+    assert P.markdown_table(SIMULATOR_OWN_SPECS) in doc
 
 
 def test_plugin_effect_is_used_by_the_estimator_node():

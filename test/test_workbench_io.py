@@ -398,10 +398,10 @@ def _raw_current_bag(bag, payloads, geometry_sidecar=True):
     """Write ``payloads`` (CDR bytes) on /current, stamped 1 ms apart, with a sidecar."""
     from rosbags.rosbag2 import Writer
 
-    from ipmc_sensor_ros.workbench.bagtopics import MULTIARRAY_TYPE, _typestore
+    from ipmc_sensor_ros.workbench.bagtopics import bag_typestore, MULTIARRAY_TYPE
 
     with Writer(bag, version=8) as writer:
-        conn = writer.add_connection('/current', MULTIARRAY_TYPE, typestore=_typestore())
+        conn = writer.add_connection('/current', MULTIARRAY_TYPE, typestore=bag_typestore())
         for k, raw in enumerate(payloads):
             writer.write(conn, 1_000_000_000 + 1_000_000 * k, raw)
     (bag / 'ipmc.yaml').write_text('geometry: {length_m: 0.022, width_m: 0.007, '

@@ -43,8 +43,8 @@ from ..physics.parameters import (PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, Mat
 
 __all__ = ['HelpFormatter', 'Progress', 'say', 'natural_key', 'fmt_time_s', 'param_names',
            'parse_geometry', 'material_from_args', 'load_material', 'effects_from_args',
-           'load_data', 'add_model_args', 'add_data_args', 'add_output_args', 'write_json',
-           'report_dir', 'parse_samples', 'renamed_flag', 'SYMBOL_TO_NAME']
+           'expand_inputs', 'load_data', 'add_model_args', 'add_data_args', 'add_output_args',
+           'write_json', 'report_dir', 'parse_samples', 'renamed_flag', 'SYMBOL_TO_NAME']
 
 MATERIAL_KEYS = tuple(MaterialParameters.__dataclass_fields__)
 #: Length units and how many of each make a metre (dividing keeps 360 um exactly 0.00036 m).
@@ -230,8 +230,12 @@ def effects_from_args(args) -> tuple:
     return tuple(base) + tuple(added)
 
 
-def _expand(paths) -> list[Path]:
-    """Files and bags named by the arguments; plain directories give their .csv/.txt files."""
+def expand_inputs(paths) -> list[Path]:
+    """
+    Return the files and bags named by ``paths``.
+
+    A directory that is not a bag gives its .csv/.txt/.tsv files and bags (natural order).
+    """
     out: list[Path] = []
     for path in paths:
         p = Path(path)
@@ -258,7 +262,7 @@ def load_data(args, *, need_deflection: bool = True) -> list:
     geometry = parse_geometry(args.geometry, getattr(args, 'sample', '') or '') \
         if getattr(args, 'geometry', None) else None
     out = []
-    for p in sorted(_expand(args.data), key=natural_key):
+    for p in sorted(expand_inputs(args.data), key=natural_key):
         if p.is_dir() or p.suffix in ('.mcap', '.db3'):
             item = read_bag(p, args.current_topic, args.deflection_topic, geometry)
         else:

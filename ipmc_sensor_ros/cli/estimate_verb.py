@@ -209,9 +209,9 @@ class EstimatorCache:
 
 def _estimate_inputs(args) -> list[Path]:
     """Return the inputs of ``estimate`` (files, bags, directories expanded), in order."""
-    from .args import _expand, natural_key
+    from .args import expand_inputs, natural_key
 
-    return sorted(_expand(args.data), key=natural_key)
+    return sorted(expand_inputs(args.data), key=natural_key)
 
 
 def _read_one(args, path: Path):

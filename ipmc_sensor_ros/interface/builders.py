@@ -17,8 +17,8 @@ from ..lti.reduction import ReducedModel
 from ..physics.effects import load_plugins
 from ..physics.model import SensorModel
 from ..physics.parameters import Geometry, MaterialParameters, short_repr
-from .specs import (GEOMETRY_NAMES, MATERIAL_NAMES, MATERIAL_SPECS, MODEL_SPECS, _one_line,
-                    check_values, model_key)
+from .specs import (check_values, describe_exception, GEOMETRY_NAMES, MATERIAL_NAMES,
+                    MATERIAL_SPECS, MODEL_SPECS, model_key)
 
 __all__ = ['build_model', 'model_file_summary', 'build_estimator', 'channel_values',
            'build_channel_estimators']
@@ -122,7 +122,7 @@ def build_estimator(
         raise
     except Exception as exc:  # numerics of an extreme but in-range combination
         raise ParameterError(f'these parameter values do not give a usable model: '
-                             f'{_one_line(exc)}') from None
+                             f'{describe_exception(exc)}') from None
 
 
 def channel_values(values: Mapping[str, Any], channel: int) -> dict[str, Any]:

@@ -30,7 +30,7 @@ __all__ = ['Spec', 'ParameterError', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_
            'QOS_SPECS', 'ESTIMATOR_SPECS', 'PUBLISH_POINTS', 'MATERIAL_NAMES', 'GEOMETRY_NAMES',
            'ARRAY_SPECS', 'MAX_CHANNELS', 'defaults', 'load_params_file', 'check_choice',
            'check_values', 'markdown_table', 'FRAME_ID_PATTERN', 'DIAGNOSTICS_SPECS',
-           'STREAM_DIAGNOSTICS_SPECS']
+           'STREAM_DIAGNOSTICS_SPECS', 'describe_exception']
 
 
 @dataclass(frozen=True)
@@ -246,7 +246,8 @@ def check_values(values: Mapping[str, Any], specs: Iterable[Spec] | None = None)
             _check_value(spec, values[spec.name], '')
 
 
-def _one_line(exc: BaseException, limit: int = 200) -> str:
+def describe_exception(exc: BaseException, limit: int = 200) -> str:
+    """Return ``'Type: message'`` of ``exc`` on one line, the message cut at ``limit`` chars."""
     text = ' '.join(str(exc).split())
     text = text if len(text) <= limit else text[:limit] + '...'
     return f'{type(exc).__name__}: {text}' if text else type(exc).__name__
@@ -353,7 +354,7 @@ def load_params_file(path: str | Path, node_name: str = 'ipmc_estimator',
         raise ParameterError(f'{path}: {exc}') from None
     except Exception as exc:  # numerics of an extreme but in-range combination
         raise ParameterError(f'{path}: these parameter values do not give a usable model: '
-                             f'{_one_line(exc)}') from None
+                             f'{describe_exception(exc)}') from None
     return values
 
 

@@ -39,10 +39,8 @@ from std_msgs.msg import Float64MultiArray, String
 from ..physics.beam import check_fidelity
 from ..errors import ParameterError
 from ..simulation.sensor import FieldSensorSimulator, SensorSimulator
-from ..interface.simulator import (SIMULATOR_OWN_SPECS as _OWN_SPECS,  # noqa: F401 (re-exported)
-                                   CHAIN_PARAMETERS, SIMULATOR_SPECS, STIMULI,
-                                   build_stimulus, describe_stimulus, load_stimulus_csv,
-                                   read_stimulus_csv)
+from ..interface.simulator import (CHAIN_PARAMETERS, SIMULATOR_SPECS, STIMULI, build_stimulus,
+                                   describe_stimulus, load_stimulus_csv, read_stimulus_csv)
 from . import params as P
 from .diagnostics import DiagnosticsPublisher
 from ..interface.blocks import current_columns, deflection_columns

@@ -50,6 +50,7 @@ __all__ = [
     'load_plugins',
     'loaded_plugins',
     'get_effect',
+    'effect_parameter',
     'catalog_markdown',
     'SCOPES',
     'split_by_scope',
@@ -222,6 +223,14 @@ def get_effect(name: str) -> Effect:
     except (KeyError, TypeError):
         raise ParameterError(f'unknown effect {short_repr(name)}; known: {sorted(EFFECTS)} '
                              '(or load a plugin with --plugin FILE)') from None
+
+
+def effect_parameter(effect_name: str, parameter_name: str) -> EffectParameter:
+    """Return the :class:`EffectParameter` ``parameter_name`` of the registered effect."""
+    for p in get_effect(effect_name).parameters:
+        if p.name == parameter_name:
+            return p
+    raise ParameterError(f"effect '{effect_name}' has no parameter '{parameter_name}'")
 
 
 def load_plugin(path: str | Path) -> list[str]:

@@ -48,16 +48,16 @@ import numpy as np
 from ..interface.blocks import SAMPLE_LABEL
 from ..physics.parameters import Geometry, MaterialParameters, ParameterError
 from .bagtopics import (
-    _align,
-    _describe_topics,
-    _find_topic,
-    _read_topic,
-    _topic_key,
-    _typestore,
+    align_deflection,
+    bag_typestore,
     CURRENT_LABEL,
     DEFLECTION_LABEL,
+    describe_topics,
+    find_topic,
     MULTIARRAY_TYPE,
     POINT_STAMPED_TYPE,
+    read_topic,
+    topic_key,
 )
 from .measurements import DataFormatError, PathLike, TimeSeries
 
@@ -195,28 +195,28 @@ def read_bag(path: PathLike, current_topic: str = 'current',
     try:
         with Reader(bag) as reader:
             topics = reader.topics
-            found = _find_topic(where, topics, current_topic)
+            found = find_topic(where, topics, current_topic)
             if found is None:
                 raise DataFormatError(where, None, f'current topic not found; '
-                                      f'{_describe_topics(topics)}', topic=current_topic)
+                                      f'{describe_topics(topics)}', topic=current_topic)
             cur_name, cur_info = found
             dfound = None
             if deflection_topic is not None:
-                dfound = _find_topic(where, topics, deflection_topic)
+                dfound = find_topic(where, topics, deflection_topic)
                 if dfound is None and require_deflection:
                     raise DataFormatError(where, None, f'deflection topic not found; '
-                                          f'{_describe_topics(topics)}', topic=deflection_topic)
+                                          f'{describe_topics(topics)}', topic=deflection_topic)
             reading = cur_name
-            tc, current = _read_topic(where, reader, cur_name, cur_info, CURRENT_LABEL, 'current')
+            tc, current = read_topic(where, reader, cur_name, cur_info, CURRENT_LABEL, 'current')
             if tc.size < 2:
                 raise DataFormatError(where, None, f'only {tc.size} current sample(s); at least 2 '
                                       'are needed', topic=cur_name)
             deflection = alignment = None
             if dfound is not None:
                 reading = dfound[0]
-                td, vd = _read_topic(where, reader, dfound[0], dfound[1], DEFLECTION_LABEL,
-                                     'deflection')
-                deflection, alignment = _align(where, dfound[0], tc, td, vd)
+                td, vd = read_topic(where, reader, dfound[0], dfound[1], DEFLECTION_LABEL,
+                                    'deflection')
+                deflection, alignment = align_deflection(where, dfound[0], tc, td, vd)
             reading = None
     except DataFormatError:
         raise
@@ -299,7 +299,7 @@ def _write_bag(bag: Path, ts: TimeSeries, plugin, current_topic: str, deflection
     import yaml
     from rosbags.rosbag2 import Writer
 
-    store = _typestore()
+    store = bag_typestore()
     types = store.types
     F64, Layout, Dim = (types['std_msgs/msg/Float64MultiArray'],
                         types['std_msgs/msg/MultiArrayLayout'],
@@ -314,7 +314,7 @@ def _write_bag(bag: Path, ts: TimeSeries, plugin, current_topic: str, deflection
         return store.serialize_cdr(F64(layout=layout, data=data), MULTIARRAY_TYPE)
 
     def topic(name: str) -> str:
-        return '/' + _topic_key(name)
+        return '/' + topic_key(name)
 
     with Writer(bag, version=8, storage_plugin=plugin) as writer:
         cur = writer.add_connection(topic(current_topic), MULTIARRAY_TYPE, typestore=store)

@@ -27,10 +27,12 @@ from ..interface.blocks import (
     unpack_columns,
 )
 from ..interface.cdr import OneSampleCodec
-from .formatread import _fmt
+from .formatread import format_exact
 from .measurements import DataFormatError
 
-__all__ = ['CURRENT_LABEL', 'DEFLECTION_LABEL', 'MULTIARRAY_TYPE', 'POINT_STAMPED_TYPE']
+__all__ = ['CURRENT_LABEL', 'DEFLECTION_LABEL', 'MULTIARRAY_TYPE', 'POINT_STAMPED_TYPE',
+           'bag_typestore', 'topic_key', 'find_topic', 'describe_topics', 'read_topic',
+           'align_deflection']
 
 #: Column label (dim[1].label) of current and deflection blocks in bags.
 CURRENT_LABEL = CURRENT_COLUMNS
@@ -40,25 +42,28 @@ POINT_STAMPED_TYPE = 'geometry_msgs/msg/PointStamped'
 
 
 @functools.lru_cache(maxsize=None)
-def _typestore():
+def bag_typestore():
+    """Return the ``rosbags`` type store of the bags (ROS 2 Jazzy message definitions)."""
     from rosbags.typesys import Stores, get_typestore
 
     return get_typestore(Stores.ROS2_JAZZY)
 
 
-def _topic_key(name: str) -> str:
+def topic_key(name: str) -> str:
+    """Return a topic name without spaces and leading ``/`` (how topics are matched)."""
     return name.strip().lstrip('/')
 
 
-def _find_topic(where: str, topics: Mapping[str, Any], wanted: str):
+def find_topic(where: str, topics: Mapping[str, Any], wanted: str):
     """(name, info) of ``wanted`` in the bag (leading '/' optional), or None."""
-    matches = [name for name in topics if _topic_key(name) == _topic_key(wanted)]
+    matches = [name for name in topics if topic_key(name) == topic_key(wanted)]
     if len(matches) > 1:
         raise DataFormatError(where, None, f'ambiguous: the bag has both {matches}', topic=wanted)
     return (matches[0], topics[matches[0]]) if matches else None
 
 
-def _describe_topics(topics: Mapping[str, Any]) -> str:
+def describe_topics(topics: Mapping[str, Any]) -> str:
+    """Return the bag's topics with their types and message counts, for an error message."""
     if not topics:
         return 'the bag has no topics'
     return 'the bag has: ' + ', '.join(f'{name} ({info.msgtype}, {info.msgcount} msgs)'
@@ -79,10 +84,10 @@ def _unpack_block(msg, label: str) -> tuple[np.ndarray, np.ndarray]:
     return times, table[:, 0]
 
 
-def _read_topic(where: str, reader, name: str, info, label: str,
-                quantity: str) -> tuple[np.ndarray, np.ndarray]:
+def read_topic(where: str, reader, name: str, info, label: str,
+               quantity: str) -> tuple[np.ndarray, np.ndarray]:
     """All (time, value) samples of one topic, in time order, validated."""
-    store = _typestore()
+    store = bag_typestore()
     msgtype = info.msgtype
     allowed = (
         (MULTIARRAY_TYPE,) if quantity == 'current' else (MULTIARRAY_TYPE, POINT_STAMPED_TYPE)
@@ -111,15 +116,16 @@ def _read_topic(where: str, reader, name: str, info, label: str,
         if bad.any():
             k = int(np.argmax(bad))
             raise DataFormatError(where, None, f'message {run_first + k}, sample 0: NaN/Inf '
-                                  f'(time {_fmt(t[k])}, {quantity} {_fmt(v[k])})', topic=name)
+                                  f'(time {format_exact(t[k])}, {quantity} '
+                                  f'{format_exact(v[k])})', topic=name)
         before = np.concatenate(([-np.inf if prev_end is None else prev_end], t[:-1]))
         late = t <= before
         if late.any():
             k = int(np.argmax(late))
             raise DataFormatError(where, None, f'message {run_first + k} starts at '
-                                  f"{_fmt(t[k])} s, not after the previous message's last "
-                                  f'sample at {_fmt(before[k])} s (blocks overlap or are out of '
-                                  'order)', topic=name)
+                                  f"{format_exact(t[k])} s, not after the previous message's "
+                                  f'last sample at {format_exact(before[k])} s (blocks overlap '
+                                  'or are out of order)', topic=name)
         prev_end = float(t[-1])
         times.append(t)
         values.append(v)
@@ -153,21 +159,23 @@ def _read_topic(where: str, reader, name: str, info, label: str,
         if bad.any():
             k = int(np.argmax(bad))
             raise DataFormatError(where, None, f'message {count}, sample {k}: NaN/Inf '
-                                  f'(time {_fmt(t[k])}, {quantity} {_fmt(v[k])})', topic=name)
+                                  f'(time {format_exact(t[k])}, {quantity} '
+                                  f'{format_exact(v[k])})', topic=name)
         if msgtype == MULTIARRAY_TYPE and t.size:
             steps = np.diff(t)
             if (steps <= 0).any():
                 k = int(np.argmax(steps <= 0)) + 1
                 raise DataFormatError(where, None, f'message {count}, sample {k}: time '
-                                      f'{_fmt(t[k])} s is not after {_fmt(t[k - 1])} s (sample '
-                                      'times must be strictly increasing)', topic=name)
+                                      f'{format_exact(t[k])} s is not after '
+                                      f'{format_exact(t[k - 1])} s (sample times must be '
+                                      'strictly increasing)', topic=name)
             if prev_end is not None and t[0] <= prev_end:
                 raise DataFormatError(
                     where,
                     None,
-                    f'message {count} starts at {_fmt(t[0])} s, not '
+                    f'message {count} starts at {format_exact(t[0])} s, not '
                     "after the previous message's last sample at "
-                    f'{_fmt(prev_end)} s (blocks overlap or are out of order)',
+                    f'{format_exact(prev_end)} s (blocks overlap or are out of order)',
                     topic=name,
                 )
             prev_end = float(t[-1])
@@ -185,13 +193,14 @@ def _read_topic(where: str, reader, name: str, info, label: str,
         dup = np.diff(t) == 0
         if dup.any():
             k = int(np.argmax(dup))
-            raise DataFormatError(where, None, f'two samples with the same stamp {_fmt(t[k])} s',
+            raise DataFormatError(where, None,
+                                  f'two samples with the same stamp {format_exact(t[k])} s',
                                   topic=name)
     return t, v
 
 
-def _align(where: str, name: str, tc: np.ndarray, td: np.ndarray,
-           vd: np.ndarray) -> tuple[np.ndarray, str]:
+def align_deflection(where: str, name: str, tc: np.ndarray, td: np.ndarray,
+                     vd: np.ndarray) -> tuple[np.ndarray, str]:
     """Deflection at the current times ``tc``: exact match or linear interpolation."""
     if td.size == 0:
         raise DataFormatError(where, None, 'has no deflection samples', topic=name)
@@ -203,7 +212,8 @@ def _align(where: str, name: str, tc: np.ndarray, td: np.ndarray,
     if np.all(np.abs(td[nearest] - tc) <= tol):
         return vd[nearest].copy(), 'exact'
     if td.size < 2 or td[0] > tc[0] + tol or td[-1] < tc[-1] - tol:
-        raise DataFormatError(where, None, f'deflection covers {_fmt(td[0])}..{_fmt(td[-1])} s '
-                              f'but the current covers {_fmt(tc[0])}..{_fmt(tc[-1])} s: cannot '
-                              'align without extrapolating (trim the recording)', topic=name)
+        raise DataFormatError(where, None, f'deflection covers {format_exact(td[0])}..'
+                              f'{format_exact(td[-1])} s but the current covers '
+                              f'{format_exact(tc[0])}..{format_exact(tc[-1])} s: cannot align '
+                              'without extrapolating (trim the recording)', topic=name)
     return np.interp(tc, td, vd), 'linear'

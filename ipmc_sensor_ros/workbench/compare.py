@@ -42,7 +42,8 @@ from .blas import single_threaded_blas
 from .freqresp import FrequencyPoint, fundamental_response
 from .metrics import fit_percent, noise_rms
 
-__all__ = ['RecordComparison', 'Comparison', 'compare_records', 'FREQUENCY_BANDS_HZ', 'BOUND99']
+__all__ = ['RecordComparison', 'Comparison', 'compare_records', 'FREQUENCY_BANDS_HZ', 'BOUND99',
+           'normalised_cross_correlation']
 
 FREQUENCY_BANDS_HZ = ((0.0, 2.0), (2.0, 5.0), (5.0, 10.0), (10.0, 20.0), (20.0, np.inf))
 #: Two-sided 99 % quantile of N(0, 1): a white residual's correlation stays in +-BOUND99/sqrt(N).
@@ -86,7 +87,7 @@ def _gradient(w: np.ndarray, t: np.ndarray) -> np.ndarray:
     return out
 
 
-def _xcorr_normalised(a: np.ndarray, b: np.ndarray, lags: np.ndarray) -> np.ndarray:
+def normalised_cross_correlation(a: np.ndarray, b: np.ndarray, lags: np.ndarray) -> np.ndarray:
     """Normalised cross-correlation at ``lags`` of ``a`` and ``b``, means removed beforehand."""
     den = np.sqrt(np.sum(a * a) * np.sum(b * b))
     out = []
@@ -223,11 +224,11 @@ def _compare_records(records, model_for, settle_s, max_lag, n_windows, transfer_
         resid = yy - yh
         centred = resid - resid.mean()
         lags = np.arange(1, max_lag + 1)
-        acf = _xcorr_normalised(centred, centred, lags)
+        acf = normalised_cross_correlation(centred, centred, lags)
         vel = _gradient(ww, tt)
         vel -= vel.mean()
         xl = np.arange(-max_lag, max_lag + 1)
-        ccf = _xcorr_normalised(centred, vel, xl)
+        ccf = normalised_cross_correlation(centred, vel, xl)
         del centred, vel
         bound = BOUND99 / np.sqrt(resid.size)
         mag_err = ph_err = mag_sd = ph_sd = None

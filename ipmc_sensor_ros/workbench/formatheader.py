@@ -27,7 +27,9 @@ from .units import LENGTH_UNITS, column_to_si, column_units, decimal_to_si, unit
 __all__ = [
     'TIMESERIES_FORMAT', 'FRF_FORMAT', 'FORMATS', 'TIMESERIES_COLUMNS',
     'TIMESERIES_COLUMNS_NO_DEFLECTION', 'FRF_COLUMNS', 'FRF_COHERENCE_COLUMN', 'FRF_STD_COLUMNS',
-    'GEOMETRY_KEYS', 'KNOWN_KEYS',
+    'GEOMETRY_KEYS', 'KNOWN_KEYS', 'TIMESERIES_LAYOUTS', 'FRF_LAYOUTS', 'TIMESERIES_NUMERIC_KEYS',
+    'FRF_NUMERIC_KEYS', 'RESERVED_KEYS', 'TIMESERIES_BASES', 'FRF_BASES', 'HEADER_KEY_PATTERN',
+    'TextHeader', 'parse_header', 'header_format', 'validate_header', 'parse_columns',
 ]
 
 TIMESERIES_FORMAT = 'ipmc-timeseries/1'
@@ -41,8 +43,8 @@ FRF_COHERENCE_COLUMN = 'coherence'
 FRF_STD_COLUMNS = ('gain_std_A_per_m', 'phase_std_deg')
 
 #: Accepted column-header lines of each format.
-_TIMESERIES_LAYOUTS = (TIMESERIES_COLUMNS, TIMESERIES_COLUMNS_NO_DEFLECTION)
-_FRF_LAYOUTS = (
+TIMESERIES_LAYOUTS = (TIMESERIES_COLUMNS, TIMESERIES_COLUMNS_NO_DEFLECTION)
+FRF_LAYOUTS = (
     FRF_COLUMNS,
     FRF_COLUMNS + (FRF_COHERENCE_COLUMN,),
     FRF_COLUMNS + FRF_STD_COLUMNS,
@@ -52,9 +54,10 @@ _FRF_LAYOUTS = (
 GEOMETRY_KEYS = ('length_m', 'width_m', 'thickness_m')
 #: Optional known physical values (header keys; :class:`MaterialParameters` names).
 KNOWN_KEYS = ('temperature_k', 'youngs_modulus_pa', 'surface_resistance_ohm')
-_TIMESERIES_NUMERIC_KEYS = GEOMETRY_KEYS + ('sample_rate_hz',) + KNOWN_KEYS
-_FRF_NUMERIC_KEYS = GEOMETRY_KEYS + KNOWN_KEYS
-_RESERVED_KEYS = ('format', 'sample') + GEOMETRY_KEYS + ('sample_rate_hz',) + KNOWN_KEYS
+#: Numeric header keys of each format; keys the reader interprets (not kept as ``extra``).
+TIMESERIES_NUMERIC_KEYS = GEOMETRY_KEYS + ('sample_rate_hz',) + KNOWN_KEYS
+FRF_NUMERIC_KEYS = GEOMETRY_KEYS + KNOWN_KEYS
+RESERVED_KEYS = ('format', 'sample') + GEOMETRY_KEYS + ('sample_rate_hz',) + KNOWN_KEYS
 
 #: Expected column of each known quantity and a description of its unit, used
 #: to say "wrong units" when a column names the right quantity in another unit.
@@ -69,17 +72,21 @@ _COLUMN_UNITS = {
     'gain_std': ('gain_std_A_per_m', 'amperes per metre'),
     'phase_std': ('phase_std_deg', 'degrees'),
 }
-_TIMESERIES_BASES = ('time', 'deflection', 'current')
-_FRF_BASES = ('frequency', 'gain', 'phase', 'coherence', 'gain_std', 'phase_std')
+#: Quantities of the columns of each format (column names without their unit).
+TIMESERIES_BASES = ('time', 'deflection', 'current')
+FRF_BASES = ('frequency', 'gain', 'phase', 'coherence', 'gain_std', 'phase_std')
 
-_KEY = re.compile(r'[A-Za-z][A-Za-z0-9_.\-]*')
+#: A valid header key.
+HEADER_KEY_PATTERN = re.compile(r'[A-Za-z][A-Za-z0-9_.\-]*')
 
 
 # ---------------------------------------------------------------------------
 # Text files: header and columns
 # ---------------------------------------------------------------------------
 @dataclass
-class _Header:
+class TextHeader:
+    """The lines of a text file before its data rows, as read (values not yet checked)."""
+
     values: dict               # key -> raw string value
     lines: dict                # key -> 1-based line
     column_line: int | None    # 1-based line of the column-header line (None: end of file)
@@ -87,7 +94,7 @@ class _Header:
     n_lines: int               # lines read (all of them when column_line is None)
 
 
-def _parse_header(path: PathLike, source: TextSource) -> _Header:
+def parse_header(path: PathLike, source: TextSource) -> TextHeader:
     """Read header lines up to and including the column-header line."""
     values: dict[str, str] = {}
     where: dict[str, int] = {}
@@ -98,11 +105,11 @@ def _parse_header(path: PathLike, source: TextSource) -> _Header:
             if not seen_text:
                 raise DataFormatError(path, 1, "empty file (expected a '# format: ...' header "
                                       'line)')
-            return _Header(values, where, None, '', source.lineno)
+            return TextHeader(values, where, None, '', source.lineno)
         s = line.strip()
         seen_text = seen_text or bool(s)
         if s and not s.startswith('#'):
-            return _Header(values, where, source.lineno, line, source.lineno)
+            return TextHeader(values, where, source.lineno, line, source.lineno)
         body = s[1:].strip()
         if not body:
             continue
@@ -112,7 +119,7 @@ def _parse_header(path: PathLike, source: TextSource) -> _Header:
                                   "(expected '# key: value')")
         key, _, value = body.partition(':')
         key, value = key.strip(), value.strip()
-        if not _KEY.fullmatch(key):
+        if not HEADER_KEY_PATTERN.fullmatch(key):
             raise DataFormatError(path, lineno, f'invalid header key {key!r} in {s!r} '
                                   "(expected '# key: value', key [A-Za-z][A-Za-z0-9_.-]*)")
         if key in values:
@@ -122,7 +129,7 @@ def _parse_header(path: PathLike, source: TextSource) -> _Header:
         where[key] = lineno
 
 
-def _format_of(path: PathLike, header: _Header) -> str:
+def header_format(path: PathLike, header: TextHeader) -> str:
     """Return the header's format, checked to be a known one."""
     if 'format' not in header.values:
         line = header.column_line or header.n_lines
@@ -135,7 +142,7 @@ def _format_of(path: PathLike, header: _Header) -> str:
     return fmt
 
 
-def _header_numbers(path, header: _Header, numeric_keys: Sequence[str]) -> dict[str, float]:
+def _header_numbers(path, header: TextHeader, numeric_keys: Sequence[str]) -> dict[str, float]:
     out: dict[str, float] = {}
     for key in sorted((k for k in numeric_keys if k in header.values),
                       key=lambda k: header.lines[k]):
@@ -149,14 +156,14 @@ def _header_numbers(path, header: _Header, numeric_keys: Sequence[str]) -> dict[
     return out
 
 
-def _parameter_line(header: _Header, exc: ParameterError, keys: Sequence[str]) -> int:
+def _parameter_line(header: TextHeader, exc: ParameterError, keys: Sequence[str]) -> int:
     m = re.search(r"parameter '(\w+)'", str(exc))
     if m and m.group(1) in header.lines:
         return header.lines[m.group(1)]
     return min(header.lines[k] for k in keys if k in header.lines)
 
 
-def _geometry_in_other_units(path, header: _Header, numbers: dict) -> None:
+def _geometry_in_other_units(path, header: TextHeader, numbers: dict) -> None:
     """Accept ``length_mm``, ``thickness_um``... as ``length_m``, ``thickness_m`` (in place)."""
     for key in GEOMETRY_KEYS:
         part = key[:-2]
@@ -179,10 +186,10 @@ def _geometry_in_other_units(path, header: _Header, numbers: dict) -> None:
         header.lines[key] = header.lines.pop(other)
 
 
-def _common_header(path, header: _Header, expected_format: str,
-                   numeric_keys: Sequence[str], layouts: Sequence[tuple[str, ...]]):
+def validate_header(path, header: TextHeader, expected_format: str,
+                    numeric_keys: Sequence[str], layouts: Sequence[tuple[str, ...]]):
     """Validate the header; return (sample, geometry, known, numbers, extra)."""
-    fmt = _format_of(path, header)
+    fmt = header_format(path, header)
     if fmt != expected_format:
         reader = 'read_frf' if fmt == FRF_FORMAT else 'read_timeseries'
         raise DataFormatError(path, header.lines['format'], f'format is {fmt!r}, expected '
@@ -217,12 +224,12 @@ def _common_header(path, header: _Header, expected_format: str,
     except ParameterError as exc:
         raise DataFormatError(path, _parameter_line(header, exc, tuple(known)),
                               f'implausible known value: {exc}') from None
-    extra = {k: v for k, v in header.values.items() if k not in _RESERVED_KEYS}
+    extra = {k: v for k, v in header.values.items() if k not in RESERVED_KEYS}
     return sample, geometry, known, numbers, extra
 
 
-def _parse_columns(path, header: _Header, layouts: Sequence[tuple[str, ...]],
-                   bases: Sequence[str]) -> tuple[tuple[str, ...], tuple[float, ...]]:
+def parse_columns(path, header: TextHeader, layouts: Sequence[tuple[str, ...]],
+                  bases: Sequence[str]) -> tuple[tuple[str, ...], tuple[float, ...]]:
     """(SI column names, factor of each column to SI) of the column-header line."""
     col_line = header.column_line
     raw = header.column_text
@@ -241,9 +248,9 @@ def _parse_columns(path, header: _Header, layouts: Sequence[tuple[str, ...]],
     if all(parse_number(n) is not None for n in names):
         raise DataFormatError(path, col_line, f'missing column header line: found a data row '
                               f'{raw.strip()!r}; expected {expected}')
-    other = _FRF_LAYOUTS if layouts is _TIMESERIES_LAYOUTS else _TIMESERIES_LAYOUTS
+    other = FRF_LAYOUTS if layouts is TIMESERIES_LAYOUTS else TIMESERIES_LAYOUTS
     if tuple(canon) in other:
-        this, that = ((TIMESERIES_FORMAT, FRF_FORMAT) if layouts is _TIMESERIES_LAYOUTS
+        this, that = ((TIMESERIES_FORMAT, FRF_FORMAT) if layouts is TIMESERIES_LAYOUTS
                       else (FRF_FORMAT, TIMESERIES_FORMAT))
         raise DataFormatError(path, col_line, f'the file declares format {this!r} but has the '
                               f'columns of {that!r}; expected {expected}')

@@ -16,15 +16,16 @@ from typing import Callable
 
 import numpy as np
 
-from .formatheader import (FRF_COHERENCE_COLUMN, FRF_FORMAT, FRF_STD_COLUMNS, TIMESERIES_FORMAT,
-                           _FRF_BASES, _FRF_LAYOUTS, _FRF_NUMERIC_KEYS, _Header,
-                           _TIMESERIES_BASES, _TIMESERIES_LAYOUTS, _TIMESERIES_NUMERIC_KEYS,
-                           _common_header, _format_of, _parse_columns, _parse_header)
+from .formatheader import (FRF_BASES, FRF_COHERENCE_COLUMN, FRF_FORMAT, FRF_LAYOUTS,
+                           FRF_NUMERIC_KEYS, FRF_STD_COLUMNS, header_format, parse_columns,
+                           parse_header, TextHeader, TIMESERIES_BASES, TIMESERIES_FORMAT,
+                           TIMESERIES_LAYOUTS, TIMESERIES_NUMERIC_KEYS, validate_header)
 from .measurements import DataFormatError, FrequencyResponseData, PathLike, TimeSeries
 from .textread import MAX_BYTES, MAX_ROWS, TextSource, first_bad, increasing_check, read_table
 from .units import to_si
 
-__all__ = ['SAMPLE_RATE_TOLERANCE', 'read_timeseries', 'read_frf', 'read_text', 'incomplete_notes']
+__all__ = ['SAMPLE_RATE_TOLERANCE', 'read_timeseries', 'read_frf', 'read_text', 'incomplete_notes',
+           'format_exact']
 
 #: Relative tolerance between ``sample_rate_hz`` and 1 / median time step.
 SAMPLE_RATE_TOLERANCE = 0.01
@@ -47,7 +48,7 @@ def _block_check(bad_rows: Callable[[np.ndarray, int], np.ndarray], row_check: C
     return check
 
 
-def _read_rows(source: TextSource, header: _Header, check, max_rows) -> list[np.ndarray]:
+def _read_rows(source: TextSource, header: TextHeader, check, max_rows) -> list[np.ndarray]:
     raw_names = [c.strip() for c in header.column_text.split(',')]
     data, _ = read_table(source, raw_names, check, max_rows=max_rows,
                          header_line=header.column_line)
@@ -62,17 +63,18 @@ def incomplete_notes(path, source: TextSource) -> tuple[str, ...]:
             'written?): not read',)
 
 
-def _fmt(x: float) -> str:
+def format_exact(x: float) -> str:
+    """Return ``x`` as the shortest decimal text that reads back as the same float (``repr``)."""
     return repr(float(x))
 
 
 # ---------------------------------------------------------------------------
 # ipmc-timeseries/1
 # ---------------------------------------------------------------------------
-def _timeseries_from(path, source: TextSource, header: _Header, max_rows) -> TimeSeries:
-    sample, geometry, known, numbers, extra = _common_header(
-        path, header, TIMESERIES_FORMAT, _TIMESERIES_NUMERIC_KEYS, _TIMESERIES_LAYOUTS)
-    columns, factors = _parse_columns(path, header, _TIMESERIES_LAYOUTS, _TIMESERIES_BASES)
+def _timeseries_from(path, source: TextSource, header: TextHeader, max_rows) -> TimeSeries:
+    sample, geometry, known, numbers, extra = validate_header(
+        path, header, TIMESERIES_FORMAT, TIMESERIES_NUMERIC_KEYS, TIMESERIES_LAYOUTS)
+    columns, factors = parse_columns(path, header, TIMESERIES_LAYOUTS, TIMESERIES_BASES)
     tname = header.column_text.split(',')[0].strip()
     tunit = tname.partition('_')[2]
 
@@ -82,7 +84,7 @@ def _timeseries_from(path, source: TextSource, header: _Header, max_rows) -> Tim
     if np.any(np.diff(t) <= 0):  # a sub-ns step in ms/us lost to rounding when converted
         k = int(np.argmax(np.diff(t) <= 0)) + 1
         raise DataFormatError(path, header.column_line + 1 + k, f'time step below float '
-                              f'resolution after conversion to seconds at {_fmt(t[k])} s')
+                              f'resolution after conversion to seconds at {format_exact(t[k])} s')
     median_dt = float(np.median(np.diff(t)))
     measured_rate = 1.0 / median_dt
     rate = numbers.get('sample_rate_hz')
@@ -90,10 +92,11 @@ def _timeseries_from(path, source: TextSource, header: _Header, max_rows) -> Tim
         rate = measured_rate
     elif rate <= 0.0:
         raise DataFormatError(path, header.lines['sample_rate_hz'], f'sample_rate_hz must be > 0, '
-                              f'got {_fmt(rate)}')
+                              f'got {format_exact(rate)}')
     elif abs(rate * median_dt - 1.0) > SAMPLE_RATE_TOLERANCE:
         raise DataFormatError(path, header.lines['sample_rate_hz'],
-                              f'sample_rate_hz = {_fmt(rate)} disagrees with the time column: '
+                              f'sample_rate_hz = {format_exact(rate)} disagrees with the time '
+                              'column: '
                               f'median step {median_dt:.6g} s -> {measured_rate:.6g} Hz '
                               f'(tolerance {SAMPLE_RATE_TOLERANCE:.0%})')
     deflection = data[1] if 'deflection_m' in columns else None
@@ -111,37 +114,39 @@ def read_timeseries(path: PathLike, *, max_bytes: int | None = MAX_BYTES,
                     max_rows: int | None = MAX_ROWS) -> TimeSeries:
     """Read an ``ipmc-timeseries/1`` file (see the docstring of :mod:`.formats`)."""
     with TextSource(path, max_bytes=max_bytes) as source:
-        return _timeseries_from(path, source, _parse_header(path, source), max_rows)
+        return _timeseries_from(path, source, parse_header(path, source), max_rows)
 
 
 # ---------------------------------------------------------------------------
 # ipmc-frf/1
 # ---------------------------------------------------------------------------
-def _frf_from(path, source: TextSource, header: _Header, max_rows) -> FrequencyResponseData:
-    sample, geometry, known, _numbers, extra = _common_header(
-        path, header, FRF_FORMAT, _FRF_NUMERIC_KEYS, _FRF_LAYOUTS)
-    columns, factors = _parse_columns(path, header, _FRF_LAYOUTS, _FRF_BASES)
+def _frf_from(path, source: TextSource, header: TextHeader, max_rows) -> FrequencyResponseData:
+    sample, geometry, known, _numbers, extra = validate_header(
+        path, header, FRF_FORMAT, FRF_NUMERIC_KEYS, FRF_LAYOUTS)
+    columns, factors = parse_columns(path, header, FRF_LAYOUTS, FRF_BASES)
     coh = columns.index(FRF_COHERENCE_COLUMN) if FRF_COHERENCE_COLUMN in columns else None
     std = [columns.index(c) for c in FRF_STD_COLUMNS if c in columns]
 
     def row_check(row, prev, lineno, prev_line):
         f = row[0]
         if f <= 0.0:
-            raise DataFormatError(path, lineno, f'non-positive frequency {_fmt(f)} Hz '
+            raise DataFormatError(path, lineno, f'non-positive frequency {format_exact(f)} Hz '
                                   '(frequency_hz must be > 0)')
         if prev is not None and f <= prev[0]:
             what = 'duplicate frequency' if f == prev[0] else 'frequency decreases:'
-            raise DataFormatError(path, lineno, f'{what} {_fmt(f)} Hz after {_fmt(prev[0])} Hz on '
-                                  f'line {prev_line}; frequency_hz must be strictly increasing')
+            raise DataFormatError(path, lineno, f'{what} {format_exact(f)} Hz after '
+                                  f'{format_exact(prev[0])} Hz on line {prev_line}; '
+                                  'frequency_hz must be strictly increasing')
         if row[1] <= 0.0:
-            raise DataFormatError(path, lineno, f'non-positive gain {_fmt(row[1])} in column '
-                                  'gain_A_per_m (a magnitude, must be > 0)')
+            raise DataFormatError(path, lineno, f'non-positive gain {format_exact(row[1])} in '
+                                  'column gain_A_per_m (a magnitude, must be > 0)')
         if coh is not None and not 0.0 <= row[coh] <= 1.0:
-            raise DataFormatError(path, lineno, f'coherence {_fmt(row[coh])} outside [0, 1]')
+            raise DataFormatError(path, lineno,
+                                  f'coherence {format_exact(row[coh])} outside [0, 1]')
         for k in std:
             if row[k] < 0.0:
                 raise DataFormatError(path, lineno, f'negative standard uncertainty '
-                                      f'{_fmt(row[k])} in column {columns[k]}')
+                                      f'{format_exact(row[k])} in column {columns[k]}')
 
     def bad_rows(rows, offset):
         bad = (rows[:, 0] <= 0) | (rows[:, 1] <= 0)
@@ -167,14 +172,14 @@ def read_frf(path: PathLike, *, max_bytes: int | None = MAX_BYTES,
              max_rows: int | None = MAX_ROWS) -> FrequencyResponseData:
     """Read an ``ipmc-frf/1`` file (see the docstring of :mod:`.formats`)."""
     with TextSource(path, max_bytes=max_bytes) as source:
-        return _frf_from(path, source, _parse_header(path, source), max_rows)
+        return _frf_from(path, source, parse_header(path, source), max_rows)
 
 
 def read_text(path: PathLike, *, max_bytes: int | None = MAX_BYTES,
               max_rows: int | None = MAX_ROWS) -> TimeSeries | FrequencyResponseData:
     """Read a text file of either format, dispatched on its ``# format:`` line."""
     with TextSource(path, max_bytes=max_bytes) as source:
-        header = _parse_header(path, source)
-        if _format_of(path, header) == TIMESERIES_FORMAT:
+        header = parse_header(path, source)
+        if header_format(path, header) == TIMESERIES_FORMAT:
             return _timeseries_from(path, source, header, max_rows)
         return _frf_from(path, source, header, max_rows)

@@ -123,10 +123,10 @@ import numpy as np
 
 from ..physics.parameters import Geometry
 from .formatheader import (FRF_COHERENCE_COLUMN, FRF_COLUMNS, FRF_FORMAT, FRF_STD_COLUMNS,
-                           GEOMETRY_KEYS, KNOWN_KEYS, TIMESERIES_COLUMNS,
-                           TIMESERIES_COLUMNS_NO_DEFLECTION, TIMESERIES_FORMAT, _KEY,
-                           _RESERVED_KEYS)
-from .formatread import _fmt, read_frf, read_text, read_timeseries
+                           GEOMETRY_KEYS, HEADER_KEY_PATTERN, KNOWN_KEYS, RESERVED_KEYS,
+                           TIMESERIES_COLUMNS, TIMESERIES_COLUMNS_NO_DEFLECTION,
+                           TIMESERIES_FORMAT)
+from .formatread import format_exact, read_frf, read_text, read_timeseries
 from .measurements import DataFormatError, FrequencyResponseData, PathLike, TimeSeries
 
 __all__ = [
@@ -148,19 +148,20 @@ def _header_text(fmt: str, sample: str, geometry: Geometry, numbers: Sequence[tu
     out = [f'# format: {fmt}']
     if sample:
         out.append(f"# sample: {single_line('sample name', sample)}")
-    out += [f'# length_m: {_fmt(geometry.length_m)}', f'# width_m: {_fmt(geometry.width_m)}',
-            f'# thickness_m: {_fmt(geometry.thickness_m)}']
-    out += [f'# {k}: {_fmt(v)}' for k, v in numbers]
+    out += [f'# length_m: {format_exact(geometry.length_m)}',
+            f'# width_m: {format_exact(geometry.width_m)}',
+            f'# thickness_m: {format_exact(geometry.thickness_m)}']
+    out += [f'# {k}: {format_exact(v)}' for k, v in numbers]
     for key in KNOWN_KEYS:
         if key in known:
-            out.append(f'# {key}: {_fmt(known[key])}')
+            out.append(f'# {key}: {format_exact(known[key])}')
     unknown_known = sorted(set(known) - set(KNOWN_KEYS))
     if unknown_known:
         raise DataFormatError(path, None, f'cannot write known value(s) {unknown_known} in a text '
                               f'file; the header knows {list(KNOWN_KEYS)}')
     for key, value in extra.items():
         key = single_line('extra key', key)
-        if not _KEY.fullmatch(key) or key in _RESERVED_KEYS:
+        if not HEADER_KEY_PATTERN.fullmatch(key) or key in RESERVED_KEYS:
             raise DataFormatError(path, None, f'cannot write extra header key {key!r}: invalid or '
                                   'reserved')
         out.append(f"# {key}: {single_line(f'value of extra key {key!r}', value)}")

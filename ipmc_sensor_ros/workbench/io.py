@@ -23,8 +23,8 @@ from pathlib import Path
 from typing import Iterable, Mapping, NamedTuple
 
 from .bags import read_bag, write_bag
-from .bagtopics import (CURRENT_LABEL, DEFLECTION_LABEL, MULTIARRAY_TYPE, POINT_STAMPED_TYPE,
-                        _typestore)
+from .bagtopics import (bag_typestore, CURRENT_LABEL, DEFLECTION_LABEL, MULTIARRAY_TYPE,
+                        POINT_STAMPED_TYPE)
 from .formats import (FRF_COLUMNS, FRF_FORMAT, GEOMETRY_KEYS, KNOWN_KEYS, TIMESERIES_COLUMNS,
                       TIMESERIES_COLUMNS_NO_DEFLECTION, TIMESERIES_FORMAT, read_frf, read_text,
                       read_timeseries, write_frf, write_timeseries)
@@ -36,10 +36,10 @@ __all__ = [
     'DataFormatError', 'TimeSeries', 'FrequencyResponseData', 'TIMESERIES_FORMAT', 'FRF_FORMAT',
     'TIMESERIES_COLUMNS', 'TIMESERIES_COLUMNS_NO_DEFLECTION', 'FRF_COLUMNS', 'GEOMETRY_KEYS',
     'KNOWN_KEYS', 'CURRENT_LABEL', 'DEFLECTION_LABEL', 'MULTIARRAY_TYPE', 'POINT_STAMPED_TYPE',
-    'read_timeseries', 'write_timeseries', 'read_frf', 'write_frf', 'read_bag', 'write_bag',
+    'bag_typestore', 'read_timeseries', 'write_timeseries', 'read_frf', 'write_frf', 'read_bag',
+    'write_bag',
     'read_any', 'load_many', 'read_records', 'Records', 'natural_key', 'DATA_SUFFIXES',
 ]
-_ = _typestore  # re-exported for the test corpus generator
 
 
 # ---------------------------------------------------------------------------

@@ -44,7 +44,8 @@ import numpy as np
 from ..physics.parameters import MaterialParameters, ParameterError
 from .formatread import incomplete_notes
 from .formats import KNOWN_KEYS, write_timeseries
-from .labmeta import _GEOMETRY_PARTS, _geometry, _header_geometry, _read_meta
+from .labmeta import (GEOMETRY_PARTS, geometry_from_header, read_run_metadata,
+                      resolve_geometry)
 from .measurements import DataFormatError, PathLike, TimeSeries
 from .textread import (MAX_BYTES, MAX_ROWS, TextSource, increasing_check, parse_number,
                        read_table)
@@ -242,7 +243,7 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
                                                  and current_gain_a_per_v > 0):
         raise DataFormatError(path, None, f'current_gain_a_per_v must be a finite number > 0, '
                               f'got {current_gain_a_per_v!r}')
-    meta_data = _read_meta(meta) if meta is not None else {}
+    meta_data = read_run_metadata(meta) if meta is not None else {}
     meta_sample = meta_data.get('sample')
     if sample and meta_sample and str(meta_sample) != sample:
         raise DataFormatError(path, None, f'sample conflict: argument says {sample!r} but run '
@@ -250,7 +251,7 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
     name = _one_line(sample or meta_sample or '')
     with TextSource(path, max_bytes=max_bytes, fallback_encoding=LEGACY_ENCODING) as source:
         notes, cells, line, delimiter, decimal = _find_table(path, source)
-        geo = _geometry(path, geometry, meta, meta_data, name, notes)
+        geo = resolve_geometry(path, geometry, meta, meta_data, name, notes)
         roles = _assign(path, cells, line, columns, current_gain_a_per_v is not None)
         factors = {role: _factor(path, line, role, cells[k], unit, current_gain_a_per_v)
                    for role, (k, unit) in roles.items()}
@@ -271,7 +272,7 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
                              for k, (_, n) in enumerate(notes)}
     extra['lab_columns'] = _one_line(', '.join(f'{role}={cells[k]}'
                                                for role, (k, _) in roles.items()))
-    header_geometry = [text for _, text in _header_geometry(path, notes).values()]
+    header_geometry = [text for _, text in geometry_from_header(path, notes).values()]
     if header_geometry:
         extra['geometry_header'] = _one_line('; '.join(header_geometry))
     if source.encoding != 'utf-8':
@@ -289,7 +290,7 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
                 raise DataFormatError(meta, None, f'run metadata {key}: {value!r} must be a '
                                       'number in SI units')
             known[key] = float(value)
-        elif key not in ('sample', 'geometry') and key.partition('_')[0] not in _GEOMETRY_PARTS:
+        elif key not in ('sample', 'geometry') and key.partition('_')[0] not in GEOMETRY_PARTS:
             if not re.fullmatch(r'[A-Za-z][A-Za-z0-9_.\-]*', str(key)):
                 continue
             scalar = isinstance(value, (str, int, float, bool))

@@ -26,14 +26,17 @@ from ..physics.parameters import Geometry, ParameterError
 from .measurements import DataFormatError, PathLike
 from .units import LENGTH_UNITS, decimal_to_si, parse_length, unit_factor
 
-__all__ = ['HEADER_GEOMETRY_NAMES', 'MAX_META_BYTES']
+__all__ = ['HEADER_GEOMETRY_NAMES', 'MAX_META_BYTES', 'GEOMETRY_PARTS', 'read_run_metadata',
+           'geometry_from_header', 'resolve_geometry']
 
-_GEOMETRY_PARTS = ('length', 'width', 'thickness')
+#: The parts of a geometry, in the order of ``--geometry length,width,thickness``.
+GEOMETRY_PARTS = ('length', 'width', 'thickness')
 #: Largest run-metadata file read, bytes.
 MAX_META_BYTES = 1 << 20
 
 
-def _read_meta(meta: PathLike) -> dict:
+def read_run_metadata(meta: PathLike) -> dict:
+    """Return the mapping of a run-metadata file (JSON by its suffix, else YAML)."""
     p = Path(meta)
     try:
         st = os.stat(p)
@@ -71,7 +74,7 @@ def _meta_geometry(meta: PathLike, data: dict) -> dict[str, tuple[float, str]]:
     out: dict[str, tuple[float, str]] = {}
     for key, value in source.items():
         part, _, unit = str(key).partition('_')
-        if part not in _GEOMETRY_PARTS:
+        if part not in GEOMETRY_PARTS:
             continue
         try:
             if unit:
@@ -107,7 +110,7 @@ _HEADER_GEOMETRY = re.compile(
     r'([-+]?\d+(?:[.,]\d+)?(?:[eE][-+]?\d+)?)\s*([A-Za-zµμ]*)\s*[;,]?\s*$', re.IGNORECASE)
 
 
-def _header_geometry(path, notes) -> dict[str, tuple[float, str]]:
+def geometry_from_header(path, notes) -> dict[str, tuple[float, str]]:
     """Map part -> (metres, 'file:line: text') from header lines such as ``Length: 22 mm``."""
     out: dict[str, tuple[float, str]] = {}
     for line, text in notes:
@@ -131,18 +134,24 @@ def _header_geometry(path, notes) -> dict[str, tuple[float, str]]:
 def _flag_geometry(geometry) -> dict[str, tuple[float, str]]:
     if isinstance(geometry, Geometry):
         return {p: (getattr(geometry, f'{p}_m'), f"{p}_m={getattr(geometry, f'{p}_m')!r}")
-                for p in _GEOMETRY_PARTS}
+                for p in GEOMETRY_PARTS}
     if isinstance(geometry, Mapping):
         return {p: (float(geometry[f'{p}_m']), f"{p}_m={geometry[f'{p}_m']!r}")
-                for p in _GEOMETRY_PARTS if f'{p}_m' in geometry}
+                for p in GEOMETRY_PARTS if f'{p}_m' in geometry}
     parts = [s.strip() for s in str(geometry).split(',')]
     if len(parts) != 3:
         raise ValueError(f'geometry {geometry!r}: expected length,width,thickness with units, '
                          'e.g. 22mm,7mm,360um')
-    return {p: (parse_length(v), v) for p, v in zip(_GEOMETRY_PARTS, parts)}
+    return {p: (parse_length(v), v) for p, v in zip(GEOMETRY_PARTS, parts)}
 
 
-def _geometry(path, geometry, meta, meta_data: dict, sample: str, notes) -> Geometry:
+def resolve_geometry(path, geometry, meta, meta_data: dict, sample: str, notes) -> Geometry:
+    """
+    Return the geometry given by the argument, the run metadata and the header lines.
+
+    Two sources that give a part differently are refused naming both; a part none of them
+    gives is an error.
+    """
     try:
         flag = _flag_geometry(geometry) if geometry is not None else {}
     except (ValueError, KeyError) as exc:
@@ -150,9 +159,9 @@ def _geometry(path, geometry, meta, meta_data: dict, sample: str, notes) -> Geom
     sources = (('the geometry argument', flag),
                (f'run metadata {meta}', _meta_geometry(meta, meta_data) if meta is not None
                 else {}),
-               ('the file header', _header_geometry(path, notes)))
+               ('the file header', geometry_from_header(path, notes)))
     values = {}
-    for part in _GEOMETRY_PARTS:
+    for part in GEOMETRY_PARTS:
         given = [(name, got[part]) for name, got in sources if part in got]
         for name, (metres, text) in given[1:]:
             first, (first_m, first_text) = given[0]
@@ -162,7 +171,7 @@ def _geometry(path, geometry, meta, meta_data: dict, sample: str, notes) -> Geom
                                       'fix one of them')
         if given:
             values[part] = given[0][1][0]
-    missing = [p for p in _GEOMETRY_PARTS if p not in values]
+    missing = [p for p in GEOMETRY_PARTS if p not in values]
     if missing:
         raise DataFormatError(path, None, f"no {', '.join(missing)}: give the geometry "
                               '(--geometry 22mm,7mm,360um, i.e. length,width,thickness), a run '

@@ -30,7 +30,7 @@ from .compare import BOUND99
 
 __all__ = ['plot_bode', 'worst_first', 'plot_time_overlay', 'plot_residual_correlation',
            'plot_residual_spectrum', 'residual_lines', 'plot_failure_map', 'plot_track',
-           'plot_error_bars']
+           'plot_error_bars', 'source_label']
 
 
 def _plt():
@@ -51,7 +51,8 @@ def _save(fig, out_dir, name: str, dpi: int = 100) -> str:
     return fname
 
 
-def _label(source: str) -> str:
+def source_label(source: str) -> str:
+    """Return the file name of a record's source path (how figures and reports name it)."""
     return Path(str(source)).name
 
 
@@ -135,7 +136,7 @@ def plot_time_overlay(out_dir: Path, name: str, records: Sequence, max_records: 
         ax.plot(t, r.measured_a[sel] * 1e6, lw=0.8, color='k', label=labels[0], zorder=3)
         ax.plot(t, (r.measured_a[sel] - r.predicted_a[sel]) * 1e6, lw=0.7, color='tab:red',
                 label='residual (measured - model)', zorder=2)
-        ax.set_title(f'{_label(r.source)}: fit {r.fit_percent:.1f} %', fontsize=8)
+        ax.set_title(f'{source_label(r.source)}: fit {r.fit_percent:.1f} %', fontsize=8)
         ax.set_ylabel('current (µA)')
         ax.grid(alpha=0.3)
     axes[0, 0].legend(fontsize=7, loc='upper right')
@@ -151,7 +152,7 @@ def plot_residual_correlation(out_dir: Path, name: str, records: Sequence, max_l
     Lags in seconds; the 99 % band of a white residual. The ``n_labelled``
     worst records are coloured and named, the others grey.
     """
-    from .compare import _xcorr_normalised as _xcorr
+    from .compare import normalised_cross_correlation as xcorr
 
     plt = _plt()
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6))
@@ -162,11 +163,12 @@ def plot_residual_correlation(out_dir: Path, name: str, records: Sequence, max_l
         e = r.measured_a - r.predicted_a
         lags = np.arange(1, max_lag + 1)
         xl = np.arange(-max_lag, max_lag + 1)
-        style = dict(lw=1.0, ms=3, label=f'{_label(r.source)} (fit {r.fit_percent:.1f} %)') \
+        label = f'{source_label(r.source)} (fit {r.fit_percent:.1f} %)'
+        style = dict(lw=1.0, ms=3, label=label) \
             if rank < n_labelled else dict(lw=0.6, ms=0, color='0.6',
                                            label='other records' if rank == n_labelled else None)
-        a1.plot(lags * dt * 1e3, _xcorr(e, e, lags), '.-', **style)
-        a2.plot(xl * dt * 1e3, _xcorr(e, np.gradient(r.deflection_m, r.time_s), xl), '.-', **style)
+        a1.plot(lags * dt * 1e3, xcorr(e, e, lags), '.-', **style)
+        a2.plot(xl * dt * 1e3, xcorr(e, np.gradient(r.deflection_m, r.time_s), xl), '.-', **style)
     if len(records):
         b = BOUND99 / np.sqrt(min(len(r.time_s) for r in records))
         for ax in (a1, a2):

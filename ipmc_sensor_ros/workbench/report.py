@@ -16,9 +16,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
-from .plots import (_label, plot_bode, plot_error_bars, plot_failure_map,
-                    plot_residual_correlation, plot_residual_spectrum, plot_time_overlay,
-                    plot_track, worst_first)
+from .plots import (plot_bode, plot_error_bars, plot_failure_map, plot_residual_correlation,
+                    plot_residual_spectrum, plot_time_overlay, plot_track, source_label,
+                    worst_first)
 
 __all__ = ['Section', 'write_report', 'compare_report', 'fit_report', 'diagnose_report',
            'track_report']
@@ -130,7 +130,7 @@ def compare_report(
     """
     rows = [
         [
-            _label(r.source),
+            source_label(r.source),
             r.sample,
             f'{r.point.frequency_hz:.3g}' if r.point else '-',
             f'{r.fit_percent:.2f}',
@@ -158,7 +158,7 @@ def compare_report(
             if cmp.noise_floor > 0
             else f'{cmp.error:.4f}'
         ),
-        'worst record': f'{_label(worst[0].source)} (fit {worst[0].fit_percent:.1f} %)',
+        'worst record': f'{source_label(worst[0].source)} (fit {worst[0].fit_percent:.1f} %)',
         'records': str(len(cmp.records)),
     }
     sections = [
@@ -262,7 +262,7 @@ def diagnose_report(out_dir: Path, diag) -> Path:
                 yh = predict(p, m)[p.keep]
                 recs.append(
                     SimpleNamespace(
-                        source=f'{_label(p.rec.path)} ({tag})',
+                        source=f'{source_label(p.rec.path)} ({tag})',
                         time_s=p.t[p.keep],
                         measured_a=y,
                         predicted_a=yh,
@@ -283,6 +283,6 @@ def diagnose_report(out_dir: Path, diag) -> Path:
 
 def track_report(out_dir: Path, tracks: dict, parameter: str) -> Path:
     """``tracks``: source -> list of TrackPoint."""
-    sections = [Section(_label(src), '', [plot_track(out_dir, f'track_{k}', tr, parameter)])
+    sections = [Section(source_label(src), '', [plot_track(out_dir, f'track_{k}', tr, parameter)])
                 for k, (src, tr) in enumerate(tracks.items())]
     return write_report(out_dir, 'ipmc-model track', sections, {'tracked parameter': parameter})

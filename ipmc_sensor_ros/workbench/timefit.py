@@ -26,7 +26,7 @@ from typing import Sequence
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..physics.effects import get_effect
+from ..physics.effects import effect_parameter
 from ..physics.model import EffectSpec, SensorModel
 from ..physics.parameters import MaterialParameters, ParameterError
 from .timepredict import PreparedRecord, predict
@@ -68,8 +68,8 @@ class ModelFit:
 def _apply(models: Sequence[SensorModel], material_names, effect_keys, x, base_material):
     mat_changes = {n: float(np.exp(v)) for n, v in zip(material_names, x[:len(material_names)])}
     ev: dict[str, dict[str, float]] = {}
-    for (eff_name, par_name), v, log in zip(effect_keys, x[len(material_names):],
-                                            [_param(e, p).log_scale for e, p in effect_keys]):
+    logs = [effect_parameter(e, p).log_scale for e, p in effect_keys]
+    for (eff_name, par_name), v, log in zip(effect_keys, x[len(material_names):], logs):
         ev.setdefault(eff_name, {})[par_name] = float(np.exp(v)) if log else float(v)
     out, built = [], {}
     for m in models:
@@ -89,14 +89,6 @@ def _apply(models: Sequence[SensorModel], material_names, effect_keys, x, base_m
         built[m] = SensorModel(m.geometry, mat, tuple(effects))
         out.append(built[m])
     return out, ev
-
-
-def _param(effect_name: str, param_name: str):
-    eff = get_effect(effect_name)
-    for p in eff.parameters:
-        if p.name == param_name:
-            return p
-    raise ParameterError(f"effect '{effect_name}' has no parameter '{param_name}'")
 
 
 def fit_model(
@@ -125,7 +117,7 @@ def fit_model(
         lo.append(v - np.log(bounds_factor))
         hi.append(v + np.log(bounds_factor))
     for eff_name, par_name in eff_keys:
-        par = _param(eff_name, par_name)
+        par = effect_parameter(eff_name, par_name)
         current = models[0].effect_values(eff_name)[par_name]
         if par.log_scale:
             x0.append(np.log(current))
@@ -170,7 +162,7 @@ def fit_model(
         if (v - l) < 1e-3 * (h - l) or (h - v) < 1e-3 * (h - l):
             flags.append(f'{name} at bound')
         if k >= len(mat_names):
-            par = _param(*eff_keys[k - len(mat_names)])
+            par = effect_parameter(*eff_keys[k - len(mat_names)])
             val = float(np.exp(v)) if par.log_scale else float(v)
             if not par.typical[0] <= val <= par.typical[1]:
                 flags.append(f'{name} = {val:.4g} {par.unit} outside plausible range '

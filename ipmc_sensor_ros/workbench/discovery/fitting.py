@@ -17,6 +17,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ...physics.effects import effect_parameter
 from ..timefit import FitSpec, ModelFit, fit_model
 from ..timepredict import PreparedRecord, predict
 from .priors import PRIOR_FACTOR
@@ -24,7 +25,7 @@ from .ranking import start_grid
 from .verdict import Candidate
 
 __all__ = ['make_folds', 'with_models', 'fit_vector', 'evaluate', 'held_out', 'Job',
-           'run_jobs', 'without', 'refit_set', 'parameter']
+           'run_jobs', 'without', 'refit_set']
 
 
 def make_folds(prepared: Sequence[PreparedRecord],
@@ -52,19 +53,12 @@ def with_models(prepared, models):
     return [replace(p, rec=replace(p.rec, model=m)) for p, m in zip(prepared, models)]
 
 
-def parameter(effect_name: str, parameter_name: str):
-    """Return the :class:`~ipmc_sensor_ros.physics.effects.EffectParameter` of an effect."""
-    from ..timefit import _param
-
-    return _param(effect_name, parameter_name)
-
-
 def fit_vector(fit: ModelFit, spec: FitSpec) -> np.ndarray:
     """Return the fit-space vector (logs of log-scale parameters) of a fit."""
     x = [np.log(getattr(fit.material, n)) for n in spec.material]
     for eff_name, par_name in spec.effect_params:
         v = fit.effect_values[eff_name][par_name]
-        x.append(np.log(v) if parameter(eff_name, par_name).log_scale else v)
+        x.append(np.log(v) if effect_parameter(eff_name, par_name).log_scale else v)
     return np.asarray(x, float)
 
 

@@ -17,7 +17,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ...physics.effects import get_effect
+from ...physics.effects import effect_parameter, get_effect
 from ..timefit import FitSpec, ModelFit
 from .verdict import Candidate
 
@@ -64,12 +64,10 @@ def start_grid(effect_name: str, shape: Sequence[str], priors: dict) -> list[lis
 
 def baseline_starts(spec: FitSpec, priors: dict, model) -> list[np.ndarray]:
     """Return the baseline fit's start: the model's material, its effects' values or priors."""
-    from .fitting import parameter
-
     x = [np.log(getattr(model.material, n)) for n in spec.material]
     for e, n in spec.effect_params:
         v = priors.get((e, n), model.effect_values(e)[n])
-        x.append(np.log(v) if parameter(e, n).log_scale else v)
+        x.append(np.log(v) if effect_parameter(e, n).log_scale else v)
     return [np.asarray(x, float)]
 
 

@@ -41,7 +41,7 @@ def raw_bag(path: Path, messages, storage: str = 'sqlite3', sidecar: bool = True
     """
     from rosbags.rosbag2 import StoragePlugin, Writer
 
-    store = io._typestore()
+    store = io.bag_typestore()
     plugin = StoragePlugin.MCAP if storage == 'mcap' else StoragePlugin.SQLITE3
     with Writer(path, version=8, storage_plugin=plugin) as writer:
         for topic, msgtype, items in messages:
@@ -55,7 +55,7 @@ def raw_bag(path: Path, messages, storage: str = 'sqlite3', sidecar: bool = True
 
 
 def block_msg(times, values, label=io.CURRENT_LABEL, size=None, stride=None):
-    store = io._typestore()
+    store = io.bag_typestore()
     T = store.types
     t = np.asarray(times, float)
     n = t.size
@@ -77,7 +77,7 @@ def block_msg(times, values, label=io.CURRENT_LABEL, size=None, stride=None):
 
 def point_msg(t: float, z: float):
     """Return a ``PointStamped`` deflection sample: ``z`` metres at ``t`` seconds."""
-    T = io._typestore().types
+    T = io.bag_typestore().types
     sec, nsec = divmod(int(round(t * 1e9)), 10**9)
     return T[io.POINT_STAMPED_TYPE](
         header=T['std_msgs/msg/Header'](
@@ -98,7 +98,7 @@ def make_all(outdir: str | Path) -> dict[str, Path]:
     out.mkdir(parents=True, exist_ok=True)
     cases: dict[str, Path] = {}
     ts = _series()
-    store = io._typestore()
+    store = io.bag_typestore()
     T = store.types
 
     # -- not text -------------------------------------------------------------
