@@ -57,6 +57,35 @@ class FitGroup:
 
 @dataclass
 class FitResult:
+    """
+    Result of :func:`fit_parameters`: estimates, intervals and identifiability.
+
+    Parameter names are the material's (``diffusivity_m2_per_s``) or ``effect.parameter``;
+    values are in each parameter's SI unit.
+
+    Attributes
+    ----------
+    material : the fitted material parameters.
+    effects : the effect specifications with the fitted effect parameters.
+    free : names of the fitted parameters, in fit order.
+    estimates : name -> fitted value.
+    ci95 : name -> 95 % confidence interval (lower, upper).
+    sd_log : name -> standard deviation of the fit coordinate: of ln(value) for log-scale
+        parameters (all material ones), of the value for linear effect parameters.
+    correlation : correlation matrix of the fit coordinates (order of ``free``).
+    chi2 : sum of squared residuals (ln-magnitude and phase, each over its uncertainty).
+    dof : degrees of freedom: residuals minus free parameters (at least 1).
+    identifiability : combinations from the SVD of the scaled Jacobian (``expression``,
+        ``sd_log``, ``sensitivity``, ``determined``), :mod:`.identifiability`.
+    named_combinations : the named combinations of free parameters (``name``, ``value``,
+        ``sd_log``, ``determined``).
+    not_identifiable : free parameters the data do not determine alone.
+    success, message : the optimiser's convergence flag and message.
+    at_bound : free parameters that ended at a bound.
+    residuals : the weighted residuals at the optimum.
+
+    """
+
     material: MaterialParameters
     effects: tuple
     free: tuple[str, ...]

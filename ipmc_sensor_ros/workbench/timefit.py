@@ -44,6 +44,25 @@ class FitSpec:
 
 @dataclass
 class ModelFit:
+    """
+    Result of :func:`fit_model`: the fitted models and the fit's statistics.
+
+    Attributes
+    ----------
+    models : the fitted model of each record (in the order of the prepared records).
+    material : the fitted material parameters (SI units, as :class:`MaterialParameters`).
+    effect_values : effect name -> parameter name -> fitted value, in the parameter's unit.
+    chi2 : sum of the squared residuals, each in units of its record's noise RMS.
+    n_rows : residuals (decimated samples) fitted.
+    n_params : free parameters fitted.
+    success : whether the optimiser reported convergence.
+    flags : warnings: parameters at a bound, effect values outside their plausible range.
+    covariance : covariance of the fit-space parameters (logs of log-scale ones) from the
+        Jacobian at the optimum, (J^T J)^-1 scaled by chi^2/dof when that exceeds 1; None
+        without free parameters.
+
+    """
+
     models: list[SensorModel]            # fitted model per record
     material: MaterialParameters
     effect_values: dict[str, dict[str, float]]
@@ -52,8 +71,6 @@ class ModelFit:
     n_params: int
     success: bool
     flags: list[str] = field(default_factory=list)
-    #: covariance of the fit-space parameters (logs of log-scale ones) from the Jacobian at the
-    #: optimum, (J^T J)^-1 scaled by chi^2/dof when that exceeds 1; None without free parameters
     covariance: np.ndarray | None = None
 
     @property

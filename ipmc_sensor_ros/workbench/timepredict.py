@@ -56,6 +56,35 @@ class Record:
 
 @dataclass
 class PreparedRecord:
+    """
+    A :class:`Record` made ready by :func:`prepare` for fast prediction of its current.
+
+    Attributes
+    ----------
+    rec : the record prepared.
+    t, w, y : its sample times (s), deflection (m) and measured current (A), float arrays.
+    keep : boolean mask of the samples after ``settle_s``, those the error metrics use.
+    rows : indices of the kept samples, decimated, whose residuals the fit uses.
+    sigma : measurement-noise RMS of the current, A (:func:`~.metrics.noise_rms`; at least
+        1e-30).
+    n_fft : length of the FFT of the padded deflection (a power of two).
+    bins : ``rfft`` bins where the transfer function is applied (all but DC).
+    freqs : frequencies of ``bins``, Hz.
+    x_pad : the deflection minus its first value, then ``pad`` samples of a raised-cosine
+        return to zero, m (:func:`~ipmc_sensor_ros.simulation.sensor.padded_record`).
+    pad : samples of that return to zero.
+    x_bins : ``rfft(x_pad, n_fft)`` at ``bins``, m.
+    grid_hz : log-spaced frequencies, Hz, where the transfer function is evaluated and
+        interpolated from.
+    lagrange : per bin, the first grid index and the four cubic Lagrange weights
+        (:func:`_lagrange4`).
+    fold : per-bin weight and phase shift to sample ``rows[0]`` (:func:`_rows_from_spectrum`;
+        set on first use).
+    row_matrix : complex (rows x grid) map from the transfer function on ``grid_hz`` to the
+        current at ``rows`` (:func:`_row_matrix`; long records only, else None).
+
+    """
+
     rec: Record
     t: np.ndarray
     w: np.ndarray
