@@ -84,6 +84,114 @@ def _unpack_block(msg, label: str) -> tuple[np.ndarray, np.ndarray]:
     return times, table[:, 0]
 
 
+def _decode_message(where: str, name: str, store, msgtype: str, label: str, count: int, conn,
+                    raw: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """Return the (times, values) of message ``count`` of a ``msgtype`` topic, in full."""
+    try:
+        msg = store.deserialize_cdr(raw, conn.msgtype)
+    except Exception as exc:  # corrupt payload: any decoder failure
+        raise DataFormatError(where, None, f'message {count}: cannot deserialize '
+                              f'{conn.msgtype}: {type(exc).__name__}: {exc}',
+                              topic=name) from exc
+    if msgtype == POINT_STAMPED_TYPE:
+        return (np.array([msg.header.stamp.sec + msg.header.stamp.nanosec / 1e9]),
+                np.array([float(msg.point.z)]))
+    try:
+        return _unpack_block(msg, label)
+    except ValueError as exc:
+        raise DataFormatError(where, None, f'message {count}: {exc}', topic=name) from None
+
+
+class _TopicSamples:
+    """
+    The samples of one topic as they are read, each message checked when it is kept.
+
+    Blocks must be finite, strictly increasing in time and start after the previous
+    message's last sample; point messages must be finite and have distinct stamps (they
+    are sorted by stamp at the end).  One-sample blocks are gathered into a run of flat
+    arrays and checked as one block when the run ends (:meth:`flush`).
+    """
+
+    def __init__(self, where: str, name: str, quantity: str) -> None:
+        self.where, self.name, self.quantity = where, name, quantity
+        self.times: list[np.ndarray] = []
+        self.values: list[np.ndarray] = []
+        self.prev_end: float | None = None
+        self.run_t, self.run_v = array.array('d'), array.array('d')
+        self.run_first = 0
+
+    def _error(self, text: str) -> DataFormatError:
+        return DataFormatError(self.where, None, text, topic=self.name)
+
+    def _check_finite(self, t: np.ndarray, v: np.ndarray, message_of) -> None:
+        """Refuse a NaN/Inf; ``message_of(k)`` is the (message, sample) of sample k."""
+        bad = ~(np.isfinite(t) & np.isfinite(v))
+        if bad.any():
+            k = int(np.argmax(bad))
+            message, sample = message_of(k)
+            raise self._error(f'message {message}, sample {sample}: NaN/Inf (time '
+                              f'{format_exact(t[k])}, {self.quantity} {format_exact(v[k])})')
+
+    def _late_error(self, message: int, start: float, prev: float) -> DataFormatError:
+        return self._error(f'message {message} starts at {format_exact(start)} s, not after the '
+                           f"previous message's last sample at {format_exact(prev)} s (blocks "
+                           'overlap or are out of order)')
+
+    def add_one(self, count: int, row) -> None:
+        """Add the (time, value) of one-sample block ``count`` to the current run."""
+        if not self.run_t:
+            self.run_first = count
+        self.run_t.append(row[0])
+        self.run_v.append(row[1])
+
+    def flush(self) -> None:
+        """Check the one-sample run as :meth:`add_block` checks a block; keep it."""
+        if not self.run_t:
+            return
+        t, v = np.array(self.run_t), np.array(self.run_v)
+        self.run_t, self.run_v = array.array('d'), array.array('d')
+        self._check_finite(t, v, lambda k: (self.run_first + k, 0))
+        before = np.concatenate(([-np.inf if self.prev_end is None else self.prev_end], t[:-1]))
+        late = t <= before
+        if late.any():
+            k = int(np.argmax(late))
+            raise self._late_error(self.run_first + k, t[k], before[k])
+        self._keep(t, v, ordered=True)
+
+    def add_block(self, count: int, t: np.ndarray, v: np.ndarray, ordered: bool) -> None:
+        """Check and keep the samples of message ``count`` (``ordered``: a block, not a point)."""
+        self._check_finite(t, v, lambda k: (count, k))
+        if ordered and t.size:
+            steps = np.diff(t)
+            if (steps <= 0).any():
+                k = int(np.argmax(steps <= 0)) + 1
+                raise self._error(f'message {count}, sample {k}: time {format_exact(t[k])} s is '
+                                  f'not after {format_exact(t[k - 1])} s (sample times must be '
+                                  'strictly increasing)')
+            if self.prev_end is not None and t[0] <= self.prev_end:
+                raise self._late_error(count, t[0], self.prev_end)
+        self._keep(t, v, ordered)
+
+    def _keep(self, t: np.ndarray, v: np.ndarray, ordered: bool) -> None:
+        if ordered and t.size:
+            self.prev_end = float(t[-1])
+        self.times.append(t)
+        self.values.append(v)
+
+    def arrays(self, by_stamp: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Return all (time, value) samples; ``by_stamp``: sorted, two equal stamps refused."""
+        t = np.concatenate(self.times) if self.times else np.empty(0)
+        v = np.concatenate(self.values) if self.values else np.empty(0)
+        if by_stamp and t.size:
+            order = np.argsort(t, kind='stable')
+            t, v = t[order], v[order]
+            dup = np.diff(t) == 0
+            if dup.any():
+                k = int(np.argmax(dup))
+                raise self._error(f'two samples with the same stamp {format_exact(t[k])} s')
+        return t, v
+
+
 def read_topic(where: str, reader, name: str, info, label: str,
                quantity: str) -> tuple[np.ndarray, np.ndarray]:
     """All (time, value) samples of one topic, in time order, validated."""
@@ -95,108 +203,25 @@ def read_topic(where: str, reader, name: str, info, label: str,
     if msgtype not in allowed:
         raise DataFormatError(where, None, f'has message type {msgtype!r}; expected '
                               + ' or '.join(repr(a) for a in allowed), topic=name)
-    times: list[np.ndarray] = []
-    values: list[np.ndarray] = []
-    count = 0
-    prev_end: float | None = None
+    samples = _TopicSamples(where, name, quantity)
     # one-sample blocks (a DAQ driver's message per sample) are read from their bytes into
     # flat arrays: deserialising each cost ~55 us and kept two small arrays per sample
     one = OneSampleCodec(label) if msgtype == MULTIARRAY_TYPE else None
-    run_t, run_v = array.array('d'), array.array('d')
-    run_first = 0
-
-    def flush() -> None:
-        """Check the one-sample run as the general path checks a message; keep it."""
-        nonlocal prev_end, run_t, run_v
-        if not run_t:
-            return
-        t, v = np.array(run_t), np.array(run_v)
-        run_t, run_v = array.array('d'), array.array('d')
-        bad = ~(np.isfinite(t) & np.isfinite(v))
-        if bad.any():
-            k = int(np.argmax(bad))
-            raise DataFormatError(where, None, f'message {run_first + k}, sample 0: NaN/Inf '
-                                  f'(time {format_exact(t[k])}, {quantity} '
-                                  f'{format_exact(v[k])})', topic=name)
-        before = np.concatenate(([-np.inf if prev_end is None else prev_end], t[:-1]))
-        late = t <= before
-        if late.any():
-            k = int(np.argmax(late))
-            raise DataFormatError(where, None, f'message {run_first + k} starts at '
-                                  f"{format_exact(t[k])} s, not after the previous message's "
-                                  f'last sample at {format_exact(before[k])} s (blocks overlap '
-                                  'or are out of order)', topic=name)
-        prev_end = float(t[-1])
-        times.append(t)
-        values.append(v)
-
+    count = 0
     for conn, _stamp, raw in reader.messages(connections=info.connections):
         count += 1
-        if one is not None:
-            row = one.decode(raw)
-            if row is not None:
-                if not run_t:
-                    run_first = count
-                run_t.append(row[0])
-                run_v.append(row[1])
-                continue
-            flush()
-        try:
-            msg = store.deserialize_cdr(raw, conn.msgtype)
-        except Exception as exc:  # corrupt payload: any decoder failure
-            raise DataFormatError(where, None, f'message {count}: cannot deserialize '
-                                  f'{conn.msgtype}: {type(exc).__name__}: {exc}',
-                                  topic=name) from exc
-        if msgtype == POINT_STAMPED_TYPE:
-            t = np.array([msg.header.stamp.sec + msg.header.stamp.nanosec / 1e9])
-            v = np.array([float(msg.point.z)])
-        else:
-            try:
-                t, v = _unpack_block(msg, label)
-            except ValueError as exc:
-                raise DataFormatError(where, None, f'message {count}: {exc}', topic=name) from None
-        bad = ~(np.isfinite(t) & np.isfinite(v))
-        if bad.any():
-            k = int(np.argmax(bad))
-            raise DataFormatError(where, None, f'message {count}, sample {k}: NaN/Inf '
-                                  f'(time {format_exact(t[k])}, {quantity} '
-                                  f'{format_exact(v[k])})', topic=name)
-        if msgtype == MULTIARRAY_TYPE and t.size:
-            steps = np.diff(t)
-            if (steps <= 0).any():
-                k = int(np.argmax(steps <= 0)) + 1
-                raise DataFormatError(where, None, f'message {count}, sample {k}: time '
-                                      f'{format_exact(t[k])} s is not after '
-                                      f'{format_exact(t[k - 1])} s (sample times must be '
-                                      'strictly increasing)', topic=name)
-            if prev_end is not None and t[0] <= prev_end:
-                raise DataFormatError(
-                    where,
-                    None,
-                    f'message {count} starts at {format_exact(t[0])} s, not '
-                    "after the previous message's last sample at "
-                    f'{format_exact(prev_end)} s (blocks overlap or are out of order)',
-                    topic=name,
-                )
-            prev_end = float(t[-1])
-        times.append(t)
-        values.append(v)
-    flush()
+        row = one.decode(raw) if one is not None else None
+        if row is not None:
+            samples.add_one(count, row)
+            continue
+        samples.flush()
+        t, v = _decode_message(where, name, store, msgtype, label, count, conn, raw)
+        samples.add_block(count, t, v, ordered=msgtype == MULTIARRAY_TYPE)
+    samples.flush()
     if count != info.msgcount and info.msgcount:
         raise DataFormatError(where, None, f'the bag lists {info.msgcount} messages but only '
                               f'{count} could be read (truncated bag?)', topic=name)
-    t = np.concatenate(times) if times else np.empty(0)
-    v = np.concatenate(values) if values else np.empty(0)
-    if msgtype == POINT_STAMPED_TYPE and t.size:
-        order = np.argsort(t, kind='stable')
-        t, v = t[order], v[order]
-        dup = np.diff(t) == 0
-        if dup.any():
-            k = int(np.argmax(dup))
-            raise DataFormatError(where, None,
-                                  f'two samples with the same stamp {format_exact(t[k])} s',
-                                  topic=name)
-    return t, v
+    return samples.arrays(by_stamp=msgtype == POINT_STAMPED_TYPE)
 
 
 def align_deflection(where: str, name: str, tc: np.ndarray, td: np.ndarray,
