@@ -2,7 +2,7 @@
 """
 Sensor-array benchmark: one estimator node, 16 channels at 1 kHz, sustained.
 
-Harness as :mod:`bench.bench_nodes`: three processes on one machine, an isolated
+Harness as :mod:`bench.node_harness`: three processes on one machine, an isolated
 ROS_DOMAIN_ID (201-232), DDS on loopback.  A driver publishes 16-column ``current`` blocks
 (``time_s,current_ch0_A,...``) of ``n`` rows at ``1000 / n`` msg/s on a steady clock; the
 estimator node (``channels: 16``, ``publish_points: none``) republishes on
@@ -16,7 +16,7 @@ import subprocess
 import sys
 import time
 
-from bench.bench_nodes import process_cpu_s, stop_trial, trial_env
+from bench.node_harness import process_cpu_s, stop_trial, trial_env
 
 CHANNELS = 16
 FS = 1000.0

@@ -49,7 +49,7 @@ def test_bench_sink_reads_rows_and_last_time_from_the_serialised_block():
     import numpy as np
     from rclpy.serialization import serialize_message
 
-    from bench.bench_nodes import block_rows_and_last_time
+    from bench.node_harness import block_rows_and_last_time
     from ipmc_sensor_ros.interface.blocks import estimate_columns
     from ipmc_sensor_ros.nodes.messages import BlockPacker, pack_block
 
