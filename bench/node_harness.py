@@ -176,7 +176,7 @@ def trial_env(domain: int) -> dict:
 
 def run_trial_in_process(kind: str, rate: float, n: int, duration: float) -> dict:
     """
-    One trial in a fresh process.
+    Run :func:`run_trial` in a fresh process; its result, or ``sent = -1`` when it gave none.
 
     A long-lived process that creates and destroys many DDS participants was seen to lose
     messages in later trials.

@@ -50,7 +50,7 @@ def bag_typestore():
 
 
 def topic_key(name: str) -> str:
-    """Return a topic name without spaces and leading ``/`` (how topics are matched)."""
+    """Return a topic name without surrounding blanks and leading ``/`` (how topics match)."""
     return name.strip().lstrip('/')
 
 

@@ -96,8 +96,7 @@ def _timeseries_from(path, source: TextSource, header: TextHeader, max_rows) -> 
     elif abs(rate * median_dt - 1.0) > SAMPLE_RATE_TOLERANCE:
         raise DataFormatError(path, header.lines['sample_rate_hz'],
                               f'sample_rate_hz = {format_exact(rate)} disagrees with the time '
-                              'column: '
-                              f'median step {median_dt:.6g} s -> {measured_rate:.6g} Hz '
+                              f'column: median step {median_dt:.6g} s -> {measured_rate:.6g} Hz '
                               f'(tolerance {SAMPLE_RATE_TOLERANCE:.0%})')
     deflection = data[1] if 'deflection_m' in columns else None
     current = data[columns.index('current_A')]

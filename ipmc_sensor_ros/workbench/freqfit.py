@@ -61,7 +61,7 @@ class FitResult:
     Result of :func:`fit_parameters`: estimates, intervals and identifiability.
 
     Parameter names are the material's (``diffusivity_m2_per_s``) or ``effect.parameter``;
-    values are in each parameter's SI unit.
+    values are in the material's SI units or the effect parameter's declared ``unit``.
 
     Attributes
     ----------
