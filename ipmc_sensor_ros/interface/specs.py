@@ -246,10 +246,16 @@ def check_values(values: Mapping[str, Any], specs: Iterable[Spec] | None = None)
             _check_value(spec, values[spec.name], '')
 
 
-def describe_exception(exc: BaseException, limit: int = 200) -> str:
-    """Return ``'Type: message'`` of ``exc`` on one line, the message cut at ``limit`` chars."""
+def describe_exception(exc: BaseException, limit: int = 300) -> str:
+    """
+    Return ``'Type: message'`` of ``exc`` on one line, the message cut at ``limit`` chars.
+
+    A :class:`ParameterError` is the message alone: it names the parameter and the place.
+    """
     text = ' '.join(str(exc).split())
     text = text if len(text) <= limit else text[:limit] + '...'
+    if isinstance(exc, ParameterError) and text:
+        return text
     return f'{type(exc).__name__}: {text}' if text else type(exc).__name__
 
 

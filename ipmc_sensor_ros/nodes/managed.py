@@ -68,7 +68,7 @@ from rclpy.duration import Duration
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from . import params as P
-from ..interface.specs import Spec
+from ..interface.specs import Spec, describe_exception
 from .estimator_node import ESTIMATOR_SPECS, EstimatorNode
 from .runner import run
 from .simulator_node import SIMULATOR_SPECS, SimulatorNode
@@ -85,12 +85,6 @@ AUTOSTART_SPEC = Spec('autostart', False, bool,
                       'configure and activate at start-up (managed nodes only; as a lifecycle '
                       "manager's autostart); false: wait for the lifecycle services",
                       read_only=True)
-
-
-def _one_line(exc: BaseException) -> str:
-    text = ' '.join(str(exc).split())
-    text = text if len(text) <= 300 else text[:300] + '...'
-    return text if isinstance(exc, P.ParameterError) else f'{type(exc).__name__}: {text}'
 
 
 class ManagedMixin:
@@ -144,7 +138,7 @@ class ManagedMixin:
                 self._configure()
             except Exception as exc:  # any failure to build refuses the transition, never a crash
                 self._release()
-                self.get_logger().error(f'configure failed: {_one_line(exc)}')
+                self.get_logger().error(f'configure failed: {describe_exception(exc)}')
                 return FAILURE
             self._configured = True
         self.get_logger().info('configured (inactive): ' + self._ready_text())
@@ -157,13 +151,14 @@ class ManagedMixin:
                 self._open_io()
             except Exception as exc:  # e.g. an unknown qos_overrides.* parameter
                 self._close_io()
-                self.get_logger().error(f'activate failed: {_one_line(exc)}')
+                self.get_logger().error(f'activate failed: {describe_exception(exc)}')
                 return FAILURE
             try:
                 self._on_activated()
                 super().on_activate(state)        # enables the lifecycle publishers
             except Exception as exc:  # error processing follows (module docstring)
-                self.get_logger().error(f'activate failed: {_one_line(exc)}; error processing')
+                self.get_logger().error(
+                    f'activate failed: {describe_exception(exc)}; error processing')
                 return ERROR
             self._fault = None
             self._taking = True
@@ -189,7 +184,8 @@ class ManagedMixin:
                 self._on_deactivated()
                 self._close_io()
             except Exception as exc:  # error processing follows (module docstring)
-                self.get_logger().error(f'deactivate failed: {_one_line(exc)}; error processing')
+                self.get_logger().error(
+                    f'deactivate failed: {describe_exception(exc)}; error processing')
                 return ERROR
             if self._fault:
                 return ERROR
@@ -224,7 +220,8 @@ class ManagedMixin:
                 self._close_io()
                 self._release()
             except Exception as exc:  # noqa: BLE001 - finalized, never a crash
-                self.get_logger().error(f'error processing failed: {_one_line(exc)}; finalized')
+                self.get_logger().error(
+                    f'error processing failed: {describe_exception(exc)}; finalized')
                 self.finalized = True
                 return FAILURE
         self.get_logger().error('error processed: released, unconfigured')
@@ -238,7 +235,8 @@ class ManagedMixin:
                 self._close_io()
                 self._release()
             except Exception as exc:  # error processing follows (module docstring)
-                self.get_logger().error(f'{what} failed: {_one_line(exc)}; error processing')
+                self.get_logger().error(
+                    f'{what} failed: {describe_exception(exc)}; error processing')
                 return False
         return True
 
@@ -284,7 +282,7 @@ class ManagedMixin:
         try:
             callback(*args)
         except Exception as exc:  # a bug or a broken device while active: never a crash
-            self._fault = f'{name}: {_one_line(exc)}'
+            self._fault = f'{name}: {describe_exception(exc)}'
             self.get_logger().error(f'error while active in {self._fault}; error processing '
                                     '(deactivate -> errorprocessing -> unconfigured)')
             self._fault_timer = self.create_timer(
