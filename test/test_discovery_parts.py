@@ -143,3 +143,43 @@ def test_correction_words_carry_the_interval():
     text = c.sentence()
     assert 'first-order high-pass, corner 0.50011 Hz [0.49976, 0.50046]' in text
     assert 'AC-coupled' in text and '1.00x the noise floor' in text
+
+
+def test_outside_stage_keeps_the_round_of_lowest_bic(monkeypatch):
+    """
+    The rounds of C(s) and the search beside it are candidates; the lowest BIC is the result.
+
+    A later round is chosen on top of effects a wrong C(s) made look needed, so it can be
+    worse (a resonance record ended at 99x the floor with the last round, 1.01x with the
+    best).  The stage's fits are replaced by stand-ins with set BICs: this checks the choice.
+    """
+    from contextlib import nullcontext
+    from types import SimpleNamespace
+
+    from ipmc_sensor_ros.workbench.discovery import outside
+
+    rounds = iter([(('resonance', 'delay'), 30.0), (('resonance',), 10.0),
+                   (('high_pass', 'low_pass'), 20.0)])
+    chosen = []
+    state = SimpleNamespace(say=lambda msg: None, chosen=[], current=None, steps=[])
+
+    def select(state_, view, base, band):
+        structure, bic = next(rounds, (None, None))
+        return (None if structure is None else SimpleNamespace(structure=structure, bic=bic)), []
+
+    def beside(view, best):
+        return SimpleNamespace(current=SimpleNamespace(fit=SimpleNamespace(bic=best.bic)),
+                               best=best, without=lambda name: None)
+
+    for name, stand_in in {'_triggered': lambda s: True, '_drop_implausible': lambda s: None,
+                           'band_hz': lambda s: (1.0, 20.0), 'history_view': lambda s, b: s,
+                           '_select': select, '_beside': beside,
+                           'catalog_search': lambda inner: None,
+                           '_drop_failing': lambda inner, st, band: None,
+                           'registered': lambda structs: nullcontext(),
+                           '_result': lambda inner, st, tried: chosen.append((inner.best, st)),
+                           '_adopt_inner': lambda s, inner, best, st: None}.items():
+        monkeypatch.setattr(outside, name, stand_in)
+    outside.outside_stage(state)
+    assert outside.MAX_ROUNDS == 3 and len(chosen) == 1
+    assert chosen[0][1] == ('resonance',) and chosen[0][0].bic == 10.0

@@ -22,7 +22,9 @@ implausible:
    holds C(s)'s elements and that many more, in the model without the effect -- does not beat
    it by ``min_delta_bic``.  An effect that fails is dropped (a step).  C(s) is then chosen
    again on top of the effects named beside it; when its structure changes, steps 2-3 run
-   again (at most :data:`MAX_ROUNDS` times).
+   again (at most :data:`MAX_ROUNDS` times).  The round whose named effects times C(s) have
+   the lowest BIC is the result (all rounds fit the same records): a later round is a new
+   candidate, not an improvement by construction.
 4. **The result** (:class:`~.correction.Correction`): C(s)'s values from a fit run to
    convergence from three starts (every parameter refitted with the named effects;
    :func:`_converged`) with 95 % profile-likelihood intervals (:mod:`.interval`), the
@@ -245,12 +247,14 @@ def outside_stage(state) -> None:
         del state.steps[n_steps:]
         state.adopt(current)
         return
+    rounds = []         # (BIC of the named effects times C(s), C(s), the search beside it)
     for round_ in range(MAX_ROUNDS):
         with registered([best.structure]):
             state.say(f"correction C(s) = {' * '.join(best.structure)}: searching beside it")
             inner = _beside(view, best)
             catalog_search(inner)
             _drop_failing(inner, best.structure, band)
+            rounds.append((inner.current.fit.bic, best, inner))
             catalog = inner.without(correction_name(best.structure))
         if round_ == MAX_ROUNDS - 1:
             break
@@ -258,6 +262,10 @@ def outside_stage(state) -> None:
         if again is None or again.structure == best.structure:
             break
         best, tried = again, tried + more
+    _, best, inner = min(rounds, key=lambda r: r[0])
+    if len(rounds) > 1:
+        state.say(f"correction C(s) = {' * '.join(best.structure)}: the lowest BIC of "
+                  f'{len(rounds)} rounds')
     with registered([best.structure]):
         state.correction = _result(inner, best.structure, tried)
         _adopt_inner(state, inner, best, best.structure)
