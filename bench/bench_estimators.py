@@ -42,7 +42,7 @@ import numpy as np
 from bench.bounds import record_bounds
 from bench.scenarios import build, names, QUICK, Record
 
-__all__ = ['Estimate', 'run_estimator', 'estimate_scores', 'judge', 'main']
+__all__ = ['Estimate', 'run_estimator', 'estimate_scores', 'judge', 'parse_seeds', 'main']
 
 #: Rows sampled before this are not judged (start-up), s.
 AFTER_S = 1.0

@@ -27,8 +27,8 @@ import numpy as np
 from ..errors import DataError
 from .timebase import MAX_STAMP_S, REFUSAL_NAMES, Timebase
 
-__all__ = ['StreamAccounts', 'validate_block', 'COUNTER_NAMES', 'REJECT_REASONS',
-           'MAX_ABS_CURRENT_A', 'MAX_BLOCK_SAMPLES', 'record_summary']
+__all__ = ['StreamAccounts', 'validate_block', 'as_current_block', 'COUNTER_NAMES',
+           'REJECT_REASONS', 'MAX_ABS_CURRENT_A', 'MAX_BLOCK_SAMPLES', 'record_summary']
 
 #: Largest block accepted by default (samples).
 MAX_BLOCK_SAMPLES = 1_000_000
@@ -66,7 +66,7 @@ def validate_block(values, max_samples: int = MAX_BLOCK_SAMPLES,
     (empty, too long, non-finite or implausibly large values).  The stream itself refuses
     such values one sample at a time.
     """
-    x = _as_block(values, max_samples)
+    x = as_current_block(values, max_samples)
     if float(np.max(np.abs(x))) <= max_abs_current_a:   # one pass; NaN makes it False
         return x
     finite = np.isfinite(x)
@@ -79,7 +79,7 @@ def validate_block(values, max_samples: int = MAX_BLOCK_SAMPLES,
                     f'({float(x[k])!r} A): not a sensing current', index=k)
 
 
-def _as_block(values, max_samples: int) -> np.ndarray:
+def as_current_block(values, max_samples: int) -> np.ndarray:
     """Return ``values`` as a float64 1-D array of 1..max_samples; DataError saying why not."""
     try:
         x = np.asarray(values, dtype=float)

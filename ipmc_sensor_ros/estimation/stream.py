@@ -49,7 +49,7 @@ import numpy as np
 
 from ..errors import DataError
 from .accounting import (COUNTER_NAMES, MAX_ABS_CURRENT_A, MAX_BLOCK_SAMPLES, REJECT_REASONS,
-                         StreamAccounts, _as_block, validate_block)
+                         StreamAccounts, as_current_block, validate_block)
 from .deflection import DeflectionEstimator
 from .timebase import (JITTER_FRACTION, MAX_STAMP_S, NON_FINITE, OUT_OF_RANGE, RATE_WINDOW_S,
                        START, Timebase)
@@ -327,7 +327,7 @@ class StreamEstimator(StreamAccounts):
                                    f'{self.max_block_samples} (max_block_samples)', 'too_long')
             return None
         try:
-            current = _as_block(currents, self.max_block_samples)
+            current = as_current_block(currents, self.max_block_samples)
             t = self.timebase.block_times(times, current.size, self._now_s)
         except DataError as exc:
             self.reject(n_claimed, str(exc))

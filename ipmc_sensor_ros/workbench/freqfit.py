@@ -26,7 +26,7 @@ from scipy.optimize import least_squares
 
 from scipy.stats import chi2 as chi2_dist
 
-from ..physics.effects import EFFECTS, get_effect
+from ..physics.effects import EFFECTS, effect_parameter, get_effect
 from ..physics.model import EffectSpec, SensorModel, parse_effects
 from ..physics.parameters import PAPER_PARAMETERS, Geometry, MaterialParameters, ParameterError
 from .freqresp import FrequencyPoint
@@ -298,7 +298,7 @@ def _start_and_bounds(keys: list, material: MaterialParameters, effects: tuple,
                 lo = np.log(1e-6)
             is_log.append(True)
         else:
-            par = next(p for p in get_effect(k[0]).parameters if p.name == k[1])
+            par = effect_parameter(*k)
             v = next(e for e in effects if e.name == k[0]).as_dict()[k[1]]
             if par.log_scale:
                 v0, lo, hi = np.log(v), np.log(par.lower), np.log(par.upper)

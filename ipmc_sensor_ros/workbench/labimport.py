@@ -42,6 +42,7 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 
 from ..physics.parameters import MaterialParameters, ParameterError
+from .formatheader import HEADER_KEY_PATTERN
 from .formatread import incomplete_notes
 from .formats import KNOWN_KEYS, write_timeseries
 from .labmeta import (GEOMETRY_PARTS, geometry_from_header, read_run_metadata,
@@ -291,7 +292,7 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
                                       'number in SI units')
             known[key] = float(value)
         elif key not in ('sample', 'geometry') and key.partition('_')[0] not in GEOMETRY_PARTS:
-            if not re.fullmatch(r'[A-Za-z][A-Za-z0-9_.\-]*', str(key)):
+            if not HEADER_KEY_PATTERN.fullmatch(str(key)):
                 continue
             scalar = isinstance(value, (str, int, float, bool))
             text = _one_line(value)[:200] if scalar else '(nested value, not kept)'
