@@ -16,12 +16,12 @@ import subprocess
 import sys
 import time
 
-from bench.node_harness import process_cpu_s, stop_trial, trial_env
+from bench.node_harness import DRIVER_START, process_cpu_s, stop_trial, trial_env
 
 CHANNELS = 16
 FS = 1000.0
 
-ARRAY_DRIVER = r"""
+ARRAY_DRIVER = DRIVER_START + r"""
 import sys, time, rclpy, numpy as np
 from std_msgs.msg import Float64MultiArray
 from ipmc_sensor_ros.interface.blocks import current_columns
@@ -30,14 +30,7 @@ from ipmc_sensor_ros.nodes.messages import BlockPacker
 channels, n = int(sys.argv[1]), int(sys.argv[2])
 duration, fs = float(sys.argv[3]), float(sys.argv[4])
 rate = fs / n
-rclpy.init()
-node = rclpy.create_node("array_driver")
-qos = P.make_qos({"qos_depth": 1000, "qos_reliability": "reliable"})
-pub = node.create_publisher(Float64MultiArray, "current", qos)
-end = time.monotonic() + 20
-while pub.get_subscription_count() == 0 and time.monotonic() < end:
-    rclpy.spin_once(node, timeout_sec=0.05)
-time.sleep(1.0)
+node, pub = open_publisher("array_driver")
 rng = np.random.default_rng(0)
 total = int(rate * duration)
 k_all = np.arange(total * n)

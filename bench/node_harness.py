@@ -21,8 +21,8 @@ import sys
 import time
 from pathlib import Path
 
-__all__ = ['ROOT', 'PASSTHROUGH_CLASS', 'PASSTHROUGH', 'DRIVER', 'NODE_CPU', 'node_in_process',
-           'trial_env', 'run_trial_in_process', 'process_cpu_s', 'stop_trial',
+__all__ = ['ROOT', 'PASSTHROUGH_CLASS', 'PASSTHROUGH', 'DRIVER_START', 'DRIVER', 'NODE_CPU',
+           'node_in_process', 'trial_env', 'run_trial_in_process', 'process_cpu_s', 'stop_trial',
            'block_rows_and_last_time', 'run_trial']
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -60,7 +60,20 @@ except KeyboardInterrupt:
     pass
 """
 
-DRIVER = r"""
+#: the drivers' start: a reliable publisher on ``current``, once the node under test subscribes
+DRIVER_START = r"""
+def open_publisher(name):
+    rclpy.init()
+    node = rclpy.create_node(name)
+    qos = P.make_qos({"qos_depth": 1000, "qos_reliability": "reliable"})
+    pub = node.create_publisher(Float64MultiArray, "current", qos)
+    end = time.monotonic() + 20
+    while pub.get_subscription_count() == 0 and time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    time.sleep(1.0)
+    return node, pub
+"""
+DRIVER = DRIVER_START + r"""
 import sys, time, rclpy, numpy as np
 from std_msgs.msg import Float64MultiArray
 from ipmc_sensor_ros.nodes import params as P
@@ -69,14 +82,7 @@ rate, n = float(sys.argv[1]), int(sys.argv[2])
 duration, fs = float(sys.argv[3]), float(sys.argv[4])
 epoch = float(sys.argv[5])   # times are seconds since this shared epoch: float64 resolution
                              # at today's epoch (0.24 us) could not carry 1 us sample periods
-rclpy.init()
-node = rclpy.create_node("driver")
-qos = P.make_qos({"qos_depth": 1000, "qos_reliability": "reliable"})
-pub = node.create_publisher(Float64MultiArray, "current", qos)
-end = time.monotonic() + 20
-while pub.get_subscription_count() == 0 and time.monotonic() < end:
-    rclpy.spin_once(node, timeout_sec=0.05)
-time.sleep(1.0)
+node, pub = open_publisher("driver")
 k = 0
 t0 = time.monotonic()
 total = int(rate * duration)
