@@ -367,15 +367,16 @@ class EstimatorNode(LiveParameters, ArrayPath, Node):
 
     def _drain(self) -> None:
         """Publish the samples the smoother still holds for their lag (the stream ends here)."""
-        pub = getattr(self, '_pub_smoothed', None)
-        if pub is not None and self._stream is not None:
+        if getattr(self, '_pub_smoothed', None) is not None and self._stream is not None:
             with self._lock:
                 self._publish_smoothed(flush=True)
-            pub.wait_for_all_acked(Duration(nanoseconds=int(P.FLUSH_TIMEOUT_S * 1e9)))
 
     def destroy_node(self) -> None:
-        """Publish the samples the smoother still holds (:meth:`_drain`), then destroy the node."""
+        """Publish what the smoother holds, wait ``params.FLUSH_TIMEOUT_S`` for acks, destroy."""
         self._drain()
+        pub = getattr(self, '_pub_smoothed', None)
+        if pub is not None:
+            pub.wait_for_all_acked(Duration(nanoseconds=int(P.FLUSH_TIMEOUT_S * 1e9)))
         super().destroy_node()
 
     def _publish_point(self, time_s: float, deflection_m: float, channel: int = 0) -> None:

@@ -315,13 +315,14 @@ class ManagedMixin:
 
     def destroy_node(self) -> None:
         """
-        Publish what is held back, release the topics and the model, destroy the node.
+        Publish what is held back, wait for acks, release topics and model, destroy the node.
 
         rclpy's ``destroy_node`` leaves the lifecycle state machine (its ``transition_event``
         publisher) to the garbage collector; it is destroyed here, or a node that is still
         referenced stays on the graph as a ghost after its context has shut down.
         """
         self._drain()
+        self._flush()
         self._close_io()
         self._release()
         super().destroy_node()
