@@ -43,6 +43,17 @@ SETTINGS = (
     Setting('motion_bandwidth_hz', 50.0, 'Hz', 0.1, 1e4,
             'upper corner of the motion spectrum (third order above it): above the 1-20 Hz band '
             'and a 30 Hz free vibration'),
+    Setting('periodic_remainder_rms_m', 20e-6, 'm', 1e-9, 1.0,
+            "RMS of the motion a periodic model leaves (a crank's play, the rig's "
+            'vibration): the motion prior once the periodic motion is modelled; small, so an '
+            'offset is learned within a few periods'),
+    Setting('motion_speed_walk', 2.4e-3, '1/sqrt(s)', 0.0, 1.0,
+            "random walk of the periodic motion's relative speed: a DC motor's speed wobbles "
+            'by ~1 % over seconds (phase excursions of 0.2-2 rad at 5-20 Hz); each periodic '
+            'component walks by motion_rms_m x 2 pi f_motion x this'),
+    Setting('motion_harmonics', 3, '', 1, 10,
+            "periodic-motion harmonics modelled: a crank-slider's second and third are a "
+            'few percent of the first'),
     Setting('working_point_walk_m', 1e-6, 'm/sqrt(s)', 0.0, 1.0,
             'random walk of the working point while moving: the stimulus, not drift, moves it; '
             'a rest sets it where the tip is held'),

@@ -10,11 +10,12 @@ its samples; there is no second implementation)::
     rest test on the window of r = i - lines(x-)        (:mod:`.rest`)
     update    nu = i - c x-,  S = c P- c' + R,  K = P- c' / S,  x = x- + K nu,
               P = P- - K S K'
-    at rest   velocity = 0, acceleration = 0, motion current = 0 (pseudo-measurements,
-              :mod:`.rest`); working point = w (its prior released first when the tip
-              moved since the working point was last set:
+    at rest   velocity = 0, acceleration = 0, motion current = 0, periodic motion = 0
+              (pseudo-measurements, :mod:`.rest`); working point = w (its prior released
+              first when the tip moved since the working point was last set:
               :attr:`~.statespace.StateSpaceModel.hold_variance`; a record that starts at
-              rest keeps the starting working point, its rest position)
+              rest keeps the starting working point, its rest position); leaving a rest,
+              the periodic motion's prior is released (a new motion's amplitude is unknown)
 
 R, the white-noise variance per sample, is measured on the current: the third difference
 i_k - 3 i_{k-1} + 3 i_{k-2} - i_{k-3} has variance 20 R for white noise and passes a current
@@ -137,8 +138,14 @@ class KalmanFilter:
         anchor_var = (cfg.rest_velocity_m_s / model.sample_rate_hz) ** 2
         accel = np.zeros(model.size)
         accel[model.ia] = model.scale[model.ia]
-        self._rest_rows = ((model.c_velocity, v2), (accel, v2 * model.sample_rate_hz ** 2),
-                           (model.c_motion, m2), (self._anchor, anchor_var))
+        rows = [(model.c_velocity, v2), (accel, v2 * model.sample_rate_hz ** 2),
+                (model.c_motion, m2), (self._anchor, anchor_var)]
+        for k, f in enumerate(model.motion_lines_hz):     # a periodic amplitude at rest is
+            for j in (model.im + 2 * k, model.im + 2 * k + 1):   # the velocity's noise / W
+                row = np.zeros(model.size)
+                row[j] = s[j]
+                rows.append((row, v2 / (2 * np.pi * f) ** 2))
+        self._rest_rows = tuple(rows)
 
     @property
     def rotation(self) -> np.ndarray:
@@ -181,7 +188,8 @@ class KalmanFilter:
         st = ([1] * n if steps is None else steps if isinstance(steps, list)
               else np.asarray(steps, dtype=np.int64).tolist())
         m, rest = self.model, self.rest
-        iw, ih, ib = m.iw, m.ih, m.ib
+        iw, ih, ib, im = m.iw, m.ih, m.ib, m.im
+        periodic = m.size > im
         sw, sb = float(m.scale[iw]), float(m.scale[ib])
         c, hold, rows, alpha, rot = m.c, m.hold_variance, self._rest_rows, self._alpha, self._rot
         nw = rest.n
@@ -245,6 +253,8 @@ class KalmanFilter:
             if release:
                 P[ih, ih] += hold
                 moved = moved and not still
+                if periodic and not still:
+                    P[im:, im:] += np.eye(m.size - im)
             if record is not None:
                 j = offset + k
                 record.x_pred[j], record.P_pred[j] = x, P
@@ -310,6 +320,13 @@ def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> Fil
         if near:
             src += [mo.il + 2 * near[0], mo.il + 2 * near[0] + 1]
             dst += [mn.il + 2 * k, mn.il + 2 * k + 1]
+    fresh = []                        # periodic states the old model did not have
+    for k, f in enumerate(mn.motion_lines_hz):
+        if mo.motion_hz == mn.motion_hz and k < len(mo.motion_lines_hz):
+            src += [mo.im + 2 * k, mo.im + 2 * k + 1]
+            dst += [mn.im + 2 * k, mn.im + 2 * k + 1]
+        else:
+            fresh += [2 * k, 2 * k + 1]
     same_sensor = np.array_equal(np.diag(mo.sensor[0]), np.diag(mn.sensor[0]))
     if same_sensor:                   # only the lines changed: the charge states carry too
         src = list(range(mo.n_sensor)) + src
@@ -320,7 +337,10 @@ def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> Fil
         x[:mn.n_sensor] = -x[mn.iu] / np.diag(mn.sensor[0])
         P[:mn.n_sensor, dst] = 0.0
         P[dst, :mn.n_sensor] = 0.0
-    out = replace(init, x=x / mn.scale, P=P / np.outer(mn.scale, mn.scale),
+    x, P = x / mn.scale, P / np.outer(mn.scale, mn.scale)
+    if fresh:
+        x, P = _restart_motion(mn, x, P)
+    out = replace(init, x=x, P=P,
                   noise_var_a2=state.noise_var_a2, samples=state.samples,
                   contiguous=state.contiguous, noise_weight=state.noise_weight,
                   still=state.still, moved=state.moved, quiet=state.quiet, cusum=state.cusum)
@@ -337,3 +357,36 @@ def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> Fil
                    window_pos=state.window_pos, total=state.total, total_sq=state.total_sq,
                    line_sums=sums, phase=np.ones(len(new.rest_lines_hz), complex),
                    phases=phases)
+
+
+def _restart_motion(mn, x: np.ndarray, P: np.ndarray):
+    """
+    Join the carried state and new periodic states under the new model's structure.
+
+    The carried states keep their mean and covariance, the new periodic states p start from
+    their prior (independent of them); the new model says the motion states m are the
+    working point plus the periodic states' forced response plus a remainder,
+    m = L h + X p + e with e ~ its stationary covariance (:meth:`~.statespace.
+    StateSpaceModel.prior`).  That relation is applied as a measurement (value 0, noise the
+    remainder's covariance), so what the old estimate held of a periodic motion goes to p,
+    with the correlations of motion, offset and working point kept.
+    """
+    motion = mn.motion_states
+    fresh = np.arange(mn.im, mn.size)
+    P = P.copy()
+    P[np.ix_(fresh, fresh)] = np.eye(fresh.size)
+    others = np.setdiff1d(np.arange(mn.size), fresh)
+    P[np.ix_(others, fresh)] = 0.0
+    P[np.ix_(fresh, others)] = 0.0
+    x = x.copy()
+    x[fresh] = 0.0
+    H = np.zeros((motion.size, mn.size))
+    H[np.arange(motion.size), motion] = 1.0
+    H[list(motion).index(mn.iw), mn.ih] = -mn.scale[mn.ih] / mn.scale[mn.iw]
+    H[:, fresh] = -mn.forced_response
+    PH = P @ H.T
+    S = H @ PH + mn.stationary_motion
+    K = np.linalg.solve(S, PH.T).T
+    x = x - K @ (H @ x)
+    P = P - K @ PH.T
+    return x, 0.5 * (P + P.T)

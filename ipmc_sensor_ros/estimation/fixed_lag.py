@@ -17,13 +17,16 @@ a reset.  With a lag longer than the record, the result is the fixed-interval sm
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from ..errors import ParameterError
 from .core import Estimate
 from .filter import ForwardRecord, KalmanFilter
 from .smoother import rts_backward
 
-__all__ = ['FixedLagSmoother', 'MAX_LAG_SAMPLES']
+__all__ = ['FixedLagSmoother', 'MAX_LAG_SAMPLES', 'lag_smoother']
 
 #: Longest lag, samples: 2 x 20000 covariances of a 15-state model are ~70 MB.
 MAX_LAG_SAMPLES = 20_000
@@ -79,3 +82,17 @@ class FixedLagSmoother:
         self._parts = [rec.rows(n_out, n_out + keep)] if keep else []
         self._held = keep
         return out
+
+
+def lag_smoother(lag_s: float, sample_rate_hz: float) -> FixedLagSmoother | None:
+    """Return the fixed-lag smoother of ``smoothed_lag_s`` (None: 0), checked."""
+    if not (math.isfinite(lag_s) and lag_s >= 0.0):
+        raise ParameterError(f"parameter 'smoothed_lag_s' must be >= 0 s, got {lag_s!r}")
+    if lag_s == 0.0:
+        return None
+    n = max(1, int(round(lag_s * sample_rate_hz)))
+    if n > MAX_LAG_SAMPLES:
+        raise ParameterError(f"parameter 'smoothed_lag_s' = {lag_s:g} s is {n} samples at "
+                             f'{sample_rate_hz:g} Hz; at most {MAX_LAG_SAMPLES} (the memory of '
+                             'its covariances)')
+    return FixedLagSmoother(n)

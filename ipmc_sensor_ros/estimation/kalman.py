@@ -13,6 +13,12 @@ sample counts (so the result does not depend on how the stream is cut into block
 appears, or moves by more than ``LINE_RETUNE_HZ``, the model is rebuilt with line states at
 the measured frequency and the filter state carried over.
 
+A periodic motion is measured at the same checks, on the same stretch
+(:func:`~.motionline.measure_motion`); when two checks in a row say it appeared, went or
+moved, the model with periodic states at the measured fundamental (a small remainder:
+:mod:`.statespace`) takes over from the start of those stretches, whose samples are
+filtered again (:mod:`.periodic`).
+
 ``smoothed_lag_s`` > 0 also smooths the live output with that lag
 (:class:`~.fixed_lag.FixedLagSmoother` on the filter's own forward record):
 :meth:`KalmanEstimator.pop_smoothed` returns what is ready, oldest first.
@@ -28,8 +34,10 @@ from ..lti.reduction import ReducedModel
 from .config import EstimatorConfig
 from .core import Estimate
 from .filter import FilterState, ForwardRecord, KalmanFilter, carry_state
-from .fixed_lag import MAX_LAG_SAMPLES, FixedLagSmoother
+from .fixed_lag import lag_smoother
 from .lines import NOMINAL_LINES_HZ, measure_line
+from .motionline import measure_motion
+from .periodic import StretchLog, refilter, same_motion
 from .smoother import smooth
 from .statespace import StateSpaceModel
 
@@ -37,7 +45,9 @@ __all__ = ['KalmanEstimator', 'MAINS_CHOICES', 'parse_mains', 'LINE_CHECK_S']
 
 #: Data between two measurements of the mains line, s (also the stretch measured): 2 s
 #: resolves 0.5 Hz and, zero-padded, finds the line to ~0.01 Hz at 3 % hum.  The first
-#: measurement is made after ``LINE_FIRST_S`` (0.5 s: to ~0.05 Hz), so hum is modelled early.
+#: measurements are made after ``LINE_FIRST_S`` (0.5 s: the line to ~0.05 Hz, so hum is
+#: modelled early) and twice that (1 s: a periodic motion judged down to 1 Hz,
+#: :mod:`.motionline`, so it is modelled early too).
 LINE_CHECK_S = 2.0
 LINE_FIRST_S = 0.5
 #: A measured line this far from the modelled one retunes the model, Hz: the line states'
@@ -90,7 +100,7 @@ class KalmanEstimator:
         self.mains_hz = parse_mains(mains_hz)
         fs = float(sample_rate_hz)
         self.smoothed_lag_s = float(smoothed_lag_s)
-        self._lag = _lag_smoother(self.smoothed_lag_s, fs)
+        self._lag = lag_smoother(self.smoothed_lag_s, fs)
         self._smoothed: list[Estimate] = []
         # until measured: a line at each nominal frequency (hum at the start must not be
         # taken for an offset), then the measured one
@@ -115,9 +125,10 @@ class KalmanEstimator:
 
     def _next_check(self, samples: int) -> int:
         """Return the sample count of the next line measurement after ``samples``."""
-        if samples < self._first_n:
-            return self._first_n
-        return self._first_n + ((samples - self._first_n) // self._check_n + 1) * self._check_n
+        first, second = self._first_n, 2 * self._first_n
+        if samples < second:
+            return first if samples < first else second
+        return second + ((samples - second) // self._check_n + 1) * self._check_n
 
     # -- properties ---------------------------------------------------------------------
     @property
@@ -138,10 +149,11 @@ class KalmanEstimator:
         if self._state is not None:
             self._flush_lag()
         nominal = () if self.mains_hz == 0.0 else self._nominal()
-        if self.model.fundamentals_hz != tuple(nominal):
+        if self.model.fundamentals_hz != tuple(nominal) or self.model.motion_hz:
             self._filter = self._new_filter(StateSpaceModel(self.reduced, self.config,
                                                             self.sample_rate_hz, nominal))
         self._state = self._filter.initial_state()
+        self._log = StretchLog(self._filter, self._state)
         self._recent = np.zeros(self._check_n)
         self._grid = 0           # sample periods since the start (bridged ones included)
         self._first_rest_n = None
@@ -162,6 +174,7 @@ class KalmanEstimator:
             if rec is not None:
                 self._keep(self._lag.push(self._filter, rec))
             self._remember(y[a:b], st[a:b], still)
+            self._log.add(y[a:b].tolist(), st[a:b].tolist(), bool(still.any()))
             parts.append((w, s, still))
             a = b
             if self._state.samples == due:
@@ -179,6 +192,7 @@ class KalmanEstimator:
             return float(est.deflection_m[0]), float(est.std_m[0])
         self._state, w, s, still = self._filter.run(self._state, [float(current_a)],
                                                     [int(steps)], copy=False)
+        self._log.add([float(current_a)], [int(steps)], bool(still[0]))
         for _ in range(int(steps)):     # a bridged slot holds the next value (line check)
             self._recent[self._grid % self._check_n] = current_a
             self._grid += 1
@@ -204,10 +218,15 @@ class KalmanEstimator:
         self._grid += int(steps.sum())
 
     def _check_line(self) -> None:
-        if self.mains_hz == 0.0:
-            return
         seen = min(self._grid, self._check_n)
         recent = np.roll(self._recent, -(self._grid % self._check_n))[-seen:]
+        self._check_mains(recent)
+        self._check_motion(recent)
+        self._log.mark(self._filter, self._state)
+
+    def _check_mains(self, recent: np.ndarray) -> None:
+        if self.mains_hz == 0.0:
+            return
         f_line, _ = measure_line(recent, self.sample_rate_hz, self._nominal(),
                                  self.config.line_harmonics)
         old = self.model.fundamentals_hz
@@ -217,10 +236,22 @@ class KalmanEstimator:
             return        # no line: keep what is modelled (the nominal pair only at the start)
         f_line = f_line or ()
         self._flush_lag()           # the forward record is the old model's
-        model = StateSpaceModel(self.reduced, self.config, self.sample_rate_hz, f_line)
+        model = StateSpaceModel(self.reduced, self.config, self.sample_rate_hz, f_line,
+                                self.model.motion_hz)
         filt = self._new_filter(model)
         self._state = carry_state(self._filter, filt, self._state)
         self._filter = filt
+
+    def _check_motion(self, recent: np.ndarray) -> None:
+        """Measure the periodic motion; a new one is modelled from its span (:mod:`.periodic`)."""
+        f0 = measure_motion(recent, self.sample_rate_hz, self.model)
+        span = self._log.span_for(f0, self._first_rest_n is None)
+        if span is None or same_motion(f0, self.model.motion_hz):
+            return
+        filt = self._new_filter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,
+                                                self.model.fundamentals_hz, f0))
+        self._flush_lag()               # the forward record is the old model's
+        self._filter, self._state = filt, refilter(span, filt)
 
     # -- fixed-lag output -------------------------------------------------------------------
     def _keep(self, est: Estimate | None) -> None:
@@ -253,8 +284,10 @@ class KalmanEstimator:
         """
         Smoothed estimate of a whole record from a fresh start (fixed-interval RTS).
 
-        The mains line is measured on the whole record first (offline, it can be).  Leaves
-        this estimator's stream state untouched.
+        The mains line and a periodic motion are measured on the whole record first
+        (offline, they can be); the periodic states are modelled from the start when the
+        sensor never rests in the record (the live rule for a motion going on since
+        power-on, :mod:`.periodic`).  Leaves this estimator's stream state untouched.
         """
         y = np.asarray(current_a, dtype=float)
         line = self.model.line_hz
@@ -263,32 +296,48 @@ class KalmanEstimator:
                                 self.config.line_harmonics)[0]
         filt = self._new_filter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,
                                                 line))
+        motion = measure_motion(y, self.sample_rate_hz, filt.model)
+        if motion:
+            periodic = self._new_filter(StateSpaceModel(
+                self.reduced, self.config, self.sample_rate_hz, line, motion))
+            if not periodic.run(periodic.initial_state(), y, steps)[3].any():
+                filt = periodic
         w, s, _ = smooth(filt, filt.initial_state(), y, steps)
         return Estimate(w, s, np.zeros(y.size, dtype=bool))
 
     # -- state ------------------------------------------------------------------------------
     def get_state(self) -> dict:
         return {'filter': self._state.copy(), 'line_hz': self.model.fundamentals_hz,
-                'recent': self._recent.copy(), 'grid': self._grid,
-                'first_rest_n': self._first_rest_n}
+                'motion_hz': self.model.motion_hz, 'recent': self._recent.copy(),
+                'grid': self._grid, 'first_rest_n': self._first_rest_n,
+                'stretches': self._log.saved()}
 
     def set_state(self, state: dict) -> None:
         try:
             fs: FilterState = state['filter']
             line = tuple(float(f) for f in state['line_hz'])
+            motion = float(state['motion_hz'])
             recent = np.asarray(state['recent'], dtype=float)
-        except (KeyError, TypeError, ValueError):
+            filt = self._model_filter(line, motion)
+            log = StretchLog.restored(state['stretches'], self._model_filter)
+        except (KeyError, TypeError, ValueError, AttributeError):
             raise ParameterError('not a state of this Kalman estimator') from None
-        if line != self.model.fundamentals_hz:
-            self._filter = self._new_filter(StateSpaceModel(self.reduced, self.config,
-                                                            self.sample_rate_hz, line))
-        if fs.x.shape != (self.model.size,) or recent.shape != self._recent.shape:
+        if fs.x.shape != (filt.model.size,) or recent.shape != self._recent.shape:
             raise ParameterError('state was saved from a different estimator design')
         self._flush_lag()
+        self._filter, self._log = filt, log
         self._state = fs.copy()
         self._recent = recent.copy()
         self._grid = int(state.get('grid', fs.samples))
         self._first_rest_n = state.get('first_rest_n')
+
+    def _model_filter(self, line_hz, motion_hz) -> KalmanFilter:
+        """Return this filter when its model has these lines and motion, else a new one."""
+        m = self.model
+        if m.fundamentals_hz == tuple(line_hz) and m.motion_hz == motion_hz:
+            return self._filter
+        return self._new_filter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,
+                                                tuple(line_hz), motion_hz))
 
     def rebuilt(self, reduced: ReducedModel | None = None, recent_input=None,
                 **changes) -> 'KalmanEstimator':
@@ -307,8 +356,10 @@ class KalmanEstimator:
         new = KalmanEstimator(reduced or self.reduced, fs, config, mains, lag_s)
         if new.mains_hz == self.mains_hz:
             new._filter = new._new_filter(StateSpaceModel(new.reduced, config, fs,
-                                                          self.model.fundamentals_hz))
+                                                          self.model.fundamentals_hz,
+                                                          self.model.motion_hz))
         new._state = carry_state(self._filter, new._filter, self._state)
+        new._log = StretchLog(new._filter, new._state)
         new._first_rest_n = self._first_rest_n
         if new._check_n == self._check_n:
             new._recent, new._grid = self._recent.copy(), self._grid
@@ -317,6 +368,7 @@ class KalmanEstimator:
     def continue_from(self, old: 'KalmanEstimator', recent_input=None) -> None:
         """Take over ``old``'s stream state (deflection, offset, lines, ...)."""
         self._state = carry_state(old._filter, self._filter, old._state)
+        self._log = StretchLog(self._filter, self._state)
         self._first_rest_n = old._first_rest_n
         if old._check_n == self._check_n:
             self._recent, self._grid = old._recent.copy(), old._grid
@@ -334,24 +386,11 @@ class KalmanEstimator:
         return {'estimator': self.name, 'offset_a': b, 'offset_std_a': b_std,
                 'at_rest': bool(self._state.still), 'deflection_std_m': w_std,
                 'noise_a': math.sqrt(self._state.noise_var_a2),
-                'mains_line_hz': self.line_hz, 'mains_line_a': level}
+                'mains_line_hz': self.line_hz, 'mains_line_a': level,
+                'motion_hz': self.model.motion_hz}
 
     def settling(self) -> tuple[float, str]:
         if self._first_rest_n is not None:
             return self._first_rest_n / self.sample_rate_hz, 'level learned at the first rest'
         return (5.0 / (2 * math.pi * self.config.motion_corner_hz),
                 'no rest yet: five time constants of motion_corner_hz')
-
-
-def _lag_smoother(lag_s: float, sample_rate_hz: float) -> FixedLagSmoother | None:
-    """Return the fixed-lag smoother of ``smoothed_lag_s`` (None: 0), checked."""
-    if not (math.isfinite(lag_s) and lag_s >= 0.0):
-        raise ParameterError(f"parameter 'smoothed_lag_s' must be >= 0 s, got {lag_s!r}")
-    if lag_s == 0.0:
-        return None
-    n = max(1, int(round(lag_s * sample_rate_hz)))
-    if n > MAX_LAG_SAMPLES:
-        raise ParameterError(f"parameter 'smoothed_lag_s' = {lag_s:g} s is {n} samples at "
-                             f'{sample_rate_hz:g} Hz; at most {MAX_LAG_SAMPLES} (the memory of '
-                             'its covariances)')
-    return FixedLagSmoother(n)

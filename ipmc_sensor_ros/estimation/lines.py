@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-__all__ = ['measure_line', 'NOMINAL_LINES_HZ', 'SEARCH_HZ']
+__all__ = ['measure_line', 'NOMINAL_LINES_HZ', 'SEARCH_HZ', 'PAD', 'vertex', 'local_level']
 
 #: Nominal mains frequencies, Hz.
 NOMINAL_LINES_HZ = (50.0, 60.0)
@@ -57,7 +57,7 @@ def measure_line(current_a, sample_rate_hz: float, nominal=NOMINAL_LINES_HZ,
         summed = sum(power[np.minimum(k * cand, power.size - 1)] for k in ks)
         j = int(np.argmax(summed[1:-1])) + 1     # the edges only serve the vertex
         if summed[j] > best[1]:
-            best = (_vertex(cand, summed, j) * df, float(summed[j]))
+            best = (vertex(cand, summed, j) * df, float(summed[j]))
     f_line = best[0]
     if not f_line:
         return 0.0, 0.0
@@ -70,13 +70,13 @@ def measure_line(current_a, sample_rate_hz: float, nominal=NOMINAL_LINES_HZ,
         if k * f_line >= 0.45 * fs:
             break
         j = int(round(k * f_line / df))
-        level = _local_level(power, j, df)
+        level = local_level(power, j, df)
         if power[j] > factor * level:
             amp = max(amp, 2.0 * math.sqrt(power[j]) / window_sum)
     return (f_line, amp) if amp else (0.0, 0.0)
 
 
-def _vertex(cand: np.ndarray, summed: np.ndarray, j: int) -> float:
+def vertex(cand: np.ndarray, summed: np.ndarray, j: int) -> float:
     """Fractional bin of the maximum (parabola through the three bins about it)."""
     if 0 < j < summed.size - 1:
         a, b, c = summed[j - 1], summed[j], summed[j + 1]
@@ -86,7 +86,7 @@ def _vertex(cand: np.ndarray, summed: np.ndarray, j: int) -> float:
     return float(cand[j])
 
 
-def _local_level(power: np.ndarray, j: int, df: float) -> float:
+def local_level(power: np.ndarray, j: int, df: float) -> float:
     """Median periodogram 2..8 Hz either side of bin j (the noise level about a line)."""
     lo, hi = int(2.0 / df), int(8.0 / df)
     side = np.r_[power[max(j - hi, 1):max(j - lo, 1)], power[j + lo:j + hi]]

@@ -10,7 +10,7 @@ H1)::
                                        velocity u: the sensor measures the rate of charge,
                                        so H(0) = 0 and a constant deflection gives no current
     w'   = u,  u' = g                  tip deflection w (m), velocity u, acceleration g
-    g'   = -a^2 f (w - h) - (a^2 + 2af) u - (2a + f) g + xi_g
+    g'   = -a^2 f (w - h - sum_j p_j[0]) - (a^2 + 2af) u - (2a + f) g + xi_g
                                        motion about the working point h: a third-order
                                        process, deflection spectrum q / ((W^2 + f^2)
                                        (W^2 + a^2)^2), f = 2 pi motion_corner_hz, a = 2 pi
@@ -20,6 +20,15 @@ H1)::
                                        from the last ones and a mains line, persistent,
                                        is told from motion within a few cycles
     h'   = xi_h                        working point (random walk, working_point_walk_m)
+    p_j' = V_j [[0, -1], [1, 0]] p_j + xi_p
+                                       periodic motion j (in phase, quadrature), m: the
+                                       target the tip follows turns at V_j = 2 pi j f_motion,
+                                       j = 1..motion_harmonics below motion_bandwidth_hz,
+                                       walking by motion_rms_m 2 pi f_motion
+                                       motion_speed_walk (a motor's speed wobble),
+                                       f_motion measured from the data (:mod:`.motionline`);
+                                       with these states xi_g drives only what the periodic
+                                       part leaves (periodic_remainder_rms_m)
     b'   = d + xi_b                    current offset, A (random walk, offset_walk_a)
     d'   = xi_d                        its drift, A/s (offset_drift_walk_a_per_s)
     l_k' = W_k [[0, -1], [1, 0]] l_k + xi_l
@@ -30,7 +39,13 @@ H1)::
 The motion is *bounded* about the working point: a bounded deflection carries no mean
 current, so the offset is the long-run mean of the current even while the sensor moves
 (slower excursions than ``motion_corner_hz`` are told from an offset change by the priors
-only).  At rest (:mod:`.rest`) the velocity and the motion's current are measured to be zero
+only, which is slow unless the motion is periodic: a periodic motion, once its frequency is
+measured, is modelled by the states p_j and leaves a small remainder, so the offset is the
+current's mean within a few periods).  Moving since before the start, the sensor and motion
+states hold the periodic states' forced response X p (X V = A X + A_p: a Sylvester
+equation) on top of their own stationary spread (:meth:`StateSpaceModel.prior`).
+
+At rest (:mod:`.rest`) the velocity and the motion's current are measured to be zero
 (pseudo-measurements), which tells offset from motion exactly, and the working point is
 where the tip is held: its prior is released (:attr:`StateSpaceModel.hold_variance`) and it
 is measured equal to w.
@@ -46,14 +61,15 @@ import functools
 import math
 
 import numpy as np
-from scipy.linalg import solve_discrete_lyapunov
+from scipy.linalg import solve_discrete_lyapunov, solve_sylvester
 
 from ..errors import ParameterError
 from ..lti.discretize import chain, van_loan
 from ..lti.reduction import ReducedModel
 from .config import EstimatorConfig
 
-__all__ = ['StateSpaceModel', 'modal_realisation', 'line_frequencies_hz']
+__all__ = ['StateSpaceModel', 'modal_realisation', 'line_frequencies_hz',
+           'motion_frequencies_hz']
 
 #: At a rest sample the working point's prior is widened to this many ``motion_rms_m`` before it
 #: is measured equal to the held deflection: wide enough that the held level, not the old
@@ -100,6 +116,13 @@ def line_frequencies_hz(line_hz: float, sample_rate_hz: float, harmonics: int) -
                  if k * line_hz < 0.45 * sample_rate_hz)
 
 
+def motion_frequencies_hz(motion_hz: float, bandwidth_hz: float, harmonics: int) -> tuple:
+    """Return the periodic motion's fundamental and harmonics below ``bandwidth_hz``, Hz."""
+    if not motion_hz:
+        return ()
+    return tuple(k * motion_hz for k in range(1, harmonics + 1) if k * motion_hz < bandwidth_hz)
+
+
 class StateSpaceModel:
     """
     The model of the module docstring for one sensor, sample rate and mains line.
@@ -115,11 +138,13 @@ class StateSpaceModel:
     line_hz : float or tuple of float
         Mains fundamental(s) in the model, Hz (0 or (): no line states; several while the line
         is not yet measured, e.g. (50, 60)).
+    motion_hz : float
+        Fundamental of the periodic motion in the model, Hz (0: none).
 
     """
 
     def __init__(self, reduced: ReducedModel, config: EstimatorConfig, sample_rate_hz: float,
-                 line_hz=0.0):
+                 line_hz=0.0, motion_hz=0.0):
         fs = float(sample_rate_hz)
         if not (math.isfinite(fs) and fs > 0):
             raise ParameterError(f"parameter 'sample_rate_hz' must be > 0 Hz, got "
@@ -133,11 +158,15 @@ class StateSpaceModel:
         self.line_hz = self.fundamentals_hz[0] if len(self.fundamentals_hz) == 1 else 0.0
         self.lines_hz = tuple(f for f0 in self.fundamentals_hz
                               for f in line_frequencies_hz(f0, fs, config.line_harmonics))
+        self.motion_hz = float(motion_hz or 0.0)
+        self.motion_lines_hz = motion_frequencies_hz(self.motion_hz, config.motion_bandwidth_hz,
+                                                     config.motion_harmonics)
         self.sensor = modal_realisation(reduced)
         n = self.n_sensor = reduced.order
         self.iw, self.iu, self.ia, self.ih, self.ib = n, n + 1, n + 2, n + 3, n + 4
         self.il = n + 6
-        self.size = n + 6 + 2 * len(self.lines_hz)
+        self.im = self.il + 2 * len(self.lines_hz)
+        self.size = self.im + 2 * len(self.motion_lines_hz)
         self.r0 = abs(float(np.real(reduced.charge_response(np.array([0.0]))[0])))
 
     # -- continuous model ---------------------------------------------------------------
@@ -160,7 +189,8 @@ class StateSpaceModel:
         A[self.ia, self.ih] = a_m * a_m * f_m
         A[self.ia, self.iu] = -(a_m * a_m + 2 * a_m * f_m)
         A[self.ia, self.ia] = -(2 * a_m + f_m)
-        Q[self.ia, self.ia] = motion_intensity(a_m, f_m, cfg.motion_rms_m)
+        rms = cfg.periodic_remainder_rms_m if self.motion_lines_hz else cfg.motion_rms_m
+        Q[self.ia, self.ia] = motion_intensity(a_m, f_m, rms)
         Q[self.ih, self.ih] = cfg.working_point_walk_m ** 2
         A[self.ib, self.ib + 1] = 1.0
         Q[self.ib, self.ib] = cfg.offset_walk_a ** 2
@@ -169,6 +199,11 @@ class StateSpaceModel:
             j = self.il + 2 * k
             A[j, j + 1], A[j + 1, j] = -2 * math.pi * f, 2 * math.pi * f
             Q[j, j] = Q[j + 1, j + 1] = cfg.line_walk_a ** 2
+        for k, f in enumerate(self.motion_lines_hz):
+            j = self.im + 2 * k
+            A[j, j + 1], A[j + 1, j] = -2 * math.pi * f, 2 * math.pi * f
+            Q[j, j] = Q[j + 1, j + 1] = self.motion_line_walk_m ** 2
+            A[self.ia, j] = a_m * a_m * f_m          # the target the tip follows
         return A, Q
 
     @functools.cached_property
@@ -183,7 +218,8 @@ class StateSpaceModel:
         s[self.ia] = s[self.iu] * 2 * math.pi * cfg.motion_bandwidth_hz
         s[self.ib] = cfg.offset_prior_a
         s[self.ib + 1] = cfg.offset_drift_a_per_s
-        s[self.il:] = cfg.line_prior_a
+        s[self.il:self.im] = cfg.line_prior_a
+        s[self.im:] = cfg.motion_rms_m
         return s
 
     # -- measurement rows (scaled states) ----------------------------------------------------
@@ -195,7 +231,7 @@ class StateSpaceModel:
         c[:self.n_sensor] = cr
         c[self.iu] = dr
         c[self.ib] = 1.0
-        c[self.il::2] = 1.0
+        c[self.il:self.im:2] = 1.0
         return c * self.scale
 
     @functools.cached_property
@@ -217,6 +253,39 @@ class StateSpaceModel:
         """Variances of the rest pseudo-measurements: velocity (m/s)^2, motion current A^2."""
         v2 = self.config.rest_velocity_m_s ** 2
         return v2, v2 * self.r0 ** 2
+
+    @property
+    def motion_line_walk_m(self) -> float:
+        """Random walk of each periodic component, m/sqrt(s) (a relative speed walk)."""
+        cfg = self.config
+        return cfg.motion_rms_m * 2 * math.pi * self.motion_hz * cfg.motion_speed_walk
+
+    @functools.cached_property
+    def motion_states(self) -> np.ndarray:
+        """Return the indices of the charge states and w, u, g (the motion, its current)."""
+        return np.r_[np.arange(self.n_sensor), self.iw, self.iu, self.ia]
+
+    @functools.cached_property
+    def forced_response(self) -> np.ndarray:
+        """
+        X (scaled): the motion states' steady response x = X p to the periodic states p.
+
+        X V = A_mm X + A_mp with V the periodic states' rotation (Sylvester; the motion
+        states are stable and V is a pure rotation, so X is unique).
+        """
+        A, _ = self.continuous
+        s = self.scale
+        As = A * s[None, :] / s[:, None]
+        m, p = self.motion_states, np.arange(self.im, self.size)
+        return solve_sylvester(As[np.ix_(m, m)], -As[np.ix_(p, p)], -As[np.ix_(m, p)])
+
+    def with_forced_response(self, P: np.ndarray) -> np.ndarray:
+        """Return P with the periodic states driving the motion states: T P T', T = I + X."""
+        if not self.motion_lines_hz:
+            return P
+        T = np.eye(self.size)
+        T[np.ix_(self.motion_states, np.arange(self.im, self.size))] = self.forced_response
+        return T @ P @ T.T
 
     @property
     def hold_variance(self) -> float:
@@ -256,6 +325,13 @@ class StateSpaceModel:
                 out = powers[bit] if out is None else chain(out, powers[bit])
         return out
 
+    @functools.cached_property
+    def stationary_motion(self) -> np.ndarray:
+        """Stationary covariance of the motion states about the working point (scaled)."""
+        F, Q = self.discrete(1)
+        m = self.motion_states
+        return solve_discrete_lyapunov(F[np.ix_(m, m)], Q[np.ix_(m, m)])
+
     def prior(self) -> tuple[np.ndarray, np.ndarray]:
         """
         (x0, P0), scaled: the motion stationary about a working point known to start_level_m.
@@ -264,11 +340,9 @@ class StateSpaceModel:
         """
         cfg = self.config
         nx = self.size
-        F, Q = self.discrete(1)
         P0 = np.zeros((nx, nx))
-        motion = np.r_[np.arange(self.n_sensor), self.iw, self.iu, self.ia]
-        P0[np.ix_(motion, motion)] = solve_discrete_lyapunov(F[np.ix_(motion, motion)],
-                                                             Q[np.ix_(motion, motion)])
+        motion = self.motion_states
+        P0[np.ix_(motion, motion)] = self.stationary_motion
         h = (cfg.start_level_m / self.scale[self.ih]) ** 2
         P0[self.ih, self.ih] = h
         P0[self.iw, self.iw] += h
@@ -276,4 +350,4 @@ class StateSpaceModel:
         P0[self.ib, self.ib] = 1.0
         P0[self.ib + 1, self.ib + 1] = 1.0
         P0[self.il:, self.il:] = np.eye(nx - self.il)
-        return np.zeros(nx), P0
+        return np.zeros(nx), self.with_forced_response(P0)

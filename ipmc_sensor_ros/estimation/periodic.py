@@ -1,0 +1,120 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+When the Kalman estimator's model takes periodic-motion states, and from when.
+
+At each line check the estimator measures the fundamental of a periodic motion on the
+last 2 s of current (:func:`~.motionline.measure_motion`; 0: none; None: the first 0.5 s is
+too short to judge).  The model changes (periodic states at that fundamental appear, move by
+more than :data:`~.motionline.MOTION_WOBBLE` of it, a motor's speed wobble that the periodic
+states' walk follows, or go: :mod:`.statespace`) when the measurement differs from the
+model and agrees with the one of the check before: two stretches in a row say so.  Periodic
+states also need a last stretch without rest (a motion starting or stopping is not
+periodic).  The first stretch judged needs no earlier one when the sensor has not rested
+since the start (moving since power-on).
+
+The new model takes over from the start of its span: the last stretch, or the last two when
+the tip has not rested since the start (it moved periodically from the start).  The span's
+samples are filtered again under it from the state there (:class:`StretchLog` keeps states
+and samples; :func:`~.filter.carry_state` joins the new periodic states to what was known),
+so its state now is as if it had been chosen then; what was published stays.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .filter import FilterState, KalmanFilter, carry_state
+from .motionline import MOTION_WOBBLE
+
+__all__ = ['Stretch', 'StretchLog', 'refilter', 'same_motion']
+
+
+def same_motion(a_hz: float, b_hz: float) -> bool:
+    """Tell whether two measured fundamentals (0: none) are the same motion."""
+    if not a_hz or not b_hz:
+        return a_hz == b_hz
+    return abs(a_hz - b_hz) <= MOTION_WOBBLE * max(a_hz, b_hz)   # the walk follows less
+
+
+@dataclass
+class Stretch:
+    """The samples between two checks and the filter and state at the first."""
+
+    filter: KalmanFilter
+    state: FilterState
+    y: list = field(default_factory=list)
+    steps: list = field(default_factory=list)
+    rest: bool = False
+    measured_hz: float | None = None
+
+
+class StretchLog:
+    """The last two stretches between checks (what a change of motion model refilters)."""
+
+    def __init__(self, filt: KalmanFilter, state: FilterState):
+        self.earlier: Stretch | None = None
+        self.current = Stretch(filt, state.copy())
+
+    def mark(self, filt: KalmanFilter, state: FilterState) -> None:
+        """End the current stretch at a check; a new one starts at ``state``."""
+        self.earlier, self.current = self.current, Stretch(filt, state.copy())
+
+    def add(self, y: list, steps: list, rest: bool) -> None:
+        """Append samples (values, sample periods since the one before) to the current one."""
+        cur = self.current
+        cur.y += y
+        cur.steps += steps
+        cur.rest = cur.rest or rest
+
+    def saved(self) -> tuple:
+        """Return the log as plain values (models by lines and fundamental; states copied)."""
+        return tuple(None if st is None else (
+            st.filter.model.fundamentals_hz, st.filter.model.motion_hz, st.state.copy(),
+            list(st.y), list(st.steps), st.rest, st.measured_hz)
+            for st in (self.earlier, self.current))
+
+    @classmethod
+    def restored(cls, saved, make_filter) -> 'StretchLog':
+        """Return the log of :meth:`saved`; ``make_filter(lines_hz, motion_hz)`` builds filters."""
+        parts = []
+        for item in saved:
+            if item is None:
+                parts.append(None)
+                continue
+            lines, motion, state, y, steps, rest, measured = item
+            filt = make_filter(tuple(lines), float(motion))
+            if state.x.shape != (filt.model.size,):
+                raise ValueError('a stretch state of another design')
+            parts.append(Stretch(filt, state.copy(), list(y), list(steps), bool(rest),
+                                 None if measured is None else float(measured)))
+        log = cls.__new__(cls)
+        log.earlier, log.current = parts
+        if log.current is None:
+            raise ValueError('no current stretch')
+        return log
+
+    def span_for(self, measured_hz: float, never_rested: bool) -> Stretch | None:
+        """
+        Record the current stretch's measurement; return the span a new model starts at.
+
+        The model has that fundamental (0: none); None: it may not take over (module
+        docstring).
+        """
+        cur, before = self.current, self.earlier
+        cur.measured_hz = measured_hz
+        if measured_hz is None or (measured_hz and cur.rest):
+            return None
+        if before is None or before.measured_hz is None:     # the first stretch judged
+            if not never_rested:
+                return None
+        elif not same_motion(measured_hz, before.measured_hz):
+            return None
+        if never_rested and before is not None:     # moving since the start: from there
+            return Stretch(before.filter, before.state, before.y + cur.y,
+                           before.steps + cur.steps)
+        return cur
+
+
+def refilter(span: Stretch, filt: KalmanFilter) -> FilterState:
+    """Return the state now of ``filt`` taking over at the start of ``span``."""
+    start = carry_state(span.filter, filt, span.state)
+    return filt.run(start, span.y, span.steps)[0] if span.y else start
