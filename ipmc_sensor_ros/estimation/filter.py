@@ -320,13 +320,11 @@ def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> Fil
         if near:
             src += [mo.il + 2 * near[0], mo.il + 2 * near[0] + 1]
             dst += [mn.il + 2 * k, mn.il + 2 * k + 1]
-    fresh = []                        # periodic states the old model did not have
-    for k, f in enumerate(mn.motion_lines_hz):
-        if mo.motion_hz == mn.motion_hz and k < len(mo.motion_lines_hz):
-            src += [mo.im + 2 * k, mo.im + 2 * k + 1]
-            dst += [mn.im + 2 * k, mn.im + 2 * k + 1]
-        else:
-            fresh += [2 * k, 2 * k + 1]
+    # periodic states carry when the fundamental is the same; else they start afresh
+    fresh = bool(mn.motion_lines_hz) and mo.motion_hz != mn.motion_hz
+    if mn.motion_lines_hz and not fresh:
+        src += list(range(mo.im, mo.size))
+        dst += list(range(mn.im, mn.size))
     same_sensor = np.array_equal(np.diag(mo.sensor[0]), np.diag(mn.sensor[0]))
     if same_sensor:                   # only the lines changed: the charge states carry too
         src = list(range(mo.n_sensor)) + src

@@ -192,7 +192,7 @@ class KalmanEstimator:
             return float(est.deflection_m[0]), float(est.std_m[0])
         self._state, w, s, still = self._filter.run(self._state, [float(current_a)],
                                                     [int(steps)], copy=False)
-        self._log.add([float(current_a)], [int(steps)], bool(still[0]))
+        self._log.add_one(float(current_a), int(steps), bool(still[0]))
         for _ in range(int(steps)):     # a bridged slot holds the next value (line check)
             self._recent[self._grid % self._check_n] = current_a
             self._grid += 1

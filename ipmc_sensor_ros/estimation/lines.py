@@ -22,7 +22,8 @@ import math
 
 import numpy as np
 
-__all__ = ['measure_line', 'NOMINAL_LINES_HZ', 'SEARCH_HZ', 'PAD', 'vertex', 'local_level']
+__all__ = ['measure_line', 'NOMINAL_LINES_HZ', 'SEARCH_HZ', 'PAD', 'family_peak', 'vertex',
+           'local_level']
 
 #: Nominal mains frequencies, Hz.
 NOMINAL_LINES_HZ = (50.0, 60.0)
@@ -54,10 +55,9 @@ def measure_line(current_a, sample_rate_hz: float, nominal=NOMINAL_LINES_HZ,
         if not ks:
             continue
         cand = np.arange(int((f0 - SEARCH_HZ) / df), int((f0 + SEARCH_HZ) / df) + 1)
-        summed = sum(power[np.minimum(k * cand, power.size - 1)] for k in ks)
-        j = int(np.argmax(summed[1:-1])) + 1     # the edges only serve the vertex
-        if summed[j] > best[1]:
-            best = (vertex(cand, summed, j) * df, float(summed[j]))
+        peak_bin, top = family_peak(power, cand, ks)
+        if top > best[1]:
+            best = (peak_bin * df, top)
     f_line = best[0]
     if not f_line:
         return 0.0, 0.0
@@ -74,6 +74,18 @@ def measure_line(current_a, sample_rate_hz: float, nominal=NOMINAL_LINES_HZ,
         if power[j] > factor * level:
             amp = max(amp, 2.0 * math.sqrt(power[j]) / window_sum)
     return (f_line, amp) if amp else (0.0, 0.0)
+
+
+def family_peak(power: np.ndarray, cand: np.ndarray, ks) -> tuple[float, float]:
+    """
+    Return (fractional bin, summed power) of the strongest family: power summed at k c.
+
+    ``cand``: candidate fundamental bins; ``ks``: the harmonics summed.  The edges of
+    ``cand`` only serve the parabolic vertex.
+    """
+    summed = sum(power[np.minimum(k * cand, power.size - 1)] for k in ks)
+    j = int(np.argmax(summed[1:-1])) + 1
+    return vertex(cand, summed, j), float(summed[j])
 
 
 def vertex(cand: np.ndarray, summed: np.ndarray, j: int) -> float:

@@ -30,8 +30,8 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 from scipy.stats import gamma
 
-from .lines import PAD, local_level, vertex
-from .statespace import motion_intensity
+from .lines import PAD, family_peak, local_level
+from .statespace import harmonics_below, motion_intensity
 
 __all__ = ['measure_motion', 'MOTION_LOWEST_HZ', 'MOTION_EXAMINED_HZ', 'MOTION_PIECE_S',
            'MOTION_RATE_HZ',
@@ -86,15 +86,14 @@ def measure_motion(current_a, sample_rate_hz: float, model,
         return 0.0
     t = np.arange(x.size) / fs
     mains = tuple(model.lines_hz)
-    modelled = lambda f: [k * f for k in range(1, cfg.motion_harmonics + 1)  # noqa: E731
-                          if k * f < 0.45 * fs]
     df = fs / x.size
     piece = min(span, max(MOTION_PIECE_S, 2.0 / f0))
-    best = minimize_scalar(lambda f: float(np.var(_residual(x, t, modelled(f), mains, piece))),
+    best = minimize_scalar(lambda f: float(np.var(_residual(
+        x, t, harmonics_below(f, 0.45 * fs, cfg.motion_harmonics), mains, piece))),
                            bounds=(f0 - df, f0 + df), method='bounded',
                            options={'xatol': 1e-4 * df})
     f0 = float(best.x)
-    every = np.arange(1, int((hi + 2 * MOTION_WOBBLE_HZ) / f0) + 1) * f0  # those near the band
+    every = np.array(harmonics_below(f0, hi + 2 * MOTION_WOBBLE_HZ, x.size))  # near the band
     residual = _residual(x, t, every, mains, span)
     allowed = np.r_[every, mains]
     width = np.r_[2 * MOTION_WOBBLE_HZ + MOTION_WOBBLE * every, np.full(len(mains), 1.0)]
@@ -116,9 +115,7 @@ def _strongest_family(x, fs, lo, hi, harmonics, false_alarm) -> float:
     df = fs / n_fft
     cand = np.arange(int(lo / df), int(hi / df) + 1)
     ks = [k for k in range(1, harmonics + 1) if k * hi < 0.45 * fs] or [1]
-    summed = sum(power[np.minimum(k * cand, power.size - 1)] for k in ks)
-    j = int(np.argmax(summed[1:-1])) + 1
-    f0 = vertex(cand, summed, j) * df
+    f0 = family_peak(power, cand, ks)[0] * df
     j0 = int(round(f0 / df))
     peak = power[j0] >= np.max(power[max(j0 - PAD, 0):j0 + PAD + 1])
     return f0 if peak and power[j0] > math.log(cand.size / false_alarm) * local_level(

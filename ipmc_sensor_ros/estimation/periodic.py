@@ -65,6 +65,13 @@ class StretchLog:
         cur.steps += steps
         cur.rest = cur.rest or rest
 
+    def add_one(self, y: float, steps: int, rest: bool) -> None:
+        """Append one sample (the node's path: no lists built)."""
+        cur = self.current
+        cur.y.append(y)
+        cur.steps.append(steps)
+        cur.rest = cur.rest or rest
+
     def saved(self) -> tuple:
         """Return the log as plain values (models by lines and fundamental; states copied)."""
         return tuple(None if st is None else (

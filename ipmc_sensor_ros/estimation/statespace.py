@@ -68,8 +68,7 @@ from ..lti.discretize import chain, van_loan
 from ..lti.reduction import ReducedModel
 from .config import EstimatorConfig
 
-__all__ = ['StateSpaceModel', 'modal_realisation', 'line_frequencies_hz',
-           'motion_frequencies_hz']
+__all__ = ['StateSpaceModel', 'modal_realisation', 'line_frequencies_hz', 'harmonics_below']
 
 #: At a rest sample the working point's prior is widened to this many ``motion_rms_m`` before it
 #: is measured equal to the held deflection: wide enough that the held level, not the old
@@ -108,19 +107,17 @@ def motion_intensity(a: float, f: float, rms_m: float) -> float:
     return rms_m ** 2 * 4 * a ** 3 * f * (a + f) ** 2 / (2 * a + f)
 
 
+def harmonics_below(fundamental_hz: float, limit_hz: float, count: int) -> tuple:
+    """Return k f, k = 1..count, below ``limit_hz`` (none for a fundamental of 0), Hz."""
+    if not fundamental_hz:
+        return ()
+    return tuple(k * fundamental_hz for k in range(1, count + 1)
+                 if k * fundamental_hz < limit_hz)
+
+
 def line_frequencies_hz(line_hz: float, sample_rate_hz: float, harmonics: int) -> tuple:
     """Return the mains line and its harmonics below 0.45 fs (none for ``line_hz`` 0), Hz."""
-    if not line_hz:
-        return ()
-    return tuple(k * line_hz for k in range(1, harmonics + 1)
-                 if k * line_hz < 0.45 * sample_rate_hz)
-
-
-def motion_frequencies_hz(motion_hz: float, bandwidth_hz: float, harmonics: int) -> tuple:
-    """Return the periodic motion's fundamental and harmonics below ``bandwidth_hz``, Hz."""
-    if not motion_hz:
-        return ()
-    return tuple(k * motion_hz for k in range(1, harmonics + 1) if k * motion_hz < bandwidth_hz)
+    return harmonics_below(line_hz, 0.45 * sample_rate_hz, harmonics)
 
 
 class StateSpaceModel:
@@ -159,8 +156,8 @@ class StateSpaceModel:
         self.lines_hz = tuple(f for f0 in self.fundamentals_hz
                               for f in line_frequencies_hz(f0, fs, config.line_harmonics))
         self.motion_hz = float(motion_hz or 0.0)
-        self.motion_lines_hz = motion_frequencies_hz(self.motion_hz, config.motion_bandwidth_hz,
-                                                     config.motion_harmonics)
+        self.motion_lines_hz = harmonics_below(self.motion_hz, config.motion_bandwidth_hz,
+                                               config.motion_harmonics)
         self.sensor = modal_realisation(reduced)
         n = self.n_sensor = reduced.order
         self.iw, self.iu, self.ia, self.ih, self.ib = n, n + 1, n + 2, n + 3, n + 4
