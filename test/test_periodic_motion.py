@@ -16,8 +16,8 @@ from bench.bench_estimators import estimate_scores, run_estimator
 from bench.scenarios import build
 from ipmc_sensor_ros.estimation.config import EstimatorConfig
 from ipmc_sensor_ros.estimation.kalman import KalmanEstimator
-from ipmc_sensor_ros.estimation.motionline import measure_motion
-from ipmc_sensor_ros.estimation.motionline import MOTION_WOBBLE
+from ipmc_sensor_ros.estimation.motionline import measure_motion, measure_recent
+from ipmc_sensor_ros.estimation.motionline import MOTION_WOBBLE, MOTION_WOBBLE_HZ
 from ipmc_sensor_ros.estimation.periodic import StretchLog
 from ipmc_sensor_ros.estimation.statespace import StateSpaceModel
 from ipmc_sensor_ros.lti.reduction import reduce_model_parts
@@ -73,13 +73,56 @@ def test_measure_motion_finds_a_crank_and_refuses_other_motions(reduced):
     f0 = measure_motion(crank.current_a[:2000], crank.sample_rate_hz, ssm)
     assert f0 == pytest.approx(5.0, rel=1e-2)      # a 2 s mean of a speed wobbling by <= 1 %
     t = np.arange(2000) / FS
-    gain = lambda f: abs(reduced.frequency_response(np.array([f]))[0])   # noqa: E731
     rng = np.random.default_rng(0)
-    two = (0.8e-3 * gain(5.0) * np.sin(2 * np.pi * 5.0 * t)
-           + 0.3e-3 * gain(7.3) * np.sin(2 * np.pi * 7.3 * t + 1.0)
+    two = (0.8e-3 * _gain(reduced, 5.0) * np.sin(2 * np.pi * 5.0 * t)
+           + 0.3e-3 * _gain(reduced, 7.3) * np.sin(2 * np.pi * 7.3 * t + 1.0)
            + 1e-9 * rng.standard_normal(t.size))
     assert measure_motion(two, FS, ssm) == 0.0
     assert measure_motion(1e-9 * rng.standard_normal(t.size), FS, ssm) == 0.0
+
+
+def _gain(reduced, f):
+    """|H(f)|, A/m: the current of a 1 m sine at f."""
+    return abs(reduced.frequency_response(np.array([f]))[0])
+
+
+def test_a_slow_crank_is_judged_on_a_long_stretch(reduced):
+    """
+    A 1 Hz crank: not judged periodic on 2 s, 1 Hz on 8 s; two slow sines on 8 s: none.
+
+    Between harmonics 1 Hz apart, 2 s of Hann window (main lobe +-1 Hz) leaves no bin to
+    judge; 8 s does (measure_recent tries 2, 4, then 8 s).
+    """
+    ssm = StateSpaceModel(reduced, EstimatorConfig(), FS)
+    y = build('crank-1hz-short-0.2na-poweron', 0).grid_current_a
+    assert measure_recent(y[:2000], FS, ssm) == 0.0
+    assert measure_recent(y[:8000], FS, ssm) == pytest.approx(1.0, rel=1e-2)
+    t = np.arange(8000) / FS
+    rng = np.random.default_rng(1)
+    two = (0.5e-3 * _gain(reduced, 1.0) * np.sin(2 * np.pi * 1.0 * t)
+           + 0.3e-3 * _gain(reduced, 1.7) * np.sin(2 * np.pi * 1.7 * t + 1.0)
+           + 0.2e-9 * rng.standard_normal(t.size))
+    assert measure_recent(two, FS, ssm) == 0.0
+
+
+def test_a_speed_wobble_is_allowed_and_a_line_beyond_its_reach_is_not(reduced):
+    """
+    A 20 Hz crank whose speed wobbles by MOTION_WOBBLE at MOTION_WOBBLE_HZ is periodic.
+
+    The same with a line of 1 % of the crank's at 24 Hz (4 Hz off: beyond the wobble's
+    excursion and four sidebands) is not.
+    """
+    ssm = StateSpaceModel(reduced, EstimatorConfig(), FS)
+    t = np.arange(2000) / FS
+    f, rate = 20.0, MOTION_WOBBLE_HZ
+    phase = 2 * np.pi * f * t + f * MOTION_WOBBLE / rate * np.sin(2 * np.pi * rate * t)
+    rng = np.random.default_rng(2)
+    crank = (1e-3 * _gain(reduced, f) * np.sin(phase)
+             + 0.05e-3 * _gain(reduced, 2 * f) * np.sin(2 * phase)
+             + 0.2e-9 * rng.standard_normal(t.size))
+    assert measure_motion(crank, FS, ssm) == pytest.approx(f, rel=MOTION_WOBBLE)
+    line = 0.01e-3 * _gain(reduced, 24.0) * np.sin(2 * np.pi * 24.0 * t)
+    assert measure_motion(crank + line, FS, ssm) == 0.0
 
 
 def test_power_on_crank_level_is_learned_within_one_percent():
@@ -135,7 +178,8 @@ def _log_after(stretches):
 
 def test_a_periodic_model_needs_two_stretches_in_a_row_or_a_start_in_motion():
     """The policy of estimation/periodic.py, stretch by stretch."""
-    # moving since the start: the first stretch judged decides, from the very start
+    # moving since the start: the first stretch judged decides, from the very start (a
+    # stretch not judged, None, runs on into the next)
     log = _log_after([(500, False, None), (500, False, None)])
     span = log.span_for(5.0, never_rested=True)
     assert span is not None and len(span.y) == 1000

@@ -13,8 +13,8 @@ sample counts (so the result does not depend on how the stream is cut into block
 appears, or moves by more than ``LINE_RETUNE_HZ``, the model is rebuilt with line states at
 the measured frequency and the filter state carried over.
 
-A periodic motion is measured at the same checks, on the same stretch
-(:func:`~.motionline.measure_motion`); when two checks in a row say it appeared, went or
+A periodic motion is measured at the same checks, on the last 2, 4 and 8 s of current
+(:func:`~.motionline.measure_recent`); when two checks in a row say it appeared, went or
 moved, the model with periodic states at the measured fundamental (a small remainder:
 :mod:`.statespace`) takes over from the start of those stretches, whose samples are
 filtered again (:mod:`.periodic`).
@@ -36,7 +36,7 @@ from .core import Estimate
 from .filter import FilterState, ForwardRecord, KalmanFilter, carry_state
 from .fixed_lag import lag_smoother
 from .lines import NOMINAL_LINES_HZ, measure_line
-from .motionline import measure_motion
+from .motionline import MOTION_LONGEST_S, measure_motion, measure_recent
 from .periodic import StretchLog, refilter, same_motion
 from .smoother import smooth
 from .statespace import StateSpaceModel
@@ -46,7 +46,7 @@ __all__ = ['KalmanEstimator', 'MAINS_CHOICES', 'parse_mains', 'LINE_CHECK_S']
 #: Data between two measurements of the mains line, s (also the stretch measured): 2 s
 #: resolves 0.5 Hz and, zero-padded, finds the line to ~0.01 Hz at 3 % hum.  The first
 #: measurements are made after ``LINE_FIRST_S`` (0.5 s: the line to ~0.05 Hz, so hum is
-#: modelled early) and twice that (1 s: a periodic motion judged down to 1 Hz,
+#: modelled early) and twice that (1 s: a fast periodic motion is judged,
 #: :mod:`.motionline`, so it is modelled early too).
 LINE_CHECK_S = 2.0
 LINE_FIRST_S = 0.5
@@ -106,6 +106,7 @@ class KalmanEstimator:
         # taken for an offset), then the measured one
         nominal_line = () if self.mains_hz == 0.0 else self._nominal()
         self._check_n = max(64, int(round(LINE_CHECK_S * fs)))
+        self._window_n = max(self._check_n, int(round(MOTION_LONGEST_S * fs)))
         self._first_n = max(64, int(round(LINE_FIRST_S * fs)))
         self._filter = self._new_filter(StateSpaceModel(reduced, self.config, fs, nominal_line))
         self._state: FilterState | None = None
@@ -154,7 +155,7 @@ class KalmanEstimator:
                                                             self.sample_rate_hz, nominal))
         self._state = self._filter.initial_state()
         self._log = StretchLog(self._filter, self._state)
-        self._recent = np.zeros(self._check_n)
+        self._recent = np.zeros(self._window_n)
         self._grid = 0           # sample periods since the start (bridged ones included)
         self._first_rest_n = None
 
@@ -194,7 +195,7 @@ class KalmanEstimator:
                                                     [int(steps)], copy=False)
         self._log.add_one(float(current_a), int(steps), bool(still[0]))
         for _ in range(int(steps)):     # a bridged slot holds the next value (line check)
-            self._recent[self._grid % self._check_n] = current_a
+            self._recent[self._grid % self._window_n] = current_a
             self._grid += 1
         if self._first_rest_n is None and still[0]:
             self._first_rest_n = n
@@ -202,12 +203,12 @@ class KalmanEstimator:
 
     def _remember(self, y: np.ndarray, steps: np.ndarray, still: np.ndarray) -> None:
         """
-        Keep the last check window of current on the sample grid; note the first rest.
+        Keep the last motion window of current on the sample grid; note the first rest.
 
         A bridged slot holds the value of the sample after it, so the line check sees the
         hum's phase where it was (a dropped burst does not shift the rest of the window).
         """
-        n = self._check_n
+        n = self._window_n
         end = self._state.samples
         if self._first_rest_n is None and still.any():
             self._first_rest_n = end - y.size + int(np.argmax(still))
@@ -218,9 +219,9 @@ class KalmanEstimator:
         self._grid += int(steps.sum())
 
     def _check_line(self) -> None:
-        seen = min(self._grid, self._check_n)
-        recent = np.roll(self._recent, -(self._grid % self._check_n))[-seen:]
-        self._check_mains(recent)
+        seen = min(self._grid, self._window_n)
+        recent = np.roll(self._recent, -(self._grid % self._window_n))[-seen:]
+        self._check_mains(recent[-self._check_n:])
         self._check_motion(recent)
         self._log.mark(self._filter, self._state)
 
@@ -244,7 +245,7 @@ class KalmanEstimator:
 
     def _check_motion(self, recent: np.ndarray) -> None:
         """Measure the periodic motion; a new one is modelled from its span (:mod:`.periodic`)."""
-        f0 = measure_motion(recent, self.sample_rate_hz, self.model)
+        f0 = measure_recent(recent, self.sample_rate_hz, self.model)
         span = self._log.span_for(f0, self._first_rest_n is None)
         if span is None or same_motion(f0, self.model.motion_hz):
             return
@@ -361,7 +362,7 @@ class KalmanEstimator:
         new._state = carry_state(self._filter, new._filter, self._state)
         new._log = StretchLog(new._filter, new._state)
         new._first_rest_n = self._first_rest_n
-        if new._check_n == self._check_n:
+        if new._window_n == self._window_n:
             new._recent, new._grid = self._recent.copy(), self._grid
         return new
 
@@ -370,7 +371,7 @@ class KalmanEstimator:
         self._state = carry_state(old._filter, self._filter, old._state)
         self._log = StretchLog(self._filter, self._state)
         self._first_rest_n = old._first_rest_n
-        if old._check_n == self._check_n:
+        if old._window_n == self._window_n:
             self._recent, self._grid = old._recent.copy(), old._grid
 
     # -- reporting -----------------------------------------------------------------------

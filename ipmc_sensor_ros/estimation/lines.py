@@ -93,8 +93,8 @@ def vertex(cand: np.ndarray, summed: np.ndarray, j: int) -> float:
     if 0 < j < summed.size - 1:
         a, b, c = summed[j - 1], summed[j], summed[j + 1]
         den = a - 2 * b + c
-        if den < 0:
-            return float(cand[j]) + 0.5 * (a - c) / den
+        if den < 0:       # b is the largest: the vertex is within half a bin (rounding aside)
+            return float(cand[j]) + float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
     return float(cand[j])
 
 

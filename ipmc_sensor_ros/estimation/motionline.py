@@ -6,21 +6,27 @@ The estimator models a periodic motion by states at k f_motion with a small rema
 (:mod:`.statespace`); :func:`measure_motion` gives the fundamental to model, or 0:
 
 * the strongest family of lines k f (k = 1..``motion_harmonics``) in the periodogram (Hann,
-  zero-padded as in :mod:`.lines`) between :data:`MOTION_LOWEST_HZ` (and two periods of the
-  stretch) and half ``motion_bandwidth_hz``, whose first line passes the chi-square test of
+  zero-padded as in :mod:`.lines`) between :data:`MOTION_PERIODS` periods of the stretch
+  and half ``motion_bandwidth_hz``, whose first line passes the chi-square test of
   :func:`~.lines.measure_line`;
 * at a rate of at least :data:`MOTION_RATE_HZ` (block means);
 * refined by least squares: a mean, the modelled lines k f and the mains lines, the
   phasors held over pieces of :data:`MOTION_PIECE_S` (a motor's speed wobbles);
-* accepted when the periodic model explains the stretch: the residual of one fit of a mean,
-  the harmonics up to the band's edge and the mains lines has, away from them (a speed wobble's
-  sidebands: 2 :data:`MOTION_WOBBLE_HZ` + :data:`MOTION_WOBBLE` k f), the
-  periodogram the model expects
-  there, the white noise (measured by the third difference, as the filter does) plus the
-  current of a remainder motion of ``periodic_remainder_rms_m`` (its spectrum through the
-  sensor, H(f)).  Each bin's ratio to that is exponential with mean 1; the stretch is refused
-  when their sum exceeds its gamma quantile, or one bin its exponential quantile, at
-  ``false_alarm``: a second motion, a step or a slow sweep is not a periodic motion.
+* accepted when the periodic model explains the stretch: the residual of one fit of the
+  offset and its drift (a mean and a slope), the harmonics up to the band's edge and the mains
+  lines has the periodogram the model expects: the white noise (measured by the third
+  difference, as the filter does), the current of a remainder motion of
+  ``periodic_remainder_rms_m`` (its spectrum through the sensor, H(f)) and, beside each
+  harmonic, at most the sidebands of a speed wobble (:func:`_wobble_power`).  Each bin's
+  ratio to that is exponential with mean 1 (every other bin of the Hann periodogram, nearly
+  independent, from the second); the stretch is refused when their sum exceeds its gamma
+  quantile, or one bin its exponential quantile, at ``false_alarm``: a second motion, a step
+  or a slow sweep is not a periodic motion.
+
+:func:`measure_recent` judges the end of a live stream: the last 2, 4 and 8 s
+(:data:`MOTION_LONGEST_S`), the shortest that holds a periodic motion first, so a fast crank
+is taken from a short stretch and a slow one (down to ``MOTION_PERIODS / MOTION_LONGEST_S``)
+from a long one.
 """
 from __future__ import annotations
 
@@ -28,18 +34,25 @@ import math
 
 import numpy as np
 from scipy.optimize import minimize_scalar
+from scipy.special import jv
 from scipy.stats import gamma
 
 from .lines import PAD, family_peak, local_level
 from .statespace import harmonics_below, motion_intensity
 
-__all__ = ['measure_motion', 'MOTION_LOWEST_HZ', 'MOTION_EXAMINED_HZ', 'MOTION_PIECE_S',
-           'MOTION_RATE_HZ',
-           'MOTION_WOBBLE', 'MOTION_WOBBLE_HZ']
+__all__ = ['measure_motion', 'measure_recent', 'MOTION_PERIODS', 'MOTION_LONGEST_S',
+           'MOTION_SHORTEST_S', 'MOTION_PIECE_S', 'MOTION_RATE_HZ', 'MOTION_WOBBLE',
+           'MOTION_WOBBLE_HZ']
 
-#: The fundamental is searched from this, Hz (and at least two periods of the stretch): a 2 s
-#: stretch resolves 0.5 Hz, and a slower motion beside a periodic one is seen only above 1 Hz.
-MOTION_LOWEST_HZ = 3.0
+#: A stretch is searched for fundamentals of at least this many periods: with fewer, the
+#: Hann window's main lobes about adjacent harmonics (+-2 / T) cover the whole axis and
+#: another motion has nowhere to show apart from a wobble.
+MOTION_PERIODS = 4.0
+#: The longest stretch judged live, s: periodic motions down to MOTION_PERIODS / this
+#: (0.5 Hz, below the paper's 1 Hz crank) are modelled, and no slower.
+MOTION_LONGEST_S = 8.0
+#: A stretch shorter than this, s, is not judged (None).
+MOTION_SHORTEST_S = 1.0
 #: The fit holds its phasors over pieces of at least this, s (and two periods): short against
 #: a motor's speed wobble, long against a period.
 MOTION_PIECE_S = 0.5
@@ -47,14 +60,37 @@ MOTION_PIECE_S = 0.5
 #: whose nulls fall on the aliases of the band), Hz: above the motion band and 3 mains
 #: harmonics, and it bounds the cost of a measurement at high sample rates.
 MOTION_RATE_HZ = 1000.0
-#: The residual is examined at multiples of this, Hz (from the first: a slow motion beside a
-#: periodic one shows there): a stretch shorter than 1 / this cannot be judged.
-MOTION_EXAMINED_HZ = 1.0
-#: A motor's speed wobbles by up to this, relative, at up to MOTION_WOBBLE_HZ: the residual
-#: within 2 MOTION_WOBBLE_HZ + MOTION_WOBBLE k f of harmonic k belongs to it (the frequency
-#: excursion plus two sidebands: at a 1e4 signal-to-noise ratio the second still shows).
+#: A motor's speed wobbles by up to this, relative, at rates up to MOTION_WOBBLE_HZ (a DC
+#: motor under a crank's varying load): the sidebands it puts beside each harmonic are
+#: allowed in the residual (:func:`_wobble_power`).
 MOTION_WOBBLE = 0.02
 MOTION_WOBBLE_HZ = 0.5
+#: Bessel orders and rates counted in the wobble bound: the index reaches ~8 on a live
+#: stretch (8 s, 25 Hz), whose sidebands above the 12th are negligible; more than
+#: 4 MOTION_WOBBLE_HZ beyond the frequency excursion every order is near 1e-6 of the line or
+#: below, and no bound is added.
+_SIDEBANDS = 24
+_RATES = 24
+
+
+def measure_recent(current_a, sample_rate_hz: float, model) -> float | None:
+    """
+    Return the fundamental of a periodic motion at the end of a live stream, Hz (module doc).
+
+    ``current_a``: the last samples (up to :data:`MOTION_LONGEST_S`); 0.0: none; None: less
+    than :data:`MOTION_SHORTEST_S` of current.
+    """
+    x = np.asarray(current_a, dtype=float)
+    fs = float(sample_rate_hz)
+    available = x.size / fs
+    if available < MOTION_SHORTEST_S - 1e-9:
+        return None
+    spans = sorted({min(available, MOTION_LONGEST_S / 2 ** j) for j in (2, 1, 0)})
+    for span in spans:
+        f0 = measure_motion(x[-int(round(span * fs)):], fs, model)
+        if f0:
+            return f0
+    return 0.0
 
 
 def measure_motion(current_a, sample_rate_hz: float, model,
@@ -62,7 +98,7 @@ def measure_motion(current_a, sample_rate_hz: float, model,
     """
     Return the fundamental of a periodic motion in a stretch of current, Hz.
 
-    0.0: none; None: a stretch shorter than 1 / :data:`MOTION_EXAMINED_HZ` cannot be judged.
+    0.0: none; None: a stretch shorter than :data:`MOTION_SHORTEST_S` cannot be judged.
     ``model``: the estimator's :class:`~.statespace.StateSpaceModel` (sensor, settings and
     mains lines).  Module docstring.
     """
@@ -70,9 +106,10 @@ def measure_motion(current_a, sample_rate_hz: float, model,
     fs = float(sample_rate_hz)
     cfg = model.config
     span = x.size / fs
-    if span * MOTION_EXAMINED_HZ < 1.0 - 1e-9:
+    if span < MOTION_SHORTEST_S - 1e-9:
         return None
-    lo, hi = max(MOTION_LOWEST_HZ, 2.0 / span), 0.5 * cfg.motion_bandwidth_hz
+    lo = MOTION_PERIODS / min(span, MOTION_LONGEST_S)
+    hi = 0.5 * cfg.motion_bandwidth_hz
     if x.size < 64 or lo >= hi or not np.all(np.isfinite(x)):
         return 0.0
     d = np.diff(x, 3)
@@ -93,13 +130,12 @@ def measure_motion(current_a, sample_rate_hz: float, model,
                            bounds=(f0 - df, f0 + df), method='bounded',
                            options={'xatol': 1e-4 * df})
     f0 = float(best.x)
-    every = np.array(harmonics_below(f0, hi + 2 * MOTION_WOBBLE_HZ, x.size))  # near the band
-    residual = _residual(x, t, every, mains, span)
-    allowed = np.r_[every, mains]
-    width = np.r_[2 * MOTION_WOBBLE_HZ + MOTION_WOBBLE * every, np.full(len(mains), 1.0)]
-    unexplained = _unexplained(residual, fs, hi, (allowed, width), _remainder_psd(model),
-                               noise_a2, false_alarm)
-    return 0.0 if unexplained else f0
+    edge = hi * (1 + MOTION_WOBBLE) + 4 * MOTION_WOBBLE_HZ + 2.0 / span   # lines reaching it
+    every = np.array(harmonics_below(f0, min(edge, 0.45 * fs), x.size))
+    residual, amplitude2 = _fit(x, t, every, mains)
+    explained = _explained(residual, fs, hi, (every, amplitude2, span), mains,
+                           _remainder_psd(model), noise_a2, false_alarm)
+    return f0 if explained else 0.0
 
 
 def _strongest_family(x, fs, lo, hi, harmonics, false_alarm) -> float:
@@ -150,24 +186,78 @@ def _remainder_psd(model):
     return psd
 
 
-def _unexplained(r, fs, hi, allowed, psd, noise_a2, false_alarm) -> bool:
+def _fit(x, t, lines_hz, mains_hz) -> tuple[np.ndarray, np.ndarray]:
     """
-    Tell whether the residual holds more than noise and remainder away from the lines.
+    Return (residual, squared amplitudes of ``lines_hz``) of one least-squares fit.
 
-    ``allowed``: (frequencies, half-widths), Hz.
+    Columns: the offset and its drift (a mean and a slope), the lines and the mains lines.
     """
-    centre, width = allowed
+    waves = [f(2 * np.pi * h * t) for h in (*lines_hz, *mains_hz) for f in (np.cos, np.sin)]
+    cols = np.array([np.ones(x.size), t - t.mean()] + waves).T
+    coef = np.linalg.lstsq(cols.T @ cols, cols.T @ x, rcond=None)[0]
+    n = len(lines_hz)
+    return x - cols @ coef, coef[2:2 + 2 * n:2] ** 2 + coef[3:3 + 2 * n:2] ** 2
+
+
+def _hann_response(bins) -> np.ndarray:
+    """Power response of the Hann window ``bins`` from a line (1 at 0, zeros at 2, 3, ...)."""
+    x = np.abs(np.asarray(bins, dtype=float))
+    near_one = np.abs(x - 1.0) < 1e-9                 # sinc(x) / (1 - x^2) -> 1/2 there
+    x = np.where(near_one, 0.0, x)
+    amplitude = np.where(near_one, 0.5, np.sinc(x) / (1.0 - x * x))
+    return amplitude * amplitude
+
+
+def _wobble_power(f, centres, power, span) -> np.ndarray:
+    """
+    Upper bound of the periodogram power a speed wobble puts at ``f`` (Hz).
+
+    ``centres``, ``power``: the harmonics, Hz, and their peak powers in the periodogram;
+    ``span``: the stretch, s.  A motor turning at f0 whose speed wobbles by
+    :data:`MOTION_WOBBLE` at rate r phase-modulates harmonic k with index
+    beta = k f0 MOTION_WOBBLE / r: sideband n, at k f0 +- n r, holds J_n(beta)^2 of the line's
+    power (the Bessel expansion of exp(i beta sin)); each reaches a bin through the Hann
+    window's response.  The bound is the largest sum over rates from 1 / (2 span) (a slower
+    wobble is, within the stretch, a change of speed) to :data:`MOTION_WOBBLE_HZ`.  A line
+    that is not a wobble (a second motion beside a harmonic) exceeds it.
+    """
+    out = np.zeros(f.size)
+    n = np.arange(1, _SIDEBANDS + 1)
+    rates = np.geomspace(min(0.5 / span, MOTION_WOBBLE_HZ), MOTION_WOBBLE_HZ, _RATES)
+    for c, p in zip(centres, power):
+        reach = c * MOTION_WOBBLE + 4 * MOTION_WOBBLE_HZ + 2.0 / span
+        j = np.flatnonzero(np.abs(f - c) < reach)
+        if j.size == 0:
+            continue
+        share = jv(n[None, :], c * MOTION_WOBBLE / rates[:, None]) ** 2    # (rate, n)
+        off = (f[j] - c)[:, None, None]
+        at = n[None, None, :] * rates[None, :, None]
+        seen = _hann_response((off - at) * span) + _hann_response((off + at) * span)
+        out[j] += p * np.max(np.sum(share[None] * seen, axis=2), axis=1)
+    return out
+
+
+def _explained(r, fs, hi, lines, mains, psd, noise_a2, false_alarm) -> bool:
+    """
+    Tell whether the residual holds no more than noise, remainder and wobble (module doc).
+
+    ``lines``: (harmonics Hz, their squared amplitudes A^2, the stretch s); ``mains``: mains lines, Hz (their neighbourhood, 1 Hz, is not judged).
+    """
+    centres, amplitude2, span = lines
     n = r.size
     window = np.hanning(n)
     power = np.abs(np.fft.rfft(r * window)) ** 2
     f = np.arange(power.size) * fs / n
-    # bins at multiples of MOTION_EXAMINED_HZ (apart by at least one bin)
-    step = max(1, int(round(MOTION_EXAMINED_HZ * n / fs)))
-    k = np.arange(step, power.size, step)
-    k = k[(f[k] <= hi) & np.all(np.abs(f[k, None] - centre[None, :]) > width[None, :], axis=1)]
+    k = np.arange(2, power.size, 2)       # every other bin: Hann bins two apart ~independent
+    k = k[f[k] <= hi]
+    if mains:
+        k = k[np.all(np.abs(f[k, None] - np.asarray(mains)[None, :]) > 1.0, axis=1)]
+    line_power = amplitude2 * (window.sum() / 2) ** 2      # a line's periodogram peak
+    expected = (float(window @ window) * (noise_a2 + fs * psd(f[k]))
+                + _wobble_power(f[k], centres, line_power, span))
     if k.size == 0:
         return False
-    expected = float(window @ window) * (noise_a2 + fs * psd(f[k]))
     ratio = power[k] / expected
-    return bool(ratio.sum() > gamma.ppf(1.0 - false_alarm, k.size)
-                or ratio.max() > math.log(k.size / false_alarm))
+    size = ratio.size
+    return not bool(ratio.sum() > gamma.ppf(1.0 - false_alarm, size)
+                    or ratio.max() > math.log(size / false_alarm))

@@ -3,8 +3,9 @@
 When the Kalman estimator's model takes periodic-motion states, and from when.
 
 At each line check the estimator measures the fundamental of a periodic motion on the
-last 2 s of current (:func:`~.motionline.measure_motion`; 0: none; None: the first 0.5 s is
-too short to judge).  The model changes (periodic states at that fundamental appear, move by
+last 2, 4 and 8 s of current (:func:`~.motionline.measure_recent`; 0: none; None: the
+checks before 2 s of current are too short to judge, and their stretches run on into the
+first judged one).  The model changes (periodic states at that fundamental appear, move by
 more than :data:`~.motionline.MOTION_WOBBLE` of it, a motor's speed wobble that the periodic
 states' walk follows, or go: :mod:`.statespace`) when the measurement differs from the
 model and agrees with the one of the check before: two stretches in a row say so.  Periodic
@@ -55,8 +56,9 @@ class StretchLog:
         self.current = Stretch(filt, state.copy())
 
     def mark(self, filt: KalmanFilter, state: FilterState) -> None:
-        """End the current stretch at a check; a new one starts at ``state``."""
-        self.earlier, self.current = self.current, Stretch(filt, state.copy())
+        """End the current stretch at a check (one not judged runs on); a new one starts."""
+        if self.current.measured_hz is not None:
+            self.earlier, self.current = self.current, Stretch(filt, state.copy())
 
     def add(self, y: list, steps: list, rest: bool) -> None:
         """Append samples (values, sample periods since the one before) to the current one."""
