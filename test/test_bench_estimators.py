@@ -61,13 +61,12 @@ def test_hindsight_narrows_the_uncertainty_of_the_same_model():
     """
     The smoothed std never exceeds the causal one where both use the same model.
 
-    ``short-jitter25-sampled``: a 2 Hz crank (below the periodic model's 3 Hz, so no periodic
-    states live or offline), +-25 % jittered instants, dropped rows.  Where the live filter
-    takes periodic states after a rest and the offline smoother does not
-    (``slim-jitter25-host`` from 5 s), the smoothed std can be a few percent wider:
-    docs/estimator.md, "where it is weak".
+    ``slim-motion-hold-0.2na``: two slow sines, a move and a hold, from rest (no periodic
+    motion, so no periodic states live or offline).  Where the live filter takes periodic
+    states after a rest and the offline smoother does not (``slim-jitter25-host`` from 5 s),
+    the smoothed std can be a few percent wider: docs/estimator.md, "where it is weak".
     """
-    record = build('short-jitter25-sampled', 0)
+    record = build('slim-motion-hold-0.2na', 0)
     est = run_estimator(record)
     smooth = run_estimator(record, causal=False)
     assert np.array_equal(smooth.row_index, est.row_index)

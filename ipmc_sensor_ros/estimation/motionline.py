@@ -241,7 +241,8 @@ def _explained(r, fs, hi, lines, mains, psd, noise_a2, false_alarm) -> bool:
     """
     Tell whether the residual holds no more than noise, remainder and wobble (module doc).
 
-    ``lines``: (harmonics Hz, their squared amplitudes A^2, the stretch s); ``mains``: mains lines, Hz (their neighbourhood, 1 Hz, is not judged).
+    ``lines``: (harmonics Hz, their squared amplitudes A^2, the stretch s); ``mains``: mains
+    lines, Hz (their neighbourhood, 1 Hz, is not judged).
     """
     centres, amplitude2, span = lines
     n = r.size
