@@ -72,13 +72,10 @@ def test_measure_motion_finds_a_crank_and_refuses_other_motions(reduced):
     crank = build('crank-5hz-short-0.2na-poweron', 0)
     f0 = measure_motion(crank.current_a[:2000], crank.sample_rate_hz, ssm)
     assert f0 == pytest.approx(5.0, rel=1e-2)      # a 2 s mean of a speed wobbling by <= 1 %
-    t = np.arange(2000) / FS
-    rng = np.random.default_rng(0)
-    two = (0.8e-3 * _gain(reduced, 5.0) * np.sin(2 * np.pi * 5.0 * t)
-           + 0.3e-3 * _gain(reduced, 7.3) * np.sin(2 * np.pi * 7.3 * t + 1.0)
-           + 1e-9 * rng.standard_normal(t.size))
+    two = _two_sines(reduced, 2000, (5.0, 0.8e-3), (7.3, 0.3e-3), 1e-9, seed=0)
     assert measure_motion(two, FS, ssm) == 0.0
-    assert measure_motion(1e-9 * rng.standard_normal(t.size), FS, ssm) == 0.0
+    rng = np.random.default_rng(0)
+    assert measure_motion(1e-9 * rng.standard_normal(2000), FS, ssm) == 0.0
 
 
 def _gain(reduced, f):
@@ -86,22 +83,28 @@ def _gain(reduced, f):
     return abs(reduced.frequency_response(np.array([f]))[0])
 
 
+def _two_sines(reduced, n, first, second, noise_a, seed):
+    """The current of two sines (Hz, m), the second 1 rad ahead, and white noise (A)."""
+    t = np.arange(n) / FS
+    rng = np.random.default_rng(seed)
+    (f1, a1), (f2, a2) = first, second
+    return (a1 * _gain(reduced, f1) * np.sin(2 * np.pi * f1 * t)
+            + a2 * _gain(reduced, f2) * np.sin(2 * np.pi * f2 * t + 1.0)
+            + noise_a * rng.standard_normal(n))
+
+
 def test_a_slow_crank_is_judged_on_a_long_stretch(reduced):
     """
-    A 1 Hz crank: not judged periodic on 2 s, 1 Hz on 8 s; two slow sines on 8 s: none.
+    A 1 Hz crank: not periodic on 2 s, 1 Hz on 8 s; two slow sines on 8 s: none.
 
-    Between harmonics 1 Hz apart, 2 s of Hann window (main lobe +-1 Hz) leaves no bin to
-    judge; 8 s does (measure_recent tries 2, 4, then 8 s).
+    2 s hold too few of its periods to search it (MOTION_PERIODS), and a family of its
+    harmonics leaves the fundamental in the residual; measure_recent tries 2, 4, then 8 s.
     """
     ssm = StateSpaceModel(reduced, EstimatorConfig(), FS)
     y = build('crank-1hz-short-0.2na-poweron', 0).grid_current_a
     assert measure_recent(y[:2000], FS, ssm) == 0.0
     assert measure_recent(y[:8000], FS, ssm) == pytest.approx(1.0, rel=1e-2)
-    t = np.arange(8000) / FS
-    rng = np.random.default_rng(1)
-    two = (0.5e-3 * _gain(reduced, 1.0) * np.sin(2 * np.pi * 1.0 * t)
-           + 0.3e-3 * _gain(reduced, 1.7) * np.sin(2 * np.pi * 1.7 * t + 1.0)
-           + 0.2e-9 * rng.standard_normal(t.size))
+    two = _two_sines(reduced, 8000, (1.0, 0.5e-3), (1.7, 0.3e-3), 0.2e-9, seed=1)
     assert measure_recent(two, FS, ssm) == 0.0
 
 
