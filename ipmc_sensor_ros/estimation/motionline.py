@@ -132,7 +132,8 @@ def measure_motion(current_a, sample_rate_hz: float, model,
     f0 = float(best.x)
     edge = hi * (1 + MOTION_WOBBLE) + 4 * MOTION_WOBBLE_HZ + 2.0 / span   # lines reaching it
     every = np.array(harmonics_below(f0, min(edge, 0.45 * fs), x.size))
-    residual, amplitude2 = _fit(x, t, every, mains)
+    residual = _fit(x, t, every, mains)
+    amplitude2 = _piecewise(x, t, every, mains, piece)[1]     # the lines' power, wobble too
     explained = _explained(residual, fs, hi, (every, amplitude2, span), mains,
                            _remainder_psd(model), noise_a2, false_alarm)
     return f0 if explained else 0.0
@@ -160,17 +161,30 @@ def _strongest_family(x, fs, lo, hi, harmonics, false_alarm) -> float:
 
 def _residual(x, t, lines_hz, mains_hz, piece_s) -> np.ndarray:
     """Return ``x`` less a mean and the lines, fitted on pieces of about ``piece_s``."""
+    return _piecewise(x, t, lines_hz, mains_hz, piece_s)[0]
+
+
+def _piecewise(x, t, lines_hz, mains_hz, piece_s) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Fit a mean and the lines on pieces of about ``piece_s``.
+
+    Return (residual, each of ``lines_hz``'s squared amplitude averaged over the pieces:
+    its power, wobble included, where one fit over the stretch sees only the carrier).
+    """
     pieces = max(1, int(x.size / (piece_s * (1.0 / (t[1] - t[0]) if t.size > 1 else 1.0))))
     edges = np.linspace(0, x.size, pieces + 1).astype(int)
     waves = [f(2 * np.pi * h * t) for h in (*lines_hz, *mains_hz) for f in (np.cos, np.sin)]
     residual = np.empty_like(x)
+    n = len(lines_hz)
+    power = np.zeros(n)
     for a, b in zip(edges[:-1], edges[1:]):
         cols = np.array([np.ones(b - a)] + [w[a:b] for w in waves]).T
         # least squares by the normal equations (a few dozen columns; lstsq of the small
         # system keeps a mains harmonic on a motion harmonic from making it singular)
         coef = np.linalg.lstsq(cols.T @ cols, cols.T @ x[a:b], rcond=None)[0]
         residual[a:b] = x[a:b] - cols @ coef
-    return residual
+        power += (coef[1:1 + 2 * n:2] ** 2 + coef[2:2 + 2 * n:2] ** 2) * (b - a) / x.size
+    return residual, power
 
 
 def _remainder_psd(model):
@@ -186,17 +200,15 @@ def _remainder_psd(model):
     return psd
 
 
-def _fit(x, t, lines_hz, mains_hz) -> tuple[np.ndarray, np.ndarray]:
+def _fit(x, t, lines_hz, mains_hz) -> np.ndarray:
     """
-    Return (residual, squared amplitudes of ``lines_hz``) of one least-squares fit.
+    Return the residual of one least-squares fit over the stretch.
 
     Columns: the offset and its drift (a mean and a slope), the lines and the mains lines.
     """
     waves = [f(2 * np.pi * h * t) for h in (*lines_hz, *mains_hz) for f in (np.cos, np.sin)]
     cols = np.array([np.ones(x.size), t - t.mean()] + waves).T
-    coef = np.linalg.lstsq(cols.T @ cols, cols.T @ x, rcond=None)[0]
-    n = len(lines_hz)
-    return x - cols @ coef, coef[2:2 + 2 * n:2] ** 2 + coef[3:3 + 2 * n:2] ** 2
+    return x - cols @ np.linalg.lstsq(cols.T @ cols, cols.T @ x, rcond=None)[0]
 
 
 def _hann_response(bins) -> np.ndarray:
