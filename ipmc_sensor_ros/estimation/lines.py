@@ -93,7 +93,9 @@ def vertex(cand: np.ndarray, summed: np.ndarray, j: int) -> float:
     if 0 < j < summed.size - 1:
         a, b, c = summed[j - 1], summed[j], summed[j + 1]
         den = a - 2 * b + c
-        if den < 0:       # b is the largest: the vertex is within half a bin (rounding aside)
+        # within half a bin of a maximum; a larger neighbour outside the searched range (a
+        # flank: b is the largest inside only) could put it anywhere
+        if den < 0:
             return float(cand[j]) + float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
     return float(cand[j])
 
