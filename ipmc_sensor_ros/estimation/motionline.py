@@ -13,9 +13,9 @@ The estimator models a periodic motion by states at k f_motion with a small rema
 * refined by least squares: a mean, the modelled lines k f and the mains lines, the
   phasors held over pieces of :data:`MOTION_PIECE_S` (a motor's speed wobbles);
 * accepted when the periodic model explains the stretch: the residual of one fit of the
-  offset and its drift (a mean and a slope), the harmonics up to the band's edge and the mains
-  lines has the periodogram the model expects: the white noise (measured by the third
-  difference, as the filter does), the current of a remainder motion of
+  offset (a mean), the harmonics up to the band's edge and the mains lines has the
+  periodogram the model expects: the white noise (measured by the third difference, as the
+  filter does), the current of a remainder motion of
   ``periodic_remainder_rms_m`` (its spectrum through the sensor, H(f)) and, beside each
   harmonic, at most the sidebands of a speed wobble (:func:`_wobble_power`).  Each bin's
   ratio to that is exponential with mean 1 (every other bin of the Hann periodogram, nearly
@@ -204,10 +204,11 @@ def _fit(x, t, lines_hz, mains_hz) -> np.ndarray:
     """
     Return the residual of one least-squares fit over the stretch.
 
-    Columns: the offset and its drift (a mean and a slope), the lines and the mains lines.
+    Columns: the offset (a mean), the lines and the mains lines.  No slope: a line's wobble
+    leaks into a fitted slope, and the ramp it takes away fills the lowest bins.
     """
     waves = [f(2 * np.pi * h * t) for h in (*lines_hz, *mains_hz) for f in (np.cos, np.sin)]
-    cols = np.array([np.ones(x.size), t - t.mean()] + waves).T
+    cols = np.array([np.ones(x.size)] + waves).T
     return x - cols @ np.linalg.lstsq(cols.T @ cols, cols.T @ x, rcond=None)[0]
 
 
