@@ -84,7 +84,7 @@ def _gain(reduced, f):
 
 
 def _two_sines(reduced, n, first, second, noise_a, seed):
-    """The current of two sines (Hz, m), the second 1 rad ahead, and white noise (A)."""
+    """Return the current of two sines (Hz, m), the second 1 rad ahead, and white noise (A)."""
     t = np.arange(n) / FS
     rng = np.random.default_rng(seed)
     (f1, a1), (f2, a2) = first, second
