@@ -266,11 +266,11 @@ def _explained(r, fs, hi, lines, mains, psd, noise_a2, false_alarm) -> bool:
     k = k[f[k] <= hi]
     if mains:
         k = k[np.all(np.abs(f[k, None] - np.asarray(mains)[None, :]) > 1.0, axis=1)]
+    if k.size == 0:
+        return False
     line_power = amplitude2 * (window.sum() / 2) ** 2      # a line's periodogram peak
     expected = (float(window @ window) * (noise_a2 + fs * psd(f[k]))
                 + _wobble_power(f[k], centres, line_power, span))
-    if k.size == 0:
-        return False
     ratio = power[k] / expected
     size = ratio.size
     return not bool(ratio.sum() > gamma.ppf(1.0 - false_alarm, size)

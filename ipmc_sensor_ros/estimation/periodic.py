@@ -3,12 +3,12 @@
 When the Kalman estimator's model takes periodic-motion states, and from when.
 
 At each line check the estimator measures the fundamental of a periodic motion on the
-last 2, 4 and 8 s of current (:func:`~.motionline.measure_recent`; 0: none; None: the
-checks before 2 s of current are too short to judge, and their stretches run on into the
-first judged one).  The model changes (periodic states at that fundamental appear, move by
-more than :data:`~.motionline.MOTION_WOBBLE` of it, a motor's speed wobble that the periodic
-states' walk follows, or go: :mod:`.statespace`) when the measurement differs from the
-model and agrees with the one of the check before: two stretches in a row say so.  Periodic
+last 2, 4 and 8 s of current (:func:`~.motionline.measure_recent`; 0: none; None: a check
+before 1 s of current is too short to judge, and its stretch runs on into the next).  The
+model changes (periodic states at that fundamental appear, move by more than
+:data:`~.motionline.MOTION_WOBBLE` of it, a motor's speed wobble that the periodic states'
+walk follows, or go: :mod:`.statespace`) when the measurement differs from the model and
+agrees with the one of the check before: two stretches in a row say so.  Periodic
 states also need a last stretch without rest (a motion starting or stopping is not
 periodic).  The first stretch judged needs no earlier one when the sensor has not rested
 since the start (moving since power-on).
