@@ -125,15 +125,18 @@ def measure_motion(current_a, sample_rate_hz: float, model,
     mains = tuple(model.lines_hz)
     df = fs / x.size
     piece = min(span, max(MOTION_PIECE_S, 2.0 / f0))
-    best = minimize_scalar(lambda f: float(np.var(_residual(
-        x, t, harmonics_below(f, 0.45 * fs, cfg.motion_harmonics), mains, piece))),
+    best = minimize_scalar(lambda f: float(np.var(_piecewise(
+        x, t, harmonics_below(f, 0.45 * fs, cfg.motion_harmonics), mains, piece)[0])),
                            bounds=(f0 - df, f0 + df), method='bounded',
                            options={'xatol': 1e-4 * df})
     f0 = float(best.x)
     edge = hi * (1 + MOTION_WOBBLE) + 4 * MOTION_WOBBLE_HZ + 2.0 / span   # lines reaching it
     every = np.array(harmonics_below(f0, min(edge, 0.45 * fs), x.size))
-    residual = _fit(x, t, every, mains)
-    amplitude2 = _piecewise(x, t, every, mains, piece)[1]     # the lines' power, wobble too
+    # the test's residual: one fit over the stretch (a mean: a slope would take up a wobbling
+    # line's leakage, and the ramp it took away would fill the lowest bins); the lines'
+    # power, wobble included, from the pieces (one fit sees only the carrier)
+    residual = _piecewise(x, t, every, mains, span)[0]
+    amplitude2 = _piecewise(x, t, every, mains, piece)[1]
     explained = _explained(residual, fs, hi, (every, amplitude2, span), mains,
                            _remainder_psd(model), noise_a2, false_alarm)
     return f0 if explained else 0.0
@@ -159,14 +162,9 @@ def _strongest_family(x, fs, lo, hi, harmonics, false_alarm) -> float:
         power, j0, df) else 0.0
 
 
-def _residual(x, t, lines_hz, mains_hz, piece_s) -> np.ndarray:
-    """Return ``x`` less a mean and the lines, fitted on pieces of about ``piece_s``."""
-    return _piecewise(x, t, lines_hz, mains_hz, piece_s)[0]
-
-
 def _piecewise(x, t, lines_hz, mains_hz, piece_s) -> tuple[np.ndarray, np.ndarray]:
     """
-    Fit a mean and the lines on pieces of about ``piece_s``.
+    Fit a mean and the lines on pieces of about ``piece_s`` (one piece: ``piece_s`` >= span).
 
     Return (residual, each of ``lines_hz``'s squared amplitude averaged over the pieces:
     its power, wobble included, where one fit over the stretch sees only the carrier).
@@ -198,18 +196,6 @@ def _remainder_psd(model):
         h2 = np.abs(model.reduced.frequency_response(f)) ** 2
         return h2 * q / ((w2 + c * c) * (w2 + a * a) ** 2)
     return psd
-
-
-def _fit(x, t, lines_hz, mains_hz) -> np.ndarray:
-    """
-    Return the residual of one least-squares fit over the stretch.
-
-    Columns: the offset (a mean), the lines and the mains lines.  No slope: a line's wobble
-    leaks into a fitted slope, and the ramp it takes away fills the lowest bins.
-    """
-    waves = [f(2 * np.pi * h * t) for h in (*lines_hz, *mains_hz) for f in (np.cos, np.sin)]
-    cols = np.array([np.ones(x.size)] + waves).T
-    return x - cols @ np.linalg.lstsq(cols.T @ cols, cols.T @ x, rcond=None)[0]
 
 
 def _hann_response(bins) -> np.ndarray:

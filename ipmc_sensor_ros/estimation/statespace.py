@@ -120,6 +120,14 @@ def line_frequencies_hz(line_hz: float, sample_rate_hz: float, harmonics: int) -
     return harmonics_below(line_hz, 0.45 * sample_rate_hz, harmonics)
 
 
+def _phasors(A: np.ndarray, Q: np.ndarray, first: int, frequencies_hz, walk: float) -> None:
+    """Write phasor pairs from state ``first``: turning at 2 pi f, each walking by ``walk``."""
+    for k, f in enumerate(frequencies_hz):
+        j = first + 2 * k
+        A[j, j + 1], A[j + 1, j] = -2 * math.pi * f, 2 * math.pi * f
+        Q[j, j] = Q[j + 1, j + 1] = walk ** 2
+
+
 class StateSpaceModel:
     """
     The model of the module docstring for one sensor, sample rate and mains line.
@@ -192,15 +200,9 @@ class StateSpaceModel:
         A[self.ib, self.ib + 1] = 1.0
         Q[self.ib, self.ib] = cfg.offset_walk_a ** 2
         Q[self.ib + 1, self.ib + 1] = cfg.offset_drift_walk_a_per_s ** 2
-        for k, f in enumerate(self.lines_hz):
-            j = self.il + 2 * k
-            A[j, j + 1], A[j + 1, j] = -2 * math.pi * f, 2 * math.pi * f
-            Q[j, j] = Q[j + 1, j + 1] = cfg.line_walk_a ** 2
-        for k, f in enumerate(self.motion_lines_hz):
-            j = self.im + 2 * k
-            A[j, j + 1], A[j + 1, j] = -2 * math.pi * f, 2 * math.pi * f
-            Q[j, j] = Q[j + 1, j + 1] = self.motion_line_walk_m ** 2
-            A[self.ia, j] = a_m * a_m * f_m          # the target the tip follows
+        _phasors(A, Q, self.il, self.lines_hz, cfg.line_walk_a)
+        _phasors(A, Q, self.im, self.motion_lines_hz, self.motion_line_walk_m)
+        A[self.ia, self.im::2] = a_m * a_m * f_m      # the target the tip follows
         return A, Q
 
     @functools.cached_property
