@@ -177,9 +177,103 @@ def test_outside_stage_keeps_the_round_of_lowest_bic(monkeypatch):
                            'catalog_search': lambda inner: None,
                            '_drop_failing': lambda inner, st, band: None,
                            'registered': lambda structs: nullcontext(),
-                           '_result': lambda inner, st, tried: chosen.append((inner.best, st)),
+                           'result': lambda inner, st, tried: chosen.append((inner.best, st)),
                            '_adopt_inner': lambda s, inner, best, st: None}.items():
         monkeypatch.setattr(outside, name, stand_in)
     outside.outside_stage(state)
     assert outside.MAX_ROUNDS == 3 and len(chosen) == 1
     assert chosen[0][1] == ('resonance',) and chosen[0][0].bic == 10.0
+
+
+def _two_valleys(monkeypatch):
+    """
+    Stand in a profile with two valleys: chi^2 0 at 40 Hz, -5 at 28 Hz, a barrier between.
+
+    Returns a candidate at the 40 Hz valley (quadratic sd 0.01 in log, as the curvature 1e4
+    says) and the profile's function of the log value; the profile refits are replaced by it.
+    """
+    from types import SimpleNamespace
+
+    from ipmc_sensor_ros.workbench.discovery import interval
+    from ipmc_sensor_ros.workbench.timefit import FitSpec
+
+    a, b = np.log(40.0), np.log(28.0)
+
+    def chi2_of(x):
+        return min(1e4 * (x - a) ** 2, 1e4 * (x - b) ** 2 - 5.0)
+
+    monkeypatch.setattr(interval, '_profile_chi2',
+                        lambda state, cand, e, p, value, start, spec: (chi2_of(np.log(value)),
+                                                                       start))
+    spec = FitSpec((), (('amplifier_bandwidth', 'corner_hz'),))
+    fit = SimpleNamespace(chi2=0.0, n_rows=10_000, n_params=1, covariance=np.array([[1e-4]]))
+    return SimpleNamespace(spec=spec, x=np.array([a]), fit=fit), chi2_of
+
+
+def test_profile_scan_finds_a_second_valley_and_the_interval_holds_it(monkeypatch):
+    """
+    A local fit stays in its valley; the scan steps 5 % out and finds the other one.
+
+    The scan's point nearest 28 Hz (28.45 Hz, 2.4 below the optimum) is a local minimum of the
+    profile and a restart; lying below the 3.84 level, it belongs in the 95 % interval, which
+    the stepping around the optimum alone would end at 40 * exp(0.0196) = 40.8 Hz and
+    40 * exp(-0.0196) = 39.2 Hz.
+    """
+    from ipmc_sensor_ros.workbench.discovery import interval
+
+    cand, chi2_of = _two_valleys(monkeypatch)
+    scan = interval.profile_scan(None, cand, 'amplifier_bandwidth', 'corner_hz')
+    values = np.exp([q[0] for q in scan])
+    assert values.min() == pytest.approx(20.0, rel=0.03) and values.max() == pytest.approx(
+        80.0, rel=0.03)     # a factor 2 each side, in 5 % steps (14 of them, 1.05^14 = 1.98)
+    (restart,) = interval.scan_minima(scan, cand.x)
+    assert np.exp(restart[0]) == pytest.approx(28.45, rel=0.01) and chi2_of(restart[0]) < 0
+    lo, hi = interval.profile_interval(None, cand, 'amplifier_bandwidth', 'corner_hz')
+    assert lo == pytest.approx(39.2, rel=0.002) and hi == pytest.approx(40.8, rel=0.002)
+    lo, hi = interval.profile_interval(None, cand, 'amplifier_bandwidth', 'corner_hz', scan)
+    assert lo == pytest.approx(28.45, rel=0.01) and hi == pytest.approx(40.8, rel=0.002)
+
+
+def test_the_result_moves_to_the_deeper_valley(monkeypatch):
+    """:func:`result._deepest` restarts from the scan's minimum and keeps the lower fit."""
+    from types import SimpleNamespace
+
+    from ipmc_sensor_ros.workbench.discovery import result
+
+    cand, chi2_of = _two_valleys(monkeypatch)
+    name = 'amplifier_bandwidth'
+
+    def local_fits(inner, spec, starts):     # a local fit: to the bottom of the start's valley
+        out = []
+        for x in starts:
+            bottom = np.log(40.0) if abs(x[0] - np.log(40.0)) < 0.17 else np.log(28.0)
+            out.append(SimpleNamespace(spec=spec, x=np.array([bottom]),
+                                       fit=SimpleNamespace(**{**vars(cand.fit),
+                                                              'chi2': chi2_of(bottom)})))
+        return out
+
+    monkeypatch.setattr(result, '_fits', local_fits)
+    best, scans = result._deepest(SimpleNamespace(say=lambda msg: None), cand, name)
+    assert np.exp(best.x[0]) == pytest.approx(28.0) and best.fit.chi2 == -5.0
+    assert min(np.exp(q[0]) for q in scans['corner_hz']) == pytest.approx(14.0, rel=0.03)
+
+
+def test_a_low_pass_beside_a_lead_lag_takes_the_pole_farther_from_the_zero():
+    """Two factorisations of one C(s); the canonical one pairs the zero with its nearer pole."""
+    from ipmc_sensor_ros.workbench.discovery.correction import _zpk, canonical
+
+    st = ('low_pass', 'lead_lag')
+    fitted = {'low_pass_corner_hz': 2.62, 'lead_lag_zero_hz': 5.38, 'lead_lag_pole_hz': 149.0}
+    got = canonical(st, fitted)
+    assert got == {'low_pass_corner_hz': 149.0, 'lead_lag_zero_hz': 5.38,
+                   'lead_lag_pole_hz': 2.62}
+    assert canonical(st, got) == got
+    s = 2j * np.pi * np.geomspace(0.1, 1e3, 50)
+    responses = []
+    for v in (fitted, got):
+        z, p, k = _zpk(st, v)
+        responses.append(k * np.prod(s[:, None] - np.array(z), axis=1)
+                         / np.prod(s[:, None] - np.array(p), axis=1))
+    assert np.allclose(*responses, rtol=1e-12)       # the same C(s), to rounding
+    assert canonical(('lead_lag',), {'lead_lag_zero_hz': 5.0, 'lead_lag_pole_hz': 99.0}) == {
+        'lead_lag_zero_hz': 5.0, 'lead_lag_pole_hz': 99.0}

@@ -28,8 +28,8 @@ import numpy as np
 
 from ...physics.effects import Effect, EffectParameter
 
-__all__ = ['ELEMENTS', 'PREFIX', 'structures', 'correction_name', 'correction_class',
-           'Correction']
+__all__ = ['ELEMENTS', 'PREFIX', 'POLE_PAIR', 'structures', 'canonical', 'correction_name',
+           'correction_class', 'Correction']
 
 #: internal effect names of C(s) start with this (never offered as catalog candidates)
 PREFIX = 'correction_'
@@ -84,6 +84,29 @@ def correction_name(structure) -> str:
     """Return the internal effect name of a structure, e.g. ``correction_high_pass_delay``."""
     return PREFIX + '_'.join(e for e in structure if e != 'gain') + (
         '_gain' if 'gain' in structure else '')
+
+
+#: the two parameters that a low-pass beside a lead-lag can exchange (the same C(s))
+POLE_PAIR = ('low_pass_corner_hz', 'lead_lag_pole_hz')
+
+
+def canonical(structure, values: dict) -> dict:
+    """
+    ``values`` with the lead-lag's pole the one nearer its zero (in log frequency).
+
+    ``(1 + s/w_z) / ((1 + s/w_p)(1 + s/w_a))`` is symmetric in ``w_p`` and ``w_a``: a low-pass
+    beside a lead-lag is the same C(s) with either pole in either element.  The lag network
+    is the zero with its nearer pole; the other pole is the low-pass, which an amplifier's
+    bandwidth may then be (a 2.6 Hz lag network behind a 149 Hz amplifier came out as a
+    2.6 Hz low-pass and a 5.4 Hz zero with a 149 Hz pole).
+    """
+    if not {'low_pass', 'lead_lag'} <= set(structure):
+        return dict(values)
+    a, p = (values[n] for n in POLE_PAIR)
+    z = values['lead_lag_zero_hz']
+    if abs(math.log(a / z)) >= abs(math.log(p / z)):
+        return dict(values)
+    return {**values, POLE_PAIR[0]: p, POLE_PAIR[1]: a}
 
 
 def _zpk(structure, v) -> tuple[list, list, float]:

@@ -25,9 +25,9 @@ implausible:
    again (at most :data:`MAX_ROUNDS` times).  The round whose named effects times C(s) have
    the lowest BIC is the result (all rounds fit the same records): a later round is a new
    candidate, not an improvement by construction.
-4. **The result** (:class:`~.correction.Correction`): C(s)'s values from a fit run to
-   convergence from three starts (every parameter refitted with the named effects;
-   :func:`_converged`) with 95 % profile-likelihood intervals (:mod:`.interval`), the
+4. **The result** (:func:`~.result.result`): C(s)'s values from a fit run to
+   convergence, moved to the deepest minimum that profile scans of its parameters find,
+   with 95 % profile-likelihood intervals (:mod:`.interval`), the
    held-out error of
    the named effects times C(s) against the floor.  The verdict's effects, and what keeps each
    (:mod:`.significance`), are those of the search beside C(s); its final model is theirs
@@ -41,25 +41,21 @@ import numpy as np
 
 from ...physics.effects import get_effect
 from ..timefit import FitSpec
-from .correction import ELEMENTS, Correction, correction_name, structures
+from .correction import ELEMENTS, correction_name, structures
 from .correction_fit import (ALPHA0, band_hz, fit_structures, history_view, registered,
                              select_correction)
 from .fitting import evaluate, with_models
 from .forward import catalog_search
-from .interval import profile_interval
+from .result import result
 from .offset_test import OFFSET
 from .significance import membership
 
-__all__ = ['outside_stage', 'CONVERGED_NFEV', 'TWINS', 'MAX_ROUNDS']
+__all__ = ['outside_stage', 'TWINS', 'MAX_ROUNDS']
 
 #: elements of C(s) that a catalog effect is: element -> (effect, parameter)
 TWINS = {'low_pass': ('amplifier_bandwidth', 'corner_hz'), 'delay': ('time_delay', 'delay_s')}
 #: C(s) is chosen again on top of the effects named beside it, at most this many times
 MAX_ROUNDS = 3
-
-#: function evaluations of the last fit, whose covariance gives the intervals (the search's
-#: fits stop at 60: enough to rank candidates, not always to converge with three corners)
-CONVERGED_NFEV = 300
 
 
 def _triggered(state) -> bool:
@@ -68,15 +64,27 @@ def _triggered(state) -> bool:
 
 
 def _beside(view, best):
-    """Return a fresh search state whose baseline is the view's baseline times ``best``'s C(s)."""
+    """
+    Return a fresh search state whose baseline is the view's baseline times ``best``'s C(s).
+
+    Started from C(s) with the material it was fitted with (and from the baseline's): its
+    corners and the material lie in one narrow valley, and C(s) with another material can
+    start a fit that ends in another (a lag network at the floor beside a 2.6 Hz low-pass
+    restarted at 1.5x the floor).
+    """
     name = correction_name(best.structure)
     values = best.fit.effect_values[name]
     base = view.baseline
     spec = FitSpec(base.spec.material, base.spec.effect_params
                    + tuple((name, p) for p in best.shape))
     models = [m.with_effect(name, **values) for m in base.fit.models]
-    x0 = np.concatenate([base.x, best.x[-len(best.shape):]])
-    start = evaluate(with_models(view.prepared, models), spec, [x0], view.folds,
+    n_mat = len(base.spec.material)
+    tail = best.x[-len(best.shape):]
+    starts = [np.concatenate([base.x, tail])]
+    if set(base.spec.effect_params) <= set(best.spec.effect_params):   # C(s)'s own material
+        own = [n_mat + best.spec.effect_params.index(ep) for ep in base.spec.effect_params]
+        starts.insert(0, np.concatenate([best.x[:n_mat], best.x[own], tail]))
+    start = evaluate(with_models(view.prepared, models), spec, starts, view.folds,
                      view.settings.fold_nfev, priors=view.priors)
     inner = replace(view, baseline=start, chosen=[], steps=[], first_ranking=[],
                     first_ties=[], late_ties=[], replaced=set(), offset={}, kept_by={})
@@ -121,43 +129,6 @@ def _drop_failing(inner, structure, band) -> None:
             inner.record(name, 'dropped', wo, why)
             inner.chosen.remove((name, shape))
             inner.adopt(wo)
-
-
-def _converged(inner):
-    """
-    Return the current model fitted to convergence, the best of three starts.
-
-    Its values, the baseline's material with them, and the records' nominal material with
-    them: a material parameter can trade with a corner of C(s) (d with a lag's pole) and hold
-    a fit that stopped early in the wrong valley.
-    """
-    cur = inner.current
-    n_mat = len(cur.spec.material)
-    nominal = np.log([getattr(inner.prepared[0].rec.model.material, n)
-                      for n in cur.spec.material])
-    starts = [cur.x, np.concatenate([inner.baseline.x[:n_mat], cur.x[n_mat:]]),
-              np.concatenate([nominal, cur.x[n_mat:]])]
-    fits = [evaluate(inner.prepared, cur.spec, [x], inner.folds, inner.settings.fold_nfev,
-                     priors=inner.priors, max_nfev=CONVERGED_NFEV, scored=False)
-            for x in starts]
-    return inner.score(min(fits, key=lambda c: c.fit.chi2))
-
-
-def _result(inner, structure, tried) -> Correction:
-    """C(s)'s values and 95 % intervals from the model beside which the search ended."""
-    cand = _converged(inner)
-    inner.adopt(cand)
-    name = correction_name(structure)
-    n_mat = len(cand.spec.material)
-    values, ci = {}, {}
-    for k, (e, p) in enumerate(cand.spec.effect_params):
-        if e == name:
-            inner.say(f'correction C(s): profile interval of {p}')
-            values[p] = float(np.exp(cand.x[n_mat + k]))
-            ci[p] = profile_interval(inner, cand, name, p)
-    return Correction(tuple(structure), values, ci, cand.error, inner.noise_floor,
-                      cand.fit.bic - inner.without(name).fit.bic, tried,
-                      tuple(e for e, _ in inner.chosen))
 
 
 def _adopt_inner(state, inner, best, structure) -> None:
@@ -267,5 +238,5 @@ def outside_stage(state) -> None:
         state.say(f"correction C(s) = {' * '.join(best.structure)}: the lowest BIC of "
                   f'{len(rounds)} rounds')
     with registered([best.structure]):
-        state.correction = _result(inner, best.structure, tried)
+        state.correction = result(inner, best.structure, tried)
         _adopt_inner(state, inner, best, best.structure)

@@ -1,0 +1,95 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+The correction C(s) the outside stage (:mod:`.outside`) reports: values and 95 % intervals.
+
+The search beside C(s) fits with a few dozen function evaluations, enough to rank
+candidates.  The result's fit is run to convergence from three starts (:func:`_converged`);
+each parameter of C(s) is then profiled a factor 2 either side (:func:`~.interval.
+profile_scan`), the fit restarts from every local minimum of these scans and moves to a
+deeper one (:func:`_deepest`: a corner and the material can hold several narrow minima far
+apart), and the intervals are the profile-likelihood sets (:func:`~.interval.
+profile_interval`).  A low-pass beside a lead-lag is reported with the lead-lag's pole the one
+nearer its zero (:func:`~.correction.canonical`).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .correction import POLE_PAIR, Correction, canonical, correction_name
+from .fitting import evaluate
+from .interval import profile_interval, profile_scan, scan_minima
+
+__all__ = ['result', 'CONVERGED_NFEV', 'RESTART_GAIN', 'MAX_RESTARTS']
+
+#: function evaluations of the last fit, whose covariance gives the intervals (the search's
+#: fits stop at 60: enough to rank candidates, not always to converge with three corners)
+CONVERGED_NFEV = 300
+#: a restart from a profile scan's minimum is taken when it lowers chi^2 by more than this
+#: (far below the 3.84 of an interval, above what separates two stops of one local fit)
+RESTART_GAIN = 0.1
+#: restarts taken at most (each is scanned again)
+MAX_RESTARTS = 2
+
+
+def _converged(inner):
+    """
+    Return the current model fitted to convergence, the best of three starts.
+
+    Its values, the baseline's material with them, and the records' nominal material with
+    them: a material parameter can trade with a corner of C(s) (d with a lag's pole) and hold
+    a fit that stopped early in the wrong valley.
+    """
+    cur = inner.current
+    n_mat = len(cur.spec.material)
+    nominal = np.log([getattr(inner.prepared[0].rec.model.material, n)
+                      for n in cur.spec.material])
+    starts = [cur.x, np.concatenate([inner.baseline.x[:n_mat], cur.x[n_mat:]]),
+              np.concatenate([nominal, cur.x[n_mat:]])]
+    return min(_fits(inner, cur.spec, starts), key=lambda c: c.fit.chi2)
+
+
+def _fits(inner, spec, starts):
+    return [evaluate(inner.prepared, spec, [x], inner.folds, inner.settings.fold_nfev,
+                     priors=inner.priors, max_nfev=CONVERGED_NFEV, scored=False)
+            for x in starts]
+
+
+def _deepest(inner, cand, name):
+    """
+    ``cand`` moved to the deepest minimum its profile scans find, and those scans.
+
+    Each parameter of C(s) is scanned (:func:`~.interval.profile_scan`); the fit restarts
+    from every local minimum of the scans and moves when one ends lower by more than
+    :data:`RESTART_GAIN`, then is scanned again (at most :data:`MAX_RESTARTS` moves).
+    """
+    params = [p for e, p in cand.spec.effect_params if e == name]
+    for _ in range(MAX_RESTARTS + 1):
+        inner.say('correction C(s): profile scans of ' + ', '.join(params))
+        scans = {p: profile_scan(inner, cand, name, p) for p in params}
+        starts = [x for p in params for x in scan_minima(scans[p], cand.x)]
+        best = min(_fits(inner, cand.spec, starts), key=lambda c: c.fit.chi2, default=None)
+        if best is None or best.fit.chi2 >= cand.fit.chi2 - RESTART_GAIN:
+            break
+        cand = best
+    return cand, scans
+
+
+def result(inner, structure, tried) -> Correction:
+    """C(s)'s values and 95 % intervals from the model beside which the search ended."""
+    name = correction_name(structure)
+    cand, scans = _deepest(inner, _converged(inner), name)
+    cand = inner.score(cand)
+    inner.adopt(cand)
+    n_mat = len(cand.spec.material)
+    values, ci = {}, {}
+    for k, (e, p) in enumerate(cand.spec.effect_params):
+        if e == name:
+            inner.say(f'correction C(s): profile interval of {p}')
+            values[p] = float(np.exp(cand.x[n_mat + k]))
+            ci[p] = profile_interval(inner, cand, name, p, scans[p])
+    if canonical(structure, values) != values:      # the two poles exchanged
+        values, ci = canonical(structure, values), {**ci, POLE_PAIR[0]: ci[POLE_PAIR[1]],
+                                                    POLE_PAIR[1]: ci[POLE_PAIR[0]]}
+    return Correction(tuple(structure), values, ci, cand.error, inner.noise_floor,
+                      cand.fit.bic - inner.without(name).fit.bic, tried,
+                      tuple(e for e, _ in inner.chosen))
