@@ -63,9 +63,11 @@ def _deepest(inner, cand, name):
     :data:`RESTART_GAIN`, then is scanned again (at most :data:`MAX_RESTARTS` moves).
     """
     params = [p for e, p in cand.spec.effect_params if e == name]
-    for _ in range(MAX_RESTARTS + 1):
+    for moves in range(MAX_RESTARTS + 1):
         inner.say('correction C(s): profile scans of ' + ', '.join(params))
         scans = {p: profile_scan(inner, cand, name, p) for p in params}
+        if moves == MAX_RESTARTS:
+            break           # the scans returned are those of the fit returned
         starts = [x for p in params for x in scan_minima(scans[p], cand.x)]
         best = min(_fits(inner, cand.spec, starts), key=lambda c: c.fit.chi2, default=None)
         if best is None or best.fit.chi2 >= cand.fit.chi2 - RESTART_GAIN:
