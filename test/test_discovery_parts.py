@@ -277,3 +277,31 @@ def test_a_low_pass_beside_a_lead_lag_takes_the_pole_farther_from_the_zero():
     assert np.allclose(*responses, rtol=1e-12)       # the same C(s), to rounding
     assert canonical(('lead_lag',), {'lead_lag_zero_hz': 5.0, 'lead_lag_pole_hz': 99.0}) == {
         'lead_lag_zero_hz': 5.0, 'lead_lag_pole_hz': 99.0}
+
+
+def test_a_named_amplifier_takes_back_the_pole_a_lead_lag_took(monkeypatch):
+    """
+    The amplifier takes the pole its plausible range (20 Hz up) allows.
+
+    A 6.9 Hz lag network behind a 37 Hz amplifier is the same model as a 37 Hz lag pole beside
+    a 6.9 Hz amplifier.
+    """
+    from types import SimpleNamespace
+
+    from ipmc_sensor_ros.workbench.discovery import result
+    from ipmc_sensor_ros.workbench.discovery.correction import assign_poles
+    from ipmc_sensor_ros.workbench.timefit import FitSpec
+
+    assert assign_poles(27.0, (37.5, 6.86)) == (6.86, 37.5)
+    assert assign_poles(27.0, (6.86, 37.5)) == (6.86, 37.5)
+    name = 'correction_lead_lag'
+    spec = FitSpec(('diffusivity_m2_per_s',), ((name, 'lead_lag_zero_hz'),
+                                               (name, 'lead_lag_pole_hz'), result.AMPLIFIER))
+    refits = []
+    monkeypatch.setattr(result, '_fits', lambda inner, sp, starts: refits.append(starts) or [
+        SimpleNamespace(spec=sp, x=starts[0])])
+    swapped = SimpleNamespace(spec=spec, x=np.log([2e-11, 27.0, 37.5, 6.86]))
+    got = result._amplifier_pole(None, swapped, name)
+    assert np.allclose(np.exp(got.x), [2e-11, 27.0, 6.86, 37.5]) and len(refits) == 1
+    right = SimpleNamespace(spec=spec, x=np.log([2e-11, 27.0, 6.86, 37.5]))
+    assert result._amplifier_pole(None, right, name) is right and len(refits) == 1

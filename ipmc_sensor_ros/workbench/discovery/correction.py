@@ -26,10 +26,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...physics.effects import Effect, EffectParameter
+from ...physics.effects import Effect, EffectParameter, get_effect
 
-__all__ = ['ELEMENTS', 'PREFIX', 'POLE_PAIR', 'structures', 'canonical', 'correction_name',
-           'correction_class', 'Correction']
+__all__ = ['ELEMENTS', 'PREFIX', 'POLE_PAIR', 'structures', 'assign_poles', 'canonical',
+           'correction_name', 'correction_class', 'Correction']
 
 #: internal effect names of C(s) start with this (never offered as catalog candidates)
 PREFIX = 'correction_'
@@ -90,23 +90,34 @@ def correction_name(structure) -> str:
 POLE_PAIR = ('low_pass_corner_hz', 'lead_lag_pole_hz')
 
 
-def canonical(structure, values: dict) -> dict:
+def assign_poles(zero_hz: float, poles_hz) -> tuple[float, float]:
     """
-    ``values`` with the lead-lag's pole the one nearer its zero (in log frequency).
+    Return ``(lead-lag's pole, low-pass's pole)`` of two poles beside a lead-lag's zero.
 
     ``(1 + s/w_z) / ((1 + s/w_p)(1 + s/w_a))`` is symmetric in ``w_p`` and ``w_a``: a low-pass
-    beside a lead-lag is the same C(s) with either pole in either element.  The lag network
-    is the zero with its nearer pole; the other pole is the low-pass, which an amplifier's
-    bandwidth may then be (a 2.6 Hz lag network behind a 149 Hz amplifier came out as a
-    2.6 Hz low-pass and a 5.4 Hz zero with a 149 Hz pole).
+    (C(s)'s own, or an amplifier's bandwidth named beside C(s)) and a lead-lag are the same
+    factor with either pole in either element.  The low-pass takes the pole an amplifier's
+    bandwidth can be (its plausible range); when both or neither can, the one farther from
+    the zero (a 6.9 Hz lag network behind a 37 Hz amplifier came out as a 37 Hz lag pole
+    beside a 6.9 Hz amplifier; a 2.6 Hz one behind a 149 Hz amplifier as a 2.6 Hz low-pass
+    beside a 5.4 Hz zero with a 149 Hz pole).
     """
+    lo, hi = next(p.typical for p in get_effect('amplifier_bandwidth').parameters
+                  if p.name == 'corner_hz')
+    a, b = poles_hz
+    fits = [lo <= a <= hi, lo <= b <= hi]
+    if fits[0] != fits[1]:
+        return (b, a) if fits[0] else (a, b)
+    far = abs(math.log(a / zero_hz)) >= abs(math.log(b / zero_hz))
+    return (b, a) if far else (a, b)
+
+
+def canonical(structure, values: dict) -> dict:
+    """``values`` with a low-pass and a lead-lag's pole assigned by :func:`assign_poles`."""
     if not {'low_pass', 'lead_lag'} <= set(structure):
         return dict(values)
-    a, p = (values[n] for n in POLE_PAIR)
-    z = values['lead_lag_zero_hz']
-    if abs(math.log(a / z)) >= abs(math.log(p / z)):
-        return dict(values)
-    return {**values, POLE_PAIR[0]: p, POLE_PAIR[1]: a}
+    pole, low = assign_poles(values['lead_lag_zero_hz'], [values[n] for n in POLE_PAIR])
+    return {**values, POLE_PAIR[0]: low, POLE_PAIR[1]: pole}
 
 
 def _zpk(structure, v) -> tuple[list, list, float]:

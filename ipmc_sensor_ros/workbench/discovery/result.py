@@ -8,19 +8,21 @@ each parameter of C(s) is then profiled a factor 2 either side (:func:`~.interva
 profile_scan`), the fit restarts from every local minimum of these scans and moves to a
 deeper one (:func:`_deepest`: a corner and the material can hold several narrow minima far
 apart), and the intervals are the profile-likelihood sets (:func:`~.interval.
-profile_interval`).  A low-pass beside a lead-lag is reported with the lead-lag's pole the one
-nearer its zero (:func:`~.correction.canonical`).
+profile_interval`).  A low-pass beside a lead-lag, C(s)'s own or a named amplifier's
+bandwidth, is given the pole :func:`~.correction.assign_poles` says is its.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .correction import POLE_PAIR, Correction, canonical, correction_name
+from .correction import POLE_PAIR, Correction, assign_poles, canonical, correction_name
 from .fitting import evaluate
 from .interval import profile_interval, profile_scan, scan_minima
 
 __all__ = ['result', 'CONVERGED_NFEV', 'RESTART_GAIN', 'MAX_RESTARTS']
 
+#: the catalog's low-pass, which can exchange its corner with a lead-lag's pole
+AMPLIFIER = ('amplifier_bandwidth', 'corner_hz')
 #: function evaluations of the last fit, whose covariance gives the intervals (the search's
 #: fits stop at 60: enough to rank candidates, not always to converge with three corners)
 CONVERGED_NFEV = 300
@@ -76,10 +78,36 @@ def _deepest(inner, cand, name):
     return cand, scans
 
 
+def _amplifier_pole(inner, cand, name):
+    """
+    ``cand`` with an amplifier named beside C(s)'s lead-lag given its pole, or ``cand`` itself.
+
+    The amplifier's bandwidth and the lead-lag's pole can exchange values (the same model);
+    :func:`~.correction.assign_poles` says which is which, and the fit is run again from the
+    exchanged values when it disagrees.
+    """
+    eps = cand.spec.effect_params
+    if AMPLIFIER not in eps or (name, 'lead_lag_pole_hz') not in eps:
+        return cand
+    n_mat = len(cand.spec.material)
+    i, j = n_mat + eps.index((name, 'lead_lag_pole_hz')), n_mat + eps.index(AMPLIFIER)
+    zero = float(np.exp(cand.x[n_mat + eps.index((name, 'lead_lag_zero_hz'))]))
+    pole, amplifier = float(np.exp(cand.x[i])), float(np.exp(cand.x[j]))
+    if assign_poles(zero, (pole, amplifier)) == (pole, amplifier):
+        return cand
+    x = np.array(cand.x, float)
+    x[i], x[j] = cand.x[j], cand.x[i]
+    return _fits(inner, cand.spec, [x])[0]
+
+
 def result(inner, structure, tried) -> Correction:
     """C(s)'s values and 95 % intervals from the model beside which the search ended."""
     name = correction_name(structure)
     cand, scans = _deepest(inner, _converged(inner), name)
+    exchanged = _amplifier_pole(inner, cand, name)
+    if exchanged is not cand:
+        inner.say('correction C(s): the amplifier takes its pole back; profile scans again')
+        cand, scans = exchanged, {p: profile_scan(inner, exchanged, name, p) for p in scans}
     cand = inner.score(cand)
     inner.adopt(cand)
     n_mat = len(cand.spec.material)
