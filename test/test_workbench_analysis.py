@@ -263,3 +263,34 @@ def test_row_matrix_prediction_matches_exact_prediction(effects):
     exact = predict_current(model, t, w, pad_s=1.0)[p.rows]
     fast = predict(p, model, rows=p.rows)
     assert np.sqrt(np.mean((fast - exact) ** 2)) / np.std(exact) < 1e-5
+
+
+def test_a_fit_stops_at_the_physical_range_of_the_material(monkeypatch):
+    """
+    A material bound is a factor 100 from the start, but never past its physical range.
+
+    With d started at 1e-7 m^2/s the factor allows 1e-5, past the largest d a model can be
+    built with (1e-6); an optimiser that ends on its bound must leave a buildable model, not
+    a ParameterError (it stopped a diagnosis's plugin rerun).
+    """
+    from ipmc_sensor_ros.physics.parameters import MATERIAL_LIMITS
+    from ipmc_sensor_ros.workbench import timefit
+    from ipmc_sensor_ros.workbench.timepredict import Record, prepare
+
+    material = PAPER_PARAMETERS.replace(diffusivity_m2_per_s=1e-7)
+    model = SensorModel.named('h2', PAPER_SAMPLES['short']).with_material(material)
+    t = np.arange(3000) / FS
+    w = CrankSlider(7.3, 2e-3, 15e-3).deflection(t)
+    p = prepare([Record('r', 'short', model, t, w, np.sin(t))])[0]
+    real = timefit.least_squares
+
+    def to_the_upper_bound(fun, x0, bounds, **kw):
+        out = real(fun, x0, bounds=bounds, max_nfev=1)
+        out.x = np.asarray(bounds[1], float)
+        return out
+
+    monkeypatch.setattr(timefit, 'least_squares', to_the_upper_bound)
+    fit = timefit.fit_model([p], timefit.FitSpec(('diffusivity_m2_per_s',), ()))
+    d = fit.material.diffusivity_m2_per_s
+    assert 0.99e-6 < d <= MATERIAL_LIMITS['diffusivity_m2_per_s'][1]
+    assert 'diffusivity_m2_per_s at bound' in fit.flags

@@ -28,7 +28,7 @@ from scipy.optimize import least_squares
 
 from ..physics.effects import effect_parameter
 from ..physics.model import EffectSpec, SensorModel
-from ..physics.parameters import MaterialParameters, ParameterError
+from ..physics.parameters import MATERIAL_LIMITS, MaterialParameters, ParameterError
 from .timepredict import PreparedRecord, predict
 
 __all__ = ['FitSpec', 'ModelFit', 'fit_model']
@@ -131,8 +131,12 @@ def fit_model(
     for n in mat_names:
         v = np.log(getattr(base, n))
         x0.append(v)
-        lo.append(v - np.log(bounds_factor))
-        hi.append(v + np.log(bounds_factor))
+        # within bounds_factor of the start and inside the physical range (a bound past it
+        # let a fit end where the model cannot be built)
+        limit = MATERIAL_LIMITS.get(n, (0.0, None))
+        lo.append(max(v - np.log(bounds_factor), np.log(max(limit[0], 1e-300)) + 1e-9))
+        hi.append(v + np.log(bounds_factor) if limit[1] is None
+                  else min(v + np.log(bounds_factor), np.log(limit[1]) - 1e-9))
     for eff_name, par_name in eff_keys:
         par = effect_parameter(eff_name, par_name)
         current = models[0].effect_values(eff_name)[par_name]
