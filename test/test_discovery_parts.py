@@ -299,9 +299,12 @@ def test_a_named_amplifier_takes_back_the_pole_a_lead_lag_took(monkeypatch):
                                                (name, 'lead_lag_pole_hz'), result.AMPLIFIER))
     refits = []
     monkeypatch.setattr(result, '_fits', lambda inner, sp, starts: refits.append(starts) or [
-        SimpleNamespace(spec=sp, x=starts[0])])
-    swapped = SimpleNamespace(spec=spec, x=np.log([2e-11, 27.0, 37.5, 6.86]))
+        SimpleNamespace(spec=sp, x=starts[0], fit=SimpleNamespace(chi2=100.0))])
+    swapped = SimpleNamespace(spec=spec, x=np.log([2e-11, 27.0, 37.5, 6.86]),
+                              fit=SimpleNamespace(chi2=100.0))
     got = result._amplifier_pole(None, swapped, name)
     assert np.allclose(np.exp(got.x), [2e-11, 27.0, 6.86, 37.5]) and len(refits) == 1
     right = SimpleNamespace(spec=spec, x=np.log([2e-11, 27.0, 6.86, 37.5]))
     assert result._amplifier_pole(None, right, name) is right and len(refits) == 1
+    swapped.fit.chi2 = 50.0     # the refit from the exchange ended higher: not taken
+    assert result._amplifier_pole(None, swapped, name) is swapped

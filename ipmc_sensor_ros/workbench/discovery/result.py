@@ -84,7 +84,8 @@ def _amplifier_pole(inner, cand, name):
 
     The amplifier's bandwidth and the lead-lag's pole can exchange values (the same model);
     :func:`~.correction.assign_poles` says which is which, and the fit is run again from the
-    exchanged values when it disagrees.
+    exchanged values when it disagrees (and kept unless it ends higher by
+    :data:`RESTART_GAIN`).
     """
     eps = cand.spec.effect_params
     if AMPLIFIER not in eps or (name, 'lead_lag_pole_hz') not in eps:
@@ -97,7 +98,8 @@ def _amplifier_pole(inner, cand, name):
         return cand
     x = np.array(cand.x, float)
     x[i], x[j] = cand.x[j], cand.x[i]
-    return _fits(inner, cand.spec, [x])[0]
+    (refit,) = _fits(inner, cand.spec, [x])
+    return refit if refit.fit.chi2 <= cand.fit.chi2 + RESTART_GAIN else cand
 
 
 def result(inner, structure, tried) -> Correction:
