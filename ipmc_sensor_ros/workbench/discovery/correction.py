@@ -26,10 +26,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...physics.effects import Effect, EffectParameter, get_effect
+from ...physics.effects import Effect, EffectParameter, effect_parameter
 
-__all__ = ['ELEMENTS', 'PREFIX', 'POLE_PAIR', 'structures', 'assign_poles', 'canonical',
-           'correction_name', 'correction_class', 'Correction']
+__all__ = ['ELEMENTS', 'PREFIX', 'POLE_PAIR', 'AMPLIFIER', 'structures', 'assign_poles',
+           'canonical', 'correction_name', 'correction_class', 'Correction']
 
 #: internal effect names of C(s) start with this (never offered as catalog candidates)
 PREFIX = 'correction_'
@@ -88,6 +88,9 @@ def correction_name(structure) -> str:
 
 #: the two parameters that a low-pass beside a lead-lag can exchange (the same C(s))
 POLE_PAIR = ('low_pass_corner_hz', 'lead_lag_pole_hz')
+#: the catalog's low-pass (effect, parameter), which can exchange its corner with a lead-lag's
+#: pole as C(s)'s own low-pass can
+AMPLIFIER = ('amplifier_bandwidth', 'corner_hz')
 
 
 def assign_poles(zero_hz: float, poles_hz) -> tuple[float, float]:
@@ -102,8 +105,7 @@ def assign_poles(zero_hz: float, poles_hz) -> tuple[float, float]:
     beside a 6.9 Hz amplifier; a 2.6 Hz one behind a 149 Hz amplifier as a 2.6 Hz low-pass
     beside a 5.4 Hz zero with a 149 Hz pole).
     """
-    lo, hi = next(p.typical for p in get_effect('amplifier_bandwidth').parameters
-                  if p.name == 'corner_hz')
+    lo, hi = effect_parameter(*AMPLIFIER).typical
     a, b = poles_hz
     fits = [lo <= a <= hi, lo <= b <= hi]
     if fits[0] != fits[1]:

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...physics.effects import get_effect
+from ...physics.effects import effect_parameter
 from ..timefit import FitSpec, fit_model
 from .fitting import fit_vector, with_models
 
@@ -59,7 +59,7 @@ def _setup(cand, effect, param):
     k = len(cand.spec.material) + cand.spec.effect_params.index((effect, param))
     spec = FitSpec(cand.spec.material,
                    tuple(ep for ep in cand.spec.effect_params if ep != (effect, param)))
-    par = next(q for q in get_effect(effect).parameters if q.name == param)
+    par = effect_parameter(effect, param)
     return k, spec, (par.lower, par.upper)
 
 

@@ -39,9 +39,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from ...physics.effects import get_effect
+from ...physics.effects import effect_parameter
 from ..timefit import FitSpec
-from .correction import ELEMENTS, correction_name, structures
+from .correction import AMPLIFIER, ELEMENTS, correction_name, structures
 from .correction_fit import (ALPHA0, band_hz, fit_structures, history_view, registered,
                              select_correction)
 from .fitting import evaluate, with_models
@@ -53,7 +53,7 @@ from .significance import membership
 __all__ = ['outside_stage', 'TWINS', 'MAX_ROUNDS']
 
 #: elements of C(s) that a catalog effect is: element -> (effect, parameter)
-TWINS = {'low_pass': ('amplifier_bandwidth', 'corner_hz'), 'delay': ('time_delay', 'delay_s')}
+TWINS = {'low_pass': AMPLIFIER, 'delay': ('time_delay', 'delay_s')}
 #: C(s) is chosen again on top of the effects named beside it, at most this many times
 MAX_ROUNDS = 3
 
@@ -184,8 +184,7 @@ def _strip_twins(view, best, band):
 
 
 def _plausible(twin, value) -> bool:
-    effect, param = twin
-    lo, hi = next(p.typical for p in get_effect(effect).parameters if p.name == param)
+    lo, hi = effect_parameter(*twin).typical
     return lo <= value <= hi
 
 

@@ -15,14 +15,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .correction import POLE_PAIR, Correction, assign_poles, canonical, correction_name
+from .correction import (AMPLIFIER, POLE_PAIR, Correction, assign_poles, canonical,
+                         correction_name)
 from .fitting import evaluate
 from .interval import profile_interval, profile_scan, scan_minima
 
 __all__ = ['result', 'CONVERGED_NFEV', 'RESTART_GAIN', 'MAX_RESTARTS']
 
-#: the catalog's low-pass, which can exchange its corner with a lead-lag's pole
-AMPLIFIER = ('amplifier_bandwidth', 'corner_hz')
 #: function evaluations of the last fit, whose covariance gives the intervals (the search's
 #: fits stop at 60: enough to rank candidates, not always to converge with three corners)
 CONVERGED_NFEV = 300
@@ -119,9 +118,10 @@ def result(inner, structure, tried) -> Correction:
             inner.say(f'correction C(s): profile interval of {p}')
             values[p] = float(np.exp(cand.x[n_mat + k]))
             ci[p] = profile_interval(inner, cand, name, p, scans[p])
-    if canonical(structure, values) != values:      # the two poles exchanged
-        values, ci = canonical(structure, values), {**ci, POLE_PAIR[0]: ci[POLE_PAIR[1]],
-                                                    POLE_PAIR[1]: ci[POLE_PAIR[0]]}
+    assigned = canonical(structure, values)
+    if assigned != values:      # the two poles exchanged
+        values, ci = assigned, {**ci, POLE_PAIR[0]: ci[POLE_PAIR[1]],
+                                POLE_PAIR[1]: ci[POLE_PAIR[0]]}
     return Correction(tuple(structure), values, ci, cand.error, inner.noise_floor,
                       cand.fit.bic - inner.without(name).fit.bic, tried,
                       tuple(e for e, _ in inner.chosen))
