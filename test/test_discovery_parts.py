@@ -137,6 +137,32 @@ def test_plugin_file_is_the_correction_it_was_written_from(structure, tmp_path, 
     assert np.allclose(rational * np.exp(-s * plugin.delay_s(values)), theirs, rtol=1e-12)
 
 
+def test_plugin_carries_the_material_and_a_fit_adding_it_starts_there(tmp_path, unregister):
+    """
+    A correction is written with the material it was fitted with; adding it starts there too.
+
+    The lag record of the study that needs it: a 2.6 Hz lag beside an amplifier, where the
+    model without the lag takes a diffusivity 5x lower, and the plugin fitted from that
+    material alone ended in another valley (6.06x the floor instead of 1.00x).
+    """
+    from ipmc_sensor_ros.workbench.discovery.fitting import Job
+    from ipmc_sensor_ros.workbench.timefit import FitSpec
+
+    material = {'diffusivity_m2_per_s': 3.44e-11, 'permittivity_f_per_m': 2.27e-3}
+    c = Correction(('lead_lag',), {'lead_lag_zero_hz': 5.38, 'lead_lag_pole_hz': 2.62},
+                   {'lead_lag_zero_hz': (5.3, 5.4), 'lead_lag_pole_hz': (2.6, 2.64)},
+                   0.01, 0.01, -100.0, material=material)
+    name = write_plugin(tmp_path / 'rc_lag.py', c)
+    unregister.append(name)
+    load_plugin(tmp_path / 'rc_lag.py')
+    assert EFFECTS[name].fitted_material == material
+    spec = FitSpec(('charge_stress_coupling_j_per_c', 'diffusivity_m2_per_s'), ())
+    x = np.log([100.0, 7e-12])
+    starts = Job([], spec, x, [], 10, {})._materials(name)
+    assert [list(v) for v in starts] == [list(x), [np.log(100.0), np.log(3.44e-11)]]
+    assert [list(v) for v in Job([], spec, x, [], 10, {})._materials('time_delay')] == [list(x)]
+
+
 def test_correction_words_carry_the_interval():
     c = Correction(('high_pass',), {'high_pass_corner_hz': 0.50011},
                    {'high_pass_corner_hz': (0.49976, 0.50046)}, 0.0100, 0.0100, -9.5e6)

@@ -112,6 +112,11 @@ class Effect:
     #: offset, drift, channel skew: kept in a model file under the calibration's provenance and
     #: not applied to other records unless asked for; the estimator learns its own offset).
     scope: ClassVar[str] = 'sensor'
+    #: The material (name -> value, SI) the defaults were fitted with, when they were fitted
+    #: jointly with it (a correction C(s) saved by ``diagnose --save-plugin``): a fit that
+    #: adds the effect starts there as well as from the current material, since a correction
+    #: and the material it was found with lie in one valley.  Empty for the catalog.
+    fitted_material: ClassVar[dict] = {}
 
     def defaults(self) -> dict[str, float]:
         return {p.name: p.default for p in self.parameters}

@@ -188,6 +188,7 @@ class Correction:
     delta_bic: float             # BIC of the catalog model times C(s) minus the catalog model's
     tried: list = field(default_factory=list)    # (structure, BIC) of every structure fitted
     model_effects: tuple = ()     # the catalog effects it was fitted with
+    material: dict = field(default_factory=dict)    # the free material it was fitted with
 
     def words(self) -> str:
         """Return the elements in physical words with their 95 % intervals."""
@@ -232,4 +233,5 @@ class Correction:
                 'ci95': {k: list(v) for k, v in self.ci95.items()}, 'error': self.error,
                 'error_over_floor': self.error / self.noise_floor, 'delta_bic': self.delta_bic,
                 'description': self.sentence(), 'model_effects': list(self.model_effects),
+                'material': self.material,
                 'tried': [{'structure': list(s), 'delta_bic': b} for s, b in self.tried]}

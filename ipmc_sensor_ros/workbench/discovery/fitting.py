@@ -17,7 +17,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ...physics.effects import effect_parameter
+from ...physics.effects import effect_parameter, get_effect
 from ..timefit import FitSpec, ModelFit, fit_model
 from ..timepredict import PreparedRecord, predict
 from .priors import PRIOR_FACTOR
@@ -121,7 +121,8 @@ class Job:
 
     Called with ``(name, shape)``: add the effect to every record's model and fit all free
     parameters from a grid of starts (:func:`~.ranking.start_grid`, or the third item,
-    ``(name, shape, starts)``); called with a :class:`Candidate`: its held-out error.
+    ``(name, shape, starts)``), each with the current material and, for an effect fitted
+    jointly with a material (``Effect.fitted_material``), with that one; called with a :class:`Candidate`: its held-out error.
     Picklable across a fork.
     """
 
@@ -137,10 +138,22 @@ class Job:
         prepared = with_models(self.prepared, models)
         spec = FitSpec(self.spec.material,
                        self.spec.effect_params + tuple((name, n) for n in shape))
-        starts = [np.concatenate([self.x, np.asarray(c, float)])
+        starts = [np.concatenate([x, np.asarray(c, float)]) for x in self._materials(name)
                   for c in (grid[0] if grid else start_grid(name, shape, self.priors))]
         return evaluate(prepared, spec, starts, self.folds, self.fold_nfev, name, shape,
                         self.priors, scored=False)
+
+
+    def _materials(self, name) -> list[np.ndarray]:
+        """The current vector, and (``Effect.fitted_material``) the one with its material."""
+        known = get_effect(name).fitted_material
+        if not any(n in known for n in self.spec.material):
+            return [self.x]
+        other = self.x.copy()
+        for k, n in enumerate(self.spec.material):
+            if n in known:
+                other[k] = np.log(known[n])
+        return [self.x, other]
 
 
 _JOB = None

@@ -7,7 +7,8 @@ The file is plain Python that a user can read and edit: one
 (``ac_coupling.py`` -> ``ac_coupling``) when its name is a Python identifier, else
 ``measured_<elements>`` (e.g. ``measured_high_pass``), whose parameters default to the
 fitted values, whose plausible range spans a factor 3 around them (the range a later fit
-starts from and flags outside of), and whose ``rational`` gives the exact zeros, poles and
+starts from and flags outside of), whose ``fitted_material`` is the material it was fitted
+with (a later fit that adds it starts there too), and whose ``rational`` gives the exact zeros, poles and
 gain (the delay apart), as the catalog effects do.  ``--plugin FILE`` loads it in every verb
 (:func:`~ipmc_sensor_ros.physics.effects.load_plugin`); ``diagnose DATA --plugin FILE`` then
 offers it as a candidate like any catalog effect.
@@ -70,6 +71,7 @@ def plugin_source(c: Correction, name: str, data_files=(),
     sentence = c.sentence()
     body = '\n'.join(f'        {line}' for e in c.structure for line in _ELEMENT_CODE[e])
     params = '\n'.join(_parameter_code(c, p.name) for e in c.structure for p in ELEMENTS[e])
+    material = '\n'.join(f'        {n!r}: {v!r},' for n, v in c.material.items())
     return f'''# SPDX-License-Identifier: Apache-2.0
 """
 Correction C(s) found by {tool} on {stamp}.
@@ -98,6 +100,9 @@ class {cls}(Effect):
     parameters = (
 {params}
     )
+    fitted_material = {{
+{material}
+    }}
 
     def rational(self, model, values):
         """Zeros, poles (rad/s) and gain of C(s) without its delay."""

@@ -124,4 +124,5 @@ def result(inner, structure, tried) -> Correction:
                                 POLE_PAIR[1]: ci[POLE_PAIR[0]]}
     return Correction(tuple(structure), values, ci, cand.error, inner.noise_floor,
                       cand.fit.bic - inner.without(name).fit.bic, tried,
-                      tuple(e for e, _ in inner.chosen))
+                      tuple(e for e, _ in inner.chosen),
+                      {n: float(getattr(cand.fit.material, n)) for n in cand.spec.material})
