@@ -294,3 +294,34 @@ def test_a_fit_stops_at_the_physical_range_of_the_material(monkeypatch):
     d = fit.material.diffusivity_m2_per_s
     assert 0.99e-6 < d <= MATERIAL_LIMITS['diffusivity_m2_per_s'][1]
     assert 'diffusivity_m2_per_s at bound' in fit.flags
+
+
+def test_fit_model_material_bounds_span_every_start(monkeypatch):
+    """
+    A start far from the model's material is not clipped back to within 100x of it.
+
+    The bounds are ``bounds_factor`` either side of the span of the model's value and the
+    starts' (a start from the records' frequency responses on a degenerate fit's material,
+    a factor 4,700 in d away, was clipped back into the degenerate valley).
+    """
+    from ipmc_sensor_ros.workbench import timefit
+    from ipmc_sensor_ros.workbench.timepredict import Record, prepare
+
+    model = SensorModel.named('h2', PAPER_SAMPLES['short'])
+    t = np.arange(3000) / FS
+    w = CrankSlider(7.3, 2e-3, 15e-3).deflection(t)
+    p = prepare([Record('r', 'short', model, t, w, np.sin(t))])[0]
+    real = timefit.least_squares
+
+    def to_the_lower_bound(fun, x0, bounds, **kw):
+        out = real(fun, x0, bounds=bounds, max_nfev=1)
+        out.x = np.asarray(bounds[0], float)
+        return out
+
+    monkeypatch.setattr(timefit, 'least_squares', to_the_lower_bound)
+    spec = timefit.FitSpec(('diffusivity_m2_per_s',), ())
+    fit = timefit.fit_model([p], spec, starts=[np.log([1e-15])])
+    assert fit.material.diffusivity_m2_per_s == pytest.approx(1e-17, rel=1e-6)
+    alone = timefit.fit_model([p], spec)
+    assert alone.material.diffusivity_m2_per_s == pytest.approx(
+        PAPER_PARAMETERS.diffusivity_m2_per_s / 100, rel=1e-6)

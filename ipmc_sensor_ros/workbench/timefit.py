@@ -121,22 +121,25 @@ def fit_model(
     Fit ``free`` to the prepared records (all rows, or ``train[r]`` row masks per record).
 
     Each record's model must already contain every effect named in ``free``.
-    ``starts``: optional list of starting vectors (fit space); the best result is kept.
+    ``starts``: optional list of starting vectors (fit space); the one of lowest cost is
+    refined.  A material parameter is bounded to ``bounds_factor`` either side of the span of
+    the model's value and the starts' (and to its physical range).
     """
     models = [p.rec.model for p in prepared]
     base = models[0].material
     mat_names = tuple(free.material)
     eff_keys = tuple(free.effect_params)
     x0, lo, hi = [], [], []
-    for n in mat_names:
+    for k, n in enumerate(mat_names):
         v = np.log(getattr(base, n))
         x0.append(v)
-        # within bounds_factor of the start and inside the physical range (a bound past it
-        # let a fit end where the model cannot be built)
+        # within bounds_factor of the model's value and of every start's, and inside the
+        # physical range (a bound past it let a fit end where the model cannot be built)
+        span = [v] + [float(st[k]) for st in (starts or [])]
         limit = MATERIAL_LIMITS.get(n, (0.0, None))
-        lo.append(max(v - np.log(bounds_factor), np.log(max(limit[0], 1e-300)) + 1e-9))
-        hi.append(v + np.log(bounds_factor) if limit[1] is None
-                  else min(v + np.log(bounds_factor), np.log(limit[1]) - 1e-9))
+        lo.append(max(min(span) - np.log(bounds_factor), np.log(max(limit[0], 1e-300)) + 1e-9))
+        top = max(span) + np.log(bounds_factor)
+        hi.append(top if limit[1] is None else min(top, np.log(limit[1]) - 1e-9))
     for eff_name, par_name in eff_keys:
         par = effect_parameter(eff_name, par_name)
         current = models[0].effect_values(eff_name)[par_name]

@@ -5,6 +5,8 @@ Fitting a correction C(s) (:mod:`.correction`) as a factor of a model, its order
 * :func:`history_view`: the state on records with a longer periodic history (:mod:`.history`),
   :data:`HISTORY_TIME_CONSTANTS` time constants of the slowest corner a fit starts from, so
   that a slow C(s) enters each record in steady state.
+* :func:`fit_structures`: each structure fitted from a grid of corners and from a start
+  fitted to the records' frequency responses (:mod:`.freqstart`).
 * :func:`select_correction`: every structure up to ``max_correction_order`` parameters fitted
   as a factor of a model (all records and samples, every free parameter refitted; corners
   started across the records' band); an order is taken when its best structure lowers the
@@ -23,6 +25,7 @@ from ...physics.effects import EFFECTS, register_effect
 from ..timepredict import prepare
 from .correction import ELEMENTS, PREFIX, correction_class, correction_name, structures
 from .fitting import evaluate, make_folds, with_models
+from .freqstart import frequency_start, response_points
 from .history import with_history
 
 __all__ = ['is_correction', 'registered', 'band_hz', 'history_view', 'fit_structures',
@@ -60,16 +63,14 @@ def registered(structs):
 
 def band_hz(state) -> tuple[float, float]:
     """Lowest and highest drive frequency of the records (or 1/T and a tenth of the rate)."""
-    from ..freqresp import fundamental_response
-
+    found = dict(response_points(state))
     lo, hi = [], []
-    for p in state.prepared:
-        t = p.t[p.keep]
-        try:
-            f0 = fundamental_response(t, p.w[p.keep], p.y[p.keep]).frequency_hz
-            lo.append(f0)
-            hi.append(f0)
-        except ValueError:
+    for k, p in enumerate(state.prepared):
+        if k in found:
+            lo.append(found[k].frequency_hz)
+            hi.append(found[k].frequency_hz)
+        else:
+            t = p.t[p.keep]
             lo.append(1.0 / (t[-1] - t[0]))
             hi.append(0.1 * (t.size - 1) / (t[-1] - t[0]))
     return min(lo), max(hi)
@@ -125,13 +126,15 @@ def fit_structures(state, base, structs, band, known=None):
     """
     Fit each structure as a factor of ``base``; the candidates, each with ``structure``.
 
-    ``known``: parameter values (a smaller correction's) to start from as well.
+    ``known``: parameter values (a smaller correction's) to start from as well; a start from
+    the records' frequency responses (:mod:`.freqstart`) joins the grid.
     """
-    items = []
+    items, points = [], response_points(state)
     for st in structs:
         names = [p.name for e in st for p in ELEMENTS[e]]
         grid = starts(st, band) + ([_known_start(names, known, band)] if known else [])
-        items.append((correction_name(st), tuple(names), grid))
+        full = frequency_start(state, base, st, grid, points)
+        items.append((correction_name(st), tuple(names), grid, [] if full is None else [full]))
     with registered(structs):
         out = state.run(state.job(base), items)
     for c, st in zip(out, structs):

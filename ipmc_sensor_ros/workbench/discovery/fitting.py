@@ -122,8 +122,9 @@ class Job:
     Called with ``(name, shape)``: add the effect to every record's model and fit all free
     parameters from a grid of starts (:func:`~.ranking.start_grid`, or the third item,
     ``(name, shape, starts)``), each with the current material and, for an effect fitted
-    jointly with a material (``Effect.fitted_material``), with that one; called with a :class:`Candidate`: its held-out error.
-    Picklable across a fork.
+    jointly with a material (``Effect.fitted_material``), with that one; a fourth item adds
+    whole vectors (material, effects, the new effect: :mod:`.freqstart`).  Called with a
+    :class:`Candidate`: its held-out error.  Picklable across a fork.
     """
 
     def __init__(self, prepared, spec, x, folds, fold_nfev, priors):
@@ -133,16 +134,17 @@ class Job:
     def __call__(self, item) -> Candidate:
         if isinstance(item, Candidate):
             return held_out(self.prepared, item, self.folds, self.fold_nfev)
-        name, shape, *grid = item
+        name, shape, *more = item
         models = [p.rec.model.with_effect(name) for p in self.prepared]
         prepared = with_models(self.prepared, models)
         spec = FitSpec(self.spec.material,
                        self.spec.effect_params + tuple((name, n) for n in shape))
+        grid = more[0] if more else start_grid(name, shape, self.priors)
+        whole = more[1] if len(more) > 1 else ()
         starts = [np.concatenate([x, np.asarray(c, float)]) for x in self._materials(name)
-                  for c in (grid[0] if grid else start_grid(name, shape, self.priors))]
+                  for c in grid] + [np.asarray(v, float) for v in whole]
         return evaluate(prepared, spec, starts, self.folds, self.fold_nfev, name, shape,
                         self.priors, scored=False)
-
 
     def _materials(self, name) -> list[np.ndarray]:
         """The current vector, and (``Effect.fitted_material``) the one with its material."""

@@ -8,10 +8,10 @@ The file is plain Python that a user can read and edit: one
 ``measured_<elements>`` (e.g. ``measured_high_pass``), whose parameters default to the
 fitted values, whose plausible range spans a factor 3 around them (the range a later fit
 starts from and flags outside of), whose ``fitted_material`` is the material it was fitted
-with (a later fit that adds it starts there too), and whose ``rational`` gives the exact zeros, poles and
-gain (the delay apart), as the catalog effects do.  ``--plugin FILE`` loads it in every verb
-(:func:`~ipmc_sensor_ros.physics.effects.load_plugin`); ``diagnose DATA --plugin FILE`` then
-offers it as a candidate like any catalog effect.
+with (a later fit that adds it starts there too), and whose ``rational`` gives the exact
+zeros, poles and gain (the delay apart), as the catalog effects do.  ``--plugin FILE`` loads
+it in every verb (:func:`~ipmc_sensor_ros.physics.effects.load_plugin`); ``diagnose DATA
+--plugin FILE`` then offers it as a candidate like any catalog effect.
 """
 from __future__ import annotations
 

@@ -83,6 +83,7 @@ def _start(records, raw, drives, settings, priors, say, given=None) -> SearchSta
                         noise_floor=noise_floor(prepared), baseline=baseline,
                         lines=summarize_lines(lines), line_test=line_test(s, lines))
     state.line_rows, state.drives = lines, drives
+    state.given_material = records[0].model.material
     state.adopt(baseline)
     return state
 

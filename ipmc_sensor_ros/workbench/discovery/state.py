@@ -50,6 +50,7 @@ class SearchState:
     drives: list = field(default_factory=list)        # the Drive of every record
     kept_by: dict = field(default_factory=dict)
     correction: object | None = None
+    given_material: object | None = None              # the records' own (the model file's)
 
     # -- moves ------------------------------------------------------------------------------
     def adopt(self, c: Candidate) -> None:
