@@ -33,8 +33,9 @@ from .freqresp import FrequencyPoint
 from .identifiability import (confidence_intervals, covariance, named_combinations,
                               not_identifiable, svd_combinations, SYMBOLS)
 
-__all__ = ['FitGroup', 'FitResult', 'fit_parameters', 'FITTABLE', 'SYMBOLS', 'model_for_group',
-           'resolve_effect_parameter', 'effect_parameter_names', 'ADEQUACY_P']
+__all__ = ['FitGroup', 'FitResult', 'fit_parameters', 'misfit', 'FITTABLE', 'SYMBOLS',
+           'model_for_group', 'resolve_effect_parameter', 'effect_parameter_names',
+           'ADEQUACY_P']
 
 #: chi^2 p-value below which the model is declared inadequate for the data
 ADEQUACY_P = 1e-3
@@ -234,8 +235,17 @@ def resolve_effect_parameter(name: str, effects) -> tuple[str, str]:
     )
 
 
-def _wrap(angle):
-    return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi
+def misfit(h_model, h_measured, sd_log_mag, sd_phase_rad) -> np.ndarray:
+    """
+    Return the weighted misfit of a modelled response: ln|H|, then the phase (wrapped).
+
+    ``ln(h_model / h_measured)``: its real part over ``sd_log_mag``, its imaginary part (the
+    phase difference in (-pi, pi]) over ``sd_phase_rad``; 1e6 where undefined.
+    """
+    with np.errstate(divide='ignore', invalid='ignore'):
+        r = np.log(np.asarray(h_model, complex) / np.asarray(h_measured, complex))
+    out = np.concatenate([r.real / sd_log_mag, r.imag / sd_phase_rad])
+    return np.where(np.isfinite(out), out, 1e6)
 
 
 class _ParameterMap:
@@ -312,15 +322,15 @@ def _start_and_bounds(keys: list, material: MaterialParameters, effects: tuple,
 
 
 def _weighted_data(groups: Sequence[FitGroup], sd_floor: float):
-    """Per group (group, f, ln|H|, phase, sd_ln, sd_phase), and all sds in residual order."""
+    """Per group (group, f, H, sd_ln, sd_phase), and all sds in residual order."""
     data = []
     for g in groups:
         f = np.array([p.frequency_hz for p in g.points])
         h = np.array([p.response for p in g.points])
         sdm = np.maximum([p.sd_log_mag for p in g.points], sd_floor)
         sdp = np.maximum([p.sd_phase_rad for p in g.points], sd_floor)
-        data.append((g, f, np.log(np.abs(h)), np.angle(h), sdm, sdp))
-    sd_rows = np.concatenate([np.concatenate([d[4], d[5]]) for d in data])
+        data.append((g, f, h, sdm, sdp))
+    sd_rows = np.concatenate([np.concatenate([d[3], d[4]]) for d in data])
     return data, sd_rows
 
 
@@ -332,13 +342,9 @@ def _residual_function(pmap: _ParameterMap, data: list):
             effs = pmap.effects_at(theta)
         except ParameterError:
             return np.full(2 * sum(d[1].size for d in data), 1e6)
-        out = []
-        for g, f, lm, ph, sdm, sdp in data:
-            hm = model_for_group(mat, g, pmap.free, effs).frequency_response(f)
-            out.append((np.log(np.abs(hm)) - lm) / sdm)
-            out.append(_wrap(np.angle(hm) - ph) / sdp)
-        r = np.concatenate(out)
-        return np.where(np.isfinite(r), r, 1e6)
+        return np.concatenate([
+            misfit(model_for_group(mat, g, pmap.free, effs).frequency_response(f), h, sdm, sdp)
+            for g, f, h, sdm, sdp in data])
     return residual
 
 

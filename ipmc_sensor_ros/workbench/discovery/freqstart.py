@@ -10,17 +10,15 @@ at 3 Hz turns the current's sign above it, the best H2 alone predicts almost not
 
 The measured response ``H_m(f_k)`` at each record's drive fundamental
 (:func:`~..freqresp.fundamental_response`, eq. 45's input-output ratio) against the model's
-gives C(s) in a small least-squares problem with no simulation::
-
-    r_k = H(j w_k; material) C(j w_k; theta) / H_m(f_k) - 1,   scaled by H_m's uncertainty
-
-on the records' own material (the model file's) and on the current one, whichever fits
-better (the material is held: from one point per record its diffusion corner trades with a
-low-pass, and a fit of both ran to the diffusivity's physical limit), the corners started from
-the time-domain fit's grid, the :data:`REFINED` cheapest refined.  The
-result joins the grid as one more start of the time-domain fit, which screens all of them by
-their cost (:func:`~..timefit.fit_model`): where the frequency-domain start is no better,
-nothing changes.
+gives C(s) in a small least-squares problem with no simulation: the misfit of
+``ln(H(j w_k; material) C(j w_k; theta) / H_m(f_k))`` in magnitude and phase, each over its
+measured uncertainty (:func:`~..freqfit.misfit`, as the frequency-domain ``fit`` weighs it).
+The material is held, the records' own (the model file's) or the current one, whichever fits
+better: from one point per record its diffusion corner trades with a low-pass, and a fit of
+both ran to the diffusivity's physical limit.  The corners start from the time-domain fit's
+grid, the :data:`REFINED` cheapest refined.  The result joins the grid as one more start of
+the time-domain fit, which screens all of them by their cost (:func:`~..timefit.fit_model`):
+where the frequency-domain start is no better, nothing changes.
 """
 from __future__ import annotations
 
@@ -29,6 +27,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..freqfit import misfit
 from ..freqresp import fundamental_response
 from .correction import ELEMENTS, correction_class
 
@@ -72,12 +71,8 @@ def _fit(groups, factor, names, material, grid):
 
     def residual(v):
         values = dict(zip(names, np.exp(v)))
-        parts = []
-        for h, s, h_m, sd_mag, sd_phase in models:
-            r = h * factor(s, None, values) / h_m - 1
-            parts += [r.real / sd_mag, r.imag / sd_phase]
-        out = np.concatenate(parts)
-        return np.where(np.isfinite(out), out, 1e6)
+        return np.concatenate([misfit(h * factor(s, None, values), h_m, sd_mag, sd_phase)
+                               for h, s, h_m, sd_mag, sd_phase in models])
 
     starts = [np.clip(np.asarray(c, float), lo, hi) for c in grid]
     costs = [float(np.sum(residual(v) ** 2)) for v in starts]
