@@ -265,6 +265,27 @@ def test_row_matrix_prediction_matches_exact_prediction(effects):
     assert np.sqrt(np.mean((fast - exact) ** 2)) / np.std(exact) < 1e-5
 
 
+def _fit_to_a_bound(monkeypatch, material, side):
+    """One prepared crank record, and ``fit_model`` whose optimiser ends on bound ``side``."""
+    from ipmc_sensor_ros.workbench import timefit
+    from ipmc_sensor_ros.workbench.timepredict import Record, prepare
+
+    model = SensorModel.named('h2', PAPER_SAMPLES['short']).with_material(material)
+    t = np.arange(3000) / FS
+    w = CrankSlider(7.3, 2e-3, 15e-3).deflection(t)
+    p = prepare([Record('r', 'short', model, t, w, np.sin(t))])[0]
+    real = timefit.least_squares
+
+    def to_the_bound(fun, x0, bounds, **kw):
+        out = real(fun, x0, bounds=bounds, max_nfev=1)
+        out.x = np.asarray(bounds[side], float)
+        return out
+
+    monkeypatch.setattr(timefit, 'least_squares', to_the_bound)
+    spec = timefit.FitSpec(('diffusivity_m2_per_s',), ())
+    return lambda **kw: timefit.fit_model([p], spec, **kw)
+
+
 def test_a_fit_stops_at_the_physical_range_of_the_material(monkeypatch):
     """
     A material bound is a factor 100 from the start, but never past its physical range.
@@ -274,23 +295,8 @@ def test_a_fit_stops_at_the_physical_range_of_the_material(monkeypatch):
     a ParameterError (it stopped a diagnosis's plugin rerun).
     """
     from ipmc_sensor_ros.physics.parameters import MATERIAL_LIMITS
-    from ipmc_sensor_ros.workbench import timefit
-    from ipmc_sensor_ros.workbench.timepredict import Record, prepare
 
-    material = PAPER_PARAMETERS.replace(diffusivity_m2_per_s=1e-7)
-    model = SensorModel.named('h2', PAPER_SAMPLES['short']).with_material(material)
-    t = np.arange(3000) / FS
-    w = CrankSlider(7.3, 2e-3, 15e-3).deflection(t)
-    p = prepare([Record('r', 'short', model, t, w, np.sin(t))])[0]
-    real = timefit.least_squares
-
-    def to_the_upper_bound(fun, x0, bounds, **kw):
-        out = real(fun, x0, bounds=bounds, max_nfev=1)
-        out.x = np.asarray(bounds[1], float)
-        return out
-
-    monkeypatch.setattr(timefit, 'least_squares', to_the_upper_bound)
-    fit = timefit.fit_model([p], timefit.FitSpec(('diffusivity_m2_per_s',), ()))
+    fit = _fit_to_a_bound(monkeypatch, PAPER_PARAMETERS.replace(diffusivity_m2_per_s=1e-7), 1)()
     d = fit.material.diffusivity_m2_per_s
     assert 0.99e-6 < d <= MATERIAL_LIMITS['diffusivity_m2_per_s'][1]
     assert 'diffusivity_m2_per_s at bound' in fit.flags
@@ -304,24 +310,8 @@ def test_fit_model_material_bounds_span_every_start(monkeypatch):
     starts' (a start from the records' frequency responses on a degenerate fit's material,
     a factor 4,700 in d away, was clipped back into the degenerate valley).
     """
-    from ipmc_sensor_ros.workbench import timefit
-    from ipmc_sensor_ros.workbench.timepredict import Record, prepare
-
-    model = SensorModel.named('h2', PAPER_SAMPLES['short'])
-    t = np.arange(3000) / FS
-    w = CrankSlider(7.3, 2e-3, 15e-3).deflection(t)
-    p = prepare([Record('r', 'short', model, t, w, np.sin(t))])[0]
-    real = timefit.least_squares
-
-    def to_the_lower_bound(fun, x0, bounds, **kw):
-        out = real(fun, x0, bounds=bounds, max_nfev=1)
-        out.x = np.asarray(bounds[0], float)
-        return out
-
-    monkeypatch.setattr(timefit, 'least_squares', to_the_lower_bound)
-    spec = timefit.FitSpec(('diffusivity_m2_per_s',), ())
-    fit = timefit.fit_model([p], spec, starts=[np.log([1e-15])])
-    assert fit.material.diffusivity_m2_per_s == pytest.approx(1e-17, rel=1e-6)
-    alone = timefit.fit_model([p], spec)
-    assert alone.material.diffusivity_m2_per_s == pytest.approx(
+    fit = _fit_to_a_bound(monkeypatch, PAPER_PARAMETERS, 0)
+    assert fit(starts=[np.log([1e-15])]).material.diffusivity_m2_per_s == pytest.approx(
+        1e-17, rel=1e-6)
+    assert fit().material.diffusivity_m2_per_s == pytest.approx(
         PAPER_PARAMETERS.diffusivity_m2_per_s / 100, rel=1e-6)
