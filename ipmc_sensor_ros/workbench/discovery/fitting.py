@@ -122,8 +122,10 @@ class Job:
     Called with ``(name, shape)``: add the effect to every record's model and fit all free
     parameters from a grid of starts (:func:`~.ranking.start_grid`, or the third item,
     ``(name, shape, starts)``), each with the current material and, for an effect fitted
-    jointly with a material (``Effect.fitted_material``), with that one; a fourth item adds
-    whole vectors (material, effects, the new effect: :mod:`.freqstart`).  Called with a
+    jointly with a material (``Effect.fitted_material``), with that one (the cheapest start
+    is refined).  A fourth item holds whole vectors (material, effects, the new effect:
+    :mod:`.freqstart`), each refined on its own beside the grid's: the lowest chi^2 is kept,
+    so a start that is cheaper at first but ends higher changes nothing.  Called with a
     :class:`Candidate`: its held-out error.  Picklable across a fork.
     """
 
@@ -140,11 +142,13 @@ class Job:
         spec = FitSpec(self.spec.material,
                        self.spec.effect_params + tuple((name, n) for n in shape))
         grid = more[0] if more else start_grid(name, shape, self.priors)
-        whole = more[1] if len(more) > 1 else ()
         starts = [np.concatenate([x, np.asarray(c, float)]) for x in self._materials(name)
-                  for c in grid] + [np.asarray(v, float) for v in whole]
-        return evaluate(prepared, spec, starts, self.folds, self.fold_nfev, name, shape,
-                        self.priors, scored=False)
+                  for c in grid]
+        whole = more[1] if len(more) > 1 else ()
+        fits = [evaluate(prepared, spec, group, self.folds, self.fold_nfev, name, shape,
+                         self.priors, scored=False)
+                for group in [starts] + [[np.asarray(v, float)] for v in whole]]
+        return min(fits, key=lambda c: c.fit.chi2)
 
     def _materials(self, name) -> list[np.ndarray]:
         """The current vector, and (``Effect.fitted_material``) the one with its material."""

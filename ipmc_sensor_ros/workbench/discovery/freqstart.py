@@ -16,9 +16,11 @@ measured uncertainty (:func:`~..freqfit.misfit`, as the frequency-domain ``fit``
 The material is held, the records' own (the model file's) or the current one, whichever fits
 better: from one point per record its diffusion corner trades with a low-pass, and a fit of
 both ran to the diffusivity's physical limit.  The corners start from the time-domain fit's
-grid, the :data:`REFINED` cheapest refined.  The result joins the grid as one more start of
-the time-domain fit, which screens all of them by their cost (:func:`~..timefit.fit_model`):
-where the frequency-domain start is no better, nothing changes.
+grid, the :data:`REFINED` cheapest refined.  The time-domain fit refines this start beside
+the grid's cheapest and keeps the lower chi^2 (:class:`~.fitting.Job`): where the
+frequency-domain start is no better, nothing changes (screened with the grid by its cost at
+the start, it was refined instead of the grid's and ended higher: a lag network came out as
+a high-pass beside a lead-lag).
 """
 from __future__ import annotations
 
