@@ -200,6 +200,32 @@ def test_frequency_start_finds_a_resonance_from_a_degenerate_material():
     assert abs(f_n / truth.outside[1] - 1) < 0.10 and abs(zeta / truth.outside[2] - 1) < 0.25
 
 
+@pytest.mark.parametrize('grid_chi2,whole_chi2', [(10.0, 5.0), (5.0, 10.0)])
+def test_job_keeps_the_lower_of_the_grid_and_a_whole_start(monkeypatch, grid_chi2, whole_chi2):
+    """
+    A whole start (the frequency-domain one) is refined beside the grid's, the lower kept.
+
+    Screened with the grid by its cost at the start, it was refined instead of the grid's
+    cheapest and could end higher (a lag network came out as a high-pass beside a lead-lag).
+    The fits are stand-ins with set chi^2: this checks the choice.
+    """
+    from types import SimpleNamespace
+
+    from ipmc_sensor_ros.workbench.discovery import fitting
+    from ipmc_sensor_ros.workbench.timefit import FitSpec
+
+    def fitted(prepared, spec, starts, *args, **kw):
+        chi2 = whole_chi2 if len(starts) == 1 else grid_chi2
+        return SimpleNamespace(fit=SimpleNamespace(chi2=chi2), starts=starts)
+
+    monkeypatch.setattr(fitting, 'evaluate', fitted)
+    job = fitting.Job([], FitSpec(('diffusivity_m2_per_s',), ()), np.log([3e-11]), [], 10, {})
+    whole = np.log([1e-11, 2e-3])
+    out = job(('time_delay', ('delay_s',), [[np.log(1e-4)], [np.log(1e-3)]], [whole]))
+    assert out.fit.chi2 == min(grid_chi2, whole_chi2)
+    assert (len(out.starts) == 1) == (whole_chi2 < grid_chi2)
+
+
 def test_correction_words_carry_the_interval():
     c = Correction(('high_pass',), {'high_pass_corner_hz': 0.50011},
                    {'high_pass_corner_hz': (0.49976, 0.50046)}, 0.0100, 0.0100, -9.5e6)
