@@ -319,8 +319,16 @@ def test_profile_scan_finds_a_second_valley_and_the_interval_holds_it(monkeypatc
     assert np.exp(restart[0]) == pytest.approx(28.45, rel=0.01) and chi2_of(restart[0]) < 0
     lo, hi = interval.profile_interval(None, cand, 'amplifier_bandwidth', 'corner_hz')
     assert lo == pytest.approx(39.2, rel=0.002) and hi == pytest.approx(40.8, rel=0.002)
-    lo, hi = interval.profile_interval(None, cand, 'amplifier_bandwidth', 'corner_hz', scan)
-    assert lo == pytest.approx(28.45, rel=0.01) and hi == pytest.approx(40.8, rel=0.002)
+    scans = {'corner_hz': scan}
+    lo, hi = interval.profile_interval(None, cand, 'amplifier_bandwidth', 'corner_hz', scans)
+    # past 28.45 Hz (inside) the next step, 27.10 Hz, is out: the crossing interpolated in
+    # chi^2 lies between them, above the parabola's own 27.18 Hz (chords of a convex profile)
+    assert 27.18 < lo < 28.0 and hi == pytest.approx(40.8, rel=0.002)
+    # a fit below the level met while scanning another parameter bounds this one's profile
+    # there: its value joins the interval
+    scans['other'] = [(0.0, -1.0, np.array([np.log(25.0)]))]
+    lo, _ = interval.profile_interval(None, cand, 'amplifier_bandwidth', 'corner_hz', scans)
+    assert lo == pytest.approx(25.0, rel=1e-9)
 
 
 def test_the_result_moves_to_the_deeper_valley(monkeypatch):

@@ -19,7 +19,10 @@ apart, a barrier of thousands between them along the straight line).  A local fi
 the one it starts in.  :func:`profile_scan` therefore follows the profile a factor
 :data:`SCAN_REACH` either side in steps of :data:`SCAN_STEP`; the fit restarts from each local
 minimum of the scan (:func:`scan_minima`, used by the caller), and the interval takes in every
-scanned value whose profile lies below the level, as the profile-likelihood set it is.
+scanned value whose profile lies below the level, as the profile-likelihood set it is, the
+parameter's value in every fit of the other parameters' scans that lies below the level (its
+profile is no higher there), and the scan's crossings of the level beyond its outermost
+values inside, interpolated between the 5 % steps.
 """
 from __future__ import annotations
 
@@ -103,13 +106,35 @@ def scan_minima(points, centre: np.ndarray) -> list[np.ndarray]:
     return out
 
 
+def _scan_ends(points, k, chi2_min, level) -> list[float]:
+    """
+    Where a scan of parameter ``k`` crosses the level beyond its outermost values below it.
+
+    Interpolated in chi^2 between the last value inside and the next one out, as the stepped
+    interval is; the outermost value itself at the end of the scan.
+    """
+    xs = [q[2][k] for q in points]
+    ds = [q[1] - chi2_min for q in points]
+    inside = [i for i, d in enumerate(ds) if d < level]
+    out = []
+    for i, j in ((inside[0], inside[0] - 1), (inside[-1], inside[-1] + 1)) if inside else ():
+        if 0 <= j < len(xs):
+            out.append(xs[i] + (xs[j] - xs[i]) * (level - ds[i]) / max(ds[j] - ds[i], 1e-12))
+        else:
+            out.append(xs[i])
+    return out
+
+
 def profile_interval(state, cand, effect: str, param: str,
-                     scan=None) -> tuple[float, float]:
+                     scans=None) -> tuple[float, float]:
     """
     Return the 95 % profile interval of a log-scale ``effect.param`` of ``cand`` (docstring).
 
-    ``scan``: the :func:`profile_scan` of ``cand``; its values below the level widen the
-    interval to hold them.
+    ``scans``: the :func:`profile_scan` of each parameter of ``cand`` (name -> points).  The
+    interval holds this parameter's value in every scanned fit below the level, of its own
+    scan and of the others' (each such fit bounds the profile from above there: a second
+    valley met while scanning the pole holds the zero that goes with it), and its own scan's
+    crossings of the level beyond them.
     """
     k, spec, bounds = _setup(cand, effect, param)
     lo_bound, hi_bound = np.log(bounds)
@@ -133,5 +158,8 @@ def profile_interval(state, cand, effect: str, param: str,
                 break
             prev_x, prev_d = x, max(d, 0.0)
         ends.append(prev_x if end is None else end)
-    inside = [q[0] for q in scan or () if q[1] - cand.fit.chi2 < level]
+    scans = scans or {}
+    inside = [q[2][k] for points in scans.values() for q in points
+              if q[1] - cand.fit.chi2 < level]
+    inside += _scan_ends(scans.get(param, ()), k, cand.fit.chi2, level)
     return float(np.exp(min([ends[0], *inside]))), float(np.exp(max([ends[1], *inside])))

@@ -117,7 +117,7 @@ def result(inner, structure, tried) -> Correction:
         if e == name:
             inner.say(f'correction C(s): profile interval of {p}')
             values[p] = float(np.exp(cand.x[n_mat + k]))
-            ci[p] = profile_interval(inner, cand, name, p, scans[p])
+            ci[p] = profile_interval(inner, cand, name, p, scans)
     assigned = canonical(structure, values)
     if assigned != values:      # the two poles exchanged
         values, ci = assigned, {**ci, POLE_PAIR[0]: ci[POLE_PAIR[1]],
