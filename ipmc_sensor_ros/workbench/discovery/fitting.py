@@ -151,7 +151,7 @@ class Job:
         return min(fits, key=lambda c: c.fit.chi2)
 
     def _materials(self, name) -> list[np.ndarray]:
-        """The current vector, and (``Effect.fitted_material``) the one with its material."""
+        """Return the current vector and (``Effect.fitted_material``) the one with its material."""
         known = get_effect(name).fitted_material
         if not any(n in known for n in self.spec.material):
             return [self.x]
