@@ -42,13 +42,21 @@ MAX_NFEV = 40
 
 
 def response_points(state) -> list:
-    """Return ``(record index, FrequencyPoint)`` at each record's drive fundamental."""
+    """
+    Return ``(record index, FrequencyPoint)`` at each record's drive fundamental.
+
+    Measured once per search state (``SearchState.drive_points``; views of it on records with
+    a periodic history keep the same rows).
+    """
+    if getattr(state, 'drive_points', None) is not None:
+        return state.drive_points
     out = []
     for k, p in enumerate(state.prepared):
         try:
             out.append((k, fundamental_response(p.t[p.keep], p.w[p.keep], p.y[p.keep])))
         except ValueError:      # no periodic drive: the record gives no point
             continue
+    state.drive_points = out
     return out
 
 

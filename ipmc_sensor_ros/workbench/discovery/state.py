@@ -51,6 +51,7 @@ class SearchState:
     kept_by: dict = field(default_factory=dict)
     correction: object | None = None
     given_material: object | None = None              # the records' own (the model file's)
+    drive_points: list | None = None    # measured response at each drive (.freqstart)
 
     # -- moves ------------------------------------------------------------------------------
     def adopt(self, c: Candidate) -> None:
