@@ -5,7 +5,7 @@ Fitting a correction C(s) (:mod:`.correction`) as a factor of a model, its order
 * :func:`history_view`: the state on records with a longer periodic history (:mod:`.history`),
   :data:`HISTORY_TIME_CONSTANTS` time constants of the slowest corner a fit starts from, so
   that a slow C(s) enters each record in steady state.
-* :func:`fit_structures`: each structure fitted from a grid of corners and from a start
+* :func:`fit_structures`: each structure fitted from a grid of corners and from starts
   fitted to the records' frequency responses (:mod:`.freqstart`).
 * :func:`select_correction`: every structure up to ``max_correction_order`` parameters fitted
   as a factor of a model (all records and samples, every free parameter refitted; corners
@@ -25,7 +25,7 @@ from ...physics.effects import EFFECTS, register_effect
 from ..timepredict import prepare
 from .correction import ELEMENTS, PREFIX, correction_class, correction_name, structures
 from .fitting import evaluate, make_folds, with_models
-from .freqstart import frequency_start, response_points
+from .freqstart import frequency_starts, response_points
 from .history import with_history
 
 __all__ = ['is_correction', 'registered', 'band_hz', 'history_view', 'fit_structures',
@@ -122,19 +122,25 @@ def _known_start(names, known, band) -> list[float]:
             for n in names]
 
 
-def fit_structures(state, base, structs, band, known=None):
+def fit_structures(state, base, structs, band, known=(), material_from=None):
     """
     Fit each structure as a factor of ``base``; the candidates, each with ``structure``.
 
-    ``known``: parameter values (a smaller correction's) to start from as well; a start from
-    the records' frequency responses (:mod:`.freqstart`) joins the grid.
+    ``known``: sets of parameter values (another correction's) to start from as well, and
+    with them the material of ``material_from`` (the model they were fitted in: a corner and
+    the material lie in one narrow valley); starts from the records' frequency responses
+    (:mod:`.freqstart`) join the grid.
     """
     items, points = [], response_points(state)
+    n_mat = len(base.spec.material)
     for st in structs:
         names = [p.name for e in st for p in ELEMENTS[e]]
-        grid = starts(st, band) + ([_known_start(names, known, band)] if known else [])
-        full = frequency_start(state, base, st, grid, points)
-        items.append((correction_name(st), tuple(names), grid, [] if full is None else [full]))
+        own = [_known_start(names, k, band) for k in known]
+        grid = starts(st, band) + own
+        whole = frequency_starts(state, base, st, grid, points)
+        if material_from is not None:
+            whole += [np.concatenate([material_from.x[:n_mat], base.x[n_mat:], x]) for x in own]
+        items.append((correction_name(st), tuple(names), grid, whole))
     with registered(structs):
         out = state.run(state.job(base), items)
     for c, st in zip(out, structs):

@@ -13,14 +13,17 @@ The measured response ``H_m(f_k)`` at each record's drive fundamental
 gives C(s) in a small least-squares problem with no simulation: the misfit of
 ``ln(H(j w_k; material) C(j w_k; theta) / H_m(f_k))`` in magnitude and phase, each over its
 measured uncertainty (:func:`~..freqfit.misfit`, as the frequency-domain ``fit`` weighs it).
-The material is held, the records' own (the model file's) or the current one, whichever fits
-better: from one point per record its diffusion corner trades with a low-pass, and a fit of
-both ran to the diffusivity's physical limit.  The corners start from the time-domain fit's
-grid, the :data:`REFINED` cheapest refined.  The time-domain fit refines this start beside
-the grid's cheapest and keeps the lower chi^2 (:class:`~.fitting.Job`): where the
-frequency-domain start is no better, nothing changes (screened with the grid by its cost at
-the start, it was refined instead of the grid's and ended higher: a lag network came out as
-a high-pass beside a lead-lag).
+The material is held, the records' own (the model file's) and the current one, each giving a
+start: from one point per record its diffusion corner trades with a low-pass, and a fit of
+both ran to the diffusivity's physical limit.  Which of the two is right is the time-domain
+fit's to say (a lag network on a delay's stand-in model: the current material, 5x low in d,
+fitted the fundamentals better and its start ended at 2.4x the floor; the records' own ended
+at the floor).  The corners start from the time-domain fit's grid, the :data:`REFINED`
+cheapest refined.  The time-domain fit refines each start beside the grid's cheapest and
+keeps the lowest chi^2 (:class:`~.fitting.Job`): where the frequency-domain starts are no
+better, nothing changes (screened with the grid by its cost at the start, one was refined
+instead of the grid's and ended higher: a lag network came out as a high-pass beside a
+lead-lag).
 """
 from __future__ import annotations
 
@@ -33,7 +36,7 @@ from ..freqfit import misfit
 from ..freqresp import fundamental_response
 from .correction import ELEMENTS, correction_class
 
-__all__ = ['response_points', 'frequency_start', 'REFINED', 'MAX_NFEV']
+__all__ = ['response_points', 'frequency_starts', 'REFINED', 'MAX_NFEV']
 
 #: starts refined in the frequency domain (the cheapest by their cost at the start)
 REFINED = 3
@@ -94,18 +97,19 @@ def _fit(groups, factor, names, material, grid):
     return best.cost, best.x
 
 
-def frequency_start(state, base, structure, grid, points) -> np.ndarray | None:
+def frequency_starts(state, base, structure, grid, points) -> list[np.ndarray]:
     """
-    Return a start (fit space: ``base.spec`` then C(s)'s parameters) for ``structure``.
+    Return starts (fit space: ``base.spec`` then C(s)'s parameters) for ``structure``.
 
-    ``grid``: the time-domain fit's starts of C(s)'s parameters; ``points``:
-    :func:`response_points`.  None without points enough to fit (module docstring).
+    One per material held (the records' own, the current one), the one that fits the
+    responses better first.  ``grid``: the time-domain fit's starts of C(s)'s parameters;
+    ``points``: :func:`response_points`.  Empty without points enough to fit.
     """
     names = [p.name for e in structure for p in ELEMENTS[e]]
     mat_names = tuple(base.spec.material)
     n_mat = len(mat_names)
     if 2 * len(points) < len(names) + 1:
-        return None
+        return []
     groups = _groups(base.fit.models, points)
     factor = correction_class(structure)().factor
     given = state.given_material or base.fit.material
@@ -113,6 +117,7 @@ def frequency_start(state, base, structure, grid, points) -> np.ndarray | None:
     for v in (np.log([getattr(given, n) for n in mat_names]), base.x[:n_mat]):
         material = replace(base.fit.material, **{n: float(np.exp(x))
                                                  for n, x in zip(mat_names, v)})
-        fitted.append((*_fit(groups, factor, names, material, grid), v))
-    _, tail, v = min(fitted, key=lambda f: f[0])
-    return np.concatenate([v, base.x[n_mat:], tail])
+        cost, tail = _fit(groups, factor, names, material, grid)
+        fitted.append((cost, np.concatenate([v, base.x[n_mat:], tail])))
+    fitted.sort(key=lambda f: f[0])
+    return [x for _, x in fitted]

@@ -12,7 +12,8 @@ implausible:
    effects stay named as they were (a delay just past its plausible range that holds an
    amplifier's lag is still the best account of the data the catalog has).
    An element of C(s) that a catalog effect is, at a value plausible for it (a low-pass that
-   an amplifier's bandwidth could be, a delay), is left to the catalog (:data:`TWINS`).
+   an amplifier's bandwidth could be, a delay), is left to the catalog (:data:`TWINS`), and
+   an element C(s) fits better without (by BIC, refitted from where it was) is taken out.
 2. **Search again beside C(s).**  The baseline times C(s) (its parameters free) starts a new
    search (offset test, forward, backward, swap and exchange) on the same records: a catalog
    effect is named only when it is significant beside C(s).  The stand-ins of the first search
@@ -41,7 +42,8 @@ import numpy as np
 
 from ...physics.effects import effect_parameter
 from ..timefit import FitSpec
-from .correction import AMPLIFIER, ELEMENTS, correction_name, structures
+from .correction import (AMPLIFIER, ELEMENTS, POLE_PAIR, canonical, correction_name,
+                         structures)
 from .correction_fit import (ALPHA0, band_hz, fit_structures, history_view, registered,
                              select_correction)
 from .fitting import evaluate, with_models
@@ -105,7 +107,7 @@ def _rival(inner, name, structure, band):
     cname = correction_name(structure)
     known = inner.current.fit.effect_values[cname]
     base = inner.without(cname, inner.without(name))
-    cands = fit_structures(inner, base, grown, band, known)
+    cands = fit_structures(inner, base, grown, band, [known], material_from=inner.current)
     return min(cands, key=lambda c: c.fit.bic)
 
 
@@ -162,25 +164,58 @@ def _drop_implausible(state) -> None:
         state.adopt(wo)
 
 
-def _strip_twins(view, best, band):
+def _pruned(view, best, band):
     """
-    C(s) less its elements that a catalog effect is, at a value plausible for that effect.
+    C(s) less its elements that a catalog effect is, then less those it fits better without.
 
     A low-pass whose corner an amplifier's bandwidth could be, a delay a channel skew could
     be: the catalog effect is the same factor, and a tie goes to the catalog (the search
-    beside C(s) finds it if it is significant).  Returns the refitted smaller C(s), ``best``
-    itself when nothing is stripped, or None when nothing is left.
+    beside C(s) finds it if it is significant); a low-pass beside a lead-lag is judged by the
+    pole it takes (:func:`~.correction.canonical`: a 3.2 Hz low-pass beside a 7.8 Hz zero
+    and a 216 Hz pole is a 216 Hz amplifier beside a lag network).  Then each element is
+    taken out in turn and C(s) refitted from the values and material it had
+    (:func:`_smaller`): the lowest BIC wins, again until no removal lowers it.  The order
+    chosen by BIC from a grid of starts can keep an element that does nothing (a low-pass
+    run to its 100 kHz bound beside a lead-lag) when the smaller structure's own starts
+    ended in a worse valley.  Returns the refitted smaller C(s), ``best`` itself when
+    nothing is stripped, or None when nothing is left.
     """
-    name = correction_name(best.structure)
-    values = best.fit.effect_values[name]
+    values = canonical(best.structure, best.fit.effect_values[correction_name(best.structure)])
     keep = tuple(e for e in best.structure if not (
         e in TWINS and _plausible(TWINS[e], values[ELEMENTS[e][0].name])))
-    if keep == best.structure:
-        return best
+    if keep != best.structure:
+        best = _smaller(view, best, keep, band)
+    while best is not None:
+        elements = [e for e in best.structure if e != 'gain']
+        if len(elements) < 2:
+            return best
+        with registered([best.structure]):
+            top = min((_smaller(view, best, tuple(k for k in best.structure if k != e), band)
+                       for e in elements), key=lambda c: c.fit.bic)
+        if top.fit.bic >= best.fit.bic:
+            return best
+        best = top
+    return None
+
+
+def _smaller(view, best, keep, band):
+    """
+    C(s) of structure ``keep`` fitted from ``best``'s values and material (None if empty).
+
+    Also from its values with a low-pass and a lead-lag's pole exchanged (the same C(s)), so
+    that taking out either element can leave either pole (a lead-lag whose pole ran to its
+    bound beside a low-pass at the lag's pole: without the low-pass, the lead-lag takes it).
+    """
     if not keep or keep == ('gain',):
         return None
-    base = view.without(name, best)
-    return fit_structures(view, base, [keep], band, values)[0]
+    name = correction_name(best.structure)
+    values = best.fit.effect_values[name]
+    known = [values]
+    if set(POLE_PAIR) <= set(values):
+        known.append({**values, POLE_PAIR[0]: values[POLE_PAIR[1]],
+                      POLE_PAIR[1]: values[POLE_PAIR[0]]})
+    return fit_structures(view, view.without(name, best), [keep], band, known,
+                          material_from=best)[0]
 
 
 def _plausible(twin, value) -> bool:
@@ -189,12 +224,12 @@ def _plausible(twin, value) -> bool:
 
 
 def _select(state, view, base, band):
-    """C(s) on top of ``base``, twins stripped, scored; None unless it passes a step's rule."""
+    """C(s) on top of ``base``, pruned, scored; None unless it passes a step's rule."""
     best, tried = select_correction(view, base, band)
     if best is None:
         return None, tried
     with registered([best.structure]):
-        best = _strip_twins(view, best, band)
+        best = _pruned(view, best, band)
     if best is None:
         return None, tried
     with registered([best.structure]):
