@@ -163,6 +163,33 @@ def test_plugin_carries_the_material_and_a_fit_adding_it_starts_there(tmp_path, 
     assert [list(v) for v in Job([], spec, x, [], 10, {})._materials('time_delay')] == [list(x)]
 
 
+def test_the_search_beside_c_s_starts_candidates_from_the_fit_c_s_was_found_in():
+    """
+    Beside C(s), a candidate starts from the values of the fit in which C(s) was found too.
+
+    A lag network behind an amplifier, first fitted as C(s) beside a 0.73 ms delay (the
+    amplifier's stand-in) with d = 3.8e-11: C(s) alone, refitted without the delay, fell to
+    d = 8e-12, and a delay added there stayed (2.8x the floor instead of 1.0x).  The known
+    fit gives the material and C(s) values, and the delay's own value joins its grid.
+    """
+    from types import SimpleNamespace
+
+    from ipmc_sensor_ros.workbench.discovery.fitting import Job
+    from ipmc_sensor_ros.workbench.timefit import FitSpec
+
+    cs = ('correction_lead_lag', 'lead_lag_zero_hz')
+    spec = FitSpec(('diffusivity_m2_per_s',), (cs,))
+    x = np.log([8e-12, 3.6])
+    known = SimpleNamespace(spec=FitSpec(('diffusivity_m2_per_s',),
+                                         (('time_delay', 'delay_s'), cs)),
+                            x=np.log([3.8e-11, 7.3e-4, 7.8]))
+    job = Job([], spec, x, [], 10, {}, known)
+    assert np.allclose(job._materials('time_delay')[-1], np.log([3.8e-11, 7.8]))
+    assert np.allclose(job._known_values('time_delay', ('delay_s',)), [[np.log(7.3e-4)]])
+    assert job._known_values('amplifier_bandwidth', ('corner_hz',)) == []
+    assert [list(v) for v in Job([], spec, x, [], 10, {})._materials('time_delay')] == [list(x)]
+
+
 def test_frequency_start_finds_a_resonance_from_a_degenerate_material():
     """
     C(s)'s start from the records' responses is in the resonance's valley (module freqstart).
@@ -271,7 +298,8 @@ def test_a_low_pass_beside_a_lead_lag_is_a_twin_by_the_pole_it_takes(monkeypatch
     A 3.2 Hz low-pass beside a lead-lag (zero 7.8 Hz, pole 216 Hz) is a 216 Hz amplifier.
 
     The two poles can be exchanged (the same C(s)); the low-pass takes the one an amplifier's
-    bandwidth can be (20 Hz-20 kHz), so it is left to the catalog: C(s) is the lead-lag.
+    bandwidth can be (20 Hz-20 kHz), so it is left to the catalog: C(s) is the lead-lag,
+    fitted beside an amplifier started at 216 Hz.
     """
     from contextlib import nullcontext
     from types import SimpleNamespace
@@ -283,14 +311,15 @@ def test_a_low_pass_beside_a_lead_lag_is_a_twin_by_the_pole_it_takes(monkeypatch
         bic=100.0, effect_values={'correction_low_pass_lead_lag': values}))
     kept = []
 
-    def smaller(view, cand, keep, band):
-        kept.append(keep)
+    def smaller(view, cand, keep, band, twins=()):
+        kept.append((keep, twins))
         return SimpleNamespace(structure=keep, fit=SimpleNamespace(bic=120.0))
 
     monkeypatch.setattr(outside, '_smaller', smaller)
     monkeypatch.setattr(outside, 'registered', lambda structs: nullcontext())
     assert outside._pruned(None, best, (1.0, 20.0)).structure == ('lead_lag',)
-    assert kept == [('lead_lag',)]
+    # the amplifier takes the low-pass's place, at its pole
+    assert kept == [(('lead_lag',), [('amplifier_bandwidth', 'corner_hz', 216.0)])]
 
 
 def test_a_smaller_c_s_starts_from_either_pole_and_the_larger_material(monkeypatch):

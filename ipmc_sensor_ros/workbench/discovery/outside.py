@@ -69,10 +69,12 @@ def _beside(view, best):
     """
     Return a fresh search state whose baseline is the view's baseline times ``best``'s C(s).
 
-    Started from C(s) with the material it was fitted with (and from the baseline's): its
-    corners and the material lie in one narrow valley, and C(s) with another material can
-    start a fit that ends in another (a lag network at the floor beside a 2.6 Hz low-pass
-    restarted at 1.5x the floor).
+    Started from C(s) with the material it was fitted with and from the baseline's, each fit
+    on its own and the lower chi^2 kept: its corners and the material lie in one narrow
+    valley, and C(s) with another material can start a fit that ends in another (a lag
+    network at the floor beside a 2.6 Hz low-pass restarted at 1.5x the floor; screened by
+    their cost at the start, the baseline's material was refined and a lag network fitted
+    beside a delay at the floor ended at 2.8x the floor without it).
     """
     name = correction_name(best.structure)
     values = best.fit.effect_values[name]
@@ -86,10 +88,13 @@ def _beside(view, best):
     if set(base.spec.effect_params) <= set(best.spec.effect_params):   # C(s)'s own material
         own = [n_mat + best.spec.effect_params.index(ep) for ep in base.spec.effect_params]
         starts.insert(0, np.concatenate([best.x[:n_mat], best.x[own], tail]))
-    start = evaluate(with_models(view.prepared, models), spec, starts, view.folds,
-                     view.settings.fold_nfev, priors=view.priors)
+    prepared = with_models(view.prepared, models)
+    start = view.score(min((evaluate(prepared, spec, [x], view.folds, view.settings.fold_nfev,
+                                     priors=view.priors, scored=False) for x in starts),
+                           key=lambda c: c.fit.chi2))
     inner = replace(view, baseline=start, chosen=[], steps=[], first_ranking=[],
-                    first_ties=[], late_ties=[], replaced=set(), offset={}, kept_by={})
+                    first_ties=[], late_ties=[], replaced=set(), offset={}, kept_by={},
+                    known=best)
     inner.adopt(start)
     return inner
 
@@ -169,8 +174,9 @@ def _pruned(view, best, band):
     C(s) less its elements that a catalog effect is, then less those it fits better without.
 
     A low-pass whose corner an amplifier's bandwidth could be, a delay a channel skew could
-    be: the catalog effect is the same factor, and a tie goes to the catalog (the search
-    beside C(s) finds it if it is significant); a low-pass beside a lead-lag is judged by the
+    be: the catalog effect is the same factor and takes the element's place, and a tie goes
+    to the catalog (the search beside C(s) names it if it is significant, started from
+    this fit: :attr:`~.state.SearchState.known`); a low-pass beside a lead-lag is judged by the
     pole it takes (:func:`~.correction.canonical`: a 3.2 Hz low-pass beside a 7.8 Hz zero
     and a 216 Hz pole is a 216 Hz amplifier beside a lag network).  Then each element is
     taken out in turn and C(s) refitted from the values and material it had
@@ -184,7 +190,9 @@ def _pruned(view, best, band):
     keep = tuple(e for e in best.structure if not (
         e in TWINS and _plausible(TWINS[e], values[ELEMENTS[e][0].name])))
     if keep != best.structure:
-        best = _smaller(view, best, keep, band)
+        twins = [(*TWINS[e], values[ELEMENTS[e][0].name]) for e in best.structure
+                 if e not in keep]
+        best = _smaller(view, best, keep, band, twins)
     while best is not None:
         elements = [e for e in best.structure if e != 'gain']
         if len(elements) < 2:
@@ -198,9 +206,13 @@ def _pruned(view, best, band):
     return None
 
 
-def _smaller(view, best, keep, band):
+def _smaller(view, best, keep, band, twins=()):
     """
     C(s) of structure ``keep`` fitted from ``best``'s values and material (None if empty).
+
+    ``twins``: ``(effect, parameter, value)`` of the catalog effects that take the place of
+    the elements taken out (each added to the model, started at the element's value, unless
+    the model has it already): the factor stays in the model C(s) is fitted in.
 
     Also from its values with a low-pass and a lead-lag's pole exchanged (the same C(s)), so
     that taking out either element can leave either pole (a lead-lag whose pole ran to its
@@ -214,8 +226,11 @@ def _smaller(view, best, keep, band):
     if set(POLE_PAIR) <= set(values):
         known.append({**values, POLE_PAIR[0]: values[POLE_PAIR[1]],
                       POLE_PAIR[1]: values[POLE_PAIR[0]]})
-    return fit_structures(view, view.without(name, best), [keep], band, known,
-                          material_from=best)[0]
+    base = view.without(name, best)
+    for effect, param, value in twins:
+        if all(e != effect for e, _ in base.spec.effect_params):
+            base = view.job(base)((effect, (param,), [[float(np.log(value))]]))
+    return fit_structures(view, base, [keep], band, known, material_from=best)[0]
 
 
 def _plausible(twin, value) -> bool:

@@ -52,6 +52,7 @@ class SearchState:
     correction: object | None = None
     given_material: object | None = None              # the records' own (the model file's)
     drive_points: list | None = None    # measured response at each drive (.freqstart)
+    known: Candidate | None = None      # a fit whose values start every candidate (Job)
 
     # -- moves ------------------------------------------------------------------------------
     def adopt(self, c: Candidate) -> None:
@@ -71,7 +72,7 @@ class SearchState:
         base = base or self.current
         s = self.settings
         return Job(with_models(self.prepared, base.fit.models), base.spec, base.x, self.folds,
-                   s.fold_nfev, self.priors)
+                   s.fold_nfev, self.priors, self.known)
 
     def run(self, job: Job, items: list) -> list:
         """Run ``job`` on ``items`` in the worker processes."""
