@@ -184,10 +184,11 @@ def test_the_search_beside_c_s_starts_candidates_from_the_fit_c_s_was_found_in()
                                          (('time_delay', 'delay_s'), cs)),
                             x=np.log([3.8e-11, 7.3e-4, 7.8]))
     job = Job([], spec, x, [], 10, {}, known)
-    assert np.allclose(job._materials('time_delay')[-1], np.log([3.8e-11, 7.8]))
+    (vector,) = job._known_vector()
+    assert np.allclose(vector, np.log([3.8e-11, 7.8]))
     assert np.allclose(job._known_values('time_delay', ('delay_s',)), [[np.log(7.3e-4)]])
     assert job._known_values('amplifier_bandwidth', ('corner_hz',)) == []
-    assert [list(v) for v in Job([], spec, x, [], 10, {})._materials('time_delay')] == [list(x)]
+    assert Job([], spec, x, [], 10, {})._known_vector() == []
 
 
 def test_frequency_start_finds_a_resonance_from_a_degenerate_material():
@@ -344,6 +345,17 @@ def test_a_smaller_c_s_starts_from_either_pole_and_the_larger_material(monkeypat
     (args, kw), = calls
     assert args[1:3] == ('base without C(s)', [('lead_lag',)]) and kw['material_from'] is best
     assert sorted(k['lead_lag_pole_hz'] for k in args[4]) == [2.44, 1e5]
+    # a twin's catalog effect is added to the model C(s) is fitted in, at the element's value
+    base = SimpleNamespace(spec=SimpleNamespace(effect_params=(('time_delay', 'delay_s'),)))
+    added = []
+    with_it = SimpleNamespace(spec=SimpleNamespace(effect_params=(
+        ('time_delay', 'delay_s'), ('amplifier_bandwidth', 'corner_hz'))))
+    view = SimpleNamespace(without=lambda name, cand: base,
+                           job=lambda b: lambda item: added.append((b, item)) or with_it)
+    twins = [('amplifier_bandwidth', 'corner_hz', 216.0), ('time_delay', 'delay_s', 1e-3)]
+    outside._smaller(view, best, ('lead_lag',), (1.0, 20.0), twins)
+    assert added == [(base, ('amplifier_bandwidth', ('corner_hz',), [[np.log(216.0)]]))]
+    assert calls[-1][0][1] is with_it       # the delay was in the model already
 
 
 def test_outside_stage_keeps_the_round_of_lowest_bic(monkeypatch):

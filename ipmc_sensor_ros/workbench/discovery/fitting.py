@@ -123,12 +123,13 @@ class Job:
     parameters from a grid of starts (:func:`~.ranking.start_grid`, or the third item,
     ``(name, shape, starts)``), each with the current material and, for an effect fitted
     jointly with a material (``Effect.fitted_material``), with that one (the cheapest start
-    is refined).  ``known``: a fit whose values are starts too (the one in which C(s) was
-    found, for the search beside it: every parameter it holds from there, the new effect's
-    from it or the grid).  A fourth item holds whole vectors (material, effects, the new
-    effect: :mod:`.freqstart`), each refined on its own beside the grid's: the lowest chi^2
-    is kept, so a start that is cheaper at first but ends higher changes nothing.  Called
-    with a :class:`Candidate`: its held-out error.  Picklable across a fork.
+    is refined).  ``known``: a fit whose values start a second group, refined on its own
+    (the one in which C(s) was found, for the search beside it: every parameter it holds
+    from there, the new effect's from it or the grid).  A fourth item holds whole vectors
+    (material, effects, the new effect: :mod:`.freqstart`), each refined on its own beside
+    the grid's: the lowest chi^2 is kept, so a start that is cheaper at first but ends
+    higher changes nothing.  Called with a :class:`Candidate`: its held-out error.
+    Picklable across a fork.
     """
 
     def __init__(self, prepared, spec, x, folds, fold_nfev, priors, known=None):
@@ -146,37 +147,35 @@ class Job:
                        self.spec.effect_params + tuple((name, n) for n in shape))
         grid = more[0] if more else start_grid(name, shape, self.priors)
         grid = grid + self._known_values(name, shape)
-        starts = [np.concatenate([x, np.asarray(c, float)]) for x in self._materials(name)
-                  for c in grid]
-        whole = more[1] if len(more) > 1 else ()
+        groups = [[np.concatenate([x, np.asarray(c, float)]) for x in group for c in grid]
+                  for group in ([self._materials(name)] + [[v] for v in self._known_vector()])]
+        groups += [[np.asarray(v, float)] for v in (more[1] if len(more) > 1 else ())]
         fits = [evaluate(prepared, spec, group, self.folds, self.fold_nfev, name, shape,
-                         self.priors, scored=False)
-                for group in [starts] + [[np.asarray(v, float)] for v in whole]]
+                         self.priors, scored=False) for group in groups]
         return min(fits, key=lambda c: c.fit.chi2)
 
     def _materials(self, name) -> list[np.ndarray]:
-        """
-        Return the current vector, the one with ``Effect.fitted_material``, and ``known``'s.
+        """Return the current vector and (``Effect.fitted_material``) the one with its material."""
+        known = get_effect(name).fitted_material
+        if not any(n in known for n in self.spec.material):
+            return [self.x]
+        other = self.x.copy()
+        for k, n in enumerate(self.spec.material):
+            if n in known:
+                other[k] = np.log(known[n])
+        return [self.x, other]
 
-        ``known``'s: the current vector with every value ``known`` holds (material, effects).
-        """
-        out = [self.x]
-        fitted = get_effect(name).fitted_material
-        if any(n in fitted for n in self.spec.material):
-            other = self.x.copy()
-            for k, n in enumerate(self.spec.material):
-                if n in fitted:
-                    other[k] = np.log(fitted[n])
-            out.append(other)
-        if self.known is not None and self.known.spec.material == self.spec.material:
-            other = self.x.copy()
-            n_mat, eps = len(self.spec.material), self.known.spec.effect_params
-            other[:n_mat] = self.known.x[:n_mat]
-            for k, ep in enumerate(self.spec.effect_params):
-                if ep in eps:
-                    other[n_mat + k] = self.known.x[n_mat + eps.index(ep)]
-            out.append(other)
-        return out
+    def _known_vector(self) -> list[np.ndarray]:
+        """The current vector with every value ``known`` holds (material, effects), or none."""
+        if self.known is None or self.known.spec.material != self.spec.material:
+            return []
+        other = self.x.copy()
+        n_mat, eps = len(self.spec.material), self.known.spec.effect_params
+        other[:n_mat] = self.known.x[:n_mat]
+        for k, ep in enumerate(self.spec.effect_params):
+            if ep in eps:
+                other[n_mat + k] = self.known.x[n_mat + eps.index(ep)]
+        return [other]
 
     def _known_values(self, name, shape) -> list[list[float]]:
         """The new effect's values in ``known`` (fit space), as one more start of its grid."""

@@ -21,7 +21,9 @@ implausible:
 3. **Better than C(s) of as many parameters.**  Each effect named beside C(s) stays only when
    it is plausible and C(s) grown by as many parameters as it has -- the best structure that
    holds C(s)'s elements and that many more, in the model without the effect -- does not beat
-   it by ``min_delta_bic``.  An effect that fails is dropped (a step).  C(s) is then chosen
+   it by ``min_delta_bic``.  An effect that fails is dropped (a step), and the forward
+   search runs on without it (a delay that C(s) grown by a low-pass beats leaves room for
+   the amplifier it stood in for).  C(s) is then chosen
    again on top of the effects named beside it; when its structure changes, steps 2-3 run
    again (at most :data:`MAX_ROUNDS` times).  The round whose named effects times C(s) have
    the lowest BIC is the result (all rounds fit the same records): a later round is a new
@@ -47,7 +49,7 @@ from .correction import (AMPLIFIER, ELEMENTS, POLE_PAIR, canonical, correction_n
 from .correction_fit import (ALPHA0, band_hz, fit_structures, history_view, registered,
                              select_correction)
 from .fitting import evaluate, with_models
-from .forward import catalog_search
+from .forward import catalog_search, forward_search
 from .result import result
 from .offset_test import OFFSET
 from .significance import membership
@@ -116,8 +118,13 @@ def _rival(inner, name, structure, band):
     return min(cands, key=lambda c: c.fit.bic)
 
 
-def _drop_failing(inner, structure, band) -> None:
-    """Drop each effect named beside C(s) that is implausible or C(s) grown beats (step 3)."""
+def _drop_failing(inner, structure, band) -> bool:
+    """
+    Drop each effect named beside C(s) that is implausible or C(s) grown beats (step 3).
+
+    Returns True when one was dropped.
+    """
+    dropped = False
     for name, shape in list(inner.chosen):
         if name == OFFSET:
             continue
@@ -136,6 +143,8 @@ def _drop_failing(inner, structure, band) -> None:
             inner.record(name, 'dropped', wo, why)
             inner.chosen.remove((name, shape))
             inner.adopt(wo)
+            dropped = True
+    return dropped
 
 
 def _adopt_inner(state, inner, best, structure) -> None:
@@ -273,7 +282,8 @@ def outside_stage(state) -> None:
             state.say(f"correction C(s) = {' * '.join(best.structure)}: searching beside it")
             inner = _beside(view, best)
             catalog_search(inner)
-            _drop_failing(inner, best.structure, band)
+            while _drop_failing(inner, best.structure, band):
+                forward_search(inner, completion=False)     # a dropped effect is not offered
             rounds.append((inner.current.fit.bic, best, inner))
             catalog = inner.without(correction_name(best.structure))
         if round_ == MAX_ROUNDS - 1:
