@@ -275,7 +275,7 @@ def test_an_element_c_s_fits_better_without_is_taken_out(monkeypatch, smaller_bi
     from contextlib import nullcontext
     from types import SimpleNamespace
 
-    from ipmc_sensor_ros.workbench.discovery import outside
+    from ipmc_sensor_ros.workbench.discovery import prune
 
     values = {'low_pass_corner_hz': 1e5, 'lead_lag_zero_hz': 5.5, 'lead_lag_pole_hz': 2.4}
     best = SimpleNamespace(structure=('low_pass', 'lead_lag'), fit=SimpleNamespace(
@@ -287,9 +287,9 @@ def test_an_element_c_s_fits_better_without_is_taken_out(monkeypatch, smaller_bi
         bic = smaller_bic if keep == ('lead_lag',) else 150.0
         return SimpleNamespace(structure=keep, fit=SimpleNamespace(bic=bic))
 
-    monkeypatch.setattr(outside, '_smaller', smaller)
-    monkeypatch.setattr(outside, 'registered', lambda structs: nullcontext())
-    got = outside._pruned(None, best, (1.0, 20.0))
+    monkeypatch.setattr(prune, 'smaller', smaller)
+    monkeypatch.setattr(prune, 'registered', lambda structs: nullcontext())
+    got = prune.pruned(None, best, (1.0, 20.0))
     assert sorted(k for _, k in tried) == [('lead_lag',), ('low_pass',)]
     assert got.structure == (expect or best.structure)
 
@@ -305,7 +305,7 @@ def test_a_low_pass_beside_a_lead_lag_is_a_twin_by_the_pole_it_takes(monkeypatch
     from contextlib import nullcontext
     from types import SimpleNamespace
 
-    from ipmc_sensor_ros.workbench.discovery import outside
+    from ipmc_sensor_ros.workbench.discovery import prune
 
     values = {'low_pass_corner_hz': 3.19, 'lead_lag_zero_hz': 7.84, 'lead_lag_pole_hz': 216.0}
     best = SimpleNamespace(structure=('low_pass', 'lead_lag'), fit=SimpleNamespace(
@@ -316,9 +316,9 @@ def test_a_low_pass_beside_a_lead_lag_is_a_twin_by_the_pole_it_takes(monkeypatch
         kept.append((keep, twins))
         return SimpleNamespace(structure=keep, fit=SimpleNamespace(bic=120.0))
 
-    monkeypatch.setattr(outside, '_smaller', smaller)
-    monkeypatch.setattr(outside, 'registered', lambda structs: nullcontext())
-    assert outside._pruned(None, best, (1.0, 20.0)).structure == ('lead_lag',)
+    monkeypatch.setattr(prune, 'smaller', smaller)
+    monkeypatch.setattr(prune, 'registered', lambda structs: nullcontext())
+    assert prune.pruned(None, best, (1.0, 20.0)).structure == ('lead_lag',)
     # the amplifier takes the low-pass's place, at its pole
     assert kept == [(('lead_lag',), [('amplifier_bandwidth', 'corner_hz', 216.0)])]
 
@@ -333,15 +333,15 @@ def test_a_smaller_c_s_starts_from_either_pole_and_the_larger_material(monkeypat
     """
     from types import SimpleNamespace
 
-    from ipmc_sensor_ros.workbench.discovery import outside
+    from ipmc_sensor_ros.workbench.discovery import prune
 
     values = {'low_pass_corner_hz': 2.44, 'lead_lag_zero_hz': 5.47, 'lead_lag_pole_hz': 1e5}
     best = SimpleNamespace(structure=('low_pass', 'lead_lag'), fit=SimpleNamespace(
         effect_values={'correction_low_pass_lead_lag': values}))
     calls = []
-    monkeypatch.setattr(outside, 'fit_structures', lambda *a, **kw: calls.append((a, kw)) or [a])
+    monkeypatch.setattr(prune, 'fit_structures', lambda *a, **kw: calls.append((a, kw)) or [a])
     view = SimpleNamespace(without=lambda name, cand: 'base without C(s)')
-    outside._smaller(view, best, ('lead_lag',), (1.0, 20.0))
+    prune.smaller(view, best, ('lead_lag',), (1.0, 20.0))
     (args, kw), = calls
     assert args[1:3] == ('base without C(s)', [('lead_lag',)]) and kw['material_from'] is best
     assert sorted(k['lead_lag_pole_hz'] for k in args[4]) == [2.44, 1e5]
@@ -353,7 +353,7 @@ def test_a_smaller_c_s_starts_from_either_pole_and_the_larger_material(monkeypat
     view = SimpleNamespace(without=lambda name, cand: base,
                            job=lambda b: lambda item: added.append((b, item)) or with_it)
     twins = [('amplifier_bandwidth', 'corner_hz', 216.0), ('time_delay', 'delay_s', 1e-3)]
-    outside._smaller(view, best, ('lead_lag',), (1.0, 20.0), twins)
+    prune.smaller(view, best, ('lead_lag',), (1.0, 20.0), twins)
     assert added == [(base, ('amplifier_bandwidth', ('corner_hz',), [[np.log(216.0)]]))]
     assert calls[-1][0][1] is with_it       # the delay was in the model already
 

@@ -12,11 +12,14 @@ implausible:
    effects stay named as they were (a delay just past its plausible range that holds an
    amplifier's lag is still the best account of the data the catalog has).
    An element of C(s) that a catalog effect is, at a value plausible for it (a low-pass that
-   an amplifier's bandwidth could be, a delay), is left to the catalog (:data:`TWINS`), and
-   an element C(s) fits better without (by BIC, refitted from where it was) is taken out.
+   an amplifier's bandwidth could be, a delay), is left to the catalog (:data:`~.prune.TWINS`), and
+   an element C(s) fits better without (by BIC, refitted from where it was) is taken out
+   (:mod:`.prune`).
 2. **Search again beside C(s).**  The baseline times C(s) (its parameters free) starts a new
    search (offset test, forward, backward, swap and exchange) on the same records: a catalog
-   effect is named only when it is significant beside C(s).  The stand-ins of the first search
+   effect is named only when it is significant beside C(s).  Each candidate starts from the
+   current model and, on its own, from the fit in which C(s) was found (its material and
+   values: C(s) refitted alone can fall into another valley).  The stand-ins of the first search
    (a delay for an AC coupling's phase lead, a 13 Hz amplifier pole for a lag network) are not.
 3. **Better than C(s) of as many parameters.**  Each effect named beside C(s) stays only when
    it is plausible and C(s) grown by as many parameters as it has -- the best structure that
@@ -42,22 +45,19 @@ from dataclasses import replace
 
 import numpy as np
 
-from ...physics.effects import effect_parameter
 from ..timefit import FitSpec
-from .correction import (AMPLIFIER, ELEMENTS, POLE_PAIR, canonical, correction_name,
-                         structures)
+from .correction import ELEMENTS, correction_name, structures
 from .correction_fit import (ALPHA0, band_hz, fit_structures, history_view, registered,
                              select_correction)
 from .fitting import evaluate, with_models
 from .forward import catalog_search, forward_search
 from .result import result
 from .offset_test import OFFSET
+from .prune import pruned
 from .significance import membership
 
-__all__ = ['outside_stage', 'TWINS', 'MAX_ROUNDS']
+__all__ = ['outside_stage', 'MAX_ROUNDS']
 
-#: elements of C(s) that a catalog effect is: element -> (effect, parameter)
-TWINS = {'low_pass': AMPLIFIER, 'delay': ('time_delay', 'delay_s')}
 #: C(s) is chosen again on top of the effects named beside it, at most this many times
 MAX_ROUNDS = 3
 
@@ -178,82 +178,13 @@ def _drop_implausible(state) -> None:
         state.adopt(wo)
 
 
-def _pruned(view, best, band):
-    """
-    C(s) less its elements that a catalog effect is, then less those it fits better without.
-
-    A low-pass whose corner an amplifier's bandwidth could be, a delay a channel skew could
-    be: the catalog effect is the same factor and takes the element's place, and a tie goes
-    to the catalog (the search beside C(s) names it if it is significant, started from
-    this fit: :attr:`~.state.SearchState.known`); a low-pass beside a lead-lag is judged by the
-    pole it takes (:func:`~.correction.canonical`: a 3.2 Hz low-pass beside a 7.8 Hz zero
-    and a 216 Hz pole is a 216 Hz amplifier beside a lag network).  Then each element is
-    taken out in turn and C(s) refitted from the values and material it had
-    (:func:`_smaller`): the lowest BIC wins, again until no removal lowers it.  The order
-    chosen by BIC from a grid of starts can keep an element that does nothing (a low-pass
-    run to its 100 kHz bound beside a lead-lag) when the smaller structure's own starts
-    ended in a worse valley.  Returns the refitted smaller C(s), ``best`` itself when
-    nothing is stripped, or None when nothing is left.
-    """
-    values = canonical(best.structure, best.fit.effect_values[correction_name(best.structure)])
-    keep = tuple(e for e in best.structure if not (
-        e in TWINS and _plausible(TWINS[e], values[ELEMENTS[e][0].name])))
-    if keep != best.structure:
-        twins = [(*TWINS[e], values[ELEMENTS[e][0].name]) for e in best.structure
-                 if e not in keep]
-        best = _smaller(view, best, keep, band, twins)
-    while best is not None:
-        elements = [e for e in best.structure if e != 'gain']
-        if len(elements) < 2:
-            return best
-        with registered([best.structure]):
-            top = min((_smaller(view, best, tuple(k for k in best.structure if k != e), band)
-                       for e in elements), key=lambda c: c.fit.bic)
-        if top.fit.bic >= best.fit.bic:
-            return best
-        best = top
-    return None
-
-
-def _smaller(view, best, keep, band, twins=()):
-    """
-    C(s) of structure ``keep`` fitted from ``best``'s values and material (None if empty).
-
-    ``twins``: ``(effect, parameter, value)`` of the catalog effects that take the place of
-    the elements taken out (each added to the model, started at the element's value, unless
-    the model has it already): the factor stays in the model C(s) is fitted in.
-
-    Also from its values with a low-pass and a lead-lag's pole exchanged (the same C(s)), so
-    that taking out either element can leave either pole (a lead-lag whose pole ran to its
-    bound beside a low-pass at the lag's pole: without the low-pass, the lead-lag takes it).
-    """
-    if not keep or keep == ('gain',):
-        return None
-    name = correction_name(best.structure)
-    values = best.fit.effect_values[name]
-    known = [values]
-    if set(POLE_PAIR) <= set(values):
-        known.append({**values, POLE_PAIR[0]: values[POLE_PAIR[1]],
-                      POLE_PAIR[1]: values[POLE_PAIR[0]]})
-    base = view.without(name, best)
-    for effect, param, value in twins:
-        if all(e != effect for e, _ in base.spec.effect_params):
-            base = view.job(base)((effect, (param,), [[float(np.log(value))]]))
-    return fit_structures(view, base, [keep], band, known, material_from=best)[0]
-
-
-def _plausible(twin, value) -> bool:
-    lo, hi = effect_parameter(*twin).typical
-    return lo <= value <= hi
-
-
 def _select(state, view, base, band):
     """C(s) on top of ``base``, pruned, scored; None unless it passes a step's rule."""
     best, tried = select_correction(view, base, band)
     if best is None:
         return None, tried
     with registered([best.structure]):
-        best = _pruned(view, best, band)
+        best = pruned(view, best, band)
     if best is None:
         return None, tried
     with registered([best.structure]):
