@@ -166,7 +166,7 @@ class Job:
         return [self.x, other]
 
     def _known_vector(self) -> list[np.ndarray]:
-        """The current vector with every value ``known`` holds (material, effects), or none."""
+        """Return the current vector with every value ``known`` holds (material, effects)."""
         if self.known is None or self.known.spec.material != self.spec.material:
             return []
         other = self.x.copy()
@@ -178,7 +178,7 @@ class Job:
         return [other]
 
     def _known_values(self, name, shape) -> list[list[float]]:
-        """The new effect's values in ``known`` (fit space), as one more start of its grid."""
+        """Return the new effect's values in ``known`` (fit space): one more start of its grid."""
         eps = () if self.known is None else self.known.spec.effect_params
         if not shape or not all((name, n) in eps for n in shape):
             return []
