@@ -358,6 +358,35 @@ def test_a_smaller_c_s_starts_from_either_pole_and_the_larger_material(monkeypat
     assert calls[-1][0][1] is with_it       # the delay was in the model already
 
 
+@pytest.mark.parametrize('refit_chi2, warm_chi2', [(10.0, 5.0), (5.0, 10.0)])
+def test_the_final_model_is_the_lower_of_its_refit_and_the_fit_beside_c_s(
+        monkeypatch, refit_chi2, warm_chi2):
+    """
+    The named effects without C(s): refitted from the baseline, or the fit beside C(s) less C(s).
+
+    Refitted effect by effect, a lag network's plugin and an amplifier ended in another valley
+    (1.24x the floor) where the fit beside C(s) was at the floor; the lower chi^2 is kept.
+    """
+    from types import SimpleNamespace
+
+    from ipmc_sensor_ros.workbench.discovery import outside
+
+    refit = SimpleNamespace(fit=SimpleNamespace(chi2=refit_chi2, bic=0.0))
+    warm = SimpleNamespace(fit=SimpleNamespace(chi2=warm_chi2, bic=0.0))
+    adopted = []
+    state = SimpleNamespace(
+        current=SimpleNamespace(error=0.02), noise_floor=0.01, steps=[], late_ties=[],
+        offset={}, record=lambda *a, **kw: None, refit_set=lambda chosen: refit,
+        without=lambda name, base: warm if base == 'inner fit' else None,
+        score=lambda c: c, adopt=adopted.append, baseline='baseline')
+    inner = SimpleNamespace(steps=[], first_ties=[], late_ties=[], offset={},
+                            chosen=[('amplifier_bandwidth', ('corner_hz',))],
+                            current='inner fit')
+    monkeypatch.setattr(outside, 'membership', lambda inner: {})
+    outside._adopt_inner(state, inner, refit, ('lead_lag',))
+    assert adopted == [refit if refit_chi2 < warm_chi2 else warm]
+
+
 def test_outside_stage_keeps_the_round_of_lowest_bic(monkeypatch):
     """
     The rounds of C(s) and the search beside it are candidates; the lowest BIC is the result.
