@@ -46,6 +46,7 @@ import itertools
 import os
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -321,13 +322,15 @@ def main(argv=None) -> int:
                     help='combinations with hydration_drift: all, only those, or none')
     ap.add_argument('--table', action='store_true', help='print the table of --out and exit')
     ap.add_argument('--plugin-dir', default=None,
-                    help='where the outside group writes its plugins (default: a temporary '
-                         'directory)')
+                    help='where the outside group writes its plugins (made if missing; default: a '
+                         'temporary directory)')
     args = ap.parse_args(argv)
     if not args.table:
         groups = set(args.only.split(','))
         run(groups, args.seeds, args.null_seeds, args.out, args.seed_first, args.first_seed,
             args.drift)
+        if args.plugin_dir:
+            Path(args.plugin_dir).mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryDirectory() as tmp:
             run_independent(groups, args.seeds, args.null_seeds, args.out,
                             args.plugin_dir or tmp, args.seed_first)
