@@ -501,9 +501,9 @@ def test_the_result_moves_to_the_deeper_valley(monkeypatch):
             out.append(SimpleNamespace(spec=spec, x=np.array([bottom]),
                                        fit=SimpleNamespace(**{**vars(cand.fit),
                                                               'chi2': chi2_of(bottom)})))
-        return out
+        return min(out, key=lambda c: c.fit.chi2, default=None)
 
-    monkeypatch.setattr(result, '_fits', local_fits)
+    monkeypatch.setattr(result, '_lowest', local_fits)
     best, scans = result._deepest(SimpleNamespace(say=lambda msg: None), cand, name)
     assert np.exp(best.x[0]) == pytest.approx(28.0) and best.fit.chi2 == -5.0
     assert min(np.exp(q[0]) for q in scans['corner_hz']) == pytest.approx(14.0, rel=0.03)
@@ -549,8 +549,8 @@ def test_a_named_amplifier_takes_back_the_pole_a_lead_lag_took(monkeypatch):
     spec = FitSpec(('diffusivity_m2_per_s',), ((name, 'lead_lag_zero_hz'),
                                                (name, 'lead_lag_pole_hz'), result.AMPLIFIER))
     refits = []
-    monkeypatch.setattr(result, '_fits', lambda inner, sp, starts: refits.append(starts) or [
-        SimpleNamespace(spec=sp, x=starts[0], fit=SimpleNamespace(chi2=100.0))])
+    monkeypatch.setattr(result, '_lowest', lambda inner, sp, starts: refits.append(starts) or
+                        SimpleNamespace(spec=sp, x=starts[0], fit=SimpleNamespace(chi2=100.0)))
     swapped = SimpleNamespace(spec=spec, x=np.log([2e-11, 27.0, 37.5, 6.86]),
                               fit=SimpleNamespace(chi2=100.0))
     got = result._amplifier_pole(None, swapped, name)

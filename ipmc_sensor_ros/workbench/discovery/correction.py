@@ -29,7 +29,7 @@ import numpy as np
 from ...physics.effects import Effect, EffectParameter, effect_parameter
 
 __all__ = ['ELEMENTS', 'PREFIX', 'POLE_PAIR', 'AMPLIFIER', 'structures', 'assign_poles',
-           'canonical', 'correction_name', 'correction_class', 'Correction']
+           'canonical', 'exchanged', 'correction_name', 'correction_class', 'Correction']
 
 #: internal effect names of C(s) start with this (never offered as catalog candidates)
 PREFIX = 'correction_'
@@ -114,12 +114,18 @@ def assign_poles(zero_hz: float, poles_hz) -> tuple[float, float]:
     return (b, a) if far else (a, b)
 
 
+def exchanged(values: dict) -> dict:
+    """Exchange the low-pass's corner and the lead-lag's pole of ``values`` (the same C(s))."""
+    low, pole = POLE_PAIR
+    return {**values, low: values[pole], pole: values[low]}
+
+
 def canonical(structure, values: dict) -> dict:
     """``values`` with a low-pass and a lead-lag's pole assigned by :func:`assign_poles`."""
     if not {'low_pass', 'lead_lag'} <= set(structure):
         return dict(values)
     pole, low = assign_poles(values['lead_lag_zero_hz'], [values[n] for n in POLE_PAIR])
-    return {**values, POLE_PAIR[0]: low, POLE_PAIR[1]: pole}
+    return exchanged(values) if values[POLE_PAIR[0]] != low else dict(values)
 
 
 def _zpk(structure, v) -> tuple[list, list, float]:

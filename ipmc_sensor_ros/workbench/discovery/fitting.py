@@ -86,6 +86,18 @@ def evaluate(prepared, spec: FitSpec, starts, folds, fold_nfev, effect=None, sha
     return held_out(prepared, c, folds, fold_nfev) if scored else c
 
 
+def lowest(prepared, spec: FitSpec, groups, folds, fold_nfev, **kw) -> Candidate | None:
+    """
+    Fit from each group of starts on its own (:func:`evaluate`, unscored); the lowest chi^2.
+
+    The first on a tie; None when there is no group.  Screened together, a start that is
+    cheaper at first can end in a higher minimum than another group's.
+    """
+    fits = (evaluate(prepared, spec, group, folds, fold_nfev, scored=False, **kw)
+            for group in groups)
+    return min(fits, key=lambda c: c.fit.chi2, default=None)
+
+
 def held_out(prepared, c: Candidate, folds, fold_nfev) -> Candidate:
     """
     Replace ``c.error`` (in-sample) by the held-out error.
@@ -150,9 +162,8 @@ class Job:
         groups = [[np.concatenate([x, np.asarray(c, float)]) for x in group for c in grid]
                   for group in ([self._materials(name)] + [[v] for v in self._known_vector()])]
         groups += [[np.asarray(v, float)] for v in (more[1] if len(more) > 1 else ())]
-        fits = [evaluate(prepared, spec, group, self.folds, self.fold_nfev, name, shape,
-                         self.priors, scored=False) for group in groups]
-        return min(fits, key=lambda c: c.fit.chi2)
+        return lowest(prepared, spec, groups, self.folds, self.fold_nfev, effect=name,
+                      shape=shape, priors=self.priors)
 
     def _materials(self, name) -> list[np.ndarray]:
         """Return the current vector and (``Effect.fitted_material``) the one with its material."""

@@ -49,7 +49,7 @@ from ..timefit import FitSpec
 from .correction import ELEMENTS, correction_name, structures
 from .correction_fit import (ALPHA0, band_hz, fit_structures, history_view, registered,
                              select_correction)
-from .fitting import evaluate, with_models
+from .fitting import lowest, with_models
 from .forward import catalog_search, forward_search
 from .result import result
 from .offset_test import OFFSET
@@ -76,7 +76,7 @@ def _beside(view, best):
     valley, and C(s) with another material can start a fit that ends in another (a lag
     network at the floor beside a 2.6 Hz low-pass restarted at 1.5x the floor; screened by
     their cost at the start, the baseline's material was refined and a lag network fitted
-    beside a delay at the floor ended at 2.8x the floor without it).
+    beside a delay at the floor ended at 3.8x the floor without it).
     """
     name = correction_name(best.structure)
     values = best.fit.effect_values[name]
@@ -91,9 +91,8 @@ def _beside(view, best):
         own = [n_mat + best.spec.effect_params.index(ep) for ep in base.spec.effect_params]
         starts.insert(0, np.concatenate([best.x[:n_mat], best.x[own], tail]))
     prepared = with_models(view.prepared, models)
-    start = view.score(min((evaluate(prepared, spec, [x], view.folds, view.settings.fold_nfev,
-                                     priors=view.priors, scored=False) for x in starts),
-                           key=lambda c: c.fit.chi2))
+    start = view.score(lowest(prepared, spec, [[x] for x in starts], view.folds,
+                              view.settings.fold_nfev, priors=view.priors))
     inner = replace(view, baseline=start, chosen=[], steps=[], first_ranking=[],
                     first_ties=[], late_ties=[], replaced=set(), offset={}, kept_by={},
                     known=best)

@@ -9,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from ...physics.effects import effect_parameter
-from .correction import AMPLIFIER, ELEMENTS, POLE_PAIR, canonical, correction_name
+from .correction import (AMPLIFIER, ELEMENTS, POLE_PAIR, canonical, correction_name,
+                         exchanged)
 from .correction_fit import fit_structures, registered
 
 __all__ = ['pruned', 'smaller', 'TWINS']
@@ -73,8 +74,7 @@ def smaller(view, best, keep, band, twins=()):
     values = best.fit.effect_values[name]
     known = [values]
     if set(POLE_PAIR) <= set(values):
-        known.append({**values, POLE_PAIR[0]: values[POLE_PAIR[1]],
-                      POLE_PAIR[1]: values[POLE_PAIR[0]]})
+        known.append(exchanged(values))
     base = view.without(name, best)
     for effect, param, value in twins:
         if all(e != effect for e, _ in base.spec.effect_params):

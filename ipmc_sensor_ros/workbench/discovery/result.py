@@ -17,7 +17,7 @@ import numpy as np
 
 from .correction import (AMPLIFIER, POLE_PAIR, Correction, assign_poles, canonical,
                          correction_name)
-from .fitting import evaluate
+from .fitting import lowest
 from .interval import profile_interval, profile_scan, scan_minima
 
 __all__ = ['result', 'CONVERGED_NFEV', 'RESTART_GAIN', 'MAX_RESTARTS']
@@ -46,13 +46,13 @@ def _converged(inner):
                       for n in cur.spec.material])
     starts = [cur.x, np.concatenate([inner.baseline.x[:n_mat], cur.x[n_mat:]]),
               np.concatenate([nominal, cur.x[n_mat:]])]
-    return min(_fits(inner, cur.spec, starts), key=lambda c: c.fit.chi2)
+    return _lowest(inner, cur.spec, starts)
 
 
-def _fits(inner, spec, starts):
-    return [evaluate(inner.prepared, spec, [x], inner.folds, inner.settings.fold_nfev,
-                     priors=inner.priors, max_nfev=CONVERGED_NFEV, scored=False)
-            for x in starts]
+def _lowest(inner, spec, starts):
+    """Fit to convergence from each start on its own; the lowest chi^2 (None: no start)."""
+    return lowest(inner.prepared, spec, [[x] for x in starts], inner.folds,
+                  inner.settings.fold_nfev, priors=inner.priors, max_nfev=CONVERGED_NFEV)
 
 
 def _deepest(inner, cand, name):
@@ -70,7 +70,7 @@ def _deepest(inner, cand, name):
         if moves == MAX_RESTARTS:
             break           # the scans returned are those of the fit returned
         starts = [x for p in params for x in scan_minima(scans[p], cand.x)]
-        best = min(_fits(inner, cand.spec, starts), key=lambda c: c.fit.chi2, default=None)
+        best = _lowest(inner, cand.spec, starts)
         if best is None or best.fit.chi2 >= cand.fit.chi2 - RESTART_GAIN:
             break
         cand = best
@@ -97,7 +97,7 @@ def _amplifier_pole(inner, cand, name):
         return cand
     x = np.array(cand.x, float)
     x[i], x[j] = cand.x[j], cand.x[i]
-    (refit,) = _fits(inner, cand.spec, [x])
+    refit = _lowest(inner, cand.spec, [x])
     return refit if refit.fit.chi2 <= cand.fit.chi2 + RESTART_GAIN else cand
 
 
