@@ -182,6 +182,50 @@ def test_hum_is_measured_modelled_and_does_not_hide_rest(reduced):
     assert abs(st['offset_a'] - 5e-9) < 3e-9
 
 
+@pytest.mark.parametrize('hum_hz, hum_a, noise, offset', [
+    (59.85, 150e-9, 20e-9, 10e-9),    # hum 7x the noise, 0.15 Hz off nominal, not learned
+    (None, 0.0, 0.2e-9, 19e-9),       # a low-noise DAQ: offset 95x the noise, not learned
+])
+def test_a_still_start_is_a_rest_from_the_first_full_window(reduced, hum_hz, hum_a, noise,
+                                                            offset):
+    """The first window's samples are tested against its line fit and one unknown offset."""
+    rng = np.random.default_rng(5)
+    t = np.arange(int(1.0 * FS)) / FS
+    y = offset + noise * rng.standard_normal(t.size)
+    if hum_hz:
+        y += hum_a * np.sin(2 * np.pi * hum_hz * t + 0.3)
+    est = KalmanEstimator(reduced, FS, mains_hz=0 if hum_hz is None else 'auto')
+    still = est.estimate(y).still
+    n = est.model.config.rest_window_s * FS
+    # rest from the sample that fills the window on: before, the first window's raw samples
+    # (hum) or the same unknown offset summed sample by sample (CUSUM) failed the test, and a
+    # crank starting 70 ms later found no rest to leave (the working point stayed)
+    assert not still[:int(n) - 1].any()
+    assert still[int(n) - 1:].mean() > 0.99
+
+
+def test_a_rest_takes_the_offset_from_the_window_that_found_it(reduced):
+    """
+    The window's samples are the offset's evidence the moment a rest begins.
+
+    Before it, a still start under the motion prior leaves the offset at its prior (a steady
+    current is also a slow motion); a crank starting a few ms later then set it.
+    """
+    rng = np.random.default_rng(11)
+    noise, offset = 50e-9, 19e-9
+    est = KalmanEstimator(reduced, FS, mains_hz=0)
+    n = int(round(est.model.config.rest_window_s * FS))
+    y = offset + noise * rng.standard_normal(n)
+    est.estimate(y[:n - 1])
+    assert est.status()['offset_std_a'] > 0.9 * est.model.config.offset_prior_a
+    est.estimate(y[n - 1:])
+    st = est.status()
+    assert st['at_rest']
+    # the mean of n samples: std noise / sqrt(n) (3.5 nA), the noise measured within 10 %
+    assert st['offset_std_a'] == pytest.approx(noise / math.sqrt(n), rel=0.15)
+    assert abs(st['offset_a'] - offset) < 4 * noise / math.sqrt(n)
+
+
 def test_bridged_samples_are_predicted_not_shifted(reduced):
     """Missing samples (steps > 1) keep the time base: the estimate matches the full record."""
     ssm = StateSpaceModel(reduced, EstimatorConfig(), FS)

@@ -10,6 +10,8 @@ its samples; there is no second implementation)::
     rest test on the window of r = i - lines(x-)        (:mod:`.rest`)
     update    nu = i - c x-,  S = c P- c' + R,  K = P- c' / S,  x = x- + K nu,
               P = P- - K S K'
+    a rest    the window's mean current (less its fit of the lines) = offset at the
+    begins    window's centre, within R/N (:meth:`KalmanFilter._window_offset`)
     at rest   velocity = 0, acceleration = 0, motion current = 0, periodic motion = 0
               (pseudo-measurements, :mod:`.rest`); working point = w (its prior released
               first when the tip moved since the working point was last set:
@@ -71,16 +73,20 @@ class FilterState:
     line_sums: np.ndarray = field(default=None, repr=False)
     phase: np.ndarray = field(default=None, repr=False)
     phases: np.ndarray = field(default=None, repr=False)
+    #: the filter's offset variance (A^2) before each window sample, in the window's slots
+    window_offset_var: np.ndarray = field(default=None, repr=False)
     total: float = 0.0
     total_sq: float = 0.0
     moved: bool = False
     quiet: int = 0
-    cusum: tuple = (0.0, 0.0)
+    #: the rest test's CUSUM and still-sensor offset (:meth:`.RestTest.sample_ok`); before
+    #: the window is full, the filter's offset before its first sample
+    rest_track: tuple | None = None
 
     def copy(self) -> 'FilterState':
         return replace(self, x=self.x.copy(), P=self.P.copy(), window=self.window.copy(),
                        line_sums=self.line_sums.copy(), phase=self.phase.copy(),
-                       phases=self.phases.copy())
+                       phases=self.phases.copy(), window_offset_var=self.window_offset_var.copy())
 
 
 @dataclass
@@ -152,12 +158,48 @@ class KalmanFilter:
         """One sample's turn e^{-i W_k / fs} of each rest-test line."""
         return self._rot
 
+    def _window_residuals(self, win, phases, sums, pos) -> np.ndarray:
+        """Return the full window's samples less its fit of the lines, oldest first."""
+        order = (pos + np.arange(win.size)) % win.size
+        if not self._rot.size:
+            return win[order]
+        return win[order] - 2.0 / win.size * (phases[order].conj() @ sums).real
+
+    def _window_offset(self, x, P, win, phases, sums, total, first_var, noise):
+        """
+        Update (x, P) with the window's mean current as a measurement of the offset.
+
+        Applied when a rest begins: the rest test has just found the window's N samples to be
+        offset + lines + white noise, so their mean less the window's fit of the lines is the
+        offset at the window's centre, b - d (N - 1) / (2 fs), within R / N.  The filter has
+        used these samples already, under its motion model, which takes little of b from
+        them (a steady current is also a slow motion: a still start leaves P_b at its prior);
+        the information on b it took, 1/P_b now less 1/P_b before the window's first sample
+        (``first_var``, A^2), is taken off the measurement's, so no sample counts twice.
+        """
+        m, n = self.model, win.size
+        fits = (2.0 / n * float(np.vdot(phases.sum(axis=0), sums).real) if self._rot.size
+                else 0.0)
+        sb, sd = float(m.scale[m.ib]), float(m.scale[m.ib + 1])
+        info = n / noise - (1.0 / (float(P[m.ib, m.ib]) * sb * sb) - 1.0 / first_var)
+        if info <= 0.0:
+            return x, P
+        row = np.zeros(m.size)
+        row[m.ib], row[m.ib + 1] = sb, -sd * (n - 1) / (2.0 * m.sample_rate_hz)
+        Pc = P @ row
+        S = float(row @ Pc) + 1.0 / info
+        x = x + Pc * (((total - fits) / n - float(row @ x)) / S)
+        g = Pc / math.sqrt(S)
+        return x, P - g[:, None] * g
+
     def initial_state(self) -> FilterState:
         x, P = self.model.prior()
         k = len(self.rest_lines_hz)
+        pb = P[self.model.ib, self.model.ib] * self.model.scale[self.model.ib] ** 2
         return FilterState(x, P, self.model.config.current_noise_a ** 2,
                            np.zeros(self.rest.n), line_sums=np.zeros(k, complex),
-                           phase=np.ones(k, complex), phases=np.ones((self.rest.n, k), complex))
+                           phase=np.ones(k, complex), phases=np.ones((self.rest.n, k), complex),
+                           window_offset_var=np.full(self.rest.n, pb))
 
     def deflection(self, state: FilterState) -> tuple[float, float]:
         """(w, its standard deviation) of a state, m."""
@@ -193,16 +235,18 @@ class KalmanFilter:
         sw, sb = float(m.scale[iw]), float(m.scale[ib])
         c, hold, rows, alpha, rot = m.c, m.hold_variance, self._rest_rows, self._alpha, self._rot
         nw = rest.n
-        x, P, win, sums, phase, phases = (state.x, state.P, state.window, state.line_sums,
-                                          state.phase, state.phases)
+        x, P, win, sums, phase, phases, bvar = (state.x, state.P, state.window,
+                                                state.line_sums, state.phase, state.phases,
+                                                state.window_offset_var)
         if copy:
-            x, P, win, sums, phase, phases = (a.copy() for a in (x, P, win, sums, phase, phases))
+            x, P, win, sums, phase, phases, bvar = (
+                a.copy() for a in (x, P, win, sums, phase, phases, bvar))
         count, pos, total, total_sq = (state.window_count, state.window_pos, state.total,
                                        state.total_sq)
         noise, weight = state.noise_var_a2, state.noise_weight
         samples, contiguous, still, moved, quiet = (state.samples, state.contiguous, state.still,
                                                     state.moved, state.quiet)
-        cusum = state.cusum
+        track = state.rest_track
         out_w, out_s, out_still = np.empty(n), np.empty(n), np.empty(n, dtype=bool)
         F, Q = m.discrete(1)
         last_steps = 1
@@ -227,14 +271,19 @@ class KalmanFilter:
             if pos == nw:               # exact sums once per window (no drift of the running ones)
                 pos = 0
                 total, total_sq = float(win.sum()), float(win @ win)
+            filled = count == nw - 1
             count = min(count + 1, nw)
             b, pb = float(x[ib]) * sb, float(P[ib, ib]) * sb * sb
-            if rot.size and count == nw:     # this sample less the window's fit of the lines
-                r = yk - 2.0 / nw * float(np.vdot(phase, sums).real)
-            else:
-                r = yk
-            ok, cusum = rest.sample_ok(r, b, pb, noise, cusum)
-            quiet = quiet + 1 if ok else 0
+            bvar[pos - 1] = pb
+            if count < nw:              # tested once the window's fit of the lines exists
+                track = track or (0.0, 0.0, b, pb)
+            elif filled:
+                quiet, track = rest.first_window(self._window_residuals(win, phases, sums, pos),
+                                                 *(track or (0.0, 0.0, b, pb))[2:], noise)
+            else:                       # this sample less the window's fit of the lines
+                r = yk - 2.0 / nw * float(np.vdot(phase, sums).real) if rot.size else yk
+                ok, track = rest.sample_ok(r, track, b, pb, noise, still)
+                quiet = quiet + 1 if ok else 0
             if count == nw:
                 energy = 2.0 / nw * float(np.vdot(sums, sums).real) if rot.size else 0.0
                 was_still = still
@@ -244,9 +293,10 @@ class KalmanFilter:
                 # coming motion is unknown) and when a new hold begins (it is where the tip is
                 # held); a record that starts at rest keeps its rest position until it moves
                 release = was_still != still and (not still or moved)
+                begins = still and not was_still
                 moved = moved or not still
             else:
-                still = release = False
+                still = release = begins = False
             if samples:
                 P = F @ P @ F.T
                 P = 0.5 * (P + P.T) + Q     # symmetric to the bit (the updates keep it so)
@@ -279,6 +329,8 @@ class KalmanFilter:
                 weight = (1.0 - alpha) * weight
                 noise = max((weight * noise + value) / (weight + 1.0), NOISE_FLOOR_A ** 2)
                 weight += 1.0
+            if begins:                  # what the window says of the offset
+                x, P = self._window_offset(x, P, win, phases, sums, total, bvar[pos], noise)
             if still:                   # the rest pseudo-measurements (velocity, ... = 0)
                 for row_c, var in rows:
                     Pc = P @ row_c
@@ -293,7 +345,7 @@ class KalmanFilter:
             out_s[k] = math.sqrt(max(P[iw, iw], 0.0)) * sw
             out_still[k] = still
         new = FilterState(x, P, noise, win, count, pos, still, samples, contiguous, weight,
-                          sums, phase, phases, total, total_sq, moved, quiet, cusum)
+                          sums, phase, phases, bvar, total, total_sq, moved, quiet, track)
         return new, out_w, out_s, out_still
 
 
@@ -341,9 +393,11 @@ def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> Fil
     out = replace(init, x=x, P=P,
                   noise_var_a2=state.noise_var_a2, samples=state.samples,
                   contiguous=state.contiguous, noise_weight=state.noise_weight,
-                  still=state.still, moved=state.moved, quiet=state.quiet, cusum=state.cusum)
+                  still=state.still, moved=state.moved, quiet=state.quiet,
+                  rest_track=state.rest_track)
     if state.window.size != new.rest.n:
-        return replace(out, still=False, moved=True)    # the rest test's window restarts
+        return replace(out, still=False, moved=True, quiet=0,    # the rest test's window
+                       rest_track=None)                          # restarts
     # the window carries over; its sliding DFT is recomputed for the new model's rest lines
     # (the window's samples taken as consecutive, the newest with phase 1)
     n = state.window.size
@@ -352,6 +406,7 @@ def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> Fil
     phases[age] = new.rotation[None, :] ** -np.arange(n)[:, None]
     sums = state.window @ phases
     return replace(out, window=state.window.copy(), window_count=state.window_count,
+                   window_offset_var=state.window_offset_var.copy(),
                    window_pos=state.window_pos, total=state.total, total_sq=state.total_sq,
                    line_sums=sums, phase=np.ones(len(new.rest_lines_hz), complex),
                    phases=phases)

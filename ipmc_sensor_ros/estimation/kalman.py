@@ -321,9 +321,11 @@ class KalmanEstimator:
             recent = np.asarray(state['recent'], dtype=float)
             filt = self._model_filter(line, motion)
             log = StretchLog.restored(state['stretches'], self._model_filter)
+            window_slots = fs.window_offset_var.shape
         except (KeyError, TypeError, ValueError, AttributeError):
             raise ParameterError('not a state of this Kalman estimator') from None
-        if fs.x.shape != (filt.model.size,) or recent.shape != self._recent.shape:
+        if (fs.x.shape != (filt.model.size,) or recent.shape != self._recent.shape
+                or window_slots != fs.window.shape):
             raise ParameterError('state was saved from a different estimator design')
         self._flush_lag()
         self._filter, self._log = filt, log

@@ -15,9 +15,16 @@ the filter predicts them), two chi-square tests at the level ``rest_false_alarm`
   hide a rest, and a slow deflection ramp, a steady current the spread cannot see, is
   motion).
 
-and every sample of the window must agree with rest on its own: (r_k - b)^2 < chi2_1 (R + P_b)
-(a motion that starts ends the rest at its first telling sample, before the pseudo-measurements
-below could push its current into the offset; ``RestTest.sample_ok``).
+and every sample of the window must agree with rest on its own (a motion that starts ends the
+rest at its first telling sample, before the pseudo-measurements below could push its current
+into the offset; ``RestTest.sample_ok``): its innovation z_k = (r_k - b_k) / sqrt(R + P_k)
+against the offset b_k (variance P_k) a still sensor would have, from the filter's own b and
+P_b and then learned from each sample that agreed (a scalar Kalman filter of the offset), is
+within chi2_1 and its two-sided CUSUM within the level for the same false-alarm rate.  Under
+rest these innovations are independent N(0, 1), so an offset not learned yet is one offset,
+not evidence summed sample by sample; at rest the filter itself is that still sensor's filter,
+and its b and P_b are used.  The window's first samples are tested once the window is full,
+against its fit of the lines (before it a hum would fail every sample).
 
 When all pass, the filter applies the zero-velocity pseudo-measurements (as zero-velocity
 updates in foot-mounted inertial navigation): the tip velocity and the motion's current are
@@ -48,18 +55,42 @@ class RestTest:
     level_limit: float
     cusum_limit: float = math.inf
 
-    def sample_ok(self, r: float, offset_a: float, offset_var_a2: float, noise_var_a2: float,
-                  cusum: tuple[float, float]) -> tuple[bool, tuple[float, float]]:
+    def sample_ok(self, r: float, track: tuple | None, offset_a: float, offset_var_a2: float,
+                  noise_var_a2: float, at_rest: bool = False) -> tuple[bool, tuple | None]:
         """
-        Test one sample r against a still sensor (offset + noise); return (ok, new CUSUM).
+        Test one sample r against a still sensor (offset + noise); return (ok, new track).
 
-        A sample that fails restarts the CUSUM.
+        ``track``: (CUSUM up, CUSUM down, the still sensor's offset, its variance) after the
+        samples that agreed so far, or None to start from the filter's ``offset_a`` and
+        ``offset_var_a2`` (used as they are ``at_rest``).  A sample that fails returns None.
         """
-        z = (r - offset_a) / math.sqrt(noise_var_a2 + offset_var_a2)
-        up = max(0.0, cusum[0] + z - CUSUM_DRIFT)
-        down = max(0.0, cusum[1] - z - CUSUM_DRIFT)
-        ok = z * z <= self.level_limit and up <= self.cusum_limit and down <= self.cusum_limit
-        return ok, ((up, down) if ok else (0.0, 0.0))
+        if track is None:
+            track = (0.0, 0.0, offset_a, offset_var_a2)
+        elif at_rest:
+            track = (track[0], track[1], offset_a, offset_var_a2)
+        up, down, b, pb = track
+        s = noise_var_a2 + pb
+        z = (r - b) / math.sqrt(s)
+        up = max(0.0, up + z - CUSUM_DRIFT)
+        down = max(0.0, down - z - CUSUM_DRIFT)
+        if z * z > self.level_limit or up > self.cusum_limit or down > self.cusum_limit:
+            return False, None
+        return True, (up, down, b + pb / s * (r - b), pb * noise_var_a2 / s)
+
+    def first_window(self, residuals, offset_a: float, offset_var_a2: float,
+                     noise_var_a2: float) -> tuple[int, tuple | None]:
+        """
+        Test a full window's samples, oldest first; return (quiet, track) after the newest.
+
+        ``quiet``: how many of the newest samples agreed in a row; ``track`` as
+        :meth:`sample_ok` returns it.  The offset (and variance) is the filter's before the
+        window's first sample; a sample that fails restarts from it.
+        """
+        quiet, track = 0, None
+        for r in residuals:
+            ok, track = self.sample_ok(float(r), track, offset_a, offset_var_a2, noise_var_a2)
+            quiet = quiet + 1 if ok else 0
+        return quiet, track
 
     @classmethod
     def design(cls, window_s: float, sample_rate_hz: float, false_alarm: float,
