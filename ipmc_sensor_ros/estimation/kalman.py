@@ -31,9 +31,10 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..lti.reduction import ReducedModel
+from .carry import carry_state
 from .config import EstimatorConfig
 from .core import Estimate
-from .filter import FilterState, ForwardRecord, KalmanFilter, carry_state
+from .filter import FilterState, ForwardRecord, KalmanFilter
 from .fixed_lag import lag_smoother
 from .lines import NOMINAL_LINES_HZ, measure_line
 from .motionline import MOTION_LONGEST_S, measure_motion, measure_recent

@@ -23,7 +23,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .filter import FilterState, KalmanFilter, carry_state
+from .carry import carry_state
+from .filter import FilterState, KalmanFilter
 from .motionline import MOTION_WOBBLE
 
 __all__ = ['Stretch', 'StretchLog', 'refilter', 'same_motion']
