@@ -169,12 +169,16 @@ class _State:
 
 
 def _log_after(stretches):
-    """Return a StretchLog after stretches of (samples, rest, measured Hz or None) each."""
+    """
+    Return a StretchLog after stretches of (samples, rest, measured Hz or None) each.
+
+    An optional fourth item is the lowest fundamental the measurement could see, Hz.
+    """
     log = StretchLog('filter', _State())
-    for i, (n, rest, measured) in enumerate(stretches):
+    for i, (n, rest, measured, *floor) in enumerate(stretches):
         log.add([0.0] * n, [1] * n, rest)
         if i < len(stretches) - 1:
-            log.span_for(measured, never_rested=False)
+            log.span_for(measured, False, *floor)
             log.mark('filter', _State())
     return log
 
@@ -198,6 +202,16 @@ def test_a_periodic_model_needs_two_stretches_in_a_row_or_a_start_in_motion():
     assert log.span_for(5.0, never_rested=False) is None
     log = _log_after([(500, True, None), (500, False, 5.0), (2000, False, None)])
     assert log.span_for(5.0 * (1 + 2 * MOTION_WOBBLE), never_rested=False) is None
+    # a check that found none on 1 s of current (4 periods: 4 Hz and up) does not speak of a
+    # 2 Hz crank: moving since the start, the 2 Hz of the next check decides alone ...
+    log = _log_after([(1000, False, 0.0, 4.0), (2000, False, None)])
+    span = log.span_for(2.0, never_rested=True, floor_hz=4 / 3)
+    assert span is not None and len(span.y) == 3000
+    log = _log_after([(500, True, None), (500, False, 0.0, 4.0), (2000, False, None)])
+    assert log.span_for(2.0, never_rested=False, floor_hz=4 / 3) is None
+    # ... while one that could have seen it (down to 1 Hz) and found none contradicts it
+    log = _log_after([(4000, False, 0.0, 1.0), (2000, False, None)])
+    assert log.span_for(2.0, never_rested=True, floor_hz=4 / 6) is None
     # the motion gone twice in a row (0 Hz) is a change too, rest or not
     log = _log_after([(500, True, None), (500, False, 0.0), (2000, True, None)])
     assert log.span_for(0.0, never_rested=False) is not None

@@ -37,7 +37,7 @@ from .core import Estimate
 from .filter import FilterState, ForwardRecord, KalmanFilter
 from .fixed_lag import lag_smoother
 from .lines import NOMINAL_LINES_HZ, measure_line
-from .motionline import MOTION_LONGEST_S, measure_motion, measure_recent
+from .motionline import MOTION_LONGEST_S, MOTION_PERIODS, measure_motion, measure_recent
 from .periodic import StretchLog, refilter, same_motion
 from .smoother import smooth
 from .statespace import StateSpaceModel
@@ -247,7 +247,8 @@ class KalmanEstimator:
     def _check_motion(self, recent: np.ndarray) -> None:
         """Measure the periodic motion; a new one is modelled from its span (:mod:`.periodic`)."""
         f0 = measure_recent(recent, self.sample_rate_hz, self.model)
-        span = self._log.span_for(f0, self._first_rest_n is None)
+        floor = MOTION_PERIODS / min(recent.size / self.sample_rate_hz, MOTION_LONGEST_S)
+        span = self._log.span_for(f0, self._first_rest_n is None, floor)
         if span is None or same_motion(f0, self.model.motion_hz):
             return
         filt = self._new_filter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,

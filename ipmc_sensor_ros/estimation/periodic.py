@@ -8,7 +8,10 @@ before 1 s of current is too short to judge, and its stretch runs on into the ne
 model changes (periodic states at that fundamental appear, move by more than
 :data:`~.motionline.MOTION_WOBBLE` of it, a motor's speed wobble that the periodic states'
 walk follows, or go: :mod:`.statespace`) when the measurement differs from the model and
-agrees with the one of the check before: two stretches in a row say so.  Periodic
+agrees with the one of the check before: two stretches in a row say so.  A check that
+found none speaks only of the fundamentals it could see (at least
+:data:`~.motionline.MOTION_PERIODS` periods in the current it judged): a 2 Hz crank is not
+contradicted by a check on the first second.  Periodic
 states also need a last stretch without rest (a motion starting or stopping is not
 periodic).  The first stretch judged needs no earlier one when the sensor has not rested
 since the start (moving since power-on).
@@ -16,7 +19,7 @@ since the start (moving since power-on).
 The new model takes over from the start of its span: the last stretch, or the last two when
 the tip has not rested since the start (it moved periodically from the start).  The span's
 samples are filtered again under it from the state there (:class:`StretchLog` keeps states
-and samples; :func:`~.filter.carry_state` joins the new periodic states to what was known),
+and samples; :func:`~.carry.carry_state` joins the new periodic states to what was known),
 so its state now is as if it had been chosen then; what was published stays.
 """
 from __future__ import annotations
@@ -47,6 +50,8 @@ class Stretch:
     steps: list = field(default_factory=list)
     rest: bool = False
     measured_hz: float | None = None
+    #: the lowest fundamental the measurement could see, Hz
+    floor_hz: float = 0.0
 
 
 class StretchLog:
@@ -79,7 +84,7 @@ class StretchLog:
         """Return the log as plain values (models by lines and fundamental; states copied)."""
         return tuple(None if st is None else (
             st.filter.model.fundamentals_hz, st.filter.model.motion_hz, st.state.copy(),
-            list(st.y), list(st.steps), st.rest, st.measured_hz)
+            list(st.y), list(st.steps), st.rest, st.measured_hz, st.floor_hz)
             for st in (self.earlier, self.current))
 
     @classmethod
@@ -90,30 +95,32 @@ class StretchLog:
             if item is None:
                 parts.append(None)
                 continue
-            lines, motion, state, y, steps, rest, measured = item
+            lines, motion, state, y, steps, rest, measured, floor = item
             filt = make_filter(tuple(lines), float(motion))
             if state.x.shape != (filt.model.size,):
                 raise ValueError('a stretch state of another design')
             parts.append(Stretch(filt, state.copy(), list(y), list(steps), bool(rest),
-                                 None if measured is None else float(measured)))
+                                 None if measured is None else float(measured), float(floor)))
         log = cls.__new__(cls)
         log.earlier, log.current = parts
         if log.current is None:
             raise ValueError('no current stretch')
         return log
 
-    def span_for(self, measured_hz: float, never_rested: bool) -> Stretch | None:
+    def span_for(self, measured_hz: float, never_rested: bool,
+                 floor_hz: float = 0.0) -> Stretch | None:
         """
         Record the current stretch's measurement; return the span a new model starts at.
 
-        The model has that fundamental (0: none); None: it may not take over (module
-        docstring).
+        The model has that fundamental (0: none, down to ``floor_hz``); None: it may not
+        take over (module docstring).
         """
         cur, before = self.current, self.earlier
-        cur.measured_hz = measured_hz
+        cur.measured_hz, cur.floor_hz = measured_hz, floor_hz
         if measured_hz is None or (measured_hz and cur.rest):
             return None
-        if before is None or before.measured_hz is None:     # the first stretch judged
+        if (before is None or before.measured_hz is None         # the first stretch judged
+                or before.measured_hz == 0.0 and measured_hz < before.floor_hz):
             if not never_rested:
                 return None
         elif not same_motion(measured_hz, before.measured_hz):
