@@ -70,7 +70,12 @@ def test_hindsight_narrows_the_uncertainty_of_the_same_model():
     est = run_estimator(record)
     smooth = run_estimator(record, causal=False)
     assert np.array_equal(smooth.row_index, est.row_index)
-    assert np.all(smooth.std_m <= est.std_m * (1 + 1e-9))
+    # the same model up to what the live filter changes as it goes (its model rebuilt at the
+    # line checks): from the hold at 9.6 s, where each pass takes the rest window's mean as
+    # an offset measurement with the noise it measured (0.5 % apart), the two passes' std
+    # differ by 2e-5 relative at the record's end, where smoothed = forward filtered; the
+    # periodic-state mismatch this guards against is a few percent
+    assert np.all(smooth.std_m <= est.std_m * (1 + 1e-4))
 
 
 def test_one_sample_path_equals_blocks():
