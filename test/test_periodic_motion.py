@@ -215,3 +215,5 @@ def test_a_periodic_model_needs_two_stretches_in_a_row_or_a_start_in_motion():
     # the motion gone twice in a row (0 Hz) is a change too, rest or not
     log = _log_after([(500, True, None), (500, False, 0.0), (2000, True, None)])
     assert log.span_for(0.0, never_rested=False) is not None
+    log = _log_after([(500, True, None), (500, False, 0.0, 4.0), (2000, True, None)])
+    assert log.span_for(0.0, never_rested=False, floor_hz=2.0) is not None

@@ -120,7 +120,7 @@ class StretchLog:
         if measured_hz is None or (measured_hz and cur.rest):
             return None
         if (before is None or before.measured_hz is None         # the first stretch judged
-                or before.measured_hz == 0.0 and measured_hz < before.floor_hz):
+                or before.measured_hz == 0.0 and 0.0 < measured_hz < before.floor_hz):
             if not never_rested:
                 return None
         elif not same_motion(measured_hz, before.measured_hz):
