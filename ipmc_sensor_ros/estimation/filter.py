@@ -10,8 +10,8 @@ its samples; there is no second implementation)::
     rest test on the window of r = i - lines(x-)        (:mod:`.rest`)
     update    nu = i - c x-,  S = c P- c' + R,  K = P- c' / S,  x = x- + K nu,
               P = P- - K S K'
-    a rest    the window's mean current (less its fit of the lines) = offset at the
-    begins    window's centre, within R/N (:meth:`KalmanFilter._window_offset`)
+    a rest    the window's mean current = offset at the window's centre + the lines' mean
+    begins    over the window, within R/N (:meth:`KalmanFilter._window_offset`)
     at rest   velocity = 0, acceleration = 0, motion current = 0, periodic motion = 0
               (pseudo-measurements, :mod:`.rest`); working point = w (its prior released
               first when the tip moved since the working point was last set:
