@@ -196,9 +196,8 @@ class KalmanFilter:
         row = self._window_lines.copy()
         row[m.ib] = sb
         row[m.ib + 1] = -float(m.scale[m.ib + 1]) * (n - 1) / (2.0 * m.sample_rate_hz)
-        mean = total / n
-        if not m.lines_hz and self._rot.size:
-            mean -= 2.0 / n * float(np.vdot(phases.sum(axis=0), sums).real)
+        mean = (total / n if m.lines_hz
+                else float(self._window_residuals(win, phases, sums, 0).mean()))
         Pc = P @ row
         S = float(row @ Pc) + 1.0 / info
         x = x + Pc * ((mean - float(row @ x)) / S)
