@@ -485,6 +485,38 @@ def test_profile_scan_finds_a_second_valley_and_the_interval_holds_it(monkeypatc
     assert lo == pytest.approx(25.0, rel=1e-9)
 
 
+def test_the_intervals_of_a_two_parameter_c_s_are_simultaneous(monkeypatch):
+    """
+    A lead-lag is one claim about its zero and its pole: each interval is at 97.5 %.
+
+    With chi^2 = 1e4 (x - a)^2 in the log of the zero (the pole free), the interval ends where
+    the rise reaches the Bonferroni level chi2_1(1 - 0.05/2) = 5.024, a +- sqrt(5.024e-4);
+    one parameter's own 95 % level (3.84) would end it at a +- 0.0196, 13 % narrower.
+    """
+    from types import SimpleNamespace
+
+    from ipmc_sensor_ros.workbench.discovery import interval
+    from ipmc_sensor_ros.workbench.timefit import FitSpec
+
+    a = np.log(20.0)
+    monkeypatch.setattr(interval, '_profile_chi2',
+                        lambda state, cand, e, p, value, start, spec: (
+                            1e4 * (np.log(value) - a) ** 2 if p == 'lead_lag_zero_hz' else 0.0,
+                            start))
+    spec = FitSpec((), (('c', 'lead_lag_zero_hz'), ('c', 'lead_lag_pole_hz')))
+    fit = SimpleNamespace(chi2=0.0, n_rows=10_000, n_params=2, covariance=np.eye(2) * 1e-4)
+    cand = SimpleNamespace(spec=spec, x=np.array([a, np.log(5.0)]), fit=fit)
+    monkeypatch.setattr(interval, 'effect_parameter',
+                        lambda e, p: SimpleNamespace(lower=1e-3, upper=1e5))
+    assert interval.interval_level(1) == pytest.approx(3.841, abs=1e-3)
+    assert interval.interval_level(2) == pytest.approx(5.024, abs=1e-3)
+    lo, hi = interval.profile_interval(None, cand, 'c', 'lead_lag_zero_hz')
+    half = np.sqrt(5.024e-4)
+    # the crossing is refitted twice on an exact parabola: its root is linear, so exact
+    assert np.log(lo) == pytest.approx(a - half, abs=1e-5)
+    assert np.log(hi) == pytest.approx(a + half, abs=1e-5)
+
+
 def test_the_result_moves_to_the_deeper_valley(monkeypatch):
     """:func:`result._deepest` restarts from the scan's minimum and keeps the lower fit."""
     from types import SimpleNamespace

@@ -17,7 +17,8 @@ its number of parameters.  :func:`correction_class` makes an :class:`~ipmc_senso
 effects.Effect` of a structure, whose ``rational`` gives the exact zeros, poles and gain (the
 delay apart, as the pipeline takes every effect's delay), so that fitting, reduction and the
 estimator treat it like a catalog effect.  :class:`Correction` is the fitted result: values,
-95 % intervals from the fit's covariance, and the sentence that says what it is.
+simultaneous 95 % profile-likelihood intervals (:mod:`.interval`), and the sentence that says
+what it is.
 """
 from __future__ import annotations
 
@@ -184,7 +185,7 @@ def _interval(value, lo, hi, unit='', scale=1.0) -> str:
 
 @dataclass
 class Correction:
-    """A fitted C(s): structure, values, 95 % intervals, and what it explains."""
+    """A fitted C(s): structure, values, simultaneous 95 % intervals, what it explains."""
 
     structure: tuple
     values: dict
@@ -197,7 +198,7 @@ class Correction:
     material: dict = field(default_factory=dict)    # the free material it was fitted with
 
     def words(self) -> str:
-        """Return the elements in physical words with their 95 % intervals."""
+        """Return the elements in physical words with their simultaneous 95 % intervals."""
         v, ci, out = self.values, self.ci95, []
 
         def iv(name, unit='Hz', scale=1.0):
@@ -230,7 +231,7 @@ class Correction:
 
     def sentence(self) -> str:
         """Return what it is and how far it takes the error (the verdict's line)."""
-        return (f'{self.words()} (95 % intervals); explains the residual to '
+        return (f'{self.words()} (simultaneous 95 % intervals); explains the residual to '
                 f'{self.error / self.noise_floor:.2f}x the noise floor (held-out error '
                 f'{self.error:.4f}, BIC {self.delta_bic:+.0f})')
 

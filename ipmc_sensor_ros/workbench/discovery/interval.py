@@ -1,17 +1,21 @@
 # SPDX-License-Identifier: Apache-2.0
 """
-95 % profile-likelihood intervals of the correction's parameters.
+Simultaneous 95 % profile-likelihood intervals of the correction's parameters.
 
 The covariance of a fit gives intervals that are right when chi^2 is quadratic in the
 parameters.  A correction's corner often trades with a material parameter along a curved
 valley (a lag network's pole with the diffusivity d, both shaping the low-frequency phase),
 where the quadratic interval is far too short.  The profile interval of a parameter is where
-chi^2, minimised over every other parameter, stays within ``3.84 s^2`` of its minimum (3.84:
-the 95 % point of chi^2 with one degree of freedom; ``s^2 = max(1, chi^2/dof)`` as for the
-covariance).  It is found by stepping out from the optimum in the log of the parameter, 1, 2,
-4, ... times its quadratic standard deviation, refitting the rest from the previous step, and
-interpolating where the profile crosses the level (:func:`profile_interval`); the steps stop
-at the parameter's bounds, and an interval that does not close before a bound ends there.
+chi^2, minimised over every other parameter, stays within ``q s^2`` of its minimum
+(``s^2 = max(1, chi^2/dof)`` as for the covariance).  C(s) is one claim about all its
+parameters (a lead-lag is right when its zero *and* its pole are), so the intervals are
+simultaneous: ``q`` is the ``1 - 0.05/k`` point of chi^2 with one degree of freedom for the
+k parameters of C(s) (Bonferroni: 3.84 for one, 5.02 for two, 5.73 for three), and all k
+intervals hold the truth together in at least 95 % of records (:func:`interval_level`).
+It is found by stepping out from the optimum in the log of the parameter, 1, 2, 4, ... times
+its quadratic standard deviation, refitting the rest from the previous step, and interpolating
+where the profile crosses the level (:func:`profile_interval`); the steps stop at the
+parameter's bounds, and an interval that does not close before a bound ends there.
 Where the profile crosses the level is found by interpolating its square root (the signed root
 of the likelihood ratio, linear in the parameter where chi^2 is quadratic; chi^2 itself,
 interpolated linearly across a steep rise, ends the interval short), refined by
@@ -31,15 +35,17 @@ values inside, found between the 5 % steps as the stepped interval's are.
 from __future__ import annotations
 
 import numpy as np
+from scipy.stats import chi2 as chi2_dist
 
 from ...physics.effects import effect_parameter
 from ..timefit import FitSpec, fit_model
 from .fitting import fit_vector, with_models
 
-__all__ = ['PROFILE_DELTA_CHI2', 'profile_interval', 'profile_scan', 'scan_minima']
+__all__ = ['JOINT_CONFIDENCE', 'interval_level', 'profile_interval', 'profile_scan',
+           'scan_minima']
 
-#: chi^2 rise that bounds a 95 % interval of one parameter
-PROFILE_DELTA_CHI2 = 3.84
+#: the probability that every interval of C(s) holds its parameter's truth at once
+JOINT_CONFIDENCE = 0.95
 #: steps out from the optimum on each side (1, 2, 4, ... 32 quadratic standard deviations)
 PROFILE_STEPS = 6
 #: function evaluations of each profile refit (warm start at the previous step)
@@ -74,9 +80,15 @@ def _setup(cand, effect, param):
     return k, spec, (par.lower, par.upper)
 
 
-def _level(cand) -> float:
+def interval_level(n_params: int) -> float:
+    """Return the chi^2 rise bounding each of ``n_params`` simultaneous intervals (docstring)."""
+    return float(chi2_dist.ppf(1.0 - (1.0 - JOINT_CONFIDENCE) / max(n_params, 1), 1))
+
+
+def _level(cand, effect) -> float:
     dof = max(cand.fit.n_rows - cand.fit.n_params, 1)
-    return PROFILE_DELTA_CHI2 * max(1.0, cand.fit.chi2 / dof)
+    n_params = sum(e == effect for e, _ in cand.spec.effect_params)
+    return interval_level(n_params) * max(1.0, cand.fit.chi2 / dof)
 
 
 def _crossing(profile, inside, outside, level) -> float:
@@ -170,7 +182,7 @@ def _scan_ends(points, k, chi2_min, level, profile) -> list[float]:
 def profile_interval(state, cand, effect: str, param: str,
                      scans=None) -> tuple[float, float]:
     """
-    Return the 95 % profile interval of a log-scale ``effect.param`` of ``cand`` (docstring).
+    Return the simultaneous profile interval of a log-scale ``effect.param`` (docstring).
 
     ``scans``: the :func:`profile_scan` of each parameter of ``cand`` (name -> points).  The
     interval holds this parameter's value in every scanned fit below the level, of its own
@@ -180,7 +192,7 @@ def profile_interval(state, cand, effect: str, param: str,
     """
     k, _, bounds = _setup(cand, effect, param)
     lo_bound, hi_bound = np.log(bounds)
-    level = _level(cand)
+    level = _level(cand, effect)
     profile = _profile(state, cand, effect, param)
     sd = float(np.sqrt(max(cand.fit.covariance[k, k], 0.0))) or 1e-3
     x0 = float(cand.x[k])

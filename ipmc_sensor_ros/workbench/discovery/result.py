@@ -26,7 +26,7 @@ __all__ = ['result', 'CONVERGED_NFEV', 'RESTART_GAIN', 'MAX_RESTARTS']
 #: fits stop at 60: enough to rank candidates, not always to converge with three corners)
 CONVERGED_NFEV = 300
 #: a restart from a profile scan's minimum is taken when it lowers chi^2 by more than this
-#: (far below the 3.84 of an interval, above what separates two stops of one local fit)
+#: (far below an interval's level of 3.84-5.73, above what separates two stops of one local fit)
 RESTART_GAIN = 0.1
 #: restarts taken at most (each is scanned again)
 MAX_RESTARTS = 2
