@@ -13,7 +13,7 @@ import numpy as np
 
 from .filter import FilterState, KalmanFilter
 
-__all__ = ['carry_state']
+__all__ = ['carry_state', 'carry_back']
 
 
 def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> FilterState:
@@ -27,36 +27,8 @@ def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> Fil
     current velocity (x_R = -u / p_i) with their prior covariance; new line states start from
     their prior.
     """
-    mo, mn = old.model, new.model
-    x_old = state.x * mo.scale
+    x, P, _ = _carried(old.model, new.model, state.x, state.P, joint=False)
     init = new.initial_state()
-    x, P = init.x * mn.scale, init.P * np.outer(mn.scale, mn.scale)
-    P_old = state.P * np.outer(mo.scale, mo.scale)
-    src = list(range(mo.iw, mo.il))
-    dst = list(range(mn.iw, mn.il))
-    for k, f in enumerate(mn.lines_hz):
-        near = [j for j, g in enumerate(mo.lines_hz) if abs(g - f) < 1.0]
-        if near:
-            src += [mo.il + 2 * near[0], mo.il + 2 * near[0] + 1]
-            dst += [mn.il + 2 * k, mn.il + 2 * k + 1]
-    # periodic states carry when the fundamental is the same; else they start afresh
-    fresh = bool(mn.motion_lines_hz) and mo.motion_hz != mn.motion_hz
-    if mn.motion_lines_hz and not fresh:
-        src += list(range(mo.im, mo.size))
-        dst += list(range(mn.im, mn.size))
-    same_sensor = np.array_equal(np.diag(mo.sensor[0]), np.diag(mn.sensor[0]))
-    if same_sensor:                   # only the lines changed: the charge states carry too
-        src = list(range(mo.n_sensor)) + src
-        dst = list(range(mn.n_sensor)) + dst
-    x[dst] = x_old[src]
-    P[np.ix_(dst, dst)] = P_old[np.ix_(src, src)]
-    if not same_sensor:
-        x[:mn.n_sensor] = -x[mn.iu] / np.diag(mn.sensor[0])
-        P[:mn.n_sensor, dst] = 0.0
-        P[dst, :mn.n_sensor] = 0.0
-    x, P = x / mn.scale, P / np.outer(mn.scale, mn.scale)
-    if fresh:
-        x, P = _restart_motion(mn, x, P)
     out = replace(init, x=x, P=P,
                   noise_var_a2=state.noise_var_a2, samples=state.samples,
                   contiguous=state.contiguous, noise_weight=state.noise_weight,
@@ -79,7 +51,60 @@ def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> Fil
                    phases=phases)
 
 
-def _restart_motion(mn, x: np.ndarray, P: np.ndarray):
+def carry_back(old: KalmanFilter, new: KalmanFilter, state: FilterState):
+    """
+    Return what the smoother needs to pass back across :func:`carry_state` (same sensor).
+
+    (x_o, P_o, C): the old state's mean and covariance once the new model's structure is
+    known (the periodic restart's relation is a measurement of it too) and its covariance
+    with the carried state, Cov(x_old, x_new).  Back from the carried state's smoothed value
+    x^s (P^s), with J = C P_new^-1: x_o + J (x^s - x_new), P_o + J (P^s - P_new) J'.
+    """
+    return _carried(old.model, new.model, state.x, state.P, joint=True)[2]
+
+
+def _carried(mo, mn, x_scaled, P_scaled, joint: bool):
+    """(x, P) of the new model, scaled, and (x_o, P_o, C) when ``joint`` (:func:`carry_back`)."""
+    x_old = x_scaled * mo.scale
+    init_x, init_P = mn.prior()
+    x, P = init_x * mn.scale, init_P * np.outer(mn.scale, mn.scale)
+    P_old = P_scaled * np.outer(mo.scale, mo.scale)
+    src = list(range(mo.iw, mo.il))
+    dst = list(range(mn.iw, mn.il))
+    for k, f in enumerate(mn.lines_hz):
+        near = [j for j, g in enumerate(mo.lines_hz) if abs(g - f) < 1.0]
+        if near:
+            src += [mo.il + 2 * near[0], mo.il + 2 * near[0] + 1]
+            dst += [mn.il + 2 * k, mn.il + 2 * k + 1]
+    # periodic states carry when the fundamental is the same; else they start afresh
+    fresh = bool(mn.motion_lines_hz) and mo.motion_hz != mn.motion_hz
+    if mn.motion_lines_hz and not fresh:
+        src += list(range(mo.im, mo.size))
+        dst += list(range(mn.im, mn.size))
+    same_sensor = np.array_equal(np.diag(mo.sensor[0]), np.diag(mn.sensor[0]))
+    if same_sensor:                   # only the lines changed: the charge states carry too
+        src = list(range(mo.n_sensor)) + src
+        dst = list(range(mn.n_sensor)) + dst
+    elif joint:
+        raise ValueError('the smoother passes back only across a model of the same sensor')
+    x[dst] = x_old[src]
+    P[np.ix_(dst, dst)] = P_old[np.ix_(src, src)]
+    if not same_sensor:
+        x[:mn.n_sensor] = -x[mn.iu] / np.diag(mn.sensor[0])
+        P[:mn.n_sensor, dst] = 0.0
+        P[dst, :mn.n_sensor] = 0.0
+    x, P = x / mn.scale, P / np.outer(mn.scale, mn.scale)
+    back = None
+    if joint:                         # x_new[dst] = x_old[src]: Cov(x_old, x_new) = P_old T'
+        C = np.zeros((mo.size, mn.size))
+        C[:, dst] = P_scaled[:, src] * (mo.scale[src] / mn.scale[dst])[None, :]
+        back = (np.array(x_scaled, float), np.array(P_scaled, float), C)
+    if fresh:
+        x, P, back = _restart_motion(mn, x, P, back)
+    return x, P, back
+
+
+def _restart_motion(mn, x: np.ndarray, P: np.ndarray, back=None):
     """
     Join the carried state and new periodic states under the new model's structure.
 
@@ -89,7 +114,8 @@ def _restart_motion(mn, x: np.ndarray, P: np.ndarray):
     m = L h + X p + e with e ~ its stationary covariance (:meth:`~.statespace.
     StateSpaceModel.prior`).  That relation is applied as a measurement (value 0, noise the
     remainder's covariance), so what the old estimate held of a periodic motion goes to p,
-    with the correlations of motion, offset and working point kept.
+    with the correlations of motion, offset and working point kept.  ``back``: (x_o, P_o, C)
+    of :func:`carry_back`, conditioned on the same relation.
     """
     motion = mn.motion_states
     fresh = np.arange(mn.im, mn.size)
@@ -107,6 +133,14 @@ def _restart_motion(mn, x: np.ndarray, P: np.ndarray):
     PH = P @ H.T
     S = H @ PH + mn.stationary_motion
     K = np.linalg.solve(S, PH.T).T
-    x = x - K @ (H @ x)
+    z = H @ x
+    if back is not None:
+        x_o, P_o, C = back
+        C = C.copy()
+        C[:, fresh] = 0.0           # the new periodic states: independent of the old state
+        CH = C @ H.T
+        K_o = np.linalg.solve(S, CH.T).T
+        back = (x_o - K_o @ z, P_o - K_o @ CH.T, C - K_o @ PH.T)
+    x = x - K @ z
     P = P - K @ PH.T
-    return x, 0.5 * (P + P.T)
+    return x, 0.5 * (P + P.T), back

@@ -17,7 +17,8 @@ from typing import NamedTuple
 
 from ..errors import ParameterError
 
-__all__ = ['EstimatorConfig', 'SETTINGS', 'Setting', 'CONFIG_FIELDS']
+__all__ = ['EstimatorConfig', 'SETTINGS', 'Setting', 'CONFIG_FIELDS', 'MAINS_CHOICES',
+           'parse_mains']
 
 
 class Setting(NamedTuple):
@@ -142,3 +143,20 @@ EstimatorConfig = dataclasses.make_dataclass(
 def setting(name: str) -> Setting:
     """Return the :class:`Setting` called ``name``."""
     return _BY_NAME[name]
+
+
+#: Values of ``mains_hz``.
+MAINS_CHOICES = ('auto', 0, 50, 60)
+
+
+def parse_mains(value) -> str | float:
+    """Return ``'auto'`` or the line frequency 0, 50.0, 60.0 (``mains_hz``)."""
+    if isinstance(value, str) and value.strip().lower() == 'auto':
+        return 'auto'
+    try:
+        f = float(value)
+    except (TypeError, ValueError):
+        f = math.nan
+    if f not in (0.0, 50.0, 60.0):
+        raise ParameterError(f"parameter 'mains_hz' must be 'auto', 0, 50 or 60, got {value!r}")
+    return f

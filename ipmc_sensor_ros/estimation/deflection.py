@@ -41,10 +41,10 @@ from ..errors import ParameterError
 from ..lti.reduction import ReducedModel, reduce_model_parts
 from ..physics.model import SensorModel
 from ..physics.pipeline import DriftSchedule
-from .config import EstimatorConfig
+from .config import EstimatorConfig, parse_mains
 from .core import ESTIMATORS, Estimate, EstimatorCore
 from .inverse import DEFAULT_LEAK_CORNER_HZ, InverseEstimator
-from .kalman import KalmanEstimator, parse_mains
+from .kalman import KalmanEstimator
 from .mains import MainsFilter, detect_lines
 
 __all__ = ['DeflectionEstimator', 'ESTIMATORS', 'leak_transient_s']

@@ -11,25 +11,41 @@ receives each sample between ``smoothed_lag_s`` and twice that after it was meas
 smoothed with at least ``smoothed_lag_s`` of the data after it; the cost is two backward steps
 per sample, and the memory 2 L of the filter's covariances.
 
-What the filter's model changes under it (a mains line measured, a new design) ends the
-record: what it holds is smoothed with the data there is and goes out (:meth:`flush`), as at
-a reset.  With a lag longer than the record, the result is the fixed-interval smoother's.
+A model change under the filter (a mains line measured; a periodic model, which takes over
+from the start of its span and filters its samples again, :mod:`.periodic`) starts a new
+part of the record: the samples held from the span are held again with the new model's
+forward record (:meth:`replace_newest`), and the backward pass goes from one model's part
+into the one before through the carry (:func:`~.smoother.across`), as the offline smoother
+does (:meth:`~.kalman.KalmanEstimator.smooth`).  With a lag longer than the record, the
+result is the fixed-interval smoother's.  A reset or a new design ends the record: what is
+held is smoothed with the data there is and goes out (:meth:`flush`).
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import ParameterError
 from .core import Estimate
 from .filter import ForwardRecord, KalmanFilter
-from .smoother import rts_backward
+from .smoother import across, rts_backward
 
 __all__ = ['FixedLagSmoother', 'MAX_LAG_SAMPLES', 'lag_smoother']
 
 #: Longest lag, samples: 2 x 20000 covariances of a 15-state model are ~70 MB.
 MAX_LAG_SAMPLES = 20_000
+
+
+@dataclass
+class _Part:
+    """Forward record of one model; ``link``: (the state it started from, carry_back) when
+    it began at a model change whose samples before are held too."""
+
+    filt: KalmanFilter
+    rec: ForwardRecord
+    link: tuple | None = None
 
 
 class FixedLagSmoother:
@@ -41,8 +57,18 @@ class FixedLagSmoother:
 
     def __init__(self, lag_samples: int):
         self.lag = int(lag_samples)
-        self._parts: list[ForwardRecord] = []
+        self._parts: list[_Part] = []
         self._held = 0
+        self._link = None
+
+    @property
+    def held(self) -> int:
+        """Samples held for their lag."""
+        return self._held
+
+    def begin(self, link: tuple) -> None:
+        """The next record is a new model's: (the state it starts from, :func:`carry_back`)."""
+        self._link = link if self._held else None
 
     def push(self, filt: KalmanFilter, record: ForwardRecord) -> Estimate | None:
         """
@@ -55,33 +81,72 @@ class FixedLagSmoother:
         a, n = 0, record.x_post.shape[0]
         while a < n:
             b = min(n, a + 2 * self.lag - self._held)
-            self._parts.append(record if (a, b) == (0, n) else record.rows(a, b))
+            rec = record if (a, b) == (0, n) else record.rows(a, b)
+            self._parts.append(_Part(filt, rec, self._link))
+            self._link = None
             self._held += b - a
             a = b
             if self._held == 2 * self.lag:
-                out.append(self._emit(filt, keep=self.lag))
+                out.append(self._emit(keep=self.lag))
         if not out:
             return None
         return out[0] if len(out) == 1 else Estimate(*(np.concatenate(p) for p in zip(*out)))
 
-    def flush(self, filt: KalmanFilter) -> Estimate | None:
-        """Smooth everything held with the data there is (a reset, a new model, the end)."""
-        return self._emit(filt, keep=0) if self._held else None
+    def flush(self) -> Estimate | None:
+        """Smooth everything held with the data there is (a reset, a new design, the end)."""
+        self._link = None
+        return self._emit(keep=0) if self._held else None
 
-    def _emit(self, filt: KalmanFilter, keep: int) -> Estimate:
-        rec = self._parts[0] if len(self._parts) == 1 else ForwardRecord(
-            *(np.concatenate(arrays) for arrays in zip(*(
-                (p.x_pred, p.P_pred, p.x_post, p.P_post, p.steps, p.still)
-                for p in self._parts))))
-        xs, pw, _ = rts_backward(filt, rec, None)
-        n_out = rec.x_post.shape[0] - keep
-        m = filt.model
-        scale = float(m.scale[m.iw])
-        out = Estimate(xs[:n_out, m.iw] * scale, np.sqrt(np.maximum(pw[:n_out], 0.0)) * scale,
-                       rec.still[:n_out].copy())
-        self._parts = [rec.rows(n_out, n_out + keep)] if keep else []
-        self._held = keep
-        return out
+    def replace_newest(self, filt: KalmanFilter, record: ForwardRecord, link) -> None:
+        """
+        Hold the newest ``len(record)`` samples again, filtered under ``filt`` (``record``).
+
+        ``link``: as :meth:`begin`, for the new model's start at the first of them.
+        """
+        n = record.x_post.shape[0]
+        if not 0 < n <= self._held:
+            raise ValueError(f'{n} samples to replace, {self._held} held')
+        self._cut(0, self._held - n)
+        self.begin(link)
+        self.push(filt, record)             # fewer than 2 L held: nothing is due
+
+    def _cut(self, start: int, stop: int) -> None:
+        """Keep the held samples ``start`` to ``stop``; a part cut at its start loses its link."""
+        parts, a = [], 0
+        for p in self._parts:
+            n = p.rec.x_post.shape[0]
+            lo, hi = max(start - a, 0), min(stop - a, n)
+            if lo < hi:
+                link = p.link if lo == 0 and a >= start and parts else None
+                parts.append(_Part(p.filt, p.rec if (lo, hi) == (0, n) else p.rec.rows(lo, hi),
+                                   link))
+            a += n
+        self._parts, self._held = parts, stop - start
+
+    def _emit(self, keep: int) -> Estimate:
+        """Smooth everything held, back through each model change; the oldest go out."""
+        segments: list[list] = []
+        for p in self._parts:
+            if p.link is not None or not segments or p.filt is not segments[-1][0]:
+                segments.append([p.filt, [p.rec], p.link])
+            else:
+                segments[-1][1].append(p.rec)
+        outs, end = [], None
+        for filt, recs, link in reversed(segments):
+            rec = recs[0] if len(recs) == 1 else ForwardRecord(
+                *(np.concatenate(arrays) for arrays in zip(*(
+                    (r.x_pred, r.P_pred, r.x_post, r.P_post, r.steps, r.still) for r in recs))))
+            xs, pw, (x_first, P_first) = rts_backward(filt, rec, end)
+            m = filt.model
+            scale = float(m.scale[m.iw])
+            outs.append((xs[:, m.iw] * scale, np.sqrt(np.maximum(pw, 0.0)) * scale, rec.still))
+            end = None if link is None else across(
+                filt, link[0], (x_first, P_first, rec.x_pred[0], rec.P_pred[0], rec.steps[0]),
+                link[1])
+        n_out = self._held - keep
+        w, std, still = (np.concatenate(p[::-1]) for p in zip(*outs))
+        self._cut(n_out, self._held)
+        return Estimate(w[:n_out], std[:n_out], still[:n_out].copy())
 
 
 def lag_smoother(lag_s: float, sample_rate_hz: float) -> FixedLagSmoother | None:

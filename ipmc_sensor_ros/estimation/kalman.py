@@ -31,18 +31,18 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..lti.reduction import ReducedModel
-from .carry import carry_state
-from .config import EstimatorConfig
+from .carry import carry_back, carry_state
+from .config import EstimatorConfig, parse_mains
 from .core import Estimate
 from .filter import FilterState, ForwardRecord, KalmanFilter
 from .fixed_lag import lag_smoother
 from .lines import NOMINAL_LINES_HZ, measure_line
-from .motionline import MOTION_LONGEST_S, MOTION_PERIODS, measure_motion, measure_recent
+from .motionline import MOTION_LONGEST_S, MOTION_PERIODS, measure_recent
 from .periodic import StretchLog, refilter, same_motion
-from .smoother import smooth
+from .smoother import smooth_segments
 from .statespace import StateSpaceModel
 
-__all__ = ['KalmanEstimator', 'MAINS_CHOICES', 'parse_mains', 'LINE_CHECK_S']
+__all__ = ['KalmanEstimator', 'LINE_CHECK_S']
 
 #: Data between two measurements of the mains line, s (also the stretch measured): 2 s
 #: resolves 0.5 Hz and, zero-padded, finds the line to ~0.01 Hz at 3 % hum.  The first
@@ -54,22 +54,6 @@ LINE_FIRST_S = 0.5
 #: A measured line this far from the modelled one retunes the model, Hz: the line states'
 #: random walk follows a smaller error (the phasor turns by 2 pi 0.02 rad/s).
 LINE_RETUNE_HZ = 0.02
-
-#: Values of ``mains_hz``.
-MAINS_CHOICES = ('auto', 0, 50, 60)
-
-
-def parse_mains(value) -> str | float:
-    """Return ``'auto'`` or the line frequency 0, 50.0, 60.0 (``mains_hz``)."""
-    if isinstance(value, str) and value.strip().lower() == 'auto':
-        return 'auto'
-    try:
-        f = float(value)
-    except (TypeError, ValueError):
-        f = math.nan
-    if f not in (0.0, 50.0, 60.0):
-        raise ParameterError(f"parameter 'mains_hz' must be 'auto', 0, 50 or 60, got {value!r}")
-    return f
 
 
 class KalmanEstimator:
@@ -103,6 +87,9 @@ class KalmanEstimator:
         self.smoothed_lag_s = float(smoothed_lag_s)
         self._lag = lag_smoother(self.smoothed_lag_s, fs)
         self._smoothed: list[Estimate] = []
+        #: (first sample, filter, state there) of each model the live filter ran, kept only
+        #: by the offline smoother's own run (:meth:`smooth`)
+        self._segments: list | None = None
         # until measured: a line at each nominal frequency (hum at the start must not be
         # taken for an offset), then the measured one
         nominal_line = () if self.mains_hz == 0.0 else self._nominal()
@@ -236,13 +223,30 @@ class KalmanEstimator:
             return
         if not f_line and (len(old) < 2 or self._state.samples > self._first_n):
             return        # no line: keep what is modelled (the nominal pair only at the start)
-        f_line = f_line or ()
-        self._flush_lag()           # the forward record is the old model's
-        model = StateSpaceModel(self.reduced, self.config, self.sample_rate_hz, f_line,
+        model = StateSpaceModel(self.reduced, self.config, self.sample_rate_hz, f_line or (),
                                 self.model.motion_hz)
         filt = self._new_filter(model)
-        self._state = carry_state(self._filter, filt, self._state)
-        self._filter = filt
+        old, old_state = self._filter, self._state
+        self._filter, self._state = filt, carry_state(old, filt, old_state)
+        link = self._begin_segment(filt, self._state, old, old_state)
+        if self._lag is not None:
+            self._lag.begin(link)
+
+    def _begin_segment(self, filt, state, old, old_state) -> tuple | None:
+        """
+        Note that ``filt`` runs on from ``state``, carried from ``old``'s ``old_state``.
+
+        Returns the link the smoothers pass back through, (``state``, :func:`carry_back`),
+        or None when neither smoother runs (:meth:`smooth`, ``smoothed_lag_s``).
+        """
+        if self._segments is None and self._lag is None:
+            return None
+        link = (state.copy(), carry_back(old, filt, old_state))
+        if self._segments is not None:
+            n = state.samples
+            self._segments = [seg for seg in self._segments if seg[0] < n]
+            self._segments.append((n, filt, *link))
+        return link
 
     def _check_motion(self, recent: np.ndarray) -> None:
         """Measure the periodic motion; a new one is modelled from its span (:mod:`.periodic`)."""
@@ -253,8 +257,13 @@ class KalmanEstimator:
             return
         filt = self._new_filter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,
                                                 self.model.fundamentals_hz, f0))
-        self._flush_lag()               # the forward record is the old model's
-        self._filter, self._state = filt, refilter(span, filt)
+        held = 0 if self._lag is None else min(len(span.y), self._lag.held)
+        rec = ForwardRecord.empty(held, filt.model.size) if held else None
+        start, state = refilter(span, filt, rec)
+        link = self._begin_segment(filt, start, span.filter, span.state)
+        if rec is not None:             # the span's samples held are the new model's
+            self._lag.replace_newest(filt, rec, link if held == len(span.y) else None)
+        self._filter, self._state = filt, state
 
     # -- fixed-lag output -------------------------------------------------------------------
     def _keep(self, est: Estimate | None) -> None:
@@ -263,7 +272,7 @@ class KalmanEstimator:
 
     def _flush_lag(self) -> None:
         if self._lag is not None:
-            self._keep(self._lag.flush(self._filter))
+            self._keep(self._lag.flush())
 
     def pop_smoothed(self, flush: bool = False) -> Estimate | None:
         """
@@ -287,26 +296,19 @@ class KalmanEstimator:
         """
         Smoothed estimate of a whole record from a fresh start (fixed-interval RTS).
 
-        The mains line and a periodic motion are measured on the whole record first
-        (offline, they can be); the periodic states are modelled from the start when the
-        sensor never rests in the record (the live rule for a motion going on since
-        power-on, :mod:`.periodic`).  Leaves this estimator's stream state untouched.
+        It follows the live model: the record runs through a fresh estimator with the live
+        rules (the mains line and a periodic motion measured at the same checks, a periodic
+        model taking over from the start of its span), and the backward pass runs over each
+        model's part and on through each change (:func:`~.smoother.smooth_segments`): the
+        fixed-lag smoother with a lag longer than the record.  Leaves this estimator's
+        stream state untouched.
         """
         y = np.asarray(current_a, dtype=float)
-        line = self.model.line_hz
-        if self.mains_hz != 0.0:
-            line = measure_line(y, self.sample_rate_hz, self._nominal(),
-                                self.config.line_harmonics)[0]
-        filt = self._new_filter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,
-                                                line))
-        motion = measure_motion(y, self.sample_rate_hz, filt.model)
-        if motion:
-            periodic = self._new_filter(StateSpaceModel(
-                self.reduced, self.config, self.sample_rate_hz, line, motion))
-            if not periodic.run(periodic.initial_state(), y, steps)[3].any():
-                filt = periodic
-        w, s, _ = smooth(filt, filt.initial_state(), y, steps)
-        return Estimate(w, s, np.zeros(y.size, dtype=bool))
+        st = np.ones(y.size, dtype=np.int64) if steps is None else np.asarray(steps, np.int64)
+        live = KalmanEstimator(self.reduced, self.sample_rate_hz, self.config, self.mains_hz)
+        live._segments = [(0, live._filter, live._state.copy(), None)]
+        still = live.estimate(y, st).still
+        return Estimate(*smooth_segments(live._segments, y, st), still)
 
     # -- state ------------------------------------------------------------------------------
     def get_state(self) -> dict:
@@ -363,11 +365,7 @@ class KalmanEstimator:
             new._filter = new._new_filter(StateSpaceModel(new.reduced, config, fs,
                                                           self.model.fundamentals_hz,
                                                           self.model.motion_hz))
-        new._state = carry_state(self._filter, new._filter, self._state)
-        new._log = StretchLog(new._filter, new._state)
-        new._first_rest_n = self._first_rest_n
-        if new._window_n == self._window_n:
-            new._recent, new._grid = self._recent.copy(), self._grid
+        new.continue_from(self)
         return new
 
     def continue_from(self, old: 'KalmanEstimator', recent_input=None) -> None:

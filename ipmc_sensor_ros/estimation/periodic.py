@@ -27,7 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from .carry import carry_state
-from .filter import FilterState, KalmanFilter
+from .filter import FilterState, ForwardRecord, KalmanFilter
 from .motionline import MOTION_WOBBLE
 
 __all__ = ['Stretch', 'StretchLog', 'refilter', 'same_motion']
@@ -131,7 +131,18 @@ class StretchLog:
         return cur
 
 
-def refilter(span: Stretch, filt: KalmanFilter) -> FilterState:
-    """Return the state now of ``filt`` taking over at the start of ``span``."""
+def refilter(span: Stretch, filt: KalmanFilter,
+             record: ForwardRecord | None = None) -> tuple[FilterState, FilterState]:
+    """
+    Return the states of ``filt`` taking over at the start of ``span``: there, and now.
+
+    ``record``: filled with the forward pass over the span's last ``len(record)`` samples
+    (what a fixed-lag smoother still holds of it).
+    """
     start = carry_state(span.filter, filt, span.state)
-    return filt.run(start, span.y, span.steps)[0] if span.y else start
+    n_rec = 0 if record is None else record.x_post.shape[0]
+    cut = len(span.y) - n_rec
+    state = filt.run(start, span.y[:cut], span.steps[:cut])[0] if cut else start
+    if n_rec:
+        state = filt.run(state, span.y[cut:], span.steps[cut:], record=record)[0]
+    return start, state

@@ -23,7 +23,7 @@ import numpy as np
 
 from .filter import FilterState, ForwardRecord, KalmanFilter
 
-__all__ = ['smooth', 'rts_backward', 'CHUNK_SAMPLES']
+__all__ = ['smooth', 'smooth_segments', 'rts_backward', 'across', 'CHUNK_SAMPLES']
 
 #: Samples re-run and smoothed at a time (2 x 4096 covariances of a 15-state model: ~15 MB).
 CHUNK_SAMPLES = 4096
@@ -33,15 +33,16 @@ def rts_backward(filt: KalmanFilter, rec: ForwardRecord, end=None):
     """
     Smooth one forward record; return (x^s, P^s diagonal of w) in scaled units.
 
-    ``end``: (x^s, P^s, x-, P-, steps) of the sample after the record (None: the record ends
-    the data).
+    ``end``: (x^s, P^s, x-, P-, steps) of the sample after the record, or (x^s, P^s) of the
+    record's last sample (smoothed across a model change: :func:`across`), or None (the
+    record ends the data).
     """
     n = rec.x_post.shape[0]
     xs = np.empty_like(rec.x_post)
     pw = np.empty(n)
     iw = filt.model.iw
-    if end is None:
-        x_next, P_next = rec.x_post[-1], rec.P_post[-1]
+    if end is None or len(end) == 2:
+        x_next, P_next = (rec.x_post[-1], rec.P_post[-1]) if end is None else end
         xs[-1], pw[-1] = x_next, P_next[iw, iw]
         last = n - 2
         xp_next, Pp_next, step_next = rec.x_pred[-1], rec.P_pred[-1], int(rec.steps[-1])
@@ -61,11 +62,14 @@ def rts_backward(filt: KalmanFilter, rec: ForwardRecord, end=None):
 
 
 def smooth(filt: KalmanFilter, state: FilterState, current_a, steps=None,
-           chunk: int = CHUNK_SAMPLES):
+           chunk: int = CHUNK_SAMPLES, last=None):
     """
-    Smooth a whole record from ``state``; return (w, std, final filter state).
+    Smooth a whole record from ``state``; return (w, std, first).
 
-    ``w`` and ``std`` are the smoothed deflection and its standard deviation, m.
+    ``w`` and ``std`` are the smoothed deflection and its standard deviation, m; ``first``:
+    (x^s, P^s, x-, P-, steps) of the first sample, scaled (:func:`across` goes back from
+    there).  ``last``: the smoothed (x^s, P^s) of the last sample, where a later model's
+    smoother passed back (None: the record ends the data).
     """
     y = np.asarray(current_a, dtype=float)
     n = y.size
@@ -76,10 +80,9 @@ def smooth(filt: KalmanFilter, state: FilterState, current_a, steps=None,
     for a in starts:                      # forward: keep the state at each chunk's start
         checkpoints.append(s)
         s, _, _, _ = filt.run(s, y[a:a + chunk], st[a:a + chunk])
-    final = s
     w = np.empty(n)
     pw = np.empty(n)
-    end = None
+    end = last
     scale = filt.model.scale[filt.model.iw]
     for a, s0 in zip(reversed(starts), reversed(checkpoints)):
         b = min(a + chunk, n)
@@ -89,4 +92,43 @@ def smooth(filt: KalmanFilter, state: FilterState, current_a, steps=None,
         w[a:b] = xs[:, filt.model.iw] * scale
         pw[a:b] = pwc
         end = (x_first, P_first, rec.x_pred[0], rec.P_pred[0], int(rec.steps[0]))
-    return w, np.sqrt(np.maximum(pw, 0.0)) * scale, final
+    return w, np.sqrt(np.maximum(pw, 0.0)) * scale, end
+
+
+def across(filt: KalmanFilter, start: FilterState, first, back):
+    """
+    Return the smoothed (x^s, P^s) of the old model's last sample before a model change.
+
+    ``filt`` ran from ``start`` (carried from the old model's last state:
+    :func:`~.carry.carry_state`); ``first``: :func:`smooth`'s ``first`` of that run;
+    ``back``: :func:`~.carry.carry_back` of the change.  One RTS step back to the carried
+    state, then through the carry: J = C P_new^-1.
+    """
+    xs, Ps, xp, Pp, step = first
+    F, _ = filt.model.discrete(int(step))
+    J = np.linalg.solve(Pp, F @ start.P).T
+    x_new = start.x + J @ (xs - xp)
+    P_new = start.P + J @ (Ps - Pp) @ J.T
+    x_o, P_o, C = back
+    Jc = np.linalg.solve(start.P, C.T).T
+    return x_o + Jc @ (x_new - start.x), P_o + Jc @ (P_new - start.P) @ Jc.T
+
+
+def smooth_segments(segments, current_a, steps) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Smooth a record the filter ran under several models; return (w, std), m.
+
+    ``segments``: (first sample, filter, the state it started from, :func:`~.carry.
+    carry_back` of the change or None) of each model, in order.  Each part is smoothed from
+    its state (:func:`smooth`), the last first, and the backward pass goes on into the part
+    before through the change (:func:`across`).
+    """
+    y = np.asarray(current_a, dtype=float)
+    w, std = np.empty(y.size), np.empty(y.size)
+    ends = [seg[0] for seg in segments[1:]] + [y.size]
+    last = None
+    for (a, filt, state, back), b in reversed(list(zip(segments, ends))):
+        if b > a:
+            w[a:b], std[a:b], first = smooth(filt, state, y[a:b], steps[a:b], last=last)
+            last = None if back is None else across(filt, state, first, back)
+    return w, std
