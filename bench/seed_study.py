@@ -204,7 +204,7 @@ def _write(out, fields):
     print(line, end='', flush=True)
 
 
-def independent_plan(groups, seeds, null_seeds, seed_first=False):
+def independent_plan(groups, seeds, null_seeds, seed_first=False, first_seed=0):
     """``(group, kind, seed)`` of the independent groups, group by group or seed by seed."""
     combos = [(g, k) for g, kinds in INDEPENDENT.items() if g in groups for k in kinds]
 
@@ -212,9 +212,9 @@ def independent_plan(groups, seeds, null_seeds, seed_first=False):
         return null_seeds if group == 'null_daq' else seeds
 
     if seed_first:      # every (group, kind) gets its first seed before any gets a second
-        return [(g, k, s) for s in range(max(seeds, null_seeds)) for g, k in combos
-                if s < n_seeds(g)]
-    return [(g, k, s) for g, k in combos for s in range(n_seeds(g))]
+        return [(g, k, s) for s in range(first_seed, max(seeds, null_seeds))
+                for g, k in combos if s < n_seeds(g)]
+    return [(g, k, s) for g, k in combos for s in range(first_seed, n_seeds(g))]
 
 
 def _done(out) -> set:
@@ -226,10 +226,11 @@ def _done(out) -> set:
     return {(f[0], f[1].split(':')[0], int(f[2])) for f in rows[1:] if f[0] in INDEPENDENT}
 
 
-def run_independent(groups, seeds, null_seeds, out, tmp_dir, seed_first=False):
+def run_independent(groups, seeds, null_seeds, out, tmp_dir, seed_first=False, first_seed=0):
     """Run the independent groups (module docstring), one TSV line per seed not in ``out``."""
     done = _done(out)
-    for group, kind, seed in independent_plan(groups, seeds, null_seeds, seed_first):
+    for group, kind, seed in independent_plan(groups, seeds, null_seeds, seed_first,
+                                              first_seed):
         if (group, kind, seed) in done:
             continue
         recs, truth, expected = scenario(kind, seed)
@@ -333,7 +334,7 @@ def main(argv=None) -> int:
             Path(args.plugin_dir).mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryDirectory() as tmp:
             run_independent(groups, args.seeds, args.null_seeds, args.out,
-                            args.plugin_dir or tmp, args.seed_first)
+                            args.plugin_dir or tmp, args.seed_first, args.first_seed)
     print(table(args.out))
     return 0
 

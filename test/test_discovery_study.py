@@ -48,3 +48,14 @@ def test_an_implausible_effect_stays_when_no_correction_replaces_it():
     diag = diagnose(recs, candidates=catalog_names())
     assert 'time_delay' in diag.missing_effects, diag.summary()
     assert diag.explained, diag.summary()
+
+
+def test_a_partial_study_continues_from_its_first_seed():
+    """``--first-seed`` continues the independent groups too, seed by seed or group by group."""
+    from bench.seed_study import independent_plan
+
+    plan = independent_plan({'offset', 'null_daq'}, 10, 20, first_seed=7)
+    assert {s for g, _, s in plan if g == 'offset'} == {7, 8, 9}
+    assert {s for g, _, s in plan if g == 'null_daq'} == set(range(7, 20))
+    first = independent_plan({'offset', 'null_daq'}, 10, 20, seed_first=True, first_seed=7)
+    assert sorted(first) == sorted(plan) and first[0][2] == 7

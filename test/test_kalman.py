@@ -109,6 +109,29 @@ def test_filter_std_covers_its_own_model(reduced):
     assert 0.90 <= inside / total <= 0.99
 
 
+def test_the_smoother_passes_back_through_a_carry_exactly(reduced):
+    """
+    A model change that changes nothing (the same model, carried at sample 150) is passed
+    back through exactly: the two parts smoothed with the step through the carry
+    (carry_back, across) equal the one record smoothed, to rounding.
+    """
+    from ipmc_sensor_ros.estimation.carry import carry_back, carry_state
+    from ipmc_sensor_ros.estimation.smoother import smooth_segments
+
+    ssm = StateSpaceModel(reduced, EstimatorConfig(), FS, (50.0,))
+    _, y = _simulate(ssm, 300, 20e-9, seed=4)
+    steps = np.ones(y.size, dtype=np.int64)
+    first, second = KalmanFilter(ssm), KalmanFilter(ssm)
+    start = first.initial_state()
+    at = first.run(start, y[:150])[0]
+    carried = carry_state(first, second, at)
+    w2, s2 = smooth_segments([(0, first, start, None),
+                              (150, second, carried, carry_back(first, second, at))], y, steps)
+    w1, s1, _ = smooth(first, start, y)
+    scale = np.max(np.abs(w1))
+    assert np.max(np.abs(w2 - w1)) <= 1e-9 * scale and np.allclose(s2, s1, rtol=1e-6)
+
+
 def test_smoother_is_the_batch_posterior(reduced):
     """RTS equals the least-squares posterior of the whole record (information form)."""
     import scipy.sparse as sp
