@@ -68,6 +68,8 @@ def periodic_after_rest():
 def test_the_smoothers_follow_the_live_model_back_through_its_changes(
         reduced, periodic_after_rest, lag_s):
     """
+    Smooth under the model the live filter had, through its changes.
+
     The live model takes periodic states at a check after the rest, from the start of the
     stretch before, whose samples it filters again.  The smoothed output follows it: the
     samples held from that stretch are smoothed under the periodic model, and the backward

@@ -111,9 +111,10 @@ def test_filter_std_covers_its_own_model(reduced):
 
 def test_the_smoother_passes_back_through_a_carry_exactly(reduced):
     """
-    A model change that changes nothing (the same model, carried at sample 150) is passed
-    back through exactly: the two parts smoothed with the step through the carry
-    (carry_back, across) equal the one record smoothed, to rounding.
+    Pass back through a model change that changes nothing, exactly.
+
+    The same model, carried at sample 150: the two parts smoothed with the step through the
+    carry (carry_back, across) equal the one record smoothed, to rounding.
     """
     from ipmc_sensor_ros.estimation.carry import carry_back, carry_state
     from ipmc_sensor_ros.estimation.smoother import smooth_segments

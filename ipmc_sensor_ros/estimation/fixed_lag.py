@@ -40,8 +40,12 @@ MAX_LAG_SAMPLES = 20_000
 
 @dataclass
 class _Part:
-    """Forward record of one model; ``link``: (the state it started from, carry_back) when
-    it began at a model change whose samples before are held too."""
+    """
+    Forward record of one model's samples.
+
+    ``link``: (the state it started from, carry_back) when it began at a model change whose
+    samples before are held too.
+    """
 
     filt: KalmanFilter
     rec: ForwardRecord
@@ -63,11 +67,11 @@ class FixedLagSmoother:
 
     @property
     def held(self) -> int:
-        """Samples held for their lag."""
+        """Return how many samples are held for their lag."""
         return self._held
 
     def begin(self, link: tuple) -> None:
-        """The next record is a new model's: (the state it starts from, :func:`carry_back`)."""
+        """Mark the next record as a new model's: (the state it starts from, carry_back)."""
         self._link = link if self._held else None
 
     def push(self, filt: KalmanFilter, record: ForwardRecord) -> Estimate | None:
