@@ -87,8 +87,8 @@ class KalmanEstimator:
         self.smoothed_lag_s = float(smoothed_lag_s)
         self._lag = lag_smoother(self.smoothed_lag_s, fs)
         self._smoothed: list[Estimate] = []
-        #: (first sample, filter, state there) of each model the live filter ran, kept only
-        #: by the offline smoother's own run (:meth:`smooth`)
+        #: (first sample, filter, state there, carry_back) of each model the live filter
+        #: ran, kept only by the offline smoother's own run (:meth:`smooth`)
         self._segments: list | None = None
         # until measured: a line at each nominal frequency (hum at the start must not be
         # taken for an offset), then the measured one

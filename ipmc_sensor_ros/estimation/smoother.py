@@ -110,7 +110,7 @@ def across(filt: KalmanFilter, start: FilterState, first, back):
     x_new = start.x + J @ (xs - xp)
     P_new = start.P + J @ (Ps - Pp) @ J.T
     x_o, P_o, C = back
-    Jc = np.linalg.solve(start.P, C.T).T
+    Jc = np.linalg.lstsq(start.P, C.T, rcond=None)[0].T      # P_new may be singular
     return x_o + Jc @ (x_new - start.x), P_o + Jc @ (P_new - start.P) @ Jc.T
 
 
