@@ -30,9 +30,9 @@ by FFT with a pre-roll, DAQ habits, a sample that is not the paper's), :func:`ju
   ``current_offset`` named;
 - ``outside``: a high-pass (0.2-2 Hz), a lag network or a resonance (3-8 Hz) on top of one
   catalog effect: success = no wrong catalog effect named, the correction C(s) holds the
-  factor's element with the true corner(s) inside their simultaneous 95 % intervals (the high-pass corner,
-  the lag network's zero and pole, the resonance's natural frequency; its damping ratio is
-  reported in the notes, not judged), and the saved plugin
+  factor's element with the true corner(s) inside their simultaneous 95 % intervals (the
+  high-pass corner, the lag network's zero and pole, the resonance's natural frequency; its
+  damping ratio is reported in the notes, not judged), and the saved plugin
   (``--save-plugin``, loaded again) brings the held-out error to at most 1.2x the floor.
 
 Each finished seed appends a line to ``--out`` (TSV: wall and CPU seconds, the CPU time
