@@ -339,23 +339,34 @@ def test_a_smaller_c_s_starts_from_either_pole_and_the_larger_material(monkeypat
     best = SimpleNamespace(structure=('low_pass', 'lead_lag'), fit=SimpleNamespace(
         effect_values={'correction_low_pass_lead_lag': values}))
     calls = []
-    monkeypatch.setattr(prune, 'fit_structures', lambda *a, **kw: calls.append((a, kw)) or [a])
-    view = SimpleNamespace(without=lambda name, cand: 'base without C(s)')
+
+    def fit_structures(*a, **kw):
+        calls.append((a, kw))
+        return [SimpleNamespace(fit=SimpleNamespace(bic=float(np.sum(a[1].x))), base=a[1])]
+    monkeypatch.setattr(prune, 'fit_structures', fit_structures)
+    without = SimpleNamespace(x=np.zeros(2), spec=SimpleNamespace(effect_params=()))
+    view = SimpleNamespace(without=lambda name, cand: without)
     prune.smaller(view, best, ('lead_lag',), (1.0, 20.0))
     (args, kw), = calls
-    assert args[1:3] == ('base without C(s)', [('lead_lag',)]) and kw['material_from'] is best
+    assert args[1:3] == (without, [('lead_lag',)]) and kw['material_from'] is best
     assert sorted(k['lead_lag_pole_hz'] for k in args[4]) == [2.44, 1e5]
     # a twin's catalog effect is added to the model C(s) is fitted in, at the element's value
-    base = SimpleNamespace(spec=SimpleNamespace(effect_params=(('time_delay', 'delay_s'),)))
+    # (unless the model has it); C(s) is fitted from the twin as its own fit left it and at
+    # the element's value, and the lower BIC is kept (a delay fitted alone ran to its bound)
+    base = SimpleNamespace(x=np.zeros(3), spec=SimpleNamespace(
+        effect_params=(('time_delay', 'delay_s'),)))
     added = []
-    with_it = SimpleNamespace(spec=SimpleNamespace(effect_params=(
-        ('time_delay', 'delay_s'), ('amplifier_bandwidth', 'corner_hz'))))
+    with_it = SimpleNamespace(x=np.array([0.0, 0.0, 0.0, 9.0]), spec=SimpleNamespace(
+        effect_params=(('time_delay', 'delay_s'), ('amplifier_bandwidth', 'corner_hz'))))
     view = SimpleNamespace(without=lambda name, cand: base,
                            job=lambda b: lambda item: added.append((b, item)) or with_it)
     twins = [('amplifier_bandwidth', 'corner_hz', 216.0), ('time_delay', 'delay_s', 1e-3)]
-    prune.smaller(view, best, ('lead_lag',), (1.0, 20.0), twins)
+    calls.clear()
+    out = prune.smaller(view, best, ('lead_lag',), (1.0, 20.0), twins)
     assert added == [(base, ('amplifier_bandwidth', ('corner_hz',), [[np.log(216.0)]]))]
-    assert calls[-1][0][1] is with_it       # the delay was in the model already
+    (as_fitted, _), (at_value, _) = calls       # the delay was in the model already
+    assert as_fitted[1] is with_it and at_value[1].x[-1] == pytest.approx(np.log(216.0))
+    assert out.base is at_value[1]              # BIC: sum of x, log 216 < 9
 
 
 @pytest.mark.parametrize('refit_chi2, warm_chi2', [(10.0, 5.0), (5.0, 10.0)])

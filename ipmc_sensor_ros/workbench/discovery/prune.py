@@ -6,6 +6,8 @@ Used by the outside stage (:mod:`.outside`) on each C(s) chosen by BIC (:func:`p
 """
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from ...physics.effects import effect_parameter
@@ -62,7 +64,10 @@ def smaller(view, best, keep, band, twins=()):
 
     ``twins``: ``(effect, parameter, value)`` of the catalog effects that take the place of
     the elements taken out (each added to the model, started at the element's value, unless
-    the model has it already): the factor stays in the model C(s) is fitted in.
+    the model has it already): the factor stays in the model C(s) is fitted in.  A twin
+    fitted alone, before C(s), can run to a bound (a delay fitted to a resonance's phase ran
+    to 0.1 s), so C(s) is fitted from both: the twin as fitted and at the element's value;
+    the lower BIC is kept.
 
     Also from its values with a low-pass and a lead-lag's pole exchanged (the same C(s)), so
     that taking out either element can leave either pole (a lead-lag whose pole ran to its
@@ -76,10 +81,17 @@ def smaller(view, best, keep, band, twins=()):
     if set(POLE_PAIR) <= set(values):
         known.append(exchanged(values))
     base = view.without(name, best)
+    at_value = np.array(base.x, float)
     for effect, param, value in twins:
         if all(e != effect for e, _ in base.spec.effect_params):
             base = view.job(base)((effect, (param,), [[float(np.log(value))]]))
-    return fit_structures(view, base, [keep], band, known, material_from=best)[0]
+            at_value = np.append(at_value, np.log(value))
+    bases = [base]
+    if at_value.size == base.x.size and not np.array_equal(at_value, base.x):
+        bases.append(copy.copy(base))
+        bases[-1].x = at_value
+    return min((fit_structures(view, b, [keep], band, known, material_from=best)[0]
+                for b in bases), key=lambda c: c.fit.bic)
 
 
 def _plausible(twin, value) -> bool:
