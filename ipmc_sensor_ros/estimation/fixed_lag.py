@@ -30,7 +30,7 @@ import numpy as np
 from ..errors import ParameterError
 from .core import Estimate
 from .filter import ForwardRecord, KalmanFilter
-from .smoother import across, rts_backward
+from .smoother import across, first_of, rts_backward
 
 __all__ = ['FixedLagSmoother', 'MAX_LAG_SAMPLES', 'lag_smoother']
 
@@ -144,9 +144,8 @@ class FixedLagSmoother:
             m = filt.model
             scale = float(m.scale[m.iw])
             outs.append((xs[:, m.iw] * scale, np.sqrt(np.maximum(pw, 0.0)) * scale, rec.still))
-            end = None if link is None else across(
-                filt, link[0], (x_first, P_first, rec.x_pred[0], rec.P_pred[0], rec.steps[0]),
-                link[1])
+            end = None if link is None else across(filt, link[0],
+                                                   first_of(rec, x_first, P_first), link[1])
         n_out = self._held - keep
         w, std, still = (np.concatenate(p[::-1]) for p in zip(*outs))
         self._cut(n_out, self._held)

@@ -23,7 +23,8 @@ import numpy as np
 
 from .filter import FilterState, ForwardRecord, KalmanFilter
 
-__all__ = ['smooth', 'smooth_segments', 'rts_backward', 'across', 'CHUNK_SAMPLES']
+__all__ = ['smooth', 'smooth_segments', 'rts_backward', 'across', 'first_of',
+           'CHUNK_SAMPLES']
 
 #: Samples re-run and smoothed at a time (2 x 4096 covariances of a 15-state model: ~15 MB).
 CHUNK_SAMPLES = 4096
@@ -91,8 +92,13 @@ def smooth(filt: KalmanFilter, state: FilterState, current_a, steps=None,
         xs, pwc, (x_first, P_first) = rts_backward(filt, rec, end)
         w[a:b] = xs[:, filt.model.iw] * scale
         pw[a:b] = pwc
-        end = (x_first, P_first, rec.x_pred[0], rec.P_pred[0], int(rec.steps[0]))
+        end = first_of(rec, x_first, P_first)
     return w, np.sqrt(np.maximum(pw, 0.0)) * scale, end
+
+
+def first_of(rec: ForwardRecord, x_first, P_first) -> tuple:
+    """(x^s, P^s, x-, P-, steps) of a record's first sample: what the pass before needs."""
+    return x_first, P_first, rec.x_pred[0], rec.P_pred[0], int(rec.steps[0])
 
 
 def across(filt: KalmanFilter, start: FilterState, first, back):
