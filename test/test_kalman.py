@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
 """The Kalman estimator's model, filter, smoother and stream behaviour (estimation/)."""
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -146,7 +147,7 @@ def test_smoother_is_the_batch_posterior(reduced):
     n, nx = y.size, ssm.size
     F, Q = ssm.discrete(1)
     x0, P0 = ssm.prior()
-    R = filt.initial_state().noise_var_a2
+    R = filt.initial_state().noise.var_a2
     Qi, P0i = np.linalg.inv(Q + 1e-14 * np.eye(nx)), np.linalg.inv(P0 + 1e-14 * np.eye(nx))
     blocks = {}
 
@@ -270,11 +271,11 @@ def test_the_window_offset_takes_the_lines_as_the_filter_models_them(reduced):
     w = 2 * np.pi * 50.3
     win = b + np.cos(w * tau) * amp[0] + np.sin(w * tau) * amp[1]
     assert abs(win.mean() - b) > 0.2e-9             # what the raw mean would say
-    x, P = filt._window_offset(x, P, win, st.phases, st.line_sums, float(win.sum()),
-                               float(st.window_offset_var[0]), noise ** 2)
+    window = replace(st.window, samples=win, total=float(win.sum()))
+    x, P = filt._window_offset(x, P, window, noise ** 2)
     # b at the window's centre with the drift's prior (5e-11 A/s x 0.1 s) beside it: the
     # update splits the mean between b and d by their variances, well under 0.01 nA
-    assert filt.offset(type(st)(x, P, noise ** 2, win))[0] == pytest.approx(b, abs=1e-11)
+    assert filt.offset(replace(st, x=x, P=P))[0] == pytest.approx(b, abs=1e-11)
 
 
 def test_bridged_samples_are_predicted_not_shifted(reduced):

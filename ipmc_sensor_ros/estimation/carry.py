@@ -29,26 +29,20 @@ def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> Fil
     """
     x, P, _ = _carried(old.model, new.model, state.x, state.P, joint=False)
     init = new.initial_state()
-    out = replace(init, x=x, P=P,
-                  noise_var_a2=state.noise_var_a2, samples=state.samples,
-                  contiguous=state.contiguous, noise_weight=state.noise_weight,
-                  still=state.still, moved=state.moved, quiet=state.quiet,
-                  rest_track=state.rest_track)
-    if state.window.size != new.rest.n:
-        return replace(out, still=False, moved=True, quiet=0,    # the rest test's window
-                       rest_track=None)                          # restarts
+    out = replace(init, x=x, P=P, noise=replace(state.noise), samples=state.samples,
+                  still=state.still, moved=state.moved)
+    win = state.window
+    if win.samples.size != new.rest.n:          # the rest test's window restarts
+        return replace(out, still=False, moved=True)
     # the window carries over; its sliding DFT is recomputed for the new model's rest lines
     # (the window's samples taken as consecutive, the newest with phase 1)
-    n = state.window.size
-    age = (state.window_pos - 1 - np.arange(n)) % n       # slot of the sample j periods ago
+    n = win.samples.size
+    age = (win.pos - 1 - np.arange(n)) % n      # slot of the sample j periods ago
     phases = np.ones((n, len(new.rest_lines_hz)), complex)
     phases[age] = new.rotation[None, :] ** -np.arange(n)[:, None]
-    sums = state.window @ phases
-    return replace(out, window=state.window.copy(), window_count=state.window_count,
-                   window_offset_var=state.window_offset_var.copy(),
-                   window_pos=state.window_pos, total=state.total, total_sq=state.total_sq,
-                   line_sums=sums, phase=np.ones(len(new.rest_lines_hz), complex),
-                   phases=phases)
+    return replace(out, window=replace(win.copy(), line_sums=win.samples @ phases,
+                                       phase=np.ones(len(new.rest_lines_hz), complex),
+                                       phases=phases))
 
 
 def carry_back(old: KalmanFilter, new: KalmanFilter, state: FilterState):

@@ -39,10 +39,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .rest import RestTest
+from .rest import RestTest, RestWindow
 from .statespace import StateSpaceModel
 
-__all__ = ['FilterState', 'KalmanFilter', 'ForwardRecord', 'NOISE_AVERAGE_S', 'NOISE_FLOOR_A']
+__all__ = ['FilterState', 'KalmanFilter', 'ForwardRecord', 'NoiseMeter', 'NOISE_AVERAGE_S',
+           'NOISE_FLOOR_A']
 
 #: Averaging time of the measured noise variance, s: long against one sample, short against a
 #: record (the noise is known within a second of the start).
@@ -56,36 +57,48 @@ NOISE_FLOOR_A = 1e-12
 
 
 @dataclass(slots=True)
+class NoiseMeter:
+    """The measured white-noise variance per sample (module docstring), A^2."""
+
+    var_a2: float
+    weight: float = 0.0
+    #: samples in a row one period apart (a third difference needs four)
+    contiguous: int = 0
+
+    def add(self, current_a: float, steps: int, window: RestWindow, alpha: float) -> None:
+        """Take the newest sample (``window`` holds it and the three before)."""
+        if steps != 1:
+            self.contiguous = 0
+            return
+        if self.contiguous < 3:
+            self.contiguous += 1
+            return
+        w, pos, n = window.samples, window.pos, window.samples.size
+        d = current_a - 3.0 * w[(pos - 2) % n] + 3.0 * w[(pos - 3) % n] - w[(pos - 4) % n]
+        value = d * d / 20.0
+        if self.weight:
+            value = min(value, NOISE_CLIP * self.var_a2)
+        weight = (1.0 - alpha) * self.weight
+        self.var_a2 = max((weight * self.var_a2 + value) / (weight + 1.0), NOISE_FLOOR_A ** 2)
+        self.weight = weight + 1.0
+
+
+@dataclass(slots=True)
 class FilterState:
     """Everything the filter carries from one sample to the next (scaled units)."""
 
     x: np.ndarray
     P: np.ndarray
-    noise_var_a2: float
-    window: np.ndarray = field(repr=False)
-    window_count: int = 0
-    window_pos: int = 0
+    noise: NoiseMeter
+    window: RestWindow = field(repr=False)
     still: bool = False
-    samples: int = 0
-    contiguous: int = 0
-    noise_weight: float = 0.0
-    line_sums: np.ndarray = field(default=None, repr=False)
-    phase: np.ndarray = field(default=None, repr=False)
-    phases: np.ndarray = field(default=None, repr=False)
-    #: the filter's offset variance (A^2) before each window sample, in the window's slots
-    window_offset_var: np.ndarray = field(default=None, repr=False)
-    total: float = 0.0
-    total_sq: float = 0.0
+    #: the tip moved since the working point was last set (a new hold releases it)
     moved: bool = False
-    quiet: int = 0
-    #: the rest test's CUSUM and still-sensor offset (:meth:`.RestTest.sample_ok`); before
-    #: the window is full, the filter's offset before its first sample
-    rest_track: tuple | None = None
+    samples: int = 0
 
     def copy(self) -> 'FilterState':
-        return replace(self, x=self.x.copy(), P=self.P.copy(), window=self.window.copy(),
-                       line_sums=self.line_sums.copy(), phase=self.phase.copy(),
-                       phases=self.phases.copy(), window_offset_var=self.window_offset_var.copy())
+        return replace(self, x=self.x.copy(), P=self.P.copy(), noise=replace(self.noise),
+                       window=self.window.copy())
 
 
 @dataclass
@@ -165,14 +178,7 @@ class KalmanFilter:
         """One sample's turn e^{-i W_k / fs} of each rest-test line."""
         return self._rot
 
-    def _window_residuals(self, win, phases, sums, pos) -> np.ndarray:
-        """Return the full window's samples less its fit of the lines, oldest first."""
-        order = (pos + np.arange(win.size)) % win.size
-        if not self._rot.size:
-            return win[order]
-        return win[order] - 2.0 / win.size * (phases[order].conj() @ sums).real
-
-    def _window_offset(self, x, P, win, phases, sums, total, first_var, noise):
+    def _window_offset(self, x, P, window: RestWindow, noise):
         """
         Update (x, P) with the window's mean current as a measurement of the offset.
 
@@ -188,30 +194,23 @@ class KalmanFilter:
         prior); the information on b it took, 1/P_b now less 1/P_b before the window's first
         sample (``first_var``, A^2), is taken off the measurement's, so no sample counts twice.
         """
-        m, n = self.model, win.size
+        m, n = self.model, window.samples.size
         sb = float(m.scale[m.ib])
+        first_var = window.offset_var[window.pos]
         info = n / noise - (1.0 / (float(P[m.ib, m.ib]) * sb * sb) - 1.0 / first_var)
         if info <= 0.0:
             return x, P
         row = self._window_lines.copy()
         row[m.ib] = sb
         row[m.ib + 1] = -float(m.scale[m.ib + 1]) * (n - 1) / (2.0 * m.sample_rate_hz)
-        mean = (total / n if m.lines_hz
-                else float(self._window_residuals(win, phases, sums, 0).mean()))
-        Pc = P @ row
-        S = float(row @ Pc) + 1.0 / info
-        x = x + Pc * ((mean - float(row @ x)) / S)
-        g = Pc / math.sqrt(S)
-        return x, P - g[:, None] * g
+        mean = (window.total / n if m.lines_hz else float(window.residuals(0).mean()))
+        return scalar_update(x, P, row, mean, 1.0 / info)
 
     def initial_state(self) -> FilterState:
         x, P = self.model.prior()
-        k = len(self.rest_lines_hz)
         pb = P[self.model.ib, self.model.ib] * self.model.scale[self.model.ib] ** 2
-        return FilterState(x, P, self.model.config.current_noise_a ** 2,
-                           np.zeros(self.rest.n), line_sums=np.zeros(k, complex),
-                           phase=np.ones(k, complex), phases=np.ones((self.rest.n, k), complex),
-                           window_offset_var=np.full(self.rest.n, pb))
+        return FilterState(x, P, NoiseMeter(self.model.config.current_noise_a ** 2),
+                           RestWindow.empty(self.rest.n, len(self.rest_lines_hz), pb))
 
     def deflection(self, state: FilterState) -> tuple[float, float]:
         """(w, its standard deviation) of a state, m."""
@@ -232,33 +231,23 @@ class KalmanFilter:
         Filter ``current_a`` (A) from ``state``; return (new state, w, std, still).
 
         ``steps[k]``: sample periods from the sample before (None: all 1).  ``record``: filled
-        at rows ``offset + k`` for the smoother.  The loop keeps its state in local variables
-        and builds the returned :class:`FilterState` once; a block and single samples run the
-        same statements.  ``copy=False``: the new state reuses ``state``'s buffers (for an
-        owner that drops the old state; ``state`` itself is then no longer valid).
+        at rows ``offset + k`` for the smoother.  The loop keeps the state's arrays in local
+        variables and builds the returned :class:`FilterState` once; a block and single
+        samples run the same statements.  ``copy=False``: the new state reuses ``state``'s
+        buffers (for an owner that drops the old state; ``state`` is then no longer valid).
         """
         y = current_a if isinstance(current_a, list) else np.asarray(current_a, float).tolist()
         n = len(y)
         st = ([1] * n if steps is None else steps if isinstance(steps, list)
               else np.asarray(steps, dtype=np.int64).tolist())
-        m, rest = self.model, self.rest
-        iw, ih, ib, im = m.iw, m.ih, m.ib, m.im
-        periodic = m.size > im
+        m = self.model
+        iw, ib = m.iw, m.ib
         sw, sb = float(m.scale[iw]), float(m.scale[ib])
-        c, hold, rows, alpha, rot = m.c, m.hold_variance, self._rest_rows, self._alpha, self._rot
-        nw = rest.n
-        x, P, win, sums, phase, phases, bvar = (state.x, state.P, state.window,
-                                                state.line_sums, state.phase, state.phases,
-                                                state.window_offset_var)
+        c, rows, rot = m.c, self._rest_rows, self._rot
+        x, P, still, moved, samples = state.x, state.P, state.still, state.moved, state.samples
+        meter, win = state.noise, state.window
         if copy:
-            x, P, win, sums, phase, phases, bvar = (
-                a.copy() for a in (x, P, win, sums, phase, phases, bvar))
-        count, pos, total, total_sq = (state.window_count, state.window_pos, state.total,
-                                       state.total_sq)
-        noise, weight = state.noise_var_a2, state.noise_weight
-        samples, contiguous, still, moved, quiet = (state.samples, state.contiguous, state.still,
-                                                    state.moved, state.quiet)
-        track = state.rest_track
+            x, P, meter, win = x.copy(), P.copy(), replace(meter), win.copy()
         out_w, out_s, out_still = np.empty(n), np.empty(n), np.empty(n, dtype=bool)
         F, Q = m.discrete(1)
         last_steps = 1
@@ -269,93 +258,70 @@ class KalmanFilter:
                 last_steps = sk
             if samples:
                 x = F @ x
-                if rot.size:
-                    phase = phase * (rot if sk == 1 else rot ** sk)
-            # the rest window holds the current; its sliding DFT fits the lines (rest.py)
-            old = win[pos]
-            if rot.size:
-                sums += yk * phase - old * phases[pos]
-                phases[pos] = phase
-            win[pos] = yk
-            total += yk - old
-            total_sq += yk * yk - old * old
-            pos += 1
-            if pos == nw:               # exact sums once per window (no drift of the running ones)
-                pos = 0
-                total, total_sq = float(win.sum()), float(win @ win)
-            filled = count == nw - 1
-            count = min(count + 1, nw)
-            b, pb = float(x[ib]) * sb, float(P[ib, ib]) * sb * sb
-            bvar[pos - 1] = pb
-            if count < nw:              # tested once the window's fit of the lines exists
-                track = track or (0.0, 0.0, b, pb)
-            elif filled:
-                quiet, track = rest.first_window(self._window_residuals(win, phases, sums, pos),
-                                                 *(track or (0.0, 0.0, b, pb))[2:], noise)
-            else:                       # this sample less the window's fit of the lines
-                r = yk - 2.0 / nw * float(np.vdot(phase, sums).real) if rot.size else yk
-                ok, track = rest.sample_ok(r, track, b, pb, noise, still)
-                quiet = quiet + 1 if ok else 0
-            if count == nw:
-                energy = 2.0 / nw * float(np.vdot(sums, sums).real) if rot.size else 0.0
-                was_still = still
-                still = quiet >= nw and rest.still(total, total_sq, energy, b,
-                                                   float(P[ib, ib]) * sb * sb, noise)
-                # the working point is released when the tip leaves a rest (the centre of the
-                # coming motion is unknown) and when a new hold begins (it is where the tip is
-                # held); a record that starts at rest keeps its rest position until it moves
-                release = was_still != still and (not still or moved)
-                begins = still and not was_still
-                moved = moved or not still
-            else:
-                still = release = begins = False
+            win.push(yk, None if not (samples and rot.size) else rot if sk == 1 else rot ** sk)
+            verdict = win.judge(self.rest, yk, float(x[ib]) * sb, float(P[ib, ib]) * sb * sb,
+                                meter.var_a2, still)
+            still, release, begins, moved = _rest_change(verdict, still, moved)
             if samples:
                 P = F @ P @ F.T
                 P = 0.5 * (P + P.T) + Q     # symmetric to the bit (the updates keep it so)
             if release:
-                P[ih, ih] += hold
-                moved = moved and not still
-                if periodic and not still:
-                    P[im:, im:] += np.eye(m.size - im)
+                P = self._released(P, still)
             if record is not None:
                 j = offset + k
                 record.x_pred[j], record.P_pred[j] = x, P
                 record.steps[j], record.still[j] = sk, still
-            # the update with the current (P - g g' with g = P c / sqrt(S): symmetric exactly)
-            Pc = P @ c
-            S = float(c @ Pc) + noise
-            x = x + Pc * ((yk - float(c @ x)) / S)
-            g = Pc / math.sqrt(S)
-            P = P - g[:, None] * g
-            # the measured noise: third difference of r (module docstring)
-            if sk != 1:
-                contiguous = 0
-            elif contiguous < 3:
-                contiguous += 1
-            else:
-                d = (yk - 3.0 * win[(pos - 2) % nw] + 3.0 * win[(pos - 3) % nw]
-                     - win[(pos - 4) % nw])
-                value = d * d / 20.0
-                if weight:
-                    value = min(value, NOISE_CLIP * noise)
-                weight = (1.0 - alpha) * weight
-                noise = max((weight * noise + value) / (weight + 1.0), NOISE_FLOOR_A ** 2)
-                weight += 1.0
+            x, P = scalar_update(x, P, c, yk, meter.var_a2)
+            meter.add(yk, sk, win, self._alpha)
             if begins:                  # what the window says of the offset
-                x, P = self._window_offset(x, P, win, phases, sums, total, bvar[pos], noise)
+                x, P = self._window_offset(x, P, win, meter.var_a2)
             if still:                   # the rest pseudo-measurements (velocity, ... = 0)
                 for row_c, var in rows:
-                    Pc = P @ row_c
-                    S = float(row_c @ Pc) + var
-                    x = x - Pc * (float(row_c @ x) / S)
-                    g = Pc / math.sqrt(S)
-                    P = P - g[:, None] * g
+                    x, P = scalar_update(x, P, row_c, 0.0, var)
             if record is not None:
                 record.x_post[offset + k], record.P_post[offset + k] = x, P
             samples += 1
             out_w[k] = x[iw] * sw
             out_s[k] = math.sqrt(max(P[iw, iw], 0.0)) * sw
             out_still[k] = still
-        new = FilterState(x, P, noise, win, count, pos, still, samples, contiguous, weight,
-                          sums, phase, phases, bvar, total, total_sq, moved, quiet, track)
-        return new, out_w, out_s, out_still
+        return FilterState(x, P, meter, win, still, moved, samples), out_w, out_s, out_still
+
+    def _released(self, P: np.ndarray, still: bool) -> np.ndarray:
+        """
+        Release the working point's prior as the rest changes, and leaving a rest the
+        periodic motion's (a new motion's amplitude is unknown).
+        """
+        m = self.model
+        P[m.ih, m.ih] += m.hold_variance
+        if m.size > m.im and not still:
+            P[m.im:, m.im:] += np.eye(m.size - m.im)
+        return P
+
+
+def _rest_change(verdict: bool | None, still: bool, moved: bool):
+    """
+    Return (still, release, begins, moved) after the rest window's ``verdict``.
+
+    The working point is released when the tip leaves a rest (the centre of the coming
+    motion is unknown) and when a new hold begins (it is where the tip is held); a record
+    that starts at rest keeps its rest position until it moves.  None: the window is not
+    full, no rest.
+    """
+    if verdict is None:
+        return False, False, False, moved
+    release = still != verdict and (not verdict or moved)
+    moved = (moved or not verdict) and not (release and verdict)
+    return verdict, release, verdict and not still, moved
+
+
+def scalar_update(x: np.ndarray, P: np.ndarray, row: np.ndarray, value: float, var: float):
+    """
+    Return (x, P) updated with the scalar measurement ``row @ x = value`` of variance ``var``.
+
+    P - g g' with g = P row / sqrt(S): symmetric exactly.
+    """
+    Pc = P @ row
+    S = float(row @ Pc) + var
+    x = x + Pc * ((value - float(row @ x)) / S)
+    g = Pc / math.sqrt(S)
+    return x, P - g[:, None] * g

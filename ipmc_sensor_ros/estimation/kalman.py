@@ -325,11 +325,11 @@ class KalmanEstimator:
             recent = np.asarray(state['recent'], dtype=float)
             filt = self._model_filter(line, motion)
             log = StretchLog.restored(state['stretches'], self._model_filter)
-            window_slots = fs.window_offset_var.shape
+            window_slots = fs.window.offset_var.shape
         except (KeyError, TypeError, ValueError, AttributeError):
             raise ParameterError('not a state of this Kalman estimator') from None
         if (fs.x.shape != (filt.model.size,) or recent.shape != self._recent.shape
-                or window_slots != fs.window.shape):
+                or window_slots != fs.window.samples.shape):
             raise ParameterError('state was saved from a different estimator design')
         self._flush_lag()
         self._filter, self._log = filt, log
@@ -388,7 +388,7 @@ class KalmanEstimator:
                                      self._state.x[m.il + 1] * s[m.il + 1]))
         return {'estimator': self.name, 'offset_a': b, 'offset_std_a': b_std,
                 'at_rest': bool(self._state.still), 'deflection_std_m': w_std,
-                'noise_a': math.sqrt(self._state.noise_var_a2),
+                'noise_a': math.sqrt(self._state.noise.var_a2),
                 'mains_line_hz': self.line_hz, 'mains_line_a': level,
                 'motion_hz': self.model.motion_hz}
 

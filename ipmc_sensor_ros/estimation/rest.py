@@ -35,11 +35,12 @@ for rest; its deflection is then below ``R0^-1 sqrt(R/N)`` per second (R0 = R_n(
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
+import numpy as np
 from scipy.stats import chi2
 
-__all__ = ['RestTest', 'CUSUM_DRIFT']
+__all__ = ['RestTest', 'RestWindow', 'CUSUM_DRIFT']
 
 #: CUSUM drift, in noise sigmas: half the smallest shift it must see quickly (a motion whose
 #: current is one noise sigma; smaller ones are left to the window's level test).
@@ -132,3 +133,100 @@ class RestTest:
             return False
         d = mean - offset_a
         return d * d <= self.level_limit * (noise_var_a2 / n + offset_var_a2)
+
+
+@dataclass(slots=True)
+class RestWindow:
+    """
+    The window the rest test judges: the last N samples of the current, and its progress.
+
+    ``samples`` is a ring (``pos``: the slot the next sample takes, ``count``: how many it
+    holds); ``line_sums`` is the sliding DFT of the tested lines over it (the phasor of each
+    slot's sample in ``phases``, of the newest in ``phase``); ``total`` and ``total_sq`` are
+    running sums, recomputed exactly once per turn of the ring (no drift); ``offset_var`` the
+    filter's offset variance (A^2) before each slot's sample; ``quiet`` how many of the newest
+    samples agreed with rest in a row, and ``track`` the CUSUM and still-sensor offset after
+    them (:meth:`RestTest.sample_ok`; before the window is full, the filter's offset before
+    its first sample).
+    """
+
+    samples: np.ndarray
+    line_sums: np.ndarray
+    phase: np.ndarray
+    phases: np.ndarray
+    offset_var: np.ndarray
+    count: int = 0
+    pos: int = 0
+    total: float = 0.0
+    total_sq: float = 0.0
+    quiet: int = 0
+    track: tuple | None = None
+
+    @classmethod
+    def empty(cls, n: int, lines: int, offset_var_a2: float) -> 'RestWindow':
+        """A window of ``n`` samples testing ``lines`` lines, before its first sample."""
+        return cls(np.zeros(n), np.zeros(lines, complex), np.ones(lines, complex),
+                   np.ones((n, lines), complex), np.full(n, offset_var_a2))
+
+    def copy(self) -> 'RestWindow':
+        return replace(self, samples=self.samples.copy(), line_sums=self.line_sums.copy(),
+                       phase=self.phase.copy(), phases=self.phases.copy(),
+                       offset_var=self.offset_var.copy())
+
+    def push(self, current_a: float, turn) -> None:
+        """Take the newest sample; ``turn``: its lines' phasor turn since the one before."""
+        pos, n = self.pos, self.samples.size
+        old = self.samples[pos]
+        if self.phase.size:
+            if turn is not None:
+                self.phase = self.phase * turn
+            self.line_sums += current_a * self.phase - old * self.phases[pos]
+            self.phases[pos] = self.phase
+        self.samples[pos] = current_a
+        self.total += current_a - old
+        self.total_sq += current_a * current_a - old * old
+        self.pos = pos + 1
+        if self.pos == n:           # exact sums once per turn
+            self.pos = 0
+            w = self.samples
+            self.total, self.total_sq = float(w.sum()), float(w @ w)
+
+    def residuals(self, start: int) -> np.ndarray:
+        """The window's samples less its fit of the lines, from slot ``start`` on."""
+        n = self.samples.size
+        order = (start + np.arange(n)) % n
+        if not self.phase.size:
+            return self.samples[order]
+        return self.samples[order] - 2.0 / n * (self.phases[order].conj() @ self.line_sums).real
+
+    def judge(self, test: RestTest, current_a: float, offset_a: float, offset_var_a2: float,
+              noise_var_a2: float, at_rest: bool) -> bool | None:
+        """
+        Test the newest sample (after :meth:`push`); return the window's verdict.
+
+        None while the window fills; then True when every sample agreed with rest on its own
+        (the window's first ones once it is full, against its fit of the lines) and the
+        whole window passes :meth:`RestTest.still`.  ``offset_a``, ``offset_var_a2``: the
+        filter's offset and its variance before this sample.
+        """
+        n = self.samples.size
+        filled = self.count == n - 1
+        self.count = min(self.count + 1, n)
+        self.offset_var[self.pos - 1] = offset_var_a2
+        if self.count < n:
+            self.track = self.track or (0.0, 0.0, offset_a, offset_var_a2)
+            return None
+        if filled:                  # from the offset before the window's first sample
+            first = self.track or (0.0, 0.0, offset_a, offset_var_a2)
+            self.quiet, self.track = test.first_window(self.residuals(self.pos), *first[2:],
+                                                       noise_var_a2)
+        else:                       # this sample less the window's fit of the lines
+            r = (current_a - 2.0 / n * float(np.vdot(self.phase, self.line_sums).real)
+                 if self.phase.size else current_a)
+            ok, self.track = test.sample_ok(r, self.track, offset_a, offset_var_a2,
+                                            noise_var_a2, at_rest)
+            self.quiet = self.quiet + 1 if ok else 0
+        energy = (2.0 / n * float(np.vdot(self.line_sums, self.line_sums).real)
+                  if self.phase.size else 0.0)
+        return self.quiet >= n and test.still(self.total, self.total_sq, energy, offset_a,
+                                              offset_var_a2, noise_var_a2)
