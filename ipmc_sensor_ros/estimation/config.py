@@ -90,7 +90,8 @@ SETTINGS = (
     Setting('rest_window_s', 0.2, 's', 1e-3, 60.0,
             'window of the rest test: five periods of the slowest crank of the paper'),
     Setting('rest_false_alarm', 1e-6, '', 1e-15, 0.5,
-            'probability that the rest test calls a still window moving (chi-square level)'),
+            'false-alarm level of each rest test: chi-square on the window spread and mean '
+            'and on each sample, and the per-sample rate of the two-sided CUSUM'),
 )
 
 #: Names of the settings, in order (node parameters and CLI flags use the same names).

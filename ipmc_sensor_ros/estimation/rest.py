@@ -99,9 +99,9 @@ class RestTest:
         """Thresholds for a window of ``window_s`` with ``lines`` mains lines fitted in it."""
         n = max(8 + 2 * lines, int(round(window_s * sample_rate_hz)))
         # Siegmund: mean run length to a false alarm ~ exp(2 k (h + 1.166)) / (2 k^2) samples,
-        # one-sided; two sides halve it
+        # one-sided; two sides halve it, so each side's is 2 / false_alarm
         k = CUSUM_DRIFT
-        cusum = math.log(2 * k * k / (2 * false_alarm)) / (2 * k) - 1.166
+        cusum = math.log(4 * k * k / false_alarm) / (2 * k) - 1.166
         return cls(n, float(chi2.isf(false_alarm, n - 1 - 2 * lines)),
                    float(chi2.isf(false_alarm, 1)), max(cusum, 1.0))
 

@@ -1,0 +1,62 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The rest test's window and its false-alarm rates (estimation/rest.py)."""
+import numpy as np
+import pytest
+
+from ipmc_sensor_ros.estimation.rest import RestTest, RestWindow
+
+FS = 1000.0
+
+
+def test_window_sums_and_line_fit_follow_the_last_samples():
+    """
+    Running sums and the sliding DFT equal a direct computation over the window.
+
+    1234 samples (several turns of the ring, a bridged gap of 3 periods), a 50 Hz line: the
+    sums match to rounding, and the window less its fit of the line (10 whole cycles of 50
+    and 100 Hz in 0.2 s, where the DFT fit is the least-squares fit) is the noise alone.
+    """
+    rng = np.random.default_rng(3)
+    lines = np.array([50.0, 100.0])
+    rot = np.exp(-2j * np.pi * lines / FS)
+    win = RestWindow.empty(200, lines.size, 1.0)
+    steps = np.ones(1234, dtype=int)
+    steps[700] = 3
+    t = np.cumsum(steps) / FS
+    noise = 1e-9 * rng.standard_normal(t.size)
+    y = 5e-8 * np.cos(2 * np.pi * 50.0 * t + 0.3) + noise
+    for k in range(t.size):
+        win.push(float(y[k]), None if k == 0 else rot ** steps[k])
+    last = y[-200:]
+    assert win.total == pytest.approx(last.sum(), rel=1e-12, abs=1e-20)
+    assert win.total_sq == pytest.approx(last @ last, rel=1e-12)
+    phasors = np.exp(-2j * np.pi * np.outer(t[-200:] - t[0], lines))   # from the first
+    assert np.allclose(win.line_sums, last @ phasors, rtol=1e-9, atol=1e-20)
+    fit_free = win.residuals(win.pos)
+    # the fit also takes the noise's own 50 and 100 Hz components (4 of 200 degrees of
+    # freedom): what is left differs from the noise by about sqrt(4 / 200) of it
+    assert np.std(fit_free - (noise[-200:] - noise[-200:].mean())) < 0.3e-9
+
+
+@pytest.mark.parametrize('false_alarm', [1e-2, 1e-3])
+def test_rest_tests_call_white_noise_moving_at_their_level(false_alarm):
+    """
+    On white noise each test calls a still sensor moving at about its stated level.
+
+    Per sample: the innovation's chi-square and the two-sided CUSUM, each at the level, so
+    2 x the level in all (Siegmund's approximation of the CUSUM's run length is within 25 %
+    at these levels); per window: the spread's and the mean's chi-square, 2 x the level.
+    Counts: 200,000 samples (2,000 or 400 alarms expected, Poisson +-2-5 %), 5,000 windows
+    (100 or 10 expected: the band is wide for 10).
+    """
+    rng = np.random.default_rng(11)
+    test = RestTest.design(0.2, FS, false_alarm)
+    track, alarms = None, 0
+    for r in rng.standard_normal(200_000).tolist():
+        ok, track = test.sample_ok(r, track, 0.0, 0.0, 1.0)
+        alarms += not ok
+    assert 1.5 * false_alarm < alarms / 200_000 < 2.5 * false_alarm
+    windows = rng.standard_normal((5000, test.n))
+    fails = sum(not test.still(float(w.sum()), float(w @ w), 0.0, 0.0, 0.0, 1.0)
+                for w in windows)
+    assert 0.8 * false_alarm < fails / 5000 < 4 * false_alarm
