@@ -46,6 +46,7 @@ from .core import ESTIMATORS, Estimate, EstimatorCore
 from .inverse import DEFAULT_LEAK_CORNER_HZ, InverseEstimator
 from .kalman import KalmanEstimator
 from .mains import MainsFilter, detect_lines
+from .ring import SampleRing
 
 __all__ = ['DeflectionEstimator', 'ESTIMATORS', 'leak_transient_s']
 
@@ -127,9 +128,7 @@ class DeflectionEstimator:
         numeric_mains = 0.0 if self.mains_hz == 'auto' else self.mains_hz
         self.mains = MainsFilter(numeric_mains if estimator == 'leaky' else 0.0,
                                  self.core.sample_rate_hz)
-        self._history = np.zeros(max(1, int(round(history_s * self.core.sample_rate_hz))))
-        self._history_n = 0
-        self._history_end = 0
+        self._history = SampleRing(max(1, int(round(history_s * self.core.sample_rate_hz))))
         self.reset_outputs()
 
     def _new_core(self, reduced: ReducedModel, sample_rate_hz: float) -> EstimatorCore:
@@ -173,8 +172,7 @@ class DeflectionEstimator:
     @property
     def recent_input(self) -> np.ndarray:
         """Return the last inputs fed to the core (effect-corrected current), oldest first."""
-        ordered = np.roll(self._history, -self._history_end)
-        return ordered[ordered.size - self._history_n:]
+        return self._history.values()
 
     def settling(self) -> tuple[float, str]:
         """Return (seconds since the reset, why) before the estimate is comparable."""
@@ -212,7 +210,7 @@ class DeflectionEstimator:
             self.core.reset()
         if self._drift is not None:
             self._drift.reset()
-        self._history_n = 0
+        self._history.clear()
         self.mains.reset()
         self.reset_outputs()
 
@@ -251,12 +249,12 @@ class DeflectionEstimator:
     def _run_core(self, elapsed, i: np.ndarray, steps) -> Estimate:
         if self._material_at is None:
             est = self.core.estimate(i, steps)
-            self._remember(i)
+            self._history.extend(i)
             return est
         parts = []
         for sl in self._drift.slices(elapsed, self._follow_drift):
             parts.append(self.core.estimate(i[sl], None if steps is None else steps[sl]))
-            self._remember(i[sl])
+            self._history.extend(i[sl])
         return Estimate(*(np.concatenate(p) for p in zip(*parts)))
 
     def _undo_input_transforms(self, est: Estimate) -> np.ndarray:
@@ -319,10 +317,7 @@ class DeflectionEstimator:
             self._lag_times.append(t_out)
         w, std = self.core.estimate_one(current_a, steps)
         self.last_std_m = np.array([std])
-        end = self._history_end
-        self._history[end] = current_a
-        self._history_end = (end + 1) % self._history.size
-        self._history_n = min(self._history_n + 1, self._history.size)
+        self._history.push(current_a)
         return t_out, w
 
     def smooth(self, time_s, current_a, steps=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -346,21 +341,6 @@ class DeflectionEstimator:
         est = fresh.core.smooth(i, steps)
         w = fresh._undo_input_transforms(est)
         return (t - self.delay_s if self.delay_s else t), w, est.std_m
-
-    def _remember(self, x: np.ndarray) -> None:
-        """Append ``x`` to the ring buffer of recent input."""
-        n = self._history.size
-        m = x.size
-        if m >= n:
-            self._history[:] = x[-n:]
-            self._history_end = 0
-        else:
-            end = self._history_end
-            first = min(m, n - end)
-            self._history[end:end + first] = x[:first]
-            self._history[:m - first] = x[first:]
-            self._history_end = (end + m) % n
-        self._history_n = min(n, self._history_n + m)
 
     def _follow_drift(self, material) -> None:
         """Rebuild the core for the drifted ``material`` (its state carried over)."""
@@ -393,7 +373,6 @@ class DeflectionEstimator:
         """Take over ``old``'s stream: its recent input, core state and time origin."""
         if old._history.size == self._history.size:
             self._history = old._history.copy()
-            self._history_n, self._history_end = old._history_n, old._history_end
         if old.core.name == self.core.name:
             self.core.continue_from(old.core, self.recent_input)
         self._t0 = old._t0

@@ -39,6 +39,7 @@ from .fixed_lag import lag_smoother
 from .lines import NOMINAL_LINES_HZ, measure_line
 from .motionline import MOTION_LONGEST_S, MOTION_PERIODS, measure_recent
 from .periodic import StretchLog, refilter, same_motion
+from .ring import SampleRing
 from .smoother import smooth_segments
 from .statespace import StateSpaceModel
 
@@ -143,8 +144,7 @@ class KalmanEstimator:
                                                             self.sample_rate_hz, nominal))
         self._state = self._filter.initial_state()
         self._log = StretchLog(self._filter, self._state)
-        self._recent = np.zeros(self._window_n)
-        self._grid = 0           # sample periods since the start (bridged ones included)
+        self._recent = SampleRing(self._window_n)    # on the sample grid: bridged slots too
         self._first_rest_n = None
 
     # -- streaming ------------------------------------------------------------------------
@@ -183,8 +183,7 @@ class KalmanEstimator:
                                                     [int(steps)], copy=False)
         self._log.add_one(float(current_a), int(steps), bool(still[0]))
         for _ in range(int(steps)):     # a bridged slot holds the next value (line check)
-            self._recent[self._grid % self._window_n] = current_a
-            self._grid += 1
+            self._recent.push(current_a)
         if self._first_rest_n is None and still[0]:
             self._first_rest_n = n
         return float(w[0]), float(s[0])
@@ -196,19 +195,12 @@ class KalmanEstimator:
         A bridged slot holds the value of the sample after it, so the line check sees the
         hum's phase where it was (a dropped burst does not shift the rest of the window).
         """
-        n = self._window_n
-        end = self._state.samples
         if self._first_rest_n is None and still.any():
-            self._first_rest_n = end - y.size + int(np.argmax(still))
-        dense = np.repeat(y, steps)[-n:]
-        idx = np.arange(self._grid + int(steps.sum()) - dense.size,
-                        self._grid + int(steps.sum())) % n
-        self._recent[idx] = dense
-        self._grid += int(steps.sum())
+            self._first_rest_n = self._state.samples - y.size + int(np.argmax(still))
+        self._recent.extend(np.repeat(y, steps))
 
     def _check_line(self) -> None:
-        seen = min(self._grid, self._window_n)
-        recent = np.roll(self._recent, -(self._grid % self._window_n))[-seen:]
+        recent = self._recent.values()
         self._check_mains(recent[-self._check_n:])
         self._check_motion(recent)
         self._log.mark(self._filter, self._state)
@@ -313,8 +305,8 @@ class KalmanEstimator:
     # -- state ------------------------------------------------------------------------------
     def get_state(self) -> dict:
         return {'filter': self._state.copy(), 'line_hz': self.model.fundamentals_hz,
-                'motion_hz': self.model.motion_hz, 'recent': self._recent.copy(),
-                'grid': self._grid, 'first_rest_n': self._first_rest_n,
+                'motion_hz': self.model.motion_hz, 'recent': self._recent.buffer.copy(),
+                'grid': self._recent.count, 'first_rest_n': self._first_rest_n,
                 'stretches': self._log.saved()}
 
     def set_state(self, state: dict) -> None:
@@ -328,14 +320,13 @@ class KalmanEstimator:
             window_slots = fs.window.offset_var.shape
         except (KeyError, TypeError, ValueError, AttributeError):
             raise ParameterError('not a state of this Kalman estimator') from None
-        if (fs.x.shape != (filt.model.size,) or recent.shape != self._recent.shape
+        if (fs.x.shape != (filt.model.size,) or recent.shape != self._recent.buffer.shape
                 or window_slots != fs.window.samples.shape):
             raise ParameterError('state was saved from a different estimator design')
         self._flush_lag()
         self._filter, self._log = filt, log
         self._state = fs.copy()
-        self._recent = recent.copy()
-        self._grid = int(state.get('grid', fs.samples))
+        self._recent = SampleRing(recent.size, recent, int(state.get('grid', fs.samples)))
         self._first_rest_n = state.get('first_rest_n')
 
     def _model_filter(self, line_hz, motion_hz) -> KalmanFilter:
@@ -374,7 +365,7 @@ class KalmanEstimator:
         self._log = StretchLog(self._filter, self._state)
         self._first_rest_n = old._first_rest_n
         if old._window_n == self._window_n:
-            self._recent, self._grid = old._recent.copy(), old._grid
+            self._recent = old._recent.copy()
 
     # -- reporting -----------------------------------------------------------------------
     def status(self) -> dict:
