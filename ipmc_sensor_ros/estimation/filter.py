@@ -192,7 +192,8 @@ class KalmanFilter:
         filter has used these samples already, under its motion model, which takes little of
         b from them (a steady current is also a slow motion: a still start leaves P_b at its
         prior); the information on b it took, 1/P_b now less 1/P_b before the window's first
-        sample (``first_var``, A^2), is taken off the measurement's, so no sample counts twice.
+        sample (kept in the window's slot), is taken off the measurement's, so no sample
+        counts twice.
         """
         m, n = self.model, window.samples.size
         sb = float(m.scale[m.ib])
