@@ -47,7 +47,7 @@ def test_diagnose_saves_model_and_prints_next_command(data, tmp_path, capsys):
     model_file = tmp_path / 'model.yaml'
     js = tmp_path / 'd.json'
     assert main(['diagnose', str(data), '--model', 'h2', '--save-model', str(model_file),
-                 '--json', str(js), '--max-effects', '2', '--mains', 'auto']) == 0
+                 '--json', str(js), '--max-effects', '2', '--mains-hz', 'auto']) == 0
     out = capsys.readouterr().out
     verdict = json.loads(js.read_text())['verdict']
     assert verdict['missing_effects'][0] == 'time_delay' and verdict['explained']

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..estimation.config import parse_mains
 from ..physics.model import SensorModel
 from ..physics.parameters import ParameterError
 from .args import (Progress, add_data_args, add_model_args, add_output_args, effects_from_args,
@@ -216,9 +217,7 @@ def _cmd_diagnose(args) -> int:
 
     recs, data = _records(args, with_data=True)
     free = param_names(args.free)
-    mains = {'off': None, 'auto': 'auto', '50': 50.0, '60': 60.0}.get(str(args.mains).lower(), '?')
-    if mains == '?':
-        raise ParameterError(f'--mains must be 50, 60, auto or off, got {args.mains!r}')
+    mains = parse_mains(args.mains_hz)       # the node's values: auto, 0, 50, 60
     cands = [c.strip() for c in args.candidates.split(',')] if args.candidates else None
     for c in cands or []:
         if c not in EFFECTS:
@@ -228,7 +227,7 @@ def _cmd_diagnose(args) -> int:
                   f'{len(names)} candidate(s)') as prog:
         diag = diagnose(recs, free_material=free, candidates=cands, progress=prog.step,
                         settle_s=args.settle, fit_effects=effects_to_fit(args.effects),
-                        max_effects=args.max_effects, mains=mains,
+                        max_effects=args.max_effects, mains=mains or None,
                         priors=priors_from_headers(data))
     print(diag.summary())
     print('  error = held-out ||y - ŷ|| / ||y - mean y||; x better = baseline error / error; '
@@ -352,8 +351,10 @@ def add_parsers(sub, formatter) -> None:
                    help='restrict to these effects, comma list (default: the whole catalog)')
     p.add_argument('--max-effects', type=int, default=3, metavar='N',
                    help='at most this many effects added by the stepwise search')
-    p.add_argument('--mains', default='auto', metavar='50|60|auto|off',
-                   help='mains lines to find and remove from the current before fitting')
+    p.add_argument('--mains-hz', default='auto', metavar='auto|0|50|60',
+                   help='mains lines to find and remove from the current before fitting: auto '
+                        'looks for both families, 50 or 60 for that one, 0 for none (the '
+                        'estimator node parameter mains_hz)')
     p.add_argument('--save-model', metavar='FILE',
                    help='write the final model (effects with fitted values, material, provenance) '
                         'as ipmc-model/1 YAML')

@@ -46,6 +46,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ...estimation.config import parse_mains as parse_mains_hz
 from .drive import drive_of
 
 __all__ = ['MainsLine', 'MAINS_SEARCH_HZ', 'LEVEL_BAND_HZ', 'parse_mains', 'find_mains_lines',
@@ -83,19 +84,15 @@ class MainsLine:
 
 
 def parse_mains(value) -> float | str | None:
-    """Parse a mains setting: 'off'/None -> None, 'auto' -> 'auto', 50/60 -> Hz; else refuse."""
-    if value is None or str(value).strip().lower() in ('off', 'none', '0', ''):
+    """
+    Return the mains family to look for: 'auto', 50.0, 60.0, or None (none).
+
+    The estimator's ``mains_hz`` values ('auto', 0, 50, 60: :func:`~ipmc_sensor_ros.
+    estimation.config.parse_mains`, which refuses others), 0 and None meaning none.
+    """
+    if value is None:
         return None
-    text = str(value).strip().lower()
-    if text == 'auto':
-        return 'auto'
-    try:
-        f = float(text)
-    except ValueError:
-        f = None
-    if f not in (50.0, 60.0):
-        raise ValueError(f'mains must be 50, 60, auto or off, got {value!r}')
-    return f
+    return parse_mains_hz(value) or None
 
 
 def line_threshold(nu: int, span_s: float, orders, false_alarm: float) -> float:
