@@ -38,7 +38,7 @@ def free_names(text: str) -> tuple[str, ...]:
     Comma list -> names: material symbols mapped to full names.
 
     Effect parameters kept (resolved against the model by
-    :func:`~ipmc_sensor_ros.workbench.freqfit.resolve_effect_parameter`).
+    :func:`~ipmc_sensor_ros.workbench.fitmap.resolve_effect_parameter`).
     """
     return tuple(
         SYMBOL_TO_NAME.get(x, x) for x in (s.strip() for s in (text or '').split(',')) if x
