@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
+from ipmc_sensor_ros.estimation.ring import SampleRing
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
 from ipmc_sensor_ros.simulation.sensor import predict_current
@@ -83,6 +84,28 @@ def test_recent_input_is_the_last_inputs_in_order_for_any_block_sizes():
         k += n
         expected = x[max(0, k - size):k]
         assert np.array_equal(est.recent_input, expected)
+
+
+def test_sample_ring_keeps_the_last_values_however_fed():
+    """Blocks and single values, a restore from (buffer, count) and a clear: the last values."""
+    ring = SampleRing(7)
+    fed = []
+    rng = np.random.default_rng(5)
+    for n in rng.choice([0, 1, 2, 7, 9, 16], size=40):
+        x = rng.normal(size=int(n))
+        if n == 1:
+            ring.push(float(x[0]))
+        else:
+            ring.extend(x)
+        fed.extend(x.tolist())
+        assert np.array_equal(ring.values(), np.array(fed[-7:]))
+    again = SampleRing(7, ring.buffer, ring.count)
+    copied = ring.copy()
+    ring.push(1.0)
+    assert np.array_equal(again.values(), np.array(fed[-7:]))
+    assert np.array_equal(copied.values(), np.array(fed[-7:]))
+    ring.clear()
+    assert ring.values().size == 0
 
 
 def test_kalman_with_a_nonlinearity_holds_a_step_and_tracks_a_crank():

@@ -289,8 +289,10 @@ class KalmanFilter:
 
     def _released(self, P: np.ndarray, still: bool) -> np.ndarray:
         """
-        Release the working point's prior as the rest changes, and leaving a rest the
-        periodic motion's (a new motion's amplitude is unknown).
+        Release the working point's prior as the rest changes (and the periodic motion's).
+
+        Leaving a rest, the periodic motion's prior is released too: a new motion's amplitude
+        is unknown.
         """
         m = self.model
         P[m.ih, m.ih] += m.hold_variance

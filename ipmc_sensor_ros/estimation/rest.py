@@ -164,7 +164,7 @@ class RestWindow:
 
     @classmethod
     def empty(cls, n: int, lines: int, offset_var_a2: float) -> 'RestWindow':
-        """A window of ``n`` samples testing ``lines`` lines, before its first sample."""
+        """Return a window of ``n`` samples testing ``lines`` lines, before its first sample."""
         return cls(np.zeros(n), np.zeros(lines, complex), np.ones(lines, complex),
                    np.ones((n, lines), complex), np.full(n, offset_var_a2))
 
@@ -192,7 +192,7 @@ class RestWindow:
             self.total, self.total_sq = float(w.sum()), float(w @ w)
 
     def residuals(self, start: int) -> np.ndarray:
-        """The window's samples less its fit of the lines, from slot ``start`` on."""
+        """Return the window's samples less its fit of the lines, from slot ``start`` on."""
         n = self.samples.size
         order = (start + np.arange(n)) % n
         if not self.phase.size:

@@ -1,7 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
 """
-The fit vector of :func:`~.freqfit.fit_parameters`: which parameters are free, and the model
-each value of it stands for.
+The fit vector of :func:`~.freqfit.fit_parameters`: its parameters and the model it stands for.
+
+Which parameters are free, on which scale and within which bounds, and the material and
+effects each value of the vector gives.
 
 Material parameters are fitted as logarithms, within a factor of their start (they span
 decades and are positive); an effect parameter on the scale its effect declares (log or
