@@ -87,8 +87,8 @@ def parse_mains(value) -> float | str | None:
     """
     Return the mains family to look for: 'auto', 50.0, 60.0, or None (none).
 
-    The estimator's ``mains_hz`` values ('auto', 0, 50, 60: :func:`~ipmc_sensor_ros.
-    estimation.config.parse_mains`, which refuses others), 0 and None meaning none.
+    The estimator's ``mains_hz`` values ('auto', 0, 50, 60; others are refused by its
+    parser, :func:`~ipmc_sensor_ros.estimation.config.parse_mains`), 0 and None meaning none.
     """
     if value is None:
         return None
