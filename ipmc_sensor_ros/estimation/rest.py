@@ -226,7 +226,9 @@ class RestWindow:
             ok, self.track = test.sample_ok(r, self.track, offset_a, offset_var_a2,
                                             noise_var_a2, at_rest)
             self.quiet = self.quiet + 1 if ok else 0
+        if self.quiet < n:          # a sample of the window disagreed: no window test
+            return False
         energy = (2.0 / n * float(np.vdot(self.line_sums, self.line_sums).real)
                   if self.phase.size else 0.0)
-        return self.quiet >= n and test.still(self.total, self.total_sq, energy, offset_a,
-                                              offset_var_a2, noise_var_a2)
+        return test.still(self.total, self.total_sq, energy, offset_a, offset_var_a2,
+                          noise_var_a2)
