@@ -42,6 +42,22 @@ H(0) = 0): a true lower bound.  On a record from rest it is the filter run on th
 one, and at most the causal bound (a smoother may ignore the future): not a lower bound,
 since the best estimator of a record from rest is not time-invariant (a filter that knows
 when the motion stopped stops integrating noise; the LTI filter integrates it all along).
+
+**Offset-unknown causal bound.**  The bounds above are given the offset; an estimator must
+learn it from the record.  With y = s + b u (s: the offset-free current, Gaussian with the
+spectrum Phi_y; u: 1 on the record's samples, 0 on the pre-roll, which the estimator does
+not see; b: a constant with a flat prior), Woodbury's identity splits the best estimate
+from y_0..y_t exactly: E[w_t | y] = W (y - u b_t), where W is the offset-known filter and
+b_t the generalised least-squares offset from y_0..y_t.  That estimate is the whitened
+regression b_t = sum a_k e_k / sum a_k^2 over k <= t (e = y / G, a = u / G, both from a
+zero state like the filter).  So the offset-unknown causal estimate is the causal one minus
+(b_t - b) times the filter's response to u; its error does not depend on b (nor on the
+offset's drift or the hum, which stay removed by oracle).  The same infinite-past
+approximation as the causal bound; a lower bound where the estimator has no prior on the
+offset.  Stationary records only: in the increments model of a record from rest a constant
+current is a steady ramp of w as likely as the spectrum of its increments makes it, while
+the record's rests (which show the offset) are a time-varying fact no LTI model holds, so
+there it would be far above what an estimator that sees the rests reaches.
 """
 from __future__ import annotations
 
@@ -67,11 +83,13 @@ class Bounds:
     """Bounds of one record; NRMSE are fractions (0.01 = 1 %)."""
 
     causal_nrmse: float
+    causal_offset_unknown_nrmse: float   # learning the offset (stationary records; else NaN)
     noncausal_nrmse: float        # stationary: expected; else min(realised, causal)
     noncausal_expected: float     # sqrt(sum S_e / sum S_w) (stationary records; else NaN)
     noncausal_realised: float     # the non-causal filter run on the record, after after_s
     causal_estimate_m: np.ndarray
     noncausal_estimate_m: np.ndarray
+    causal_offset_unknown_estimate_m: np.ndarray
 
 
 def evaluation_mask(time_s: np.ndarray, after_s: float) -> np.ndarray:
@@ -141,7 +159,21 @@ def _filters(s_x: np.ndarray, r: np.ndarray, s_n: float, m: int, integrate: bool
     u[m // 2:] = 0.0
     k = np.fft.irfft((np.fft.rfft(u) + anticausal_sum) / (var_e * g), m)
     k[m // 2:] = 0.0                     # exactly causal (lags 0 .. m/2 - 1 >= record length)
-    return np.fft.rfft(k), s_x * np.conj(r) / phi, phi
+    return np.fft.rfft(k), s_x * np.conj(r) / phi, phi, g
+
+
+def _offset_error(y_f, u_f, g, m: int, span: slice) -> np.ndarray:
+    """
+    b_t - b of the whitened regression (module docstring) at every sample of ``span``.
+
+    ``y_f``, ``u_f``: transforms on the m-grid of the offset-free current and of the offset's
+    regressor u; ``g``: the monic minimum-phase factor of Phi_y.  The flat prior: the sums
+    start where u does.
+    """
+    e = np.fft.irfft(y_f / g, m)[span]
+    a = np.fft.irfft(u_f / g, m)[span]
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return np.cumsum(a * e) / np.cumsum(a * a)
 
 
 def _motion_model(w, h, f, sample_rate_hz, response, stationary):
@@ -188,13 +220,18 @@ def wiener_bounds(current_a, deflection_m, sample_rate_hz: float, response, nois
     x, r = _motion_model(w, h, f, sample_rate_hz, response, stationary)
     taper_n = None if stationary else int(round(taper_s * sample_rate_hz))
     s_x = _smooth(_periodogram(x, m, taper_n), int(round(smooth_hz * m / sample_rate_hz)))
-    causal, noncausal, phi = _filters(s_x, r, s_n, m, integrate=not stationary)
+    causal, noncausal, phi, g = _filters(s_x, r, s_n, m, integrate=not stationary)
     y_f = np.fft.rfft(y, m)
-    w_c = np.fft.irfft(causal * y_f, m)[n_pre:n_pre + n]
-    w_nc = np.fft.irfft(noncausal * y_f, m)[n_pre:n_pre + n]
-    if not stationary:
+    span = slice(n_pre, n_pre + n)
+    w_c = np.fft.irfft(causal * y_f, m)[span]
+    w_nc = np.fft.irfft(noncausal * y_f, m)[span]
+    if stationary:                                     # minus (b_t - b) x the response to u
+        u_f = np.fft.rfft(np.concatenate([np.zeros(n_pre), np.ones(n)]), m)
+        w_cu = w_c - _offset_error(y_f, u_f, g, m, span) * np.fft.irfft(causal * u_f, m)[span]
+    else:
         w_c = w[0] + np.cumsum(w_c)
         w_nc = w[0] + np.cumsum(w_nc)
+        w_cu = np.full(n, np.nan)
     t = np.arange(n) / sample_rate_hz
     mask = evaluation_mask(t, after_s)
     expected = float('nan')
@@ -205,7 +242,9 @@ def wiener_bounds(current_a, deflection_m, sample_rate_hz: float, response, nois
         expected = math.sqrt(float(np.sum(weights * s_e) / np.sum(weights * s_x)))
     realised, causal_nrmse = nrmse(w_nc, w, mask), nrmse(w_c, w, mask)
     bound = expected if stationary else min(realised, causal_nrmse)
-    return Bounds(causal_nrmse, bound, expected, realised, w_c, w_nc)
+    unknown = nrmse(w_cu, w, mask) if stationary else float('nan')
+    return Bounds(causal_nrmse, unknown, bound, expected, realised, w_c, w_nc,
+                  w_cu)
 
 
 def record_bounds(record: Record, *, after_s: float = 1.0, **kwargs) -> Bounds:

@@ -98,3 +98,51 @@ def test_quick_set_bounds_are_physical_numbers():
     for name in QUICK:
         b = record_bounds(build(name, 1))
         assert 1e-7 < b.causal_nrmse < 0.1, name
+
+
+def _rate_sensor(a=0.999, q=1.0, r=0.01, n=60_000, n_pre=5000, seed=0):
+    """Return w (AR(1)), y = w_n - w_(n-1) + noise (a rate sensor: H(1) = 0) and its pre-roll."""
+    rng = np.random.default_rng(seed)
+    w = lfilter([1.0], [1.0, -a], rng.normal(0.0, math.sqrt(q), n + n_pre))
+    y = np.diff(w, prepend=0.0) + rng.normal(0.0, math.sqrt(r), w.size)
+    return w[n_pre:], y[n_pre:], y[:n_pre]
+
+
+def _kalman_learning_the_offset(y, pre, a, q, r):
+    """Exact causal LMMSE of w: state [w_n, w_(n-1), b], b constant, flat prior from y_0."""
+    f = np.array([[a, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    h = np.array([1.0, -1.0, 1.0])
+    x = np.zeros(3)
+    p = np.zeros((3, 3))
+    p[:2, :2] = q / (1 - a * a) * np.array([[1.0, a], [a, 1.0]])
+    out = np.empty(y.size)
+    for i, v in enumerate(np.concatenate([pre, y])):
+        if i == pre.size:
+            p[2, 2] = 1e12                       # the offset unknown from the record's start
+        x, p = f @ x, f @ p @ f.T + np.diag([q, 0.0, 0.0])
+        s = h @ p @ h + r
+        k = p @ h / s
+        x, p = x + k * (v - h @ x), p - np.outer(k, k) * s
+        if i >= pre.size:
+            out[i - pre.size] = x[0]
+    return out
+
+
+def test_offset_unknown_bound_is_the_kalman_filter_that_learns_the_offset():
+    """A rate sensor with an offset of flat prior: the Kalman filter of [w, w_prev, b]."""
+    a, q, r = 0.999, 1.0, 0.01
+    w, y, pre = _rate_sensor(a, q, r)
+
+    def bounds(current):
+        return wiener_bounds(current, w, 1000.0, lambda f: -np.expm1(-2j * np.pi * f / 1000.0),
+                             r, stationary=True, pre_current_a=pre, after_s=0.2)
+    b, shifted = bounds(y), bounds(y + 3.0)
+    # blind to the offset's value (rounding only), unlike the offset-known estimate
+    assert np.max(np.abs(shifted.causal_offset_unknown_estimate_m
+                         - b.causal_offset_unknown_estimate_m)) < 1e-9
+    assert np.max(np.abs(shifted.causal_estimate_m - b.causal_estimate_m)) > 1.0
+    exact = nrmse(_kalman_learning_the_offset(y, pre, a, q, r), w,
+                  evaluation_mask(np.arange(w.size) / 1000.0, 0.2))
+    # measured ratio 0.99-1.08 on seeds 0-3 (1.01 here): the oracle spectrum is one 60 s
+    # realisation's, smoothed 0.25 Hz, where the Kalman filter has the true model
+    assert abs(b.causal_offset_unknown_nrmse / exact - 1) < 0.15
