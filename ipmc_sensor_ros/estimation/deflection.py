@@ -31,16 +31,15 @@ Time in the effect hooks runs from the first sample after construction or the la
 """
 from __future__ import annotations
 
-from collections import deque
 from typing import Sequence
 
 import numpy as np
-from scipy.signal import lfilter
 
 from ..errors import ParameterError
 from ..lti.reduction import ReducedModel, reduce_model_parts
 from ..physics.model import SensorModel
 from ..physics.pipeline import DriftSchedule
+from .around import InputInverse, LagOutput
 from .config import EstimatorConfig, parse_mains
 from .core import ESTIMATORS, Estimate, EstimatorCore
 from .inverse import DEFAULT_LEAK_CORNER_HZ, InverseEstimator
@@ -109,14 +108,12 @@ class DeflectionEstimator:
         self.band_hz = (float(band_hz[0]), float(band_hz[1]))
         self.update_s = float(update_s)
         self.smoothed_lag_s = float(smoothed_lag_s)
-        # output times of the samples the core holds for its lag; what is smoothed, with times
-        self._lag_times = deque() if self.smoothed_lag_s else None
-        self._smoothed: list[tuple] = []
+        self._lag = LagOutput() if self.smoothed_lag_s else None
         self.delay_s = float(model.delay_s())
         compiled = model.compiled
         compiled.require_inverse()
         self._current_inv = compiled.output_transforms
-        self._deflection_inv = compiled.input_transforms
+        self._deflection_inv = InputInverse(compiled.input_transforms, model)
         self._material_at = compiled.material_at
         self._drift = (DriftSchedule(compiled.material_at, self.update_s)
                        if compiled.material_at is not None else None)
@@ -197,8 +194,7 @@ class DeflectionEstimator:
         self.last_std_m = np.zeros(0)
         self.last_still = np.zeros(0, dtype=bool)
         self._t0: float | None = None
-        self._bias_m = 0.0          # m = <T(w) - w>, see the module docstring
-        self._bias_zi = np.zeros(1)
+        self._deflection_inv.reset()
 
     def reset(self) -> None:
         """Zero the core and restart the effects' time origin."""
@@ -236,8 +232,8 @@ class DeflectionEstimator:
             self._t0 = float(t[0])
         elapsed = t - self._t0 if (self._current_inv or self._material_at is not None) else None
         t_out = t - self.delay_s if self.delay_s else t
-        if self._lag_times is not None:
-            self._lag_times.extend(t_out.tolist())
+        if self._lag is not None:
+            self._lag.times.extend(t_out.tolist())
         i = self.mains.process(i)
         for eff, values in reversed(self._current_inv):
             i = eff.inverse_output_transform(elapsed, i, self.model, values)
@@ -258,25 +254,8 @@ class DeflectionEstimator:
         return Estimate(*(np.concatenate(p) for p in zip(*parts)))
 
     def _undo_input_transforms(self, est: Estimate) -> np.ndarray:
-        w = est.deflection_m
-        if not self._deflection_inv:
-            return w
-        w_prime, w = self._inverse_input(w)
-        gap = (w_prime - w)[~est.still]
         corner = getattr(self.core, 'leak_corner_hz', NONLINEAR_MEAN_CORNER_HZ)
-        a = float(np.exp(-2 * np.pi * corner / self.sample_rate_hz))
-        if gap.size:
-            avg, self._bias_zi = lfilter([1 - a], [1, -a], gap, zi=self._bias_zi)
-            self._bias_m = float(avg[-1])
-        return w
-
-    def _inverse_input(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Return (w + m, the input transforms undone on it): module docstring."""
-        w_prime = w + self._bias_m
-        w = w_prime
-        for eff, values in reversed(self._deflection_inv):
-            w = np.asarray(eff.inverse_input_transform(w, self.model, values), dtype=float)
-        return w_prime, w
+        return self._deflection_inv.undo(est, corner, self.sample_rate_hz)
 
     def pop_smoothed(self, flush: bool = False):
         """
@@ -286,18 +265,11 @@ class DeflectionEstimator:
         with the data there is (this estimator is being replaced).
         """
         self._collect_smoothed(flush)
-        if not self._smoothed:
-            return None
-        parts, self._smoothed = self._smoothed, []
-        return parts[0] if len(parts) == 1 else tuple(np.concatenate(p) for p in zip(*parts))
+        return None if self._lag is None else self._lag.pop()
 
     def _collect_smoothed(self, flush: bool) -> None:
-        est = self.core.pop_smoothed(flush)
-        if est is None:
-            return
-        times = np.array([self._lag_times.popleft() for _ in range(est.deflection_m.size)])
-        w = self._inverse_input(est.deflection_m)[1] if self._deflection_inv else est.deflection_m
-        self._smoothed.append((times, w, est.std_m))
+        if self._lag is not None:
+            self._lag.collect(self.core.pop_smoothed(flush), self._deflection_inv)
 
     def process_one(self, time_s: float, current_a: float, steps: int = 1) -> tuple[float, float]:
         """
@@ -313,8 +285,8 @@ class DeflectionEstimator:
         if self._t0 is None:
             self._t0 = float(time_s)
         t_out = time_s - self.delay_s if self.delay_s else float(time_s)
-        if self._lag_times is not None:
-            self._lag_times.append(t_out)
+        if self._lag is not None:
+            self._lag.times.append(t_out)
         w, std = self.core.estimate_one(current_a, steps)
         self.last_std_m = np.array([std])
         self._history.push(current_a)
