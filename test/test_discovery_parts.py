@@ -61,7 +61,7 @@ def test_hum_on_drive_harmonics_is_found_in_every_record_and_removed():
     """50.1 Hz hum at 4 % on a sweep where 50 Hz is the 50th, 25th, 10th and 5th harmonic."""
     truth = Truth(hum_rel=0.04, hum_hz=50.1)
     recs = make_records(truth, 5, samples=('slim',), frequencies_hz=DRIVE_HARMONIC_SWEEP_HZ)
-    lines, cleaned = mains_lines(recs)
+    lines, cleaned, _ = mains_lines(recs)
     at_50 = {ln.record for ln in lines if ln.nominal_hz == 50.0}
     assert at_50 == {r.path for r in recs}
     for ln in lines:                  # measured to a thousandth of a hertz per harmonic
@@ -87,6 +87,19 @@ def test_a_response_at_a_drive_harmonic_alone_is_not_taken_for_hum():
             r.current_a = r.current_a + 0.01 * np.std(r.current_a) * np.cos(
                 2 * np.pi * 60.0 * r.time_s + 0.3)
     assert mains_lines(recs)[0] == []
+
+
+def test_hum_on_a_drive_harmonic_of_one_record_is_reported_left_in_the_residual():
+    """One 5 Hz record with 4 % hum at 50 Hz: nothing tells it from the sensor's 10th harmonic."""
+    recs = make_records(Truth(hum_rel=0.04, hum_hz=50.0), 3, samples=('slim',),
+                        frequencies_hz=(5.0,))
+    lines, _, left = mains_lines(recs, 50)
+    assert lines == []
+    # the hum's three lines (50, 100, 150 Hz), each on a drive harmonic, at the level made
+    assert [(ln.nominal_hz, harmonic) for ln, harmonic in left] == [(50.0, 10), (100.0, 20),
+                                                                    (150.0, 30)]
+    level = np.sqrt(sum(ln.level ** 2 for ln, _ in left))
+    assert level == pytest.approx(0.04, rel=0.1)     # RMS levels of the record's current
 
 
 def test_history_is_the_periodic_continuation():

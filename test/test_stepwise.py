@@ -180,7 +180,7 @@ def test_mains_lines_off_the_nominal_frequency_are_measured_and_removed():
     # 1 % noise is 10x larger).
     kw = dict(frequencies_hz=(2.0, 7.0), duration_s=20.0)
     hum = crank_slider_campaign(('surface_resistance',), seed=3, hum_rel=0.05, hum_hz=50.2, **kw)
-    lines, cleaned = mains_lines(hum, 'auto')
+    lines, cleaned, _ = mains_lines(hum, 'auto')
     assert {ln.nominal_hz for ln in lines} >= {50.0, 150.0}
     for ln in lines:
         m = round(ln.nominal_hz / 50.0)

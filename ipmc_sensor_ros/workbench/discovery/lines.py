@@ -35,7 +35,10 @@ Procedure (:func:`find_mains_lines`)
    a harmonic of the drive (:func:`on_drive_harmonic`) may be what the model misses there (a
    nonlinear sensor responds at the odd harmonics of a crank, whose deflection has none); it
    counts as hum only when the same line shows off every drive harmonic in another record of
-   the campaign (mains couples into all of them alike).
+   the campaign (mains couples into all of them alike).  Otherwise it stays in the residual
+   and is reported as such (``left``): one record, or a sweep whose every drive puts a
+   harmonic on the line, cannot tell hum from the sensor's response; a record at a drive
+   frequency whose harmonics miss the line can.
 6. With ``mains='auto'`` both families are tested and the one with the larger detected power is
    kept.  Removing a line subtracts its fitted sinusoid from the whole record.
 """
@@ -226,16 +229,18 @@ def find_mains_lines(records: Sequence, predictions: Sequence[np.ndarray],
     ``records``: objects with ``path``, ``time_s``, ``current_a`` and ``deflection_m``;
     ``predictions``: the current the model predicts from each record's deflection; ``keeps``:
     the samples to use (after the settle time); ``drives``: their :class:`~.drive.Drive`
-    (found here when not given).  Returns ``(lines, fitted)``: the detected lines and, per
-    record, the fitted line sum to subtract from the whole record.
+    (found here when not given).  Returns ``(lines, fitted, left)``: the detected lines, per
+    record, the fitted line sum to subtract from the whole record; ``left``: (line, the drive
+    harmonic it sits on) for each line that passed the test there and stays in the residual
+    (step 5).
     """
     mains = parse_mains(mains)
     zeros = [np.zeros(np.asarray(r.current_a).size) for r in records]
     if mains is None:
-        return [], zeros
+        return [], zeros, []
     families = (50.0, 60.0) if mains == 'auto' else (mains,)
     drives = drives or [drive_of(rec) for rec in records]
-    best = ([], zeros, 0.0)
+    best, left = ([], zeros, 0.0), []
     for f_mains in families:
         per_record = [_record_rows(rec, pred, keep, drive, f_mains, families, n_harmonics,
                                    false_alarm)
@@ -247,10 +252,14 @@ def find_mains_lines(records: Sequence, predictions: Sequence[np.ndarray],
         found = [_line_sum(rec, keep, [row for row, ambiguous in rows
                                        if not ambiguous or row[1] in clear])
                  for rec, keep, rows in zip(records, keeps, per_record)]
+        left += [(ln, round(ln.frequency_hz / drive.frequency_hz))
+                 for rec, keep, rows, drive in zip(records, keeps, per_record, drives)
+                 for ln in _line_sum(rec, keep, [row for row, ambiguous in rows
+                                                 if ambiguous and row[1] not in clear])[0]]
         power = sum(float(np.sum(f ** 2)) for _, f in found)
         if power > best[2]:
             best = ([ln for lines, _ in found for ln in lines], [f for _, f in found], power)
-    return best[0], best[1]
+    return best[0], best[1], left
 
 
 def summarize_lines(lines: Sequence[MainsLine]) -> list[dict]:

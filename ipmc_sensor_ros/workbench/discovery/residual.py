@@ -37,7 +37,7 @@ def noise_floor(prepared) -> float:
 
 def detect_lines(records, prepared, models, settings, drives=None):
     """
-    Mains lines of the measured records under ``models`` (one per record): ``(lines, fitted)``.
+    Mains lines of the records under ``models`` (one per record): ``(lines, fitted, left)``.
 
     ``prepared``: the records as measured (:func:`~.history.prepare_with_history`); each
     record's current is predicted from its deflection by its model and the lines are looked
@@ -61,13 +61,22 @@ def clean(records, prepared, fitted, settle_s, drives=None):
     return prepare_with_history(cleaned, settle_s, drives)
 
 
-def line_test(settings, lines) -> dict:
-    """Return what the JSON says about the line test: its false-alarm rate and what it found."""
+def line_test(settings, lines, left=()) -> dict:
+    """
+    Return what the JSON says about the line test: its false-alarm rate and what it found.
+
+    ``left_in_residual``: the lines that passed the test on a drive harmonic and were not
+    taken for hum (:mod:`.lines`, step 5), with the harmonic of the drive they sit on.
+    """
     if parse_mains(settings.mains) is None:
         return {}
     return {'false_alarm_per_record': settings.line_false_alarm,
             'mains': parse_mains(settings.mains), 'search_hz': MAINS_SEARCH_HZ,
-            'lines_found': len(lines)}
+            'lines_found': len(lines),
+            'left_in_residual': [{'record': ln.record, 'frequency_hz': ln.frequency_hz,
+                                  'nominal_hz': ln.nominal_hz, 'level': ln.level, 'z': ln.z,
+                                  'drive_harmonic': harmonic}
+                                 for ln, harmonic in left]}
 
 
 def lines_changed(before, after, factor: float = 2.0) -> bool:
@@ -95,11 +104,12 @@ def lines_changed(before, after, factor: float = 2.0) -> bool:
 
 def mains_lines(records, mains='auto', **settings):
     """
-    Return ``(lines, cleaned records)``: the mains lines of records under their own model.
+    Return ``(lines, cleaned records, left)``: the mains lines of records under their own model.
 
     As the diagnosis first finds them (:func:`detect_lines`): the records' model with its free
     material (``settings``: fields of :class:`~.settings.Settings`) fitted to the records, the
-    lines looked for in what its prediction leaves.  ``lines``: :class:`~.lines.MainsLine`.
+    lines looked for in what its prediction leaves.  ``lines``: :class:`~.lines.MainsLine`;
+    ``left``: (line, drive harmonic) of the lines left in the residual (:mod:`.lines`, step 5).
     """
     from .ranking import baseline_starts
     from .settings import Settings
@@ -111,6 +121,6 @@ def mains_lines(records, mains='auto', **settings):
     folds, _ = make_folds(prepared, s.n_folds)
     starts = baseline_starts(spec, {}, records[0].model)
     fit = evaluate(prepared, spec, starts, folds, s.fold_nfev, scored=False)
-    lines, fitted = detect_lines(records, prepared, fit.fit.models, s, drives)
+    lines, fitted, left = detect_lines(records, prepared, fit.fit.models, s, drives)
     return lines, [replace(r, current_a=np.asarray(r.current_a, float) - f)
-                   for r, f in zip(records, fitted)]
+                   for r, f in zip(records, fitted)], left

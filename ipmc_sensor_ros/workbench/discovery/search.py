@@ -65,12 +65,12 @@ def _start(records, raw, drives, settings, priors, say, given=None) -> SearchSta
     folds, cv = make_folds(raw, s.n_folds)
     starts = baseline_starts(spec, priors, records[0].model)
     say('fitting baseline')
-    fit, lines, fitted = None, [], [np.zeros(p.t.size) for p in raw]
+    fit, lines, fitted, left = None, [], [np.zeros(p.t.size) for p in raw], []
     if given is not None:
-        lines, fitted = given
+        lines, fitted, left = given
     elif parse_mains(s.mains) is not None:
         fit = evaluate(raw, spec, starts, folds, s.fold_nfev, priors=priors, scored=False)
-        lines, fitted = detect_lines(records, raw, fit.fit.models, s, drives)
+        lines, fitted, left = detect_lines(records, raw, fit.fit.models, s, drives)
     prepared = clean(records, raw, fitted, s.settle_s, drives)
     if fit is not None and prepared is raw:         # no line: the fit is the baseline's
         baseline = held_out(raw, fit, folds, s.fold_nfev)
@@ -81,7 +81,7 @@ def _start(records, raw, drives, settings, priors, say, given=None) -> SearchSta
                                              for e, n in spec.effect_params}}
     state = SearchState(s, prepared, folds, cv, spec, priors, _pool(records, s), say,
                         noise_floor=noise_floor(prepared), baseline=baseline,
-                        lines=summarize_lines(lines), line_test=line_test(s, lines))
+                        lines=summarize_lines(lines), line_test=line_test(s, lines, left))
     state.line_rows, state.drives = lines, drives
     state.given_material = records[0].model.material
     state.adopt(baseline)

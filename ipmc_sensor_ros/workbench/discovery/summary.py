@@ -17,6 +17,12 @@ def _lines_text(diag) -> list[str]:
         out.append(f"line test: the current less the model's prediction from the deflection, "
                    f"false-alarm probability {lt['false_alarm_per_record']:g} per record "
                    f"({lt['lines_found']} line(s) found)")
+        for d in lt.get('left_in_residual', ()):
+            out.append(f"  left in the residual: {d['frequency_hz']:.3f} Hz in {d['record']}, "
+                       f"level {d['level']:.3g} of the signal RMS ({d['z']:.0f} standard "
+                       f"errors), on the drive's harmonic {d['drive_harmonic']}: hum or the "
+                       "sensor's own response there; no record shows it off the drive's "
+                       'harmonics (one at another drive frequency would tell)')
     if diag.offset_test:
         ot = diag.offset_test
         out.append(f"offset test: mean residual current {ot['mean_a'] * 1e9:.3g} nA, chi2 "
