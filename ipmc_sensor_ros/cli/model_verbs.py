@@ -34,6 +34,10 @@ def _records(args, with_data: bool = False):
     effects, material = effects_from_args(args), material_from_args(args)   # flags before files
     data = load_data(args)
     recs = records_from(data, material, effects)
+    for r in recs:
+        if r.filled is not None:
+            say(f'{r.path}: {int(r.filled.sum())} row(s) missing on the sample clock: the '
+                "deflection interpolated there as the model's input, not fitted or scored")
     return (recs, data) if with_data else recs
 
 

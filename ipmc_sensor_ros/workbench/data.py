@@ -5,7 +5,10 @@ from __future__ import annotations
 from typing import Sequence
 
 import numpy as np
+from scipy.interpolate import CubicSpline
 
+from ..estimation.timebase import START, Timebase
+from ..interface.specs import defaults, ESTIMATOR_SPECS
 from ..physics.model import SensorModel
 from ..physics.parameters import MaterialParameters
 from .freqfit import FitGroup
@@ -13,7 +16,10 @@ from .freqresp import FrequencyPoint, fundamental_response
 from .measurements import FrequencyResponseData, TimeSeries, sample_label
 from .timepredict import Record
 
-__all__ = ['material_for', 'records_from', 'groups_from', 'frf_points']
+__all__ = ['material_for', 'records_from', 'on_sample_grid', 'groups_from', 'frf_points']
+
+#: the stream's ``max_gap_s`` default: the longest gap of dropped rows bridged, s
+MAX_GAP_S = float(defaults(ESTIMATOR_SPECS)['max_gap_s'])
 
 #: relative gain / phase uncertainty assumed for FRF files without std columns
 #: or coherence (1 % and 0.01 rad, typical of a careful crank-slider sweep)
@@ -37,9 +43,63 @@ def records_from(series: Sequence[TimeSeries], material: MaterialParameters,
         if ts.deflection_m is None:
             raise ValueError(f'{ts.path}: no deflection column: cannot compare or fit')
         model = SensorModel(ts.geometry, material_for(ts, material), effects)
-        out.append(Record(ts.path, sample_label(ts), model,
-                          ts.time_s, ts.deflection_m, ts.current_a))
+        grid = on_sample_grid(ts.path, ts.time_s, ts.deflection_m, ts.current_a)
+        t, (w, y), filled = grid or (ts.time_s, (ts.deflection_m, ts.current_a), None)
+        out.append(Record(ts.path, sample_label(ts), model, t, w, y, filled))
     return out
+
+
+def on_sample_grid(path: str, time_s, *columns, max_gap_s: float = MAX_GAP_S):
+    """
+    Return ``(grid times, columns on the grid, filled)`` of a record with dropped rows, or None.
+
+    The model predicts the current from the deflection on the sample clock (an FFT over the
+    samples): a dropped row would join the motion before and after it, a jump that puts a
+    spurious charge into the prediction.  Each stamp takes its sample-clock slot by the
+    stream's rule (:class:`~ipmc_sensor_ros.estimation.timebase.Timebase`: jitter up to a
+    quarter of the period, the clock's period and phase followed); each column is interpolated
+    (cubic spline) at the slots no row holds, which ``filled`` marks: the model's input there,
+    never fitted or scored.  None: no slot is missing, or a stamp has no slot of its own
+    (left as they are).  A gap longer than ``max_gap_s`` (the stream's) is refused: the
+    motion in it is unknown.
+    """
+    t = np.asarray(time_s, float)
+    if t.size < 8 or not np.all(np.diff(t) > 0):
+        return None
+    steps = _steps(path, t, max_gap_s)
+    if steps is None or np.all(steps == 1):
+        return None
+    slots = np.concatenate([[0], np.cumsum(steps)])
+    filled = np.ones(slots[-1] + 1, bool)
+    filled[slots] = False
+    slope, intercept = np.polyfit(slots, t, 1)
+    t_grid = intercept + slope * np.arange(filled.size)
+    t_grid[slots] = t
+    return t_grid, tuple(CubicSpline(t, np.asarray(c, float))(t_grid) if c is not None else None
+                         for c in columns), filled
+
+
+def _steps(path: str, t: np.ndarray, max_gap_s: float) -> np.ndarray | None:
+    """Return the slot steps of stamps ``t[1:]`` (:class:`Timebase`), or None: one refused."""
+    base = Timebase(float(np.median(np.diff(t))), max_gap_s)
+    base.admit(float(t[0]))
+    out, i = [], 1
+    while i < t.size:
+        run = base.admit_plain(t, i, t.size)
+        out.append(run)
+        i += run.size
+        if i < t.size:
+            step = base.admit(float(t[i]))
+            if step == START:
+                raise ValueError(f'{path}: no sample for {t[i] - t[i - 1]:.6g} s after t = '
+                                 f'{t[i - 1]:.6g} s, a gap longer than max_gap_s '
+                                 f'({max_gap_s:g} s): the motion in it is unknown; split the '
+                                 'record there')
+            if step < 1:
+                return None
+            out.append(np.array([step]))
+            i += 1
+    return np.concatenate(out)
 
 
 def frf_points(frf: FrequencyResponseData) -> list[FrequencyPoint]:

@@ -52,6 +52,9 @@ class Record:
     time_s: np.ndarray
     deflection_m: np.ndarray
     current_a: np.ndarray
+    #: samples the DAQ dropped, filled on the sample grid for the model's input
+    #: (:func:`~.data.on_sample_grid`); never fitted or scored.  None: none.
+    filled: np.ndarray | None = None
 
 
 @dataclass
@@ -120,6 +123,8 @@ def prepare(records: Sequence[Record], *, settle_s: float = 0.5, max_rows_per_re
         w = np.asarray(rec.deflection_m, float)
         y = np.asarray(rec.current_a, float)
         keep = t >= t[0] + settle_s
+        if rec.filled is not None:
+            keep &= ~rec.filled
         if keep.sum() < 32:
             raise ValueError(
                 f'{rec.path}: fewer than 32 samples after the {settle_s} s settle time'

@@ -67,9 +67,11 @@ def with_history(rec, history_s: float, drive=None):
     dt = tt[-1] / (t.size - 1)
     th = np.arange(-int(np.ceil(history_s / dt)), 0) * dt
     phase = np.mod(th, period)
+    filled = None if rec.filled is None else np.concatenate([np.zeros(th.size, bool),
+                                                             rec.filled])
     return replace(rec, time_s=np.concatenate([t[0] + th, t]),
                    deflection_m=np.concatenate([spline(phase), w]),
-                   current_a=np.concatenate([CubicSpline(tt, y)(phase), y]))
+                   current_a=np.concatenate([CubicSpline(tt, y)(phase), y]), filled=filled)
 
 
 def free_history_s(rec) -> float:
