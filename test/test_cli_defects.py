@@ -103,3 +103,36 @@ def test_amplitude_bins_never_repeat_an_edge():
 def test_geometry_in_micrometres_is_exact():
     g = parse_geometry('22mm,7mm,360um')
     assert (g.length_m, g.width_m, g.thickness_m) == (0.022, 0.007, 0.00036)
+
+
+def test_geometry_flag_that_disagrees_with_a_file_is_refused(sweep, tmp_path, capsys):
+    """A header's or a sidecar's geometry and --geometry: equal is fine, different refused."""
+    csv = str(sweep / 'slim_1Hz.csv')
+    assert main(['compare', csv, '--geometry', '22mm,7mm,360um']) == 0
+    assert main(['compare', csv, '--geometry', '11mm,7mm,360um']) == 2
+    err = capsys.readouterr().err
+    assert 'slim_1Hz.csv: the geometry given (--geometry: length_m 0.011' in err
+    assert "disagrees with the file's (length_m 0.022" in err
+    assert main(['simulate', '--out', str(tmp_path), '--samples', 'slim', '--frequencies', '5',
+                 '--duration', '2', '--format', 'bag']) == 0
+    assert main(['compare', str(tmp_path / 'slim_5Hz'), '--geometry', '11mm,7mm,360um']) == 2
+    assert 'ipmc.yaml: the geometry given' in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('flags, message', [
+    (['--duration', '-1'], 'argument --duration: must be > 0'),
+    (['--sample-rate', '0'], 'argument --sample-rate: must be > 0'),
+    (['--noise-rel', '-0.1'], 'argument --noise-rel: must be >= 0'),
+    (['--frequencies', '600'], "--frequencies: '600': each must be above 0 and below half the "
+                               '--sample-rate (500 Hz)'),
+    (['--set', 'd=abc'], "--set d=abc: 'abc' is not a number"),
+])
+def test_simulate_names_the_bad_flag_and_writes_nothing(tmp_path, capsys, flags, message):
+    out = tmp_path / 'out'
+    try:                                  # argparse's own errors exit; ours return 2
+        code = main(['simulate', '--out', str(out), '--samples', 'slim', *flags])
+    except SystemExit as exc:
+        code = exc.code
+    assert code == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()

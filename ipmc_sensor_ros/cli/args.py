@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import re
 import sys
 import threading
@@ -41,10 +42,11 @@ from ..workbench.io import natural_key
 from ..physics.parameters import (PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, MaterialParameters,
                                   ParameterError, load_yaml)
 
-__all__ = ['HelpFormatter', 'Progress', 'say', 'natural_key', 'fmt_time_s', 'param_names',
-           'parse_geometry', 'material_from_args', 'load_material', 'effects_from_args',
-           'expand_inputs', 'load_data', 'add_model_args', 'add_data_args', 'add_output_args',
-           'write_json', 'report_dir', 'parse_samples', 'renamed_flag', 'SYMBOL_TO_NAME']
+__all__ = ['HelpFormatter', 'Progress', 'say', 'positive', 'nonnegative', 'nonnegative_int',
+           'natural_key', 'fmt_time_s', 'param_names', 'parse_geometry', 'material_from_args',
+           'load_material', 'effects_from_args', 'expand_inputs', 'load_data', 'add_model_args',
+           'add_data_args', 'add_output_args', 'write_json', 'report_dir', 'parse_samples',
+           'renamed_flag', 'SYMBOL_TO_NAME']
 
 MATERIAL_KEYS = tuple(MaterialParameters.__dataclass_fields__)
 #: Length units and how many of each make a metre (dividing keeps 360 um exactly 0.00036 m).
@@ -61,6 +63,37 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
         if action.option_strings or action.nargs in (argparse.OPTIONAL, argparse.ZERO_OR_MORE):
             return text + ' (default: %(default)s)'
         return text
+
+
+def positive(text: str) -> float:
+    """Argparse type: a finite number > 0 (argparse names the flag in its error)."""
+    return _number(text, lambda v: v > 0, '> 0')
+
+
+def nonnegative(text: str) -> float:
+    """Argparse type: a finite number >= 0."""
+    return _number(text, lambda v: v >= 0, '>= 0')
+
+
+def nonnegative_int(text: str) -> int:
+    """Argparse type: an integer >= 0."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected an integer >= 0, got {text!r}') from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f'expected an integer >= 0, got {text!r}')
+    return value
+
+
+def _number(text: str, ok, rule: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected a number {rule}, got {text!r}') from None
+    if not (math.isfinite(value) and ok(value)):
+        raise argparse.ArgumentTypeError(f'must be {rule}, got {text!r}')
+    return value
 
 
 def say(msg: str) -> None:
@@ -204,7 +237,11 @@ def material_from_args(args) -> MaterialParameters:
         if '=' not in item:
             raise ParameterError(f'--set expects name=value, got {item!r}')
         k, v = item.split('=', 1)
-        material = material.replace(**{param_names(k, '--set')[0]: float(v)})
+        try:
+            value = float(v)
+        except ValueError:
+            raise ParameterError(f'--set {item}: {v!r} is not a number') from None
+        material = material.replace(**{param_names(k, '--set')[0]: value})
     return material
 
 
@@ -257,6 +294,7 @@ def load_data(args, *, need_deflection: bool = True) -> list:
     Time series without a deflection column are skipped (with a line saying
     so) when ``need_deflection``; an error if nothing is left.
     """
+    from ..workbench.bags import same_geometry
     from ..workbench.io import TimeSeries, read_any, read_bag
 
     geometry = parse_geometry(args.geometry, getattr(args, 'sample', '') or '') \
@@ -267,6 +305,8 @@ def load_data(args, *, need_deflection: bool = True) -> list:
             item = read_bag(p, args.current_topic, args.deflection_topic, geometry)
         else:
             item = read_any(p)
+            if geometry is not None and getattr(item, 'geometry', None) is not None:
+                same_geometry(str(p), item.geometry, geometry)     # the header holds one
         if need_deflection and isinstance(item, TimeSeries) and item.deflection_m is None:
             say(f'skipped {p}: current only (no deflection column)')
             continue
@@ -318,7 +358,8 @@ def add_data_args(p: argparse.ArgumentParser) -> None:
                    help='bags: topic of the measured deflection')
     g.add_argument('--geometry', metavar='L,W,T',
                    help='bags without ipmc.yaml sidecar: length, width, thickness in metres or '
-                        'with units (22mm,7mm,360um)')
+                        'with units (22mm,7mm,360um); refused where it disagrees with a '
+                        "file's own")
 
 
 def add_output_args(p: argparse.ArgumentParser, *, report: bool = True) -> None:

@@ -11,8 +11,8 @@ from ..physics.beam import FIDELITIES
 from ..physics.model import SensorModel
 from ..physics.parameters import PAPER_SAMPLES, ParameterError
 from .args import (Progress, add_data_args, add_model_args, add_output_args, effects_from_args,
-                   material_from_args, natural_key, parse_geometry, parse_samples, renamed_flag,
-                   write_json)
+                   material_from_args, natural_key, nonnegative, parse_geometry, parse_samples,
+                   positive, renamed_flag, write_json)
 from .estimate_verb import ESTIMATE_FORMAT, cmd_estimate, estimate_accuracy, read_estimate
 from .saved_models import add_model_file_args
 
@@ -20,15 +20,21 @@ __all__ = ['add_parsers', 'read_estimate', 'estimate_accuracy', 'ESTIMATE_FORMAT
 
 
 # ---------------------------------------------------------------------------
-def _parse_frequencies(text: str) -> list[float]:
+def _parse_frequencies(text: str, sample_rate_hz: float) -> list[float]:
     try:
         if ':' in text:
             lo, hi, n = text.split(':')
-            return [float(x) for x in np.geomspace(float(lo), float(hi), int(n))]
-        return [float(x) for x in text.split(',') if x.strip()]
+            freqs = [float(x) for x in np.geomspace(float(lo), float(hi), int(n))]
+        else:
+            freqs = [float(x) for x in text.split(',') if x.strip()]
     except ValueError:
         raise ParameterError(f"--frequencies: cannot read {text!r}; use 'lo:hi:n' or a comma list "
                              'in Hz') from None
+    bad = [f for f in freqs if not 0 < f < sample_rate_hz / 2]
+    if bad or not freqs:
+        raise ParameterError(f'--frequencies: {text!r}: each must be above 0 and below half the '
+                             f'--sample-rate ({sample_rate_hz / 2:g} Hz)')
+    return freqs
 
 
 def _frequency_text(freqs: list[float]) -> str:
@@ -51,7 +57,7 @@ def _cmd_simulate(args) -> int:
     effects = effects_from_args(args)
     material = material_from_args(args)
     samples = parse_samples(args.samples)
-    freqs = _parse_frequencies(args.frequencies)
+    freqs = _parse_frequencies(args.frequencies, args.sample_rate)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     with Progress(f'simulating {len(samples) * len(freqs)} record(s)'):
@@ -149,13 +155,14 @@ def add_parsers(sub, formatter) -> None:
                    help='paper samples, comma list (big, slim, short)')
     p.add_argument('--frequencies', default='1:20:8', metavar='LO:HI:N|LIST',
                    help="crank frequencies, Hz: 'lo:hi:n' (log-spaced) or a comma list")
-    p.add_argument('--duration', type=float, default=6.0, metavar='S',
+    p.add_argument('--duration', type=positive, default=6.0, metavar='S',
                    help='record length per frequency, s')
-    p.add_argument('--sample-rate', type=float, default=1000.0, metavar='HZ',
+    p.add_argument('--sample-rate', type=positive, default=1000.0, metavar='HZ',
                    help='sample rate, Hz')
-    p.add_argument('--crank-radius', type=float, default=2e-3, metavar='M',
+    p.add_argument('--crank-radius', type=positive, default=2e-3, metavar='M',
                    help='crank radius = deflection amplitude, m')
-    p.add_argument('--noise-rel', type=float, default=0.01, help='noise RMS / clean current RMS')
+    p.add_argument('--noise-rel', type=nonnegative, default=0.01,
+                   help='noise RMS / clean current RMS')
     p.add_argument('--seed', type=int, default=0, help='random seed of the noise')
     p.add_argument('--format', choices=('timeseries', 'frf', 'bag'), default='timeseries',
                    help='ipmc-timeseries/1 files, one ipmc-frf/1 file per sample, or rosbag2 bags')

@@ -12,8 +12,8 @@ from ..estimation.config import parse_mains
 from ..physics.model import SensorModel
 from ..physics.parameters import ParameterError
 from .args import (Progress, add_data_args, add_model_args, add_output_args, effects_from_args,
-                   load_data, material_from_args, param_names, renamed_flag, report_dir, say,
-                   write_json)
+                   load_data, material_from_args, nonnegative, nonnegative_int, param_names,
+                   positive, renamed_flag, report_dir, say, write_json)
 from .saved_models import data_files, print_saved, with_recording_flag, write_params_files
 
 __all__ = ['add_parsers']
@@ -277,7 +277,7 @@ def _save_plugin(args, diag, data) -> str | None:
 def _add_settle(p) -> None:
     p.add_argument(
         '--settle',
-        type=float,
+        type=nonnegative,
         default=0.5,
         metavar='S',
         help='seconds left out at each record start (they depend on motion before it), s',
@@ -334,8 +334,8 @@ def add_parsers(sub, formatter) -> None:
         '--free', metavar='LIST', default='d', help=FREE_HELP + '; refitted in every window'
     )
     renamed_flag(p, '--param', '--free')
-    p.add_argument('--window', type=float, default=60.0, metavar='S', help='window length, s')
-    p.add_argument('--step', type=float, default=None, metavar='S',
+    p.add_argument('--window', type=positive, default=60.0, metavar='S', help='window length, s')
+    p.add_argument('--step', type=positive, default=None, metavar='S',
                    help='window step, s (default: the window length)')
     add_output_args(p)
     p.set_defaults(func=_cmd_track)
@@ -353,7 +353,7 @@ def add_parsers(sub, formatter) -> None:
     )
     p.add_argument('--candidates', metavar='LIST',
                    help='restrict to these effects, comma list (default: the whole catalog)')
-    p.add_argument('--max-effects', type=int, default=3, metavar='N',
+    p.add_argument('--max-effects', type=nonnegative_int, default=3, metavar='N',
                    help='at most this many effects added by the stepwise search')
     p.add_argument('--mains-hz', default='auto', metavar='auto|0|50|60',
                    help='mains lines to find and remove from the current before fitting: auto '

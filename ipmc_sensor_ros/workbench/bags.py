@@ -28,7 +28,8 @@ leading ``/``.
   ``"linear"`` (linear interpolation; the deflection must cover the whole
   current time span, no extrapolation).  A missing deflection topic gives
   ``deflection_m = None`` unless ``require_deflection=True``.
-* geometry: the ``geometry`` argument, else the YAML sidecar (argument
+* geometry: the ``geometry`` argument (refused where the sidecar holds another), else the
+  YAML sidecar (argument
   ``sidecar``, default ``<bag dir>/ipmc.yaml``, for a single storage file the
   ``ipmc.yaml`` beside it)::
 
@@ -61,7 +62,7 @@ from .bagtopics import (
 )
 from .measurements import DataFormatError, PathLike, TimeSeries
 
-__all__ = ['read_bag', 'write_bag']
+__all__ = ['read_bag', 'write_bag', 'same_geometry']
 
 SIDECAR_NAME = 'ipmc.yaml'
 _SIDECAR_KEYS = ('geometry', 'material', 'extra', 'model')
@@ -86,6 +87,17 @@ def _yaml_line(text: str, keys: Sequence[str]) -> int | None:
         else:
             break
     return line
+
+
+def same_geometry(where: str, own, given) -> None:
+    """Refuse a geometry argument that disagrees with the one ``where`` holds (to 1 ppm)."""
+    keys = ('length_m', 'width_m', 'thickness_m')
+    mine = [float(getattr(own, k)) for k in keys]
+    theirs = [float(given[k] if isinstance(given, dict) else getattr(given, k)) for k in keys]
+    if not np.allclose(mine, theirs, rtol=1e-6, atol=0.0):
+        raise DataFormatError(where, None, 'the geometry given (--geometry: ' + ', '.join(
+            f'{k} {v:g}' for k, v in zip(keys, theirs)) + ") disagrees with the file's (" +
+            ', '.join(f'{k} {v:g}' for k, v in zip(keys, mine)) + '): drop one of them')
 
 
 def _read_sidecar(bag: str, path: Path, need_geometry: bool):
@@ -165,8 +177,8 @@ def read_bag(path: PathLike, current_topic: str = 'current',
     ``PointStamped``; it is aligned to the current sample times and
     ``deflection_alignment`` says how ("exact" or "linear").  If the topic is
     absent the deflection is None, unless ``require_deflection``.
-    The geometry comes from ``geometry`` or else the sidecar (see the module
-    docstring); a sidecar, when present, also gives ``known`` and ``extra``.
+    The geometry comes from ``geometry`` (which must agree with the sidecar's) or else the
+    sidecar (see the module docstring); a sidecar, when present, also gives ``known`` and ``extra``.
     Every problem raises :class:`DataFormatError` naming the bag and topic.
     """
     bag = Path(path)
@@ -232,9 +244,10 @@ def read_bag(path: PathLike, current_topic: str = 'current',
         side_geometry, known, extra = _read_sidecar(where, sidecar_path, geometry is None)
         if geometry is None:
             geometry = side_geometry
-        elif side_geometry is not None and side_geometry.name and not getattr(geometry, 'name',
-                                                                              ''):
-            geometry = geometry.replace(name=side_geometry.name)   # the sample's name
+        elif side_geometry is not None:
+            same_geometry(str(sidecar_path), side_geometry, geometry)
+            if side_geometry.name and not getattr(geometry, 'name', ''):
+                geometry = geometry.replace(name=side_geometry.name)   # the sample's name
     if geometry is None:
         raise DataFormatError(where, None, 'no geometry: pass geometry= or put an '
                               f"{SIDECAR_NAME} sidecar with 'geometry: {{length_m, width_m, "
