@@ -136,3 +136,11 @@ def test_simulate_names_the_bad_flag_and_writes_nothing(tmp_path, capsys, flags,
     assert code == 2
     assert message in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_fit_with_no_more_data_values_than_free_parameters_is_refused(sweep, capsys):
+    """One record is one frequency point (gain, phase): two values cannot judge three."""
+    assert main(['fit', str(sweep / 'slim_1Hz.csv')]) == 2
+    assert ('3 free parameter(s) (charge_stress_coupling_j_per_c, diffusivity_m2_per_s, '
+            'permittivity_f_per_m) but only 2 data values' in capsys.readouterr().err)
+    assert main(['fit', str(sweep / 'slim_1Hz.csv'), '--free', 'd']) == 0

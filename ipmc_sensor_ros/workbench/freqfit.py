@@ -302,5 +302,11 @@ def fit_parameters(groups: Sequence[FitGroup], free: Sequence[str],
     theta0, lower, upper, is_log = start_and_bounds(keys, material, effects, bounds_factor)
     pmap = ParameterMap(free, keys, is_log, material, effects)
     data, sd_rows = _weighted_data(groups, sd_floor)
+    if sd_rows.size <= len(free):
+        points = sum(len(g.points) for g in groups)
+        raise ParameterError(f'{len(free)} free parameter(s) ({", ".join(free)}) but only '
+                             f'{sd_rows.size} data values ({points} frequency point(s): gain and '
+                             'phase each): nothing is left to judge the fit; add records at '
+                             'other frequencies or free fewer parameters')
     sol = _optimise(_residual_function(pmap, data), theta0, lower, upper, is_log)
     return _result(sol, pmap, sd_rows, lower, upper, sd_threshold, min_sensitivity)

@@ -90,7 +90,8 @@ def svd_combinations(jac: np.ndarray, sd_rows: np.ndarray, cov: np.ndarray, free
     # Structural sensitivity: derivative of the model's ln-response itself (not
     # divided by the uncertainty), RMS over all points, per e-fold change.
     sens_jac = jac * sd_rows[:, None]
-    _, sv, vt = np.linalg.svd(sens_jac / np.sqrt(sens_jac.shape[0]), full_matrices=False)
+    _, sv, vt = np.linalg.svd(sens_jac / np.sqrt(sens_jac.shape[0]), full_matrices=True)
+    sv = np.concatenate([sv, np.zeros(vt.shape[0] - sv.size)])   # fewer rows: unseen ones
     combos = []
     for k in range(len(sv)):
         sd_k = float(np.sqrt(max(vt[k] @ cov @ vt[k], 0.0)))
