@@ -144,3 +144,18 @@ def test_fit_with_no_more_data_values_than_free_parameters_is_refused(sweep, cap
     assert ('3 free parameter(s) (charge_stress_coupling_j_per_c, diffusivity_m2_per_s, '
             'permittivity_f_per_m) but only 2 data values' in capsys.readouterr().err)
     assert main(['fit', str(sweep / 'slim_1Hz.csv'), '--free', 'd']) == 0
+
+
+def test_a_misspelt_header_key_is_refused_and_a_note_kept(tmp_path):
+    """'temperatur_k' would leave the model at 300 K without a word; 'operator' is a note."""
+    rows = '\n'.join(f'{k * 1e-3},{1e-3 * np.sin(k / 30)},{1e-9 * np.cos(k / 30)}'
+                     for k in range(200))
+    head = ('# format: ipmc-timeseries/1\n# sample: slim\n# length_m: 0.022\n'
+            '# width_m: 0.007\n# thickness_m: 0.00036\n{}\ntime_s,deflection_m,current_A\n')
+    typo, note = tmp_path / 'typo.csv', tmp_path / 'note.csv'
+    typo.write_text(head.format('# temperatur_k: 350') + rows)
+    note.write_text(head.format('# operator: lab 2') + rows)
+    with pytest.raises(ValueError, match=r"typo.csv:6: header key 'temperatur_k' is not one of "
+                                         r"the format; did you mean 'temperature_k'\?"):
+        read_any(typo)
+    assert read_any(note).extra == {'operator': 'lab 2'}

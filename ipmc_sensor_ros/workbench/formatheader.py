@@ -15,6 +15,8 @@ line.
 """
 from __future__ import annotations
 
+import difflib
+
 import re
 from dataclasses import dataclass
 from typing import Sequence
@@ -58,6 +60,11 @@ KNOWN_KEYS = ('temperature_k', 'youngs_modulus_pa', 'surface_resistance_ohm')
 TIMESERIES_NUMERIC_KEYS = GEOMETRY_KEYS + ('sample_rate_hz',) + KNOWN_KEYS
 FRF_NUMERIC_KEYS = GEOMETRY_KEYS + KNOWN_KEYS
 RESERVED_KEYS = ('format', 'sample') + GEOMETRY_KEYS + ('sample_rate_hz',) + KNOWN_KEYS
+#: A header key that is not the format's but this close to one of its keys (difflib's
+#: ratio: 'temperatur_k' 0.96, 'length' 0.86 against 'length_m') is taken for a misspelling
+#: and refused, since a value meant for the model would otherwise be ignored; other keys
+#: ('operator', 'amplifier_gain') are notes, kept as ``extra``.
+NEAR_MISS = 0.85
 
 #: Expected column of each known quantity and a description of its unit, used
 #: to say "wrong units" when a column names the right quantity in another unit.
@@ -225,6 +232,12 @@ def validate_header(path, header: TextHeader, expected_format: str,
         raise DataFormatError(path, _parameter_line(header, exc, tuple(known)),
                               f'implausible known value: {exc}') from None
     extra = {k: v for k, v in header.values.items() if k not in RESERVED_KEYS}
+    for key in extra:
+        near = difflib.get_close_matches(key, RESERVED_KEYS, n=1, cutoff=NEAR_MISS)
+        if near:
+            raise DataFormatError(path, header.lines.get(key), f'header key {key!r} is not '
+                                  f'one of the format; did you mean {near[0]!r}? (keys that '
+                                  'are not near one are kept as notes)')
     return sample, geometry, known, numbers, extra
 
 
