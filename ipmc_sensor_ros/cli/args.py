@@ -347,10 +347,11 @@ def add_model_args(p: argparse.ArgumentParser, *, effects: bool = True) -> None:
                    help='override a material parameter, e.g. --set d=3e-11 (repeatable)')
 
 
-def add_data_args(p: argparse.ArgumentParser) -> None:
+def add_data_args(p: argparse.ArgumentParser, frf: bool = True) -> None:
+    kinds = 'ipmc-timeseries/1 or ipmc-frf/1 files' if frf else 'ipmc-timeseries/1 files'
     p.add_argument('data', nargs='+',
-                   help='ipmc-timeseries/1 or ipmc-frf/1 files, directories of them, or rosbag2 '
-                        'bags (see: ipmc-model import for lab files)')
+                   help=f'{kinds}, directories of them, or rosbag2 bags (see: ipmc-model import '
+                        'for lab files)')
     g = p.add_argument_group('data')
     g.add_argument('--current-topic', default='current', metavar='TOPIC',
                    help='bags: topic of the current blocks')

@@ -179,7 +179,7 @@ def add_parsers(sub, formatter) -> None:
     p = sub.add_parser('estimate', formatter_class=formatter,
                        help='estimate deflection offline (same code path and params file as the '
                             'estimator node); NRMSE when the input has a measured deflection')
-    add_data_args(p)
+    add_data_args(p, frf=False)
     p.add_argument(
         '--out',
         required=True,
@@ -195,7 +195,8 @@ def add_parsers(sub, formatter) -> None:
         help='ROS 2 params file of the estimator node (config/estimator.yaml); values it '
         'does not set come from the data header (geometry) or the node defaults',
     )
-    add_model_file_args(p)
+    add_model_file_args(p, replaces='the node defaults (--params may still set the filter, no '
+                        'model or material value)')
     p.add_argument('--prefer', choices=('none', 'header', 'params'), default='none',
                    help='which wins when the data header and --params give different geometry or '
                         'material values (none: stop with an error naming both)')

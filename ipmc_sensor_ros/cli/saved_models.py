@@ -27,11 +27,11 @@ _NOT_NODE_PARAMS = ('faraday_constant_c_per_mol', 'gas_constant_j_per_mol_k',
                     'one_minus_anion_volume_fraction')
 
 
-def add_model_file_args(g) -> None:
+def add_model_file_args(g, replaces: str = '--model and --params') -> None:
     """``--model-file`` and ``--apply-recording-effects`` (every verb that takes a model)."""
     g.add_argument('--model-file', metavar='FILE',
                    help='a saved model (ipmc-model/1 YAML from --save-model): its sensor effects '
-                        'with their values and its material replace --model and --params')
+                        f'with their values and its material replace {replaces}')
     g.add_argument('--apply-recording-effects', action='store_true',
                    help="also apply the model file's recording effects (offset, drift, channel "
                         'delay of the calibration records); for those records only: the '
