@@ -159,3 +159,13 @@ def test_a_misspelt_header_key_is_refused_and_a_note_kept(tmp_path):
                                          r"the format; did you mean 'temperature_k'\?"):
         read_any(typo)
     assert read_any(note).extra == {'operator': 'lab 2'}
+
+
+def test_estimate_refuses_an_existing_output_before_the_work(sweep, tmp_path, capsys):
+    csv = str(sweep / 'slim_1Hz.csv')
+    assert main(['estimate', csv, '--out', str(tmp_path)]) == 0
+    capsys.readouterr()
+    assert main(['estimate', csv, '--out', str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert 'slim_1Hz.estimate.csv: exists, written from' in err
+    assert 'estimating' not in err                # refused before the estimator ran

@@ -19,7 +19,7 @@ import numpy as np
 from ..estimation.limits import beyond_limit, deflection_limit_m
 from ..physics.parameters import ParameterError
 from .args import Progress, fmt_time_s, load_data, say, write_json
-from .outputs import printable, write_complete
+from .outputs import check_free, printable, write_complete
 from .saved_models import estimate_values
 
 __all__ = ['cmd_estimate', 'read_estimate', 'estimate_accuracy', 'EstimatorCache',
@@ -262,6 +262,7 @@ def _estimate_one(args, path: Path, base: dict, explicit: set, cache: EstimatorC
     from ..estimation.accounting import record_summary
 
     data = _read_one(args, path)
+    check_free(_output_path(args, data.path), args.overwrite)      # before the work
     src = printable(data.path)
     values = _resolve_values(data, base, explicit, args.params or args.model_file,
                              args.prefer)
@@ -309,10 +310,8 @@ def _write_output(args, data, values, model_text, resets, t_out, current, w, mea
     """Write the estimate of one input (text or bag); (output path, note to print)."""
     from ..workbench.io import TimeSeries, write_bag
 
-    stem = Path(data.path).name.removesuffix('.csv').removesuffix('.txt')
-    out_dir = Path(args.out)
+    out = _output_path(args, data.path)
     if args.format == 'bag':
-        out = out_dir / f'{stem}_estimate'
         ts = TimeSeries(path='', sample=data.sample, geometry=data.geometry, known=data.known,
                         sample_rate_hz=data.sample_rate_hz, time_s=t_out, current_a=current,
                         deflection_m=w)
@@ -320,12 +319,18 @@ def _write_output(args, data, values, model_text, resets, t_out, current, w, mea
             p, ts, storage=args.storage, current_topic=args.current_topic,
             deflection_topic=args.estimate_topic), args.overwrite)
     else:
-        out = out_dir / f'{stem}.estimate.csv'
         note = write_complete(out, lambda p: _write_estimate(
             p, data, values, model_text, args.params, resets, t_out, current, w, measured,
             flagged, std, not args.causal),
             args.overwrite)
     return out, (f'; {note}' if note else '')
+
+
+def _output_path(args, data_path) -> Path:
+    """Return where the estimate of the input ``data_path`` goes (``--out``, ``--format``)."""
+    stem = Path(data_path).name.removesuffix('.csv').removesuffix('.txt')
+    suffix = '_estimate' if args.format == 'bag' else '.estimate.csv'
+    return Path(args.out) / f'{stem}{suffix}'
 
 
 def _estimate_line(row: dict, values: dict, estimator, t_out, w, measured) -> str:

@@ -23,7 +23,7 @@ from typing import Callable
 
 from ..physics.parameters import ParameterError
 
-__all__ = ['printable', 'write_complete', 'first_writer']
+__all__ = ['printable', 'write_complete', 'first_writer', 'check_free']
 
 
 def printable(text) -> str:
@@ -64,8 +64,7 @@ def write_complete(final: Path, write: Callable[[Path], None], overwrite: bool) 
     Returns '' or, with ``overwrite``, a note naming what was replaced.  ParameterError
     naming ``final`` and its first writer when it exists and ``overwrite`` is false.
     """
-    if final.exists() and not overwrite:
-        raise _exists(final)
+    check_free(final, overwrite)
     made = [p for p in (final.parent, *final.parent.parents) if not p.exists()]
     final.parent.mkdir(parents=True, exist_ok=True)
     scratch = final.parent / f'.ipmc-partial-{os.getpid()}'
@@ -99,6 +98,12 @@ def write_complete(final: Path, write: Callable[[Path], None], overwrite: bool) 
                 folder.rmdir()
             except OSError:
                 pass
+
+
+def check_free(final: Path, overwrite: bool) -> None:
+    """Refuse ``final`` when it exists and ``overwrite`` is false (before any work is done)."""
+    if final.exists() and not overwrite:
+        raise _exists(final)
 
 
 def _exists(final: Path) -> ParameterError:
