@@ -169,3 +169,14 @@ def test_estimate_refuses_an_existing_output_before_the_work(sweep, tmp_path, ca
     err = capsys.readouterr().err
     assert 'slim_1Hz.estimate.csv: exists, written from' in err
     assert 'estimating' not in err                # refused before the estimator ran
+
+
+def test_an_interval_prints_with_the_digits_that_tell_its_ends_apart():
+    from ipmc_sensor_ros.workbench.freqfit import interval_digits
+
+    for value, lo, hi in ((104.00022, 103.99994, 104.0005), (3.3e-11, 3.2e-11, 3.4e-11),
+                          (2.0, 1.0, 3.0), (5.0, 5.0 - 1e-12, 5.0 + 1e-12)):
+        d = interval_digits(value, lo, hi)
+        texts = [f'{x:.{d}g}' for x in (lo, value, hi)]
+        assert 4 <= d <= 10
+        assert len(set(texts)) == 3 or d == 10        # a gap below 1e-10 relative: capped

@@ -196,10 +196,7 @@ def _cmd_track(args) -> int:
         print(f'{ts.path}: (value [95 % confidence interval])')
         print(f"{'t (s)':>9} {'f0 (Hz)':>8} " + ' '.join(f'{n:>36}' for n in free))
         for p in tr:
-            cells = ' '.join(
-                f'{p.estimates[n]:>11.4g} [{p.ci95[n][0]:.4g}, {p.ci95[n][1]:.4g}]'.rjust(36)
-                for n in free
-            )
+            cells = ' '.join(_interval_cell(p.estimates[n], *p.ci95[n]) for n in free)
             model_cells = ('  model: ' + ', '.join(f'{v:.4g}' for v in p.model_estimates.values())
                            if p.model_estimates else '')
             print(f'{p.time_s:9.1f} {p.frequency_hz:8.3f} {cells}{model_cells}')
@@ -212,6 +209,13 @@ def _cmd_track(args) -> int:
 
         print(f'report: {track_report(rd, tracks, free[0])}')
     return 0
+
+
+def _interval_cell(value: float, lo: float, hi: float) -> str:
+    from ..workbench.freqfit import interval_digits
+
+    d = interval_digits(value, lo, hi)
+    return f'{value:>11.{d}g} [{lo:.{d}g}, {hi:.{d}g}]'.rjust(36)
 
 
 def _cmd_diagnose(args) -> int:

@@ -18,6 +18,8 @@ Here:
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 from typing import Sequence
 
@@ -138,13 +140,15 @@ class FitResult:
         for name in self.free:
             lo, hi = self.ci95[name]
             note = 'at bound' if name in self.at_bound else ''
-            lines.append(f'{name:<32} {self.estimates[name]:>12.4g} [{lo:>11.4g}, {hi:>11.4g}]  '
-                         f'{note}')
+            d = interval_digits(self.estimates[name], lo, hi)
+            lines.append(f'{name:<32} {self.estimates[name]:>12.{d}g} [{lo:>11.{d}g}, '
+                         f'{hi:>11.{d}g}]  {note}')
         if len(self.free) > 1:
             lines.append('correlation:')
+            width = max(8, *(len(SYMBOLS.get(n, n)) for n in self.free))
             for k, name in enumerate(self.free):
                 row = ' '.join(f'{c:+.3f}' for c in self.correlation[k])
-                lines.append(f'  {SYMBOLS.get(name, name):>8} {row}')
+                lines.append(f'  {SYMBOLS.get(name, name):>{width}} {row}')
         lines.append('identifiability (SVD of the scaled Jacobian; combinations of the free '
                      'parameters; sensitivity = change of the ln-response per e-fold change):')
         for comb in self.identifiability:
@@ -239,6 +243,14 @@ def _optimise(residual, theta0: np.ndarray, lower: np.ndarray, upper: np.ndarray
         diff_step=1e-6,
         max_nfev=200 * (len(theta0) + 1),
     )
+
+
+def interval_digits(value: float, lo: float, hi: float) -> int:
+    """Return the significant digits (4 to 10) that print ``lo``, ``value`` and ``hi`` apart."""
+    gap = min(abs(value - lo), abs(hi - value))
+    if not (math.isfinite(gap) and gap > 0 and value):
+        return 4
+    return int(min(10, max(4, math.ceil(math.log10(abs(value) / gap)) + 2)))
 
 
 def _at_bound(free: Sequence[str], theta, lower, upper) -> list[str]:
