@@ -75,8 +75,15 @@ def on_sample_grid(path: str, time_s, *columns, max_gap_s: float = MAX_GAP_S):
     slope, intercept = np.polyfit(slots, t, 1)
     t_grid = intercept + slope * np.arange(filled.size)
     t_grid[slots] = t
-    return t_grid, tuple(CubicSpline(t, np.asarray(c, float))(t_grid) if c is not None else None
+    return t_grid, tuple(None if c is None else _filled(t, np.asarray(c, float), t_grid, slots)
                          for c in columns), filled
+
+
+def _filled(t, values, t_grid, slots) -> np.ndarray:
+    """Return ``values`` at their slots of ``t_grid``, a cubic spline through them between."""
+    out = CubicSpline(t, values)(t_grid)
+    out[slots] = values
+    return out
 
 
 def _steps(path: str, t: np.ndarray, max_gap_s: float) -> np.ndarray | None:
