@@ -156,6 +156,19 @@ def test_columns_found_overridden_and_refused(tmp_path):
         import_lab_file(bare, geometry='22mm,7mm,360um', columns={'time': 'Zeit'})
 
 
+def test_a_units_row_under_the_names_gives_the_units(tmp_path):
+    """Spreadsheet exports: names, then units in a row of their own, then numbers."""
+    src = _lab(tmp_path, 'units.csv', 'run 7\nTime,Laser,Current\ns,mm,uA\n0,1,2\n0.5,1,2\n')
+    ts = import_lab_file(src, geometry='22mm,7mm,360um')
+    assert ts.deflection_m.tolist() == [0.001, 0.001]
+    assert ts.current_a.tolist() == pytest.approx([2e-6, 2e-6], rel=1e-15)
+    assert ts.extra['lab_columns'] == 'time=Time [s], deflection=Laser [mm], current=Current [uA]'
+    # a row under the names that is not all units stays the header
+    words = _lab(tmp_path, 'words.csv', 'Time,Laser,Current\nt [s],w [mm],tag\n0,1,2\n1,1,2\n')
+    with pytest.raises(DataFormatError, match=r'words\.csv:2: no current column'):
+        import_lab_file(words, geometry='22mm,7mm,360um')
+
+
 REFUSED = {  # file text -> the message it must give (file:line where a line applies)
     'wrong.csv': ('Time [s],Deflection [A],Current [A]\n0,1,2\n1,1,2\n',
                   r"wrong\.csv:1: column 'Deflection \[A\]' \(deflection\): unit 'A' is not a "

@@ -100,11 +100,35 @@ def _find_table(path, source: TextSource):
                 if n and len(head.split(delimiter)) == n and not _is_row(head, delimiter,
                                                                          decimal):
                     source.unread(line)
-                    notes = [(n, text.strip()) for n, text in previous[:-1] if text.strip()]
                     cells = [c.strip() for c in head.split(delimiter)]
+                    names = _names_above_units(previous, cells, delimiter)
+                    if names:                       # a names row, then a units row
+                        head_line, cells = previous[-2][0], names
+                        previous = previous[:-1]
+                    notes = [(n, text.strip()) for n, text in previous[:-1] if text.strip()]
                     return notes, cells, head_line, delimiter, decimal
         if line.strip():
             previous.append((source.lineno, line))
+
+
+def _names_above_units(previous, cells: list[str], delimiter: str) -> list[str] | None:
+    """
+    Return the column names with their units when ``cells`` is a row of units under them.
+
+    Spreadsheet and LabVIEW exports often put the units in a row of their own (``Time,Laser,I``
+    then ``s,mm,uA``): the names become ``Time [s]`` ...  None: ``cells`` are names.
+    """
+    if len(previous) < 2:
+        return None
+    units = [c.strip('[]() ') for c in cells]
+    tables = (TIME_UNITS, LENGTH_UNITS, CURRENT_UNITS, VOLTAGE_UNITS)
+    if not any(units) or not all(not u or any(unit_factor(u, t) is not None for t in tables)
+                                 for u in units):
+        return None
+    names = [c.strip() for c in previous[-2][1].split(delimiter)]
+    if len(names) != len(units) or not all(names):
+        return None
+    return [f'{n} [{u}]' if u else n for n, u in zip(names, units)]
 
 
 def parse_columns_spec(text: str) -> dict[str, str]:
