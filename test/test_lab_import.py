@@ -169,6 +169,14 @@ def test_a_units_row_under_the_names_gives_the_units(tmp_path):
         import_lab_file(words, geometry='22mm,7mm,360um')
 
 
+def test_a_delimiter_ending_every_line_is_read(tmp_path):
+    """Excel writes 'a,b,c,' on every line: an empty last column, not a missing table."""
+    src = _lab(tmp_path, 'excel.csv', 'Time [s],Laser [mm],Current [uA],\n0,1,2,\n0.5,1,2,\n')
+    ts = import_lab_file(src, geometry='22mm,7mm,360um')
+    assert ts.time_s.tolist() == [0.0, 0.5] and ts.deflection_m.tolist() == [0.001, 0.001]
+    assert 'unused_columns' not in ts.extra
+
+
 REFUSED = {  # file text -> the message it must give (file:line where a line applies)
     'wrong.csv': ('Time [s],Deflection [A],Current [A]\n0,1,2\n1,1,2\n',
                   r"wrong\.csv:1: column 'Deflection \[A\]' \(deflection\): unit 'A' is not a "

@@ -72,11 +72,16 @@ _DIALECTS = (('\t', '.'), ('\t', ','), (';', '.'), (';', ','), (',', '.'))
 
 
 def _is_row(line: str, delimiter: str, decimal: str) -> int:
-    """Return the number of cells if ``line`` is a row of >= 2 numbers in this dialect, else 0."""
-    cells = line.split(delimiter)
-    if len(cells) < 2:
+    """
+    Return the number of cells if ``line`` is a row of >= 2 numbers in this dialect, else 0.
+
+    A delimiter that ends the line (spreadsheets write one) leaves an empty last cell, counted.
+    """
+    cells = line.rstrip('\r\n').split(delimiter)
+    numbers = cells[:-1] if len(cells) > 2 and not cells[-1].strip() else cells
+    if len(numbers) < 2:
         return 0
-    return len(cells) if all(parse_number(c, decimal) is not None for c in cells) else 0
+    return len(cells) if all(parse_number(c, decimal) is not None for c in numbers) else 0
 
 
 def _find_table(path, source: TextSource):
@@ -284,7 +289,7 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
         data, _ = read_table(source, cells, increasing_check(path, cells[t_index], t_unit or '',
                                                              t_index),
                              delimiter=delimiter, decimal=decimal, max_rows=max_rows,
-                             header_line=line)
+                             header_line=line, empty_last=cells[-1] == '')
     picked = {role: to_si(data[k], factors[role]) for role, (k, _) in roles.items()}
     del data
     t = picked['time']
@@ -303,7 +308,7 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
     if source.encoding != 'utf-8':
         extra['text_encoding'] = source.encoding
     used = {k for k, _ in roles.values()}
-    unused = [c for k, c in enumerate(cells) if k not in used]
+    unused = [c for k, c in enumerate(cells) if k not in used and c]   # '': a trailing delimiter
     if unused:
         extra['unused_columns'] = _one_line(', '.join(unused))
     if current_gain_a_per_v is not None:

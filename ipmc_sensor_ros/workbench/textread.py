@@ -264,8 +264,8 @@ def _fast_block(raw: bytes, ncol: int, delimiter: str, decimal: str) -> np.ndarr
 
 
 def _slow_block(path, raw: bytes, first: int, columns: Sequence[str], delimiter: str,
-                decimal: str, state: dict,
-                encoding: str = 'utf-8') -> tuple[np.ndarray, DataFormatError | None]:
+                decimal: str, state: dict, encoding: str = 'utf-8',
+                empty_last: bool = False) -> tuple[np.ndarray, DataFormatError | None]:
     """Rows parsed line by line up to the first error (returned, not raised)."""
     ncol = len(columns)
     rows: list[list[float]] = []
@@ -295,12 +295,13 @@ def _slow_block(path, raw: bytes, first: int, columns: Sequence[str], delimiter:
                 path, lineno, f'wrong number of cells: expected {ncol} '
                 f'({delimiter.join(columns)}), got {len(cells)}{hint}')
         row = []
-        for cell, column in zip(cells, columns):
+        last = empty_last and not cells[-1].strip()
+        for cell, column in zip(cells[:-1] if last else cells, columns):
             v = parse_number(cell, decimal)
             if v is None:
                 return _rows(rows, ncol), cell_error(path, lineno, cell, column, decimal)
             row.append(v)
-        rows.append(row)
+        rows.append(row + [float('nan')] if last else row)
     return _rows(rows, ncol), None
 
 
@@ -310,13 +311,16 @@ def _rows(rows: list, ncol: int) -> np.ndarray:
 
 def read_table(source: TextSource, columns: Sequence[str], check: BlockCheck | None = None, *,
                delimiter: str = ',', decimal: str = '.', max_rows: int | None = MAX_ROWS,
-               header_line: int | None = None) -> tuple[list[np.ndarray], int]:
+               header_line: int | None = None,
+               empty_last: bool = False) -> tuple[list[np.ndarray], int]:
     """
     Read the data rows left in ``source``: (one array per column, line of the first row).
 
     Rows are contiguous; empty lines are allowed only at the end.  ``check``
     sees each parsed block with the previous row, in file order, so the first
     problem in the file is the one reported.  At least two rows are needed.
+    ``empty_last``: the last column is the empty cell after a delimiter that ends each line
+    (spreadsheet exports); empty, it reads as NaN.
     """
     ncol = len(columns)
     parts: list[list[np.ndarray]] = [[] for _ in columns]
@@ -325,11 +329,12 @@ def read_table(source: TextSource, columns: Sequence[str], check: BlockCheck | N
     first_row_line: int | None = None
     n = 0
     for first, raw in source.chunks():
-        block = None if 'blank' in state else _fast_block(raw, ncol, delimiter, decimal)
+        fast = 'blank' not in state and not empty_last
+        block = _fast_block(raw, ncol, delimiter, decimal) if fast else None
         error = None
         if block is None:
             block, error = _slow_block(source.path, raw, first, columns, delimiter, decimal, state,
-                                       source.encoding)
+                                       source.encoding, empty_last)
         if block.shape[0]:
             if first_row_line is None:
                 first_row_line = first  # a blank line before a row is an error: rows start here
