@@ -178,7 +178,8 @@ def read_bag(path: PathLike, current_topic: str = 'current',
     ``deflection_alignment`` says how ("exact" or "linear").  If the topic is
     absent the deflection is None, unless ``require_deflection``.
     The geometry comes from ``geometry`` (which must agree with the sidecar's) or else the
-    sidecar (see the module docstring); a sidecar, when present, also gives ``known`` and ``extra``.
+    sidecar (see the module docstring); a sidecar, when present, also gives ``known`` and
+    ``extra``.
     Every problem raises :class:`DataFormatError` naming the bag and topic.
     """
     bag = Path(path)
