@@ -77,10 +77,7 @@ def nonnegative(text: str) -> float:
 
 def nonnegative_int(text: str) -> int:
     """Argparse type: an integer >= 0."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'expected an integer >= 0, got {text!r}') from None
+    value = int(text) if re.fullmatch(r'\s*\d+\s*', text) else -1
     if value < 0:
         raise argparse.ArgumentTypeError(f'expected an integer >= 0, got {text!r}')
     return value

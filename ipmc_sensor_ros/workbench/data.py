@@ -7,7 +7,7 @@ from typing import Sequence
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from ..estimation.timebase import START, Timebase
+from ..estimation.timebase import JITTER_FRACTION, START, Timebase
 from ..interface.specs import defaults, ESTIMATOR_SPECS
 from ..physics.model import SensorModel
 from ..physics.parameters import MaterialParameters
@@ -64,8 +64,11 @@ def on_sample_grid(path: str, time_s, *columns, max_gap_s: float = MAX_GAP_S):
     motion in it is unknown.
     """
     t = np.asarray(time_s, float)
-    if t.size < 8 or not np.all(np.diff(t) > 0):
+    dt = np.diff(t)
+    if t.size < 8 or not np.all(dt > 0):
         return None
+    if np.max(dt) < (1 + 2 * JITTER_FRACTION) * np.median(dt):
+        return None                         # no spacing holds a missing slot: nothing to fill
     steps = _steps(path, t, max_gap_s)
     if steps is None or np.all(steps == 1):
         return None
