@@ -171,6 +171,53 @@ def test_estimate_refuses_an_existing_output_before_the_work(sweep, tmp_path, ca
     assert 'estimating' not in err                # refused before the estimator ran
 
 
+@pytest.mark.parametrize('verb, flag', [
+    ('diagnose', '--save-model'), ('diagnose', '--save-plugin'), ('fit', '--save'),
+    ('fit', '--save-model'), ('fit', '--save-material')])
+def test_an_existing_output_file_is_refused_before_the_data_is_read(
+        verb, flag, tmp_path, capsys):
+    calibrated = tmp_path / 'm.yaml'
+    calibrated.write_text('kept\n')
+    assert main([verb, 'no-such-data', flag, str(calibrated)]) == 2
+    err = capsys.readouterr().err
+    assert 'm.yaml: exists, written at' in err and f'choose another {flag}' in err
+    assert 'no-such-data' not in err              # refused before the data was looked for
+    assert calibrated.read_text() == 'kept\n'     # nothing lost
+
+
+def test_two_flags_naming_one_file_are_refused(tmp_path, capsys):
+    out = tmp_path / 'm.yaml'
+    assert main(['diagnose', 'no-such-data', '--save-model', str(out), '--json', str(out)]) == 2
+    assert 'the same file as --json' in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_simulate_refuses_existing_records_and_overwrite_replaces_them(tmp_path, capsys):
+    flags = ['simulate', '--out', str(tmp_path), '--samples', 'slim', '--frequencies', '5',
+             '--duration', '1']
+    assert main(flags) == 0
+    record = tmp_path / 'slim_5Hz.csv'
+    record.write_text('a record kept\n')
+    capsys.readouterr()
+    assert main(flags + ['--seed', '1']) == 2
+    assert 'slim_5Hz.csv: exists' in capsys.readouterr().err
+    assert record.read_text() == 'a record kept\n'
+    assert main(flags + ['--seed', '1', '--overwrite']) == 0
+    assert read_any(record).current_a.size == 1000      # 1 s at 1 kHz, written anew
+
+
+def test_import_refuses_an_existing_output_and_overwrite_replaces_it(tmp_path, capsys):
+    src = tmp_path / 'run_5Hz.csv'
+    src.write_text((LAB / 'labview_slim_5Hz.csv').read_text(encoding='utf-8'), encoding='utf-8')
+    out = tmp_path / 'out'
+    flags = ['import', str(src), '--geometry', '22mm,7mm,360um', '--out', str(out)]
+    assert main(flags) == 0
+    capsys.readouterr()
+    assert main(flags) == 2
+    assert '--overwrite' in capsys.readouterr().err
+    assert main(flags + ['--overwrite']) == 0
+
+
 def test_an_interval_prints_with_the_digits_that_tell_its_ends_apart():
     from ipmc_sensor_ros.workbench.freqfit import interval_digits
 

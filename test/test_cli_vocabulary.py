@@ -146,10 +146,11 @@ def test_import_verb_passes_everything_to_the_library(monkeypatch, tmp_path, cap
     calls = []
 
     def fake_import(paths, out_dir, *, geometry=None, meta=None, columns=None,
-                    current_gain_a_per_v=None, sample=None, notice=None):
+                    current_gain_a_per_v=None, sample=None, notice=None, overwrite=False):
         assert callable(notice)
         calls.append(dict(paths=paths, out_dir=out_dir, geometry=geometry, meta=meta,
-                          columns=columns, gain=current_gain_a_per_v, sample=sample))
+                          columns=columns, gain=current_gain_a_per_v, sample=sample,
+                          overwrite=overwrite))
         return [out_dir / 'run1.csv']
 
     monkeypatch.setitem(sys.modules, 'ipmc_sensor_ros.workbench.labimport',
@@ -183,6 +184,7 @@ def test_import_verb_passes_everything_to_the_library(monkeypatch, tmp_path, cap
     assert (
         c['gain'] == pytest.approx(1e-6) and c['meta'].name == 'run.json' and c['sample'] == 's1'
     )
+    assert c['overwrite'] is False                  # an existing output is refused by default
     assert 'run1.csv' in capsys.readouterr().out
     assert main(['import', 'a.csv', '--out', str(tmp_path), '--columns', 'volts=V']) == 2
     assert "--columns: unknown role 'volts'" in capsys.readouterr().err

@@ -366,6 +366,10 @@ def add_output_args(p: argparse.ArgumentParser, *, report: bool = True) -> None:
     if report:
         g.add_argument('--report', metavar='DIR',
                        help='write index.html and PNG plots into this directory')
+    g.add_argument('--overwrite', action='store_true',
+                   help='replace saved models, parameter files and records that exist '
+                        '(default: refuse before any work, naming what wrote them; --json and '
+                        '--report are replaced)')
 
 
 def _json_default(o):

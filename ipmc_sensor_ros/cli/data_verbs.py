@@ -14,6 +14,7 @@ from .args import (Progress, add_data_args, add_model_args, add_output_args, eff
                    material_from_args, natural_key, nonnegative, parse_geometry, parse_samples,
                    positive, renamed_flag, write_json)
 from .estimate_verb import ESTIMATE_FORMAT, cmd_estimate, estimate_accuracy, read_estimate
+from .outputs import check_free, write_complete
 from .saved_models import add_model_file_args
 
 __all__ = ['add_parsers', 'read_estimate', 'estimate_accuracy', 'ESTIMATE_FORMAT']
@@ -41,6 +42,24 @@ def _frequency_text(freqs: list[float]) -> str:
     if len(freqs) == 1:
         return f'1 frequency ({freqs[0]:.4g} Hz)'
     return f'{len(freqs)} frequencies {freqs[0]:.4g}-{freqs[-1]:.4g} Hz'
+
+
+def _frf_name(sample: str) -> str:
+    return f'{sample}.frf.csv'
+
+
+def _target_name(record, fmt: str) -> str:
+    """Return the file (or bag directory) name simulate writes a record to."""
+    if fmt == 'frf':
+        return _frf_name(record.sample)
+    name = record.path.replace('.', 'p')
+    return f'{name}.csv' if fmt == 'timeseries' else name
+
+
+def _check_targets(out: Path, recs, args) -> None:
+    """Refuse, before anything is written, outputs that exist (without --overwrite)."""
+    for name in sorted({_target_name(r, args.format) for r in recs}):
+        check_free(out / name, args.overwrite)
 
 
 def _cmd_simulate(args) -> int:
@@ -74,29 +93,31 @@ def _cmd_simulate(args) -> int:
             fidelity=args.fidelity,
             beam_model=args.beam_model,
         )
+    _check_targets(out, recs, args)
     written, points = [], {}
     for r in recs:
-        name = r.path.replace('.', 'p')
         ts = TimeSeries(path='', sample=r.sample, geometry=r.model.geometry, known={},
                         sample_rate_hz=args.sample_rate, time_s=r.time_s, current_a=r.current_a,
                         deflection_m=r.deflection_m)
         if args.format == 'timeseries':
-            written.append(out / f'{name}.csv')
-            write_timeseries(written[-1], ts)
+            written.append(out / _target_name(r, args.format))
+            write_complete(written[-1], lambda f: write_timeseries(f, ts), args.overwrite)
         elif args.format == 'bag':
-            written.append(out / name)
-            write_bag(written[-1], ts, storage=args.storage)
+            written.append(out / _target_name(r, args.format))
+            write_complete(written[-1], lambda f: write_bag(f, ts, storage=args.storage),
+                           args.overwrite)
         else:
             points.setdefault(r.sample, []).append(
                 fundamental_response(r.time_s, r.deflection_m, r.current_a))
     for sample, pts in points.items():
-        written.append(out / f'{sample}.frf.csv')
-        write_frf(written[-1], FrequencyResponseData(
+        written.append(out / _frf_name(sample))
+        frf = FrequencyResponseData(
             path='', sample=sample, geometry=PAPER_SAMPLES[sample], known={},
             frequency_hz=[p.frequency_hz for p in pts], gain_a_per_m=[p.gain_a_per_m for p in pts],
             phase_deg=[p.phase_deg for p in pts],
             gain_std_a_per_m=[p.gain_a_per_m * p.sd_log_mag for p in pts],
-            phase_std_deg=[np.degrees(p.sd_phase_rad) for p in pts]))
+            phase_std_deg=[np.degrees(p.sd_phase_rad) for p in pts])
+        write_complete(written[-1], lambda f: write_frf(f, frf), args.overwrite)
     model_text = SensorModel(PAPER_SAMPLES[samples[0]], material, effects).describe()
     print(f'wrote {len(written)} {args.format} file(s) to {out}: model {model_text}, '
           f'{_frequency_text(freqs)}, {args.duration:g} s each at {args.sample_rate:g} Hz, '
@@ -131,7 +152,7 @@ def _cmd_import(args) -> int:
         )
     geometry = parse_geometry(args.geometry, args.sample or '') if args.geometry else None
     files = sorted((Path(p) for p in args.files), key=natural_key)   # 1Hz before 13Hz
-    written = import_lab_files(files, Path(args.out), geometry=geometry,
+    written = import_lab_files(files, Path(args.out), geometry=geometry, overwrite=args.overwrite,
                                meta=Path(args.meta) if args.meta else None,
                                columns=_parse_columns(args.columns),
                                current_gain_a_per_v=None if gain is None else 1.0 / gain,
@@ -187,8 +208,6 @@ def add_parsers(sub, formatter) -> None:
         help='output directory: <input>.estimate.csv (ipmc-estimate/1) or <input>_estimate bags; '
         'an output that exists is not replaced (see --overwrite)',
     )
-    p.add_argument('--overwrite', action='store_true',
-                   help='replace outputs that exist (default: refuse, naming what wrote them)')
     p.add_argument(
         '--params',
         metavar='FILE',

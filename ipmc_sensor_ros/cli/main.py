@@ -14,6 +14,7 @@ import sys
 
 from . import data_verbs, info_verbs, model_verbs
 from .args import HelpFormatter
+from .outputs import check_outputs
 
 __all__ = ['main', 'build_parser']
 
@@ -46,6 +47,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        check_outputs(args)
         return int(args.func(args) or 0)
     except (ValueError, OSError) as exc:   # ParameterError, DataFormatError, ... are ValueErrors
         print(f'ipmc-model {args.verb}: error: {exc}', file=sys.stderr)

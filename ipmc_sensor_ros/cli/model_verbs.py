@@ -14,7 +14,9 @@ from ..physics.parameters import ParameterError
 from .args import (Progress, add_data_args, add_model_args, add_output_args, effects_from_args,
                    load_data, material_from_args, nonnegative, nonnegative_int, param_names,
                    positive, renamed_flag, report_dir, say, write_json)
-from .saved_models import data_files, print_saved, with_recording_flag, write_params_files
+from .outputs import check_free
+from .saved_models import (data_files, params_file_paths, print_saved, with_recording_flag,
+                           write_params_files)
 
 __all__ = ['add_parsers']
 
@@ -75,6 +77,8 @@ def _cmd_fit(args) -> int:
     material = material_from_args(args)
     data = load_data(args)
     groups = groups_from(data)
+    for path in params_file_paths(Path(args.save), groups) if args.save else ():
+        check_free(path, args.overwrite, '--save')          # before the fit
     fit_eff = effects_to_fit(args.effects)
     free = _free_names(args, fit_eff)
     for e in fit_eff:

@@ -5,11 +5,12 @@ How the command line writes its outputs and names files.
 * **Complete or absent**: an output is written under a temporary name in a private
   directory beside it and appears under its final name only once complete, so an error
   (or a signal) never leaves an empty or half-written output behind.
-* **Created exclusively**: without ``--overwrite`` an output that exists is never replaced;
-  the second writer (another run, or a second input of the same name in one run) refuses,
-  naming the output and what wrote it first.  Appearing under the final name is atomic
-  (``link`` for a file, ``rename`` onto a missing name for a bag directory), so two runs
-  started together cannot both win.
+* **Created exclusively**: without ``--overwrite`` an output that exists is never replaced
+  (estimates, records, saved models and parameter files; ``--json`` and ``--report``, what a
+  rerun gives again, are); the second writer (another run, or a second input of the same
+  name in one run) refuses, naming the output and what wrote it first.  Appearing under the
+  final name is atomic (``link`` for a file, ``rename`` onto a missing name for a bag
+  directory), so two runs started together cannot both win.
 * **Any file name**: names that are not UTF-8 (a Latin-1 ``é`` from an old instrument PC)
   are handled as bytes and shown with escapes (``caf\xe9.csv``), never an encoding error.
 """
@@ -23,7 +24,14 @@ from typing import Callable
 
 from ..physics.parameters import ParameterError
 
-__all__ = ['printable', 'write_complete', 'first_writer', 'check_free']
+__all__ = ['printable', 'write_complete', 'first_writer', 'check_free', 'check_outputs',
+           'OUTPUT_FILE_FLAGS']
+
+#: The flags that name one file a verb keeps (argparse dest: flag): a calibration or a model,
+#: refused when it exists (without ``--overwrite``).  ``--json`` and ``--report``, the numbers
+#: and plots of one run that rerunning gives again, are replaced, as a test runner's report.
+OUTPUT_FILE_FLAGS = {'save': '--save', 'save_material': '--save-material',
+                     'save_model': '--save-model', 'save_plugin': '--save-plugin'}
 
 
 def printable(text) -> str:
@@ -100,12 +108,33 @@ def write_complete(final: Path, write: Callable[[Path], None], overwrite: bool) 
                 pass
 
 
-def check_free(final: Path, overwrite: bool) -> None:
+def check_free(final: Path, overwrite: bool, flag: str = '--out') -> None:
     """Refuse ``final`` when it exists and ``overwrite`` is false (before any work is done)."""
     if final.exists() and not overwrite:
-        raise _exists(final)
+        raise _exists(final, flag)
 
 
-def _exists(final: Path) -> ParameterError:
+def check_outputs(args) -> None:
+    """
+    Refuse, before any work, the files a verb keeps that exist (without ``--overwrite``).
+
+    The files of :data:`OUTPUT_FILE_FLAGS`; two flags naming the same file (``--json``
+    included) are refused too: the second write would lose the first.
+    """
+    named: dict[Path, str] = {}
+    for dest, flag in {'json': '--json', **OUTPUT_FILE_FLAGS}.items():
+        value = getattr(args, dest, None)
+        if not value:
+            continue
+        path = Path(value).resolve()
+        if path in named:
+            raise ParameterError(f'{flag} {printable(value)}: the same file as {named[path]}; '
+                                 'give each output its own name')
+        named[path] = flag
+        if dest in OUTPUT_FILE_FLAGS:
+            check_free(Path(value), bool(getattr(args, 'overwrite', False)), flag)
+
+
+def _exists(final: Path, flag: str = '--out') -> ParameterError:
     return ParameterError(f'{printable(final)}: exists, written {first_writer(final)}; not '
-                          'replaced (pass --overwrite to replace it, or choose another --out)')
+                          f'replaced (pass --overwrite to replace it, or choose another {flag})')

@@ -19,8 +19,8 @@ from ..workbench.measurements import round_rate_hz
 from .args import say
 
 __all__ = ['add_model_file_args', 'saved_model', 'recording_effects_wanted', 'estimate_values',
-           'params_file_doc', 'params_file_text', 'write_params_files', 'data_files',
-           'print_saved', 'with_recording_flag']
+           'params_file_doc', 'params_file_text', 'params_file_paths', 'write_params_files',
+           'data_files', 'print_saved', 'with_recording_flag']
 
 #: physical constants of MaterialParameters that are not node parameters
 _NOT_NODE_PARAMS = ('faraday_constant_c_per_mol', 'gas_constant_j_per_mol_k',
@@ -146,6 +146,13 @@ def params_file_text(doc: dict) -> str:
     return yaml.dump(doc, Dumper=_Plain, sort_keys=False)
 
 
+def params_file_paths(path: Path, groups) -> list[Path]:
+    """Return the params file of each sample geometry: ``path``, or ``NAME_<sample>.yaml``."""
+    if len(groups) == 1:
+        return [path]
+    return [path.with_name(f'{path.stem}_{g.name}{path.suffix}') for g in groups]
+
+
 def write_params_files(path: Path, groups, data, res) -> list[Path]:
     """
     One params file per sample geometry (``NAME_<sample>.yaml`` when several).
@@ -156,8 +163,7 @@ def write_params_files(path: Path, groups, data, res) -> list[Path]:
 
     fitted = ModelFile.from_model(effects=res.effects, material=res.material)
     written = []
-    for g in groups:
-        out = path if len(groups) == 1 else path.with_name(f'{path.stem}_{g.name}{path.suffix}')
+    for g, out in zip(groups, params_file_paths(path, groups)):
         known = {k: v for k, v in g.known.items()
                  if k not in res.free and k in MaterialParameters.__dataclass_fields__}
         view = ModelFile(fitted.effects, fitted.material.replace(**known),

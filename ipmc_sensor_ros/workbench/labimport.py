@@ -358,7 +358,8 @@ def import_lab_files(paths: Iterable[PathLike], out_dir: PathLike, *,
                                   'rename one of the files')
         seen[dst] = src
         if dst.exists() and not overwrite:
-            raise DataFormatError(dst, None, 'output exists; remove it first')
+            raise DataFormatError(dst, None, 'output exists; not replaced (pass --overwrite to '
+                                  'replace it, or choose another --out)')
     series = [import_lab_file(p, **options) for p in paths]
     for src, ts in zip(paths, series):
         for note in ts.notes if notice is not None else ():
