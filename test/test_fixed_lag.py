@@ -157,3 +157,34 @@ def test_a_lag_that_cannot_be_honoured_is_refused_naming_it(reduced):
         KalmanEstimator(reduced, FS, smoothed_lag_s=30.0)        # 30000 samples
     with pytest.raises(ParameterError, match="smoothed_lag_s.*'kalman'"):
         DeflectionEstimator(MODEL, FS, estimator='leaky', smoothed_lag_s=0.1)
+
+
+def test_the_node_sends_what_its_smoother_holds_once_the_input_is_silent(record):
+    """
+    The last ``smoothed_lag_s`` of a stream that stops goes out once the input is stale.
+
+    Not only at shutdown: the status timer (1 s ticks) drains after ``stale_after_s`` of
+    silence.
+    """
+    from conftest import DirectNode
+    from ipmc_sensor_ros.nodes.messages import ESTIMATE_COLUMNS, pack_block, unpack_block
+
+    t, i = record
+    d = DirectNode(smoothed_lag_s=0.5, stale_after_s=2.0)
+    smoothed = []
+    d.node._pub_smoothed.publish = lambda m: smoothed.append(
+        unpack_block(m, ESTIMATE_COLUMNS).times_s.copy())
+    try:
+        for k in range(0, 2000, 100):
+            d.send(pack_block(t[k:k + 100], i[k:k + 100]))
+        held = 2000 - sum(s.size for s in smoothed)
+        assert held >= 500                              # at least the lag is held back
+        d.node._on_timer()                              # a tick that sees the data
+        d.node._on_timer()
+        d.node._on_timer()                              # 2 s of silence: not yet stale
+        assert sum(s.size for s in smoothed) == 2000 - held
+        d.node._on_timer()                              # 3 s: stale (stale_after_s 2)
+        assert sum(s.size for s in smoothed) == 2000    # every sample out, once
+        assert np.array_equal(np.concatenate(smoothed), t[:2000])
+    finally:
+        d.close()

@@ -68,3 +68,53 @@ def test_standard_qos_override_applies_and_a_stray_one_is_refused(context, tmp_p
     with pytest.raises(P.ParameterError, match='uot'):
         P.check_qos_overrides(node)
     node.destroy_node()
+
+
+@pytest.mark.parametrize('override, shown', [
+    ('qos_overrides./out.publisher.reliability:=bestefort', "'bestefort'"),
+    ('qos_overrides./out.publisher.depth:=-5', '-5')])
+def test_a_qos_override_value_rclpy_refuses_names_the_parameter(context, tmp_path, override,
+                                                                shown):
+    """A misspelt policy or a negative depth: a ParameterError naming it (no traceback)."""
+    node, args = _node(context, tmp_path, '/**:\n  ros__parameters:\n    gain: 1.0\n',
+                       ['-p', override])
+    with pytest.raises(P.ParameterError) as refused:
+        P.create_publisher(node, String, 'out', P.COUNTERS_QOS)
+    name = override.split(':=')[0]
+    assert f"'{name}': {shown}" in str(refused.value) and 'best_effort' in str(refused.value)
+    # rclpy applies overrides to the profile it is given: the shared one stays as it was
+    assert P.COUNTERS_QOS.depth == 1
+    assert P.COUNTERS_QOS.reliability == rclpy.qos.ReliabilityPolicy.RELIABLE
+    node.destroy_node()
+
+
+def test_mains_hz_written_as_a_number_is_accepted_as_the_simulator_writes_it(
+        context, tmp_path):
+    """A shared ``/**`` file with ``mains_hz: 50`` (the simulator's integer) starts both."""
+    from ipmc_sensor_ros.estimation.config import parse_mains
+    from ipmc_sensor_ros.interface.specs import ESTIMATOR_SPECS, check_values
+
+    mains = [s for s in ESTIMATOR_SPECS if s.name == 'mains_hz']
+    node, args = _node(context, tmp_path, '/**:\n  ros__parameters:\n    mains_hz: 50\n')
+    P.declare(node, mains)
+    value = P.read(node, mains)['mains_hz']
+    check_values({'mains_hz': value}, mains)              # no raise
+    assert parse_mains(value) == 50.0
+    node.destroy_node()
+    with pytest.raises(P.ParameterError, match='must be one of'):
+        check_values({'mains_hz': 55}, mains)
+
+
+def test_a_params_file_with_no_section_for_the_node_is_said(context, tmp_path, capfd):
+    """A misspelt section key (``/**/ipmc_estimatr``) leaves the node on its defaults: said."""
+    node, args = _node(context, tmp_path, '/**/ipmc_estimatr:\n  ros__parameters:\n'
+                       '    gain: 2.5\n')
+    P.check_unknown_overrides(node, SPECS, args, default_name='ipmc_estimator')
+    err = capfd.readouterr().err
+    assert 'p.yaml: no section applies to /ipmc_estimator' in err
+    assert "did you mean '/**/ipmc_estimator'?" in err
+    node.destroy_node()
+    node, args = _node(context, tmp_path, '/**:\n  ros__parameters:\n    gain: 2.5\n')
+    P.check_unknown_overrides(node, SPECS, args, default_name='ipmc_estimator')
+    assert 'no section applies' not in capfd.readouterr().err
+    node.destroy_node()

@@ -233,6 +233,14 @@ class StreamAccounts:
         if lost > 0:
             c['samples_lost'] += lost
 
+    def _recount(self, timebase: Timebase) -> None:
+        """Take off the slots and gaps a re-lock found were no lost samples."""
+        lost, gaps = timebase.recounted
+        c = self.counters
+        c['samples_lost'] = max(c['samples_lost'] - lost, 0)
+        c['gaps_bridged'] = max(c['gaps_bridged'] - gaps, 0)
+        timebase.recounted = (0, 0)
+
     def _drop(self, n: int) -> None:
         """Drop ``n`` samples whose estimate is not finite; reset the filter."""
         self.estimator.reset()

@@ -33,11 +33,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.ndimage import maximum_filter1d
 from scipy.optimize import minimize_scalar
 from scipy.special import jv
 from scipy.stats import gamma
 
-from .lines import PAD, family_peak, local_level
+from .lines import PAD, local_level, vertex
 from .statespace import harmonics_below, motion_intensity
 
 __all__ = ['measure_motion', 'measure_recent', 'MOTION_PERIODS', 'MOTION_LONGEST_S',
@@ -146,8 +147,11 @@ def _strongest_family(x, fs, lo, hi, harmonics, false_alarm) -> float:
     """
     Return the fundamental of the strongest line family in [lo, hi] (0.0: none).
 
-    Its first line must be a line: a peak of the periodogram within one resolution bin (not
-    the flank of a stronger line outside the band) above the chi-square level.
+    The family is chosen among the fundamentals whose first line is a line: a peak of the
+    periodogram within one resolution bin (not the flank of a stronger line) above the
+    chi-square level.  (The strongest family of all can be a subharmonic's: on a record with
+    little noise, 2.5 Hz, 5 Hz and 7.5 Hz hold a 5 Hz line and its leakage, more than 5, 10
+    and 15 Hz do; its first line is no line.)
     """
     w = (x - x.mean()) * np.hanning(x.size)
     n_fft = 1 << int(math.ceil(math.log2(PAD * x.size)))
@@ -155,11 +159,15 @@ def _strongest_family(x, fs, lo, hi, harmonics, false_alarm) -> float:
     df = fs / n_fft
     cand = np.arange(int(lo / df), int(hi / df) + 1)
     ks = [k for k in range(1, harmonics + 1) if k * hi < 0.45 * fs] or [1]
-    f0 = family_peak(power, cand, ks)[0] * df
-    j0 = int(round(f0 / df))
-    peak = power[j0] >= np.max(power[max(j0 - PAD, 0):j0 + PAD + 1])
-    return f0 if peak and power[j0] > math.log(cand.size / false_alarm) * local_level(
-        power, j0, df) else 0.0
+    summed = sum(power[np.minimum(k * cand, power.size - 1)] for k in ks)
+    near = maximum_filter1d(power, 2 * PAD + 1, mode='nearest')[cand]
+    level = math.log(cand.size / false_alarm)
+    lines = [j for j in range(1, cand.size - 1) if power[cand[j]] >= near[j]
+             and power[cand[j]] > level * local_level(power, cand[j], df)]
+    if not lines:
+        return 0.0
+    best = max(lines, key=lambda j: summed[j])
+    return vertex(cand, summed, best) * df
 
 
 def _piecewise(x, t, lines_hz, mains_hz, piece_s) -> tuple[np.ndarray, np.ndarray]:

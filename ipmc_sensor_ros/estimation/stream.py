@@ -18,9 +18,9 @@ run; the node only unpacks messages, calls :meth:`StreamEstimator.feed` (a block
   sample's slot is refused (that sample; no reset).  A longer gap (``gaps``) or jump back (a
   bag loop, a new run) starts a new run: filter reset (``resets``).  The output time of a
   sample is its stamp (minus a model delay);
-* **rate**: measured from the stamps (``measured_rate_hz``); off ``sample_rate_hz`` by more
-  than ``rate_tolerance`` it is reported once; the filter is rebuilt at the measured rate
-  (bumpless) whenever the two differ by more than ``RATE_FOLLOW_FRACTION`` (``rate_rebuilds``);
+* **rate**: measured from the stamps (``measured_rate_hz``), said once if off ``sample_rate_hz``
+  by more than ``rate_tolerance`` (slots a re-locked grid shows never were leave the counts);
+  the filter follows it (bumpless) beyond ``RATE_FOLLOW_FRACTION`` (``rate_rebuilds``);
 * **smoothed output** (``smoothed_lag_s`` > 0): :meth:`StreamEstimator.pop_smoothed` returns
   each estimated sample once more, smoothed with that lag, in order; an estimator replaced
   hands over what it holds first;
@@ -37,8 +37,7 @@ One rule per sample: :meth:`StreamEstimator.feed_one` applies it to one sample;
 :meth:`StreamEstimator.feed` applies it to a block, running its leading samples that are
 accepted without a refusal or a new run through the same grid expression in numpy
 (:meth:`~ipmc_sensor_ros.estimation.timebase.Timebase.admit_plain`).  Rule violations are
-named in ``last_rejection`` / ``last_warning`` with the values and (``source``) the topic or
-file.
+named in ``last_rejection`` / ``last_warning`` with the values and the topic or file.
 """
 from __future__ import annotations
 
@@ -60,8 +59,8 @@ __all__ = ['StreamEstimator', 'validate_block', 'COUNTER_NAMES', 'REJECT_REASONS
 
 #: The filter is rebuilt at the measured rate when it differs from the filter's by more than
 #: this fraction.  The sensor differentiates, so a relative rate error is the same relative
-#: amplitude error: 0.2 % is a fifth of the 1 % accuracy the estimator is held to, and 20
-#: times the ~100 ppm a DAQ crystal is off the host clock (which never causes a rebuild).
+#: amplitude error: 0.2 % is a fifth of the 1 % accuracy the estimator is held to, and 20 times
+#: the ~100 ppm a DAQ crystal is off the host clock (which never causes a rebuild).
 RATE_FOLLOW_FRACTION = 0.002
 
 
@@ -187,6 +186,7 @@ class StreamEstimator(StreamAccounts):
     def _rate_action(self) -> float | None:
         """Judge a freshly measured rate: report a mismatch once; return a rate to follow."""
         self.timebase.fresh = False
+        self._recount(self.timebase)
         hz = self.measured_rate_hz
         off = hz / self.nominal_rate_hz - 1.0
         if abs(off) > self.rate_tolerance:

@@ -170,6 +170,9 @@ class Timebase:
         self.measured: float | None = None     # period of the last full rate window, s
         self.fresh = False                     # a rate window just completed
         self.relocks = 0
+        #: slots and gaps counted under a grid a re-lock found wrong (the stream takes them
+        #: off its counts: a 500 Hz stream read on a 1 kHz grid lost no samples)
+        self.recounted = (0, 0)
         self.break_kind = ''                   # why the last run started: '', 'gap', 'back'
         self.break_s = 0.0                     # and the size of that gap or jump, s
         self._win_t: list[float] = []
@@ -282,6 +285,12 @@ class Timebase:
                 k = np.concatenate([[0.0], np.cumsum(np.maximum(
                     np.floor(np.diff(t) / spacing + 0.5), 1.0))])
                 k += self.last_slot - k[-1]
+                was, now = np.diff(self._win_k), np.diff(k)
+                # the slots the old grid counted lost; a faster stream's new empty slots are
+                # its refused samples' (counted as refused): nothing is added
+                lost = max(int(np.sum(was - now)), 0)
+                gaps = max(int(np.sum(was > 1) - np.sum(now > 1)), 0)
+                self.recounted = (self.recounted[0] + lost, self.recounted[1] + gaps)
                 self._win_k = k.astype(np.int64).tolist()
                 self.relocks += 1
         slope, std, kc, tc = fit_line(k, t, period)

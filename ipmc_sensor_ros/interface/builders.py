@@ -45,7 +45,7 @@ def build_model(values: Mapping[str, Any]) -> SensorModel:
         return SensorModel.named(values['model'], geometry, material, extra)
     except ParameterError as exc:
         raise ParameterError(f"parameter 'effects' = {short_repr(list(extra))} with model "
-                             f"'{short_repr(values['model'])}': {exc}") from None
+                             f"{short_repr(values['model'])}: {exc}") from None
 
 
 def _model_from_file(values: Mapping[str, Any], geometry: Geometry) -> SensorModel:
@@ -60,7 +60,10 @@ def _model_from_file(values: Mapping[str, Any], geometry: Geometry) -> SensorMod
     from ..physics.modelfile import load_model
 
     path = values['model_file']
-    saved = load_model(path)
+    try:
+        saved = load_model(path)
+    except ParameterError as exc:       # the file's own problem, with the parameter named
+        raise ParameterError(f"parameter 'model_file': {exc}") from None
     spec_default = {s.name: s.default for s in MODEL_SPECS + MATERIAL_SPECS}
     in_file = saved.material.to_dict()
     for name in ('model', 'effects') + MATERIAL_NAMES:

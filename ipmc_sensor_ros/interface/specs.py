@@ -54,6 +54,9 @@ class Spec:
     choices: tuple[str, ...] = ()
     pattern: str = ''
     max_length: int | None = None
+    #: a string a params file may write as a number (``mains_hz: 50``, as the simulator's
+    #: integer of the same name): the number is taken as its text ('50')
+    numbers_as_text: bool = False
 
 
 _M = MaterialParameters()
@@ -163,7 +166,7 @@ ESTIMATOR_SPECS = GEOMETRY_SPECS + MATERIAL_SPECS + MODEL_SPECS + (
     Spec('mains_hz', 'auto', str, "mains hum: 'auto' measures a line near 50 or 60 Hz in the "
          "data and models it (line states at the measured frequency); '50' or '60' measures "
          "near that one; '0' = no hum model (the leaky baseline notches '50'/'60' and ignores "
-         "'auto')", choices=('auto', '0', '50', '60')),
+         "'auto')", choices=('auto', '0', '50', '60'), numbers_as_text=True),
     Spec('frame_id', 'ipmc_clamp', str, 'frame of the deflection points: origin at the '
          'clamp, x along the beam to the tip, z in the bending direction',
          pattern=FRAME_ID_PATTERN, max_length=128),
@@ -280,6 +283,9 @@ def _check_value(spec: Spec, value: Any, where: str) -> Any:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ParameterError(f"{where}parameter '{spec.name}' must be an integer, got {shown}")
     elif spec.kind is str:
+        if spec.numbers_as_text and isinstance(value, (int, float)) \
+                and not isinstance(value, bool):
+            value = f'{value:g}'
         if not isinstance(value, str):
             raise ParameterError(f"{where}parameter '{spec.name}' must be a string, got {shown}")
     elif spec.kind is bool:
@@ -381,5 +387,6 @@ def markdown_table(specs: Iterable[Spec]) -> str:
         rng = f'{fmt.format(s.low)} .. {fmt.format(s.high)}' if s.low is not None else (
             ' \\| '.join(str(c) for c in s.choices) if s.choices else '')
         ro = ' **read-only**' if s.read_only else ''
-        rows.append(f'| `{s.name}` | {names[s.kind]} | {default} | {rng} | {s.description}{ro} |')
+        kind = names[s.kind] + (' (or int)' if s.numbers_as_text else '')
+        rows.append(f'| `{s.name}` | {kind} | {default} | {rng} | {s.description}{ro} |')
     return '\n'.join(rows)

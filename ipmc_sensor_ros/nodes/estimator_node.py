@@ -118,7 +118,7 @@ class EstimatorNode(LiveParameters, ArrayPath, Node):
                                    'loaded once, not re-read')
         P.log_model_files(self, self._values)
         self._init_live_parameters()
-        self._ticks = 0
+        self._ticks = self._quiet_ticks = self._samples_seen = 0
         logger = self.get_logger()
         topic = self.resolve_topic_name('current')
         rules = dict(max_gap_s=float(self._values['max_gap_s']),
@@ -397,6 +397,11 @@ class EstimatorNode(LiveParameters, ArrayPath, Node):
             counters = dict(self._array.totals(), channels=list(counters.values()))
         if counters['samples_in'] == 0 and self._ticks % 5 == 1:
             self.get_logger().info(f'waiting for data on {self._sub.topic_name}')
+        n = counters['samples_in']
+        self._quiet_ticks = self._quiet_ticks + 1 if n == self._samples_seen else 0
+        self._samples_seen = n
+        if self._quiet_ticks > float(self._values['stale_after_s']):      # 1 s ticks
+            self._drain()       # the input went silent: what the smoother holds goes out
         counters['node'] = self.get_fully_qualified_name()
         self._pub_counters.publish(String(data=json.dumps(counters)))
 

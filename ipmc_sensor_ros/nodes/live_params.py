@@ -102,7 +102,9 @@ class LiveParameters:
                 ch.max_gap_s = float(values['max_gap_s'])
                 ch.rate_tolerance = float(values['rate_tolerance'])
             self._source.selector.stale_after_s = float(values['stale_after_s'])
-            self._changed.update(p.name for p in parameters)
+            # the values that changed (not the QoS overrides a configure declares again)
+            self._changed.update(p.name for p in parameters
+                                 if p.name in values and values[p.name] != old[p.name])
             if (key != self._model_key or self._wanted is not None or self._builder is not None
                     or self._rebuilt is not None):
                 self._wanted = values        # coalesced: only the latest values are built

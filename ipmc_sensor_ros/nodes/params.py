@@ -12,6 +12,9 @@ estimator), whose errors name the parameter.
 """
 from __future__ import annotations
 
+import contextlib
+import copy
+import difflib
 import weakref
 from typing import Any, Iterable, Mapping
 
@@ -35,7 +38,7 @@ __all__ = ['ParameterError', 'Spec', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_
            'QOS_SPECS', 'declare', 'read', 'build_sensor_model', 'make_qos', 'COUNTERS_QOS',
            'check_choice', 'ParameterError', 'MATERIAL_NAMES', 'GEOMETRY_NAMES', 'markdown_table',
            'params_files', 'check_unknown_overrides', 'section_matches', 'params_file_sections',
-           'create_publisher', 'create_subscription', 'check_qos_overrides',
+           'create_publisher', 'create_subscription', 'check_qos_overrides', 'qos_overrides_named',
            'qos_overriding_options', 'destroy_io', 'parameter_overrides', 'log_model_files',
            'node_help', 'ros_arguments', 'wants_help']
 
@@ -48,6 +51,8 @@ def descriptor(spec: Spec) -> ParameterDescriptor:
     """Return the rclpy descriptor of a core parameter spec (description, range, read-only)."""
     d = ParameterDescriptor(name=spec.name, type=_TYPES[spec.kind],
                             description=spec.description, read_only=spec.read_only)
+    if spec.numbers_as_text:            # an integer from a shared params file is accepted
+        d.type, d.dynamic_typing = ParameterType.PARAMETER_NOT_SET, True
     if spec.choices:
         d.additional_constraints = 'one of: ' + ', '.join(str(c) for c in spec.choices)
     if spec.low is not None and spec.kind is float:
@@ -150,18 +155,34 @@ def _file_sections(node, cli_args, default_name):
     fallback: dict[str, Any] = {}
     origins = []
     for path in params_files(cli_args):
+        keys, used = [], False
         for key, section in params_file_sections(path):
             own = '*' not in key.rsplit('/', 1)[-1]   # '/**' is any node; '/**/name' is not
+            keys.append(key)
             if section_matches(key, fqn):
+                used = True
                 if own:
                     exact.update(section)
                 else:
                     for name in section:
                         wildcard.setdefault(name, f"{path} section '{key}'")
             elif renamed and own and section_matches(key, f'{ns}/{default_name}'):
+                used = True
                 fallback.update(section)
                 origins.append(f"{path} section '{key}'")
+        if not used:
+            _say_unused(node, path, keys, default_name or node.get_name())
     return exact, wildcard, fallback, origins
+
+
+def _say_unused(node, path: str, keys: list, name: str) -> None:
+    """Warn that no section of params file ``path`` applies to ``node`` (a misspelt key?)."""
+    near = [k for k in keys
+            if difflib.SequenceMatcher(None, k.rsplit('/', 1)[-1], name).ratio() >= 0.8]
+    hint = f"; did you mean '{near[0].rsplit('/', 1)[0]}/{name}'?" if near else ''
+    node.get_logger().warning(
+        f'{path}: no section applies to {node.get_fully_qualified_name()} (sections: '
+        f"{keys}; expected '/**', '/**/{name}' or '{name}'): its values are not used{hint}")
 
 
 def check_unknown_overrides(node, specs: Iterable[Spec], cli_args=None,
@@ -234,7 +255,9 @@ def create_publisher(node, msg_type, topic: str, qos: QoSProfile):
     A lifecycle node gets a lifecycle publisher (enabled by its ``on_activate``).
     """
     create = getattr(node, 'create_lifecycle_publisher', node.create_publisher)
-    return create(msg_type, topic, qos, qos_overriding_options=qos_overriding_options())
+    with qos_overrides_named(node, topic, 'publisher'):     # rclpy applies overrides in place
+        return create(msg_type, topic, copy.copy(qos),
+                      qos_overriding_options=qos_overriding_options())
 
 
 def destroy_io(node, names: Iterable[str]) -> None:
@@ -267,8 +290,32 @@ def _destroy(node, entity) -> None:
 
 def create_subscription(node, msg_type, topic: str, callback, qos: QoSProfile, raw=False):
     """``node.create_subscription`` with the standard QoS override parameters."""
-    return node.create_subscription(msg_type, topic, callback, qos, raw=raw,
-                                    qos_overriding_options=qos_overriding_options())
+    with qos_overrides_named(node, topic, 'subscription'):   # a copy: see create_publisher
+        return node.create_subscription(msg_type, topic, callback, copy.copy(qos), raw=raw,
+                                        qos_overriding_options=qos_overriding_options())
+
+
+@contextlib.contextmanager
+def qos_overrides_named(node, topic: str, kind: str):
+    """
+    Turn rclpy's refusal of a ``qos_overrides.*`` value into a ParameterError naming it.
+
+    rclpy raises a RuntimeError for a policy value it does not know ('bestefort') and an
+    RCLError (a RuntimeError) for a depth the middleware cannot take (-5), as tracebacks.
+    """
+    try:
+        yield
+    except (RuntimeError, ValueError, TypeError) as exc:
+        prefix = f'qos_overrides.{node.resolve_topic_name(topic)}.{kind}.'
+        given = {n: v.value for n, v in parameter_overrides(node).items()
+                 if n.startswith(prefix)}
+        if not given:
+            raise
+        text = ' '.join(str(exc).split()).split(', at /')[0]
+        raise ParameterError(
+            f'{given}: refused by rclpy ({text}); valid: history keep_last, keep_all or '
+            'system_default; depth an integer >= 0; reliability reliable, best_effort or '
+            'system_default') from None
 
 
 def check_qos_overrides(node) -> None:

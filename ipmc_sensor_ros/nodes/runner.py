@@ -155,7 +155,10 @@ def run(node_factory, name: str, args=None) -> int:
     """
     args = list(sys.argv if args is None else args)
     if wants_help(args):
-        print(node_help(name))
+        try:
+            print(node_help(name), flush=True)
+        except BrokenPipeError:     # `--help | head`: the reader left; not an error
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     # A shell starts background jobs with SIGINT ignored, and Python keeps an
     # inherited SIG_IGN: restore the default so SIGINT always stops the node.

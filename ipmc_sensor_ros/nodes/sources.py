@@ -11,6 +11,8 @@ and says what it decided in the stream's accounts
 """
 from __future__ import annotations
 
+import copy
+
 import time
 from typing import Any, Callable
 
@@ -32,10 +34,11 @@ def subscribe_followed(node, msg_type, topic: str, callback, qos, on_message_los
     takes one argument or two (:meth:`FollowedSource.unpack`) and the subscription is told to
     pass the info.
     """
-    sub = node.create_subscription(
-        msg_type, topic, callback, qos, raw=True,
-        qos_overriding_options=P.qos_overriding_options(),
-        event_callbacks=SubscriptionEventCallbacks(message_lost=on_message_lost))
+    with P.qos_overrides_named(node, topic, 'subscription'):
+        sub = node.create_subscription(
+            msg_type, topic, callback, copy.copy(qos), raw=True,    # overrides act in place
+            qos_overriding_options=P.qos_overriding_options(),
+            event_callbacks=SubscriptionEventCallbacks(message_lost=on_message_lost))
     sub._callback_type = Subscription.CallbackType.WithMessageInfo
     return sub
 

@@ -227,7 +227,8 @@ def get_effect(name: str) -> Effect:
         return EFFECTS[name]
     except (KeyError, TypeError):
         raise ParameterError(f'unknown effect {short_repr(name)}; known: {sorted(EFFECTS)} '
-                             '(or load a plugin with --plugin FILE)') from None
+                             "(a plugin defines more: --plugin FILE, node parameter 'plugins')"
+                             ) from None
 
 
 def effect_parameter(effect_name: str, parameter_name: str) -> EffectParameter:
