@@ -19,7 +19,7 @@ run; the node only unpacks messages, calls :meth:`StreamEstimator.feed` (a block
   bag loop, a new run) starts a new run: filter reset (``resets``).  The output time of a
   sample is its stamp (minus a model delay);
 * **rate**: measured from the stamps (``measured_rate_hz``), said once if off ``sample_rate_hz``
-  by more than ``rate_tolerance`` (slots a re-locked grid shows never were leave the counts);
+  by more than ``rate_tolerance`` (slots a re-lock shows were no loss leave the counts);
   the filter follows it (bumpless) beyond ``RATE_FOLLOW_FRACTION`` (``rate_rebuilds``);
 * **smoothed output** (``smoothed_lag_s`` > 0): :meth:`StreamEstimator.pop_smoothed` returns
   each estimated sample once more, smoothed with that lag, in order; an estimator replaced

@@ -177,9 +177,9 @@ def _file_sections(node, cli_args, default_name):
 
 def _say_unused(node, path: str, keys: list, name: str) -> None:
     """Warn that no section of params file ``path`` applies to ``node`` (a misspelt key?)."""
-    near = [k for k in keys
-            if difflib.SequenceMatcher(None, k.rsplit('/', 1)[-1], name).ratio() >= 0.8]
-    hint = f"; did you mean '{near[0].rsplit('/', 1)[0]}/{name}'?" if near else ''
+    near = [k.rpartition('/')[0] + k.rpartition('/')[1] for k in keys
+            if difflib.SequenceMatcher(None, k.rpartition('/')[2], name).ratio() >= 0.8]
+    hint = f"; did you mean '{near[0]}{name}'?" if near else ''
     node.get_logger().warning(
         f'{path}: no section applies to {node.get_fully_qualified_name()} (sections: '
         f"{keys}; expected '/**', '/**/{name}' or '{name}'): its values are not used{hint}")

@@ -12,7 +12,6 @@ and says what it decided in the stream's accounts
 from __future__ import annotations
 
 import copy
-
 import time
 from typing import Any, Callable
 
