@@ -48,7 +48,7 @@ def test_other_nodes_keys_in_wildcard_section_warn_but_typo_for_this_node_fails(
     assert not node.has_parameter('block_size')          # warned about, never declared
     node.destroy_node()
     node, args = _node(context, tmp_path, 'ipmc_estimator:\n  ros__parameters:\n    gian: 1.0\n')
-    with pytest.raises(P.ParameterError, match='gian'):
+    with pytest.raises(P.ParameterError, match="did you mean 'gain' for 'gian'"):
         P.check_unknown_overrides(node, SPECS, args, default_name='ipmc_estimator')
     node.destroy_node()
 

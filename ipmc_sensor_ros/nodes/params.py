@@ -228,8 +228,11 @@ def check_unknown_overrides(node, specs: Iterable[Spec], cli_args=None,
     if fatal:
         files = params_files(cli_args)
         where = f" in {', '.join(files)}" if files else ''
+        ours = sorted(known - {'use_sim_time', 'start_type_description_service'})
+        near = {n: difflib.get_close_matches(n, ours, 1) for n in fatal}
+        hint = ''.join(f"; did you mean '{m[0]}' for '{n}'?" for n, m in near.items() if m)
         raise ParameterError(f'unknown parameter(s) {fatal}{where} for node '
-                             f"'{node.get_name()}'; known: {sorted(known - {'use_sim_time'})}")
+                             f"'{node.get_name()}'{hint}; known: {ours}")
 
 
 #: QoS parameters of a topic are declared read-only by rclpy as
