@@ -101,6 +101,7 @@ def test_mains_hz_written_as_a_number_is_accepted_as_the_simulator_writes_it(
     check_values({'mains_hz': value}, mains)              # no raise
     assert parse_mains(value) == 50.0
     node.destroy_node()
+    check_values({'mains_hz': -0.0}, mains)               # '0', as 0: no raise
     with pytest.raises(P.ParameterError, match='must be one of'):
         check_values({'mains_hz': 55}, mains)
 

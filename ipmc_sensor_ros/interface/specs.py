@@ -285,7 +285,7 @@ def _check_value(spec: Spec, value: Any, where: str) -> Any:
     elif spec.kind is str:
         if spec.numbers_as_text and isinstance(value, (int, float)) \
                 and not isinstance(value, bool):
-            value = f'{value:g}'
+            value = f'{value + 0.0:g}'       # -0.0 is '0', as 0
         if not isinstance(value, str):
             raise ParameterError(f"{where}parameter '{spec.name}' must be a string, got {shown}")
     elif spec.kind is bool:
