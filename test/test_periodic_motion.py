@@ -213,6 +213,10 @@ def test_a_periodic_model_needs_two_stretches_in_a_row_or_a_start_in_motion():
     log = _log_after([(500, True, None), (500, False, 5.0), (2000, False, None)])
     span = log.span_for(5.05, never_rested=False)
     assert span is not None and len(span.y) == 2000
+    # ... and of the one before when it had no rest either: both are that periodic motion
+    log = _log_after([(500, True, 0.0), (1000, False, 5.0), (1000, False, None)])
+    span = log.span_for(5.0, never_rested=False)
+    assert span is not None and len(span.y) == 2000
     # a rest in the last stretch, or a fundamental that moved by more than MOTION_WOBBLE: no
     log = _log_after([(500, True, None), (500, False, 5.0), (2000, True, None)])
     assert log.span_for(5.0, never_rested=False) is None

@@ -8,12 +8,12 @@ It joins the model (:mod:`.statespace`), filter (:mod:`.filter`), smoother
 :class:`KalmanEstimator` implements :class:`~.core.EstimatorCore`.  It owns one
 :class:`~.filter.FilterState` and advances it sample by sample; a block and single samples
 run the same recursion.  The mains line (``mains_hz``: ``'auto'``, 50, 60 or 0 = none) is
-measured every ``LINE_CHECK_S`` of data on the last ``LINE_CHECK_S`` of current, at fixed
+measured every ``CHECK_S`` of data on the last ``LINE_WINDOW_S`` of current, at fixed
 sample counts (so the result does not depend on how the stream is cut into blocks); when it
 appears, or moves by more than ``LINE_RETUNE_HZ``, the model is rebuilt with line states at
 the measured frequency and the filter state carried over.
 
-A periodic motion is measured at the same checks, on the last 2, 4 and 8 s of current
+A periodic motion is measured at the same checks, on the last 1, 2, 4 and 8 s of current
 (:func:`~.motionline.measure_recent`); when two checks in a row say it appeared, went or
 moved, the model with periodic states at the measured fundamental (a small remainder:
 :mod:`.statespace`) takes over from the start of those stretches, whose samples are
@@ -43,15 +43,20 @@ from .ring import SampleRing
 from .smoother import smooth_segments
 from .statespace import StateSpaceModel
 
-__all__ = ['KalmanEstimator', 'LINE_CHECK_S']
+__all__ = ['KalmanEstimator', 'CHECK_S', 'LINE_WINDOW_S']
 
-#: Data between two measurements of the mains line, s (also the stretch measured): 2 s
-#: resolves 0.5 Hz and, zero-padded, finds the line to ~0.01 Hz at 3 % hum.  The first
-#: measurements are made after ``LINE_FIRST_S`` (0.5 s: the line to ~0.05 Hz, so hum is
-#: modelled early) and twice that (1 s: a fast periodic motion is judged,
-#: :mod:`.motionline`, so it is modelled early too).
-LINE_CHECK_S = 2.0
+#: Data between two checks of the mains line and the periodic motion, s (a stretch,
+#: :mod:`.periodic`): a periodic motion is modelled at the second check that measures it, so
+#: this is the delay of that choice (the offset is learned slowly until then: 100 um of
+#: level a second is typical of a 5 Hz crank with 1-2 % noise started within the first
+#: 0.5 s); a check costs ~20 ms on 8 s of 1 kHz current, 20 us a sample.  The first checks
+#: are made after ``LINE_FIRST_S`` (0.5 s: the line to ~0.05 Hz, so hum is modelled early)
+#: and twice that (1 s: a fast periodic motion is judged, :mod:`.motionline`).
+CHECK_S = 1.0
 LINE_FIRST_S = 0.5
+#: The mains line is measured on the last this of current, s: 2 s resolves 0.5 Hz and,
+#: zero-padded, finds the line to ~0.01 Hz at 3 % hum.
+LINE_WINDOW_S = 2.0
 #: A measured line this far from the modelled one retunes the model, Hz: the line states'
 #: random walk follows a smaller error (the phasor turns by 2 pi 0.02 rad/s).
 LINE_RETUNE_HZ = 0.02
@@ -94,7 +99,8 @@ class KalmanEstimator:
         # until measured: a line at each nominal frequency (hum at the start must not be
         # taken for an offset), then the measured one
         nominal_line = () if self.mains_hz == 0.0 else self._nominal()
-        self._check_n = max(64, int(round(LINE_CHECK_S * fs)))
+        self._check_n = max(64, int(round(CHECK_S * fs)))
+        self._line_n = max(64, int(round(LINE_WINDOW_S * fs)))
         self._window_n = max(self._check_n, int(round(MOTION_LONGEST_S * fs)))
         self._first_n = max(64, int(round(LINE_FIRST_S * fs)))
         self._filter = self._new_filter(StateSpaceModel(reduced, self.config, fs, nominal_line))
@@ -201,7 +207,7 @@ class KalmanEstimator:
 
     def _check_line(self) -> None:
         recent = self._recent.values()
-        self._check_mains(recent[-self._check_n:])
+        self._check_mains(recent[-self._line_n:])
         self._check_motion(recent)
         self._log.mark(self._filter, self._state)
 

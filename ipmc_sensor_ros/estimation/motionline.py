@@ -23,7 +23,7 @@ The estimator models a periodic motion by states at k f_motion with a small rema
   quantile, or one bin its exponential quantile, at ``false_alarm``: a second motion, a step
   or a slow sweep is not a periodic motion.
 
-:func:`measure_recent` judges the end of a live stream: the last 2, 4 and 8 s
+:func:`measure_recent` judges the end of a live stream: the last 1, 2, 4 and 8 s
 (:data:`MOTION_LONGEST_S`), the shortest that holds a periodic motion first, so a fast crank
 is taken from a short stretch and a slow one (down to ``MOTION_PERIODS / MOTION_LONGEST_S``)
 from a long one.
@@ -86,7 +86,7 @@ def measure_recent(current_a, sample_rate_hz: float, model) -> float | None:
     available = x.size / fs
     if available < MOTION_SHORTEST_S - 1e-9:
         return None
-    spans = sorted({min(available, MOTION_LONGEST_S / 2 ** j) for j in (2, 1, 0)})
+    spans = sorted({min(available, MOTION_LONGEST_S / 2 ** j) for j in (3, 2, 1, 0)})
     for span in spans:
         f0 = measure_motion(x[-int(round(span * fs)):], fs, model)
         if f0:

@@ -3,7 +3,7 @@
 When the Kalman estimator's model takes periodic-motion states, and from when.
 
 At each line check the estimator measures the fundamental of a periodic motion on the
-last 2, 4 and 8 s of current (:func:`~.motionline.measure_recent`; 0: none; None: a check
+last 1, 2, 4 and 8 s of current (:func:`~.motionline.measure_recent`; 0: none; None: a check
 before 1 s of current is too short to judge, and its stretch runs on into the next).  The
 model changes (periodic states at that fundamental appear, move by more than
 :data:`~.motionline.MOTION_WOBBLE` of it, a motor's speed wobble that the periodic states'
@@ -16,11 +16,13 @@ states also need a last stretch without rest (a motion starting or stopping is n
 periodic).  The first stretch judged needs no earlier one when the sensor has not rested
 since the start (moving since power-on).
 
-The new model takes over from the start of its span: the last stretch, or the last two when
-the tip has not rested since the start (it moved periodically from the start).  The span's
-samples are filtered again under it from the state there (:class:`StretchLog` keeps states
-and samples; :func:`~.carry.carry_state` joins the new periodic states to what was known),
-so its state now is as if it had been chosen then; what was published stays.
+The new model takes over from the start of its span: the last two stretches when both
+measured that periodic motion and neither had a rest, or when the tip has not rested since
+the start (it moved periodically from the start); else the last one (a motion that went is
+dropped from the last stretch on).  The span's samples are filtered again under it from
+the state there (:class:`StretchLog` keeps states and samples; :func:`~.carry.carry_state`
+joins the new periodic states to what was known), so its state now is as if it had been
+chosen then; what was published stays.
 """
 from __future__ import annotations
 
@@ -125,7 +127,7 @@ class StretchLog:
                 return None
         elif not same_motion(measured_hz, before.measured_hz):
             return None
-        if never_rested and before is not None:     # moving since the start: from there
+        if before is not None and (never_rested or measured_hz and not before.rest):
             return Stretch(before.filter, before.state, before.y + cur.y,
                            before.steps + cur.steps)
         return cur
