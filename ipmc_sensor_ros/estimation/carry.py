@@ -13,7 +13,7 @@ import numpy as np
 
 from .filter import FilterState, KalmanFilter
 
-__all__ = ['carry_state', 'carry_back']
+__all__ = ['carry_state', 'carry_back', 'chain_back', 'link_change']
 
 
 def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> FilterState:
@@ -55,6 +55,43 @@ def carry_back(old: KalmanFilter, new: KalmanFilter, state: FilterState):
     x^s (P^s), with J = C P_new^-1: x_o + J (x^s - x_new), P_o + J (P^s - P_new) J'.
     """
     return _carried(old.model, new.model, state.x, state.P, joint=True)[2]
+
+
+def chain_back(first, middle: FilterState, second):
+    """
+    Return the :func:`carry_back` of two changes at one sample, as one.
+
+    ``first`` is into the model that started from ``middle`` there, ``second`` out of it (a
+    periodic model taken from the start of a stretch where the mains line changed): back
+    through both, J = J_1 J_2 with J_1 = C_1 P_middle^-1, so (x_1 + J_1 (x_2 - x_middle),
+    P_1 + J_1 (P_2 - P_middle) J_1', J_1 C_2).
+    """
+    x1, P1, C1 = first
+    x2, P2, C2 = second
+    J = np.linalg.lstsq(middle.P, C1.T, rcond=None)[0].T      # P_middle may be singular
+    return x1 + J @ (x2 - middle.x), P1 + J @ (P2 - middle.P) @ J.T, J @ C2
+
+
+def link_change(changes: dict, state: FilterState, back) -> tuple:
+    """
+    Return the smoothers' link (``state``, ``back``) of a model change at ``state.samples``.
+
+    ``changes`` maps the samples of the last changes to their links; this one is noted in it.
+    A change at the sample of an earlier one (a periodic model taken from the start of a
+    stretch where the mains line changed) passes back through both (:func:`chain_back`), so
+    the smoothers drop the earlier one's part; the changes after it are forgotten (a span
+    from here filtered their samples again), and only the last three are kept (a span
+    reaches back two stretches).
+    """
+    n = state.samples
+    if n in changes:
+        back = chain_back(changes[n][1], changes[n][0], back)
+    link = (state.copy(), back)
+    kept = [(k, v) for k, v in changes.items() if k < n][-3:]
+    changes.clear()
+    changes.update(kept)
+    changes[n] = link
+    return link
 
 
 def _carried(mo, mn, x_scaled, P_scaled, joint: bool):

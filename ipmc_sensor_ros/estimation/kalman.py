@@ -31,7 +31,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..lti.reduction import ReducedModel
-from .carry import carry_back, carry_state
+from .carry import carry_back, carry_state, link_change
 from .config import EstimatorConfig, parse_mains
 from .core import Estimate
 from .filter import FilterState, ForwardRecord, KalmanFilter
@@ -152,6 +152,7 @@ class KalmanEstimator:
         self._log = StretchLog(self._filter, self._state)
         self._recent = SampleRing(self._window_n)    # on the sample grid: bridged slots too
         self._first_rest_n = None
+        self._changes: dict = {}      # sample -> link of a model change (link_change)
 
     # -- streaming ------------------------------------------------------------------------
     def estimate(self, current_a, steps=None) -> Estimate:
@@ -235,13 +236,14 @@ class KalmanEstimator:
         Note that ``filt`` runs on from ``state``, carried from ``old``'s ``old_state``.
 
         Returns the link the smoothers pass back through, (``state``, :func:`carry_back`),
-        or None when neither smoother runs (:meth:`smooth`, ``smoothed_lag_s``).
+        or None when neither smoother runs (:meth:`smooth`, ``smoothed_lag_s``); through an
+        earlier change at the same sample too (:func:`~.carry.link_change`).
         """
         if self._segments is None and self._lag is None:
             return None
-        link = (state.copy(), carry_back(old, filt, old_state))
+        link = link_change(self._changes, state, carry_back(old, filt, old_state))
+        n = state.samples
         if self._segments is not None:
-            n = state.samples
             self._segments = [seg for seg in self._segments if seg[0] < n]
             self._segments.append((n, filt, *link))
         return link
@@ -334,6 +336,7 @@ class KalmanEstimator:
         self._state = fs.copy()
         self._recent = SampleRing(recent.size, recent, int(state.get('grid', fs.samples)))
         self._first_rest_n = state.get('first_rest_n')
+        self._changes = {}
 
     def _model_filter(self, line_hz, motion_hz) -> KalmanFilter:
         """Return this filter when its model has these lines and motion, else a new one."""
