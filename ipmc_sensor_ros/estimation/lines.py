@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 __all__ = ['measure_line', 'NOMINAL_LINES_HZ', 'SEARCH_HZ', 'PAD', 'family_peak', 'vertex',
-           'local_level']
+           'local_level', 'local_levels']
 
 #: Nominal mains frequencies, Hz.
 NOMINAL_LINES_HZ = (50.0, 60.0)
@@ -102,7 +102,21 @@ def vertex(cand: np.ndarray, summed: np.ndarray, j: int) -> float:
 
 def local_level(power: np.ndarray, j: int, df: float) -> float:
     """Median periodogram 2..8 Hz either side of bin j (the noise level about a line)."""
+    return float(local_levels(power, np.array([j]), df)[0])
+
+
+def local_levels(power: np.ndarray, bins: np.ndarray, df: float) -> np.ndarray:
+    """Return :func:`local_level` of each of ``bins`` (those away from the edges at once)."""
     lo, hi = int(2.0 / df), int(8.0 / df)
-    side = np.r_[power[max(j - hi, 1):max(j - lo, 1)], power[j + lo:j + hi]]
+    bins = np.asarray(bins, dtype=np.int64)
+    out = np.empty(bins.size)
+    inner = (bins - hi >= 1) & (bins + hi <= power.size)
+    if inner.any():
+        offsets = np.r_[np.arange(-hi, -lo), np.arange(lo, hi)]
+        out[inner] = np.median(power[bins[inner, None] + offsets], axis=1)
+    for k in np.flatnonzero(~inner):
+        j = int(bins[k])
+        side = np.r_[power[max(j - hi, 1):max(j - lo, 1)], power[j + lo:j + hi]]
+        out[k] = np.median(side) if side.size else math.inf
     # the median of an exponential is ln 2 times its mean
-    return float(np.median(side)) / math.log(2.0) if side.size else float('inf')
+    return out / math.log(2.0)

@@ -38,7 +38,7 @@ from scipy.optimize import minimize_scalar
 from scipy.special import jv
 from scipy.stats import gamma
 
-from .lines import PAD, local_level, vertex
+from .lines import PAD, local_levels, vertex
 from .statespace import harmonics_below, motion_intensity
 
 __all__ = ['measure_motion', 'measure_recent', 'MOTION_PERIODS', 'MOTION_LONGEST_S',
@@ -162,8 +162,8 @@ def _strongest_family(x, fs, lo, hi, harmonics, false_alarm) -> float:
     summed = sum(power[np.minimum(k * cand, power.size - 1)] for k in ks)
     near = maximum_filter1d(power, 2 * PAD + 1, mode='nearest')[cand]
     level = math.log(cand.size / false_alarm)
-    lines = [j for j in range(1, cand.size - 1) if power[cand[j]] >= near[j]
-             and power[cand[j]] > level * local_level(power, cand[j], df)]
+    peaks = np.flatnonzero(power[cand[1:-1]] >= near[1:-1]) + 1
+    lines = peaks[power[cand[peaks]] > level * local_levels(power, cand[peaks], df)].tolist()
     if not lines:
         return 0.0
     best = max(lines, key=lambda j: summed[j])
