@@ -49,7 +49,7 @@ __all__ = ['KalmanEstimator', 'CHECK_S', 'LINE_WINDOW_S']
 #: :mod:`.periodic`): a periodic motion is modelled at the second check that measures it, so
 #: this is the delay of that choice (the offset is learned slowly until then: 100 um of
 #: level a second is typical of a 5 Hz crank with 1-2 % noise started within the first
-#: 0.5 s); a check costs ~20 ms on 8 s of 1 kHz current, 20 us a sample.  The first checks
+#: 0.5 s); a check costs 10-20 ms on 8 s of 1 kHz current, 10-20 us a sample.  The first checks
 #: are made after ``LINE_FIRST_S`` (0.5 s: the line to ~0.05 Hz, so hum is modelled early)
 #: and twice that (1 s: a fast periodic motion is judged, :mod:`.motionline`).
 CHECK_S = 1.0
