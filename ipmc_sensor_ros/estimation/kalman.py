@@ -101,7 +101,7 @@ class KalmanEstimator:
         nominal_line = () if self.mains_hz == 0.0 else self._nominal()
         self._check_n = max(64, int(round(CHECK_S * fs)))
         self._line_n = max(64, int(round(LINE_WINDOW_S * fs)))
-        self._window_n = max(self._check_n, int(round(MOTION_LONGEST_S * fs)))
+        self._window_n = max(self._line_n, int(round(MOTION_LONGEST_S * fs)))   # both windows
         self._first_n = max(64, int(round(LINE_FIRST_S * fs)))
         self._filter = self._new_filter(StateSpaceModel(reduced, self.config, fs, nominal_line))
         self._state: FilterState | None = None
