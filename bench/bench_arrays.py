@@ -26,6 +26,7 @@ import sys, time, rclpy, numpy as np
 from std_msgs.msg import Float64MultiArray
 from ipmc_sensor_ros.interface.blocks import current_columns
 from ipmc_sensor_ros.nodes import params as P
+from ipmc_sensor_ros.nodes import topics as T
 from ipmc_sensor_ros.nodes.messages import BlockPacker
 channels, n = int(sys.argv[1]), int(sys.argv[2])
 duration, fs = float(sys.argv[3]), float(sys.argv[4])
@@ -61,7 +62,7 @@ def _array_trial(n: int, duration: float) -> dict:
     from std_msgs.msg import Float64MultiArray
 
     from ipmc_sensor_ros.interface.blocks import estimate_columns, unpack_columns
-    from ipmc_sensor_ros.nodes import params as P
+    from ipmc_sensor_ros.nodes import topics as T
     from ipmc_sensor_ros.nodes.runner import make_executor
 
     domain = random.randint(201, 232)
@@ -79,7 +80,7 @@ def _array_trial(n: int, duration: float) -> dict:
     def on_block(msg):
         received[0] += unpack_columns(msg, columns)[0].size
 
-    qos = P.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'})
+    qos = T.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'})
     sub = sink.create_subscription(Float64MultiArray, 'deflection/block', on_block, qos)
     ex = make_executor(context=ctx)
     ex.add_node(sink)

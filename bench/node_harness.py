@@ -36,10 +36,11 @@ import sys, rclpy
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 from ipmc_sensor_ros.nodes import params as P
+from ipmc_sensor_ros.nodes import topics as T
 class PassThrough(Node):
     def __init__(self):
         super().__init__("passthrough")
-        qos = P.make_qos({"qos_depth": 1000, "qos_reliability": "reliable"})
+        qos = T.make_qos({"qos_depth": 1000, "qos_reliability": "reliable"})
         self.pub = self.create_publisher(Float64MultiArray, "deflection/block", qos)
         self.create_subscription(Float64MultiArray, "current", self.on_msg, qos, raw=True)
         self.handled = 0
@@ -65,7 +66,7 @@ DRIVER_START = r"""
 def open_publisher(name):
     rclpy.init()
     node = rclpy.create_node(name)
-    qos = P.make_qos({"qos_depth": 1000, "qos_reliability": "reliable"})
+    qos = T.make_qos({"qos_depth": 1000, "qos_reliability": "reliable"})
     pub = node.create_publisher(Float64MultiArray, "current", qos)
     end = time.monotonic() + 20
     while pub.get_subscription_count() == 0 and time.monotonic() < end:
@@ -77,6 +78,7 @@ DRIVER = DRIVER_START + r"""
 import sys, time, rclpy, numpy as np
 from std_msgs.msg import Float64MultiArray
 from ipmc_sensor_ros.nodes import params as P
+from ipmc_sensor_ros.nodes import topics as T
 from ipmc_sensor_ros.nodes.messages import pack_block
 rate, n = float(sys.argv[1]), int(sys.argv[2])
 duration, fs = float(sys.argv[3]), float(sys.argv[4])
@@ -267,7 +269,7 @@ def run_trial(kind: str, rate: float, n: int, duration: float) -> dict:
     import rclpy
     from std_msgs.msg import Float64MultiArray
 
-    from ipmc_sensor_ros.nodes import params as P
+    from ipmc_sensor_ros.nodes import topics as T
 
     fs = rate * n
     domain = random.randint(201, 232)
@@ -287,7 +289,7 @@ def run_trial(kind: str, rate: float, n: int, duration: float) -> dict:
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=domain)
     sink = rclpy.create_node('sink', context=ctx)
-    qos = P.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'})
+    qos = T.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'})
     received = [0]
     latencies: list[float] = []
     node_cpu: list[tuple[float, float]] = []    # (wall, CPU s of the node) while data flows

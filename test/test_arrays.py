@@ -281,14 +281,14 @@ def test_simulator_array_to_estimator_array_over_dds(tmp_path, monkeypatch):
     """
     from std_msgs.msg import Float64MultiArray, String
 
-    from ipmc_sensor_ros.nodes import params as P
+    from ipmc_sensor_ros.nodes import topics as T
     from ipmc_sensor_ros.workbench.metrics import nrmse
     from process_graph import ProcessGraph
 
     channels, duration_s = 4, 120.0
     n_samples = int(duration_s * FS)
     graph = ProcessGraph(tmp_path, monkeypatch)
-    qos = P.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'})
+    qos = T.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'})
     est, truth, counters = [], [], {}
     subs = [
         graph.node.create_subscription(
@@ -299,7 +299,7 @@ def test_simulator_array_to_estimator_array_over_dds(tmp_path, monkeypatch):
             lambda m: truth.append(unpack_columns(m, deflection_columns(channels))), qos),
         graph.node.create_subscription(
             String, '/array/estimator/counters',
-            lambda m: counters.update(json.loads(m.data)), P.COUNTERS_QOS),
+            lambda m: counters.update(json.loads(m.data)), T.COUNTERS_QOS),
     ]
 
     def rows(blocks):

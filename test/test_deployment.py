@@ -24,7 +24,7 @@ import rclpy
 from lifecycle_msgs.msg import Transition
 from std_msgs.msg import String
 
-from ipmc_sensor_ros.nodes import params as P
+from ipmc_sensor_ros.nodes import topics as T
 from ipmc_sensor_ros.nodes.messages import pack_block
 from test_managed import Client
 
@@ -80,7 +80,7 @@ def managed_child(tmp_path, monkeypatch):
     counters: list = []
     client.node.create_subscription(String, 'estimator/counters',
                                     lambda m: counters.append(json.loads(m.data)),
-                                    P.COUNTERS_QOS)
+                                    T.COUNTERS_QOS)
     client.counters = counters
     try:
         client.spin_until(lambda: client.change.service_is_ready(), 'the lifecycle services',

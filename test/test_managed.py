@@ -35,7 +35,7 @@ from conftest import TEST_DOMAIN, DirectNode
 from ipmc_sensor_ros.interface import builders as B
 from ipmc_sensor_ros.interface import specs as C
 from ipmc_sensor_ros.interface.blocks import current_columns, estimate_columns, unpack_columns
-from ipmc_sensor_ros.nodes import params as P
+from ipmc_sensor_ros.nodes import topics as T
 from ipmc_sensor_ros.nodes.managed import ManagedEstimatorNode, ManagedSimulatorNode
 from ipmc_sensor_ros.nodes.messages import (CURRENT_COLUMNS, ESTIMATE_COLUMNS, pack_block,
                                             unpack_block)
@@ -50,7 +50,7 @@ pytestmark = pytest.mark.ros
 ROOT = Path(__file__).resolve().parents[1]
 FS = 1000.0
 TIMEOUT_S = 30.0
-QOS = P.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'})
+QOS = T.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'})
 
 
 def crank_messages(seconds: float, t0: float = 1000.0, block: int = 100) -> list:

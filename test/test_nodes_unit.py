@@ -29,6 +29,7 @@ from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
 from ipmc_sensor_ros.estimation.kalman import KalmanEstimator
 from ipmc_sensor_ros.estimation.stream import StreamEstimator
 from ipmc_sensor_ros.nodes import params as P
+from ipmc_sensor_ros.nodes import topics as T
 from ipmc_sensor_ros.nodes.estimator_node import ESTIMATOR_SPECS, EstimatorNode
 from ipmc_sensor_ros.nodes.messages import (
     CURRENT_COLUMNS,
@@ -236,7 +237,7 @@ class Harness:
             params.append(Parameter('use_sim_time', value=True))
         self.node = node_cls(context=self.ctx, parameter_overrides=params)
         self.tester = rclpy.create_node('tester', context=self.ctx)
-        qos = P.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'})
+        qos = T.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'})
         self.pub = self.tester.create_publisher(Float64MultiArray, 'current', qos)
         self.blocks: list = []
         self.points: list[PointStamped] = []
@@ -254,7 +255,7 @@ class Harness:
         for topic in ('estimator/counters', 'simulator/counters'):
             self.tester.create_subscription(
                 String, topic, lambda m: self.counters_msgs.append(json.loads(m.data)),
-                P.COUNTERS_QOS)
+                T.COUNTERS_QOS)
         self.ex = SingleThreadedExecutor(context=self.ctx)
         self.ex.add_node(self.node)
         self.ex.add_node(self.tester)
@@ -433,7 +434,7 @@ def _record_smoothed(h) -> list:
     h.tester.create_subscription(
         Float64MultiArray, 'deflection/smoothed/block',
         lambda m: smoothed.append(unpack_block(m, ESTIMATE_COLUMNS)),
-        P.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'}))
+        T.make_qos({'qos_depth': 1000, 'qos_reliability': 'reliable'}))
     return smoothed
 
 

@@ -9,6 +9,7 @@ from rclpy.node import Node  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
 from ipmc_sensor_ros.nodes import params as P  # noqa: E402
+from ipmc_sensor_ros.nodes import topics as T  # noqa: E402
 from ipmc_sensor_ros.interface.specs import Spec  # noqa: E402
 
 SPECS = (Spec('gain', 1.0, float, 'test gain'),)
@@ -57,16 +58,16 @@ def test_standard_qos_override_applies_and_a_stray_one_is_refused(context, tmp_p
     node, args = _node(context, tmp_path, '/**:\n  ros__parameters:\n    gain: 1.0\n',
                        ['-p', 'qos_overrides./out.publisher.reliability:=best_effort'])
     P.check_unknown_overrides(node, SPECS, args)
-    pub = P.create_publisher(node, String, 'out', P.COUNTERS_QOS)
-    P.check_qos_overrides(node)
+    pub = T.create_publisher(node, String, 'out', T.COUNTERS_QOS)
+    T.check_qos_overrides(node)
     assert pub.qos_profile.reliability == rclpy.qos.ReliabilityPolicy.BEST_EFFORT
     node.destroy_node()
     node, args = _node(context, tmp_path, '/**:\n  ros__parameters:\n    gain: 1.0\n',
                        ['-p', 'qos_overrides./uot.publisher.reliability:=best_effort'])
     P.check_unknown_overrides(node, SPECS, args)
-    P.create_publisher(node, String, 'out', P.COUNTERS_QOS)
+    T.create_publisher(node, String, 'out', T.COUNTERS_QOS)
     with pytest.raises(P.ParameterError, match='uot'):
-        P.check_qos_overrides(node)
+        T.check_qos_overrides(node)
     node.destroy_node()
 
 
@@ -79,12 +80,12 @@ def test_a_qos_override_value_rclpy_refuses_names_the_parameter(context, tmp_pat
     node, args = _node(context, tmp_path, '/**:\n  ros__parameters:\n    gain: 1.0\n',
                        ['-p', override])
     with pytest.raises(P.ParameterError) as refused:
-        P.create_publisher(node, String, 'out', P.COUNTERS_QOS)
+        T.create_publisher(node, String, 'out', T.COUNTERS_QOS)
     name = override.split(':=')[0]
     assert f"'{name}': {shown}" in str(refused.value) and 'best_effort' in str(refused.value)
     # rclpy applies overrides to the profile it is given: the shared one stays as it was
-    assert P.COUNTERS_QOS.depth == 1
-    assert P.COUNTERS_QOS.reliability == rclpy.qos.ReliabilityPolicy.RELIABLE
+    assert T.COUNTERS_QOS.depth == 1
+    assert T.COUNTERS_QOS.reliability == rclpy.qos.ReliabilityPolicy.RELIABLE
     node.destroy_node()
 
 

@@ -50,6 +50,7 @@ from ..estimation.stream import COUNTER_NAMES, StreamEstimator
 from ..errors import DataError, IpmcError
 from ..physics.parameters import short_repr
 from . import params as P
+from . import topics as T
 from ..interface.blocks import current_columns, estimate_columns
 from ..interface.sources import SourceSelector
 from .messages import (CURRENT_COLUMNS, BlockPacker, OneSampleCodec, PointCodec,
@@ -141,7 +142,7 @@ class EstimatorNode(LiveParameters, ArrayPath, Node):
 
     def _open_io(self) -> None:
         """Create the subscription, the publishers, the timer and /diagnostics."""
-        qos = P.make_qos(self._values)
+        qos = T.make_qos(self._values)
         # raw: bytes in, so that one-sample blocks never become message objects (README
         # "Benchmarks": rclpy's conversion of a Float64MultiArray costs more than the estimate)
         self._sub = subscribe_followed(self, Float64MultiArray, 'current',
@@ -149,21 +150,21 @@ class EstimatorNode(LiveParameters, ArrayPath, Node):
                                        self._source.on_message_lost)
         self._source.topic = self._sub.topic_name
         self._source.selector.forget()
-        self._pub_block = P.create_publisher(self, Float64MultiArray, 'deflection/block', qos)
+        self._pub_block = T.create_publisher(self, Float64MultiArray, 'deflection/block', qos)
         self._packer = BlockPacker(estimate_columns(self._channels))
         self._one_in = OneSampleCodec(CURRENT_COLUMNS)
         self._one_out = OneSampleCodec(estimate_columns(1))
         self._points: PointCodec | None = None
-        self._pub_points = [P.create_publisher(self, PointMsg, 'deflection', qos)
+        self._pub_points = [T.create_publisher(self, PointMsg, 'deflection', qos)
                             if self._channels == 1 else
-                            P.create_publisher(self, PointMsg, f'ch{c}/deflection', qos)
+                            T.create_publisher(self, PointMsg, f'ch{c}/deflection', qos)
                             for c in range(self._channels)]
         self._pub_point = self._pub_points[0]
-        self._pub_smoothed = (P.create_publisher(self, Float64MultiArray,
+        self._pub_smoothed = (T.create_publisher(self, Float64MultiArray,
                                                  'deflection/smoothed/block', qos)
                               if self._values['smoothed_lag_s'] else None)
-        P.check_qos_overrides(self)
-        self._pub_counters = self.create_publisher(String, 'estimator/counters', P.COUNTERS_QOS)
+        T.check_qos_overrides(self)
+        self._pub_counters = self.create_publisher(String, 'estimator/counters', T.COUNTERS_QOS)
         self._diagnostics = DiagnosticsPublisher(
             self, self._values, channels=self._channel_names,
             sample_rate_hz=self._stream.estimator.sample_rate_hz, source=self._status)
@@ -172,7 +173,7 @@ class EstimatorNode(LiveParameters, ArrayPath, Node):
 
     def _close_io(self) -> None:
         """Destroy what :meth:`_open_io` created (the stream core and its counters stay)."""
-        P.destroy_io(self, ('_timer', '_diagnostics', '_sub', '_pub_block', '_pub_points',
+        T.destroy_io(self, ('_timer', '_diagnostics', '_sub', '_pub_block', '_pub_points',
                             '_pub_smoothed', '_pub_counters'))
         self._pub_point = None
 
@@ -372,11 +373,11 @@ class EstimatorNode(LiveParameters, ArrayPath, Node):
                 self._publish_smoothed(flush=True)
 
     def destroy_node(self) -> None:
-        """Publish what the smoother holds, wait ``params.FLUSH_TIMEOUT_S`` for acks, destroy."""
+        """Publish what the smoother holds, wait ``topics.FLUSH_TIMEOUT_S`` for acks, destroy."""
         self._drain()
         pub = getattr(self, '_pub_smoothed', None)
         if pub is not None:
-            pub.wait_for_all_acked(Duration(nanoseconds=int(P.FLUSH_TIMEOUT_S * 1e9)))
+            pub.wait_for_all_acked(Duration(nanoseconds=int(T.FLUSH_TIMEOUT_S * 1e9)))
         super().destroy_node()
 
     def _publish_point(self, time_s: float, deflection_m: float, channel: int = 0) -> None:

@@ -20,7 +20,7 @@ inactive                  built, no topics; parameter changes validated and appl
 activate                  creates the subscription, the (lifecycle) publishers, the timers
                           and /diagnostics
 deactivate                stops taking input, publishes the samples the smoother still
-                          holds (``smoothed_lag_s``), waits up to ``params.FLUSH_TIMEOUT_S`` for
+                          holds (``smoothed_lag_s``), waits up to ``topics.FLUSH_TIMEOUT_S`` for
                           reliable subscribers to acknowledge the estimates published,
                           publishes a last /diagnostics status "inactive" and destroys the
                           topics and timers; the stream core (counters, filter state) stays
@@ -68,6 +68,7 @@ from rclpy.duration import Duration
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from . import params as P
+from . import topics as T
 from ..interface.specs import Spec, describe_exception
 from .estimator_node import ESTIMATOR_SPECS, EstimatorNode
 from .runner import run
@@ -241,8 +242,8 @@ class ManagedMixin:
         return True
 
     def _flush(self) -> None:
-        """Wait (at most ``params.FLUSH_TIMEOUT_S``) until reliable subscribers have the output."""
-        end = time.monotonic() + P.FLUSH_TIMEOUT_S
+        """Wait (at most ``topics.FLUSH_TIMEOUT_S``) until reliable subscribers have the output."""
+        end = time.monotonic() + T.FLUSH_TIMEOUT_S
         for publisher in self._output_publishers():
             left = max(end - time.monotonic(), 0.0)
             publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))

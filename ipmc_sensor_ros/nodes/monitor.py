@@ -15,7 +15,7 @@ import numpy as np
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray, String
 
-from . import params as P
+from . import topics as T
 from ..workbench.metrics import nrmse
 from .messages import DEFLECTION_COLUMNS, ESTIMATE_COLUMNS, unpack_block
 
@@ -32,7 +32,7 @@ class TrackingMonitor:
 
     def __init__(self, node: Node, namespace: str = '', qos_depth: int = 1000):
         prefix = namespace.rstrip('/') + '/' if namespace else ''
-        qos = P.make_qos({'qos_depth': qos_depth, 'qos_reliability': 'reliable'})
+        qos = T.make_qos({'qos_depth': qos_depth, 'qos_reliability': 'reliable'})
         self._est: list = []
         self._truth: list = []
         self.estimator_counters: dict = {}
@@ -44,9 +44,9 @@ class TrackingMonitor:
             sub(Float64MultiArray, prefix + 'deflection_truth',
                 lambda m: self._truth.append(unpack_block(m, DEFLECTION_COLUMNS)), qos),
             sub(String, prefix + 'estimator/counters',
-                lambda m: setattr(self, 'estimator_counters', json.loads(m.data)), P.COUNTERS_QOS),
+                lambda m: setattr(self, 'estimator_counters', json.loads(m.data)), T.COUNTERS_QOS),
             sub(String, prefix + 'simulator/counters',
-                lambda m: setattr(self, 'simulator_counters', json.loads(m.data)), P.COUNTERS_QOS),
+                lambda m: setattr(self, 'simulator_counters', json.loads(m.data)), T.COUNTERS_QOS),
         ]
 
     @property

@@ -42,6 +42,7 @@ from ..simulation.sensor import FieldSensorSimulator, SensorSimulator
 from ..interface.simulator import (CHAIN_PARAMETERS, SIMULATOR_SPECS, STIMULI, build_stimulus,
                                    describe_stimulus, load_stimulus_csv, read_stimulus_csv)
 from . import params as P
+from . import topics as T
 from .diagnostics import DiagnosticsPublisher
 from ..interface.blocks import current_columns, deflection_columns
 from .messages import BlockPacker
@@ -104,14 +105,14 @@ class SimulatorNode(Node):
     def _open_io(self) -> None:
         """Create the publishers, the timers and /diagnostics."""
         v = self._values
-        qos = P.make_qos(v)
-        self._pub_current = P.create_publisher(self, Float64MultiArray, 'current', qos)
-        self._pub_truth = P.create_publisher(self, Float64MultiArray, 'deflection_truth', qos)
-        P.check_qos_overrides(self)
+        qos = T.make_qos(v)
+        self._pub_current = T.create_publisher(self, Float64MultiArray, 'current', qos)
+        self._pub_truth = T.create_publisher(self, Float64MultiArray, 'deflection_truth', qos)
+        T.check_qos_overrides(self)
         self._pack_current = BlockPacker(current_columns(self._channels))
         self._pack_truth = BlockPacker(deflection_columns(self._channels))
         self._offset_s = float(v['channel_time_offset_s'])
-        self._pub_counters = self.create_publisher(String, 'simulator/counters', P.COUNTERS_QOS)
+        self._pub_counters = self.create_publisher(String, 'simulator/counters', T.COUNTERS_QOS)
         if self._rtf > 0.0:
             period = max(self._block / self._fs / self._rtf, MIN_TICK_S)
             self._timer = self.create_timer(period, self._on_tick)   # node clock: sim-time aware
@@ -129,7 +130,7 @@ class SimulatorNode(Node):
 
     def _close_io(self) -> None:
         """Destroy what :meth:`_open_io` created (the simulation state stays)."""
-        P.destroy_io(self, ('_timer', '_counter_timer', '_diagnostics', '_pub_current',
+        T.destroy_io(self, ('_timer', '_counter_timer', '_diagnostics', '_pub_current',
                             '_pub_truth', '_pub_counters'))
 
     def _ready_text(self) -> str:

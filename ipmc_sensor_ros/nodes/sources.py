@@ -19,7 +19,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.subscription import Subscription
 
 from ..interface.sources import IGNORED, SWITCHED, SourceSelector
-from . import params as P
+from . import topics as T
 
 __all__ = ['FollowedSource', 'subscribe_followed']
 
@@ -33,10 +33,10 @@ def subscribe_followed(node, msg_type, topic: str, callback, qos, on_message_los
     takes one argument or two (:meth:`FollowedSource.unpack`) and the subscription is told to
     pass the info.
     """
-    with P.qos_overrides_named(node, topic, 'subscription'):
+    with T.qos_overrides_named(node, topic, 'subscription'):
         sub = node.create_subscription(
             msg_type, topic, callback, copy.copy(qos), raw=True,    # overrides act in place
-            qos_overriding_options=P.qos_overriding_options(),
+            qos_overriding_options=T.qos_overriding_options(),
             event_callbacks=SubscriptionEventCallbacks(message_lost=on_message_lost))
     sub._callback_type = Subscription.CallbackType.WithMessageInfo
     return sub
