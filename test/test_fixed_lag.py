@@ -54,7 +54,13 @@ def test_a_lag_longer_than_the_record_is_the_fixed_interval_smoother(record, red
     whole = KalmanEstimator(reduced, FS, mains_hz=0).smooth(i)
     # the same backward pass over the same forward record: equal to rounding
     assert np.max(np.abs(held.deflection_m - whole.deflection_m)) <= 1e-12
-    assert np.all(held.std_m <= live.std_m * (1 + 1e-9))     # P^s <= P+
+    # P^s <= P+, but where the live filter published the last samples of the rest, and the
+    # sample that ended it, which it then took again as the sine's start (the rest test tells
+    # a motion a few samples late; the forward pass the smoother runs on has them as motion:
+    # .onset)
+    revised = (live.still | np.roll(live.still, 1)) & ~held.still
+    assert 0 < revised.sum() <= 10 and np.all(np.flatnonzero(revised) > 1000)
+    assert np.all(held.std_m[~revised] <= live.std_m[~revised] * (1 + 1e-9))
 
 
 @pytest.fixture(scope='module')

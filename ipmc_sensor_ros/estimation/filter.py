@@ -39,6 +39,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .onset import Onset, follow
 from .rest import RestTest, RestWindow
 from .statespace import StateSpaceModel
 
@@ -95,10 +96,17 @@ class FilterState:
     #: the tip moved since the working point was last set (a new hold releases it)
     moved: bool = False
     samples: int = 0
+    #: at rest: where a motion that ends it would have begun (:mod:`.onset`)
+    onset: Onset | None = None
+    #: the rest ended at the last sample: (state where the motion began, samples, steps)
+    ended: tuple | None = None
+    #: samples still to be taken as motion whatever the rest test says (:func:`.onset.restart`)
+    hold_off: int = 0
 
     def copy(self) -> 'FilterState':
         return replace(self, x=self.x.copy(), P=self.P.copy(), noise=replace(self.noise),
-                       window=self.window.copy())
+                       window=self.window.copy(),
+                       onset=None if self.onset is None else self.onset.copy())
 
 
 @dataclass
@@ -227,7 +235,7 @@ class KalmanFilter:
 
     # -- the recursion ---------------------------------------------------------------------------
     def run(self, state: FilterState, current_a, steps=None, record: ForwardRecord | None = None,
-            offset: int = 0, copy: bool = True):
+            offset: int = 0, copy: bool = True, until_motion: bool = False):
         """
         Filter ``current_a`` (A) from ``state``; return (new state, w, std, still).
 
@@ -236,6 +244,8 @@ class KalmanFilter:
         variables and builds the returned :class:`FilterState` once; a block and single
         samples run the same statements.  ``copy=False``: the new state reuses ``state``'s
         buffers (for an owner that drops the old state; ``state`` is then no longer valid).
+        ``until_motion``: stop after a sample that ends a rest (the outputs are then shorter;
+        the state's ``ended`` says where the motion began: :mod:`.onset`).
         """
         y = current_a if isinstance(current_a, list) else np.asarray(current_a, float).tolist()
         n = len(y)
@@ -246,12 +256,13 @@ class KalmanFilter:
         sw, sb = float(m.scale[iw]), float(m.scale[ib])
         c, rows, rot = m.c, self._rest_rows, self._rot
         x, P, still, moved, samples = state.x, state.P, state.still, state.moved, state.samples
-        meter, win = state.noise, state.window
+        meter, win, onset, hold = state.noise, state.window, state.onset, state.hold_off
         if copy:
             x, P, meter, win = x.copy(), P.copy(), replace(meter), win.copy()
+            onset = None if onset is None else onset.copy()
         out_w, out_s, out_still = np.empty(n), np.empty(n), np.empty(n, dtype=bool)
         F, Q = m.discrete(1)
-        last_steps = 1
+        last_steps, ended = 1, None
         for k in range(n):
             yk, sk = y[k], st[k]
             if sk != last_steps:
@@ -262,6 +273,9 @@ class KalmanFilter:
             win.push(yk, None if not (samples and rot.size) else rot if sk == 1 else rot ** sk)
             verdict = win.judge(self.rest, yk, float(x[ib]) * sb, float(P[ib, ib]) * sb * sb,
                                 meter.var_a2, still)
+            if hold:
+                verdict, hold = _held(verdict, hold, win)
+            was = still
             still, release, begins, moved = _rest_change(verdict, still, moved)
             if samples:
                 P = F @ P @ F.T
@@ -285,7 +299,16 @@ class KalmanFilter:
             out_w[k] = x[iw] * sw
             out_s[k] = math.sqrt(max(P[iw, iw], 0.0)) * sw
             out_still[k] = still
-        return FilterState(x, P, meter, win, still, moved, samples), out_w, out_s, out_still
+            if still:
+                onset = follow(onset, win.track, yk, sk, lambda: FilterState(
+                    x, P, replace(meter), win.copy(), True, moved, samples))
+            elif was and onset is not None:
+                ended, onset = onset.start(yk, sk), None
+                if until_motion and ended is not None:
+                    n = k + 1
+                    break
+        return (FilterState(x, P, meter, win, still, moved, samples, onset, ended, hold),
+                out_w[:n], out_s[:n], out_still[:n])
 
     def _released(self, P: np.ndarray, still: bool) -> np.ndarray:
         """
@@ -299,6 +322,19 @@ class KalmanFilter:
         if m.size > m.im and not still:
             P[m.im:, m.im:] += np.eye(m.size - m.im)
         return P
+
+
+def _held(verdict: bool | None, hold: int, win: RestWindow) -> tuple[bool | None, int]:
+    """
+    Return (verdict, samples still held) for a sample of a motion's start filtered again.
+
+    The rest test's verdict is overridden (motion); at the last such sample the window's
+    run of quiet samples starts again, as the sample that ended the rest made it.
+    """
+    hold -= 1
+    if not hold:
+        win.quiet, win.track = 0, None
+    return (None if verdict is None else False), hold
 
 
 def _rest_change(verdict: bool | None, still: bool, moved: bool):

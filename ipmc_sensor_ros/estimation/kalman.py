@@ -38,6 +38,7 @@ from .filter import FilterState, ForwardRecord, KalmanFilter
 from .fixed_lag import lag_smoother
 from .lines import NOMINAL_LINES_HZ, measure_line
 from .motionline import MOTION_LONGEST_S, MOTION_PERIODS, measure_recent
+from .onset import restart
 from .periodic import StretchLog, refilter, same_motion
 from .ring import SampleRing
 from .smoother import smooth_segments
@@ -166,13 +167,16 @@ class KalmanEstimator:
             b = min(y.size, a + due - self._state.samples)
             rec = None if self._lag is None else ForwardRecord.empty(b - a, self.model.size)
             self._state, w, s, still = self._filter.run(self._state, y[a:b], st[a:b],
-                                                        record=rec, copy=False)
+                                                        record=rec, copy=False,
+                                                        until_motion=True)
+            b = a + w.size              # a rest ended there: its motion is filtered again
             if rec is not None:
-                self._keep(self._lag.push(self._filter, rec))
+                self._keep(self._lag.push(self._filter, rec.rows(0, w.size)))
             self._remember(y[a:b], st[a:b], still)
             self._log.add(y[a:b].tolist(), st[a:b].tolist(), bool(still.any()))
             parts.append((w, s, still))
             a = b
+            self._restart_motion()
             if self._state.samples == due:
                 self._check_line()
         if not parts:
@@ -187,13 +191,25 @@ class KalmanEstimator:
                                 None if steps == 1 else np.array([steps]))
             return float(est.deflection_m[0]), float(est.std_m[0])
         self._state, w, s, still = self._filter.run(self._state, [float(current_a)],
-                                                    [int(steps)], copy=False)
+                                                    [int(steps)], copy=False,
+                                                    until_motion=True)
         self._log.add_one(float(current_a), int(steps), bool(still[0]))
         for _ in range(int(steps)):     # a bridged slot holds the next value (line check)
             self._recent.push(current_a)
         if self._first_rest_n is None and still[0]:
             self._first_rest_n = n
+        self._restart_motion()
         return float(w[0]), float(s[0])
+
+    def _restart_motion(self) -> None:
+        """A rest ended: filter the motion from where it began (:mod:`.onset`)."""
+        if self._state.ended is None or len(self._state.ended[1]) < 2:
+            return
+        held = 0 if self._lag is None else min(len(self._state.ended[1]), self._lag.held)
+        start, self._state, rec = restart(self._filter, self._state, held)
+        link = self._begin_segment(self._filter, start, self._filter, start)
+        if rec is not None:
+            self._lag.replace_newest(self._filter, rec, link if held == start.hold_off else None)
 
     def _remember(self, y: np.ndarray, steps: np.ndarray, still: np.ndarray) -> None:
         """

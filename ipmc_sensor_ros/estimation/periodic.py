@@ -138,10 +138,13 @@ def refilter(span: Stretch, filt: KalmanFilter,
     """
     Return the states of ``filt`` taking over at the start of ``span``: there, and now.
 
+    The span's state is carried onto ``filt`` (:func:`~.carry.carry_state`), or taken as it
+    is when the span ran under ``filt`` (a motion's start filtered again: :mod:`.onset`).
+
     ``record``: filled with the forward pass over the span's last ``len(record)`` samples
     (what a fixed-lag smoother still holds of it).
     """
-    start = carry_state(span.filter, filt, span.state)
+    start = span.state if span.filter is filt else carry_state(span.filter, filt, span.state)
     n_rec = 0 if record is None else record.x_post.shape[0]
     cut = len(span.y) - n_rec
     state = filt.run(start, span.y[:cut], span.steps[:cut])[0] if cut else start

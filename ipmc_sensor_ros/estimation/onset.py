@@ -1,0 +1,91 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+Where a motion that ends a rest began: the change point of the rest test's CUSUM.
+
+At rest the filter measures the tip's velocity to be zero (:mod:`.rest`).  A motion that
+starts gently (a crank spinning up, a minimum-jerk move) keeps its current within the noise
+for some samples before the rest test can tell it; over those samples the pseudo-measurements
+hold the deflection and take the motion's current for offset (tens of um on a crank from rest
+with 1-2 % noise).  The test's two-sided CUSUM (:meth:`~.rest.RestTest.sample_ok`) says in
+hindsight where the shift began: after the last sample at which the side that grew was at
+zero (Page 1954: the CUSUM's estimate of a change point).  So at rest the filter keeps, for
+each side, its state after that side's last zero and the samples since (:class:`Onset`); when
+the rest ends, the older of the two and the samples since are the motion's start
+(``FilterState.ended``), and the estimator filters those samples again from that state as
+motion (:func:`restart`: the rest test's verdict is overridden for them,
+``FilterState.hold_off``).  The model then says the rest ended where the motion began, not
+where the test could first tell it.  What was published stays; the smoothers follow the same
+model (a part that starts there, with the state there: :meth:`~.kalman.KalmanEstimator`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+__all__ = ['Onset', 'follow', 'restart']
+
+
+@dataclass(slots=True)
+class Onset:
+    """
+    At rest: per CUSUM side, (state after its last zero, samples since, their steps).
+
+    None for a side that has not been at zero in this rest.  The states are never changed
+    (shared by copies); the lists grow.
+    """
+
+    up: tuple | None = None
+    down: tuple | None = None
+
+    def copy(self) -> 'Onset':
+        return Onset(*(None if s is None else (s[0], list(s[1]), list(s[2]))
+                       for s in (self.up, self.down)))
+
+    def start(self, y: float, step: int) -> tuple | None:
+        """The rest ended at sample ``y``: return (state, samples, steps) of the older side."""
+        sides = [s for s in (self.up, self.down) if s is not None]
+        if not sides:
+            return None
+        state, ys, steps = max(sides, key=lambda s: len(s[1]))
+        return state, ys + [y], steps + [step]
+
+
+def follow(onset: Onset | None, track: tuple | None, y: float, step: int, snapshot) -> Onset:
+    """
+    Return the onset after a rest sample ``y`` (``step`` periods after the one before).
+
+    ``track``: the rest test's (CUSUM up, CUSUM down, ...) after it; ``snapshot()`` builds the
+    filter state after it (called only when a side is at zero).
+    """
+    old = (None, None) if onset is None else (onset.up, onset.down)
+    levels = (1.0, 1.0) if track is None else track[:2]
+    state = None
+    sides = []
+    for level, side in zip(levels, old):
+        if level == 0.0:
+            state = snapshot() if state is None else state
+            sides.append((state, [], []))
+        elif side is not None:
+            side[1].append(y)
+            side[2].append(step)
+            sides.append(side)
+        else:
+            sides.append(None)
+    return Onset(*sides)
+
+
+def restart(filt, state, held: int):
+    """
+    Filter the motion's first samples again from where it began.
+
+    ``state.ended``: (state there, samples, steps) of the motion's start.  Returns (the
+    state the new run started from, the state now, the forward record of the last ``held``
+    samples or None); the run's start overrides the rest test for those samples.
+    """
+    from .filter import ForwardRecord
+    from .periodic import Stretch, refilter
+
+    there, ys, steps = state.ended
+    start = replace(there, hold_off=len(ys))
+    record = ForwardRecord.empty(held, filt.model.size) if held else None
+    _, now = refilter(Stretch(filt, start, ys, steps), filt, record)
+    return start, now, record
