@@ -18,7 +18,8 @@ forward record (:meth:`replace_newest`), and the backward pass goes from one mod
 into the one before through the carry (:func:`~.smoother.across`), as the offline smoother
 does (:meth:`~.kalman.KalmanEstimator.smooth`).  With a lag longer than the record, the
 result is the fixed-interval smoother's.  A reset or a new design ends the record: what is
-held is smoothed with the data there is and goes out (:meth:`flush`).
+held is smoothed with the data there is and goes out (:meth:`flush`); :meth:`pop` returns
+what is ready.
 """
 from __future__ import annotations
 
@@ -64,6 +65,7 @@ class FixedLagSmoother:
         self._parts: list[_Part] = []
         self._held = 0
         self._link = None
+        self._ready: list[Estimate] = []
 
     @property
     def held(self) -> int:
@@ -74,14 +76,13 @@ class FixedLagSmoother:
         """Mark the next record as a new model's: (the state it starts from, carry_back)."""
         self._link = link if self._held else None
 
-    def push(self, filt: KalmanFilter, record: ForwardRecord) -> Estimate | None:
+    def push(self, filt: KalmanFilter, record: ForwardRecord) -> None:
         """
-        Add the forward record of the samples just filtered; return those now smoothed.
+        Add the forward record of the samples just filtered; what is smoothed is kept.
 
         The backward passes run at fixed sample counts (each time 2 L are held), so the
         result does not depend on how the stream was cut into blocks.
         """
-        out = []
         a, n = 0, record.x_post.shape[0]
         while a < n:
             b = min(n, a + 2 * self.lag - self._held)
@@ -91,15 +92,27 @@ class FixedLagSmoother:
             self._held += b - a
             a = b
             if self._held == 2 * self.lag:
-                out.append(self._emit(keep=self.lag))
-        if not out:
-            return None
-        return out[0] if len(out) == 1 else Estimate(*(np.concatenate(p) for p in zip(*out)))
+                self._ready.append(self._emit(keep=self.lag))
 
-    def flush(self) -> Estimate | None:
+    def flush(self) -> None:
         """Smooth everything held with the data there is (a reset, a new design, the end)."""
         self._link = None
-        return self._emit(keep=0) if self._held else None
+        if self._held:
+            self._ready.append(self._emit(keep=0))
+
+    def pop(self, flush: bool = False) -> Estimate | None:
+        """
+        Return the estimates smoothed since the last call, oldest first (None: none).
+
+        One per sample filtered, in order, each exactly once.  ``flush``: also those held for
+        their lag, smoothed with the data there is (:meth:`flush`).
+        """
+        if flush:
+            self.flush()
+        parts, self._ready = [p for p in self._ready if p.deflection_m.size], []
+        if len(parts) < 2:
+            return parts[0] if parts else None
+        return Estimate(*(np.concatenate(p) for p in zip(*parts)))
 
     def replace_newest(self, filt: KalmanFilter, record: ForwardRecord, link) -> None:
         """

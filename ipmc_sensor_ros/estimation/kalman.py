@@ -17,7 +17,8 @@ A periodic motion is measured at the same checks, on the last 1, 2, 4 and 8 s of
 (:func:`~.motionline.measure_recent`); when two checks in a row say it appeared, went or
 moved, the model with periodic states at the measured fundamental (a small remainder:
 :mod:`.statespace`) takes over from the start of those stretches, whose samples are
-filtered again (:mod:`.periodic`).
+filtered again (:mod:`.periodic`).  A motion that ends a rest is filtered again from where
+the rest test's CUSUM says it began (:mod:`.onset`).
 
 ``smoothed_lag_s`` > 0 also smooths the live output with that lag
 (:class:`~.fixed_lag.FixedLagSmoother` on the filter's own forward record):
@@ -93,7 +94,6 @@ class KalmanEstimator:
         fs = float(sample_rate_hz)
         self.smoothed_lag_s = float(smoothed_lag_s)
         self._lag = lag_smoother(self.smoothed_lag_s, fs)
-        self._smoothed: list[Estimate] = []
         #: (first sample, filter, state there, carry_back) of each model the live filter
         #: ran, kept only by the offline smoother's own run (:meth:`smooth`)
         self._segments: list | None = None
@@ -143,8 +143,8 @@ class KalmanEstimator:
 
     def reset(self) -> None:
         """Start afresh: the nominal lines (the measured ones are measured again) and the prior."""
-        if self._state is not None:
-            self._flush_lag()
+        if self._state is not None and self._lag is not None:
+            self._lag.flush()
         nominal = () if self.mains_hz == 0.0 else self._nominal()
         if self.model.fundamentals_hz != tuple(nominal) or self.model.motion_hz:
             self._filter = self._new_filter(StateSpaceModel(self.reduced, self.config,
@@ -171,7 +171,7 @@ class KalmanEstimator:
                                                         until_motion=True)
             b = a + w.size              # a rest ended there: its motion is filtered again
             if rec is not None:
-                self._keep(self._lag.push(self._filter, rec.rows(0, w.size)))
+                self._lag.push(self._filter, rec.rows(0, w.size))
             self._remember(y[a:b], st[a:b], still)
             self._log.add(y[a:b].tolist(), st[a:b].tolist(), bool(still.any()))
             parts.append((w, s, still))
@@ -202,7 +202,7 @@ class KalmanEstimator:
         return float(w[0]), float(s[0])
 
     def _restart_motion(self) -> None:
-        """A rest ended: filter the motion from where it began (:mod:`.onset`)."""
+        """Filter a motion that ended a rest again from where it began (:mod:`.onset`)."""
         if self._state.ended is None or len(self._state.ended[1]) < 2:
             return
         held = 0 if self._lag is None else min(len(self._state.ended[1]), self._lag.held)
@@ -282,30 +282,9 @@ class KalmanEstimator:
         self._filter, self._state = filt, state
 
     # -- fixed-lag output -------------------------------------------------------------------
-    def _keep(self, est: Estimate | None) -> None:
-        if est is not None and est.deflection_m.size:
-            self._smoothed.append(est)
-
-    def _flush_lag(self) -> None:
-        if self._lag is not None:
-            self._keep(self._lag.flush())
-
     def pop_smoothed(self, flush: bool = False) -> Estimate | None:
-        """
-        Return the fixed-lag smoothed estimates ready since the last call, oldest first.
-
-        One per sample filtered, in order, each exactly once (``smoothed_lag_s`` > 0; else
-        None).  ``flush``: also those held for their lag, smoothed with the data there is
-        (before this estimator is replaced).
-        """
-        if flush:
-            self._flush_lag()
-        if not self._smoothed:
-            return None
-        parts, self._smoothed = self._smoothed, []
-        if len(parts) == 1:
-            return parts[0]
-        return Estimate(*(np.concatenate(p) for p in zip(*parts)))
+        """Return the fixed-lag smoothed estimates ready, oldest first (``FixedLagSmoother``)."""
+        return None if self._lag is None else self._lag.pop(flush)
 
     # -- offline --------------------------------------------------------------------------
     def smooth(self, current_a, steps=None) -> Estimate:
@@ -347,7 +326,8 @@ class KalmanEstimator:
         if (fs.x.shape != (filt.model.size,) or recent.shape != self._recent.buffer.shape
                 or window_slots != fs.window.samples.shape):
             raise ParameterError('state was saved from a different estimator design')
-        self._flush_lag()
+        if self._lag is not None:
+            self._lag.flush()
         self._filter, self._log = filt, log
         self._state = fs.copy()
         self._recent = SampleRing(recent.size, recent, int(state.get('grid', fs.samples)))

@@ -41,7 +41,7 @@ class Onset:
                        for s in (self.up, self.down)))
 
     def start(self, y: float, step: int) -> tuple | None:
-        """The rest ended at sample ``y``: return (state, samples, steps) of the older side."""
+        """Return (state, samples, steps) of the older side: the rest ended at sample ``y``."""
         sides = [s for s in (self.up, self.down) if s is not None]
         if not sides:
             return None

@@ -3,9 +3,9 @@
 The nodes' topics: creation with the QoS override parameters, their QoS, their destruction.
 
 Publishers and subscriptions get the standard ``qos_overrides.*`` parameters; their QoS comes
-from the node parameters (:func:`make_qos`). Kept apart from :mod:`.params` (parameter declaration and reading): a topic's QoS is set once
-at creation, by ``qos_depth`` / ``qos_reliability`` and by ``qos_overrides.*``, which rclpy
-declares read-only.
+from the node parameters (:func:`make_qos`).  Kept apart from :mod:`.params` (parameter
+declaration and reading): a topic's QoS is set once at creation, by ``qos_depth`` /
+``qos_reliability`` and by ``qos_overrides.*``, which rclpy declares read-only.
 """
 from __future__ import annotations
 
