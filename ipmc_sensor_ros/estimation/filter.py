@@ -98,7 +98,8 @@ class FilterState:
     samples: int = 0
     #: at rest: where a motion that ends it would have begun (:mod:`.onset`)
     onset: Onset | None = None
-    #: the rest ended at the last sample: (state where the motion began, samples, steps)
+    #: the rest ended at the last sample: ((x, P, moved, samples) where the motion began,
+    #: the samples since, their steps)
     ended: tuple | None = None
     #: samples still to be taken as motion whatever the rest test says (:func:`.onset.restart`)
     hold_off: int = 0
@@ -270,11 +271,14 @@ class KalmanFilter:
                 last_steps = sk
             if samples:
                 x = F @ x
-            win.push(yk, None if not (samples and rot.size) else rot if sk == 1 else rot ** sk)
-            verdict = win.judge(self.rest, yk, float(x[ib]) * sb, float(P[ib, ib]) * sb * sb,
-                                meter.var_a2, still)
-            if hold:
-                verdict, hold = _held(verdict, hold, win)
+            held = hold > 0             # a motion's start again: the window has its samples
+            if held:
+                verdict, hold = _held(hold, win)
+            else:
+                win.push(yk, None if not (samples and rot.size) else rot if sk == 1
+                         else rot ** sk)
+                verdict = win.judge(self.rest, yk, float(x[ib]) * sb,
+                                    float(P[ib, ib]) * sb * sb, meter.var_a2, still)
             was = still
             still, release, begins, moved = _rest_change(verdict, still, moved)
             if samples:
@@ -287,7 +291,8 @@ class KalmanFilter:
                 record.x_pred[j], record.P_pred[j] = x, P
                 record.steps[j], record.still[j] = sk, still
             x, P = scalar_update(x, P, c, yk, meter.var_a2)
-            meter.add(yk, sk, win, self._alpha)
+            if not held:
+                meter.add(yk, sk, win, self._alpha)
             if begins:                  # what the window says of the offset
                 x, P = self._window_offset(x, P, win, meter.var_a2)
             if still:                   # the rest pseudo-measurements (velocity, ... = 0)
@@ -300,8 +305,7 @@ class KalmanFilter:
             out_s[k] = math.sqrt(max(P[iw, iw], 0.0)) * sw
             out_still[k] = still
             if still:
-                onset = follow(onset, win.track, yk, sk, lambda: FilterState(
-                    x, P, replace(meter), win.copy(), True, moved, samples))
+                onset = follow(onset, win.track, yk, sk, lambda: (x, P, moved, samples))
             elif was and onset is not None:
                 ended, onset = onset.start(yk, sk), None
                 if until_motion and ended is not None:
@@ -324,17 +328,18 @@ class KalmanFilter:
         return P
 
 
-def _held(verdict: bool | None, hold: int, win: RestWindow) -> tuple[bool | None, int]:
+def _held(hold: int, win: RestWindow) -> tuple[bool, int]:
     """
     Return (verdict, samples still held) for a sample of a motion's start filtered again.
 
-    The rest test's verdict is overridden (motion); at the last such sample the window's
+    Motion, whatever the rest test said of it the first time (its window and noise meter
+    are already past these samples: :func:`.onset.restart`); at the last of them the window's
     run of quiet samples starts again, as the sample that ended the rest made it.
     """
     hold -= 1
     if not hold:
         win.quiet, win.track = 0, None
-    return (None if verdict is None else False), hold
+    return False, hold
 
 
 def _rest_change(verdict: bool | None, still: bool, moved: bool):

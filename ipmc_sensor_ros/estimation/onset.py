@@ -29,8 +29,8 @@ class Onset:
     """
     At rest: per CUSUM side, (state after its last zero, samples since, their steps).
 
-    None for a side that has not been at zero in this rest.  The states are never changed
-    (shared by copies); the lists grow.
+    The state is the filter's (x, P, moved, samples), never changed (shared by copies); the
+    lists grow.  None for a side that has not been at zero in this rest.
     """
 
     up: tuple | None = None
@@ -53,8 +53,8 @@ def follow(onset: Onset | None, track: tuple | None, y: float, step: int, snapsh
     """
     Return the onset after a rest sample ``y`` (``step`` periods after the one before).
 
-    ``track``: the rest test's (CUSUM up, CUSUM down, ...) after it; ``snapshot()`` builds the
-    filter state after it (called only when a side is at zero).
+    ``track``: the rest test's (CUSUM up, CUSUM down, ...) after it; ``snapshot()`` returns
+    the filter's state after it (called only when a side is at zero).
     """
     old = (None, None) if onset is None else (onset.up, onset.down)
     levels = (1.0, 1.0) if track is None else track[:2]
@@ -77,15 +77,18 @@ def restart(filt, state, held: int):
     """
     Filter the motion's first samples again from where it began.
 
-    ``state.ended``: (state there, samples, steps) of the motion's start.  Returns (the
-    state the new run started from, the state now, the forward record of the last ``held``
-    samples or None); the run's start overrides the rest test for those samples.
+    ``state.ended``: ((x, P, moved, samples) there, the samples since, their steps).  The
+    run starts from the filter's state there with the rest test's window and noise meter as
+    they are now (past those samples), and takes the samples as motion (``hold_off``).
+    Returns (the state the run started from, the state now, the forward record of the last
+    ``held`` samples or None).
     """
     from .filter import ForwardRecord
     from .periodic import Stretch, refilter
 
-    there, ys, steps = state.ended
-    start = replace(there, hold_off=len(ys))
+    (x, P, moved, samples), ys, steps = state.ended
+    start = replace(state, x=x, P=P, still=True, moved=moved, samples=samples, onset=None,
+                    ended=None, hold_off=len(ys))
     record = ForwardRecord.empty(held, filt.model.size) if held else None
     _, now = refilter(Stretch(filt, start, ys, steps), filt, record)
     return start, now, record
