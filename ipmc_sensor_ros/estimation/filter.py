@@ -98,11 +98,16 @@ class FilterState:
     samples: int = 0
     #: at rest: where a motion that ends it would have begun (:mod:`.onset`)
     onset: Onset | None = None
-    #: the rest ended at the last sample: ((x, P, moved, samples) where the motion began,
+    #: the rest ended at the last sample: ((x, P, moved, samples, nis, tested) where it began,
     #: the samples since, their steps)
     ended: tuple | None = None
     #: samples still to be taken as motion whatever the rest test says (:func:`.onset.restart`)
     hold_off: int = 0
+    #: sum of the squared normalised innovations of the current (chi-square, one degree a
+    #: sample, under the model), and how many samples it holds: those after the noise was
+    #: measured (``NOISE_AVERAGE_S``); what a check tests the model by (:mod:`.periodic`)
+    nis: float = 0.0
+    tested: int = 0
 
     def copy(self) -> 'FilterState':
         return replace(self, x=self.x.copy(), P=self.P.copy(), noise=replace(self.noise),
@@ -214,7 +219,7 @@ class KalmanFilter:
         row[m.ib] = sb
         row[m.ib + 1] = -float(m.scale[m.ib + 1]) * (n - 1) / (2.0 * m.sample_rate_hz)
         mean = (window.total / n if m.lines_hz else float(window.residuals(0).mean()))
-        return scalar_update(x, P, row, mean, 1.0 / info)
+        return scalar_update(x, P, row, mean, 1.0 / info)[:2]
 
     def initial_state(self) -> FilterState:
         x, P = self.model.prior()
@@ -258,6 +263,7 @@ class KalmanFilter:
         c, rows, rot = m.c, self._rest_rows, self._rot
         x, P, still, moved, samples = state.x, state.P, state.still, state.moved, state.samples
         meter, win, onset, hold = state.noise, state.window, state.onset, state.hold_off
+        nis, tested, settled = state.nis, state.tested, 1.0 / self._alpha
         if copy:
             x, P, meter, win = x.copy(), P.copy(), replace(meter), win.copy()
             onset = None if onset is None else onset.copy()
@@ -290,14 +296,16 @@ class KalmanFilter:
                 j = offset + k
                 record.x_pred[j], record.P_pred[j] = x, P
                 record.steps[j], record.still[j] = sk, still
-            x, P = scalar_update(x, P, c, yk, meter.var_a2)
+            x, P, z2 = scalar_update(x, P, c, yk, meter.var_a2)
+            if samples >= settled:      # R measured: the innovation's variance is the model's
+                nis, tested = nis + z2, tested + 1
             if not held:
                 meter.add(yk, sk, win, self._alpha)
             if begins:                  # what the window says of the offset
                 x, P = self._window_offset(x, P, win, meter.var_a2)
             if still:                   # the rest pseudo-measurements (velocity, ... = 0)
                 for row_c, var in rows:
-                    x, P = scalar_update(x, P, row_c, 0.0, var)
+                    x, P, _ = scalar_update(x, P, row_c, 0.0, var)
             if record is not None:
                 record.x_post[offset + k], record.P_post[offset + k] = x, P
             samples += 1
@@ -305,13 +313,15 @@ class KalmanFilter:
             out_s[k] = math.sqrt(max(P[iw, iw], 0.0)) * sw
             out_still[k] = still
             if still:
-                onset = follow(onset, win.track, yk, sk, lambda: (x, P, moved, samples))
+                onset = follow(onset, win.track, yk, sk,
+                               lambda: (x, P, moved, samples, nis, tested))
             elif was and onset is not None:
                 ended, onset = onset.start(yk, sk), None
                 if until_motion and ended is not None:
                     n = k + 1
                     break
-        return (FilterState(x, P, meter, win, still, moved, samples, onset, ended, hold),
+        return (FilterState(x, P, meter, win, still, moved, samples, onset, ended, hold, nis,
+                            tested),
                 out_w[:n], out_s[:n], out_still[:n])
 
     def _released(self, P: np.ndarray, still: bool) -> np.ndarray:
@@ -360,12 +370,14 @@ def _rest_change(verdict: bool | None, still: bool, moved: bool):
 
 def scalar_update(x: np.ndarray, P: np.ndarray, row: np.ndarray, value: float, var: float):
     """
-    Return (x, P) updated with the scalar measurement ``row @ x = value`` of variance ``var``.
+    Return (x, P, z^2) updated with the scalar measurement ``row @ x = value`` of variance ``var``.
 
-    P - g g' with g = P row / sqrt(S): symmetric exactly.
+    P - g g' with g = P row / sqrt(S): symmetric exactly; z^2 = nu^2 / S, the squared
+    normalised innovation.
     """
     Pc = P @ row
     S = float(row @ Pc) + var
-    x = x + Pc * ((value - float(row @ x)) / S)
+    nu = value - float(row @ x)
+    x = x + Pc * (nu / S)
     g = Pc / math.sqrt(S)
-    return x, P - g[:, None] * g
+    return x, P - g[:, None] * g, nu * nu / S

@@ -17,8 +17,9 @@ A periodic motion is measured at the same checks, on the last 1, 2, 4 and 8 s of
 (:func:`~.motionline.measure_recent`); when two checks in a row say it appeared, went or
 moved, the model with periodic states at the measured fundamental (a small remainder:
 :mod:`.statespace`) takes over from the start of those stretches, whose samples are
-filtered again (:mod:`.periodic`).  A motion that ends a rest is filtered again from where
-the rest test's CUSUM says it began (:mod:`.onset`).
+filtered again (:mod:`.periodic`); it must explain the current of its span, and then of each
+stretch (its innovations' chi-square), or it goes from that stretch's start.  A motion that
+ends a rest is filtered again from where the rest test's CUSUM says it began (:mod:`.onset`).
 
 ``smoothed_lag_s`` > 0 also smooths the live output with that lag
 (:class:`~.fixed_lag.FixedLagSmoother` on the filter's own forward record):
@@ -40,7 +41,7 @@ from .fixed_lag import lag_smoother
 from .lines import NOMINAL_LINES_HZ, measure_line
 from .motionline import MOTION_LONGEST_S, MOTION_PERIODS, measure_recent
 from .onset import restart
-from .periodic import StretchLog, refilter, same_motion
+from .periodic import StretchLog, explains, refilter, same_motion
 from .ring import SampleRing
 from .smoother import smooth_segments
 from .statespace import StateSpaceModel
@@ -48,12 +49,9 @@ from .statespace import StateSpaceModel
 __all__ = ['KalmanEstimator', 'CHECK_S', 'LINE_WINDOW_S']
 
 #: Data between two checks of the mains line and the periodic motion, s (a stretch,
-#: :mod:`.periodic`): a periodic motion is modelled at the second check that measures it, so
-#: this is the delay of that choice (the offset is learned slowly until then: 100 um of
-#: level a second is typical of a 5 Hz crank with 1-2 % noise started within the first
-#: 0.5 s); a check costs 10-20 ms on 8 s of 1 kHz current, 10-20 us a sample.  The first checks
-#: are made after ``LINE_FIRST_S`` (0.5 s: the line to ~0.05 Hz, so hum is modelled early)
-#: and twice that (1 s: a fast periodic motion is judged, :mod:`.motionline`).
+#: :mod:`.periodic`): the delay of a periodic model, modelled at the second check that
+#: measures it; a check costs 10-20 ms on 8 s of 1 kHz current, 10-20 us a sample.  The
+#: first checks come after ``LINE_FIRST_S`` (the line to ~0.05 Hz) and twice that.
 CHECK_S = 1.0
 LINE_FIRST_S = 0.5
 #: The mains line is measured on the last this of current, s: 2 s resolves 0.5 Hz and,
@@ -265,10 +263,12 @@ class KalmanEstimator:
         return link
 
     def _check_motion(self, recent: np.ndarray) -> None:
-        """Measure the periodic motion; a new one is modelled from its span (:mod:`.periodic`)."""
+        """Measure the periodic motion: a model from its span, while it explains the current."""
         f0 = measure_recent(recent, self.sample_rate_hz, self.model)
         floor = MOTION_PERIODS / min(recent.size / self.sample_rate_hz, MOTION_LONGEST_S)
-        span = self._log.span_for(f0, self._first_rest_n is None, floor)
+        span = self._log.refuted(self._state)
+        f0 = 0.0 if span else f0
+        span = span or self._log.span_for(f0, self._first_rest_n is None, floor)
         if span is None or same_motion(f0, self.model.motion_hz):
             return
         filt = self._new_filter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,
@@ -276,6 +276,9 @@ class KalmanEstimator:
         held = 0 if self._lag is None else min(len(span.y), self._lag.held)
         rec = ForwardRecord.empty(held, filt.model.size) if held else None
         start, state = refilter(span, filt, rec)
+        if f0 and not explains(state.nis - start.nis, state.tested - start.tested):
+            self._log.current.measured_hz = 0.0         # refused: it counts as none
+            return
         link = self._begin_segment(filt, start, span.filter, span.state)
         if rec is not None:             # the span's samples held are the new model's
             self._lag.replace_newest(filt, rec, link if held == len(span.y) else None)

@@ -29,8 +29,8 @@ class Onset:
     """
     At rest: per CUSUM side, (state after its last zero, samples since, their steps).
 
-    The state is the filter's (x, P, moved, samples), never changed (shared by copies); the
-    lists grow.  None for a side that has not been at zero in this rest.
+    The state is the filter's (x, P, moved, samples, nis, tested), never changed (shared by
+    copies); the lists grow.  None for a side that has not been at zero in this rest.
     """
 
     up: tuple | None = None
@@ -77,18 +77,19 @@ def restart(filt, state, held: int):
     """
     Filter the motion's first samples again from where it began.
 
-    ``state.ended``: ((x, P, moved, samples) there, the samples since, their steps).  The
-    run starts from the filter's state there with the rest test's window and noise meter as
-    they are now (past those samples), and takes the samples as motion (``hold_off``).
+    ``state.ended``: ((x, P, moved, samples, nis, tested) there, the samples since, their
+    steps).  The run starts from the filter's state there with the rest test's window and
+    noise meter as they are now (past those samples), and takes the samples as motion
+    (``hold_off``).
     Returns (the state the run started from, the state now, the forward record of the last
     ``held`` samples or None).
     """
     from .filter import ForwardRecord
     from .periodic import Stretch, refilter
 
-    (x, P, moved, samples), ys, steps = state.ended
+    (x, P, moved, samples, nis, tested), ys, steps = state.ended
     start = replace(state, x=x, P=P, still=True, moved=moved, samples=samples, onset=None,
-                    ended=None, hold_off=len(ys))
+                    ended=None, hold_off=len(ys), nis=nis, tested=tested)
     record = ForwardRecord.empty(held, filt.model.size) if held else None
     _, now = refilter(Stretch(filt, start, ys, steps), filt, record)
     return start, now, record

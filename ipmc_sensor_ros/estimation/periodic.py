@@ -28,11 +28,32 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from scipy.stats import chi2
+
 from .carry import carry_state
 from .filter import FilterState, ForwardRecord, KalmanFilter
 from .motionline import MOTION_WOBBLE
 
-__all__ = ['Stretch', 'StretchLog', 'refilter', 'same_motion']
+__all__ = ['Stretch', 'StretchLog', 'refilter', 'same_motion', 'explains',
+           'MODEL_FALSE_ALARM']
+
+#: False-alarm level of the test that a periodic model explains the current of a stretch (its
+#: normalised innovations' chi-square): a model that does is refused or dropped by chance
+#: once in 10^6 stretches (11 days of checks).
+MODEL_FALSE_ALARM = 1e-6
+
+
+def explains(nis: float, samples: int) -> bool:
+    """
+    Tell whether a model explains ``samples`` of current whose squared innovations sum to ``nis``.
+
+    Under the model each innovation over its predicted standard deviation is N(0, 1), one
+    sample independent of the next, so ``nis`` is chi-square with ``samples`` degrees of
+    freedom; more than its 1 - :data:`MODEL_FALSE_ALARM` quantile is a current the model does
+    not produce (a slow move under a crank, which the periodogram test cannot see in a few
+    periods: the model would take its current for offset).
+    """
+    return samples == 0 or nis <= chi2.isf(MODEL_FALSE_ALARM, samples)
 
 
 def same_motion(a_hz: float, b_hz: float) -> bool:
@@ -108,6 +129,19 @@ class StretchLog:
         if log.current is None:
             raise ValueError('no current stretch')
         return log
+
+    def refuted(self, state: FilterState) -> Stretch | None:
+        """
+        Return the current stretch if its periodic model does not explain it (:func:`explains`).
+
+        ``state``: the filter's now.  The motion measured there then counts as none.
+        """
+        cur = self.current
+        if (not cur.filter.model.motion_hz
+                or explains(state.nis - cur.state.nis, state.tested - cur.state.tested)):
+            return None
+        cur.measured_hz = 0.0
+        return cur
 
     def span_for(self, measured_hz: float, never_rested: bool,
                  floor_hz: float = 0.0) -> Stretch | None:
