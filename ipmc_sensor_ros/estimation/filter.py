@@ -279,7 +279,7 @@ class KalmanFilter:
                 x = F @ x
             held = hold > 0             # a motion's start again: the window has its samples
             if held:
-                verdict, hold = _held(hold, win)
+                verdict, hold = _held(hold)
             else:
                 win.push(yk, None if not (samples and rot.size) else rot if sk == 1
                          else rot ** sk)
@@ -315,8 +315,9 @@ class KalmanFilter:
             if still:
                 onset = follow(onset, win.track, yk, sk,
                                lambda: (x, P, moved, samples, nis, tested))
-            elif was and onset is not None:
-                ended, onset = onset.start(yk, sk), None
+            elif was and onset is not None:     # a sample told motion: where did it begin
+                ended = onset.start(yk, sk) if win.quiet == 0 else None
+                onset = None
                 if until_motion and ended is not None:
                     n = k + 1
                     break
@@ -338,18 +339,15 @@ class KalmanFilter:
         return P
 
 
-def _held(hold: int, win: RestWindow) -> tuple[bool, int]:
+def _held(hold: int) -> tuple[bool, int]:
     """
     Return (verdict, samples still held) for a sample of a motion's start filtered again.
 
-    Motion, whatever the rest test said of it the first time (its window and noise meter
-    are already past these samples: :func:`.onset.restart`); at the last of them the window's
-    run of quiet samples starts again, as the sample that ended the rest made it.
+    Motion, whatever the rest test said of it the first time; its window and noise meter are
+    left as they are, already past these samples (:func:`.onset.restart`): as the test left
+    them at the sample that ended the rest.
     """
-    hold -= 1
-    if not hold:
-        win.quiet, win.track = 0, None
-    return False, hold
+    return False, hold - 1
 
 
 def _rest_change(verdict: bool | None, still: bool, moved: bool):
