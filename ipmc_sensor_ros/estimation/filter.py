@@ -277,9 +277,9 @@ class KalmanFilter:
                 last_steps = sk
             if samples:
                 x = F @ x
-            held = hold > 0             # a motion's start again: the window has its samples
-            if held:
-                verdict, hold = _held(hold)
+            held = hold > 0             # a motion's start again (.onset.restart): motion, the
+            if held:                    # window and meter left as the test left them, past it
+                verdict, hold = False, hold - 1
             else:
                 win.push(yk, None if not (samples and rot.size) else rot if sk == 1
                          else rot ** sk)
@@ -315,7 +315,7 @@ class KalmanFilter:
             if still:
                 onset = follow(onset, win.track, yk, sk,
                                lambda: (x, P, moved, samples, nis, tested))
-            elif was and onset is not None:     # a sample told motion: where did it begin
+            elif was and onset is not None:     # the rest ended: a sample told it?
                 ended = onset.start(yk, sk) if win.quiet == 0 else None
                 onset = None
                 if until_motion and ended is not None:
@@ -337,17 +337,6 @@ class KalmanFilter:
         if m.size > m.im and not still:
             P[m.im:, m.im:] += np.eye(m.size - m.im)
         return P
-
-
-def _held(hold: int) -> tuple[bool, int]:
-    """
-    Return (verdict, samples still held) for a sample of a motion's start filtered again.
-
-    Motion, whatever the rest test said of it the first time; its window and noise meter are
-    left as they are, already past these samples (:func:`.onset.restart`): as the test left
-    them at the sample that ended the rest.
-    """
-    return False, hold - 1
 
 
 def _rest_change(verdict: bool | None, still: bool, moved: bool):

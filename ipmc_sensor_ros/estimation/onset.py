@@ -10,7 +10,8 @@ with 1-2 % noise).  The test's two-sided CUSUM (:meth:`~.rest.RestTest.sample_ok
 hindsight where the shift began: after the last sample at which the side that grew was at
 zero (Page 1954: the CUSUM's estimate of a change point).  So at rest the filter keeps, for
 each side, its state after that side's last zero and the samples since (:class:`Onset`); when
-the rest ends, the older of the two and the samples since are the motion's start
+a sample ends the rest (a window test at its threshold says nothing of when), the older of
+the two and the samples since are the motion's start
 (``FilterState.ended``), and the estimator filters those samples again from that state as
 motion (:func:`restart`: the rest test's verdict is overridden for them,
 ``FilterState.hold_off``).  The model then says the rest ended where the motion began, not
