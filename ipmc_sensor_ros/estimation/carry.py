@@ -30,8 +30,8 @@ def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> Fil
     x, P, _ = _carried(old.model, new.model, state.x, state.P, joint=False)
     init = new.initial_state()
     out = replace(init, x=x, P=P, noise=replace(state.noise), samples=state.samples,
-                  still=state.still, moved=state.moved, nis=state.nis,
-                  tested=state.tested)
+                  still=state.still, moved=state.moved,
+                  innovations=state.innovations.closed())
     win = state.window
     if win.samples.size != new.rest.n:          # the rest test's window restarts
         return replace(out, still=False, moved=True)

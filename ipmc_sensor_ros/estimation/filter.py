@@ -39,6 +39,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .innovations import Innovations, block_samples
 from .onset import Onset, follow
 from .rest import RestTest, RestWindow
 from .statespace import StateSpaceModel
@@ -98,16 +99,13 @@ class FilterState:
     samples: int = 0
     #: at rest: where a motion that ends it would have begun (:mod:`.onset`)
     onset: Onset | None = None
-    #: the rest ended at the last sample: ((x, P, moved, samples, nis, tested) where it began,
+    #: the rest ended at the last sample: ((x, P, moved, samples, innovations) where it began,
     #: the samples since, their steps)
     ended: tuple | None = None
     #: samples still to be taken as motion whatever the rest test says (:func:`.onset.restart`)
     hold_off: int = 0
-    #: sum of the squared normalised innovations of the current (chi-square, one degree a
-    #: sample, under the model), and how many samples it holds: those after the noise was
-    #: measured (``NOISE_AVERAGE_S``); what a check tests the model by (:mod:`.periodic`)
-    nis: float = 0.0
-    tested: int = 0
+    #: the normalised innovations' sums a check tests the model by (:mod:`.innovations`)
+    innovations: Innovations = Innovations()
 
     def copy(self) -> 'FilterState':
         return replace(self, x=self.x.copy(), P=self.P.copy(), noise=replace(self.noise),
@@ -163,6 +161,7 @@ class KalmanFilter:
         # one step of each line's phasor e^{-i W_k / fs} (sliding DFT of the rest window)
         self._rot = np.exp(-2j * np.pi * np.asarray(lines) / model.sample_rate_hz)
         self._alpha = 1.0 / (NOISE_AVERAGE_S * model.sample_rate_hz)
+        self._block = block_samples(model.motion_hz, model.sample_rate_hz)
         s = model.scale
         self._anchor = np.zeros(model.size)
         self._anchor[model.iw], self._anchor[model.ih] = s[model.iw], -s[model.ih]
@@ -263,7 +262,8 @@ class KalmanFilter:
         c, rows, rot = m.c, self._rest_rows, self._rot
         x, P, still, moved, samples = state.x, state.P, state.still, state.moved, state.samples
         meter, win, onset, hold = state.noise, state.window, state.onset, state.hold_off
-        nis, tested, settled = state.nis, state.tested, 1.0 / self._alpha
+        chi, blocks, zs, zn = state.innovations
+        settled, block = 1.0 / self._alpha, self._block
         if copy:
             x, P, meter, win = x.copy(), P.copy(), replace(meter), win.copy()
             onset = None if onset is None else onset.copy()
@@ -296,9 +296,11 @@ class KalmanFilter:
                 j = offset + k
                 record.x_pred[j], record.P_pred[j] = x, P
                 record.steps[j], record.still[j] = sk, still
-            x, P, z2 = scalar_update(x, P, c, yk, meter.var_a2)
+            x, P, z = scalar_update(x, P, c, yk, meter.var_a2)
             if samples >= settled:      # R measured: the innovation's variance is the model's
-                nis, tested = nis + z2, tested + 1
+                zs, zn = zs + z, zn + 1
+                if zn == block:
+                    chi, blocks, zs, zn = chi + zs * zs / zn, blocks + 1, 0.0, 0
             if not held:
                 meter.add(yk, sk, win, self._alpha)
             if begins:                  # what the window says of the offset
@@ -314,15 +316,16 @@ class KalmanFilter:
             out_still[k] = still
             if still:
                 onset = follow(onset, win.track, yk, sk,
-                               lambda: (x, P, moved, samples, nis, tested))
+                               lambda: (x, P, moved, samples,
+                                        Innovations(chi, blocks, zs, zn)))
             elif was and onset is not None:     # the rest ended: a sample told it?
                 ended = onset.start(yk, sk) if win.quiet == 0 else None
                 onset = None
                 if until_motion and ended is not None:
                     n = k + 1
                     break
-        return (FilterState(x, P, meter, win, still, moved, samples, onset, ended, hold, nis,
-                            tested),
+        return (FilterState(x, P, meter, win, still, moved, samples, onset, ended, hold,
+                            Innovations(chi, blocks, zs, zn)),
                 out_w[:n], out_s[:n], out_still[:n])
 
     def _released(self, P: np.ndarray, still: bool) -> np.ndarray:
@@ -357,14 +360,15 @@ def _rest_change(verdict: bool | None, still: bool, moved: bool):
 
 def scalar_update(x: np.ndarray, P: np.ndarray, row: np.ndarray, value: float, var: float):
     """
-    Return (x, P, z^2) updated with the scalar measurement ``row @ x = value`` of variance ``var``.
+    Return (x, P, z) updated with the scalar measurement ``row @ x = value`` of variance ``var``.
 
-    P - g g' with g = P row / sqrt(S): symmetric exactly; z^2 = nu^2 / S, the squared
-    normalised innovation.
+    P - g g' with g = P row / sqrt(S): symmetric exactly; z = nu / sqrt(S), the normalised
+    innovation.
     """
     Pc = P @ row
     S = float(row @ Pc) + var
     nu = value - float(row @ x)
     x = x + Pc * (nu / S)
-    g = Pc / math.sqrt(S)
-    return x, P - g[:, None] * g, nu * nu / S
+    r = math.sqrt(S)
+    g = Pc / r
+    return x, P - g[:, None] * g, nu / r

@@ -41,7 +41,8 @@ from .fixed_lag import lag_smoother
 from .lines import NOMINAL_LINES_HZ, measure_line
 from .motionline import MOTION_LONGEST_S, MOTION_PERIODS, measure_recent
 from .onset import restart
-from .periodic import StretchLog, explains, refilter, same_motion
+from .innovations import explains
+from .periodic import StretchLog, refilter, same_motion
 from .ring import SampleRing
 from .smoother import smooth_segments
 from .statespace import StateSpaceModel
@@ -276,7 +277,7 @@ class KalmanEstimator:
         held = 0 if self._lag is None else min(len(span.y), self._lag.held)
         rec = ForwardRecord.empty(held, filt.model.size) if held else None
         start, state = refilter(span, filt, rec)
-        if f0 and not explains(state.nis - start.nis, state.tested - start.tested):
+        if f0 and not explains(state.innovations, start.innovations):
             self._log.current.measured_hz = 0.0         # refused: it counts as none
             return
         link = self._begin_segment(filt, start, span.filter, span.state)

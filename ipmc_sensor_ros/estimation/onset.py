@@ -30,7 +30,7 @@ class Onset:
     """
     At rest: per CUSUM side, (state after its last zero, samples since, their steps).
 
-    The state is the filter's (x, P, moved, samples, nis, tested), never changed (shared by
+    The state is the filter's (x, P, moved, samples, innovations), never changed (shared by
     copies); the lists grow.  None for a side that has not been at zero in this rest.
     """
 
@@ -78,7 +78,7 @@ def restart(filt, state, held: int):
     """
     Filter the motion's first samples again from where it began.
 
-    ``state.ended``: ((x, P, moved, samples, nis, tested) there, the samples since, their
+    ``state.ended``: ((x, P, moved, samples, innovations) there, the samples since, their
     steps).  The run starts from the filter's state there with the rest test's window and
     noise meter as they are now (past those samples), and takes the samples as motion
     (``hold_off``).
@@ -88,9 +88,9 @@ def restart(filt, state, held: int):
     from .filter import ForwardRecord
     from .periodic import Stretch, refilter
 
-    (x, P, moved, samples, nis, tested), ys, steps = state.ended
+    (x, P, moved, samples, innovations), ys, steps = state.ended
     start = replace(state, x=x, P=P, still=True, moved=moved, samples=samples, onset=None,
-                    ended=None, hold_off=len(ys), nis=nis, tested=tested)
+                    ended=None, hold_off=len(ys), innovations=innovations)
     record = ForwardRecord.empty(held, filt.model.size) if held else None
     _, now = refilter(Stretch(filt, start, ys, steps), filt, record)
     return start, now, record

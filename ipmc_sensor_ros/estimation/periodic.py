@@ -22,38 +22,21 @@ the start (it moved periodically from the start); else the last one (a motion th
 dropped from the last stretch on).  The span's samples are filtered again under it from
 the state there (:class:`StretchLog` keeps states and samples; :func:`~.carry.carry_state`
 joins the new periodic states to what was known), so its state now is as if it had been
-chosen then; what was published stays.
+chosen then; what was published stays.  A periodic model is taken only if it explains the
+current of its span, and kept only while it explains each stretch after
+(:func:`~.innovations.explains`: its innovations below the motion's period); a stretch it
+does not explain counts as one without periodic motion, and the model goes from its start.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from scipy.stats import chi2
-
 from .carry import carry_state
 from .filter import FilterState, ForwardRecord, KalmanFilter
+from .innovations import explains
 from .motionline import MOTION_WOBBLE
 
-__all__ = ['Stretch', 'StretchLog', 'refilter', 'same_motion', 'explains',
-           'MODEL_FALSE_ALARM']
-
-#: False-alarm level of the test that a periodic model explains the current of a stretch (its
-#: normalised innovations' chi-square): a model that does is refused or dropped by chance
-#: once in 10^6 stretches (11 days of checks).
-MODEL_FALSE_ALARM = 1e-6
-
-
-def explains(nis: float, samples: int) -> bool:
-    """
-    Tell whether a model explains ``samples`` of current whose squared innovations sum to ``nis``.
-
-    Under the model each innovation over its predicted standard deviation is N(0, 1), one
-    sample independent of the next, so ``nis`` is chi-square with ``samples`` degrees of
-    freedom; more than its 1 - :data:`MODEL_FALSE_ALARM` quantile is a current the model does
-    not produce (a slow move under a crank, which the periodogram test cannot see in a few
-    periods: the model would take its current for offset).
-    """
-    return samples == 0 or nis <= chi2.isf(MODEL_FALSE_ALARM, samples)
+__all__ = ['Stretch', 'StretchLog', 'refilter', 'same_motion']
 
 
 def same_motion(a_hz: float, b_hz: float) -> bool:
@@ -132,13 +115,13 @@ class StretchLog:
 
     def refuted(self, state: FilterState) -> Stretch | None:
         """
-        Return the current stretch if its periodic model does not explain it (:func:`explains`).
+        Return the current stretch if its periodic model does not explain it (``explains``).
 
         ``state``: the filter's now.  The motion measured there then counts as none.
         """
         cur = self.current
         if (not cur.filter.model.motion_hz
-                or explains(state.nis - cur.state.nis, state.tested - cur.state.tested)):
+                or explains(state.innovations, cur.state.innovations)):
             return None
         cur.measured_hz = 0.0
         return cur
