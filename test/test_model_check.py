@@ -72,8 +72,8 @@ def test_a_periodic_model_a_slow_move_refutes_is_dropped():
 
 
 def test_a_crank_keeps_its_periodic_model():
-    # 20 Hz crank moving since power-on, 1-2 % noise, a motor's speed wobble: its chi-square
-    # per sample is 0.8-1.0 under the model, against a limit of 1.23
+    # 20 Hz crank moving since power-on, 1-2 % noise, a motor's speed wobble: its block
+    # statistic reads 2.8-8.5 over 20 blocks at the checks, against a limit of 65
     _, out = _run('crank-20hz-slim-pct-poweron', 0)
     assert all(abs(m - 20.0) < 0.1 for m, _, _ in out)
 
