@@ -181,18 +181,23 @@ def judge(record: Record, estimators=('kalman',), block_samples: int = 1000) -> 
 
 
 def parse_seeds(text: str) -> list[int]:
-    """'3' -> [0, 1, 2]; '4-6' -> [4, 5, 6]; '0,7,1000' -> [0, 7, 1000]."""
+    """'3' -> [0, 1, 2]; '4-6' -> [4, 5, 6]; '0,7,1000' -> [0, 7, 1000]; none is an error."""
     text = text.strip()
     try:
         if ',' in text:
-            return [int(s) for s in text.split(',') if s.strip()]
-        if '-' in text:
+            seeds = [int(s) for s in text.split(',') if s.strip()]
+        elif '-' in text:
             first, last = text.split('-', 1)
-            return list(range(int(first), int(last) + 1))
-        return list(range(int(text)))
+            seeds = list(range(int(first), int(last) + 1))
+        else:
+            seeds = list(range(int(text)))
     except ValueError:
         raise SystemExit('--seeds: expected N, a-b or a,b,c (non-negative integers), got '
                          f'{text!r}') from None
+    if not seeds:
+        raise SystemExit(f'--seeds {text!r} names no seed (N is seeds 0..N-1: seed 0 alone is '
+                         '0-0)')
+    return seeds
 
 
 def select_scenarios(patterns: str | None, quick: bool) -> list[str]:

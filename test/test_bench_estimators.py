@@ -101,6 +101,10 @@ def test_seed_and_scenario_options():
     assert parse_seeds('0,7') == [0, 7]
     with pytest.raises(SystemExit, match='--seeds'):
         parse_seeds('a-b')
+    assert parse_seeds('0-0') == [0]
+    for empty in ('0', '3-1'):      # a run of no seed is an error, not an empty table
+        with pytest.raises(SystemExit, match='names no seed'):
+            parse_seeds(empty)
     assert select_scenarios(None, True) == list(QUICK)
     assert select_scenarios('crank-20hz-short-*', False) == [
         'crank-20hz-short-0.2na-rest', 'crank-20hz-short-0.2na-poweron',
