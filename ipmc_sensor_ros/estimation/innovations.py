@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from scipy.stats import chi2
+from scipy.stats import chi2 as chi2_dist
 
 __all__ = ['Innovations', 'block_samples', 'explains', 'MODEL_FALSE_ALARM']
 
@@ -63,4 +63,4 @@ def explains(now: Innovations, then: Innovations) -> bool:
     closed block says nothing against the model.
     """
     dof = now.blocks - then.blocks
-    return dof <= 0 or now.chi2 - then.chi2 <= chi2.isf(MODEL_FALSE_ALARM, dof)
+    return dof <= 0 or now.chi2 - then.chi2 <= chi2_dist.isf(MODEL_FALSE_ALARM, dof)
