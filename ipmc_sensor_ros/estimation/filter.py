@@ -7,11 +7,12 @@ its samples; there is no second implementation)::
 
     predict   x- = F_m x,  P- = F_m P F_m' + Q_m       (m = sample periods since the last
                                                          sample: missing samples bridged)
-    rest test on the window of r = i - lines(x-)        (:mod:`.rest`)
+    rest test on the window of the current, less its     (:mod:`.rest`)
+              own fit of a constant and the lines
     update    nu = i - c x-,  S = c P- c' + R,  K = P- c' / S,  x = x- + K nu,
               P = P- - K S K'
-    a rest    the window's mean current = offset at the window's centre + the lines' mean
-    begins    over the window, within R/N (:meth:`KalmanFilter._window_offset`)
+    a rest    the window's mean current less its fit of the lines = offset at the window's
+    begins    centre, within R/N (:meth:`KalmanFilter._window_offset`)
     at rest   velocity = 0, acceleration = 0, motion current = 0, periodic motion = 0
               (pseudo-measurements, :mod:`.rest`); working point = w (its prior released
               first when the tip moved since the working point was last set:
@@ -19,11 +20,16 @@ its samples; there is no second implementation)::
               rest keeps the starting working point, its rest position); leaving a rest,
               the periodic motion's prior is released (a new motion's amplitude is unknown)
 
-R, the white-noise variance per sample, is measured on the current: the third difference
-i_k - 3 i_{k-1} + 3 i_{k-2} - i_{k-3} has variance 20 R for white noise and passes a current
-at f only as (2 sin(pi f / fs))^6 (4e-6 at 20 Hz, 0.06 at 150 Hz, at 1 kHz), so its square / 20,
-averaged over ``NOISE_AVERAGE_S`` (weights normalised, so the first differences already give
-R; ``current_noise_a`` until then), is R.  Differences across a bridged gap are skipped.
+R, the white-noise variance per sample, is measured on the current less the lines the filter
+holds: the third difference i_k - 3 i_{k-1} + 3 i_{k-2} - i_{k-3} has variance 20 R for white
+noise and passes a current at f only as (2 sin(pi f / fs))^6 (4e-6 at 20 Hz, 0.06 at 150 Hz,
+at 1 kHz), so its square / 20, averaged over ``NOISE_AVERAGE_S`` (weights normalised, so the
+first differences already give R; ``current_noise_a`` until then), is R.  A hum is not small
+there (0.56 at 150 Hz: a 2 % hum with harmonics read a 0.5 nA noise as 3.9 nA), so the lines'
+own third difference is taken off first, as the filter predicts it from its state before the
+four samples (:attr:`KalmanFilter.line_difference`: the phasors turned on; the state after
+them has fitted their noise, and a second's lines taken from it read a 20 nA noise as
+16 nA).  Differences across a bridged gap are skipped.
 The state is held in scaled units (x / scale) so that every entry of P is O(1) whatever the
 sensor (deflections of mm, currents of nA).
 
@@ -66,17 +72,33 @@ class NoiseMeter:
     weight: float = 0.0
     #: samples in a row one period apart (a third difference needs four)
     contiguous: int = 0
+    #: the lines' third difference over the next four samples, as predicted after each of the
+    #: last four (oldest first; empty when no lines are modelled), A
+    ahead: tuple = ()
 
-    def add(self, current_a: float, steps: int, window: RestWindow, alpha: float) -> None:
-        """Take the newest sample (``window`` holds it and the three before)."""
+    def add(self, current_a: float, steps: int, window: RestWindow, alpha: float,
+            lines_next: float | None = None) -> None:
+        """
+        Take the newest sample (``window`` holds it and the three before).
+
+        ``lines_next``: the lines' third difference over the four samples after this one, as
+        the filter predicts it now (A); None: no lines are modelled.
+        """
+        ahead = self.ahead
+        if lines_next is not None:
+            self.ahead = (ahead + (lines_next,))[-4:] if steps == 1 else (lines_next,)
         if steps != 1:
             self.contiguous = 0
             return
         if self.contiguous < 3:
             self.contiguous += 1
             return
+        if lines_next is not None and len(ahead) < 4:
+            return
+        lines_a = ahead[0] if lines_next is not None else 0.0
         w, pos, n = window.samples, window.pos, window.samples.size
-        d = current_a - 3.0 * w[(pos - 2) % n] + 3.0 * w[(pos - 3) % n] - w[(pos - 4) % n]
+        d = (current_a - 3.0 * w[(pos - 2) % n] + 3.0 * w[(pos - 3) % n] - w[(pos - 4) % n]
+             - lines_a)
         value = d * d / 20.0
         if self.weight:
             value = min(value, NOISE_CLIP * self.var_a2)
@@ -157,7 +179,7 @@ class KalmanFilter:
                       else rest_lines_hz)
         self.rest_lines_hz = lines
         self.rest = RestTest.design(cfg.rest_window_s, model.sample_rate_hz,
-                                    cfg.rest_false_alarm, len(lines))
+                                    cfg.rest_false_alarm, lines)
         # one step of each line's phasor e^{-i W_k / fs} (sliding DFT of the rest window)
         self._rot = np.exp(-2j * np.pi * np.asarray(lines) / model.sample_rate_hz)
         self._alpha = 1.0 / (NOISE_AVERAGE_S * model.sample_rate_hz)
@@ -177,14 +199,16 @@ class KalmanFilter:
                 row[j] = s[j]
                 rows.append((row, v2 / (2 * np.pi * f) ** 2))
         self._rest_rows = tuple(rows)
-        # the lines' in-phase mean over the rest window, per state now: a phasor turned back by
-        # tau is (cos W tau) l_I + (sin W tau) l_Q (A = [[0, -W], [W, 0]], statespace._phasors)
-        tau = np.arange(self.rest.n) / model.sample_rate_hz
-        self._window_lines = np.zeros(model.size)
+        # the lines' third difference i_{k+4} - 3 i_{k+3} + 3 i_{k+2} - i_{k+1} from the state
+        # at sample k (module docstring): a phasor turned on by tau is (cos W tau) l_I -
+        # (sin W tau) l_Q (A = [[0, -W], [W, 0]], statespace._phasors)
+        ahead = np.arange(4, 0, -1) / model.sample_rate_hz
+        weights = np.array([1.0, -3.0, 3.0, -1.0])
+        self.line_difference = np.zeros(model.size)
         for k, f in enumerate(model.lines_hz):
             j = model.il + 2 * k
-            self._window_lines[j] = np.mean(np.cos(2 * np.pi * f * tau)) * s[j]
-            self._window_lines[j + 1] = np.mean(np.sin(2 * np.pi * f * tau)) * s[j + 1]
+            self.line_difference[j] = weights @ np.cos(2 * np.pi * f * ahead) * s[j]
+            self.line_difference[j + 1] = -weights @ np.sin(2 * np.pi * f * ahead) * s[j + 1]
 
     @property
     def rotation(self) -> np.ndarray:
@@ -196,12 +220,9 @@ class KalmanFilter:
         Update (x, P) with the window's mean current as a measurement of the offset.
 
         Applied when a rest begins: the rest test has just found the window's N samples to be
-        offset + lines + white noise, so their mean is the offset at the window's centre,
-        b - d (N - 1) / (2 fs), plus the lines' mean over the window, within R / N.  The
-        lines are the filter's own (each phasor turned back over the window,
-        :attr:`_window_lines`, with its uncertainty); where the model has none, the window's
-        fit of the lines it tests is taken off (its DFT fit leaks a fraction of a hum of
-        tens of nA into the mean: 0.1 nA, three times the mean's noise at 0.5 nA).  The
+        offset + lines + white noise, so the constant of its least-squares fit (:mod:`.rest`)
+        is the offset at the window's centre, b - d (N - 1) / (2 fs), within R / N (the
+        fit's lines add 1e-4 of it for three lines of 50.22 Hz in 0.2 s).  The
         filter has used these samples already, under its motion model, which takes little of
         b from them (a steady current is also a slow motion: a still start leaves P_b at its
         prior); the information on b it took, 1/P_b now less 1/P_b before the window's first
@@ -214,10 +235,10 @@ class KalmanFilter:
         info = n / noise - (1.0 / (float(P[m.ib, m.ib]) * sb * sb) - 1.0 / first_var)
         if info <= 0.0:
             return x, P
-        row = self._window_lines.copy()
+        row = np.zeros(m.size)
         row[m.ib] = sb
         row[m.ib + 1] = -float(m.scale[m.ib + 1]) * (n - 1) / (2.0 * m.sample_rate_hz)
-        mean = (window.total / n if m.lines_hz else float(window.residuals(0).mean()))
+        mean = float(window.residuals(0).mean())
         return scalar_update(x, P, row, mean, 1.0 / info)[:2]
 
     def initial_state(self) -> FilterState:
@@ -260,6 +281,7 @@ class KalmanFilter:
         iw, ib = m.iw, m.ib
         sw, sb = float(m.scale[iw]), float(m.scale[ib])
         c, rows, rot = m.c, self._rest_rows, self._rot
+        d3, lined = self.line_difference, bool(m.lines_hz)
         x, P, still, moved, samples = state.x, state.P, state.still, state.moved, state.samples
         meter, win, onset, hold = state.noise, state.window, state.onset, state.hold_off
         chi, blocks, zs, zn = state.innovations
@@ -282,7 +304,7 @@ class KalmanFilter:
                 verdict, hold = False, hold - 1
             else:
                 win.push(yk, None if not (samples and rot.size) else rot if sk == 1
-                         else rot ** sk)
+                         else rot ** sk, sk)
                 verdict = win.judge(self.rest, yk, float(x[ib]) * sb,
                                     float(P[ib, ib]) * sb * sb, meter.var_a2, still)
             was = still
@@ -302,7 +324,7 @@ class KalmanFilter:
                 if zn == block:
                     chi, blocks, zs, zn = chi + zs * zs / zn, blocks + 1, 0.0, 0
             if not held:
-                meter.add(yk, sk, win, self._alpha)
+                meter.add(yk, sk, win, self._alpha, float(d3 @ x) if lined else None)
             if begins:                  # what the window says of the offset
                 x, P = self._window_offset(x, P, win, meter.var_a2)
             if still:                   # the rest pseudo-measurements (velocity, ... = 0)
