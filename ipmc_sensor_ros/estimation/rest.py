@@ -24,15 +24,15 @@ level ``rest_false_alarm`` decide:
 
 and every sample of the window must agree with rest on its own (a motion that starts ends the
 rest at its first telling sample, before the pseudo-measurements below could push its current
-into the offset; ``RestTest.sample_ok``): its innovation z_k = (r_k - b_k) / sqrt(R + P_k)
-(r_k: the sample less the window's fit of the lines)
-against the offset b_k (variance P_k) a still sensor would have, from the filter's own b and
-P_b and then learned from each sample that agreed (a scalar Kalman filter of the offset), is
-within chi2_1 and its two-sided CUSUM within the level for the same false-alarm rate.  Under
-rest these innovations are independent N(0, 1), so an offset not learned yet is one offset,
-not evidence summed sample by sample; at rest the filter itself is that still sensor's filter,
-and its b and P_b are used.  The window's first samples are tested once the window is full,
-against its fit of the lines (before it a hum would fail every sample).
+into the offset; ``RestTest.sample_ok``): its innovation z_k = (r_k - b_k) / sqrt(R + P_k),
+r_k the sample less the window's fit of the lines, against the offset b_k (variance P_k) a
+still sensor would have, from the filter's own b and P_b and then learned from each sample
+that agreed (a scalar Kalman filter of the offset), is within chi2_1 and its two-sided CUSUM
+within the level for the same false-alarm rate.  Under rest these innovations are independent
+N(0, 1), so an offset not learned yet is one offset, not evidence summed sample by sample; at
+rest the filter itself is that still sensor's filter, and its b and P_b are used.  The
+window's first samples are tested once the window is full, against its fit of the lines
+(before it a hum would fail every sample).
 
 When all pass, the filter applies the zero-velocity pseudo-measurements (as zero-velocity
 updates in foot-mounted inertial navigation): the tip velocity and the motion's current are
