@@ -43,7 +43,7 @@ def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> Fil
     phases[age] = new.rotation[None, :] ** -np.arange(n)[:, None]
     return replace(out, window=replace(win.copy(), line_sums=win.samples @ phases,
                                        phase=np.ones(len(new.rest_lines_hz), complex),
-                                       phases=phases))
+                                       phases=phases, contiguous=n))
 
 
 def carry_back(old: KalmanFilter, new: KalmanFilter, state: FilterState):
