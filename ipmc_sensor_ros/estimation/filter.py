@@ -217,7 +217,7 @@ class KalmanFilter:
 
     def _window_offset(self, x, P, window: RestWindow, noise):
         """
-        Update (x, P) with the window's mean current as a measurement of the offset.
+        Update (x, P) with the window's fitted constant as a measurement of the offset.
 
         Applied when a rest begins: the rest test has just found the window's N samples to be
         offset + lines + white noise, so the constant of its least-squares fit (:mod:`.rest`)

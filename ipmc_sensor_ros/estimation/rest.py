@@ -219,9 +219,9 @@ class RestWindow:
 
     def fit(self, gram_inv: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """
-        Return (theta, A'r): the least-squares fit of a constant and the lines (module docstring).
+        Return (theta, A'i): the least-squares fit of a constant and the lines (module docstring).
 
-        theta = [mean, (cos, -sin) of each line], the times from the newest sample (A'r is the
+        theta = [mean, (cos, -sin) of each line], the times from the newest sample (A'i is the
         sliding DFT turned to the newest sample, as reals); ``gram_inv``: (A'A)^-1 for a window
         without a gap (None: formed from the phases).
         """
