@@ -93,7 +93,7 @@ def test_the_onset_is_the_older_side_after_its_last_zero():
 def test_under_hum_a_rest_ends_only_where_the_tip_moves(monkeypatch):
     # 2 % hum of the peak current on the big sample at 0.5 nA (50.22 Hz: 10.04 periods in
     # the 0.2 s window): the window's least-squares line fit leaves the noise, so a rest ends
-    # at a move and nowhere else (a sliding DFT's leak sat at the spread's threshold: 120
+    # at a move and nowhere else (a sliding DFT's leak sat at the spread's threshold: 1,564
     # ends in these 20 s), and each end is started again at most once
     from ipmc_sensor_ros.estimation import kalman as K
 

@@ -71,8 +71,7 @@ def test_line_fit_is_least_squares_when_the_window_is_not_whole_periods(gap_at):
     holds 10.04 periods) over a 0.5 nA noise and a 6 nA offset, 1234 samples; with a gap of
     3 periods inside the last window or none.  The fit's residuals equal numpy's lstsq on the
     samples' times (to 1e-6 of the noise: rounding of the sliding sums), the constant is the
-    offset within 5 sigma of R/N, and the still window passes (a sliding DFT's leak read up to
-    10 x the spread's limit on windows of that record).
+    offset within 5 sigma of R/N, and the still window passes.
     """
     rng = np.random.default_rng(5)
     lines = np.array([50.22, 100.44, 150.66])

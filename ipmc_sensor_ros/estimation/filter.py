@@ -204,7 +204,7 @@ class KalmanFilter:
         # (sin W tau) l_Q (A = [[0, -W], [W, 0]], statespace._phasors)
         ahead = np.arange(4, 0, -1) / model.sample_rate_hz
         weights = np.array([1.0, -3.0, 3.0, -1.0])
-        self.line_difference = np.zeros(model.size)
+        self.line_difference = np.zeros(model.size) if model.lines_hz else None
         for k, f in enumerate(model.lines_hz):
             j = model.il + 2 * k
             self.line_difference[j] = weights @ np.cos(2 * np.pi * f * ahead) * s[j]
@@ -281,7 +281,7 @@ class KalmanFilter:
         iw, ib = m.iw, m.ib
         sw, sb = float(m.scale[iw]), float(m.scale[ib])
         c, rows, rot = m.c, self._rest_rows, self._rot
-        d3, lined = self.line_difference, bool(m.lines_hz)
+        d3 = self.line_difference
         x, P, still, moved, samples = state.x, state.P, state.still, state.moved, state.samples
         meter, win, onset, hold = state.noise, state.window, state.onset, state.hold_off
         chi, blocks, zs, zn = state.innovations
@@ -324,7 +324,7 @@ class KalmanFilter:
                 if zn == block:
                     chi, blocks, zs, zn = chi + zs * zs / zn, blocks + 1, 0.0, 0
             if not held:
-                meter.add(yk, sk, win, self._alpha, float(d3 @ x) if lined else None)
+                meter.add(yk, sk, win, self._alpha, None if d3 is None else float(d3 @ x))
             if begins:                  # what the window says of the offset
                 x, P = self._window_offset(x, P, win, meter.var_a2)
             if still:                   # the rest pseudo-measurements (velocity, ... = 0)

@@ -63,8 +63,9 @@ class RestTest:
     spread_limit: float
     level_limit: float
     cusum_limit: float = math.inf
-    #: (A'A)^-1 of the window's fit when it holds no gap (module docstring)
-    gram_inv: np.ndarray = field(default_factory=lambda: np.ones((1, 1)), compare=False)
+    #: (A'A)^-1 of the window's fit when it holds no gap (module docstring; None: formed
+    #: from the window's phases each time)
+    gram_inv: np.ndarray | None = field(default=None, compare=False)
 
     def sample_ok(self, r: float, track: tuple | None, offset_a: float, offset_var_a2: float,
                   noise_var_a2: float, at_rest: bool = False) -> tuple[bool, tuple | None]:
