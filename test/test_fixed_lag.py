@@ -71,18 +71,24 @@ def periodic_after_rest():
     return t, w, daq_current(MODEL, t, w, noise_fraction=0.02, seed=3)
 
 
-def test_the_smoothers_pass_back_through_two_changes_at_one_sample(reduced, monkeypatch):
+def test_the_smoothers_pass_back_through_the_changes_of_line_and_motion(reduced, monkeypatch):
     """
-    A periodic model taken from the start of a stretch where the line changed.
+    Each model change takes over from the start of its stretch; the smoothers follow it.
 
-    A 1 Hz sine moving since power-on, 1 % noise, a 50 Hz hum from 1.2 s: at 0.5 s the
-    nominal lines go (10 states), at the 2 s check the line is measured (16), and the 1 Hz
-    model taken at 4 s starts from the stretch that began there (22).  The smoothers pass
-    back through both changes at once (carry.chain_back); with only the second they
-    failed on the state sizes (the offline smoother raised).
+    A 1 Hz sine moving since power-on, 1 % noise, a 50 Hz hum from 1.2 s: at the 0.5 s check
+    the nominal lines go (10 states, from the start), at the 2 s check the line is measured
+    (16, from the start of its stretch at 1 s) and at the 3 s check measured again (from 2
+    s), and the 1 Hz model taken at 4 s starts from the stretch that began at 2 s (22): it
+    replaces the line's part there.  The fixed-lag smoother and the offline one pass back
+    through the same changes.
     """
-    chained, chain = [], carry.chain_back
-    monkeypatch.setattr(carry, 'chain_back', lambda *a: chained.append(1) or chain(*a))
+    begun = []
+    begin = carry.Changes.begin
+
+    def spy(self, filt, state, old, old_state):
+        begun.append((state.samples, filt.model.size))
+        return begin(self, filt, state, old, old_state)
+    monkeypatch.setattr(carry.Changes, 'begin', spy)
     t = np.arange(6000) / FS
     w = 1e-3 * np.sin(2 * np.pi * t + 0.3)
     i = daq_current(MODEL, t, w, noise_fraction=0.01, seed=3)
@@ -91,7 +97,9 @@ def test_the_smoothers_pass_back_through_two_changes_at_one_sample(reduced, monk
     live = k.estimate(i)
     held = np.concatenate([p.deflection_m for p in _drain(k) + _drain(k, flush=True)])
     whole = KalmanEstimator(reduced, FS).smooth(i)
-    assert chained and k.model.motion_hz == pytest.approx(1.0, rel=0.01)
+    assert k.model.motion_hz == pytest.approx(1.0, rel=0.01)
+    changes = [(0, 10), (1000, 16), (2000, 16), (2000, 22)]
+    assert begun == changes + changes             # the live run (the lag's), the offline one
     assert np.max(np.abs(held - whole.deflection_m)) <= 1e-12     # the same passes
 
     def err(x, part):

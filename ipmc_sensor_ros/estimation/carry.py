@@ -13,7 +13,7 @@ import numpy as np
 
 from .filter import FilterState, KalmanFilter
 
-__all__ = ['carry_state', 'carry_back', 'chain_back', 'link_change']
+__all__ = ['carry_state', 'carry_back', 'Changes']
 
 
 def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> FilterState:
@@ -58,41 +58,29 @@ def carry_back(old: KalmanFilter, new: KalmanFilter, state: FilterState):
     return _carried(old.model, new.model, state.x, state.P, joint=True)[2]
 
 
-def chain_back(first, middle: FilterState, second):
+class Changes:
     """
-    Return the :func:`carry_back` of two changes at one sample, as one.
+    The live filter's model changes, as the offline smoother needs them.
 
-    ``first`` is into the model that started from ``middle`` there, ``second`` out of it (a
-    periodic model taken from the start of a stretch where the mains line changed): back
-    through both, J = J_1 J_2 with J_1 = C_1 P_middle^-1, so (x_1 + J_1 (x_2 - x_middle),
-    P_1 + J_1 (P_2 - P_middle) J_1', J_1 C_2).
+    ``segments``: (first sample, filter, the state it started from, :func:`carry_back` or
+    None) of each model the filter ran, kept only for the offline smoother's own run (None:
+    not kept).  Every change takes over from a state the filter had before any change there
+    (the start of a stretch, where a motion began), and filters every sample since again: so
+    a change drops the segments from its first sample on, an earlier change at that sample
+    included.
     """
-    x1, P1, C1 = first
-    x2, P2, C2 = second
-    J = np.linalg.lstsq(middle.P, C1.T, rcond=None)[0].T      # P_middle may be singular
-    return x1 + J @ (x2 - middle.x), P1 + J @ (P2 - middle.P) @ J.T, J @ C2
 
+    def __init__(self, segments: list | None = None):
+        self.segments = segments
 
-def link_change(changes: dict, state: FilterState, back) -> tuple:
-    """
-    Return the smoothers' link (``state``, ``back``) of a model change at ``state.samples``.
-
-    ``changes`` maps the samples of the last changes to their links; this one is noted in it.
-    A change at the sample of an earlier one (a periodic model taken from the start of a
-    stretch where the mains line changed) passes back through both (:func:`chain_back`), so
-    the smoothers drop the earlier one's part; the changes after it are forgotten (a span
-    from here filtered their samples again), and only the last three are kept (a span
-    reaches back two stretches).
-    """
-    n = state.samples
-    if n in changes:
-        back = chain_back(changes[n][1], changes[n][0], back)
-    link = (state.copy(), back)
-    kept = [(k, v) for k, v in changes.items() if k < n][-3:]
-    changes.clear()
-    changes.update(kept)
-    changes[n] = link
-    return link
+    def begin(self, filt, state: FilterState, old, old_state: FilterState) -> tuple:
+        """Note that ``filt`` runs on from ``state``, carried from ``old``'s ``old_state``."""
+        link = (state.copy(), carry_back(old, filt, old_state))
+        if self.segments is not None:
+            n = state.samples
+            self.segments = [seg for seg in self.segments if seg[0] < n]
+            self.segments.append((n, filt, *link))
+        return link
 
 
 def _carried(mo, mn, x_scaled, P_scaled, joint: bool):

@@ -10,8 +10,9 @@ It joins the model (:mod:`.statespace`), filter (:mod:`.filter`), smoother
 run the same recursion.  The mains line (``mains_hz``: ``'auto'``, 50, 60 or 0 = none) is
 measured every ``CHECK_S`` of data on the last ``LINE_WINDOW_S`` of current, at fixed
 sample counts (so the result does not depend on how the stream is cut into blocks); when it
-appears, or moves by more than ``LINE_RETUNE_HZ``, the model is rebuilt with line states at
-the measured frequency and the filter state carried over.
+appears, or moves by more than ``LINE_RETUNE_HZ``, the model with line states at the
+measured frequency takes over from the start of the stretch since the last check, whose
+samples are filtered again (:func:`~.periodic.refilter`).
 
 A periodic motion is measured at the same checks, on the last 1, 2, 4 and 8 s of current
 (:func:`~.motionline.measure_recent`); when two checks in a row say it appeared, went or
@@ -33,14 +34,14 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..lti.reduction import ReducedModel
-from .carry import carry_back, carry_state, link_change
+from .carry import Changes, carry_state
 from .config import EstimatorConfig, parse_mains
 from .core import Estimate
 from .filter import FilterState, ForwardRecord, KalmanFilter
 from .fixed_lag import lag_smoother
 from .lines import NOMINAL_LINES_HZ, measure_line
 from .motionline import MOTION_LONGEST_S, MOTION_PERIODS, measure_recent
-from .onset import restart
+from .onset import due, restart
 from .innovations import explains
 from .periodic import StretchLog, refilter, same_motion
 from .ring import SampleRing
@@ -93,9 +94,7 @@ class KalmanEstimator:
         fs = float(sample_rate_hz)
         self.smoothed_lag_s = float(smoothed_lag_s)
         self._lag = lag_smoother(self.smoothed_lag_s, fs)
-        #: (first sample, filter, state there, carry_back) of each model the live filter
-        #: ran, kept only by the offline smoother's own run (:meth:`smooth`)
-        self._segments: list | None = None
+        self._changes = Changes()       # the segments only for :meth:`smooth`
         # until measured: a line at each nominal frequency (hum at the start must not be
         # taken for an offset), then the measured one
         nominal_line = () if self.mains_hz == 0.0 else self._nominal()
@@ -152,7 +151,6 @@ class KalmanEstimator:
         self._log = StretchLog(self._filter, self._state)
         self._recent = SampleRing(self._window_n)    # on the sample grid: bridged slots too
         self._first_rest_n = None
-        self._changes: dict = {}      # sample -> link of a model change (link_change)
 
     # -- streaming ------------------------------------------------------------------------
     def estimate(self, current_a, steps=None) -> Estimate:
@@ -202,7 +200,7 @@ class KalmanEstimator:
 
     def _restart_motion(self) -> None:
         """Filter a motion that ended a rest again from where it began (:mod:`.onset`)."""
-        if self._state.ended is None or len(self._state.ended[1]) < 2:
+        if not due(self._state):
             return
         held = 0 if self._lag is None else min(len(self._state.ended[1]), self._lag.held)
         start, self._state, rec = restart(self._filter, self._state, held)
@@ -239,29 +237,13 @@ class KalmanEstimator:
             return        # no line: keep what is modelled (the nominal pair only at the start)
         model = StateSpaceModel(self.reduced, self.config, self.sample_rate_hz, f_line or (),
                                 self.model.motion_hz)
-        filt = self._new_filter(model)
-        old, old_state = self._filter, self._state
-        self._filter, self._state = filt, carry_state(old, filt, old_state)
-        link = self._begin_segment(filt, self._state, old, old_state)
-        if self._lag is not None:
-            self._lag.begin(link)
+        self._take_over(self._new_filter(model), self._log.current)    # measured there
 
     def _begin_segment(self, filt, state, old, old_state) -> tuple | None:
-        """
-        Note that ``filt`` runs on from ``state``, carried from ``old``'s ``old_state``.
-
-        Returns the link the smoothers pass back through, (``state``, :func:`carry_back`),
-        or None when neither smoother runs (:meth:`smooth`, ``smoothed_lag_s``); through an
-        earlier change at the same sample too (:func:`~.carry.link_change`).
-        """
-        if self._segments is None and self._lag is None:
+        """Return the smoothers' link of a change (:meth:`~.carry.Changes.begin`), if one runs."""
+        if self._changes.segments is None and self._lag is None:
             return None
-        link = link_change(self._changes, state, carry_back(old, filt, old_state))
-        n = state.samples
-        if self._segments is not None:
-            self._segments = [seg for seg in self._segments if seg[0] < n]
-            self._segments.append((n, filt, *link))
-        return link
+        return self._changes.begin(filt, state, old, old_state)
 
     def _check_motion(self, recent: np.ndarray) -> None:
         """Measure the periodic motion: a model from its span, while it explains the current."""
@@ -274,16 +256,33 @@ class KalmanEstimator:
             return
         filt = self._new_filter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,
                                                 self.model.fundamentals_hz, f0))
+        if not self._take_over(filt, span, lambda run: not f0 or explains(
+                run.now.innovations, run.start.innovations)):
+            self._log.current.measured_hz = 0.0         # refused: it counts as none
+
+    def _take_over(self, filt: KalmanFilter, span, accept=None) -> bool:
+        """
+        Let ``filt`` take over from the start of ``span``, filtered again under it.
+
+        Returns False, changing nothing, when ``accept(run)`` (:func:`~.periodic.refilter`'s
+        result) refuses the run.
+        """
         held = 0 if self._lag is None else min(len(span.y), self._lag.held)
         rec = ForwardRecord.empty(held, filt.model.size) if held else None
-        start, state = refilter(span, filt, rec)
-        if f0 and not explains(state.innovations, start.innovations):
-            self._log.current.measured_hz = 0.0         # refused: it counts as none
-            return
-        link = self._begin_segment(filt, start, span.filter, span.state)
+        run = refilter(span, filt, rec)
+        if accept is not None and not accept(run):
+            return False
+        link = self._begin_segment(filt, run.start, span.filter, span.state)
+        for begun in run.restarts:      # a motion's start in the span: a part from there
+            self._begin_segment(filt, begun, filt, begun)
         if rec is not None:             # the span's samples held are the new model's
             self._lag.replace_newest(filt, rec, link if held == len(span.y) else None)
-        self._filter, self._state = filt, state
+        cur = self._log.current         # what the rest test says of the stretch now
+        cur.rest = cur.rest if span is not cur else bool(run.still.any())
+        if self._first_rest_n is None and run.still.any():
+            self._first_rest_n = run.start.samples + int(np.argmax(run.still))
+        self._filter, self._state = filt, run.now
+        return True
 
     # -- fixed-lag output -------------------------------------------------------------------
     def pop_smoothed(self, flush: bool = False) -> Estimate | None:
@@ -305,9 +304,9 @@ class KalmanEstimator:
         y = np.asarray(current_a, dtype=float)
         st = np.ones(y.size, dtype=np.int64) if steps is None else np.asarray(steps, np.int64)
         live = KalmanEstimator(self.reduced, self.sample_rate_hz, self.config, self.mains_hz)
-        live._segments = [(0, live._filter, live._state.copy(), None)]
+        live._changes.segments = [(0, live._filter, live._state.copy(), None)]
         still = live.estimate(y, st).still
-        return Estimate(*smooth_segments(live._segments, y, st), still)
+        return Estimate(*smooth_segments(live._changes.segments, y, st), still)
 
     # -- state ------------------------------------------------------------------------------
     def get_state(self) -> dict:
@@ -336,7 +335,6 @@ class KalmanEstimator:
         self._state = fs.copy()
         self._recent = SampleRing(recent.size, recent, int(state.get('grid', fs.samples)))
         self._first_rest_n = state.get('first_rest_n')
-        self._changes = {}
 
     def _model_filter(self, line_hz, motion_hz) -> KalmanFilter:
         """Return this filter when its model has these lines and motion, else a new one."""

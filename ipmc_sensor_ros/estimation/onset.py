@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-__all__ = ['Onset', 'follow', 'restart']
+__all__ = ['Onset', 'follow', 'restart', 'due']
 
 
 @dataclass(slots=True)
@@ -74,6 +74,11 @@ def follow(onset: Onset | None, track: tuple | None, y: float, step: int, snapsh
     return Onset(*sides)
 
 
+def due(state) -> bool:
+    """Tell whether a sample that ended the rest left a motion's start to filter again."""
+    return state.ended is not None and len(state.ended[1]) >= 2
+
+
 def restart(filt, state, held: int):
     """
     Filter the motion's first samples again from where it began.
@@ -92,5 +97,5 @@ def restart(filt, state, held: int):
     start = replace(state, x=x, P=P, still=True, moved=moved, samples=samples, onset=None,
                     ended=None, hold_off=len(ys), innovations=innovations)
     record = ForwardRecord.empty(held, filt.model.size) if held else None
-    _, now = refilter(Stretch(filt, start, ys, steps), filt, record)
+    now = refilter(Stretch(filt, start, ys, steps), filt, record).now
     return start, now, record

@@ -29,14 +29,18 @@ does not explain counts as one without periodic motion, and the model goes from 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
+from typing import NamedTuple
+
+import numpy as np
 
 from .carry import carry_state
 from .filter import FilterState, ForwardRecord, KalmanFilter
 from .innovations import explains
 from .motionline import MOTION_WOBBLE
+from .onset import due, restart
 
-__all__ = ['Stretch', 'StretchLog', 'refilter', 'same_motion']
+__all__ = ['Stretch', 'StretchLog', 'Refiltered', 'refilter', 'same_motion']
 
 
 def same_motion(a_hz: float, b_hz: float) -> bool:
@@ -150,21 +154,56 @@ class StretchLog:
         return cur
 
 
+class Refiltered(NamedTuple):
+    """What :func:`refilter` returns."""
+
+    #: the new model's state at the start of the span (carried there)
+    start: FilterState
+    #: its state now, at the end of the span
+    now: FilterState
+    #: the states each motion that ended a rest in the span was filtered again from
+    restarts: list
+    #: per sample of the span: the rest test found it still (as published live)
+    still: np.ndarray
+
+
 def refilter(span: Stretch, filt: KalmanFilter,
-             record: ForwardRecord | None = None) -> tuple[FilterState, FilterState]:
+             record: ForwardRecord | None = None) -> Refiltered:
     """
-    Return the states of ``filt`` taking over at the start of ``span``: there, and now.
+    Filter the samples of ``span`` again under ``filt``, taking over at its start.
 
     The span's state is carried onto ``filt`` (:func:`~.carry.carry_state`), or taken as it
     is when the span ran under ``filt`` (a motion's start filtered again: :mod:`.onset`).
+    The samples run through the live rules: a motion that ends a rest is filtered again from
+    where it began (:func:`~.onset.restart`), so the state now is the one the live filter
+    would have had under ``filt`` from the span's start.
 
     ``record``: filled with the forward pass over the span's last ``len(record)`` samples
     (what a fixed-lag smoother still holds of it).
     """
     start = span.state if span.filter is filt else carry_state(span.filter, filt, span.state)
-    n_rec = 0 if record is None else record.x_post.shape[0]
-    cut = len(span.y) - n_rec
-    state = filt.run(start, span.y[:cut], span.steps[:cut])[0] if cut else start
-    if n_rec:
-        state = filt.run(state, span.y[cut:], span.steps[cut:], record=record)[0]
-    return start, state
+    n = len(span.y)
+    cut = n - (0 if record is None else record.x_post.shape[0])
+    state, a, restarts, flags = start, 0, [], []
+    while a < n:
+        b = cut if a < cut else n
+        state, w, _, still = filt.run(state, span.y[a:b], span.steps[a:b],
+                                      record=None if a < cut else record, offset=a - cut,
+                                      until_motion=True)
+        flags.append(still)
+        a += w.size
+        if due(state):
+            held = min(len(state.ended[1]), max(a - cut, 0))
+            begun, state, rows = restart(filt, state, held)
+            restarts.append(begun)
+            if rows is not None:
+                _put(record, a - cut - held, rows)
+    return Refiltered(start, state, restarts,
+                      np.concatenate(flags) if flags else np.zeros(0, dtype=bool))
+
+
+def _put(record: ForwardRecord, at: int, rows: ForwardRecord) -> None:
+    """Write ``rows`` into ``record`` from its row ``at`` on."""
+    n = rows.x_post.shape[0]
+    for f in fields(ForwardRecord):
+        getattr(record, f.name)[at:at + n] = getattr(rows, f.name)
