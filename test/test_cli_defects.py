@@ -227,3 +227,14 @@ def test_an_interval_prints_with_the_digits_that_tell_its_ends_apart():
         texts = [f'{x:.{d}g}' for x in (lo, value, hi)]
         assert 4 <= d <= 10
         assert len(set(texts)) == 3 or d == 10        # a gap below 1e-10 relative: capped
+
+
+def test_an_unknown_flag_is_named_with_the_verbs_usage_and_a_near_flag(tmp_path, capsys):
+    """``estimate ... --casual``: the verb's usage, the flag, and ``--causal`` suggested."""
+    with pytest.raises(SystemExit) as exc:
+        main(['estimate', str(tmp_path / 'x.csv'), '--out', str(tmp_path / 'o'), '--casual'])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert 'usage: ipmc-model estimate' in err
+    assert 'unrecognized arguments: --casual (did you mean --causal?)' in err
+    assert not (tmp_path / 'o').exists()

@@ -11,10 +11,10 @@ Convention, for every document:
     ``examples/`` and ``test/data/`` (so ``config/estimator.yaml`` works as in a checkout),
     with ``ipmc-model``, the node executables and ``python`` on PATH running this checkout's
     code, and a ROS_DOMAIN_ID of its own (the documents run side by side).  Each command must
-    exit 0 without a traceback.  ``timeout -s INT N <node>`` (for the reader: run the node
-    for N s, then SIGINT) is run until the node logs "ready", then sent SIGINT, and must exit
-    0: a node that fails to start, or does not stop on SIGINT, fails the test.  Keep the
-    commands small: short records, few frequencies.
+    exit 0 without a traceback.  ``timeout --preserve-status -s INT N <node>`` (for the
+    reader: run the node for N s, then SIGINT, and exit with its status) is run until the node
+    logs "ready", then sent SIGINT, and must exit 0: a node that fails to start, or does not
+    stop on SIGINT, fails the test.  Keep the commands small: short records, few frequencies.
 ``` ```bash ``` / ``` ```sh ```
     Not run.  The first line is a comment saying why (``# needs a ROS 2 installation``,
     ``# not run by the doc test: ...``).  A block that uses ``ros2 run`` (or any ``ros2``
@@ -100,12 +100,12 @@ def _workdir(tmp: Path, domain: int) -> dict:
                 PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(domain), MPLBACKEND='Agg')
 
 
-_NODE_RUN = re.compile(r'^timeout -s INT \d+ ')
+_NODE_RUN = re.compile(r'^timeout --preserve-status -s INT \d+ ')
 
 
 def _run_node(cmd: str, cwd: Path, env: dict, where: str) -> None:
     """
-    ``timeout -s INT N <node>``: start the node, and once it is ready, send SIGINT.
+    ``timeout --preserve-status -s INT N <node>``: start the node; once it is ready, SIGINT.
 
     Waiting for "ready" instead of N seconds keeps the test independent of the machine's
     speed; the node must then exit 0 without a traceback.

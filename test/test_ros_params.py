@@ -120,3 +120,28 @@ def test_a_params_file_with_no_section_for_the_node_is_said(context, tmp_path, c
     P.check_unknown_overrides(node, SPECS, args, default_name='ipmc_estimator')
     assert 'no section applies' not in capfd.readouterr().err
     node.destroy_node()
+
+
+@pytest.mark.parametrize('text, value', [('22e-3', 0.022), ('1', None)])
+def test_the_workbench_reads_a_params_file_as_the_node_does(context, tmp_path, text, value):
+    """
+    A params file means the same to ``--params`` as to the node.
+
+    ``22e-3`` is a number to the node (YAML 1.2) and to ``--params``; ``1`` is an integer,
+    which the node refuses for a double parameter, and so does ``--params``.
+    """
+    from ipmc_sensor_ros.interface.specs import ESTIMATOR_SPECS, load_params_file
+
+    spec = [s for s in ESTIMATOR_SPECS if s.name == 'length_m']
+    node, args = _node(context, tmp_path, f'ipmc_estimator:\n  ros__parameters:\n'
+                       f'    length_m: {text}\n')
+    if value is None:
+        with pytest.raises(Exception, match='INTEGER'):
+            P.declare(node, spec)
+        with pytest.raises(P.ParameterError, match=r"'length_m' = 1 is an integer.*1\.0"):
+            load_params_file(tmp_path / 'p.yaml')
+    else:
+        P.declare(node, spec)
+        assert P.read(node, spec)['length_m'] == value
+        assert load_params_file(tmp_path / 'p.yaml')['length_m'] == value
+    node.destroy_node()

@@ -10,6 +10,7 @@ vocabulary is in :mod:`.args`.
 from __future__ import annotations
 
 import argparse
+import difflib
 import sys
 
 from . import data_verbs, info_verbs, model_verbs
@@ -40,12 +41,27 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest='verb', required=True, metavar='VERB')
     for module in (data_verbs, model_verbs, info_verbs):
         module.add_parsers(sub, HelpFormatter)
+    parser.set_defaults(verbs=sub.choices)
     return parser
+
+
+def _refuse_unknown(args: argparse.Namespace, extra: list[str]) -> None:
+    """Exit 2 with the verb's usage, naming each unknown argument (and a near flag)."""
+    verb = args.verbs[args.verb]
+    flags = [o for a in verb._actions for o in a.option_strings]
+    said = []
+    for token in extra:
+        near = difflib.get_close_matches(token.split('=')[0], flags, n=1, cutoff=0.6)
+        said.append(f'{token} (did you mean {near[0]}?)' if near and token.startswith('-')
+                    else token)
+    verb.error('unrecognized arguments: ' + ' '.join(said))
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        _refuse_unknown(args, extra)
     try:
         check_outputs(args)
         return int(args.func(args) or 0)

@@ -356,6 +356,9 @@ def load_params_file(path: str | Path, node_name: str = 'ipmc_estimator',
             if name not in by_name:
                 raise ParameterError(f'{path}: unknown parameter {short_repr(name)} in section '
                                      f"'{key}' (known: {sorted(by_name)})")
+            if by_name[name].kind is float and type(value) is int:    # as the node's rcl
+                raise ParameterError(f"{path}: parameter '{name}' = {value} is an integer; a "
+                                     f'ROS 2 node refuses it for a double: write {value}.0')
             values[name] = _check_value(by_name[name], value, str(path))
     if not found:
         raise ParameterError(f"{path}: no section for node '{node_name}' (expected one of "

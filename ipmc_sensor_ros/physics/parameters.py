@@ -320,7 +320,7 @@ def read_yaml(path: str | Path, what: str = 'YAML file') -> Any:
         raise ParameterError(f'{path}: {what} is not UTF-8 (or UTF-16 with a byte-order mark) '
                              f'text: undecodable byte at offset {exc.start}') from None
     try:
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=_loader())
     except yaml.YAMLError as exc:
         mark = getattr(exc, 'problem_mark', None)
         line = f':{mark.line + 1}' if mark is not None else ''
@@ -329,6 +329,25 @@ def read_yaml(path: str | Path, what: str = 'YAML file') -> Any:
         raise ParameterError(f'{path}{line}: not valid YAML for a {what}: {problem}') from None
     except RecursionError:
         raise ParameterError(f'{path}: {what} is nested too deeply') from None
+
+
+def _loader():
+    """
+    Return ``yaml.SafeLoader`` reading YAML 1.2 floats as numbers, as ROS 2 (rcl) does.
+
+    PyYAML follows YAML 1.1, where ``22e-3`` and ``1.5e3`` (no dot, or no exponent sign) are
+    strings: a params file the node reads would be refused here.
+    """
+    import re
+
+    import yaml
+
+    class Loader(yaml.SafeLoader):
+        pass
+
+    Loader.add_implicit_resolver('tag:yaml.org,2002:float', re.compile(
+        r'^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$'), list('-+0123456789.'))
+    return Loader
 
 
 def load_yaml(path: str | Path) -> tuple[MaterialParameters, Geometry | None]:

@@ -250,7 +250,8 @@ def read_bag(path: PathLike, current_topic: str = 'current',
             if side_geometry.name and not getattr(geometry, 'name', ''):
                 geometry = geometry.replace(name=side_geometry.name)   # the sample's name
     if geometry is None:
-        raise DataFormatError(where, None, 'no geometry: pass geometry= or put an '
+        raise DataFormatError(where, None, 'no geometry: give it (ipmc-model: --geometry '
+                              'L,W,T, e.g. 22mm,7mm,360um; Python: geometry=) or put an '
                               f"{SIDECAR_NAME} sidecar with 'geometry: {{length_m, width_m, "
                               "thickness_m}' (metres) next to the bag")
     if not isinstance(geometry, Geometry):

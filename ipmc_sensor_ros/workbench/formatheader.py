@@ -213,11 +213,20 @@ def validate_header(path, header: TextHeader, expected_format: str,
         )
     col_line = header.column_line
     _geometry_in_other_units(path, header, numbers)
+    extra = {k: v for k, v in header.values.items() if k not in RESERVED_KEYS}
+    for key in extra:               # a misspelt key is named before it is missed
+        near = difflib.get_close_matches(key, RESERVED_KEYS, n=1, cutoff=NEAR_MISS)
+        if near:
+            raise DataFormatError(path, header.lines.get(key), f'header key {key!r} is not '
+                                  f'one of the format; did you mean {near[0]!r}? (keys that '
+                                  'are not near one are kept as notes)')
     missing = [k for k in GEOMETRY_KEYS if k not in header.values]
     if missing:
+        example = {'length_m': '0.022', 'width_m': '0.007', 'thickness_m': '0.00036'}
         raise DataFormatError(path, col_line, 'missing required header key(s) '
                               + ', '.join(f"'{k}'" for k in missing)
-                              + " (geometry in metres, e.g. '# length_m: 0.022')")
+                              + f" (geometry in metres, e.g. '# {missing[0]}: "
+                              + f"{example[missing[0]]}')")
     sample = header.values.get('sample', '')
     try:
         geometry = Geometry(numbers['length_m'], numbers['width_m'], numbers['thickness_m'],
@@ -231,13 +240,6 @@ def validate_header(path, header: TextHeader, expected_format: str,
     except ParameterError as exc:
         raise DataFormatError(path, _parameter_line(header, exc, tuple(known)),
                               f'implausible known value: {exc}') from None
-    extra = {k: v for k, v in header.values.items() if k not in RESERVED_KEYS}
-    for key in extra:
-        near = difflib.get_close_matches(key, RESERVED_KEYS, n=1, cutoff=NEAR_MISS)
-        if near:
-            raise DataFormatError(path, header.lines.get(key), f'header key {key!r} is not '
-                                  f'one of the format; did you mean {near[0]!r}? (keys that '
-                                  'are not near one are kept as notes)')
     return sample, geometry, known, numbers, extra
 
 
