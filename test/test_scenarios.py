@@ -180,3 +180,14 @@ def test_quantisation_noise_and_model_text():
     residual = r.grid_current_a - clean              # white noise + quantisation error
     expected = math.sqrt(r.noise_std_a ** 2 + r.lsb_a ** 2 / 12)
     assert abs(np.std(residual) / expected - 1) < 0.02          # 60,000 samples: 0.3 % std
+
+
+def test_the_offset_steps_once_where_the_amplifier_is_re_zeroed():
+    """``slim-offset-step``: one step of 2-5 nA at 10-20 s, in the record's offset column."""
+    r = build('slim-offset-step', 0)
+    t = r.time_s - r.time_s[0]
+    jumps = np.flatnonzero(np.abs(np.diff(r.offset_a)) > 1e-12)
+    assert jumps.size == 1
+    k = int(jumps[0])
+    assert 10.0 <= t[k + 1] <= 20.0
+    assert 2e-9 <= abs(r.offset_a[k + 1] - r.offset_a[k]) <= 5e-9

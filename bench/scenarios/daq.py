@@ -29,6 +29,8 @@ class Daq:
         RMS over the record (combined in quadrature).
     offset_a, offset_drift_a_per_s, offset_walk_a_per_sqrt_s : offset at t = 0, its linear
         drift, and a random walk on top (A per square root of second).
+    offset_steps : (time_s, step_a) pairs: the offset steps by step_a at time_s (an amplifier
+        re-zeroed, a range switched).
     mains_hz : hum fundamental (e.g. 50.17), 0 for none; ``hum_fraction`` of the clean
         current's RMS (``hum_of='rms'``) or peak (``'peak'``); ``hum_harmonics``: amplitudes of
         the 2nd and 3rd harmonics relative to the fundamental; ``hum_phases_rad``: 3 phases.
@@ -48,6 +50,7 @@ class Daq:
     offset_a: float = 0.0
     offset_drift_a_per_s: float = 0.0
     offset_walk_a_per_sqrt_s: float = 0.0
+    offset_steps: tuple = ()
     mains_hz: float = 0.0
     hum_fraction: float = 0.0
     hum_of: str = 'rms'
@@ -126,6 +129,8 @@ class Record:
 
 def _offset(daq: Daq, t: np.ndarray, rng) -> np.ndarray:
     b = daq.offset_a + daq.offset_drift_a_per_s * t
+    for time_s, step_a in daq.offset_steps:
+        b = b + step_a * (t >= time_s)
     if daq.offset_walk_a_per_sqrt_s:
         dt = 1.0 / daq.sample_rate_hz
         steps = rng.normal(0.0, daq.offset_walk_a_per_sqrt_s * math.sqrt(dt), t.size)

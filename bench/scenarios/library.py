@@ -167,6 +167,20 @@ def _free_vibration(rng):
     return Sensor('slim'), motion, Daq(offset_a=10 * NA, noise_fraction=0.01)
 
 
+def _strong_hum(rng):
+    daq = Daq(offset_a=rng.uniform(5, 15) * NA, noise_fraction=rng.uniform(0.005, 0.01),
+              **_hum(rng, 50.0, rng.uniform(0.2, 0.4)))
+    return Sensor('slim'), _crank(rng, 5.0, True), daq
+
+
+def _offset_step(rng):
+    motion = _path(rng, 1.0, 29.5, (2.0, 4.0), 0.4, 1.0 * MM)
+    step = (rng.uniform(10, 20), rng.choice([-1, 1]) * rng.uniform(2, 5) * NA)
+    daq = Daq(offset_a=rng.uniform(3, 10) * NA, noise_a=0.2 * NA, adc_bits=16,
+              offset_steps=(step,))
+    return Sensor('slim'), motion, daq
+
+
 def _hour_drift(rng):
     bursts, steps, t = [], [], rng.uniform(20, 60)
     while t < 3540:
@@ -219,6 +233,12 @@ def _scenarios() -> list[Scenario]:
         Scenario('slim-jitter25-host', 'jitter', 20.0, _jitter25('slim', 5.0, 'host'),
                  'slim, 5 Hz crank from rest, host stamps +-25 % of the period off the DAQ '
                  'clock, 0.2 % dropped rows'),
+        Scenario('slim-strong-hum', 'daq', 20.0, _strong_hum,
+                 'slim, 5 Hz crank from rest, an unshielded lead: hum 20-40 % of the current '
+                 'RMS, 50 Hz +-0.3 Hz with harmonics; noise 0.5-1 %'),
+        Scenario('slim-offset-step', 'daq', 30.0, _offset_step,
+                 'slim, 30 s pick-and-place (0.4 s moves, 2-4 s holds, +-1 mm); the amplifier '
+                 're-zeroed once (offset steps by 2-5 nA at 10-20 s); 0.2 nA, 16 bit'),
         Scenario('narrow-pick-place-2min', 'pick-place', 120.0, _pick_place('narrow', 2, False),
                  'narrow (30 x 5 x 0.2 mm), 2 min pick-and-place, offset drifting 5 -> 25 nA, '
                  '0.5 nA, 16 bit'),
