@@ -122,8 +122,9 @@ def test_short_record_still_reports_accuracy(short_run, tmp_path, capsys):
     out = capsys.readouterr().out
     settle_s = 5 / (2 * np.pi * EstimatorConfig().motion_corner_hz)
     assert 'NRMSE' in out and f'after the first {settle_s:.4g} s' in out
-    value = float(out.split('NRMSE ')[1].split()[0])
-    assert value < 0.05        # 1 % noise; a short record leaves a little more of the transient
+    value = float(out.split('NRMSE ')[1].split()[0])      # printed in %, as the bench's
+    assert out.split('NRMSE ')[1].split()[1] == '%'
+    assert value < 5.0         # 1 % noise; a short record leaves a little more of the transient
 
 
 def test_params_without_geometry_takes_the_header_and_says_so(short_run, tmp_path, capsys):
@@ -198,5 +199,6 @@ def test_estimate_reports_the_level_error_beside_the_nrmse(short_run, tmp_path, 
     assert {'nrmse', 'nrmse_raw', 'mean_error_m', 'start_error_m', 'end_error_m'} <= set(row)
     assert all(np.isfinite(row[k]) for k in ('nrmse_raw', 'start_error_m', 'end_error_m'))
     out = capsys.readouterr().out
-    assert f"as measured (nothing removed): {row['nrmse_raw']:.4f}, level error " \
+    assert f"NRMSE {100 * row['nrmse']:.3g} % (means and linear trends removed)" in out
+    assert f"as measured: {100 * row['nrmse_raw']:.3g} %, level error " \
         f"{row['start_error_m']:+.3g} m -> {row['end_error_m']:+.3g} m" in out

@@ -55,6 +55,10 @@ def test_hidden_effect_ranks_first_and_error_falls(name):
     assert diag.missing_effect == name, diag.summary()
     if name != 'current_offset':
         assert diag.candidates[0].effect == name, diag.summary()
+    # one row per effect: an effect tried in two shapes (hydration_drift) is ranked once, the
+    # shapes that were not cross-validated too
+    names = [c.effect for c in diag.candidates]
+    assert len(names) == len(set(names)), diag.summary()
     best = diag.final
     # "falls at least 3x or to the noise floor": noise floor within 20 % (finite-sample scatter
     # of a 1 % noise estimate over ~90k samples is far below that)

@@ -346,11 +346,10 @@ def _estimate_line(row: dict, values: dict, estimator, t_out, w, measured) -> st
                                                settle=estimator.settling())
     row['nrmse'] = err
     row.update(level)
-    return msg + (f'; NRMSE {err:.4f} = RMS(estimate - measured) / RMS(measured), means and '
-                  f'linear trends removed, over {fmt_time_s(used)} s ({what}); '
-                  f"as measured (nothing removed): {level['nrmse_raw']:.4f}, level error "
-                  f"{level['start_error_m']:+.3g} m -> {level['end_error_m']:+.3g} m (what a "
-                  'reader at rest sees, if the measured deflection is zero at rest)')
+    return msg + (f'; NRMSE {100 * err:.3g} % (means and linear trends removed) over '
+                  f'{fmt_time_s(used)} s ({what}); as measured: '
+                  f"{100 * level['nrmse_raw']:.3g} %, level error "
+                  f"{level['start_error_m']:+.3g} m -> {level['end_error_m']:+.3g} m")
 
 
 def cmd_estimate(args) -> int:

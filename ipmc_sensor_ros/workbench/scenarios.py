@@ -87,7 +87,8 @@ def crank_slider_campaign(true_effects: Sequence = ('surface_resistance',), *,
         geometry = PAPER_SAMPLES[sample] if isinstance(sample, str) else sample
         truth = SensorModel(geometry, material, tuple(true_effects))
         for f in frequencies_hz:
-            t = np.arange(int(round((duration_s + preroll_s) * sample_rate_hz))) / sample_rate_hz
+            k = np.arange(int(round((duration_s + preroll_s) * sample_rate_hz)))
+            t = k / sample_rate_hz
             stim = CrankSlider(float(f), crank_radius_m, rod_length_m)
             w = stim.deflection(t)
             if fidelity == 'field':
@@ -99,7 +100,9 @@ def crank_slider_campaign(true_effects: Sequence = ('surface_resistance',), *,
             else:
                 i = predict_current(truth, t, w)
             keep = t >= preroll_s
-            t, w, i = t[keep] - preroll_s, w[keep], i[keep]
+            # the record's clock from its first sample, by sample count (t - preroll_s carries
+            # rounding noise into the written times: 0.0009999999999998899)
+            t, w, i = (k[keep] - k[keep][0]) / sample_rate_hz, w[keep], i[keep]
             scale = np.std(i)
             i = i + rng.normal(0.0, noise_rel * scale, i.size)
             if hum_rel > 0:

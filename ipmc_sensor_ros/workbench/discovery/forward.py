@@ -32,9 +32,11 @@ def _score_step(state, items):
                         key=lambda c: c.fit.bic)[:s.max_cv]
     state.say(f'step {len(state.steps) + 1}: held-out error of {len(contenders)} contender(s)')
     scored = state.run(job, contenders)
-    others = [c for c in fitted if not any(c is k for k in contenders)]
-    return (rank(merge_shapes(scored, s.tie_tol), s.tie_tol)
-            + sorted(others, key=lambda c: c.error))
+    ranked = merge_shapes(scored, s.tie_tol)
+    shown = {c.effect for c in ranked}          # one shape per effect, in-sample ones too
+    others = merge_shapes([c for c in fitted if not any(c is k for k in contenders)
+                           and c.effect not in shown], s.tie_tol)
+    return rank(ranked, s.tie_tol) + sorted(others, key=lambda c: c.error)
 
 
 def _passes(state, c) -> bool:
