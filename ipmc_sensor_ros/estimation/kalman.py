@@ -277,9 +277,10 @@ class KalmanEstimator:
             self._begin_segment(filt, begun, filt, begun)
         if rec is not None:             # the span's samples held are the new model's
             self._lag.replace_newest(filt, rec, link if held == len(span.y) else None)
-        cur = self._log.current         # what the rest test says of the stretch now
-        cur.rest = cur.rest if span is not cur else bool(run.still.any())
-        if self._first_rest_n is None and run.still.any():
+        rested = bool(run.still.any())
+        if span is self._log.current:   # what the rest test says of the stretch now
+            span.rest = rested
+        if self._first_rest_n is None and rested:
             self._first_rest_n = run.start.samples + int(np.argmax(run.still))
         self._filter, self._state = filt, run.now
         return True

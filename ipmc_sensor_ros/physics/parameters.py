@@ -19,6 +19,7 @@ value (zero or negative length, negative resistance, NaN, ...) raises
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import reprlib
 from dataclasses import dataclass, fields
@@ -331,6 +332,7 @@ def read_yaml(path: str | Path, what: str = 'YAML file') -> Any:
         raise ParameterError(f'{path}: {what} is nested too deeply') from None
 
 
+@functools.cache
 def _loader():
     """
     Return ``yaml.SafeLoader`` reading YAML 1.2 floats as numbers, as ROS 2 (rcl) does.

@@ -102,7 +102,8 @@ def crank_slider_campaign(true_effects: Sequence = ('surface_resistance',), *,
             keep = t >= preroll_s
             # the record's clock from its first sample, by sample count (t - preroll_s carries
             # rounding noise into the written times: 0.0009999999999998899)
-            t, w, i = (k[keep] - k[keep][0]) / sample_rate_hz, w[keep], i[keep]
+            k = k[keep]
+            t, w, i = (k - k[0]) / sample_rate_hz, w[keep], i[keep]
             scale = np.std(i)
             i = i + rng.normal(0.0, noise_rel * scale, i.size)
             if hum_rel > 0:
