@@ -85,8 +85,9 @@ def test_the_onset_is_the_older_side_after_its_last_zero():
         onset = follow(onset, track + (0.0, 1.0), float(k), 1, lambda: next(states))
     assert onset.up == (1, [2.0, 3.0, 4.0], [1, 1, 1])
     assert onset.down == (3, [4.0], [1])
-    state, ys, steps = onset.start(5.0, 2)
-    assert (state, ys, steps) == (1, [2.0, 3.0, 4.0, 5.0], [1, 1, 1, 2])
+    start = onset.start(5.0, 2)
+    assert start[:3] == (1, [2.0, 3.0, 4.0, 5.0], [1, 1, 1, 2])
+    assert start.still and not start.held_still    # from a rest, taken again as motion
     assert Onset().start(5.0, 1) is None       # no zero seen in this rest: nothing to redo
 
 

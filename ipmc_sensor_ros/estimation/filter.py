@@ -20,16 +20,7 @@ its samples; there is no second implementation)::
               rest keeps the starting working point, its rest position); leaving a rest,
               the periodic motion's prior is released (a new motion's amplitude is unknown)
 
-R, the white-noise variance per sample, is measured on the current less the lines the filter
-holds: the third difference i_k - 3 i_{k-1} + 3 i_{k-2} - i_{k-3} has variance 20 R for white
-noise and passes a current at f only as (2 sin(pi f / fs))^6 (4e-6 at 20 Hz, 0.06 at 150 Hz,
-at 1 kHz), so its square / 20, averaged over ``NOISE_AVERAGE_S`` (weights normalised, so the
-first differences already give R; ``current_noise_a`` until then), is R.  A hum is not small
-there (0.56 at 150 Hz: a 2 % hum with harmonics read a 0.5 nA noise as 3.9 nA), so the lines'
-own third difference is taken off first, as the filter predicts it from its state before the
-four samples (:attr:`KalmanFilter.line_difference`: the phasors turned on; the state after
-them has fitted their noise, and a second's lines taken from it read a 20 nA noise as
-16 nA).  Differences across a bridged gap are skipped.
+R, the white-noise variance per sample, is measured by :class:`~.noise.NoiseMeter`.
 The state is held in scaled units (x / scale) so that every entry of P is O(1) whatever the
 sensor (deflections of mm, currents of nA).
 
@@ -46,65 +37,13 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .innovations import Innovations, block_samples
-from .onset import Onset, follow
+from .noise import NOISE_AVERAGE_S, NOISE_FLOOR_A, NoiseMeter
+from .onset import Onset, Start, follow
 from .rest import RestTest, RestWindow
 from .statespace import StateSpaceModel
 
 __all__ = ['FilterState', 'KalmanFilter', 'ForwardRecord', 'NoiseMeter', 'NOISE_AVERAGE_S',
            'NOISE_FLOOR_A']
-
-#: Averaging time of the measured noise variance, s: long against one sample, short against a
-#: record (the noise is known within a second of the start).
-NOISE_AVERAGE_S = 1.0
-#: One sample counts at most this many times the measured variance in the noise average (a
-#: step in the current moves the measured noise by at most this, not by its square).
-NOISE_CLIP = 25.0
-#: The measured noise stays above this, A RMS (below any DAQ's noise; a noise-free record would
-#: otherwise drive the gain to infinity).
-NOISE_FLOOR_A = 1e-12
-
-
-@dataclass(slots=True)
-class NoiseMeter:
-    """The measured white-noise variance per sample (module docstring), A^2."""
-
-    var_a2: float
-    weight: float = 0.0
-    #: samples in a row one period apart (a third difference needs four)
-    contiguous: int = 0
-    #: the lines' third difference over the next four samples, as predicted after each of the
-    #: last four (oldest first; empty when no lines are modelled), A
-    ahead: tuple = ()
-
-    def add(self, current_a: float, steps: int, window: RestWindow, alpha: float,
-            lines_next: float | None = None) -> None:
-        """
-        Take the newest sample (``window`` holds it and the three before).
-
-        ``lines_next``: the lines' third difference over the four samples after this one, as
-        the filter predicts it now (A); None: no lines are modelled.
-        """
-        ahead = self.ahead
-        if lines_next is not None:
-            self.ahead = (ahead + (lines_next,))[-4:] if steps == 1 else (lines_next,)
-        if steps != 1:
-            self.contiguous = 0
-            return
-        if self.contiguous < 3:
-            self.contiguous += 1
-            return
-        if lines_next is not None and len(ahead) < 4:
-            return
-        lines_a = ahead[0] if lines_next is not None else 0.0
-        w, pos, n = window.samples, window.pos, window.samples.size
-        d = (current_a - 3.0 * w[(pos - 2) % n] + 3.0 * w[(pos - 3) % n] - w[(pos - 4) % n]
-             - lines_a)
-        value = d * d / 20.0
-        if self.weight:
-            value = min(value, NOISE_CLIP * self.var_a2)
-        weight = (1.0 - alpha) * self.weight
-        self.var_a2 = max((weight * self.var_a2 + value) / (weight + 1.0), NOISE_FLOOR_A ** 2)
-        self.weight = weight + 1.0
 
 
 @dataclass(slots=True)
@@ -121,18 +60,24 @@ class FilterState:
     samples: int = 0
     #: at rest: where a motion that ends it would have begun (:mod:`.onset`)
     onset: Onset | None = None
-    #: the rest ended at the last sample: ((x, P, moved, samples, innovations) where it began,
-    #: the samples since, their steps)
-    ended: tuple | None = None
-    #: samples still to be taken as motion whatever the rest test says (:func:`.onset.restart`)
+    #: the rest ended at the last sample, or the offset jumped: where to filter again from
+    #: (:class:`.onset.Start`)
+    ended: Start | None = None
+    #: samples still to be taken as motion (as still if ``hold_still``) whatever the rest test
+    #: says (:func:`.onset.restart`)
     hold_off: int = 0
+    hold_still: bool = False
+    #: a run of samples the jump test finds still at one offset (:mod:`.rest`): a
+    #: :class:`.onset.Start` from before its first sample
+    jump: Start | None = None
     #: the normalised innovations' sums a check tests the model by (:mod:`.innovations`)
     innovations: Innovations = Innovations()
 
     def copy(self) -> 'FilterState':
         return replace(self, x=self.x.copy(), P=self.P.copy(), noise=replace(self.noise),
                        window=self.window.copy(),
-                       onset=None if self.onset is None else self.onset.copy())
+                       onset=None if self.onset is None else self.onset.copy(),
+                       jump=None if self.jump is None else self.jump.copy())
 
 
 @dataclass
@@ -179,7 +124,7 @@ class KalmanFilter:
                       else rest_lines_hz)
         self.rest_lines_hz = lines
         self.rest = RestTest.design(cfg.rest_window_s, model.sample_rate_hz,
-                                    cfg.rest_false_alarm, lines)
+                                    cfg.rest_false_alarm, lines, cfg.offset_jump_a)
         # one step of each line's phasor e^{-i W_k / fs} (sliding DFT of the rest window)
         self._rot = np.exp(-2j * np.pi * np.asarray(lines) / model.sample_rate_hz)
         self._alpha = 1.0 / (NOISE_AVERAGE_S * model.sample_rate_hz)
@@ -284,11 +229,13 @@ class KalmanFilter:
         d3 = self.line_difference
         x, P, still, moved, samples = state.x, state.P, state.still, state.moved, state.samples
         meter, win, onset, hold = state.noise, state.window, state.onset, state.hold_off
+        hold_still, jump = state.hold_still, state.jump
         chi, blocks, zs, zn = state.innovations
         settled, block = 1.0 / self._alpha, self._block
         if copy:
             x, P, meter, win = x.copy(), P.copy(), replace(meter), win.copy()
             onset = None if onset is None else onset.copy()
+            jump = None if jump is None else jump.copy()
         out_w, out_s, out_still = np.empty(n), np.empty(n), np.empty(n, dtype=bool)
         F, Q = m.discrete(1)
         last_steps, ended = 1, None
@@ -297,16 +244,27 @@ class KalmanFilter:
             if sk != last_steps:
                 F, Q = m.discrete(sk)
                 last_steps = sk
+            x0, P0, accepted = x, P, None
             if samples:
                 x = F @ x
             held = hold > 0             # a motion's start again (.onset.restart): motion, the
             if held:                    # window and meter left as the test left them, past it
-                verdict, hold = False, hold - 1
+                verdict, hold = hold_still, hold - 1
             else:
                 win.push(yk, None if not (samples and rot.size) else rot if sk == 1
                          else rot ** sk, sk)
                 verdict = win.judge(self.rest, yk, float(x[ib]) * sb,
                                     float(P[ib, ib]) * sb * sb, meter.var_a2, still)
+                if verdict or not win.jump_quiet:
+                    jump = None
+                elif win.jump_quiet == 1:       # a step out of a rest: a jump's run starts
+                    jump = Start((x0, P0, moved, samples, Innovations(chi, blocks, zs, zn)),
+                                 [], [], True, True)
+                if jump is not None:
+                    jump.y.append(yk)
+                    jump.steps.append(sk)
+                    if verdict is False and win.jumped(self.rest, meter.var_a2):
+                        accepted, jump = self._jumped(jump), None
             was = still
             still, release, begins, moved = _rest_change(verdict, still, moved)
             if samples:
@@ -325,7 +283,7 @@ class KalmanFilter:
                     chi, blocks, zs, zn = chi + zs * zs / zn, blocks + 1, 0.0, 0
             if not held:
                 meter.add(yk, sk, win, self._alpha, None if d3 is None else float(d3 @ x))
-            if begins:                  # what the window says of the offset
+            if begins and not held:     # what the window says of the offset
                 x, P = self._window_offset(x, P, win, meter.var_a2)
             if still:                   # the rest pseudo-measurements (velocity, ... = 0)
                 for row_c, var in rows:
@@ -336,19 +294,29 @@ class KalmanFilter:
             out_w[k] = x[iw] * sw
             out_s[k] = math.sqrt(max(P[iw, iw], 0.0)) * sw
             out_still[k] = still
-            if still:
+            if accepted is not None:    # the offset jumped: the run again, still, from its start
+                ended, onset = accepted, None
+            elif still:
                 onset = follow(onset, win.track, yk, sk,
                                lambda: (x, P, moved, samples,
                                         Innovations(chi, blocks, zs, zn)))
             elif was and onset is not None:     # the rest ended: a sample told it?
                 ended = onset.start(yk, sk) if win.quiet == 0 else None
                 onset = None
-                if until_motion and ended is not None:
-                    n = k + 1
-                    break
+            if until_motion and ended is not None:
+                n = k + 1
+                break
         return (FilterState(x, P, meter, win, still, moved, samples, onset, ended, hold,
-                            Innovations(chi, blocks, zs, zn)),
+                            hold_still, jump, Innovations(chi, blocks, zs, zn)),
                 out_w[:n], out_s[:n], out_still[:n])
+
+    def _jumped(self, run: Start) -> Start:
+        """Return ``run`` with the offset's variance at its start grown by a jump's."""
+        m = self.model
+        x, P, *rest = run.state
+        P = P.copy()
+        P[m.ib, m.ib] += self.rest.jump_var_a2 / float(m.scale[m.ib]) ** 2
+        return run._replace(state=(x, P, *rest))
 
     def _released(self, P: np.ndarray, still: bool) -> np.ndarray:
         """

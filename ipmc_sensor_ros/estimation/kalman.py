@@ -202,7 +202,7 @@ class KalmanEstimator:
         """Filter a motion that ended a rest again from where it began (:mod:`.onset`)."""
         if not due(self._state):
             return
-        held = 0 if self._lag is None else min(len(self._state.ended[1]), self._lag.held)
+        held = 0 if self._lag is None else min(len(self._state.ended.y), self._lag.held)
         start, self._state, rec = restart(self._filter, self._state, held)
         link = self._begin_segment(self._filter, start, self._filter, start)
         if rec is not None:

@@ -21,8 +21,25 @@ model (a part that starts there, with the state there: :meth:`~.kalman.KalmanEst
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
-__all__ = ['Onset', 'follow', 'restart', 'due']
+__all__ = ['Onset', 'Start', 'follow', 'restart', 'due']
+
+
+class Start(NamedTuple):
+    """Where to filter samples again from: the state before the first, the samples since."""
+
+    #: the filter's (x, P, moved, samples, innovations) before the first sample (never changed)
+    state: tuple
+    y: list
+    steps: list
+    #: the rest flag there
+    still: bool = True
+    #: the samples are taken as still (an offset that jumped: :mod:`.rest`), not as motion
+    held_still: bool = False
+
+    def copy(self) -> 'Start':
+        return self._replace(y=list(self.y), steps=list(self.steps))
 
 
 @dataclass(slots=True)
@@ -41,13 +58,13 @@ class Onset:
         return Onset(*(None if s is None else (s[0], list(s[1]), list(s[2]))
                        for s in (self.up, self.down)))
 
-    def start(self, y: float, step: int) -> tuple | None:
-        """Return (state, samples, steps) of the older side: the rest ended at sample ``y``."""
+    def start(self, y: float, step: int) -> Start | None:
+        """Return the older side's :class:`Start`: the rest ended at sample ``y``."""
         sides = [s for s in (self.up, self.down) if s is not None]
         if not sides:
             return None
         state, ys, steps = max(sides, key=lambda s: len(s[1]))
-        return state, ys + [y], steps + [step]
+        return Start(state, ys + [y], steps + [step])
 
 
 def follow(onset: Onset | None, track: tuple | None, y: float, step: int, snapshot) -> Onset:
@@ -76,26 +93,27 @@ def follow(onset: Onset | None, track: tuple | None, y: float, step: int, snapsh
 
 def due(state) -> bool:
     """Tell whether a sample that ended the rest left a motion's start to filter again."""
-    return state.ended is not None and len(state.ended[1]) >= 2
+    return state.ended is not None and len(state.ended.y) >= 2
 
 
 def restart(filt, state, held: int):
     """
     Filter the motion's first samples again from where it began.
 
-    ``state.ended``: ((x, P, moved, samples, innovations) there, the samples since, their
-    steps).  The run starts from the filter's state there with the rest test's window and
-    noise meter as they are now (past those samples), and takes the samples as motion
-    (``hold_off``).
+    ``state.ended`` (:class:`Start`): the state there, the samples since, their steps.  The
+    run starts from the filter's state there with the rest test's window and noise meter as
+    they are now (past those samples), and takes the samples as motion (``hold_off``), or as
+    still after an offset that jumped (``held_still``).
     Returns (the state the run started from, the state now, the forward record of the last
     ``held`` samples or None).
     """
     from .filter import ForwardRecord
     from .periodic import Stretch, refilter
 
-    (x, P, moved, samples, innovations), ys, steps = state.ended
-    start = replace(state, x=x, P=P, still=True, moved=moved, samples=samples, onset=None,
-                    ended=None, hold_off=len(ys), innovations=innovations)
+    (x, P, moved, samples, innovations), ys, steps, still, held_still = state.ended
+    start = replace(state, x=x, P=P, still=still, moved=moved, samples=samples, onset=None,
+                    ended=None, hold_off=len(ys), hold_still=held_still,
+                    innovations=innovations)
     record = ForwardRecord.empty(held, filt.model.size) if held else None
     now = refilter(Stretch(filt, start, ys, steps), filt, record).now
     return start, now, record

@@ -193,7 +193,7 @@ def refilter(span: Stretch, filt: KalmanFilter,
         flags.append(still)
         a += w.size
         if due(state):
-            held = min(len(state.ended[1]), max(a - cut, 0))
+            held = min(len(state.ended.y), max(a - cut, 0))
             begun, state, rows = restart(filt, state, held)
             restarts.append(begun)
             if rows is not None:

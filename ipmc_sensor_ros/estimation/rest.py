@@ -63,6 +63,8 @@ class RestTest:
     spread_limit: float
     level_limit: float
     cusum_limit: float = math.inf
+    #: variance of an offset jump (``offset_jump_a`` squared), A^2; 0: no jump test
+    jump_var_a2: float = 0.0
     #: (A'A)^-1 of the window's fit when it holds no gap (module docstring; None: formed
     #: from the window's phases each time)
     gram_inv: np.ndarray | None = field(default=None, compare=False)
@@ -106,8 +108,12 @@ class RestTest:
 
     @classmethod
     def design(cls, window_s: float, sample_rate_hz: float, false_alarm: float,
-               lines_hz=()) -> 'RestTest':
-        """Thresholds for a window of ``window_s`` with the mains lines ``lines_hz`` fitted."""
+               lines_hz=(), jump_a: float = 0.0) -> 'RestTest':
+        """
+        Thresholds for a window of ``window_s`` with the mains lines ``lines_hz`` fitted.
+
+        ``jump_a``: RMS of an offset jump, A (0: no jump test).
+        """
         lines = len(lines_hz)
         n = max(8 + 2 * lines, int(round(window_s * sample_rate_hz)))
         turns = np.exp(2j * np.pi * np.outer(np.arange(n), lines_hz) / sample_rate_hz)
@@ -116,7 +122,8 @@ class RestTest:
         k = CUSUM_DRIFT
         cusum = math.log(4 * k * k / false_alarm) / (2 * k) - 1.166
         return cls(n, float(chi2.isf(false_alarm, n - 1 - 2 * lines)),
-                   float(chi2.isf(false_alarm, 1)), max(cusum, 1.0), _gram_inv(turns))
+                   float(chi2.isf(false_alarm, 1)), max(cusum, 1.0), jump_a * jump_a,
+                   _gram_inv(turns))
 
     def still(self, mean: float, spread: float, offset_a: float, offset_var_a2: float,
               noise_var_a2: float) -> bool:
@@ -183,6 +190,9 @@ class RestWindow:
     total_sq: float = 0.0
     quiet: int = 0
     track: tuple | None = None
+    #: the same for a still sensor whose offset jumped (``RestTest.jump_var_a2``)
+    jump_quiet: int = 0
+    jump_track: tuple | None = None
 
     @classmethod
     def empty(cls, n: int, lines: int, offset_var_a2: float) -> 'RestWindow':
@@ -269,11 +279,56 @@ class RestWindow:
             ok, self.track = test.sample_ok(r, self.track, offset_a, offset_var_a2,
                                             noise_var_a2, at_rest)
             self.quiet = self.quiet + 1 if ok else 0
+            if test.jump_var_a2:
+                self._follow_jump(test, r, offset_a, offset_var_a2, noise_var_a2, at_rest)
         if self.quiet < n:          # a sample of the window disagreed: no window test
             return False
+        return test.still(*self._level(theta, b), offset_a, offset_var_a2, noise_var_a2)
+
+    def _level(self, theta, b) -> tuple[float, float]:
+        """Return the window's (mean, spread) less the lines' fit ``theta`` (None: none)."""
+        n = self.samples.size
         if theta is None:
             mean, explained = self.total / n, self.total * self.total / n
         else:
             mean, explained = float(theta[0]), float(b @ theta)
-        return test.still(mean, max(self.total_sq - explained, 0.0), offset_a, offset_var_a2,
-                          noise_var_a2)
+        return mean, max(self.total_sq - explained, 0.0)
+
+    def _follow_jump(self, test: RestTest, r: float, offset_a: float, offset_var_a2: float,
+                     noise_var_a2: float, at_rest: bool) -> None:
+        """
+        Test sample ``r`` against a still sensor whose offset jumped (module docstring).
+
+        A run starts at a step out of a rest: a sample ``at_rest`` beyond the per-sample
+        limit from the filter's offset on its own (a motion that starts gently, or a drift,
+        fails the CUSUM first); it starts from the filter's offset with the jump's variance
+        added (``jump_quiet`` 1: a run starts here) and learns it from each sample that agrees.
+        """
+        if self.jump_track is not None:
+            ok, self.jump_track = test.sample_ok(r, self.jump_track, offset_a, offset_var_a2,
+                                                 noise_var_a2)
+            if ok:
+                self.jump_quiet += 1
+                return
+        d = r - offset_a
+        ok = at_rest and d * d > test.level_limit * (noise_var_a2 + offset_var_a2)
+        if ok:
+            ok, self.jump_track = test.sample_ok(r, None, offset_a,
+                                                 offset_var_a2 + test.jump_var_a2, noise_var_a2)
+        self.jump_quiet = 1 if ok else 0
+
+    def jumped(self, test: RestTest, noise_var_a2: float) -> bool:
+        """
+        Tell whether the window is still at an offset that jumped; if so, rest on that run.
+
+        True when the jump test's run holds the whole window and the window passes
+        :meth:`RestTest.still` against the run's offset and its variance; the rest test's
+        run then becomes that one (the offset the filter learns from it is the run's).
+        """
+        if self.jump_quiet < self.samples.size or self.jump_track is None:
+            return False
+        fit = self.fit(test.gram_inv) if self.phase.size else (None, None)
+        if not test.still(*self._level(*fit), *self.jump_track[2:], noise_var_a2):
+            return False
+        self.quiet, self.track = self.jump_quiet, self.jump_track
+        return True

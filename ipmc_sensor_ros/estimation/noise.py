@@ -1,0 +1,75 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+The white-noise variance per sample the Kalman filter measures (R of :mod:`.filter`).
+
+R, the white-noise variance per sample, is measured on the current less the lines the filter
+holds: the third difference i_k - 3 i_{k-1} + 3 i_{k-2} - i_{k-3} has variance 20 R for white
+noise and passes a current at f only as (2 sin(pi f / fs))^6 (4e-6 at 20 Hz, 0.06 at 150 Hz,
+at 1 kHz), so its square / 20, averaged over ``NOISE_AVERAGE_S`` (weights normalised, so the
+first differences already give R; ``current_noise_a`` until then), is R.  A hum is not small
+there (0.56 at 150 Hz: a 2 % hum with harmonics read a 0.5 nA noise as 3.9 nA), so the lines'
+own third difference is taken off first, as the filter predicts it from its state before the
+four samples (:attr:`.filter.KalmanFilter.line_difference`: the phasors turned on; the state after
+them has fitted their noise, and a second's lines taken from it read a 20 nA noise as
+16 nA).  Differences across a bridged gap are skipped.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .rest import RestWindow
+
+__all__ = ['NoiseMeter', 'NOISE_AVERAGE_S', 'NOISE_CLIP', 'NOISE_FLOOR_A']
+
+#: Averaging time of the measured noise variance, s: long against one sample, short against a
+#: record (the noise is known within a second of the start).
+NOISE_AVERAGE_S = 1.0
+#: One sample counts at most this many times the measured variance in the noise average (a
+#: step in the current moves the measured noise by at most this, not by its square).
+NOISE_CLIP = 25.0
+#: The measured noise stays above this, A RMS (below any DAQ's noise; a noise-free record would
+#: otherwise drive the gain to infinity).
+NOISE_FLOOR_A = 1e-12
+
+
+@dataclass(slots=True)
+class NoiseMeter:
+    """The measured white-noise variance per sample (module docstring), A^2."""
+
+    var_a2: float
+    weight: float = 0.0
+    #: samples in a row one period apart (a third difference needs four)
+    contiguous: int = 0
+    #: the lines' third difference over the next four samples, as predicted after each of the
+    #: last four (oldest first; empty when no lines are modelled), A
+    ahead: tuple = ()
+
+    def add(self, current_a: float, steps: int, window: RestWindow, alpha: float,
+            lines_next: float | None = None) -> None:
+        """
+        Take the newest sample (``window`` holds it and the three before).
+
+        ``lines_next``: the lines' third difference over the four samples after this one, as
+        the filter predicts it now (A); None: no lines are modelled.
+        """
+        ahead = self.ahead
+        if lines_next is not None:
+            self.ahead = (ahead + (lines_next,))[-4:] if steps == 1 else (lines_next,)
+        if steps != 1:
+            self.contiguous = 0
+            return
+        if self.contiguous < 3:
+            self.contiguous += 1
+            return
+        if lines_next is not None and len(ahead) < 4:
+            return
+        lines_a = ahead[0] if lines_next is not None else 0.0
+        w, pos, n = window.samples, window.pos, window.samples.size
+        d = (current_a - 3.0 * w[(pos - 2) % n] + 3.0 * w[(pos - 3) % n] - w[(pos - 4) % n]
+             - lines_a)
+        value = d * d / 20.0
+        if self.weight:
+            value = min(value, NOISE_CLIP * self.var_a2)
+        weight = (1.0 - alpha) * self.weight
+        self.var_a2 = max((weight * self.var_a2 + value) / (weight + 1.0), NOISE_FLOOR_A ** 2)
+        self.weight = weight + 1.0

@@ -1,0 +1,83 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+An offset that jumps (an amplifier re-zeroed) is a jump of the offset state, not a ramp.
+
+estimation/rest.py (the jump test) and filter.py: when a window is still at a level the
+filter's offset does not explain but the offset after a jump of RMS ``offset_jump_a`` does,
+the run of still samples is filtered again from its first sample as rest, the offset's
+variance grown by the jump's.  Records come from ``bench.scenarios`` (exact H2 by FFT with a
+pre-roll, DAQ offset step, noise, 16-bit quantisation): generated independently of the
+estimator's code.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bench.bench_estimators import _causal, estimate_scores
+from bench.scenarios.daq import Daq
+from bench.scenarios.library import MM, NA, Scenario
+from bench.scenarios.motions import MinJerkPath
+from bench.scenarios.sensor import Sensor
+from ipmc_sensor_ros.estimation.config import EstimatorConfig
+from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
+from ipmc_sensor_ros.physics.model import SensorModel
+from ipmc_sensor_ros.physics.parameters import Geometry
+
+JUMP_S = 3.0
+
+
+def _record(step_a: float, seconds: float = 12.0):
+    """slim, moves at 1, 5, 9 s (0.4 s) between holds; the offset steps at 3 s; 0.2 nA."""
+    def make(rng):
+        path = MinJerkPath((1.0, 5.0, 9.0), (0.4,) * 3, (0.0, 0.8 * MM, -0.5 * MM, 0.3 * MM))
+        daq = Daq(offset_a=6 * NA, noise_a=0.2 * NA, adc_bits=16,
+                  offset_steps=((JUMP_S, step_a),))
+        return Sensor('slim'), path, daq
+    return Scenario('offset-jump', 'daq', seconds, make, '').build(0)
+
+
+def _estimator(rec, **config):
+    model = SensorModel.named(rec.model, Geometry(*rec.geometry_m, rec.sample),
+                              extra_effects=rec.effects)
+    return DeflectionEstimator(model, rec.sample_rate_hz, config=EstimatorConfig(**config))
+
+
+@pytest.mark.parametrize('step_a', [3 * NA, -5 * NA])
+def test_an_offset_that_jumps_in_a_hold_is_learned_not_read_as_a_ramp(step_a):
+    """
+    Without the jump in the model the hold after the step is a steady 'motion' current:
+    measured 14 um/s per 3 nA for the rest of the record (6.9-20.6 % NRMSE on the bench's
+    slim-offset-step).  With it the level stays; allowed 1 % (the issue's floor, the causal
+    bound of a 0.2 nA record being far below it), and the offset ends within 0.1 nA of the
+    DAQ's (200 samples of 0.2 nA noise know it to 0.014 nA).
+    """
+    rec = _record(step_a)
+    est = _estimator(rec)
+    out = _causal(rec, est, 1000)
+    assert out.row_index.size == rec.current_a.size
+    assert estimate_scores(rec, out)['nrmse'] < 0.01
+    offset_a = est.core.status()['offset_a']
+    assert offset_a == pytest.approx(6 * NA + step_a, abs=0.1 * NA)
+    off = _causal(rec, _estimator(rec, offset_jump_a=0.0), 1000)
+    assert estimate_scores(rec, off)['nrmse'] > 0.05      # the model change is what does it
+
+
+def test_blocks_single_samples_and_a_state_saved_mid_jump_agree():
+    """One recursion through a jump: any cut, one sample at a time, and a save/restore."""
+    rec = _record(4 * NA, seconds=6.0)
+    y = rec.current_a
+    block = _estimator(rec).core.estimate(y).deflection_m
+    one = _estimator(rec).core
+    singles = np.array([one.estimate_one(v)[0] for v in y])
+    np.testing.assert_allclose(singles, block, rtol=0, atol=1e-12)
+    cut = int((JUMP_S + 0.1) * rec.sample_rate_hz)       # the jump's run not yet accepted
+    est = _estimator(rec).core
+    first = est.estimate(y[:cut]).deflection_m
+    assert est._state.jump is not None and est._state.jump.held_still
+    saved = est.get_state()
+    tail = est.estimate(y[cut:]).deflection_m
+    est.set_state(saved)
+    again = est.estimate(y[cut:]).deflection_m
+    assert np.array_equal(tail, again)
+    np.testing.assert_allclose(np.concatenate((first, tail)), block, rtol=0, atol=1e-12)
