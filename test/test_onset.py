@@ -16,7 +16,7 @@ import pytest
 from bench.scenarios import build
 from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
 from ipmc_sensor_ros.estimation.kalman import KalmanEstimator
-from ipmc_sensor_ros.estimation.onset import Onset, follow
+from ipmc_sensor_ros.estimation.onset import Onset, follow, follow_jump
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import Geometry
 
@@ -110,3 +110,14 @@ def test_under_hum_a_rest_ends_only_where_the_tip_moves(monkeypatch):
     moves = int(np.count_nonzero(np.diff(moving.astype(int)) == 1)) + int(moving[0])
     assert 0 < ends <= moves and len(starts) <= ends
     assert still.mean() > 0.75          # the holds (91 % of the time) are rests from 0.4 s on
+
+
+def test_a_jumps_run_starts_at_its_first_sample_and_ends_when_still_or_broken():
+    snaps = iter(range(100))
+    run = follow_jump(None, 1, False, 0.5, 1, lambda: next(snaps))
+    assert run.state == 0 and run.y == [0.5] and run.held_still
+    run = follow_jump(run, 2, False, 0.7, 2, lambda: next(snaps))
+    assert run.state == 0 and run.y == [0.5, 0.7] and run.steps == [1, 2]
+    assert follow_jump(run, 3, True, 0.7, 1, lambda: 9) is None      # still: no jump needed
+    assert follow_jump(run, 0, False, 0.7, 1, lambda: 9) is None     # the run broke
+    assert follow_jump(None, 5, False, 0.7, 1, lambda: 9) is None    # begun under another model

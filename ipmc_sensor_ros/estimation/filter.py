@@ -19,6 +19,9 @@ its samples; there is no second implementation)::
               :attr:`~.statespace.StateSpaceModel.hold_variance`; a record that starts at
               rest keeps the starting working point, its rest position); leaving a rest,
               the periodic motion's prior is released (a new motion's amplitude is unknown)
+    a jump    a step out of a rest, then a window still at a new offset (:mod:`.rest`):
+              the run is filtered again from its start as still, the offset's variance
+              grown by ``offset_jump_a`` squared (:func:`.onset.restart`)
 
 R, the white-noise variance per sample, is measured by :class:`~.noise.NoiseMeter`.
 The state is held in scaled units (x / scale) so that every entry of P is O(1) whatever the
@@ -38,7 +41,7 @@ import numpy as np
 
 from .innovations import Innovations, block_samples
 from .noise import NOISE_AVERAGE_S, NOISE_FLOOR_A, NoiseMeter
-from .onset import Onset, Start, follow
+from .onset import Onset, Start, follow, follow_jump
 from .rest import RestTest, RestWindow
 from .statespace import StateSpaceModel
 
@@ -255,16 +258,11 @@ class KalmanFilter:
                          else rot ** sk, sk)
                 verdict = win.judge(self.rest, yk, float(x[ib]) * sb,
                                     float(P[ib, ib]) * sb * sb, meter.var_a2, still)
-                if verdict or not win.jump_quiet:
-                    jump = None
-                elif win.jump_quiet == 1:       # a step out of a rest: a jump's run starts
-                    jump = Start((x0, P0, moved, samples, Innovations(chi, blocks, zs, zn)),
-                                 [], [], True, True)
-                if jump is not None:
-                    jump.y.append(yk)
-                    jump.steps.append(sk)
-                    if verdict is False and win.jumped(self.rest, meter.var_a2):
-                        accepted, jump = self._jumped(jump), None
+                jump = follow_jump(jump, win.jump_quiet, verdict, yk, sk, lambda: (
+                    x0, P0, moved, samples, Innovations(chi, blocks, zs, zn)))
+                if jump is not None and verdict is False and win.jumped(self.rest,
+                                                                        meter.var_a2):
+                    accepted, jump = self._jumped(jump), None
             was = still
             still, release, begins, moved = _rest_change(verdict, still, moved)
             if samples:

@@ -23,7 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
-__all__ = ['Onset', 'Start', 'follow', 'restart', 'due']
+__all__ = ['Onset', 'Start', 'follow', 'follow_jump', 'restart', 'due']
 
 
 class Start(NamedTuple):
@@ -89,6 +89,26 @@ def follow(onset: Onset | None, track: tuple | None, y: float, step: int, snapsh
         else:
             sides.append(None)
     return Onset(*sides)
+
+
+def follow_jump(run: Start | None, quiet: int, verdict, y: float, step: int,
+                snapshot) -> Start | None:
+    """
+    Return the run of an offset's jump after sample ``y`` (:mod:`.rest`), or None.
+
+    ``quiet``: the samples of the run so far (``RestWindow.jump_quiet``; 1: it starts at
+    ``y``, from the filter's state ``snapshot()`` before it); ``verdict``: the rest test's
+    against the filter's offset (a still window needs no jump).
+    """
+    if verdict or not quiet:
+        return None
+    if quiet == 1:
+        run = Start(snapshot(), [], [], True, True)
+    elif run is None:               # a run begun under another model (carried): not this one's
+        return None
+    run.y.append(y)
+    run.steps.append(step)
+    return run
 
 
 def due(state) -> bool:

@@ -34,6 +34,17 @@ rest the filter itself is that still sensor's filter, and its b and P_b are used
 window's first samples are tested once the window is full, against its fit of the lines
 (before it a hum would fail every sample).
 
+**An offset that jumps** (``offset_jump_a``: an amplifier re-zeroed while the tip rests):
+a sample at rest beyond the per-sample limit from the filter's offset on its own is a step
+(a motion that starts gently, or a drift, fails the CUSUM first).  From it a second run of
+the per-sample tests starts, against a still sensor whose offset is the filter's with the
+jump's variance added (``jump_track``, ``jump_quiet``).  When the window fails against the
+filter's offset but its run holds the whole window and the window passes the spread and
+level tests against the run's offset (:meth:`RestWindow.jumped`), the offset jumped where
+the run began: the filter takes the run's samples again from there as still, the offset's
+variance grown by the jump's (:func:`.onset.restart`), and the rest test goes on with the
+run's offset.
+
 When all pass, the filter applies the zero-velocity pseudo-measurements (as zero-velocity
 updates in foot-mounted inertial navigation): the tip velocity and the motion's current are
 zero within ``rest_velocity_m_s``.  The test runs on every sample; a window that fails ends
