@@ -136,6 +136,10 @@ class RestTest:
                    float(chi2.isf(false_alarm, 1)), max(cusum, 1.0), jump_a * jump_a,
                    _gram_inv(turns))
 
+    def flat(self, spread: float, noise_var_a2: float) -> bool:
+        """The spread test: the window's residual ``spread`` (A^2) is white noise."""
+        return spread <= self.spread_limit * noise_var_a2
+
     def still(self, mean: float, spread: float, offset_a: float, offset_var_a2: float,
               noise_var_a2: float) -> bool:
         """
@@ -155,7 +159,7 @@ class RestTest:
             The measured white-noise variance per sample, A^2.
 
         """
-        if spread > self.spread_limit * noise_var_a2:
+        if not self.flat(spread, noise_var_a2):
             return False
         d = mean - offset_a
         return d * d <= self.level_limit * (noise_var_a2 / self.n + offset_var_a2)
@@ -332,14 +336,17 @@ class RestWindow:
         """
         Tell whether the window is still at an offset that jumped; if so, rest on that run.
 
-        True when the jump test's run holds the whole window and the window passes
-        :meth:`RestTest.still` against the run's offset and its variance; the rest test's
-        run then becomes that one (the offset the filter learns from it is the run's).
+        True when the jump test's run holds the whole window (each sample agreed with the
+        run's offset, learned from the samples before it) and the window passes the spread
+        test; the rest test's run then becomes that one.  The window's mean is not tested
+        against the run's offset: the run's samples were taken less the lines fitted to
+        windows that still held the step, which a line fit leaks into (0.1 nA of a 3.9 nA
+        step under a 49.6 Hz line at 0.2 nA noise: 5 sigma of the window's mean).
         """
         if self.jump_quiet < self.samples.size or self.jump_track is None:
             return False
         fit = self.fit(test.gram_inv) if self.phase.size else (None, None)
-        if not test.still(*self._level(*fit), *self.jump_track[2:], noise_var_a2):
+        if not test.flat(self._level(*fit)[1], noise_var_a2):
             return False
         self.quiet, self.track = self.jump_quiet, self.jump_track
         return True
