@@ -262,7 +262,7 @@ class KalmanFilter:
                     x0, P0, moved, samples, Innovations(chi, blocks, zs, zn)))
                 if jump is not None and verdict is False and win.jumped(self.rest,
                                                                         meter.var_a2):
-                    accepted, jump = self._jumped(jump), None
+                    accepted, jump = jump, None
             was = still
             still, release, begins, moved = _rest_change(verdict, still, moved)
             if samples:
@@ -308,13 +308,12 @@ class KalmanFilter:
                             hold_still, jump, Innovations(chi, blocks, zs, zn)),
                 out_w[:n], out_s[:n], out_still[:n])
 
-    def _jumped(self, run: Start) -> Start:
-        """Return ``run`` with the offset's variance at its start grown by a jump's."""
+    def with_jump(self, P: np.ndarray) -> np.ndarray:
+        """Return a copy of ``P`` with the offset's variance grown by a jump's."""
         m = self.model
-        x, P, *rest = run.state
         P = P.copy()
         P[m.ib, m.ib] += self.rest.jump_var_a2 / float(m.scale[m.ib]) ** 2
-        return run._replace(state=(x, P, *rest))
+        return P
 
     def _released(self, P: np.ndarray, still: bool) -> np.ndarray:
         """

@@ -203,8 +203,8 @@ class KalmanEstimator:
         if not due(self._state):
             return
         held = 0 if self._lag is None else min(len(self._state.ended.y), self._lag.held)
-        start, self._state, rec = restart(self._filter, self._state, held)
-        link = self._begin_segment(self._filter, start, self._filter, start)
+        start, before, self._state, rec = restart(self._filter, self._state, held)
+        link = self._begin_segment(self._filter, start, self._filter, before)
         if rec is not None:
             self._lag.replace_newest(self._filter, rec, link if held == start.hold_off else None)
 
@@ -273,8 +273,8 @@ class KalmanEstimator:
         if accept is not None and not accept(run):
             return False
         link = self._begin_segment(filt, run.start, span.filter, span.state)
-        for begun in run.restarts:      # a motion's start in the span: a part from there
-            self._begin_segment(filt, begun, filt, begun)
+        for begun, before in run.restarts:      # a motion's start (or a jump) in the span:
+            self._begin_segment(filt, begun, filt, before)     # a part from there
         if rec is not None:             # the span's samples held are the new model's
             self._lag.replace_newest(filt, rec, link if held == len(span.y) else None)
         rested = bool(run.still.any())

@@ -124,16 +124,18 @@ def restart(filt, state, held: int):
     run starts from the filter's state there with the rest test's window and noise meter as
     they are now (past those samples), and takes the samples as motion (``hold_off``), or as
     still after an offset that jumped (``held_still``).
-    Returns (the state the run started from, the state now, the forward record of the last
-    ``held`` samples or None).
+    Returns (the state the run started from, the filter's state there before it (without
+    the jump's variance: what the smoothers pass back to), the state now, the forward record
+    of the last ``held`` samples or None).
     """
     from .filter import ForwardRecord
     from .periodic import Stretch, refilter
 
     (x, P, moved, samples, innovations), ys, steps, still, held_still = state.ended
-    start = replace(state, x=x, P=P, still=still, moved=moved, samples=samples, onset=None,
-                    ended=None, hold_off=len(ys), hold_still=held_still,
-                    innovations=innovations)
+    start = replace(state, x=x, P=filt.with_jump(P) if held_still else P, still=still,
+                    moved=moved, samples=samples, onset=None, ended=None, hold_off=len(ys),
+                    hold_still=held_still, innovations=innovations)
+    before = replace(start, P=P) if held_still else start
     record = ForwardRecord.empty(held, filt.model.size) if held else None
     now = refilter(Stretch(filt, start, ys, steps), filt, record).now
-    return start, now, record
+    return start, before, now, record

@@ -161,7 +161,8 @@ class Refiltered(NamedTuple):
     start: FilterState
     #: its state now, at the end of the span
     now: FilterState
-    #: the states each motion that ended a rest in the span was filtered again from
+    #: (the state, the state before it) each motion that ended a rest (or each offset that
+    #: jumped) in the span was filtered again from (:func:`~.onset.restart`)
     restarts: list
     #: per sample of the span: the rest test found it still (as published live)
     still: np.ndarray
@@ -194,8 +195,8 @@ def refilter(span: Stretch, filt: KalmanFilter,
         a += w.size
         if due(state):
             held = min(len(state.ended.y), max(a - cut, 0))
-            begun, state, rows = restart(filt, state, held)
-            restarts.append(begun)
+            begun, before, state, rows = restart(filt, state, held)
+            restarts.append((begun, before))
             if rows is not None:
                 _put(record, a - cut - held, rows)
     return Refiltered(start, state, restarts,
