@@ -46,6 +46,8 @@ def _estimator(rec, **config):
 @pytest.mark.parametrize('step_a', [3 * NA, -5 * NA])
 def test_an_offset_that_jumps_in_a_hold_is_learned_not_read_as_a_ramp(step_a):
     """
+    A step of the offset at rest is learned: the level holds through it.
+
     Without the jump in the model the hold after the step is a steady 'motion' current:
     measured 14 um/s per 3 nA for the rest of the record (6.9-20.6 % NRMSE on the bench's
     slim-offset-step).  With it the level stays; allowed 1 % (the issue's floor, the causal
@@ -85,6 +87,8 @@ def test_blocks_single_samples_and_a_state_saved_mid_jump_agree():
 
 def test_a_slow_move_from_rest_is_not_taken_for_a_jump():
     """
+    A slow move out of a rest is motion, not a jump.
+
     A 10 s minimum-jerk move of 0.3 mm at 0.2 nA: its current leaves the rest gently and is
     flat within the noise for ~0.6 s about its peak (12 nA).  A jump test that started its
     run at any sample took that for a jump and lost the move (113 % NRMSE, 0.3 mm off); a
@@ -102,6 +106,8 @@ def test_a_slow_move_from_rest_is_not_taken_for_a_jump():
 
 def test_the_smoothers_pass_back_across_a_jump_as_a_jump():
     """
+    The smoothed level holds through a jump as the live one does.
+
     The smoothers' link across a jump is new = old + a jump of the offset (the state before
     the jump's variance was added: onset.restart), so the offset learned after the jump is
     not carried back into the hold before it.  Linked to the state with the jump's variance,

@@ -137,7 +137,7 @@ class RestTest:
                    _gram_inv(turns))
 
     def flat(self, spread: float, noise_var_a2: float) -> bool:
-        """The spread test: the window's residual ``spread`` (A^2) is white noise."""
+        """Tell whether the window's residual ``spread`` (A^2) is white noise (the spread test)."""
         return spread <= self.spread_limit * noise_var_a2
 
     def still(self, mean: float, spread: float, offset_a: float, offset_var_a2: float,
