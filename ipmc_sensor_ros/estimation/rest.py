@@ -39,11 +39,11 @@ a sample at rest beyond the per-sample limit from the filter's offset on its own
 (a motion that starts gently, or a drift, fails the CUSUM first).  From it a second run of
 the per-sample tests starts, against a still sensor whose offset is the filter's with the
 jump's variance added (``jump_track``, ``jump_quiet``).  When the window fails against the
-filter's offset but its run holds the whole window and the window passes the spread and
-level tests against the run's offset (:meth:`RestWindow.jumped`), the offset jumped where
-the run began: the filter takes the run's samples again from there as still, the offset's
-variance grown by the jump's (:func:`.onset.restart`), and the rest test goes on with the
-run's offset.
+filter's offset but its run holds the whole window and the window passes the spread test
+(:meth:`RestWindow.jumped`; each of its samples agreed with the run's offset), the offset
+jumped where the run began: the filter takes the run's samples again from there as still,
+the offset's variance grown by the jump's (:func:`.onset.restart`), and the rest test goes
+on with the run's offset.
 
 When all pass, the filter applies the zero-velocity pseudo-measurements (as zero-velocity
 updates in foot-mounted inertial navigation): the tip velocity and the motion's current are
