@@ -175,9 +175,10 @@ def _strong_hum(rng):
 
 def _offset_step(rng):
     motion = _path(rng, 1.0, 29.5, (2.0, 4.0), 0.4, 1.0 * MM)
-    step = (rng.uniform(10, 20), rng.choice([-1, 1]) * rng.uniform(2, 5) * NA)
-    daq = Daq(offset_a=rng.uniform(3, 10) * NA, noise_a=0.2 * NA, adc_bits=16,
-              offset_steps=(step,))
+    size = math.exp(rng.uniform(math.log(2.0), math.log(60.0)))      # log-uniform 2-60 nA
+    step = (rng.uniform(10, 20), rng.choice([-1, 1]) * size * NA)
+    daq = Daq(offset_a=rng.uniform(3, 10) * NA, noise_a=rng.choice([0.2, 2.0]) * NA,
+              adc_bits=16, offset_steps=(step,))
     return Sensor('slim'), motion, daq
 
 
@@ -238,7 +239,8 @@ def _scenarios() -> list[Scenario]:
                  'RMS, 50 Hz +-0.3 Hz with harmonics; noise 0.5-1 %'),
         Scenario('slim-offset-step', 'daq', 30.0, _offset_step,
                  'slim, 30 s pick-and-place (0.4 s moves, 2-4 s holds, +-1 mm); the amplifier '
-                 're-zeroed once (offset steps by 2-5 nA at 10-20 s); 0.2 nA, 16 bit'),
+                 're-zeroed or its range switched once (offset steps by 2-60 nA, '
+                 'log-uniform, at 10-20 s); noise 0.2 or 2 nA, 16 bit'),
         Scenario('narrow-pick-place-2min', 'pick-place', 120.0, _pick_place('narrow', 2, False),
                  'narrow (30 x 5 x 0.2 mm), 2 min pick-and-place, offset drifting 5 -> 25 nA, '
                  '0.5 nA, 16 bit'),

@@ -68,9 +68,10 @@ SETTINGS = (
     Setting('offset_walk_a', 1e-12, 'A/sqrt(s)', 0.0, 1e-6,
             'random walk of the offset: small, since every offset change assumed while moving '
             'is a deflection ramp the sensor cannot show (H(0) = 0)'),
-    Setting('offset_jump_a', 5e-9, 'A', 0.0, 1e-3,
-            'RMS of a jump of the offset (an amplifier re-zeroed, a range switched: a few nA): '
-            'a step out of a rest to a still current the offset does not explain is taken for '
+    Setting('offset_jump_a', 30e-9, 'A', 0.0, 1e-3,
+            'RMS of a jump of the offset (an amplifier re-zeroed, a range switched): as wide as '
+            'offsets are (offset_prior_a), since a re-zero can leave it anywhere they lie; a '
+            'step out of a rest to a still current the offset does not explain is taken for '
             'one; 0: the offset never jumps'),
     Setting('offset_drift_a_per_s', 0.05e-9, 'A/s', 0.0, 1e-3,
             "RMS of the offset's drift rate before it is learned: 3 nA a minute, a DAQ "
