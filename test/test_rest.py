@@ -99,3 +99,42 @@ def test_line_fit_is_least_squares_when_the_window_is_not_whole_periods(gap_at):
     lines_only = y[-test.n:] - A[:, 1:] @ coef[1:]
     assert np.allclose(win.residuals(win.pos), lines_only, rtol=0, atol=0.5e-15)
     assert abs(theta[0] - 6e-9) < 5 * 0.5e-9 / np.sqrt(test.n)
+
+
+def test_a_jumps_run_is_tested_on_its_own_fit_with_the_step():
+    """
+    The samples of an offset's jump are taken less the lines of the fit with the step.
+
+    The nominal 50 and 60 Hz lines with two harmonics each (what the rest test fits until a
+    line is measured), a hum-free still current of 6 nA under 0.2 nA of noise whose offset
+    steps by 20 nA (100 sigma) at sample 400: the run starts at the step and holds each of
+    the 150 samples after it (the 200-sample window still holds the step); the newest
+    sample's residual equals numpy's lstsq with a step column to 1e-15 A (rounding of the
+    sliding sums).  The fit without the step column leaks 2 sigma of it into this sample
+    (asserted > 1.5 sigma): a bias the CUSUM (drift 0.5 sigma) sums to its limit within
+    tens of samples, which is how such steps were refused.
+    """
+    rng = np.random.default_rng(8)
+    lines = np.array([50.0, 100.0, 150.0, 60.0, 120.0, 180.0])
+    test = RestTest.design(0.2, FS, 1e-6, tuple(lines), 30e-9)
+    rot = np.exp(-2j * np.pi * lines / FS)
+    win = RestWindow.empty(test.n, lines.size, 1.0)
+    n, step_at = 550, 400
+    y = 6e-9 + 20e-9 * (np.arange(n) >= step_at) + 0.2e-9 * rng.standard_normal(n)
+    for k in range(n):
+        win.push(float(y[k]), None if k == 0 else rot)
+        win.judge(test, float(y[k]), 6e-9, 1e-24, 0.04e-18, True)
+    assert win.jump_quiet == n - step_at
+    tw = (np.arange(test.n) - (test.n - 1)) / FS
+    A = np.column_stack([np.ones(test.n)] + [g(2 * np.pi * f * tw) for f in lines
+                                             for g in (np.cos, lambda a: -np.sin(a))])
+    e = (np.arange(n - test.n, n) >= step_at).astype(float)
+    coef = np.linalg.lstsq(np.column_stack([A, e]), y[-test.n:], rcond=None)[0]
+    expected = y[-1] - coef[1:-1:2].sum()           # the newest sample less its lines
+    gram = win.gram(test.gram_inv)
+    theta, b = win.solve(gram)
+    win.jump_quiet -= 1                             # the residual as judged (run before it)
+    assert win._step_residual(float(y[-1]), gram, theta, b) == pytest.approx(expected,
+                                                                              abs=1e-15)
+    leaked = y[-1] - theta[1::2].sum() - expected   # the fit without the step
+    assert abs(leaked) > 1.5 * 0.2e-9
