@@ -134,7 +134,7 @@ def test_a_jumps_run_is_tested_on_its_own_fit_with_the_step():
     gram = win.gram(test.gram_inv)
     theta, b = win.solve(gram)
     win.jump_quiet -= 1                             # the residual as judged (run before it)
-    assert win._step_residual(float(y[-1]), gram, theta, b) == pytest.approx(expected,
-                                                                              abs=1e-15)
+    residual = win._step_residual(float(y[-1]), gram, theta, b)
+    assert residual == pytest.approx(expected, abs=1e-15)
     leaked = y[-1] - theta[1::2].sum() - expected   # the fit without the step
     assert abs(leaked) > 1.5 * 0.2e-9
