@@ -154,6 +154,25 @@ def test_jittered_stamps_are_all_taken_contiguously(jitter):
     assert abs(stream.measured_rate_hz / FS - 1.0) < 1e-3
 
 
+@pytest.mark.parametrize('seed', [5, 22, 76, 127, 156])
+def test_a_first_window_s_slope_does_not_lock_the_grid_off_rate(seed):
+    """
+    +-25 % jitter, 3 s at 1 kHz: no period a few % off is taken, none is kept.
+
+    Five of the six seeds in 0-199 (the sixth, 75, now loses 2 samples early in the run to
+    a grid still uncertain: docs/ros_interface.md) whose first window of 8 stamps fitted a slope
+    3.4-5.5 % off the nominal that passed 3 standard errors estimated from its 6 residuals;
+    the grid then
+    read the stream as one missing every 15th-30th sample on a grid of its own, and 170-320
+    of 3,000 samples were refused (`estimate` on such a record: 924 of 20,000).  The test
+    takes the Student-t quantile of the fit's degrees of freedom, and a window's median
+    spacing refutes a grid a few % off.
+    """
+    stamps, _, _ = _daq(FS, 3000, jitter=0.25, seed=seed)
+    c = _fed(stamps, one=False, blocks=(100,)).counters
+    assert c['samples_out'] == 3000 and c['samples_rejected'] == 0 and c['samples_lost'] == 0
+
+
 def test_missing_samples_are_bridged_with_their_steps_and_counted_as_lost():
     stamps, _, _ = _daq(FS, 3000, jitter=0.2, seed=1)
     drop = [1000, 2000, 2001, 2002]                  # one sample, then three in a row
