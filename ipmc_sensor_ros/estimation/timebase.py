@@ -40,8 +40,8 @@ within the remaining 25 % of the stamps' slots, which the grid's updates keep it
   ``P`` that explains the stamps with at most every other slot empty re-locks the grid (slots
   re-counted from the spacings, then fitted); so does one less far off that differs from
   ``P`` by more than ``SIGNIFICANCE`` standard errors of the median (a grid a few % off whose
-  phase walked past half a period reads the stamps as a stream missing samples).  A stream losing more than half its samples
-  cannot be told from a slower one;
+  phase walked past half a period reads the stamps as a stream missing samples).  A stream
+  losing more than half its samples cannot be told from a slower one;
 * **the measured rate** ``1/P`` is reported (``measured``) after every window of
   ``RATE_WINDOW_S`` of data (or ``MAX_WINDOW_SAMPLES``); the stream decides what it implies
   (:class:`~ipmc_sensor_ros.estimation.stream.StreamEstimator`).
