@@ -27,12 +27,12 @@ from ipmc_sensor_ros.physics.parameters import Geometry
 JUMP_S = 3.0
 
 
-def _record(step_a: float, seconds: float = 12.0):
+def _record(step_a: float, seconds: float = 12.0, jump_s: float = JUMP_S):
     """slim, moves at 1, 5, 9 s (0.4 s) between holds; the offset steps at 3 s; 0.2 nA."""
     def make(rng):
         path = MinJerkPath((1.0, 5.0, 9.0), (0.4,) * 3, (0.0, 0.8 * MM, -0.5 * MM, 0.3 * MM))
         daq = Daq(offset_a=6 * NA, noise_a=0.2 * NA, adc_bits=16,
-                  offset_steps=((JUMP_S, step_a),))
+                  offset_steps=((jump_s, step_a),))
         return Sensor('slim'), path, daq
     return Scenario('offset-jump', 'daq', seconds, make, '').build(0)
 
@@ -65,6 +65,24 @@ def test_an_offset_that_jumps_in_a_hold_is_learned_not_read_as_a_ramp(step_a):
     assert offset_a == pytest.approx(6 * NA + step_a, abs=0.1 * NA)
     off = _causal(rec, _estimator(rec, offset_jump_a=0.0), 1000)
     assert estimate_scores(rec, off)['nrmse'] > 0.05      # the model change is what does it
+
+
+def test_a_jump_just_after_a_move_before_the_rest_is_confirmed_is_learned():
+    """
+    A step 0.3 s after a move ends, before the rest test confirms a rest (~0.5 s after it).
+
+    The run starts at a step out of samples that agreed with rest on their own, not only out
+    of a confirmed rest: before, such a step was never taken (the hold after it is never a
+    rest, so no step could come out of one): 93.6 % NRMSE here, and on slim-offset-step
+    seed 5 (36.6 nA, 0.31 s after a move) 156 %, now 0.19 %.  Allowed 1 %, as above.
+    (Within ~0.25 s of the move's end the current's decay is still over the noise: a step
+    there is not seen, 96-97 % measured at 1.45-1.5 s.)
+    """
+    rec = _record(-30 * NA, jump_s=1.7)
+    est = _estimator(rec)
+    out = _causal(rec, est, 1000)
+    assert estimate_scores(rec, out)['nrmse'] < 0.01
+    assert est.core.status()['offset_a'] == pytest.approx(-24 * NA, abs=0.1 * NA)
 
 
 def test_blocks_single_samples_and_a_state_saved_mid_jump_agree():

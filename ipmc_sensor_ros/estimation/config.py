@@ -71,8 +71,8 @@ SETTINGS = (
     Setting('offset_jump_a', 30e-9, 'A', 0.0, 1e-3,
             'RMS of a jump of the offset (an amplifier re-zeroed, a range switched): as wide as '
             'offsets are (offset_prior_a), since a re-zero can leave it anywhere they lie; a '
-            'step out of a rest to a still current the offset does not explain is taken for '
-            'one; 0: the offset never jumps'),
+            'step out of a still stretch to a still current the offset does not explain is '
+            'taken for one; 0: the offset never jumps'),
     Setting('offset_drift_a_per_s', 0.05e-9, 'A/s', 0.0, 1e-3,
             "RMS of the offset's drift rate before it is learned: 3 nA a minute, a DAQ "
             'warming up; a short rest cannot tell a larger drift from noise'),

@@ -19,7 +19,7 @@ its samples; there is no second implementation)::
               :attr:`~.statespace.StateSpaceModel.hold_variance`; a record that starts at
               rest keeps the starting working point, its rest position); leaving a rest,
               the periodic motion's prior is released (a new motion's amplitude is unknown)
-    a jump    a step out of a rest, then a window still at a new offset (:mod:`.rest`):
+    a jump    a step out of a still stretch, then a window still at a new offset (:mod:`.rest`):
               the run is filtered again from its start as still, the offset's variance
               grown by ``offset_jump_a`` squared (:func:`.onset.restart`)
 

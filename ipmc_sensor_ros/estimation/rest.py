@@ -35,8 +35,10 @@ window's first samples are tested once the window is full, against its fit of th
 (before it a hum would fail every sample).
 
 **An offset that jumps** (``offset_jump_a``: an amplifier re-zeroed while the tip rests):
-a sample at rest beyond the per-sample limit from the filter's offset on its own is a step
-(a motion that starts gently, or a drift, fails the CUSUM first).  From it a second run of
+a sample beyond the per-sample limit from the filter's offset on its own, out of a still
+stretch (at rest, or after a sample that agreed with rest on its own: a hold whose rest the
+window has not confirmed yet), is a step (a motion that starts gently, or a drift, fails the
+CUSUM first).  From it a second run of
 the per-sample tests starts, against a still sensor whose offset is the filter's with the
 jump's variance added (``jump_track``, ``jump_quiet``); its samples are taken less the lines
 of the jump's own fit, the window's basis with a step at the run's first sample (a line fit
@@ -297,10 +299,11 @@ class RestWindow:
             r = current_a - float(theta[1::2].sum()) if theta is not None else current_a
             ok, self.track = test.sample_ok(r, self.track, offset_a, offset_var_a2,
                                             noise_var_a2, at_rest)
+            still_before = at_rest or self.quiet > 0
             self.quiet = self.quiet + 1 if ok else 0
             if test.jump_var_a2:
                 self._follow_jump(test, r, (current_a, gram, theta, b), offset_a,
-                                  offset_var_a2, noise_var_a2, at_rest)
+                                  offset_var_a2, noise_var_a2, still_before)
         if self.quiet < n:          # a sample of the window disagreed: no window test
             return False
         return test.still(*self._level(theta, b), offset_a, offset_var_a2, noise_var_a2)
@@ -315,13 +318,14 @@ class RestWindow:
         return mean, max(self.total_sq - explained, 0.0)
 
     def _follow_jump(self, test: RestTest, r: float, fit: tuple, offset_a: float,
-                     offset_var_a2: float, noise_var_a2: float, at_rest: bool) -> None:
+                     offset_var_a2: float, noise_var_a2: float, still_before: bool) -> None:
         """
         Test sample ``r`` against a still sensor whose offset jumped (module docstring).
 
-        A run starts at a step out of a rest: a sample ``at_rest`` beyond the per-sample
-        limit from the filter's offset on its own (a motion that starts gently, or a drift,
-        fails the CUSUM first); it starts from the filter's offset with the jump's variance
+        A run starts at a step out of a still stretch: a sample beyond the per-sample limit
+        from the filter's offset on its own when ``still_before`` (at rest, or the sample
+        before agreed with rest; a motion that starts gently, or a drift, fails the CUSUM
+        first); it starts from the filter's offset with the jump's variance
         added (``jump_quiet`` 1: a run starts here) and learns it from each sample that agrees.
         The run's later samples are taken less the lines of the jump's own fit
         (:meth:`_step_residual`).  ``fit``: (the sample's current, and the window's
@@ -343,7 +347,7 @@ class RestWindow:
                 return
         d = r - offset_a
         self.jump_quiet, self.jump_track, self.jump_sums = 0, None, None
-        if at_rest and d * d > test.level_limit * (noise_var_a2 + offset_var_a2):
+        if still_before and d * d > test.level_limit * (noise_var_a2 + offset_var_a2):
             sums = (current, self.phase.copy())
             if gram is not None:        # the step's first sample less the lines of the others
                 self.jump_sums = sums
