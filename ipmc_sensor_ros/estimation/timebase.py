@@ -130,9 +130,9 @@ def fit_line(slots: np.ndarray, times: np.ndarray, period_s: float):
     Least-squares line ``t = t_c + slope (k - k_c)`` of stamps against slots.
 
     Points more than half a period off the first fit are dropped and the line refitted (a
-    stamp on a wrong slot is a period off).  Returns ``(slope, slope_std, k_c, t_c)``: the
-    slope (s per slot), its standard error (inf with fewer than 3 points) and the centroid of
-    the points kept.
+    stamp on a wrong slot is a period off).  Returns ``(slope, slope_std, k_c, t_c, dof)``:
+    the slope (s per slot), its standard error (inf with fewer than 3 points), the centroid of
+    the points kept and the degrees of freedom the standard error is estimated from.
     """
     k = slots - slots[-1]
     t = times - times[-1]
