@@ -348,13 +348,15 @@ class RestWindow:
         d = r - offset_a
         self.jump_quiet, self.jump_track, self.jump_sums = 0, None, None
         if still_before and d * d > test.level_limit * (noise_var_a2 + offset_var_a2):
-            sums = (current, self.phase.copy())
+            self.jump_sums = (current, self.phase.copy())
             if gram is not None:        # the step's first sample less the lines of the others
-                self.jump_sums = sums
                 r = self._step_residual(current, gram, theta, b)
             ok, self.jump_track = test.sample_ok(r, None, offset_a,
                                                  offset_var_a2 + test.jump_var_a2, noise_var_a2)
-            self.jump_quiet, self.jump_sums = (1, sums) if ok else (0, None)
+            if ok:
+                self.jump_quiet = 1
+            else:
+                self.jump_sums = None
 
     def _step_residual(self, current_a: float, gram: np.ndarray, theta: np.ndarray,
                        b: np.ndarray) -> float:
