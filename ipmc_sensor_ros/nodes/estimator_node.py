@@ -10,7 +10,7 @@ block / none; z = +-inf beyond the limit of :mod:`~ipmc_sensor_ros.estimation.li
 ``deflection/smoothed/block`` (the same columns, smoothed with ``smoothed_lag_s``; only
 when it is > 0), ``estimator/counters`` (JSON, 1 Hz) and ``/diagnostics``.  Parameter
 changes are validated by building the new estimator and applied without an output jump
-(:mod:`.live_params`).
+(:mod:`.live_params`); the publishing is :mod:`.publishing`.
 README "ROS 2 interface".
 
 One source per stream: the node follows one publisher of ``current`` (its GID from the message
@@ -27,12 +27,10 @@ silent for ``stale_after_s``.
 from __future__ import annotations
 
 import json
-import math
 import sys
 import threading
 from typing import Any
 
-import numpy as np
 from geometry_msgs.msg import PointStamped as PointMsg
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
@@ -57,6 +55,7 @@ from .messages import (CURRENT_COLUMNS, BlockPacker, OneSampleCodec, PointCodec,
                        claimed_samples, one_sample, unpack_block)
 from .diagnostics import DiagnosticsPublisher
 from .array_path import ArrayPath
+from .publishing import EstimatePublishing
 from .live_params import LiveParameters
 from .sources import FollowedSource, subscribe_followed
 from .runner import run
@@ -70,7 +69,7 @@ ESTIMATOR_SPECS = C.ESTIMATOR_SPECS
 _ERRORS = (IpmcError,)  # every deliberate error of the package names the parameter
 
 
-class EstimatorNode(LiveParameters, ArrayPath, Node):
+class EstimatorNode(LiveParameters, ArrayPath, EstimatePublishing, Node):
     """
     The estimator node (module docstring).
 
@@ -317,61 +316,6 @@ class EstimatorNode(LiveParameters, ArrayPath, Node):
             if self._pub_smoothed is not None:
                 self._publish_smoothed()
 
-    def _publish(self, block_msg: Float64MultiArray, times, deflections, n: int) -> None:
-        """
-        Publish a block and its points.
-
-        a publish that cannot complete (e.g. a stalled reliable subscriber) is counted
-        by the stream core, never fatal, never a reset.
-        """
-        try:
-            self._pub_block.publish(block_msg)
-        except Exception as exc:  # rclpy raises RCLError and others: back-pressure, not a bug
-            self._stream.unpublished(n, short_repr(str(exc)))
-            return
-        mode = self._values['publish_points']
-        if mode == 'none':
-            return
-        try:
-            if n == 1 and not isinstance(times, np.ndarray):
-                self._publish_point(times, deflections)
-            elif mode == 'last_of_block':
-                self._publish_point(float(times[-1]), float(deflections[-1]))
-            else:
-                for t, w in zip(times.tolist(), deflections.tolist()):
-                    self._publish_point(t, w)
-        except Exception as exc:  # the block went out; points are a convenience view
-            self._stream.counters['messages_unpublished'] += 1
-            self.get_logger().warning(
-                f'could not publish deflection points: {short_repr(str(exc))}',
-                throttle_duration_sec=1.0,
-            )
-
-    def _publish_smoothed(self, flush: bool = False) -> None:
-        """
-        Publish what the stream smoothed with ``smoothed_lag_s`` (a block, when ready).
-
-        ``flush``: also the samples held for their lag (the stream ends: deactivate).
-        """
-        out = self._stream.pop_smoothed(flush)
-        if out is None:
-            return
-        t, w, std = out
-        flags = self._limits[0].flags(self._stream.estimator, w)
-        try:
-            self._pub_smoothed.publish(self._packer.pack(t, w, std, flags))
-        except Exception as exc:  # a second view of samples counted already: as the points
-            self._stream.counters['messages_unpublished'] += 1
-            self.get_logger().warning(
-                f'could not publish smoothed deflection: {short_repr(str(exc))}',
-                throttle_duration_sec=1.0)
-
-    def _drain(self) -> None:
-        """Publish the samples the smoother still holds for their lag (the stream ends here)."""
-        if getattr(self, '_pub_smoothed', None) is not None and self._stream is not None:
-            with self._lock:
-                self._publish_smoothed(flush=True)
-
     def destroy_node(self) -> None:
         """Publish what the smoother holds, wait ``topics.FLUSH_TIMEOUT_S`` for acks, destroy."""
         self._drain()
@@ -379,15 +323,6 @@ class EstimatorNode(LiveParameters, ArrayPath, Node):
         if pub is not None:
             pub.wait_for_all_acked(Duration(nanoseconds=int(T.FLUSH_TIMEOUT_S * 1e9)))
         super().destroy_node()
-
-    def _publish_point(self, time_s: float, deflection_m: float, channel: int = 0) -> None:
-        key = (float(self._values['length_m']), self._values['frame_id'])
-        if self._points is None or self._points.key != key:
-            self._points = PointCodec(*key)
-        limit = self._limits[channel].limit_m
-        if not -limit <= deflection_m <= limit:     # REP 117: out of range is +-inf
-            deflection_m = math.copysign(math.inf, deflection_m)
-        self._pub_points[channel].publish(self._points.encode(time_s, deflection_m))
 
     # -- periodic -------------------------------------------------------------
     def _on_timer(self) -> None:
