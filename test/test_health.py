@@ -46,6 +46,15 @@ def test_warn_on_malformed_messages_resets_gaps_only_while_they_happen():
     assert mon.evaluate(_counters(3000, rejected_malformed=2, resets=1, gaps=1), 3.0).level == OK
 
 
+def test_warn_when_the_estimator_takes_a_jump_of_the_offset():
+    mon = HealthMonitor(FS)
+    assert mon.evaluate(_counters(1000, offset_jumps=0), 1.0).level == OK
+    h = mon.evaluate(_counters(2000, offset_jumps=1), 2.0)
+    assert h.level == WARN and '1 jump(s) of the current offset taken' in h.message
+    assert h.values['offset_jumps'] == '1'
+    assert mon.evaluate(_counters(3000, offset_jumps=1), 3.0).level == OK
+
+
 def test_warn_when_the_lost_or_refused_fraction_exceeds_its_limit():
     mon = HealthMonitor(FS, HealthLimits(loss_warn_fraction=0.01))
     mon.evaluate(_counters(1000), 1.0)

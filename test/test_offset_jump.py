@@ -63,8 +63,11 @@ def test_an_offset_that_jumps_in_a_hold_is_learned_not_read_as_a_ramp(step_a):
     assert estimate_scores(rec, out)['nrmse'] < 0.01
     offset_a = est.core.status()['offset_a']
     assert offset_a == pytest.approx(6 * NA + step_a, abs=0.1 * NA)
-    off = _causal(rec, _estimator(rec, offset_jump_a=0.0), 1000)
+    assert est.core.status()['offset_jumps'] == 1       # counted: the node warns on it
+    no_jumps = _estimator(rec, offset_jump_a=0.0)
+    off = _causal(rec, no_jumps, 1000)
     assert estimate_scores(rec, off)['nrmse'] > 0.05      # the model change is what does it
+    assert no_jumps.core.status()['offset_jumps'] == 0
 
 
 def test_a_jump_just_after_a_move_before_the_rest_is_confirmed_is_learned():

@@ -104,6 +104,7 @@ class KalmanEstimator:
         self._first_n = max(64, int(round(LINE_FIRST_S * fs)))
         self._filter = self._new_filter(StateSpaceModel(reduced, self.config, fs, nominal_line))
         self._state: FilterState | None = None
+        self.offset_jumps = 0           # jumps of the offset taken (:mod:`.rest`)
         self.reset()
 
     def _new_filter(self, model: StateSpaceModel) -> KalmanFilter:
@@ -156,8 +157,7 @@ class KalmanEstimator:
     def estimate(self, current_a, steps=None) -> Estimate:
         y = np.asarray(current_a, dtype=float)
         st = np.ones(y.size, dtype=np.int64) if steps is None else np.asarray(steps, np.int64)
-        parts = []
-        a = 0
+        parts, a = [], 0
         while a < y.size:
             # cut where the line check falls due (a fixed sample count, however cut)
             due = self._next_check(self._state.samples)
@@ -204,6 +204,7 @@ class KalmanEstimator:
             return
         held = 0 if self._lag is None else min(len(self._state.ended.y), self._lag.held)
         start, before, self._state, rec = restart(self._filter, self._state, held)
+        self.offset_jumps += bool(start.hold_still)
         link = self._begin_segment(self._filter, start, self._filter, before)
         if rec is not None:
             self._lag.replace_newest(self._filter, rec, link if held == start.hold_off else None)
@@ -314,7 +315,7 @@ class KalmanEstimator:
         return {'filter': self._state.copy(), 'line_hz': self.model.fundamentals_hz,
                 'motion_hz': self.model.motion_hz, 'recent': self._recent.buffer.copy(),
                 'grid': self._recent.count, 'first_rest_n': self._first_rest_n,
-                'stretches': self._log.saved()}
+                'stretches': self._log.saved(), 'offset_jumps': self.offset_jumps}
 
     def set_state(self, state: dict) -> None:
         try:
@@ -336,6 +337,7 @@ class KalmanEstimator:
         self._state = fs.copy()
         self._recent = SampleRing(recent.size, recent, int(state.get('grid', fs.samples)))
         self._first_rest_n = state.get('first_rest_n')
+        self.offset_jumps = int(state.get('offset_jumps', 0))
 
     def _model_filter(self, line_hz, motion_hz) -> KalmanFilter:
         """Return this filter when its model has these lines and motion, else a new one."""
@@ -371,7 +373,7 @@ class KalmanEstimator:
         """Take over ``old``'s stream state (deflection, offset, lines, ...)."""
         self._state = carry_state(old._filter, self._filter, old._state)
         self._log = StretchLog(self._filter, self._state)
-        self._first_rest_n = old._first_rest_n
+        self._first_rest_n, self.offset_jumps = old._first_rest_n, old.offset_jumps
         if old._window_n == self._window_n:
             self._recent = old._recent.copy()
 
@@ -389,7 +391,7 @@ class KalmanEstimator:
                 'at_rest': bool(self._state.still), 'deflection_std_m': w_std,
                 'noise_a': math.sqrt(self._state.noise.var_a2),
                 'mains_line_hz': self.line_hz, 'mains_line_a': level,
-                'motion_hz': self.model.motion_hz}
+                'motion_hz': self.model.motion_hz, 'offset_jumps': self.offset_jumps}
 
     def settling(self) -> tuple[float, str]:
         if self._first_rest_n is not None:

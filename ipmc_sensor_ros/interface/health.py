@@ -230,6 +230,8 @@ class HealthMonitor:
                      ('rejected_too_long', 'sample(s) in message(s) over max_block_samples '
                                            'rejected'),
                      ('source_switches', 'switch(es) to another publisher'),
+                     ('offset_jumps', 'jump(s) of the current offset taken (an amplifier '
+                                      're-zeroed or its range switched?)'),
                      ('messages_lost_reported', 'message(s) reported lost by the middleware'))
 
     def __init__(self, sample_rate_hz: float | None, limits: HealthLimits = HealthLimits(),
