@@ -22,7 +22,7 @@ from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
 from ipmc_sensor_ros.estimation.records import estimate_record
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
-from ipmc_sensor_ros.simulation import sensor
+from ipmc_sensor_ros.simulation import convolution
 from ipmc_sensor_ros.workbench import compare as compare_module
 from ipmc_sensor_ros.workbench import freqresp, metrics
 from ipmc_sensor_ros.workbench.blas import single_threaded_blas
@@ -39,7 +39,7 @@ class _Record:
         self.path, self.sample = f'synthetic_{n}', 'slim'
         self.time_s = np.arange(n) / FS
         self.deflection_m = 1e-3 * np.sin(2 * np.pi * 3.0 * self.time_s)
-        i = sensor.lti_response_fft(self.model.transfer, self.time_s, self.deflection_m)
+        i = convolution.lti_response_fft(self.model.transfer, self.time_s, self.deflection_m)
         noise = np.random.default_rng(seed).standard_normal(n)
         self.current_a = i + 0.02 * np.std(i) * noise
 
@@ -59,7 +59,7 @@ def _traced_peak(fn) -> int:
 def _small_chunks(monkeypatch):
     """Chunks of 4096 samples: their fixed working set is then negligible against 5e4 rows."""
     monkeypatch.setattr(freqresp, 'FIT_CHUNK_ROWS', 4096)
-    monkeypatch.setattr(sensor, 'TRANSFER_CHUNK', 4096)
+    monkeypatch.setattr(convolution, 'TRANSFER_CHUNK', 4096)
     monkeypatch.setattr(compare_module, 'GRADIENT_CHUNK', 4096)
     monkeypatch.setattr(metrics, 'CHUNK_ROWS', 4096)
 
@@ -146,13 +146,13 @@ def test_chunked_harmonic_fit_equals_the_whole_matrix_fit(monkeypatch):
 def test_chunked_transfer_equals_the_one_shot_fft(monkeypatch):
     rec = _Record(3_001)
     t, w, transfer = rec.time_s, rec.deflection_m, rec.model.transfer
-    x, n, fs, _ = sensor.padded_record(t, w, 2.0)
+    x, n, fs, _ = convolution.padded_record(t, w, 2.0)
     h = np.asarray(transfer(2j * np.pi * np.fft.rfftfreq(n, 1.0 / fs)), dtype=complex)
     h[0] = 0.0
     h[-1] = h[-1].real
     ref = np.fft.irfft(np.fft.rfft(x, n) * h, n)[:t.size]
-    monkeypatch.setattr(sensor, 'TRANSFER_CHUNK', 100)     # many chunks, a ragged last one
-    assert np.array_equal(sensor.lti_response_fft(transfer, t, w), ref)
+    monkeypatch.setattr(convolution, 'TRANSFER_CHUNK', 100)     # many chunks, a ragged last one
+    assert np.array_equal(convolution.lti_response_fft(transfer, t, w), ref)
 
 
 def test_overlap_save_blocks_equal_the_whole_record_convolution(monkeypatch):
@@ -169,10 +169,10 @@ def test_overlap_save_blocks_equal_the_whole_record_convolution(monkeypatch):
     model = SensorModel(PAPER_SAMPLES['slim'])
     t = np.arange(300_000) / 1000.0
     w = RobotMotion(seed=2).deflection(t) + 1e-4 * np.sin(2 * np.pi * 7 * t)
-    whole = sensor.lti_response_fft(model.transfer, t, w)
-    monkeypatch.setattr(sensor, 'OVERLAP_SAVE_FFT', 1 << 16)
-    monkeypatch.setattr(sensor, 'OVERLAP_SAVE_ABOVE', 1 << 17)
-    blocks = sensor.lti_response_fft(model.transfer, t, w)
+    whole = convolution.lti_response_fft(model.transfer, t, w)
+    monkeypatch.setattr(convolution, 'OVERLAP_SAVE_FFT', 1 << 16)
+    monkeypatch.setattr(convolution, 'OVERLAP_SAVE_ABOVE', 1 << 17)
+    blocks = convolution.lti_response_fft(model.transfer, t, w)
     assert blocks.shape == whole.shape
     assert np.max(np.abs(blocks - whole)) < 2e-4 * np.std(whole)
 
