@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..physics.model import SensorModel
-from .sensor import predict_current
+from .convolution import predict_current
 from .stimuli import RobotMotion
 
 __all__ = ['daq_current', 'robot_motion', 'started', 'intermittent_motion']

@@ -36,7 +36,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ..physics.model import SensorModel
-from ..simulation.sensor import lti_response_fft
+from ..simulation.convolution import lti_response_fft
 from .adequacy import magnitude_flags
 from .blas import single_threaded_blas
 from .freqresp import FrequencyPoint, fundamental_response

@@ -21,7 +21,7 @@ from ..physics.beam import check_fidelity
 from ..physics.effects import get_effect
 from ..physics.model import SensorModel
 from ..physics.parameters import PAPER_PARAMETERS, PAPER_SAMPLES, Geometry, MaterialParameters
-from ..simulation.sensor import predict_current
+from ..simulation.convolution import predict_current
 from ..simulation.stimuli import CrankSlider
 from .timepredict import Record
 

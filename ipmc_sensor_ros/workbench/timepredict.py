@@ -26,7 +26,7 @@ from typing import Sequence
 import numpy as np
 
 from ..physics.model import SensorModel
-from ..simulation.sensor import padded_record
+from ..simulation.convolution import padded_record
 from .metrics import noise_rms
 
 __all__ = ['Record', 'PreparedRecord', 'prepare', 'predict']
