@@ -158,3 +158,75 @@ def test_the_smoothers_pass_back_across_a_jump_as_a_jump():
     held = lagged.pop_smoothed(flush=True).deflection_m
     whole = core.smooth(rec.current_a).deflection_m
     assert np.max(np.abs(held - whole)) <= 1e-12
+
+
+def _crank_record(step_a: float, frequency_hz: float = 5.0, jump_s: float = 7.3,
+                  seconds: float = 14.0):
+    """slim, a crank from rest at 0.3 s; the offset steps by ``step_a`` at ``jump_s``."""
+    from bench.scenarios.motions import Crank
+
+    def make(rng):
+        crank = Crank(frequency_hz, 2.0 * MM, 20 * MM, phase_rad=0.3, start_s=0.3,
+                      wobble=0.005, wobble_hz=0.3)
+        steps = ((jump_s, step_a),) if step_a else ()
+        return Sensor('slim'), crank, Daq(offset_a=10 * NA, noise_a=0.7 * NA, adc_bits=16,
+                                          offset_steps=steps)
+    return Scenario('crank-jump', 'daq', seconds, make, '').build(0)
+
+
+@pytest.mark.parametrize('frequency_hz, step_a, jump_s', [
+    (3.0, -10 * NA, 7.3), (5.0, 20 * NA, 7.3), (20.0, -30 * NA, 9.5)])
+def test_an_offset_that_jumps_while_a_crank_runs_is_taken(frequency_hz, step_a, jump_s):
+    """
+    A jump of the offset under a periodic motion is taken where it happened.
+
+    Before, the jump refuted the periodic model (its innovations' test), the model went and
+    the level with it: 2.8-6.9 % NRMSE here without jumps (``offset_jump_a`` 0; drawn
+    record 1, a 34 nA step under a 3.2 Hz crank, read 13 % with hundreds of um off to the
+    end).  Now the stretches the model does not explain are filtered again with a jump where
+    its likelihood ratio peaks (``periodic.offset_step_at``), and the model stays when it
+    then explains them: measured 0.61-0.79 %, the level 2.6-4.8 um RMS off from 2.7 s after
+    the step on.  Allowed 1 % (the issue's floor: the ~1.5 s between the step and the check
+    whose stretch the model no longer explains are published as they were); the offset
+    within 2 nA at the end (0.3-1.2 nA off measured: the jump's time is found to a fraction
+    of a period, and the samples between are shared by the offsets before and after).
+    """
+    rec = _crank_record(step_a, frequency_hz, jump_s)
+    est = _estimator(rec)
+    out = _causal(rec, est, 1000)
+    assert estimate_scores(rec, out)['nrmse'] < 0.01
+    status = est.core.status()
+    assert status['offset_jumps'] == 1 and status['motion_hz'] > 0
+    assert status['offset_a'] == pytest.approx(10 * NA + step_a, abs=2 * NA)
+    off = _causal(rec, _estimator(rec, offset_jump_a=0.0), 1000)
+    assert estimate_scores(rec, off)['nrmse'] > 0.02      # what the jump does
+
+
+def test_a_crank_without_a_jump_takes_none_and_a_jump_is_one_recursion():
+    """
+    No jump where the offset holds; through one, blocks and single samples agree.
+
+    A crank whose model explains every stretch never tries a jump (the estimate equals the
+    one with ``offset_jump_a`` 0 to the bit).  The jump is found and taken at a check, by
+    filtering the stretches again: the same samples whatever the cut, so the one-sample path
+    and a state saved before the check agree with the block path to 1e-12 m.
+    """
+    plain = _crank_record(0.0, seconds=10.0)
+    a = _causal(plain, _estimator(plain), 1000).deflection_m
+    b = _causal(plain, _estimator(plain, offset_jump_a=0.0), 1000).deflection_m
+    assert np.array_equal(a, b)
+    rec = _crank_record(20 * NA, seconds=10.0)
+    y = rec.current_a
+    block = _estimator(rec).core.estimate(y).deflection_m
+    one = _estimator(rec).core
+    singles = np.array([one.estimate_one(v)[0] for v in y])
+    assert one.status()['offset_jumps'] == 1
+    np.testing.assert_allclose(singles, block, rtol=0, atol=1e-12)
+    est = _estimator(rec).core
+    cut = int(8.5 * rec.sample_rate_hz)       # after the step, before the check that finds it
+    first = est.estimate(y[:cut]).deflection_m
+    saved = est.get_state()
+    tail = est.estimate(y[cut:]).deflection_m
+    est.set_state(saved)
+    assert np.array_equal(est.estimate(y[cut:]).deflection_m, tail)
+    np.testing.assert_allclose(np.concatenate((first, tail)), block, rtol=0, atol=1e-12)

@@ -32,9 +32,8 @@ import math
 
 import numpy as np
 
-from ..errors import ParameterError
 from ..lti.reduction import ReducedModel
-from .carry import Changes, carry_state
+from .carry import Changes
 from .config import EstimatorConfig, parse_mains
 from .core import Estimate
 from .filter import FilterState, ForwardRecord, KalmanFilter
@@ -43,7 +42,8 @@ from .lines import NOMINAL_LINES_HZ, measure_line
 from .motionline import MOTION_LONGEST_S, MOTION_PERIODS, measure_recent
 from .onset import due, restart
 from .innovations import explains
-from .periodic import StretchLog, refilter, same_motion
+from .kalman_state import KalmanState
+from .periodic import Stretch, StretchLog, offset_step_at, refilter, same_motion
 from .ring import SampleRing
 from .smoother import smooth_segments
 from .statespace import StateSpaceModel
@@ -64,7 +64,7 @@ LINE_WINDOW_S = 2.0
 LINE_RETUNE_HZ = 0.02
 
 
-class KalmanEstimator:
+class KalmanEstimator(KalmanState):
     """
     Streaming Kalman estimate of tip deflection (m) from sensing current (A).
 
@@ -251,6 +251,8 @@ class KalmanEstimator:
         f0 = measure_recent(recent, self.sample_rate_hz, self.model)
         floor = MOTION_PERIODS / min(recent.size / self.sample_rate_hz, MOTION_LONGEST_S)
         span = self._log.refuted(self._state)
+        if span is not None and self._jumped_in(span):
+            return
         f0 = 0.0 if span else f0
         span = span or self._log.span_for(f0, self._first_rest_n is None, floor)
         if span is None or same_motion(f0, self.model.motion_hz):
@@ -261,16 +263,40 @@ class KalmanEstimator:
                 run.now.innovations, run.start.innovations)):
             self._log.current.measured_hz = 0.0         # refused: it counts as none
 
-    def _take_over(self, filt: KalmanFilter, span, accept=None) -> bool:
+    def _jumped_in(self, span) -> bool:
+        """
+        Tell whether the periodic model explains ``span`` with a jump of the offset in it.
+
+        A stretch the periodic model does not explain may hold a jump of the offset (an
+        amplifier re-zeroed while the crank runs): the span is filtered again with a jump
+        where the current's mean over a period moved most (:func:`~.periodic.offset_step_at`),
+        and the jump is taken when the model, so, explains the span.
+        """
+        m, before = self.model, self._log.earlier
+        if not (m.motion_hz and self.config.offset_jump_a):
+            return False
+        whole = span
+        if before is not None and same_motion(before.filter.model.motion_hz, m.motion_hz):
+            whole = Stretch(before.filter, before.state, before.y + span.y,
+                            before.steps + span.steps)     # a jump the last check missed
+        at = offset_step_at(whole, self._filter)
+        if at is None or not self._take_over(self._filter, whole, lambda run: explains(
+                run.now.innovations, run.start.innovations), jump_at=at):
+            return False
+        span.measured_hz = m.motion_hz
+        self.offset_jumps += 1
+        return True
+
+    def _take_over(self, filt: KalmanFilter, span, accept=None, jump_at=None) -> bool:
         """
         Let ``filt`` take over from the start of ``span``, filtered again under it.
 
         Returns False, changing nothing, when ``accept(run)`` (:func:`~.periodic.refilter`'s
-        result) refuses the run.
+        result) refuses the run.  ``jump_at``: the offset jumped before that sample.
         """
         held = 0 if self._lag is None else min(len(span.y), self._lag.held)
         rec = ForwardRecord.empty(held, filt.model.size) if held else None
-        run = refilter(span, filt, rec)
+        run = refilter(span, filt, rec, jump_at)
         if accept is not None and not accept(run):
             return False
         link = self._begin_segment(filt, run.start, span.filter, span.state)
@@ -309,73 +335,6 @@ class KalmanEstimator:
         live._changes.segments = [(0, live._filter, live._state.copy(), None)]
         still = live.estimate(y, st).still
         return Estimate(*smooth_segments(live._changes.segments, y, st), still)
-
-    # -- state ------------------------------------------------------------------------------
-    def get_state(self) -> dict:
-        return {'filter': self._state.copy(), 'line_hz': self.model.fundamentals_hz,
-                'motion_hz': self.model.motion_hz, 'recent': self._recent.buffer.copy(),
-                'grid': self._recent.count, 'first_rest_n': self._first_rest_n,
-                'stretches': self._log.saved(), 'offset_jumps': self.offset_jumps}
-
-    def set_state(self, state: dict) -> None:
-        try:
-            fs: FilterState = state['filter']
-            line = tuple(float(f) for f in state['line_hz'])
-            motion = float(state['motion_hz'])
-            recent = np.asarray(state['recent'], dtype=float)
-            filt = self._model_filter(line, motion)
-            log = StretchLog.restored(state['stretches'], self._model_filter)
-            window_slots = fs.window.offset_var.shape
-        except (KeyError, TypeError, ValueError, AttributeError):
-            raise ParameterError('not a state of this Kalman estimator') from None
-        if (fs.x.shape != (filt.model.size,) or recent.shape != self._recent.buffer.shape
-                or window_slots != fs.window.samples.shape):
-            raise ParameterError('state was saved from a different estimator design')
-        if self._lag is not None:
-            self._lag.flush()
-        self._filter, self._log = filt, log
-        self._state = fs.copy()
-        self._recent = SampleRing(recent.size, recent, int(state.get('grid', fs.samples)))
-        self._first_rest_n = state.get('first_rest_n')
-        self.offset_jumps = int(state.get('offset_jumps', 0))
-
-    def _model_filter(self, line_hz, motion_hz) -> KalmanFilter:
-        """Return this filter when its model has these lines and motion, else a new one."""
-        m = self.model
-        if m.fundamentals_hz == tuple(line_hz) and m.motion_hz == motion_hz:
-            return self._filter
-        return self._new_filter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,
-                                                tuple(line_hz), motion_hz))
-
-    def rebuilt(self, reduced: ReducedModel | None = None, recent_input=None,
-                **changes) -> 'KalmanEstimator':
-        """
-        Return an estimator for a new design (reduced model, sample rate, settings).
-
-        Its state continues from this one's: deflection, velocity, working point, offset and
-        lines carried over; the sensor's charge states restarted from the velocity.
-        """
-        fs = float(changes.pop('sample_rate_hz', self.sample_rate_hz))
-        config = changes.pop('config', self.config)
-        mains = changes.pop('mains_hz', self.mains_hz)
-        lag_s = changes.pop('smoothed_lag_s', self.smoothed_lag_s)
-        if changes:
-            raise ParameterError(f'cannot rebuild the Kalman estimator with {sorted(changes)}')
-        new = KalmanEstimator(reduced or self.reduced, fs, config, mains, lag_s)
-        if new.mains_hz == self.mains_hz:
-            new._filter = new._new_filter(StateSpaceModel(new.reduced, config, fs,
-                                                          self.model.fundamentals_hz,
-                                                          self.model.motion_hz))
-        new.continue_from(self)
-        return new
-
-    def continue_from(self, old: 'KalmanEstimator', recent_input=None) -> None:
-        """Take over ``old``'s stream state (deflection, offset, lines, ...)."""
-        self._state = carry_state(old._filter, self._filter, old._state)
-        self._log = StretchLog(self._filter, self._state)
-        self._first_rest_n, self.offset_jumps = old._first_rest_n, old.offset_jumps
-        if old._window_n == self._window_n:
-            self._recent = old._recent.copy()
 
     # -- reporting -----------------------------------------------------------------------
     def status(self) -> dict:

@@ -29,18 +29,19 @@ does not explain counts as one without periodic motion, and the model goes from 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import NamedTuple
 
 import numpy as np
 
 from .carry import carry_state
 from .filter import FilterState, ForwardRecord, KalmanFilter
-from .innovations import explains
+from .innovations import block_samples, explains
 from .motionline import MOTION_WOBBLE
 from .onset import due, restart
 
-__all__ = ['Stretch', 'StretchLog', 'Refiltered', 'refilter', 'same_motion']
+__all__ = ['Stretch', 'StretchLog', 'Refiltered', 'refilter', 'same_motion',
+           'offset_step_at']
 
 
 def same_motion(a_hz: float, b_hz: float) -> bool:
@@ -168,8 +169,8 @@ class Refiltered(NamedTuple):
     still: np.ndarray
 
 
-def refilter(span: Stretch, filt: KalmanFilter,
-             record: ForwardRecord | None = None) -> Refiltered:
+def refilter(span: Stretch, filt: KalmanFilter, record: ForwardRecord | None = None,
+             jump_at: int | None = None) -> Refiltered:
     """
     Filter the samples of ``span`` again under ``filt``, taking over at its start.
 
@@ -180,14 +181,21 @@ def refilter(span: Stretch, filt: KalmanFilter,
     would have had under ``filt`` from the span's start.
 
     ``record``: filled with the forward pass over the span's last ``len(record)`` samples
-    (what a fixed-lag smoother still holds of it).
+    (what a fixed-lag smoother still holds of it).  ``jump_at``: the offset jumped before
+    that sample of the span (:func:`offset_step_at`): there the offset's variance grows by a
+    jump's (``KalmanFilter.with_jump``), a change the smoothers pass back through as at a
+    jump found at rest (a restart).
     """
     start = span.state if span.filter is filt else carry_state(span.filter, filt, span.state)
     n = len(span.y)
     cut = n - (0 if record is None else record.x_post.shape[0])
     state, a, restarts, flags = start, 0, [], []
     while a < n:
+        if a == jump_at:
+            before, state = state, replace(state, P=filt.with_jump(state.P))
+            restarts.append((state, before))
         b = cut if a < cut else n
+        b = jump_at if jump_at is not None and a < jump_at < b else b
         state, w, _, still = filt.run(state, span.y[a:b], span.steps[a:b],
                                       record=None if a < cut else record, offset=a - cut,
                                       until_motion=True)
@@ -201,6 +209,60 @@ def refilter(span: Stretch, filt: KalmanFilter,
                 _put(record, a - cut - held, rows)
     return Refiltered(start, state, restarts,
                       np.concatenate(flags) if flags else np.zeros(0, dtype=bool))
+
+
+def offset_step_at(span: Stretch, filt: KalmanFilter, chunk: int = 512) -> int | None:
+    """
+    Return the sample of ``span`` before which the offset most likely jumped, or None.
+
+    The generalised likelihood ratio of one jump (Willsky and Jones 1976) on the statistic
+    of :mod:`.innovations`: ``span`` is filtered again under ``filt`` (in pieces of ``chunk``
+    samples, so the covariances held stay small) for its normalised innovations
+    z_k = nu_k / sqrt(S_k), summed over blocks one period of the periodic motion long (white
+    N(0, 1) sums under the model; a model's residual at the motion's harmonics sums to nearly
+    nothing).  A jump of the offset by ``a`` before sample t adds a * rho_k(t) to z_k, the
+    jump's signature through this filter: rho_k = c e_k / sqrt(S_k), e_t the offset's unit
+    vector, e_{k+1} = F (I - K_k c) e_k.  The sample is the t (every ``len(span) / 200``-th)
+    that maximises (sum_B Z_B R_B / n_B)^2 / sum_B R_B^2 / n_B over the blocks B (Z_B, R_B
+    the sums of z and rho over B, n_B its samples): what the best jump there explains.
+    Candidates leave a period after them (None: none does).
+    """
+    m = filt.model
+    state = span.state if span.filter is filt else carry_state(span.filter, filt, span.state)
+    n, c = len(span.y), m.c
+    period = block_samples(m.motion_hz, m.sample_rate_hz)
+    if n < period + 2:
+        return None
+    at = np.arange(1, n - period + 1, max(1, n // 200))
+    sig = np.zeros((m.size, at.size))           # the signatures' state errors, by candidate
+    fit, power = np.zeros(at.size), np.zeros(at.size)       # by blocks, and by samples
+    fit_1, power_1 = np.zeros(at.size), np.zeros(at.size)
+    block_z, block_rho = 0.0, np.zeros(at.size)
+    for a in range(0, n, chunk):
+        b = min(n, a + chunk)
+        rec = ForwardRecord.empty(b - a, m.size)
+        state = filt.run(state, span.y[a:b], span.steps[a:b], record=rec)[0]
+        gains = rec.P_pred @ c
+        s = np.sqrt(gains @ c + state.noise.var_a2)
+        z = (np.asarray(span.y[a:b]) - rec.x_pred @ c) / s
+        for k in range(a, b):
+            sig[m.ib, at == k] = 1.0 / m.scale[m.ib]
+            rho = (c @ sig) / s[k - a]
+            block_z += z[k - a]
+            block_rho += rho
+            fit_1 += rho * z[k - a]
+            power_1 += rho * rho
+            if (k + 1) % period == 0 or k + 1 == n:
+                size = (k % period) + 1
+                fit += block_rho * block_z / size
+                power += block_rho * block_rho / size
+                block_z, block_rho = 0.0, np.zeros(at.size)
+            sig = m.discrete(span.steps[k + 1] if k + 1 < n else 1)[0] @ (
+                sig - np.outer(gains[k - a] / (s[k - a] * s[k - a]), c @ sig))
+    coarse = at[int(np.argmax(fit * fit / np.maximum(power, 1e-300)))]
+    fine = np.where(np.abs(at - coarse) <= period, fit_1 * fit_1 / np.maximum(power_1, 1e-300),
+                    -1.0)
+    return int(at[int(np.argmax(fine))])
 
 
 def _put(record: ForwardRecord, at: int, rows: ForwardRecord) -> None:

@@ -1,0 +1,95 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+The Kalman estimator's state in and out: save, restore, rebuild for a new design, continue.
+
+What :class:`~.kalman.KalmanEstimator` is at any sample is its :class:`~.filter.FilterState`,
+the model's lines and periodic motion, the last window of current on the sample grid, the
+stretches a model change would filter again (:class:`~.periodic.StretchLog`) and two
+counters; :meth:`KalmanState.get_state` returns them as values and
+:meth:`KalmanState.set_state` takes them back (scipy.signal's ``zi`` / ``zf``: state in,
+state out), so a restored estimator continues to the bit.  A new design (reduced model,
+rate, settings) continues from the old one's state (:func:`~.carry.carry_state`).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import ParameterError
+from ..lti.reduction import ReducedModel
+from .carry import carry_state
+from .filter import FilterState, KalmanFilter
+from .periodic import StretchLog
+from .ring import SampleRing
+from .statespace import StateSpaceModel
+
+__all__ = ['KalmanState']
+
+
+class KalmanState:
+    """Save, restore and carry the state of :class:`~.kalman.KalmanEstimator` (a mixin)."""
+
+    def get_state(self) -> dict:
+        return {'filter': self._state.copy(), 'line_hz': self.model.fundamentals_hz,
+                'motion_hz': self.model.motion_hz, 'recent': self._recent.buffer.copy(),
+                'grid': self._recent.count, 'first_rest_n': self._first_rest_n,
+                'stretches': self._log.saved(), 'offset_jumps': self.offset_jumps}
+
+    def set_state(self, state: dict) -> None:
+        try:
+            fs: FilterState = state['filter']
+            line = tuple(float(f) for f in state['line_hz'])
+            motion = float(state['motion_hz'])
+            recent = np.asarray(state['recent'], dtype=float)
+            filt = self._model_filter(line, motion)
+            log = StretchLog.restored(state['stretches'], self._model_filter)
+            window_slots = fs.window.offset_var.shape
+        except (KeyError, TypeError, ValueError, AttributeError):
+            raise ParameterError('not a state of this Kalman estimator') from None
+        if (fs.x.shape != (filt.model.size,) or recent.shape != self._recent.buffer.shape
+                or window_slots != fs.window.samples.shape):
+            raise ParameterError('state was saved from a different estimator design')
+        if self._lag is not None:
+            self._lag.flush()
+        self._filter, self._log = filt, log
+        self._state = fs.copy()
+        self._recent = SampleRing(recent.size, recent, int(state.get('grid', fs.samples)))
+        self._first_rest_n = state.get('first_rest_n')
+        self.offset_jumps = int(state.get('offset_jumps', 0))
+
+    def _model_filter(self, line_hz, motion_hz) -> KalmanFilter:
+        """Return this filter when its model has these lines and motion, else a new one."""
+        m = self.model
+        if m.fundamentals_hz == tuple(line_hz) and m.motion_hz == motion_hz:
+            return self._filter
+        return self._new_filter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,
+                                                tuple(line_hz), motion_hz))
+
+    def rebuilt(self, reduced: ReducedModel | None = None, recent_input=None,
+                **changes) -> 'KalmanState':
+        """
+        Return an estimator for a new design (reduced model, sample rate, settings).
+
+        Its state continues from this one's: deflection, velocity, working point, offset and
+        lines carried over; the sensor's charge states restarted from the velocity.
+        """
+        fs = float(changes.pop('sample_rate_hz', self.sample_rate_hz))
+        config = changes.pop('config', self.config)
+        mains = changes.pop('mains_hz', self.mains_hz)
+        lag_s = changes.pop('smoothed_lag_s', self.smoothed_lag_s)
+        if changes:
+            raise ParameterError(f'cannot rebuild the Kalman estimator with {sorted(changes)}')
+        new = type(self)(reduced or self.reduced, fs, config, mains, lag_s)
+        if new.mains_hz == self.mains_hz:
+            new._filter = new._new_filter(StateSpaceModel(new.reduced, config, fs,
+                                                          self.model.fundamentals_hz,
+                                                          self.model.motion_hz))
+        new.continue_from(self)
+        return new
+
+    def continue_from(self, old: 'KalmanState', recent_input=None) -> None:
+        """Take over ``old``'s stream state (deflection, offset, lines, ...)."""
+        self._state = carry_state(old._filter, self._filter, old._state)
+        self._log = StretchLog(self._filter, self._state)
+        self._first_rest_n, self.offset_jumps = old._first_rest_n, old.offset_jumps
+        if old._window_n == self._window_n:
+            self._recent = old._recent.copy()
