@@ -268,9 +268,10 @@ class KalmanEstimator(KalmanState):
         Tell whether the periodic model explains ``span`` with a jump of the offset in it.
 
         A stretch the periodic model does not explain may hold a jump of the offset (an
-        amplifier re-zeroed while the crank runs): the span is filtered again with a jump
-        where the current's mean over a period moved most (:func:`~.periodic.offset_step_at`),
-        and the jump is taken when the model, so, explains the span.
+        amplifier re-zeroed while the crank runs): this stretch and the one before (a jump
+        late in it may pass its check) are filtered again with a jump where its likelihood
+        ratio peaks (:func:`~.periodic.offset_step_at`), and the jump is taken when the
+        model, so, explains them (:func:`~.innovations.explains`).
         """
         m, before = self.model, self._log.earlier
         if not (m.motion_hz and self.config.offset_jump_a):

@@ -215,54 +215,63 @@ def offset_step_at(span: Stretch, filt: KalmanFilter, chunk: int = 512) -> int |
     """
     Return the sample of ``span`` before which the offset most likely jumped, or None.
 
-    The generalised likelihood ratio of one jump (Willsky and Jones 1976) on the statistic
-    of :mod:`.innovations`: ``span`` is filtered again under ``filt`` (in pieces of ``chunk``
-    samples, so the covariances held stay small) for its normalised innovations
-    z_k = nu_k / sqrt(S_k), summed over blocks one period of the periodic motion long (white
-    N(0, 1) sums under the model; a model's residual at the motion's harmonics sums to nearly
-    nothing).  A jump of the offset by ``a`` before sample t adds a * rho_k(t) to z_k, the
-    jump's signature through this filter: rho_k = c e_k / sqrt(S_k), e_t the offset's unit
-    vector, e_{k+1} = F (I - K_k c) e_k.  The sample is the t (every ``len(span) / 200``-th)
-    that maximises (sum_B Z_B R_B / n_B)^2 / sum_B R_B^2 / n_B over the blocks B (Z_B, R_B
-    the sums of z and rho over B, n_B its samples): what the best jump there explains.
-    Candidates leave a period after them (None: none does).
+    The generalised likelihood ratio of one jump (Willsky and Jones 1976): ``span`` filtered
+    again under ``filt`` gives its normalised innovations z_k = nu_k / sqrt(S_k), N(0, 1)
+    under the model (:func:`_innovations`).  A jump of the offset by ``a`` before sample t
+    adds a * rho_k(t) to z_k, the jump's signature through this filter: rho_k = c e_k /
+    sqrt(S_k), e_t the offset's unit vector, e_{k+1} = F (I - K_k c) e_k.  For each candidate
+    t (every ``len(span) / 200``-th sample, leaving a period of the periodic motion after
+    it; None: none does) what the best jump there explains is (sum rho z)^2 / sum rho^2.  It
+    is taken first over blocks one period long, the sums of z and rho over each block over
+    its root size (the statistic of :mod:`.innovations`: a model's residual at the motion's
+    harmonics sums to nearly nothing over a period, while sample by sample it would pull the
+    jump's time to where it happens to match); that finds the jump's period, and the same
+    ratio over single samples within a period of it, where the jump's first innovation is
+    sharpest, its sample.
     """
     m = filt.model
-    state = span.state if span.filter is filt else carry_state(span.filter, filt, span.state)
-    n, c = len(span.y), m.c
-    period = block_samples(m.motion_hz, m.sample_rate_hz)
+    n, period = len(span.y), block_samples(m.motion_hz, m.sample_rate_hz)
     if n < period + 2:
         return None
     at = np.arange(1, n - period + 1, max(1, n // 200))
     sig = np.zeros((m.size, at.size))           # the signatures' state errors, by candidate
-    fit, power = np.zeros(at.size), np.zeros(at.size)       # by blocks, and by samples
-    fit_1, power_1 = np.zeros(at.size), np.zeros(at.size)
+    sums = np.zeros((4, at.size))               # fit and power, by blocks and by samples
     block_z, block_rho = 0.0, np.zeros(at.size)
-    for a in range(0, n, chunk):
-        b = min(n, a + chunk)
+    c, unit = m.c, 1.0 / m.scale[m.ib]
+    for k, z, s, gain in _innovations(span, filt, chunk):
+        sig[m.ib, at == k] = unit
+        rho = (c @ sig) / s
+        block_z += z
+        block_rho += rho
+        sums[2:] += rho * z, rho * rho
+        if (k + 1) % period == 0 or k + 1 == n:
+            size = (k % period) + 1
+            sums[:2] += block_rho * block_z / size, block_rho * block_rho / size
+            block_z, block_rho = 0.0, np.zeros(at.size)
+        sig = m.discrete(span.steps[k + 1] if k + 1 < n else 1)[0] @ (
+            sig - np.outer(gain / (s * s), c @ sig))
+    explained = sums[[0, 2]] ** 2 / np.maximum(sums[[1, 3]], 1e-300)
+    coarse = at[int(np.argmax(explained[0]))]
+    return int(at[int(np.argmax(np.where(np.abs(at - coarse) <= period, explained[1], -1.0)))])
+
+
+def _innovations(span: Stretch, filt: KalmanFilter, chunk: int):
+    """
+    Yield (k, z_k, sqrt(S_k), P_k c') for each sample k of ``span`` filtered again under ``filt``.
+
+    In pieces of ``chunk`` samples, so the covariances held for them stay small.
+    """
+    m = filt.model
+    state = span.state if span.filter is filt else carry_state(span.filter, filt, span.state)
+    for a in range(0, len(span.y), chunk):
+        b = min(len(span.y), a + chunk)
         rec = ForwardRecord.empty(b - a, m.size)
         state = filt.run(state, span.y[a:b], span.steps[a:b], record=rec)[0]
-        gains = rec.P_pred @ c
-        s = np.sqrt(gains @ c + state.noise.var_a2)
-        z = (np.asarray(span.y[a:b]) - rec.x_pred @ c) / s
-        for k in range(a, b):
-            sig[m.ib, at == k] = 1.0 / m.scale[m.ib]
-            rho = (c @ sig) / s[k - a]
-            block_z += z[k - a]
-            block_rho += rho
-            fit_1 += rho * z[k - a]
-            power_1 += rho * rho
-            if (k + 1) % period == 0 or k + 1 == n:
-                size = (k % period) + 1
-                fit += block_rho * block_z / size
-                power += block_rho * block_rho / size
-                block_z, block_rho = 0.0, np.zeros(at.size)
-            sig = m.discrete(span.steps[k + 1] if k + 1 < n else 1)[0] @ (
-                sig - np.outer(gains[k - a] / (s[k - a] * s[k - a]), c @ sig))
-    coarse = at[int(np.argmax(fit * fit / np.maximum(power, 1e-300)))]
-    fine = np.where(np.abs(at - coarse) <= period, fit_1 * fit_1 / np.maximum(power_1, 1e-300),
-                    -1.0)
-    return int(at[int(np.argmax(fine))])
+        gains = rec.P_pred @ m.c
+        s = np.sqrt(gains @ m.c + state.noise.var_a2)
+        z = (np.asarray(span.y[a:b]) - rec.x_pred @ m.c) / s
+        for j in range(b - a):
+            yield a + j, float(z[j]), float(s[j]), gains[j]
 
 
 def _put(record: ForwardRecord, at: int, rows: ForwardRecord) -> None:
