@@ -222,14 +222,15 @@ def test_a_crank_without_a_jump_takes_none_and_a_jump_is_one_recursion():
     singles = np.array([one.estimate_one(v)[0] for v in y])
     assert one.status()['offset_jumps'] == 1
     np.testing.assert_allclose(singles, block, rtol=0, atol=1e-12)
-    est = _estimator(rec).core
-    cut = int(8.5 * rec.sample_rate_hz)       # after the step, before the check that finds it
-    first = est.estimate(y[:cut]).deflection_m
-    saved = est.get_state()
-    tail = est.estimate(y[cut:]).deflection_m
-    est.set_state(saved)
-    assert np.array_equal(est.estimate(y[cut:]).deflection_m, tail)
-    np.testing.assert_allclose(np.concatenate((first, tail)), block, rtol=0, atol=1e-12)
+    for cut_s in (8.5, 9.5):        # before the check that finds the step, and after it
+        est = _estimator(rec).core
+        cut = int(cut_s * rec.sample_rate_hz)
+        first = est.estimate(y[:cut]).deflection_m
+        saved = est.get_state()
+        tail = est.estimate(y[cut:]).deflection_m
+        est.set_state(saved)
+        assert np.array_equal(est.estimate(y[cut:]).deflection_m, tail)
+        np.testing.assert_allclose(np.concatenate((first, tail)), block, rtol=0, atol=1e-12)
 
 
 def test_the_smoothers_pass_back_across_a_jump_found_under_a_crank():

@@ -277,14 +277,15 @@ class KalmanEstimator(KalmanState):
         if not (m.motion_hz and self.config.offset_jump_a):
             return False
         whole = span
-        if before is not None and same_motion(before.filter.model.motion_hz, m.motion_hz):
+        if (before is not None and not before.jumped
+                and same_motion(before.filter.model.motion_hz, m.motion_hz)):
             whole = Stretch(before.filter, before.state, before.y + span.y,
                             before.steps + span.steps)     # a jump the last check missed
         at = offset_step_at(whole, self._filter)
         if at is None or not self._take_over(self._filter, whole, lambda run: explains(
                 run.now.innovations, run.start.innovations), jump_at=at):
             return False
-        span.measured_hz = m.motion_hz
+        span.measured_hz, span.jumped = m.motion_hz, True
         self.offset_jumps += 1
         return True
 

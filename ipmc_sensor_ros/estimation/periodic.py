@@ -63,6 +63,9 @@ class Stretch:
     measured_hz: float | None = None
     #: the lowest fundamental the measurement could see, Hz
     floor_hz: float = 0.0
+    #: a jump of the offset was taken at its end's check, filtering again from before its
+    #: start: its start state is not the one its samples now follow, so no span starts there
+    jumped: bool = False
 
 
 class StretchLog:
@@ -95,7 +98,7 @@ class StretchLog:
         """Return the log as plain values (models by lines and fundamental; states copied)."""
         return tuple(None if st is None else (
             st.filter.model.fundamentals_hz, st.filter.model.motion_hz, st.state.copy(),
-            list(st.y), list(st.steps), st.rest, st.measured_hz, st.floor_hz)
+            list(st.y), list(st.steps), st.rest, st.measured_hz, st.floor_hz, st.jumped)
             for st in (self.earlier, self.current))
 
     @classmethod
@@ -106,12 +109,13 @@ class StretchLog:
             if item is None:
                 parts.append(None)
                 continue
-            lines, motion, state, y, steps, rest, measured, floor = item
+            lines, motion, state, y, steps, rest, measured, floor, jumped = item
             filt = make_filter(tuple(lines), float(motion))
             if state.x.shape != (filt.model.size,):
                 raise ValueError('a stretch state of another design')
             parts.append(Stretch(filt, state.copy(), list(y), list(steps), bool(rest),
-                                 None if measured is None else float(measured), float(floor)))
+                                 None if measured is None else float(measured), float(floor),
+                                 bool(jumped)))
         log = cls.__new__(cls)
         log.earlier, log.current = parts
         if log.current is None:
@@ -149,7 +153,8 @@ class StretchLog:
                 return None
         elif not same_motion(measured_hz, before.measured_hz):
             return None
-        if before is not None and (never_rested or measured_hz and not before.rest):
+        if (before is not None and not before.jumped
+                and (never_rested or measured_hz and not before.rest)):
             return Stretch(before.filter, before.state, before.y + cur.y,
                            before.steps + cur.steps)
         return cur
