@@ -12,9 +12,17 @@ own third difference is taken off first, as the filter predicts it from its stat
 four samples (:attr:`.filter.KalmanFilter.line_difference`: the phasors turned on; the state after
 them has fitted their noise, and a second's lines taken from it read a 20 nA noise as
 16 nA).  Differences across a bridged gap are skipped.
+
+An ADC's rounding is noise of variance q^2 / 12 for a step q (uniform within a step), which
+the third difference misses while the reading sits on one code: R is at least that, q the
+smallest change between two successive samples seen (``step_a``; for unquantised data it
+shrinks below any noise).  A still reading that steps by one code now and then is then
+within the rest test's per-sample limit, not a 5.7 sigma outlier (16 bits over +-100 uA at
+0.37 nA of noise).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from .rest import RestWindow
@@ -34,8 +42,9 @@ NOISE_FLOOR_A = 1e-12
 
 @dataclass(slots=True)
 class NoiseMeter:
-    """The measured white-noise variance per sample (module docstring), A^2."""
+    """The white-noise variance per sample (module docstring), A^2: measured, quantiser's."""
 
+    #: what the filter takes: the measured average, at least the quantiser's step^2 / 12
     var_a2: float
     weight: float = 0.0
     #: samples in a row one period apart (a third difference needs four)
@@ -43,6 +52,10 @@ class NoiseMeter:
     #: the lines' third difference over the next four samples, as predicted after each of the
     #: last four (oldest first; empty when no lines are modelled), A
     ahead: tuple = ()
+    #: the third differences' average, A^2 (None: none yet)
+    measured_a2: float | None = None
+    #: the smallest change between two samples seen (an ADC's step), A (inf: none yet)
+    step_a: float = math.inf
 
     def add(self, current_a: float, steps: int, window: RestWindow, alpha: float,
             lines_next: float | None = None) -> None:
@@ -53,6 +66,11 @@ class NoiseMeter:
         the filter predicts it now (A); None: no lines are modelled.
         """
         ahead = self.ahead
+        w, pos, n = window.samples, window.pos, window.samples.size
+        if steps == 1 and self.contiguous:          # the sample before is in the window
+            change = abs(current_a - w[(pos - 2) % n])
+            if 0.0 < change < self.step_a:
+                self.step_a = change
         if lines_next is not None:
             self.ahead = (ahead + (lines_next,))[-4:] if steps == 1 else (lines_next,)
         if steps != 1:
@@ -64,12 +82,14 @@ class NoiseMeter:
         if lines_next is not None and len(ahead) < 4:
             return
         lines_a = ahead[0] if lines_next is not None else 0.0
-        w, pos, n = window.samples, window.pos, window.samples.size
         d = (current_a - 3.0 * w[(pos - 2) % n] + 3.0 * w[(pos - 3) % n] - w[(pos - 4) % n]
              - lines_a)
         value = d * d / 20.0
         if self.weight:
             value = min(value, NOISE_CLIP * self.var_a2)
         weight = (1.0 - alpha) * self.weight
-        self.var_a2 = max((weight * self.var_a2 + value) / (weight + 1.0), NOISE_FLOOR_A ** 2)
+        measured = value if self.measured_a2 is None else self.measured_a2
+        self.measured_a2 = (weight * measured + value) / (weight + 1.0)
+        quantiser = self.step_a ** 2 / 12.0 if math.isfinite(self.step_a) else 0.0
+        self.var_a2 = max(self.measured_a2, quantiser, NOISE_FLOOR_A ** 2)
         self.weight = weight + 1.0
