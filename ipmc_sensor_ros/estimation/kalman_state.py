@@ -4,8 +4,8 @@ The Kalman estimator's state in and out: save, restore, rebuild for a new design
 
 What :class:`~.kalman.KalmanEstimator` is at any sample is its :class:`~.filter.FilterState`,
 the model's lines and periodic motion, the last window of current on the sample grid, the
-stretches a model change would filter again (:class:`~.periodic.StretchLog`) and two
-counters; :meth:`KalmanState.get_state` returns them as values and
+stretches a model change would filter again (:class:`~.periodic.StretchLog`), the first
+rest's sample and the jumps counted; :meth:`KalmanState.get_state` returns them as values and
 :meth:`KalmanState.set_state` takes them back (scipy.signal's ``zi`` / ``zf``: state in,
 state out), so a restored estimator continues to the bit.  A new design (reduced model,
 rate, settings) continues from the old one's state (:func:`~.carry.carry_state`).
