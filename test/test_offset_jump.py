@@ -185,7 +185,7 @@ def test_an_offset_that_jumps_while_a_crank_runs_is_taken(frequency_hz, step_a, 
     record 1, a 34 nA step under a 3.2 Hz crank, read 9.8 %, hundreds of um off to the end;
     now 0.69 %).  Now the stretches the model does not explain are filtered again with a
     jump where its likelihood ratio peaks (``periodic.offset_step_at``), and the model stays
-    when it then explains them: measured 0.61-0.79 %, the level 2.6-4.8 um RMS off from 2.7 s after
+    when it then explains them: measured 0.61-0.79 %, the level 2.7-4.8 um RMS off from 2.7 s after
     the step on.  Allowed 1 % (the issue's floor: the ~1.5 s between the step and the check
     whose stretch the model no longer explains are published as they were); the offset
     within 2 nA at the end (0.3-1.2 nA off measured: the jump's time is found to a fraction

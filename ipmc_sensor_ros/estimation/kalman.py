@@ -43,7 +43,7 @@ from .motionline import MOTION_LONGEST_S, MOTION_PERIODS, measure_recent
 from .onset import due, restart
 from .innovations import explains
 from .kalman_state import KalmanState
-from .periodic import Stretch, StretchLog, offset_step_at, refilter, same_motion
+from .periodic import StretchLog, offset_step_at, refilter, same_motion
 from .ring import SampleRing
 from .smoother import smooth_segments
 from .statespace import StateSpaceModel
@@ -279,8 +279,7 @@ class KalmanEstimator(KalmanState):
         whole = span
         if (before is not None and not before.jumped
                 and same_motion(before.filter.model.motion_hz, m.motion_hz)):
-            whole = Stretch(before.filter, before.state, before.y + span.y,
-                            before.steps + span.steps)     # a jump the last check missed
+            whole = before.then(span)       # a jump late in it may have passed its check
         at = offset_step_at(whole, self._filter)
         if at is None or not self._take_over(self._filter, whole, lambda run: explains(
                 run.now.innovations, run.start.innovations), jump_at=at):

@@ -52,8 +52,8 @@ class NoiseMeter:
     #: the lines' third difference over the next four samples, as predicted after each of the
     #: last four (oldest first; empty when no lines are modelled), A
     ahead: tuple = ()
-    #: the third differences' average, A^2 (None: none yet)
-    measured_a2: float | None = None
+    #: the third differences' average, A^2 (weight 0: none yet)
+    measured_a2: float = 0.0
     #: the smallest change between two samples seen (an ADC's step), A (inf: none yet)
     step_a: float = math.inf
 
@@ -88,8 +88,7 @@ class NoiseMeter:
         if self.weight:
             value = min(value, NOISE_CLIP * self.var_a2)
         weight = (1.0 - alpha) * self.weight
-        measured = value if self.measured_a2 is None else self.measured_a2
-        self.measured_a2 = (weight * measured + value) / (weight + 1.0)
+        self.measured_a2 = (weight * self.measured_a2 + value) / (weight + 1.0)
         quantiser = self.step_a ** 2 / 12.0 if math.isfinite(self.step_a) else 0.0
         self.var_a2 = max(self.measured_a2, quantiser, NOISE_FLOOR_A ** 2)
         self.weight = weight + 1.0

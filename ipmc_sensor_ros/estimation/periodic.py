@@ -67,6 +67,16 @@ class Stretch:
     #: start: its start state is not the one its samples now follow, so no span starts there
     jumped: bool = False
 
+    def then(self, later: 'Stretch') -> 'Stretch':
+        """Return the span from this stretch's start through the end of ``later``."""
+        return Stretch(self.filter, self.state, self.y + later.y, self.steps + later.steps)
+
+    def start_under(self, filt: KalmanFilter) -> FilterState:
+        """Return the state at its start under ``filt`` (carried when it ran another)."""
+        if self.filter is filt:
+            return self.state
+        return carry_state(self.filter, filt, self.state)
+
 
 class StretchLog:
     """The last two stretches between checks (what a change of motion model refilters)."""
@@ -155,8 +165,7 @@ class StretchLog:
             return None
         if (before is not None and not before.jumped
                 and (never_rested or measured_hz and not before.rest)):
-            return Stretch(before.filter, before.state, before.y + cur.y,
-                           before.steps + cur.steps)
+            return before.then(cur)
         return cur
 
 
@@ -191,7 +200,7 @@ def refilter(span: Stretch, filt: KalmanFilter, record: ForwardRecord | None = N
     jump's (``KalmanFilter.with_jump``), a change the smoothers pass back through as at a
     jump found at rest (a restart).
     """
-    start = span.state if span.filter is filt else carry_state(span.filter, filt, span.state)
+    start = span.start_under(filt)
     n = len(span.y)
     cut = n - (0 if record is None else record.x_post.shape[0])
     state, a, restarts, flags = start, 0, [], []
@@ -266,8 +275,7 @@ def _innovations(span: Stretch, filt: KalmanFilter, chunk: int):
 
     In pieces of ``chunk`` samples, so the covariances held for them stay small.
     """
-    m = filt.model
-    state = span.state if span.filter is filt else carry_state(span.filter, filt, span.state)
+    m, state = filt.model, span.start_under(filt)
     for a in range(0, len(span.y), chunk):
         b = min(len(span.y), a + chunk)
         rec = ForwardRecord.empty(b - a, m.size)
