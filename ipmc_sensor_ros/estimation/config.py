@@ -71,8 +71,14 @@ SETTINGS = (
     Setting('offset_jump_a', 30e-9, 'A', 0.0, 1e-3,
             'RMS of a jump of the offset (an amplifier re-zeroed, a range switched): as wide as '
             'offsets are (offset_prior_a), since a re-zero can leave it anywhere they lie; a '
-            'step out of a still stretch to a still current the offset does not explain is '
-            'taken for one; 0: the offset never jumps'),
+            'still current the offset does not explain, for a rest window out of a still '
+            'stretch or jump_hold_s after a motion, is taken for one; 0: the offset never '
+            'jumps'),
+    Setting('jump_hold_s', 1.0, 's', 0.0, 60.0,
+            'how long a current still at a level the offset does not explain must hold after '
+            "a motion to be taken for a jump of the offset: a smooth move's current is flat "
+            'within the noise about its peak for up to ~0.6 s (0.3 mm over 10 s at 0.2 nA), a '
+            'hold after a move lasts seconds; out of a still stretch a rest window is enough'),
     Setting('offset_drift_a_per_s', 0.05e-9, 'A/s', 0.0, 1e-3,
             "RMS of the offset's drift rate before it is learned: 3 nA a minute, a DAQ "
             'warming up; a short rest cannot tell a larger drift from noise'),

@@ -127,9 +127,12 @@ class KalmanFilter:
                       else rest_lines_hz)
         self.rest_lines_hz = lines
         self.rest = RestTest.design(cfg.rest_window_s, model.sample_rate_hz,
-                                    cfg.rest_false_alarm, lines, cfg.offset_jump_a)
+                                    cfg.rest_false_alarm, lines, cfg.offset_jump_a,
+                                    cfg.jump_hold_s)
         # one step of each line's phasor e^{-i W_k / fs} (sliding DFT of the rest window)
         self._rot = np.exp(-2j * np.pi * np.asarray(lines) / model.sample_rate_hz)
+        self._c_lines = np.zeros(model.size)        # the mains lines' current
+        self._c_lines[model.il:model.im] = model.c[model.il:model.im]
         self._alpha = 1.0 / (NOISE_AVERAGE_S * model.sample_rate_hz)
         self._block = block_samples(model.motion_hz, model.sample_rate_hz)
         s = model.scale
@@ -228,7 +231,7 @@ class KalmanFilter:
         m = self.model
         iw, ib = m.iw, m.ib
         sw, sb = float(m.scale[iw]), float(m.scale[ib])
-        c, rows, rot = m.c, self._rest_rows, self._rot
+        c, rows, rot, c_lines = m.c, self._rest_rows, self._rot, self._c_lines
         d3 = self.line_difference
         x, P, still, moved, samples = state.x, state.P, state.still, state.moved, state.samples
         meter, win, onset, hold = state.noise, state.window, state.onset, state.hold_off
@@ -257,9 +260,10 @@ class KalmanFilter:
                 win.push(yk, None if not (samples and rot.size) else rot if sk == 1
                          else rot ** sk, sk)
                 verdict = win.judge(self.rest, yk, float(x[ib]) * sb,
-                                    float(P[ib, ib]) * sb * sb, meter.var_a2, still)
+                                    float(P[ib, ib]) * sb * sb, meter.var_a2, still,
+                                    float(c_lines @ x))
                 jump = follow_jump(jump, win.jump_quiet, verdict, yk, sk, lambda: (
-                    x0, P0, moved, samples, Innovations(chi, blocks, zs, zn)))
+                    x0, P0, moved, samples, Innovations(chi, blocks, zs, zn)), win.jump_moving)
                 if jump is not None and verdict is False and win.jumped(self.rest,
                                                                         meter.var_a2):
                     accepted, jump = jump, None

@@ -92,18 +92,19 @@ def follow(onset: Onset | None, track: tuple | None, y: float, step: int, snapsh
 
 
 def follow_jump(run: Start | None, quiet: int, verdict, y: float, step: int,
-                snapshot) -> Start | None:
+                snapshot, moving: bool = False) -> Start | None:
     """
     Return the run of an offset's jump after sample ``y`` (:mod:`.rest`), or None.
 
     ``quiet``: the samples of the run so far (``RestWindow.jump_quiet``; 1: it starts at
     ``y``, from the filter's state ``snapshot()`` before it); ``verdict``: the rest test's
-    against the filter's offset (a still window needs no jump).
+    against the filter's offset (a still window needs no jump); ``moving``: the run did not
+    start out of a still stretch (its :class:`Start` says the rest flag there was off).
     """
     if verdict or not quiet:
         return None
     if quiet == 1:
-        run = Start(snapshot(), [], [], True, True)
+        run = Start(snapshot(), [], [], not moving, True)
     elif run is None:               # a run begun under another model (carried): not this one's
         return None
     run.y.append(y)

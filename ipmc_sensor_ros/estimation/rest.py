@@ -34,20 +34,23 @@ rest the filter itself is that still sensor's filter, and its b and P_b are used
 window's first samples are tested once the window is full, against its fit of the lines
 (before it a hum would fail every sample).
 
-**An offset that jumps** (``offset_jump_a``: an amplifier re-zeroed while the tip rests):
-a sample beyond the per-sample limit from the filter's offset on its own, out of a still
-stretch (at rest, or after a sample that agreed with rest on its own: a hold whose rest the
-window has not confirmed yet), is a step (a motion that starts gently, or a drift, fails the
-CUSUM first).  From it a second run of
-the per-sample tests starts, against a still sensor whose offset is the filter's with the
-jump's variance added (``jump_track``, ``jump_quiet``); its samples are taken less the lines
-of the jump's own fit, the window's basis with a step at the run's first sample (a line fit
-without it leaks the step into the lines).  When the window fails against the
-filter's offset but its run holds the whole window and the window passes the spread test
-(:meth:`RestWindow.jumped`; each of its samples agreed with the run's offset), the offset
-jumped where the run began: the filter takes the run's samples again from there as still,
-the offset's variance grown by the jump's (:func:`.onset.restart`), and the rest test goes
-on with the run's offset.
+**An offset that jumps** (``offset_jump_a``: an amplifier re-zeroed, a range switched):
+a sample beyond the per-sample limit from the filter's offset on its own may be a step.
+From it a second run of the per-sample tests starts, against a still sensor whose offset is
+the filter's with the jump's variance added (``jump_track``, ``jump_quiet``).  Out of a
+still stretch (at rest, or after a sample that agreed with rest on its own: a hold whose
+rest the window has not confirmed yet; a motion that starts gently, or a drift, fails the
+CUSUM first) its samples are taken less the lines of the jump's own fit, the window's basis
+with a step at the run's first sample (a line fit without it leaks the step into the
+lines), and it must hold the window.  Out of a motion (a step inside a move, or in a hold
+after it before the rest is confirmed) its samples are taken less the filter's own lines
+(the window's older samples are the motion's) and it must hold ``jump_hold_s``
+(:attr:`RestTest.moving_jump_n`: a smooth move's current can be flat within the noise for
+a window about its peak).  When the window fails against the filter's offset but its run
+has held that long and the window passes the spread test (:meth:`RestWindow.jumped`; each
+of its samples agreed with the run's offset), the offset jumped where the run began: the
+filter takes the run's samples again from there as still, the offset's variance grown by
+the jump's (:func:`.onset.restart`), and the rest test goes on with the run's offset.
 
 When all pass, the filter applies the zero-velocity pseudo-measurements (as zero-velocity
 updates in foot-mounted inertial navigation): the tip velocity and the motion's current are
@@ -62,6 +65,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.stats import chi2
+
+from .rest_jump import JumpRun
 
 __all__ = ['RestTest', 'RestWindow', 'CUSUM_DRIFT']
 
@@ -80,6 +85,9 @@ class RestTest:
     cusum_limit: float = math.inf
     #: variance of an offset jump (``offset_jump_a`` squared), A^2; 0: no jump test
     jump_var_a2: float = 0.0
+    #: samples a jump's run must hold when it did not start out of a still stretch
+    #: (``jump_hold_s``; out of one, a window's)
+    moving_jump_n: int = 0
     #: (A'A)^-1 of the window's fit when it holds no gap (module docstring; None: formed
     #: from the window's phases each time)
     gram_inv: np.ndarray | None = field(default=None, compare=False)
@@ -123,11 +131,12 @@ class RestTest:
 
     @classmethod
     def design(cls, window_s: float, sample_rate_hz: float, false_alarm: float,
-               lines_hz=(), jump_a: float = 0.0) -> 'RestTest':
+               lines_hz=(), jump_a: float = 0.0, jump_hold_s: float = 0.0) -> 'RestTest':
         """
         Thresholds for a window of ``window_s`` with the mains lines ``lines_hz`` fitted.
 
-        ``jump_a``: RMS of an offset jump, A (0: no jump test).
+        ``jump_a``: RMS of an offset jump, A (0: no jump test); ``jump_hold_s``: how long a
+        jump's run that did not start out of a still stretch must hold, s.
         """
         lines = len(lines_hz)
         n = max(8 + 2 * lines, int(round(window_s * sample_rate_hz)))
@@ -138,7 +147,7 @@ class RestTest:
         cusum = math.log(4 * k * k / false_alarm) / (2 * k) - 1.166
         return cls(n, float(chi2.isf(false_alarm, n - 1 - 2 * lines)),
                    float(chi2.isf(false_alarm, 1)), max(cusum, 1.0), jump_a * jump_a,
-                   _gram_inv(turns))
+                   max(n, int(round(jump_hold_s * sample_rate_hz))), _gram_inv(turns))
 
     def flat(self, spread: float, noise_var_a2: float) -> bool:
         """Tell whether the window's residual ``spread`` (A^2) is white noise (the spread test)."""
@@ -173,7 +182,7 @@ def _gram_inv(turns: np.ndarray) -> np.ndarray:
 
 
 @dataclass(slots=True)
-class RestWindow:
+class RestWindow(JumpRun):
     """
     The window the rest test judges: the last N samples of the current, and its progress.
 
@@ -206,6 +215,8 @@ class RestWindow:
     #: the run's own sums over its samples: (sum of the currents, sum of their phasors)
     #: (:meth:`_step_residual`)
     jump_sums: tuple | None = None
+    #: the run did not start out of a still stretch (it must hold ``moving_jump_n`` samples)
+    jump_moving: bool = False
 
     @classmethod
     def empty(cls, n: int, lines: int, offset_var_a2: float) -> 'RestWindow':
@@ -273,7 +284,7 @@ class RestWindow:
         return self.samples[order] - (turns.real @ theta[1::2] + turns.imag @ theta[2::2])
 
     def judge(self, test: RestTest, current_a: float, offset_a: float, offset_var_a2: float,
-              noise_var_a2: float, at_rest: bool) -> bool | None:
+              noise_var_a2: float, at_rest: bool, lines_a: float = 0.0) -> bool | None:
         """
         Test the newest sample (after :meth:`push`); return the window's verdict.
 
@@ -303,7 +314,7 @@ class RestWindow:
             self.quiet = self.quiet + 1 if ok else 0
             if test.jump_var_a2:
                 self._follow_jump(test, r, (current_a, gram, theta, b), offset_a,
-                                  offset_var_a2, noise_var_a2, still_before)
+                                  offset_var_a2, noise_var_a2, still_before, lines_a)
         if self.quiet < n:          # a sample of the window disagreed: no window test
             return False
         return test.still(*self._level(theta, b), offset_a, offset_var_a2, noise_var_a2)
@@ -316,84 +327,3 @@ class RestWindow:
         else:
             mean, explained = float(theta[0]), float(b @ theta)
         return mean, max(self.total_sq - explained, 0.0)
-
-    def _follow_jump(self, test: RestTest, r: float, fit: tuple, offset_a: float,
-                     offset_var_a2: float, noise_var_a2: float, still_before: bool) -> None:
-        """
-        Test sample ``r`` against a still sensor whose offset jumped (module docstring).
-
-        A run starts at a step out of a still stretch: a sample beyond the per-sample limit
-        from the filter's offset on its own when ``still_before`` (at rest, or the sample
-        before agreed with rest; a motion that starts gently, or a drift, fails the CUSUM
-        first); it starts from the filter's offset with the jump's variance
-        added (``jump_quiet`` 1: a run starts here) and learns it from each sample that agrees.
-        The run's later samples are taken less the lines of the jump's own fit
-        (:meth:`_step_residual`).  ``fit``: (the sample's current, and the window's
-        (A'A)^-1, fit and A'i; None without lines).
-        """
-        current, gram, theta, b = fit
-        if self.jump_track is not None:
-            if gram is not None and self.jump_quiet + 1 < self.samples.size:
-                total, phasors = self.jump_sums
-                self.jump_sums = (total + current, phasors + self.phase)
-                ok, self.jump_track = test.sample_ok(
-                    self._step_residual(current, gram, theta, b), self.jump_track, offset_a,
-                    offset_var_a2, noise_var_a2)
-            else:
-                ok, self.jump_track = test.sample_ok(r, self.jump_track, offset_a,
-                                                     offset_var_a2, noise_var_a2)
-            if ok:
-                self.jump_quiet += 1
-                return
-        d = r - offset_a
-        self.jump_quiet, self.jump_track, self.jump_sums = 0, None, None
-        if still_before and d * d > test.level_limit * (noise_var_a2 + offset_var_a2):
-            self.jump_sums = (current, self.phase.copy())
-            if gram is not None:        # the step's first sample less the lines of the others
-                r = self._step_residual(current, gram, theta, b)
-            ok, self.jump_track = test.sample_ok(r, None, offset_a,
-                                                 offset_var_a2 + test.jump_var_a2, noise_var_a2)
-            if ok:
-                self.jump_quiet = 1
-            else:
-                self.jump_sums = None
-
-    def _step_residual(self, current_a: float, gram: np.ndarray, theta: np.ndarray,
-                       b: np.ndarray) -> float:
-        """
-        Return the newest sample less the lines of the window's fit with the jump's step.
-
-        The jump's hypothesis is its own least squares: the window's basis A (a constant and
-        the lines) and a step e, 1 on the run's samples, 0 before.  With G = A'A, u = A'e,
-        L = e'e and the fit theta = G^-1 A'i: the step beta = (e'i - u' theta) / (L - u' G^-1
-        u) and the lines' fit theta - G^-1 u beta (the block inverse).  Fitted without e, a
-        window that holds the step leaks it into the lines (~1 nA of a 14 nA step over the
-        nominal 50 and 60 Hz lines with harmonics: 5 sigma at 0.2 nA of noise).
-        """
-        total, phasors = self.jump_sums
-        length = self.jump_quiet + 1
-        u = np.concatenate(((float(length),), (phasors * self.phase.conj()).view(float)))
-        v = gram @ u
-        schur = length - float(u @ v)
-        if not schur > 1e-9 * length:   # the window's basis already holds the step
-            return current_a - float(theta[1::2].sum())
-        beta = (total - float(u @ theta)) / schur
-        return current_a - float((theta[1::2] - v[1::2] * beta).sum())
-
-    def jumped(self, test: RestTest, noise_var_a2: float) -> bool:
-        """
-        Tell whether the window is still at an offset that jumped; if so, rest on that run.
-
-        True when the jump test's run holds the whole window (each sample agreed with the
-        run's offset, learned from the samples before it) and the window passes the spread
-        test; the rest test's run then becomes that one.  The window's mean is not tested
-        again: each of its samples agreed with the run's offset, within the per-sample test
-        and the CUSUM.
-        """
-        if self.jump_quiet < self.samples.size or self.jump_track is None:
-            return False
-        fit = self.fit(test.gram_inv) if self.phase.size else (None, None)
-        if not test.flat(self._level(*fit)[1], noise_var_a2):
-            return False
-        self.quiet, self.track = self.jump_quiet, self.jump_track
-        return True

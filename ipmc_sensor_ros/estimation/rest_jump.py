@@ -1,0 +1,117 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+The rest test's jump run: a still sensor whose offset jumped (:mod:`.rest`, module docstring).
+
+:class:`JumpRun` holds the methods of :class:`~.rest.RestWindow` that follow the run: where
+it starts, what each of its samples is tested as, and when it is taken.  Its fields
+(``jump_quiet``, ``jump_track``, ``jump_sums``, ``jump_moving``) are the window's.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ['JumpRun']
+
+
+class JumpRun:
+    """Mixin of :class:`~.rest.RestWindow`: the run of an offset's jump."""
+
+    __slots__ = ()
+
+    def _follow_jump(self, test, r: float, fit: tuple, offset_a: float,
+                     offset_var_a2: float, noise_var_a2: float, still_before: bool,
+                     lines_a: float) -> None:
+        """
+        Test sample ``r`` against a still sensor whose offset jumped (module docstring).
+
+        A run starts at a sample beyond the per-sample limit from the filter's offset on its
+        own; out of a still stretch (``still_before``: at rest, or the sample before agreed
+        with rest; a motion that starts gently, or a drift, fails the CUSUM first) it must
+        hold a window, out of a motion ``RestTest.moving_jump_n`` samples (a smooth move's
+        current can be flat within the noise for a window about its peak).  It starts from
+        the filter's offset with the jump's variance added (``jump_quiet`` 1: a run starts
+        here) and learns it from each sample that agrees (:meth:`_run_residual`).  ``fit``:
+        (the sample's current, and the window's (A'A)^-1, fit and A'i; None without lines);
+        ``lines_a``: the filter's mains lines at this sample, A.
+        """
+        current, gram = fit[:2]
+        if self.jump_track is not None:
+            if gram is not None:
+                total, phasors = self.jump_sums
+                self.jump_sums = (total + current, phasors + self.phase)
+            ok, self.jump_track = test.sample_ok(self._run_residual(r, fit, lines_a),
+                                                 self.jump_track, offset_a, offset_var_a2,
+                                                 noise_var_a2)
+            if ok:
+                self.jump_quiet += 1
+                return
+        self.jump_quiet, self.jump_track, self.jump_sums = 0, None, None
+        moving = not still_before
+        d = (current - lines_a if moving else r) - offset_a
+        if d * d > test.level_limit * (noise_var_a2 + offset_var_a2):
+            self.jump_sums, self.jump_moving = (current, self.phase.copy()), moving
+            ok, self.jump_track = test.sample_ok(self._run_residual(r, fit, lines_a), None,
+                                                 offset_a, offset_var_a2 + test.jump_var_a2,
+                                                 noise_var_a2)
+            if ok:
+                self.jump_quiet = 1
+            else:
+                self.jump_sums = None
+
+    def _run_residual(self, r: float, fit: tuple, lines_a: float) -> float:
+        """
+        Return the newest sample less the lines the jump's run assumes.
+
+        Out of a still stretch, the lines of the window's fit with the jump's step
+        (:meth:`_step_residual`; ``r``, the fit without it, once the run holds the window).
+        Out of a motion, the filter's own lines ``lines_a``: the window's older samples are
+        the motion's, whose current a fit of lines would take in (a crank's end leaked ~8 nA
+        into them, and the run began only when the motion had left the window).
+        """
+        current, gram, theta, b = fit
+        if self.jump_moving:
+            return current - lines_a
+        if gram is None or self.jump_quiet + 1 >= self.samples.size:
+            return r
+        return self._step_residual(current, gram, theta, b)
+
+    def _step_residual(self, current_a: float, gram: np.ndarray, theta: np.ndarray,
+                       b: np.ndarray) -> float:
+        """
+        Return the newest sample less the lines of the window's fit with the jump's step.
+
+        The jump's hypothesis is its own least squares: the window's basis A (a constant and
+        the lines) and a step e, 1 on the run's samples, 0 before.  With G = A'A, u = A'e,
+        L = e'e and the fit theta = G^-1 A'i: the step beta = (e'i - u' theta) / (L - u' G^-1
+        u) and the lines' fit theta - G^-1 u beta (the block inverse).  Fitted without e, a
+        window that holds the step leaks it into the lines (~1 nA of a 14 nA step over the
+        nominal 50 and 60 Hz lines with harmonics: 5 sigma at 0.2 nA of noise).
+        """
+        total, phasors = self.jump_sums
+        length = self.jump_quiet + 1
+        u = np.concatenate(((float(length),), (phasors * self.phase.conj()).view(float)))
+        v = gram @ u
+        schur = length - float(u @ v)
+        if not schur > 1e-9 * length:   # the window's basis already holds the step
+            return current_a - float(theta[1::2].sum())
+        beta = (total - float(u @ theta)) / schur
+        return current_a - float((theta[1::2] - v[1::2] * beta).sum())
+
+    def jumped(self, test, noise_var_a2: float) -> bool:
+        """
+        Tell whether the window is still at an offset that jumped; if so, rest on that run.
+
+        True when the jump test's run holds the whole window (each sample agreed with the
+        run's offset, learned from the samples before it) and the window passes the spread
+        test; the rest test's run then becomes that one.  The window's mean is not tested
+        again: each of its samples agreed with the run's offset, within the per-sample test
+        and the CUSUM.
+        """
+        need = max(self.samples.size, test.moving_jump_n if self.jump_moving else 0)
+        if self.jump_quiet < need or self.jump_track is None:
+            return False
+        fit = self.fit(test.gram_inv) if self.phase.size else (None, None)
+        if not test.flat(self._level(*fit)[1], noise_var_a2):
+            return False
+        self.quiet, self.track = self.jump_quiet, self.jump_track
+        return True
