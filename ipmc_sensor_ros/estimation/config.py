@@ -78,7 +78,8 @@ SETTINGS = (
             'how long a current still at a level the offset does not explain must hold after '
             "a motion to be taken for a jump of the offset: a smooth move's current is flat "
             'within the noise about its peak for up to ~0.6 s (0.3 mm over 10 s at 0.2 nA), a '
-            'hold after a move lasts seconds; out of a still stretch a rest window is enough'),
+            'hold after a move lasts seconds; out of a still stretch (and at 0) a rest window '
+            'is enough'),
     Setting('offset_drift_a_per_s', 0.05e-9, 'A/s', 0.0, 1e-3,
             "RMS of the offset's drift rate before it is learned: 3 nA a minute, a DAQ "
             'warming up; a short rest cannot tell a larger drift from noise'),

@@ -65,8 +65,8 @@ class JumpRun:
         Out of a still stretch, the lines of the window's fit with the jump's step
         (:meth:`_step_residual`; ``r``, the fit without it, once the run holds the window).
         Out of a motion, the filter's own lines ``lines_a``: the window's older samples are
-        the motion's, whose current a fit of lines would take in (a crank's end leaked ~8 nA
-        into them, and the run began only when the motion had left the window).
+        the motion's, whose current a fit of lines would take in (a move's end leaked ~8 nA
+        into them, and the run began only when the move had left the window).
         """
         current, gram, theta, b = fit
         if self.jump_moving:
@@ -101,9 +101,10 @@ class JumpRun:
         """
         Tell whether the window is still at an offset that jumped; if so, rest on that run.
 
-        True when the jump test's run holds the whole window (each sample agreed with the
-        run's offset, learned from the samples before it) and the window passes the spread
-        test; the rest test's run then becomes that one.  The window's mean is not tested
+        True when the jump test's run has held the whole window (``RestTest.moving_jump_n``
+        samples out of a motion; each sample agreed with the run's offset, learned from the
+        samples before it) and the window passes the spread test; the rest test's run then
+        becomes that one.  The window's mean is not tested
         again: each of its samples agreed with the run's offset, within the per-sample test
         and the CUSUM.
         """
