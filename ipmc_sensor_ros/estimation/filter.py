@@ -261,7 +261,7 @@ class KalmanFilter:
                          else rot ** sk, sk)
                 verdict = win.judge(self.rest, yk, float(x[ib]) * sb,
                                     float(P[ib, ib]) * sb * sb, meter.var_a2, still,
-                                    float(c_lines @ x))
+                                    lambda: float(c_lines @ x))
                 jump = follow_jump(jump, win.jump_quiet, verdict, yk, sk, lambda: (
                     x0, P0, moved, samples, Innovations(chi, blocks, zs, zn)), win.jump_moving)
                 if jump is not None and verdict is False and win.jumped(self.rest,

@@ -284,14 +284,15 @@ class RestWindow(JumpRun):
         return self.samples[order] - (turns.real @ theta[1::2] + turns.imag @ theta[2::2])
 
     def judge(self, test: RestTest, current_a: float, offset_a: float, offset_var_a2: float,
-              noise_var_a2: float, at_rest: bool, lines_a: float = 0.0) -> bool | None:
+              noise_var_a2: float, at_rest: bool, lines=lambda: 0.0) -> bool | None:
         """
         Test the newest sample (after :meth:`push`); return the window's verdict.
 
         None while the window fills; then True when every sample agreed with rest on its own
         (the window's first ones once it is full, against its fit of the lines) and the
         whole window passes :meth:`RestTest.still`.  ``offset_a``, ``offset_var_a2``: the
-        filter's offset and its variance before this sample.
+        filter's offset and its variance before this sample; ``lines()``: the filter's mains
+        lines at it, A (the jump test's run out of a motion asks for them).
         """
         n = self.samples.size
         filled = self.count == n - 1
@@ -314,7 +315,7 @@ class RestWindow(JumpRun):
             self.quiet = self.quiet + 1 if ok else 0
             if test.jump_var_a2:
                 self._follow_jump(test, r, (current_a, gram, theta, b), offset_a,
-                                  offset_var_a2, noise_var_a2, still_before, lines_a)
+                                  offset_var_a2, noise_var_a2, still_before, lines)
         if self.quiet < n:          # a sample of the window disagreed: no window test
             return False
         return test.still(*self._level(theta, b), offset_a, offset_var_a2, noise_var_a2)

@@ -20,7 +20,7 @@ class JumpRun:
 
     def _follow_jump(self, test, r: float, fit: tuple, offset_a: float,
                      offset_var_a2: float, noise_var_a2: float, still_before: bool,
-                     lines_a: float) -> None:
+                     lines) -> None:
         """
         Test sample ``r`` against a still sensor whose offset jumped (module docstring).
 
@@ -32,25 +32,26 @@ class JumpRun:
         the filter's offset with the jump's variance added (``jump_quiet`` 1: a run starts
         here) and learns it from each sample that agrees (:meth:`_run_residual`).  ``fit``:
         (the sample's current, and the window's (A'A)^-1, fit and A'i; None without lines);
-        ``lines_a``: the filter's mains lines at this sample, A.
+        ``lines()``: the filter's mains lines at this sample, A (asked for only out of a
+        motion).
         """
-        current, gram = fit[:2]
+        current = fit[0]
         if self.jump_track is not None:
-            if gram is not None:
+            if self._steps():
                 total, phasors = self.jump_sums
                 self.jump_sums = (total + current, phasors + self.phase)
-            ok, self.jump_track = test.sample_ok(self._run_residual(r, fit, lines_a),
+            ok, self.jump_track = test.sample_ok(self._run_residual(r, fit, lines),
                                                  self.jump_track, offset_a, offset_var_a2,
                                                  noise_var_a2)
             if ok:
                 self.jump_quiet += 1
                 return
         self.jump_quiet, self.jump_track, self.jump_sums = 0, None, None
-        moving = not still_before
-        d = (current - lines_a if moving else r) - offset_a
+        self.jump_moving = moving = not still_before
+        d = (current - lines() if moving else r) - offset_a
         if d * d > test.level_limit * (noise_var_a2 + offset_var_a2):
-            self.jump_sums, self.jump_moving = (current, self.phase.copy()), moving
-            ok, self.jump_track = test.sample_ok(self._run_residual(r, fit, lines_a), None,
+            self.jump_sums = None if moving else (current, self.phase.copy())
+            ok, self.jump_track = test.sample_ok(self._run_residual(r, fit, lines), None,
                                                  offset_a, offset_var_a2 + test.jump_var_a2,
                                                  noise_var_a2)
             if ok:
@@ -58,20 +59,25 @@ class JumpRun:
             else:
                 self.jump_sums = None
 
-    def _run_residual(self, r: float, fit: tuple, lines_a: float) -> float:
+    def _steps(self) -> bool:
+        """Tell whether the run's samples are fitted with its step (:meth:`_run_residual`)."""
+        return (self.jump_sums is not None and not self.jump_moving
+                and self.jump_quiet + 1 < self.samples.size)
+
+    def _run_residual(self, r: float, fit: tuple, lines) -> float:
         """
         Return the newest sample less the lines the jump's run assumes.
 
         Out of a still stretch, the lines of the window's fit with the jump's step
         (:meth:`_step_residual`; ``r``, the fit without it, once the run holds the window).
-        Out of a motion, the filter's own lines ``lines_a``: the window's older samples are
+        Out of a motion, the filter's own lines ``lines()``: the window's older samples are
         the motion's, whose current a fit of lines would take in (a move's end leaked ~8 nA
         into them, and the run began only when the move had left the window).
         """
         current, gram, theta, b = fit
         if self.jump_moving:
-            return current - lines_a
-        if gram is None or self.jump_quiet + 1 >= self.samples.size:
+            return current - lines()
+        if gram is None or not self._steps():
             return r
         return self._step_residual(current, gram, theta, b)
 
