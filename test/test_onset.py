@@ -114,10 +114,12 @@ def test_under_hum_a_rest_ends_only_where_the_tip_moves(monkeypatch):
 
 def test_a_jumps_run_starts_at_its_first_sample_and_ends_when_still_or_broken():
     snaps = iter(range(100))
-    run = follow_jump(None, 1, False, 0.5, 1, lambda: next(snaps))
-    assert run.state == 0 and run.y == [0.5] and run.held_still
-    run = follow_jump(run, 2, False, 0.7, 2, lambda: next(snaps))
+    run = follow_jump(None, 1, False, 0.5, 1, lambda: next(snaps), True)
+    assert run.state == 0 and run.y == [0.5] and run.held_still and run.still
+    run = follow_jump(run, 2, False, 0.7, 2, lambda: next(snaps), False)
     assert run.state == 0 and run.y == [0.5, 0.7] and run.steps == [1, 2]
-    assert follow_jump(run, 3, True, 0.7, 1, lambda: 9) is None      # still: no jump needed
-    assert follow_jump(run, 0, False, 0.7, 1, lambda: 9) is None     # the run broke
-    assert follow_jump(None, 5, False, 0.7, 1, lambda: 9) is None    # begun under another model
+    assert run.still                    # the rest flag where the run began
+    assert not follow_jump(None, 1, False, 0.5, 1, lambda: 0, False).still   # out of a motion
+    assert follow_jump(run, 3, True, 0.7, 1, lambda: 9, True) is None     # still: no jump needed
+    assert follow_jump(run, 0, False, 0.7, 1, lambda: 9, True) is None    # the run broke
+    assert follow_jump(None, 5, False, 0.7, 1, lambda: 9, True) is None   # begun under another

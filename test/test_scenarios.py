@@ -191,3 +191,19 @@ def test_the_offset_steps_once_where_the_amplifier_is_re_zeroed():
     k = int(jumps[0])
     assert 10.0 <= t[k + 1] <= 20.0
     assert 2e-9 <= abs(r.offset_a[k + 1] - r.offset_a[k]) <= 60e-9
+
+
+def test_a_crank_that_stops_holds_where_it_stopped():
+    crank = Crank(3.0, 2e-3, 20e-3, phase_rad=0.7, start_s=0.3, wobble=0.01, wobble_hz=0.3,
+                  stop_s=5.0, stop_duration_s=0.3)
+    turning = Crank(3.0, 2e-3, 20e-3, phase_rad=0.7, start_s=0.3, wobble=0.01, wobble_hz=0.3)
+    t = np.arange(0.0, 8.0, 1e-4)
+    w, free = crank(t), turning(t)
+    assert np.array_equal(w[t <= 5.0], free[t <= 5.0])          # the same motion until the stop
+    held = w[t >= 5.3]
+    assert np.ptp(held) == 0.0 and np.ptp(free[t >= 5.3]) > 3e-3  # held, where it would turn
+    # it slows down, never faster than it turned (2 pi f r = 38 mm/s, 1 % wobble)
+    assert np.max(np.abs(np.diff(w))) < 38e-3 * 1e-4 * 1.05
+    rec = build('slim-crank-stop', 0)
+    late = rec.sample_time_s > 7.6      # stops by 7.5 s at the latest
+    assert np.ptp(rec.deflection_m[late]) == 0.0 and np.ptp(rec.deflection_m) > 3e-3

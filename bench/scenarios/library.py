@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
@@ -85,6 +85,13 @@ def _crank_maker(frequency_hz: float, sample: str, noise: str, from_rest: bool):
         daq = Daq(offset_a=rng.uniform(0, 20) * NA, **_noise(rng, noise))
         return Sensor(sample), motion, daq
     return make
+
+
+def _crank_stop(rng):
+    """A 2-5 Hz crank from rest that stops at 5-7 s (in 0.1-0.5 s) and holds where it stopped."""
+    crank = replace(_crank(rng, rng.uniform(2.0, 5.0), True), stop_s=rng.uniform(5.0, 7.0),
+                    stop_duration_s=rng.uniform(0.1, 0.5))
+    return Sensor('slim'), crank, Daq(offset_a=rng.uniform(0, 20) * NA, **_noise(rng, 'pct'))
 
 
 def _sines(rng, n: int, lo_hz: float, hi_hz: float, lo_m: float, hi_m: float) -> Sines:
@@ -244,6 +251,9 @@ def _scenarios() -> list[Scenario]:
         Scenario('narrow-pick-place-2min', 'pick-place', 120.0, _pick_place('narrow', 2, False),
                  'narrow (30 x 5 x 0.2 mm), 2 min pick-and-place, offset drifting 5 -> 25 nA, '
                  '0.5 nA, 16 bit'),
+        Scenario('slim-crank-stop', 'crank', 12.0, _crank_stop,
+                 'slim, 2-5 Hz crank from rest that stops at 5-7 s (in 0.1-0.5 s) and holds '
+                 'where it stopped, noise 1-2 %, offset 0-20 nA'),
         Scenario('crank-5hz-narrow-pct-rest', 'crank', 20.0,
                  _crank_maker(5.0, 'narrow', 'pct', True),
                  'narrow (30 x 5 x 0.2 mm), 5 Hz crank from rest, noise 1-2 %'),

@@ -104,7 +104,9 @@ class Crank:
     size ``wobble`` at ``wobble_hz`` (a DC motor is not a clock).  ``start_s`` None: turning
     since before power-on, w = x - (cycle mean of x), zero mean; else at rest until
     ``start_s``, spun up smoothly (speed 3 s^2 - 2 s^3 of its final value over ``spinup_s``)
-    and w = x - x(theta at rest), zero before the start.
+    and w = x - x(theta at rest), zero before the start.  ``stop_s``: the motor stops there,
+    smoothly (speed 1 - 3 s^2 + 2 s^3 of its nominal value over ``stop_duration_s``), and the
+    tip holds where the crank stopped.
     """
 
     frequency_hz: float
@@ -115,12 +117,21 @@ class Crank:
     spinup_s: float = 0.5
     wobble: float = 0.0
     wobble_hz: float = 0.2
+    stop_s: float | None = None
+    stop_duration_s: float = 0.3
 
     def _x(self, theta):
         r, rod = self.crank_radius_m, self.rod_length_m
         return r * np.cos(theta) + np.sqrt(rod ** 2 - (r * np.sin(theta)) ** 2)
 
     def _angle(self, t):
+        if self.stop_s is None:
+            return self._turning(t)
+        s = np.clip((t - self.stop_s) / self.stop_duration_s, 0.0, 1.0)
+        coast = 2.0 * math.pi * self.frequency_hz * self.stop_duration_s
+        return self._turning(np.minimum(t, self.stop_s)) + coast * (s - s ** 3 + s ** 4 / 2.0)
+
+    def _turning(self, t):
         omega = 2.0 * math.pi * self.frequency_hz
         wm = 2.0 * math.pi * self.wobble_hz
         if self.start_s is None:

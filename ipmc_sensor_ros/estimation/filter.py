@@ -204,6 +204,18 @@ class KalmanFilter:
         s = m.scale[m.iw]
         return float(state.x[m.iw] * s), math.sqrt(max(float(state.P[m.iw, m.iw]), 0.0)) * s
 
+    def to_block_end(self, state: FilterState) -> int:
+        """
+        Return the samples after which the filter closes its next innovation block.
+
+        A block is one period of the periodic motion (:mod:`.innovations`), counted from
+        the first sample after ``NOISE_AVERAGE_S``; without a periodic model, 0 (none).
+        """
+        if self._block == 1:
+            return 0
+        before = max(0, math.ceil(1.0 / self._alpha) - state.samples)
+        return before + self._block - state.innovations.open_n
+
     def offset(self, state: FilterState) -> tuple[float, float]:
         """Return (current offset, its standard deviation) of a state, A."""
         m = self.model
@@ -236,7 +248,7 @@ class KalmanFilter:
         x, P, still, moved, samples = state.x, state.P, state.still, state.moved, state.samples
         meter, win, onset, hold = state.noise, state.window, state.onset, state.hold_off
         hold_still, jump = state.hold_still, state.jump
-        chi, blocks, zs, zn = state.innovations
+        chi, blocks, zs, zn, nll = state.innovations
         settled, block = 1.0 / self._alpha, self._block
         if copy:
             x, P, meter, win = x.copy(), P.copy(), replace(meter), win.copy()
@@ -263,7 +275,7 @@ class KalmanFilter:
                                     float(P[ib, ib]) * sb * sb, meter.var_a2, still,
                                     lambda: float(c_lines @ x))
                 jump = follow_jump(jump, win.jump_quiet, verdict, yk, sk, lambda: (
-                    x0, P0, moved, samples, Innovations(chi, blocks, zs, zn)), win.jump_moving)
+                    x0, P0, moved, samples, Innovations(chi, blocks, zs, zn, nll)), still)
                 if jump is not None and verdict is False and win.jumped(self.rest,
                                                                         meter.var_a2):
                     accepted, jump = jump, None
@@ -278,9 +290,9 @@ class KalmanFilter:
                 j = offset + k
                 record.x_pred[j], record.P_pred[j] = x, P
                 record.steps[j], record.still[j] = sk, still
-            x, P, z = scalar_update(x, P, c, yk, meter.var_a2)
+            x, P, z, r = scalar_update(x, P, c, yk, meter.var_a2)
             if samples >= settled:      # R measured: the innovation's variance is the model's
-                zs, zn = zs + z, zn + 1
+                zs, zn, nll = zs + z, zn + 1, nll + z * z + 2.0 * math.log(r)
                 if zn == block:
                     chi, blocks, zs, zn = chi + zs * zs / zn, blocks + 1, 0.0, 0
             if not held:
@@ -289,7 +301,7 @@ class KalmanFilter:
                 x, P = self._window_offset(x, P, win, meter.var_a2)
             if still:                   # the rest pseudo-measurements (velocity, ... = 0)
                 for row_c, var in rows:
-                    x, P, _ = scalar_update(x, P, row_c, 0.0, var)
+                    x, P = scalar_update(x, P, row_c, 0.0, var)[:2]
             if record is not None:
                 record.x_post[offset + k], record.P_post[offset + k] = x, P
             samples += 1
@@ -301,7 +313,7 @@ class KalmanFilter:
             elif still:
                 onset = follow(onset, win.track, yk, sk,
                                lambda: (x, P, moved, samples,
-                                        Innovations(chi, blocks, zs, zn)))
+                                        Innovations(chi, blocks, zs, zn, nll)))
             elif was and onset is not None:     # the rest ended: a sample told it?
                 ended = onset.start(yk, sk) if win.quiet == 0 else None
                 onset = None
@@ -309,7 +321,7 @@ class KalmanFilter:
                 n = k + 1
                 break
         return (FilterState(x, P, meter, win, still, moved, samples, onset, ended, hold,
-                            hold_still, jump, Innovations(chi, blocks, zs, zn)),
+                            hold_still, jump, Innovations(chi, blocks, zs, zn, nll)),
                 out_w[:n], out_s[:n], out_still[:n])
 
     def with_jump(self, P: np.ndarray) -> np.ndarray:
@@ -351,10 +363,12 @@ def _rest_change(verdict: bool | None, still: bool, moved: bool):
 
 def scalar_update(x: np.ndarray, P: np.ndarray, row: np.ndarray, value: float, var: float):
     """
-    Return (x, P, z) updated with the scalar measurement ``row @ x = value`` of variance ``var``.
+    Update (x, P) with the scalar measurement ``row @ x = value`` of variance ``var``.
+
+    Returns (x, P, z, sqrt(S)).
 
     P - g g' with g = P row / sqrt(S): symmetric exactly; z = nu / sqrt(S), the normalised
-    innovation.
+    innovation, S its variance.
     """
     Pc = P @ row
     S = float(row @ Pc) + var
@@ -362,4 +376,4 @@ def scalar_update(x: np.ndarray, P: np.ndarray, row: np.ndarray, value: float, v
     x = x + Pc * (nu / S)
     r = math.sqrt(S)
     g = Pc / r
-    return x, P - g[:, None] * g, nu / r
+    return x, P - g[:, None] * g, nu / r, r

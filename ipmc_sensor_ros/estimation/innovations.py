@@ -14,6 +14,9 @@ model does not produce below the motion's fundamental (a slow move under a crank
 the periodogram cannot see in a few periods and which the model would take for offset: the
 level would follow it) adds up block after block.  The test is what matters for the
 estimate: a periodic model that misreads the low frequencies misreads the level (H(0) = 0).
+The sums also keep twice the negative log-likelihood of the current under the model
+(sum of z^2 + ln S): what tells a jump of the offset under a periodic motion from the end
+of that motion when the test fails (:func:`~.periodic.after_refutation`).
 
 A 20 Hz crank with a 1 % speed wobble at 1-2 % noise: the squared innovations sum to
 1.3-1.6 per sample (a plain chi-square of the squares refuses the right model), the block
@@ -23,6 +26,7 @@ block closed a second after the move began, against 24; 1,577 over the next.
 """
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 from scipy.stats import chi2 as chi2_dist
@@ -44,10 +48,13 @@ class Innovations(NamedTuple):
     #: the open block's sum of z and its samples
     open_sum: float = 0.0
     open_n: int = 0
+    #: sum over the samples of z^2 + ln S, S the innovation's variance (A^2): twice the
+    #: negative log-likelihood of the current under the model, less a constant per sample
+    nll: float = 0.0
 
     def closed(self) -> 'Innovations':
         """Return the sums without the open block (a block belongs to one model)."""
-        return Innovations(self.chi2, self.blocks)
+        return Innovations(self.chi2, self.blocks, nll=self.nll)
 
 
 def block_samples(motion_hz: float, sample_rate_hz: float) -> int:
@@ -63,4 +70,10 @@ def explains(now: Innovations, then: Innovations) -> bool:
     closed block says nothing against the model.
     """
     dof = now.blocks - then.blocks
-    return dof <= 0 or now.chi2 - then.chi2 <= chi2_dist.isf(MODEL_FALSE_ALARM, dof)
+    return dof <= 0 or now.chi2 - then.chi2 <= _limit(dof)
+
+
+@functools.lru_cache(maxsize=256)
+def _limit(dof: int) -> float:
+    """Return the test's limit for ``dof`` blocks (asked as each block closes: kept)."""
+    return float(chi2_dist.isf(MODEL_FALSE_ALARM, dof))

@@ -18,9 +18,12 @@ A periodic motion is measured at the same checks, on the last 1, 2, 4 and 8 s of
 (:func:`~.motionline.measure_recent`); when two checks in a row say it appeared, went or
 moved, the model with periodic states at the measured fundamental (a small remainder:
 :mod:`.statespace`) takes over from the start of those stretches, whose samples are
-filtered again (:mod:`.periodic`); it must explain the current of its span, and then of each
-stretch (its innovations' chi-square), or it goes from that stretch's start.  A motion that
-ends a rest is filtered again from where the rest test's CUSUM says it began (:mod:`.onset`).
+filtered again (:mod:`.periodic`); it must explain the current of its span, and then, as each
+of its blocks (one period) closes, of the stretch so far (its innovations' chi-square).  When
+it fails, the current since the last state that passed is filtered again without it, and
+with a jump of the offset under it; the more likely takes over (a crank that stops goes
+within a period).  A motion that ends a rest is filtered again from where the rest test's
+CUSUM says it began (:mod:`.onset`).
 
 ``smoothed_lag_s`` > 0 also smooths the live output with that lag
 (:class:`~.fixed_lag.FixedLagSmoother` on the filter's own forward record):
@@ -43,7 +46,7 @@ from .motionline import MOTION_LONGEST_S, MOTION_PERIODS, measure_recent
 from .onset import due, restart
 from .innovations import explains
 from .kalman_state import KalmanState
-from .periodic import StretchLog, offset_step_at, refilter, same_motion
+from .periodic import StretchLog, after_refutation, refilter, same_motion
 from .ring import SampleRing
 from .smoother import smooth_segments
 from .statespace import StateSpaceModel
@@ -162,6 +165,9 @@ class KalmanEstimator(KalmanState):
             # cut where the line check falls due (a fixed sample count, however cut)
             due = self._next_check(self._state.samples)
             b = min(y.size, a + due - self._state.samples)
+            closes = self._filter.to_block_end(self._state)     # a periodic model's period
+            b = min(b, a + closes) if closes else b
+            blocks = self._state.innovations.blocks
             rec = None if self._lag is None else ForwardRecord.empty(b - a, self.model.size)
             self._state, w, s, still = self._filter.run(self._state, y[a:b], st[a:b],
                                                         record=rec, copy=False,
@@ -173,7 +179,10 @@ class KalmanEstimator(KalmanState):
             self._log.add(y[a:b].tolist(), st[a:b].tolist(), bool(still.any()))
             parts.append((w, s, still))
             a = b
+            closed = self._state.innovations.blocks != blocks
             self._restart_motion()
+            if closed:
+                self._block_closed()
             if self._state.samples == due:
                 self._check_line()
         if not parts:
@@ -187,6 +196,7 @@ class KalmanEstimator(KalmanState):
             est = self.estimate(np.array([current_a], dtype=float),
                                 None if steps == 1 else np.array([steps]))
             return float(est.deflection_m[0]), float(est.std_m[0])
+        blocks = self._state.innovations.blocks
         self._state, w, s, still = self._filter.run(self._state, [float(current_a)],
                                                     [int(steps)], copy=False,
                                                     until_motion=True)
@@ -195,7 +205,10 @@ class KalmanEstimator(KalmanState):
             self._recent.push(current_a)
         if self._first_rest_n is None and still[0]:
             self._first_rest_n = n
+        closed = self._state.innovations.blocks != blocks
         self._restart_motion()
+        if closed:
+            self._block_closed()
         return float(w[0]), float(s[0])
 
     def _restart_motion(self) -> None:
@@ -246,15 +259,43 @@ class KalmanEstimator(KalmanState):
             return None
         return self._changes.begin(filt, state, old, old_state)
 
+    def _block_closed(self) -> None:
+        """
+        Test the periodic model as each of its blocks closes: it goes once it fails.
+
+        When the closed blocks of the stretch (since the last check) fail the model's test
+        (:meth:`~.periodic.StretchLog.refuted`), the current since the last state the test
+        passed (the stretch before too, when it ran the same model: its last block was
+        still open at its check; a jump taken at its end, on the few samples of a change
+        then, is judged again) is explained by a jump of the offset or by the end of the
+        periodic motion, whichever is more likely (:func:`~.periodic.after_refutation`), and
+        the stretch ends (with a jump, or measured without periodic motion).  A crank that
+        stops is dropped within a period of it.
+        """
+        span = self._log.refuted(self._state)
+        if span is None:
+            return
+        m, before = self.model, self._log.earlier
+        whole = span
+        if before is not None and same_motion(before.filter.model.motion_hz, m.motion_hz):
+            whole = before.then(span)       # a jump taken at its end is judged again
+        drop = self._new_filter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,
+                                                m.fundamentals_hz))
+        change = after_refutation(whole, self._filter, drop, bool(self.config.offset_jump_a))
+        if change is None:              # judged again as the next block closes
+            span.measured_hz = None
+            return
+        self._take_over(change.filter, change.span, jump_at=change.jump_at)
+        if change.jump_at is not None:
+            span.measured_hz, span.jumped = m.motion_hz, True
+            self.offset_jumps += 1
+        self._log.mark(self._filter, self._state)
+
     def _check_motion(self, recent: np.ndarray) -> None:
         """Measure the periodic motion: a model from its span, while it explains the current."""
         f0 = measure_recent(recent, self.sample_rate_hz, self.model)
         floor = MOTION_PERIODS / min(recent.size / self.sample_rate_hz, MOTION_LONGEST_S)
-        span = self._log.refuted(self._state)
-        if span is not None and self._jumped_in(span):
-            return
-        f0 = 0.0 if span else f0
-        span = span or self._log.span_for(f0, self._first_rest_n is None, floor)
+        span = self._log.span_for(f0, self._first_rest_n is None, floor)
         if span is None or same_motion(f0, self.model.motion_hz):
             return
         filt = self._new_filter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,
@@ -262,31 +303,6 @@ class KalmanEstimator(KalmanState):
         if not self._take_over(filt, span, lambda run: not f0 or explains(
                 run.now.innovations, run.start.innovations)):
             self._log.current.measured_hz = 0.0         # refused: it counts as none
-
-    def _jumped_in(self, span) -> bool:
-        """
-        Tell whether the periodic model explains ``span`` with a jump of the offset in it.
-
-        A stretch the periodic model does not explain may hold a jump of the offset (an
-        amplifier re-zeroed while the crank runs): this stretch and the one before (a jump
-        late in it may pass its check) are filtered again with a jump where its likelihood
-        ratio peaks (:func:`~.periodic.offset_step_at`), and the jump is taken when the
-        model, so, explains them (:func:`~.innovations.explains`).
-        """
-        m, before = self.model, self._log.earlier
-        if not (m.motion_hz and self.config.offset_jump_a):
-            return False
-        whole = span
-        if (before is not None and not before.jumped
-                and same_motion(before.filter.model.motion_hz, m.motion_hz)):
-            whole = before.then(span)       # a jump late in it may have passed its check
-        at = offset_step_at(whole, self._filter)
-        if at is None or not self._take_over(self._filter, whole, lambda run: explains(
-                run.now.innovations, run.start.innovations), jump_at=at):
-            return False
-        span.measured_hz, span.jumped = m.motion_hz, True
-        self.offset_jumps += 1
-        return True
 
     def _take_over(self, filt: KalmanFilter, span, accept=None, jump_at=None) -> bool:
         """

@@ -92,19 +92,20 @@ def follow(onset: Onset | None, track: tuple | None, y: float, step: int, snapsh
 
 
 def follow_jump(run: Start | None, quiet: int, verdict, y: float, step: int,
-                snapshot, moving: bool = False) -> Start | None:
+                snapshot, still: bool) -> Start | None:
     """
     Return the run of an offset's jump after sample ``y`` (:mod:`.rest`), or None.
 
     ``quiet``: the samples of the run so far (``RestWindow.jump_quiet``; 1: it starts at
     ``y``, from the filter's state ``snapshot()`` before it); ``verdict``: the rest test's
-    against the filter's offset (a still window needs no jump); ``moving``: the run did not
-    start out of a still stretch (its :class:`Start` says the rest flag there was off).
+    against the filter's offset (a still window needs no jump); ``still``: the filter's rest
+    flag before ``y`` (its :class:`Start` keeps it: a run out of a motion, or out of a hold
+    the rest test has not confirmed, begins a rest, which releases the working point).
     """
     if verdict or not quiet:
         return None
     if quiet == 1:
-        run = Start(snapshot(), [], [], not moving, True)
+        run = Start(snapshot(), [], [], still, True)
     elif run is None:               # a run begun under another model (carried): not this one's
         return None
     run.y.append(y)

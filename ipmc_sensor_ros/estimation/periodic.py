@@ -23,12 +23,14 @@ dropped from the last stretch on).  The span's samples are filtered again under 
 the state there (:class:`StretchLog` keeps states and samples; :func:`~.carry.carry_state`
 joins the new periodic states to what was known), so its state now is as if it had been
 chosen then; what was published stays.  A periodic model is taken only if it explains the
-current of its span, and kept only while it explains each stretch after
-(:func:`~.innovations.explains`: its innovations below the motion's period); a stretch it
-does not explain counts as one without periodic motion, and the model goes from its start.
+current of its span, and kept only while it explains the stretch so far as each of its
+blocks closes (:func:`~.innovations.explains`: its innovations below the motion's period;
+:meth:`StretchLog.refuted`); a stretch it does not explain counts as one without periodic
+motion, and ends there (the estimator filters it again: :mod:`.kalman`).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, fields, replace
 from typing import NamedTuple
 
@@ -41,7 +43,7 @@ from .motionline import MOTION_WOBBLE
 from .onset import due, restart
 
 __all__ = ['Stretch', 'StretchLog', 'Refiltered', 'refilter', 'same_motion',
-           'offset_step_at']
+           'offset_step_at', 'Change', 'after_refutation']
 
 
 def same_motion(a_hz: float, b_hz: float) -> bool:
@@ -223,6 +225,54 @@ def refilter(span: Stretch, filt: KalmanFilter, record: ForwardRecord | None = N
                 _put(record, a - cut - held, rows)
     return Refiltered(start, state, restarts,
                       np.concatenate(flags) if flags else np.zeros(0, dtype=bool))
+
+
+class Change(NamedTuple):
+    """What takes over where a periodic model failed: a filter, from a span's start."""
+
+    filter: KalmanFilter
+    span: Stretch
+    #: the offset jumped before this sample of the span (the filter is the periodic one)
+    jump_at: int | None = None
+
+
+def after_refutation(whole: Stretch, filt: KalmanFilter, drop: KalmanFilter,
+                     jumps: bool) -> Change | None:
+    """
+    Return what takes over where the periodic model ``filt`` failed its test on ``whole``.
+
+    ``whole``: the current since the model's last state that passed; ``drop``: the model
+    without periodic states.  The offset jumped under the periodic motion, where a jump is
+    most likely (:func:`offset_step_at`), when ``jumps``, the model so explains ``whole``
+    (:func:`~.innovations.explains`) and the current is more likely so than if the
+    periodic motion had ended instead: the samples after a change point filtered under
+    ``drop`` from the periodic model's state there, the point tried at the jump's sample
+    and every half period over the last two (the innovations' sums keep twice the negative
+    log-likelihood, ``nll``).  A crank that stopped leaves a residual at the harmonics that
+    the test cannot see, so a jump passes it; the likelihood tells.  Else the motion ended:
+    ``drop`` takes over from the start of ``whole`` (not from the change point: the
+    periodic model's state there has taken part of the change for offset and level).  None:
+    the jump is the more likely but fewer than two periods follow it (a crank slowing to a
+    stop fits a jump and the periodic model for a few samples better than a model that
+    knows nothing of the motion does): judged again as the next block closes.
+    """
+    at = offset_step_at(whole, filt) if jumps else None
+    if at is None:
+        return Change(drop, whole)
+    jumped = refilter(whole, filt, jump_at=at)
+    if not explains(jumped.now.innovations, jumped.start.innovations):
+        return Change(drop, whole)
+    n = len(whole.y)
+    period = block_samples(filt.model.motion_hz, filt.model.sample_rate_hz)
+    ended, state, done = math.inf, whole.start_under(filt), 0
+    for p in sorted({q for q in (at, *(n - j * (period // 2) for j in range(1, 5))) if q > 0}):
+        state = refilter(Stretch(filt, state, whole.y[done:p], whole.steps[done:p]), filt).now
+        done = p
+        tail = Stretch(filt, state, whole.y[p:], whole.steps[p:])
+        ended = min(ended, refilter(tail, drop).now.innovations.nll)
+    if jumped.now.innovations.nll >= ended:
+        return Change(drop, whole)
+    return None if at > n - 2 * period else Change(filt, whole, at)
 
 
 def offset_step_at(span: Stretch, filt: KalmanFilter, chunk: int = 512) -> int | None:
