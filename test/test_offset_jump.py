@@ -209,9 +209,11 @@ def _crank_record(step_a: float, frequency_hz: float = 5.0, jump_s: float = 7.3,
     return Scenario('crank-jump', 'daq', seconds, make, '').build(0)
 
 
-@pytest.mark.parametrize('frequency_hz, step_a, jump_s', [
-    (3.0, -10 * NA, 7.3), (5.0, 20 * NA, 7.3), (20.0, -30 * NA, 9.5)])
-def test_an_offset_that_jumps_while_a_crank_runs_is_taken(frequency_hz, step_a, jump_s):
+@pytest.mark.parametrize('frequency_hz, step_a, jump_s, seconds', [
+    (3.0, -10 * NA, 7.3, 14.0), (5.0, 20 * NA, 7.3, 14.0), (20.0, -30 * NA, 9.5, 14.0),
+    (1.0, -18 * NA, 12.0, 20.0)])
+def test_an_offset_that_jumps_while_a_crank_runs_is_taken(frequency_hz, step_a, jump_s,
+                                                          seconds):
     """
     A jump of the offset under a periodic motion is taken where it happened.
 
@@ -225,8 +227,14 @@ def test_an_offset_that_jumps_while_a_crank_runs_is_taken(frequency_hz, step_a, 
     whose stretch the model no longer explains are published as they were); the offset
     within 2 nA at the end (0.3-1.2 nA off measured: the jump's time is found to a fraction
     of a period, and the samples between are shared by the offsets before and after).
+    On a 1 Hz crank a block is a second long: the block after the step may pass (the drift
+    takes part of it), the next fails with the step before what it is judged on, and the
+    jump found there (at its start: what the drift left) has less than two periods after
+    it; its stretch then runs on past the check, so the next block judges the same jump on
+    two periods (0.78 %; 6.3 % when the check ended that stretch: the jump fell out of what
+    was judged, and the model went).
     """
-    rec = _crank_record(step_a, frequency_hz, jump_s)
+    rec = _crank_record(step_a, frequency_hz, jump_s, seconds)
     est = _estimator(rec)
     out = _causal(rec, est, 1000)
     assert estimate_scores(rec, out)['nrmse'] < 0.01

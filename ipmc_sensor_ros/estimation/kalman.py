@@ -269,8 +269,9 @@ class KalmanEstimator(KalmanState):
         still open at its check; a jump taken at its end, on the few samples of a change
         then, is judged again) is explained by a jump of the offset or by the end of the
         periodic motion, whichever is more likely (:func:`~.periodic.after_refutation`), and
-        the stretch ends (with a jump, or measured without periodic motion).  A crank that
-        stops is dropped within a period of it.
+        the stretch ends (with a jump, or measured without periodic motion); a jump too
+        recent to judge is judged as the next block closes, the stretch running on past a
+        check meanwhile.  A crank that stops is dropped within a period of it.
         """
         span = self._log.refuted(self._state)
         if span is None:
@@ -281,9 +282,10 @@ class KalmanEstimator(KalmanState):
             whole = before.then(span)       # a jump taken at its end is judged again
         drop = self._new_filter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,
                                                 m.fundamentals_hz))
-        change = after_refutation(whole, self._filter, drop, bool(self.config.offset_jump_a))
-        if change is None:              # judged again as the next block closes
-            span.measured_hz = None
+        change = after_refutation(whole, self._filter, drop, bool(self.config.offset_jump_a),
+                                  wait=not span.deferred)
+        if change is None:              # judged again as the next block closes, once
+            span.measured_hz, span.deferred = None, True
             return
         self._take_over(change.filter, change.span, jump_at=change.jump_at)
         if change.jump_at is not None:
@@ -293,6 +295,8 @@ class KalmanEstimator(KalmanState):
 
     def _check_motion(self, recent: np.ndarray) -> None:
         """Measure the periodic motion: a model from its span, while it explains the current."""
+        if self._log.current.deferred:      # a failed model's judgement waits: it runs on
+            return
         f0 = measure_recent(recent, self.sample_rate_hz, self.model)
         floor = MOTION_PERIODS / min(recent.size / self.sample_rate_hz, MOTION_LONGEST_S)
         span = self._log.span_for(f0, self._first_rest_n is None, floor)

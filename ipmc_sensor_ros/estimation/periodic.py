@@ -68,6 +68,9 @@ class Stretch:
     #: a jump of the offset was taken at its end's check, filtering again from before its
     #: start: its start state is not the one its samples now follow, so no span starts there
     jumped: bool = False
+    #: the periodic model failed its test in it, a jump was the more likely and too recent
+    #: to judge (:func:`after_refutation`): the next failure decides
+    deferred: bool = False
 
     def then(self, later: 'Stretch') -> 'Stretch':
         """Return the span from this stretch's start through the end of ``later``."""
@@ -110,7 +113,8 @@ class StretchLog:
         """Return the log as plain values (models by lines and fundamental; states copied)."""
         return tuple(None if st is None else (
             st.filter.model.fundamentals_hz, st.filter.model.motion_hz, st.state.copy(),
-            list(st.y), list(st.steps), st.rest, st.measured_hz, st.floor_hz, st.jumped)
+            list(st.y), list(st.steps), st.rest, st.measured_hz, st.floor_hz, st.jumped,
+            st.deferred)
             for st in (self.earlier, self.current))
 
     @classmethod
@@ -121,13 +125,13 @@ class StretchLog:
             if item is None:
                 parts.append(None)
                 continue
-            lines, motion, state, y, steps, rest, measured, floor, jumped = item
+            lines, motion, state, y, steps, rest, measured, floor, jumped, deferred = item
             filt = make_filter(tuple(lines), float(motion))
             if state.x.shape != (filt.model.size,):
                 raise ValueError('a stretch state of another design')
             parts.append(Stretch(filt, state.copy(), list(y), list(steps), bool(rest),
                                  None if measured is None else float(measured), float(floor),
-                                 bool(jumped)))
+                                 bool(jumped), bool(deferred)))
         log = cls.__new__(cls)
         log.earlier, log.current = parts
         if log.current is None:
@@ -237,7 +241,7 @@ class Change(NamedTuple):
 
 
 def after_refutation(whole: Stretch, filt: KalmanFilter, drop: KalmanFilter,
-                     jumps: bool) -> Change | None:
+                     jumps: bool, wait: bool = True) -> Change | None:
     """
     Return what takes over where the periodic model ``filt`` failed its test on ``whole``.
 
@@ -251,10 +255,11 @@ def after_refutation(whole: Stretch, filt: KalmanFilter, drop: KalmanFilter,
     log-likelihood, ``nll``).  A crank that stopped leaves a residual at the harmonics that
     the test cannot see, so a jump passes it; the likelihood tells.  Else the motion ended:
     ``drop`` takes over from the start of ``whole`` (not from the change point: the
-    periodic model's state there has taken part of the change for offset and level).  None:
-    the jump is the more likely but fewer than two periods follow it (a crank slowing to a
-    stop fits a jump and the periodic model for a few samples better than a model that
-    knows nothing of the motion does): judged again as the next block closes.
+    periodic model's state there has taken part of the change for offset and level).  None
+    (only when ``wait``): the jump is the more likely but fewer than two periods follow it
+    (a crank slowing to a stop fits a jump and the periodic model for a few samples better
+    than a model that knows nothing of the motion does): judged again as the next block
+    closes.
     """
     at = offset_step_at(whole, filt) if jumps else None
     if at is None:
@@ -272,7 +277,7 @@ def after_refutation(whole: Stretch, filt: KalmanFilter, drop: KalmanFilter,
         ended = min(ended, refilter(tail, drop).now.innovations.nll)
     if jumped.now.innovations.nll >= ended:
         return Change(drop, whole)
-    return None if at > n - 2 * period else Change(filt, whole, at)
+    return None if wait and at > n - 2 * period else Change(filt, whole, at)
 
 
 def offset_step_at(span: Stretch, filt: KalmanFilter, chunk: int = 512) -> int | None:
