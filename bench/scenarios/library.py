@@ -88,7 +88,7 @@ def _crank_maker(frequency_hz: float, sample: str, noise: str, from_rest: bool):
 
 
 def _crank_stop(rng):
-    """A 2-5 Hz crank from rest that stops at 5-7 s (in 0.1-0.5 s) and holds where it stopped."""
+    """Draw a 2-5 Hz crank from rest that stops at 5-7 s (in 0.1-0.5 s) and holds there."""
     crank = replace(_crank(rng, rng.uniform(2.0, 5.0), True), stop_s=rng.uniform(5.0, 7.0),
                     stop_duration_s=rng.uniform(0.1, 0.5))
     return Sensor('slim'), crank, Daq(offset_a=rng.uniform(0, 20) * NA, **_noise(rng, 'pct'))
