@@ -134,6 +134,8 @@ class KalmanFilter:
         self._c_lines = np.zeros(model.size)        # the mains lines' current
         self._c_lines[model.il:model.im] = model.c[model.il:model.im]
         self._alpha = 1.0 / (NOISE_AVERAGE_S * model.sample_rate_hz)
+        #: the first sample whose innovation the test counts (R measured: NOISE_AVERAGE_S)
+        self._settled = math.ceil(1.0 / self._alpha)
         self._block = block_samples(model.motion_hz, model.sample_rate_hz)
         s = model.scale
         self._anchor = np.zeros(model.size)
@@ -213,7 +215,7 @@ class KalmanFilter:
         """
         if self._block == 1:
             return 0
-        before = max(0, math.ceil(1.0 / self._alpha) - state.samples)
+        before = max(0, self._settled - state.samples)
         return before + self._block - state.innovations.open_n
 
     def offset(self, state: FilterState) -> tuple[float, float]:
@@ -249,7 +251,7 @@ class KalmanFilter:
         meter, win, onset, hold = state.noise, state.window, state.onset, state.hold_off
         hold_still, jump = state.hold_still, state.jump
         chi, blocks, zs, zn, nll = state.innovations
-        settled, block = 1.0 / self._alpha, self._block
+        settled, block = self._settled, self._block
         if copy:
             x, P, meter, win = x.copy(), P.copy(), replace(meter), win.copy()
             onset = None if onset is None else onset.copy()
