@@ -239,19 +239,25 @@ def test_a_periodic_model_needs_two_stretches_in_a_row_or_a_start_in_motion():
     assert log.span_for(0.0, never_rested=False, floor_hz=2.0) is not None
 
 
+def _core(record):
+    """Return the Kalman core the package builds for ``record``'s sensor and rate."""
+    from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
+    from ipmc_sensor_ros.physics.parameters import Geometry
+
+    model = SensorModel.named(record.model, Geometry(*record.geometry_m, record.sample))
+    return DeflectionEstimator(model, record.sample_rate_hz).core
+
+
 def _stop_record(seed):
     """Return a 2-5 Hz crank that stops and holds (bench), its estimator and its Crank."""
     import zlib
 
     from bench.scenarios import SCENARIOS
-    from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
-    from ipmc_sensor_ros.physics.parameters import Geometry
 
     name = 'slim-crank-stop'
     record = build(name, seed)
     crank = SCENARIOS[name].make(np.random.default_rng([seed, zlib.crc32(name.encode())]))[1]
-    model = SensorModel.named(record.model, Geometry(*record.geometry_m, record.sample))
-    return record, DeflectionEstimator(model, record.sample_rate_hz).core, crank
+    return record, _core(record), crank
 
 
 @pytest.mark.parametrize('seed', [0, 1, 2])
@@ -298,8 +304,6 @@ def test_a_crank_braked_in_50_ms_is_not_read_as_a_jump_of_the_offset():
     from bench.scenarios.daq import acquire, Daq
     from bench.scenarios.motions import Crank
     from bench.scenarios.sensor import Sensor
-    from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
-    from ipmc_sensor_ros.physics.parameters import Geometry
 
     rng = np.random.default_rng([6, 777])
     crank = Crank(2.0, rng.uniform(1.8, 2.2) * 1e-3, rng.uniform(15, 25) * 1e-3,
@@ -309,8 +313,7 @@ def test_a_crank_braked_in_50_ms_is_not_read_as_a_jump_of_the_offset():
     daq = Daq(offset_a=rng.uniform(0, 20) * 1e-9, noise_fraction=rng.uniform(0.01, 0.02))
     record = acquire('braked-crank', 6, Sensor('slim'), crank, 12.0, daq, rng,
                      stationary=False, description='', tags=('crank',), post_record_s=12.0)
-    model = SensorModel.named(record.model, Geometry(*record.geometry_m, record.sample))
-    core = DeflectionEstimator(model, record.sample_rate_hz).core
+    core = _core(record)
     w = core.estimate(record.current_a).deflection_m
     held = record.sample_time_s > crank.stop_s + crank.stop_duration_s + 1.0
     assert core.model.motion_hz == 0.0
