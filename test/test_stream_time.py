@@ -16,7 +16,7 @@ import pytest
 from conftest import DirectNode
 from ipmc_sensor_ros.estimation.stream import (COUNTER_NAMES, RATE_FOLLOW_FRACTION,
                                                StreamEstimator)
-from ipmc_sensor_ros.estimation.timebase import RELOCK_MIN_SAMPLES, Timebase, grid_slot
+from ipmc_sensor_ros.estimation.timebase import RELOCK_MIN_SAMPLES, Timebase, grid_slot, slots_of
 from ipmc_sensor_ros.interface import builders as B
 from ipmc_sensor_ros.interface import specs as C
 from ipmc_sensor_ros.nodes.messages import pack_block
@@ -63,7 +63,12 @@ class Recorder:
         return None                 # no smoothed output (smoothed_lag_s 0)
 
     def steps(self) -> list[int]:
-        return [e[2] for e in self.log if e[0] == 'sample']
+        """Return the slots handed with each sample (since the sample before)."""
+        return [slots_of(e[2]) for e in self.log if e[0] == 'sample']
+
+    def offsets(self) -> np.ndarray:
+        """Return each sample's stamp off its slot, periods (the fraction of what was handed)."""
+        return np.array([e[2] - slots_of(e[2]) for e in self.log if e[0] == 'sample'])
 
 
 def _fed(stamps, currents=None, one=True, blocks=(1, 37, 500), **kw):
@@ -149,6 +154,13 @@ def test_jittered_stamps_are_all_taken_contiguously(jitter):
     assert c['samples_out'] == 10_000 and c['samples_rejected'] == 0 and c['resets'] == 0
     assert set(stream.estimator.steps()) == {1}
     assert c['samples_lost'] == c['gaps_bridged'] == 0
+    # each sample's offset from its slot is its stamp's jitter less the grid's own error, a
+    # fit of the stamps that moves only where a window is refitted: from one sample to the
+    # next the offsets follow the jitter to 3 % of its change (measured 1.9 %, 0.2 % after the
+    # first second, whose first windows are a few samples long)
+    jitter_periods = (stamps - T0) * FS - np.arange(stamps.size)
+    error = np.diff(stream.estimator.offsets() - jitter_periods)
+    assert np.sqrt(np.mean(error ** 2)) < 0.03 * np.sqrt(np.mean(np.diff(jitter_periods) ** 2))
     # the measured rate: the slope of 0.5 s of stamps, jitter sd 0.14 periods for +-25 %,
     # has a standard error of ~1e-4; 1e-3 is ten of them
     assert abs(stream.measured_rate_hz / FS - 1.0) < 1e-3

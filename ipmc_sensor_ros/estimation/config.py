@@ -96,6 +96,11 @@ SETTINGS = (
     Setting('current_noise_a', 20e-9, 'A', 1e-15, 1e-3,
             'white noise RMS per sample assumed until measured (the filter measures it within '
             'a second)'),
+    Setting('sampled_at_stamp_prior', 0.5, '', 0.0, 1.0,
+            'prior probability that each stamp is the instant its sample was taken (a DAQ '
+            "timed by the host), not a host's time for a sample taken on the DAQ's own clock "
+            '(the stamp late by a varying delay): at 0.5 the data decide (the innovations '
+            "against what the stamps' offsets from their slots would explain); 0 or 1 fixes it"),
     Setting('rest_velocity_m_s', 1e-6, 'm/s', 1e-12, 1.0,
             "RMS velocity of a tip at rest (the rest pseudo-measurement's std): a hold creeps "
             'less than 4 um in 4 s'),

@@ -24,6 +24,10 @@ its samples; there is no second implementation)::
               grown by ``offset_jump_a`` squared (:func:`.onset.restart`)
 
 R, the white-noise variance per sample, is measured by :class:`~.noise.NoiseMeter`.
+A sample whose stamp is d periods off its slot (:mod:`.timebase`) was taken there (a DAQ the
+host times) or on the slot (a DAQ on its own clock, stamped late): with p the probability of
+the first (:func:`.innovations.at_stamp`), its row is the mixture's mean (1 - p) c + p c e^{A
+d/fs}, R grows by the mixture's spread, and the published deflection is the tip's there.
 The state is held in scaled units (x / scale) so that every entry of P is O(1) whatever the
 sensor (deflections of mm, currents of nA).
 
@@ -39,14 +43,15 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .innovations import Innovations, block_samples
+from .forward import ForwardRecord, astuple_shallow
+from .innovations import Innovations, at_stamp, block_samples
 from .noise import NOISE_AVERAGE_S, NOISE_FLOOR_A, NoiseMeter
 from .onset import Onset, Start, follow, follow_jump
 from .rest import RestTest, RestWindow
-from .statespace import StateSpaceModel
+from .statespace import OFF_SLOT_STEPS, StateSpaceModel
 
-__all__ = ['FilterState', 'KalmanFilter', 'ForwardRecord', 'NoiseMeter', 'NOISE_AVERAGE_S',
-           'NOISE_FLOOR_A']
+__all__ = ['FilterState', 'KalmanFilter', 'ForwardRecord', 'astuple_shallow', 'NoiseMeter',
+           'NOISE_AVERAGE_S', 'NOISE_FLOOR_A']
 
 
 @dataclass(slots=True)
@@ -83,29 +88,6 @@ class FilterState:
                        jump=None if self.jump is None else self.jump.copy())
 
 
-@dataclass
-class ForwardRecord:
-    """Per-sample predictions and updates of a forward pass (what the RTS smoother needs)."""
-
-    x_pred: np.ndarray
-    P_pred: np.ndarray
-    x_post: np.ndarray
-    P_post: np.ndarray
-    steps: np.ndarray
-    still: np.ndarray
-
-    @classmethod
-    def empty(cls, n: int, nx: int) -> 'ForwardRecord':
-        return cls(np.empty((n, nx)), np.empty((n, nx, nx)), np.empty((n, nx)),
-                   np.empty((n, nx, nx)), np.empty(n, dtype=np.int64), np.empty(n, dtype=bool))
-
-    def rows(self, start: int, stop: int) -> 'ForwardRecord':
-        """Return the record of samples ``start`` to ``stop`` (views, not copies)."""
-        return ForwardRecord(self.x_pred[start:stop], self.P_pred[start:stop],
-                             self.x_post[start:stop], self.P_post[start:stop],
-                             self.steps[start:stop], self.still[start:stop])
-
-
 class KalmanFilter:
     """
     The recursion of the module docstring for ``model``.
@@ -138,6 +120,8 @@ class KalmanFilter:
         self._settled = math.ceil(1.0 / self._alpha)
         self._block = block_samples(model.motion_hz, model.sample_rate_hz)
         s = model.scale
+        self._w_row = np.zeros(model.size)          # the published deflection, m
+        self._w_row[model.iw] = s[model.iw]
         self._anchor = np.zeros(model.size)
         self._anchor[model.iw], self._anchor[model.ih] = s[model.iw], -s[model.ih]
         v2, m2 = model.rest_variances
@@ -162,6 +146,23 @@ class KalmanFilter:
             j = model.il + 2 * k
             self.line_difference[j] = weights @ np.cos(2 * np.pi * f * ahead) * s[j]
             self.line_difference[j + 1] = -weights @ np.sin(2 * np.pi * f * ahead) * s[j + 1]
+
+    def _off_slot(self, x: np.ndarray, y: float, d: float, p: float):
+        """
+        Return (current row, deflection row, innovation on the slot, at the stamp).
+
+        Of a sample ``d`` periods off its slot, taken at its stamp with probability ``p``
+        (module docstring; :attr:`~.statespace.StateSpaceModel.off_slot_rows`, linear).
+        """
+        u = (d + 0.5) * OFF_SLOT_STEPS
+        j = min(int(u), OFF_SLOT_STEPS - 1)
+        f = u - j
+        tc, tw = self.model.off_slot_rows
+        c_at = tc[j] + f * (tc[j + 1] - tc[j])
+        c = self.model.c
+        nu_slot, nu_stamp = y - float(c @ x), y - float(c_at @ x)
+        w_at = tw[j] + f * (tw[j + 1] - tw[j])
+        return c + p * (c_at - c), self._w_row + p * (w_at - self._w_row), nu_slot, nu_stamp
 
     @property
     def rotation(self) -> np.ndarray:
@@ -230,7 +231,8 @@ class KalmanFilter:
         """
         Filter ``current_a`` (A) from ``state``; return (new state, w, std, still).
 
-        ``steps[k]``: sample periods from the sample before (None: all 1).  ``record``: filled
+        ``steps[k]``: sample periods from the slot of the sample before (None: all 1); a
+        fraction is the stamp's offset from its slot (:meth:`_off_slot`).  ``record``: filled
         at rows ``offset + k`` for the smoother.  The loop keeps the state's arrays in local
         variables and builds the returned :class:`FilterState` once; a block and single
         samples run the same statements.  ``copy=False``: the new state reuses ``state``'s
@@ -241,7 +243,7 @@ class KalmanFilter:
         y = current_a if isinstance(current_a, list) else np.asarray(current_a, float).tolist()
         n = len(y)
         st = ([1] * n if steps is None else steps if isinstance(steps, list)
-              else np.asarray(steps, dtype=np.int64).tolist())
+              else np.asarray(steps, dtype=float).tolist())
         m = self.model
         iw, ib = m.iw, m.ib
         sw, sb = float(m.scale[iw]), float(m.scale[ib])
@@ -250,7 +252,8 @@ class KalmanFilter:
         x, P, still, moved, samples = state.x, state.P, state.still, state.moved, state.samples
         meter, win, onset, hold = state.noise, state.window, state.onset, state.hold_off
         hold_still, jump = state.hold_still, state.jump
-        chi, blocks, zs, zn, nll = state.innovations
+        chi, blocks, zs, zn, nll, stamps = state.innovations
+        prior, w_row = m.config.sampled_at_stamp_prior, self._w_row
         settled, block = self._settled, self._block
         if copy:
             x, P, meter, win = x.copy(), P.copy(), replace(meter), win.copy()
@@ -260,7 +263,9 @@ class KalmanFilter:
         F, Q = m.discrete(1)
         last_steps, ended = 1, None
         for k in range(n):
-            yk, sk = y[k], st[k]
+            yk, tk = y[k], st[k]
+            sk = math.floor(tk + 0.5)   # the slots (timebase.slots_of) and the offset from it
+            dk = tk - sk
             if sk != last_steps:
                 F, Q = m.discrete(sk)
                 last_steps = sk
@@ -276,8 +281,9 @@ class KalmanFilter:
                 verdict = win.judge(self.rest, yk, float(x[ib]) * sb,
                                     float(P[ib, ib]) * sb * sb, meter.var_a2, still,
                                     lambda: float(c_lines @ x))
-                jump = follow_jump(jump, win.jump_quiet, verdict, yk, sk, lambda: (
-                    x0, P0, moved, samples, Innovations(chi, blocks, zs, zn, nll)), still)
+                jump = follow_jump(jump, win.jump_quiet, verdict, yk, tk, lambda: (
+                    x0, P0, moved, samples, Innovations(chi, blocks, zs, zn, nll,
+                                                        stamps)), still)
                 if jump is not None and verdict is False and win.jumped(self.rest,
                                                                         meter.var_a2):
                     accepted, jump = jump, None
@@ -288,15 +294,24 @@ class KalmanFilter:
                 P = 0.5 * (P + P.T) + Q     # symmetric to the bit (the updates keep it so)
             if release:
                 P = self._released(P, still)
+            row, wk, var = c, w_row, meter.var_a2
+            if dk:                      # taken off its slot: at the stamp, or on the slot?
+                p = at_stamp(stamps, prior)
+                row, wk, nu_slot, nu_stamp = self._off_slot(x, yk, dk, p)
+                P0c = P @ c
+                var += p * (1.0 - p) * (nu_slot - nu_stamp) ** 2    # the mixture's spread
             if record is not None:
                 j = offset + k
                 record.x_pred[j], record.P_pred[j] = x, P
-                record.steps[j], record.still[j] = sk, still
-            x, P, z, r = scalar_update(x, P, c, yk, meter.var_a2)
+                record.steps[j], record.still[j], record.w_row[j] = sk, still, wk
+            x, P, z, r = scalar_update(x, P, row, yk, var)
             if samples >= settled:      # R measured: the innovation's variance is the model's
                 zs, zn, nll = zs + z, zn + 1, nll + z * z + 2.0 * math.log(r)
                 if zn == block:
                     chi, blocks, zs, zn = chi + zs * zs / zn, blocks + 1, 0.0, 0
+            if dk:                      # over the slot's sqrt(S) (the used row's depends on dk)
+                sd = math.sqrt(float(c @ P0c) + meter.var_a2)
+                stamps = stamps.add(nu_slot / sd, (nu_slot - nu_stamp) / sd)
             if not held:
                 meter.add(yk, sk, win, self._alpha, None if d3 is None else float(d3 @ x))
             if begins and not held:     # what the window says of the offset
@@ -307,23 +322,27 @@ class KalmanFilter:
             if record is not None:
                 record.x_post[offset + k], record.P_post[offset + k] = x, P
             samples += 1
-            out_w[k] = x[iw] * sw
-            out_s[k] = math.sqrt(max(P[iw, iw], 0.0)) * sw
+            if dk:
+                out_w[k] = float(wk @ x)
+                out_s[k] = math.sqrt(max(float(wk @ P @ wk), 0.0))
+            else:
+                out_w[k] = x[iw] * sw
+                out_s[k] = math.sqrt(max(P[iw, iw], 0.0)) * sw
             out_still[k] = still
             if accepted is not None:    # the offset jumped: the run again, still, from its start
                 ended, onset = accepted, None
             elif still:
-                onset = follow(onset, win.track, yk, sk,
+                onset = follow(onset, win.track, yk, tk,
                                lambda: (x, P, moved, samples,
-                                        Innovations(chi, blocks, zs, zn, nll)))
+                                        Innovations(chi, blocks, zs, zn, nll, stamps)))
             elif was and onset is not None:     # the rest ended: a sample told it?
-                ended = onset.start(yk, sk) if win.quiet == 0 else None
+                ended = onset.start(yk, tk) if win.quiet == 0 else None
                 onset = None
             if until_motion and ended is not None:
                 n = k + 1
                 break
         return (FilterState(x, P, meter, win, still, moved, samples, onset, ended, hold,
-                            hold_still, jump, Innovations(chi, blocks, zs, zn, nll)),
+                            hold_still, jump, Innovations(chi, blocks, zs, zn, nll, stamps)),
                 out_w[:n], out_s[:n], out_still[:n])
 
     def with_jump(self, P: np.ndarray) -> np.ndarray:

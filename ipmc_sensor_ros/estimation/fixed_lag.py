@@ -30,7 +30,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from .core import Estimate
-from .filter import ForwardRecord, KalmanFilter
+from .filter import ForwardRecord, KalmanFilter, astuple_shallow
 from .smoother import across, first_of, rts_backward
 
 __all__ = ['FixedLagSmoother', 'MAX_LAG_SAMPLES', 'lag_smoother']
@@ -151,12 +151,9 @@ class FixedLagSmoother:
         outs, end = [], None
         for filt, recs, link in reversed(segments):
             rec = recs[0] if len(recs) == 1 else ForwardRecord(
-                *(np.concatenate(arrays) for arrays in zip(*(
-                    (r.x_pred, r.P_pred, r.x_post, r.P_post, r.steps, r.still) for r in recs))))
-            xs, pw, (x_first, P_first) = rts_backward(filt, rec, end)
-            m = filt.model
-            scale = float(m.scale[m.iw])
-            outs.append((xs[:, m.iw] * scale, np.sqrt(np.maximum(pw, 0.0)) * scale, rec.still))
+                *(np.concatenate(arrays) for arrays in zip(*map(astuple_shallow, recs))))
+            w, pw, (x_first, P_first) = rts_backward(filt, rec, end)
+            outs.append((w, np.sqrt(np.maximum(pw, 0.0)), rec.still))
             end = None if link is None else across(filt, link[0],
                                                    first_of(rec, x_first, P_first), link[1])
         n_out = self._held - keep

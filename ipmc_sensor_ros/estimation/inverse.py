@@ -204,15 +204,16 @@ class InverseEstimator:
         """
         Filter a block; return an :class:`~.core.Estimate` (std NaN, never at rest).
 
-        A sample ``steps[k] > 1`` periods after the one before is preceded by ``steps[k] - 1``
+        A sample ``steps[k] > 1`` slots after the one before is preceded by ``steps[k] - 1``
         zero-current samples (the leaky inverse has no prediction model: a missing sample is
-        taken as no charge flowing).
+        taken as no charge flowing); a stamp's offset from its slot is not used (on a slot).
         """
         from .core import Estimate
+        from .timebase import slots_of
 
         x = np.asarray(current_a, dtype=float)
-        if steps is not None and np.any(np.asarray(steps) > 1):
-            st = np.asarray(steps, dtype=np.int64)
+        st = None if steps is None else slots_of(steps)
+        if st is not None and np.any(st > 1):
             idx = np.cumsum(st) - st[0]
             padded = np.zeros(int(idx[-1]) + 1)
             padded[idx] = x
@@ -221,10 +222,12 @@ class InverseEstimator:
             w = self.process(x)
         return Estimate(w, np.full(w.size, np.nan), np.zeros(w.size, dtype=bool))
 
-    def estimate_one(self, current_a: float, steps: int = 1) -> tuple[float, float]:
+    def estimate_one(self, current_a: float, steps: float = 1) -> tuple[float, float]:
         """One sample: (deflection, NaN); :meth:`process_one` after ``steps - 1`` zeros."""
-        if steps > 1:
-            self._process_small([0.0] * (int(steps) - 1))
+        from .timebase import slots_of
+
+        if slots_of(steps) > 1:
+            self._process_small([0.0] * (slots_of(steps) - 1))
         return self.process_one(current_a), math.nan
 
     def pop_smoothed(self, flush: bool = False) -> None:

@@ -44,12 +44,13 @@ from .fixed_lag import lag_smoother
 from .lines import NOMINAL_LINES_HZ, measure_line
 from .motionline import MOTION_LONGEST_S, MOTION_PERIODS, measure_recent
 from .onset import due, restart
-from .innovations import explains
+from .innovations import at_stamp, explains
 from .kalman_state import KalmanState
 from .periodic import StretchLog, after_refutation, refilter, same_motion
 from .ring import SampleRing
 from .smoother import smooth_segments
 from .statespace import StateSpaceModel
+from .timebase import slots_of
 
 __all__ = ['KalmanEstimator', 'CHECK_S', 'LINE_WINDOW_S']
 
@@ -159,7 +160,7 @@ class KalmanEstimator(KalmanState):
     # -- streaming ------------------------------------------------------------------------
     def estimate(self, current_a, steps=None) -> Estimate:
         y = np.asarray(current_a, dtype=float)
-        st = np.ones(y.size, dtype=np.int64) if steps is None else np.asarray(steps, np.int64)
+        st = np.ones(y.size) if steps is None else np.asarray(steps, dtype=float)
         parts, a = [], 0
         while a < y.size:
             # cut where the line check falls due (a fixed sample count, however cut)
@@ -189,7 +190,7 @@ class KalmanEstimator(KalmanState):
             return Estimate(np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool))
         return Estimate(*(np.concatenate(p) for p in zip(*parts)))
 
-    def estimate_one(self, current_a: float, steps: int = 1) -> tuple[float, float]:
+    def estimate_one(self, current_a: float, steps: float = 1) -> tuple[float, float]:
         """One sample through the same recursion (:meth:`estimate` without its arrays)."""
         n = self._state.samples
         if n + 1 == self._next_check(n) or self._lag is not None:
@@ -198,10 +199,10 @@ class KalmanEstimator(KalmanState):
             return float(est.deflection_m[0]), float(est.std_m[0])
         blocks = self._state.innovations.blocks
         self._state, w, s, still = self._filter.run(self._state, [float(current_a)],
-                                                    [int(steps)], copy=False,
+                                                    [float(steps)], copy=False,
                                                     until_motion=True)
-        self._log.add_one(float(current_a), int(steps), bool(still[0]))
-        for _ in range(int(steps)):     # a bridged slot holds the next value (line check)
+        self._log.add_one(float(current_a), float(steps), bool(still[0]))
+        for _ in range(slots_of(float(steps))):     # a bridged slot holds the next value
             self._recent.push(current_a)
         if self._first_rest_n is None and still[0]:
             self._first_rest_n = n
@@ -231,7 +232,7 @@ class KalmanEstimator(KalmanState):
         """
         if self._first_rest_n is None and still.any():
             self._first_rest_n = self._state.samples - y.size + int(np.argmax(still))
-        self._recent.extend(np.repeat(y, steps))
+        self._recent.extend(np.repeat(y, slots_of(steps)))
 
     def _check_line(self) -> None:
         recent = self._recent.values()
@@ -351,7 +352,7 @@ class KalmanEstimator(KalmanState):
         stream state untouched.
         """
         y = np.asarray(current_a, dtype=float)
-        st = np.ones(y.size, dtype=np.int64) if steps is None else np.asarray(steps, np.int64)
+        st = np.ones(y.size) if steps is None else np.asarray(steps, dtype=float)
         live = KalmanEstimator(self.reduced, self.sample_rate_hz, self.config, self.mains_hz)
         live._changes.segments = [(0, live._filter, live._state.copy(), None)]
         still = live.estimate(y, st).still
@@ -371,7 +372,9 @@ class KalmanEstimator(KalmanState):
                 'at_rest': bool(self._state.still), 'deflection_std_m': w_std,
                 'noise_a': math.sqrt(self._state.noise.var_a2),
                 'mains_line_hz': self.line_hz, 'mains_line_a': level,
-                'motion_hz': self.model.motion_hz, 'offset_jumps': self.offset_jumps}
+                'motion_hz': self.model.motion_hz, 'offset_jumps': self.offset_jumps,
+                'sampled_at_stamp': at_stamp(self._state.innovations.stamps,
+                                             self.config.sampled_at_stamp_prior)}
 
     def settling(self) -> tuple[float, str]:
         if self._first_rest_n is not None:

@@ -41,6 +41,7 @@ from .filter import FilterState, ForwardRecord, KalmanFilter
 from .innovations import block_samples, explains
 from .motionline import MOTION_WOBBLE
 from .onset import due, restart
+from .timebase import slots_of
 
 __all__ = ['Stretch', 'StretchLog', 'Refiltered', 'refilter', 'same_motion',
            'offset_step_at', 'Change', 'after_refutation']
@@ -317,7 +318,7 @@ def offset_step_at(span: Stretch, filt: KalmanFilter, chunk: int = 512) -> int |
             size = (k % period) + 1
             sums[:2] += block_rho * block_z / size, block_rho * block_rho / size
             block_z, block_rho = 0.0, np.zeros(at.size)
-        sig = m.discrete(span.steps[k + 1] if k + 1 < n else 1)[0] @ (
+        sig = m.discrete(slots_of(span.steps[k + 1]) if k + 1 < n else 1)[0] @ (
             sig - np.outer(gain / (s * s), c @ sig))
     explained = sums[[0, 2]] ** 2 / np.maximum(sums[[1, 3]], 1e-300)
     coarse = at[int(np.argmax(explained[0]))]

@@ -32,19 +32,20 @@ CHUNK_SAMPLES = 4096
 
 def rts_backward(filt: KalmanFilter, rec: ForwardRecord, end=None):
     """
-    Smooth one forward record; return (x^s, P^s diagonal of w) in scaled units.
+    Smooth one forward record; return (w^s, its variance, (x^s, P^s) of the first sample).
+
+    The deflection is the record's published one (``w_row``: where each sample was taken),
+    m and m^2.
 
     ``end``: (x^s, P^s, x-, P-, steps) of the sample after the record, or (x^s, P^s) of the
     record's last sample (smoothed across a model change: :func:`across`), or None (the
     record ends the data).
     """
     n = rec.x_post.shape[0]
-    xs = np.empty_like(rec.x_post)
-    pw = np.empty(n)
-    iw = filt.model.iw
+    w, pw, rows = np.empty(n), np.empty(n), rec.w_row
     if end is None or len(end) == 2:
         x_next, P_next = (rec.x_post[-1], rec.P_post[-1]) if end is None else end
-        xs[-1], pw[-1] = x_next, P_next[iw, iw]
+        w[-1], pw[-1] = rows[-1] @ x_next, rows[-1] @ P_next @ rows[-1]
         last = n - 2
         xp_next, Pp_next, step_next = rec.x_pred[-1], rec.P_pred[-1], int(rec.steps[-1])
     else:
@@ -58,8 +59,8 @@ def rts_backward(filt: KalmanFilter, rec: ForwardRecord, end=None):
         J = np.linalg.solve(Pp_next, F @ rec.P_post[k]).T
         x_next = rec.x_post[k] + J @ (x_next - xp_next)
         P_next = rec.P_post[k] + J @ (P_next - Pp_next) @ J.T
-        xs[k], pw[k] = x_next, P_next[iw, iw]
-    return xs, pw, (x_next, P_next)
+        w[k], pw[k] = rows[k] @ x_next, rows[k] @ P_next @ rows[k]
+    return w, pw, (x_next, P_next)
 
 
 def smooth(filt: KalmanFilter, state: FilterState, current_a, steps=None,
@@ -74,7 +75,7 @@ def smooth(filt: KalmanFilter, state: FilterState, current_a, steps=None,
     """
     y = np.asarray(current_a, dtype=float)
     n = y.size
-    st = np.ones(n, dtype=np.int64) if steps is None else np.asarray(steps, dtype=np.int64)
+    st = np.ones(n) if steps is None else np.asarray(steps, dtype=float)
     starts = list(range(0, n, chunk))
     checkpoints = []
     s = state
@@ -84,16 +85,13 @@ def smooth(filt: KalmanFilter, state: FilterState, current_a, steps=None,
     w = np.empty(n)
     pw = np.empty(n)
     end = last
-    scale = filt.model.scale[filt.model.iw]
     for a, s0 in zip(reversed(starts), reversed(checkpoints)):
         b = min(a + chunk, n)
         rec = ForwardRecord.empty(b - a, filt.model.size)
         filt.run(s0, y[a:b], st[a:b], record=rec)
-        xs, pwc, (x_first, P_first) = rts_backward(filt, rec, end)
-        w[a:b] = xs[:, filt.model.iw] * scale
-        pw[a:b] = pwc
+        w[a:b], pw[a:b], (x_first, P_first) = rts_backward(filt, rec, end)
         end = first_of(rec, x_first, P_first)
-    return w, np.sqrt(np.maximum(pw, 0.0)) * scale, end
+    return w, np.sqrt(np.maximum(pw, 0.0)), end
 
 
 def first_of(rec: ForwardRecord, x_first, P_first) -> tuple:

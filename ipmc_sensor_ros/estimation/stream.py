@@ -10,9 +10,9 @@ run; the node only unpacks messages, calls :meth:`StreamEstimator.feed` (a block
 * **values**: a current that is not finite or has ``|i| > MAX_ABS_CURRENT_A`` is refused
   (that sample only);
 * **time** (:mod:`~ipmc_sensor_ros.estimation.timebase`): samples are taken at their stamps,
-  on the nearest slot of a grid that follows them (jitter up to 25 % of the period).  The
-  slots since the previous accepted sample are the ``steps`` handed to the filter
-  (``DeflectionEstimator.process(time_s, current_a, steps)``): missing samples and gaps up to
+  on the nearest slot of a grid that follows them (jitter up to 25 % of the period); the
+  slots since the previous accepted sample plus the stamp's offset from its slot are the
+  ``steps`` handed to the filter (``DeflectionEstimator.process``): missing samples and gaps up to
   ``max_gap_s`` are bridged by its prediction (``gaps_bridged``, ``samples_lost``).  A
   duplicated stamp, a stamp behind the previous one by at most ``max_gap_s`` or on the previous
   sample's slot is refused (that sample; no reset).  A longer gap (``gaps``) or jump back (a
@@ -101,7 +101,8 @@ class StreamEstimator(StreamAccounts):
         self._now_s = now_s or (lambda: 0.0)
         self.nominal_rate_hz = float(estimator.sample_rate_hz)
         self.timebase = Timebase(1.0 / self.nominal_rate_hz, max_gap_s)
-        self.accepted = np.zeros(0, dtype=bool)   # input samples of the last feed with output
+        # of the last feed: input samples with output, each stamp's offset from its slot
+        self.accepted, self.offsets = np.zeros(0, dtype=bool), np.zeros(0)
         self._filter_hz = self.nominal_rate_hz      # rate the filter is (to be) built for
         self._rate_reported = False
         self._stamp_floor_s: float | None = None    # output stamps must pass it (delay grew)
@@ -116,8 +117,7 @@ class StreamEstimator(StreamAccounts):
     @property
     def measured_rate_hz(self) -> float | None:
         """Return the rate measured from the stamps (None before a full window), Hz."""
-        p = self.timebase.measured
-        return None if p is None else 1.0 / p
+        return None if self.timebase.measured is None else 1.0 / self.timebase.measured
 
     @property
     def max_gap_s(self) -> float:
@@ -223,15 +223,13 @@ class StreamEstimator(StreamAccounts):
             code = self.timebase.admit(t)
         else:
             code = OUT_OF_RANGE if math.isfinite(i) else NON_FINITE
-        if code > 0:
+        if code >= 0:               # accepted: a gap bridged, or the first of a run
             if code > 1:
                 self._bridged(code, self._refused_since)
             self._refused_since = 0
+            if code == START:
+                self._begin_run()
             return code
-        if code == START:
-            self._refused_since = 0
-            self._begin_run()
-            return START
         self._refuse(code, t, i)
         return -1
 
@@ -240,12 +238,12 @@ class StreamEstimator(StreamAccounts):
         :meth:`_admit` for every sample of a block, the plain runs of samples in numpy.
 
         Returns (codes, rate cuts): per sample steps >= 1, 0 (START) or -1, and the
-        ``(index, rate)`` after which the filter follows a measured rate.
+        ``(index, rate)`` after which the filter follows a measured rate; ``offsets``: each
+        accepted stamp's offset from its slot, periods.
         """
-        n = t.size
-        codes = np.empty(n, dtype=np.int64)
-        cuts = []
-        tb = self.timebase
+        n, tb, cuts = t.size, self.timebase, []
+        codes, self.offsets = np.empty(n, dtype=np.int64), np.zeros(n)
+        offsets = self.offsets
         ok = (i >= -MAX_ABS_CURRENT_A) & (i <= MAX_ABS_CURRENT_A)
         bad = np.flatnonzero(~ok).tolist() + [n]
         b = k = 0
@@ -253,7 +251,7 @@ class StreamEstimator(StreamAccounts):
             plain = tb.admit_plain(t, k, bad[b]) if k < bad[b] else ()
             if len(plain):
                 m = len(plain)
-                codes[k:k + m] = plain
+                codes[k:k + m], offsets[k:k + m] = plain, tb.plain_offsets
                 for j in np.flatnonzero(plain > 1).tolist():   # rare: a Python loop
                     self._bridged(int(plain[j]), self._refused_since if j == 0 else 0)
                 self._refused_since = 0
@@ -261,6 +259,7 @@ class StreamEstimator(StreamAccounts):
             else:
                 b += k == bad[b]
                 codes[k] = self._admit(float(t[k]), float(i[k]))
+                offsets[k] = tb.slot_offset if codes[k] >= 0 else 0.0
                 k += 1
             if tb.fresh:
                 hz = self._rate_action()
@@ -286,7 +285,7 @@ class StreamEstimator(StreamAccounts):
         est = self.estimator
         if code == START:
             est.reset()
-        t_out, w = est.process_one(time_s, current_a, code or 1)
+        t_out, w = est.process_one(time_s, current_a, (code or 1) + self.timebase.slot_offset)
         if self.timebase.fresh:
             hz = self._rate_action()
             if hz is not None:
@@ -377,7 +376,8 @@ class StreamEstimator(StreamAccounts):
         for stop, kind, hz in events + [(t.size, 2, None)]:
             sel = np.flatnonzero(accepted[start:stop]) + start
             if sel.size:
-                t_out, w = self.estimator.process(t[sel], current[sel], np.maximum(codes[sel], 1))
+                t_out, w = self.estimator.process(t[sel], current[sel],
+                                                  np.maximum(codes[sel], 1) + self.offsets[sel])
                 if np.all(np.isfinite(w)):
                     parts.append((t_out, w, self.estimator.last_std_m))
                     self.counters['samples_out'] += sel.size

@@ -14,9 +14,11 @@ anchor (the *grid*) and takes each stamp at the nearest grid slot (:func:`grid_s
     k = floor((t - a) / P + 1/2) + k_a                                                  (2)
 
 so ``steps = k - k_prev`` is the number of sample periods since the previous accepted sample
-(1: contiguous; m > 1: m - 1 samples missing, bridged by the filter).  Jitter up to
-``JITTER_FRACTION`` = 25 % of the period rounds to the right slot as long as the grid is
-within the remaining 25 % of the stamps' slots, which the grid's updates keep it:
+(1: contiguous; m > 1: m - 1 samples missing, bridged by the filter), and
+``(t - a) / P - (k - k_a)``, in [-1/2, 1/2), the stamp's offset from its slot in periods
+(``slot_offset``: where a DAQ that samples when it stamps took the sample, :mod:`.filter`).
+Jitter up to ``JITTER_FRACTION`` = 25 % of the period rounds to the right slot as long as the
+grid is within the remaining 25 % of the stamps' slots, which the grid's updates keep it:
 
 * **phase and period** are refitted at the end of each *window* of accepted samples: a
   least-squares line of the stamps against their slots (outliers beyond half a period
@@ -67,7 +69,7 @@ from scipy.stats import norm, t as student_t
 
 from ..errors import DataError
 
-__all__ = ['Timebase', 'grid_slot', 'fit_line', 'MAX_STAMP_S', 'JITTER_FRACTION',
+__all__ = ['Timebase', 'grid_slot', 'slots_of', 'fit_line', 'MAX_STAMP_S', 'JITTER_FRACTION',
            'RATE_WINDOW_S', 'FIRST_WINDOW_SAMPLES', 'RELOCK_MIN_SAMPLES', 'SIGNIFICANCE',
            'DRIFT_MARGIN', 'MAX_WINDOW_SAMPLES',
            'START', 'DUPLICATE', 'BEHIND', 'TOO_CLOSE', 'NON_FINITE', 'OUT_OF_RANGE',
@@ -113,6 +115,18 @@ START, DUPLICATE, BEHIND, TOO_CLOSE, NON_FINITE, OUT_OF_RANGE = 0, -1, -2, -3, -
 REFUSAL_NAMES = {DUPLICATE: 'duplicate_stamp', BEHIND: 'stamp_behind',
                  TOO_CLOSE: 'stamp_too_close', NON_FINITE: 'non_finite',
                  OUT_OF_RANGE: 'out_of_range'}
+
+
+def slots_of(steps):
+    """
+    Return the slots of ``steps``: sample periods from the slot of the sample before.
+
+    What the stream hands the filter is the slots plus the stamp's offset from its slot
+    (``slot_offset``, in [-1/2, 1/2)), so the slots are the nearest integer (eq. 2's rule).
+    """
+    if isinstance(steps, (int, float)):
+        return math.floor(steps + 0.5)
+    return np.floor(np.asarray(steps, dtype=float) + 0.5).astype(np.int64)
 
 
 def grid_slot(time_s, anchor_s: float, period_s: float, anchor_slot: int, floor=math.floor):
@@ -198,6 +212,10 @@ class Timebase:
         self.max_gap_s = float(max_gap_s)
         self.last_s: float | None = None       # stamp of the last accepted sample
         self.last_slot = 0
+        #: the last accepted stamp's offset from its slot, periods (eq. 2: in [-1/2, 1/2));
+        #: of the samples :meth:`admit_plain` accepted, ``plain_offsets``
+        self.slot_offset = 0.0
+        self.plain_offsets = np.zeros(0)
         self.anchor_s = 0.0
         self.anchor_slot = 0
         self.measured: float | None = None     # period of the last full rate window, s
@@ -244,6 +262,7 @@ class Timebase:
                 return TOO_CLOSE
             self.last_s = t
             self.last_slot = slot
+            self.slot_offset = (t - self.anchor_s) / self.period_s - (slot - self.anchor_slot)
             self._win_t.append(t)
             self._win_k.append(slot)
             self._due -= 1
@@ -279,6 +298,8 @@ class Timebase:
         j = m if ok.all() else int(np.argmin(ok))
         if j == 0:
             return np.zeros(0, dtype=np.int64)
+        self.plain_offsets = ((t[:j] - self.anchor_s) / self.period_s
+                              - (slots[:j] - self.anchor_slot))
         self.last_s = float(t[j - 1])
         self.last_slot = int(slots[j - 1])
         self._win_t.extend(t[:j].tolist())
@@ -293,6 +314,7 @@ class Timebase:
         """Begin a run at stamp ``t``: slot 0, the grid anchored there."""
         self.last_s = self.anchor_s = t
         self.last_slot = self.anchor_slot = 0
+        self.slot_offset = 0.0
         self.break_kind, self.break_s = kind, size_s
         self._win_t, self._win_k, self._close = [t], [0], []
         self._due = FIRST_WINDOW_SAMPLES - 1       # accepted samples until the window ends
