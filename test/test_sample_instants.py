@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from ipmc_sensor_ros.estimation.records import estimate_record, smooth_record
+from ipmc_sensor_ros.estimation.stream import StreamEstimator
 from ipmc_sensor_ros.interface import builders as B
 from ipmc_sensor_ros.interface import specs as C
 from ipmc_sensor_ros.physics.model import SensorModel
@@ -95,3 +96,20 @@ def test_blocks_and_single_samples_agree_off_the_slots(sampled):
     ones = estimate_record(_estimator(), stamps, current, block_samples=1)[1]
     # the same recursion, sample by sample (the stamps' evidence included)
     np.testing.assert_allclose(ones, whole, rtol=0.0, atol=1e-12)
+
+
+def test_the_fixed_lag_output_is_the_tip_where_each_sample_was_taken():
+    stamps, current, truth = _record(sampled=True)
+    values = C.defaults(C.ESTIMATOR_SPECS)
+    values.update(sample_rate_hz=FS, smoothed_lag_s=0.1)
+    stream = StreamEstimator(B.build_estimator(values))
+    live_w, smooth = [], []
+    for a in range(0, stamps.size, 250):
+        live_w.append(stream.feed(stamps[a:a + 250], current[a:a + 250])[1])
+        ready = stream.pop_smoothed()
+        smooth += [] if ready is None else [ready]
+    smooth.append(stream.pop_smoothed(flush=True))
+    t, w = (np.concatenate([s[k] for s in smooth]) for k in (0, 1))
+    # each sample once, at its stamp, and better than the live estimate with 0.1 s of lag
+    # (measured: live 0.06 %, smoothed 0.04 %; on the slots both would be 1.7 %)
+    assert _error(t, w, stamps, truth) < _error(stamps, np.concatenate(live_w), stamps, truth)

@@ -26,7 +26,7 @@ its samples; there is no second implementation)::
 R, the white-noise variance per sample, is measured by :class:`~.noise.NoiseMeter`.
 A sample whose stamp is d periods off its slot (:mod:`.timebase`) was taken there (a DAQ the
 host times) or on the slot (a DAQ on its own clock, stamped late): with p the probability of
-the first (:func:`.innovations.at_stamp`), its row is the mixture's mean (1 - p) c + p c e^{A
+the first (:mod:`.instants`), its row is the mixture's mean (1 - p) c + p c e^{A
 d/fs}, R grows by the mixture's spread, and the published deflection is the tip's there.
 The state is held in scaled units (x / scale) so that every entry of P is O(1) whatever the
 sensor (deflections of mm, currents of nA).
@@ -44,11 +44,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .forward import ForwardRecord, astuple_shallow
-from .innovations import Innovations, at_stamp, block_samples
+from .innovations import Innovations, block_samples
+from .instants import STAMP_WINDOW, OffSlot, StampEvidence, at_stamp
 from .noise import NOISE_AVERAGE_S, NOISE_FLOOR_A, NoiseMeter
 from .onset import Onset, Start, follow, follow_jump
 from .rest import RestTest, RestWindow
-from .statespace import OFF_SLOT_STEPS, StateSpaceModel
+from .statespace import StateSpaceModel
 
 __all__ = ['FilterState', 'KalmanFilter', 'ForwardRecord', 'astuple_shallow', 'NoiseMeter',
            'NOISE_AVERAGE_S', 'NOISE_FLOOR_A']
@@ -122,6 +123,7 @@ class KalmanFilter:
         s = model.scale
         self._w_row = np.zeros(model.size)          # the published deflection, m
         self._w_row[model.iw] = s[model.iw]
+        self.off_slot = OffSlot(model, self._w_row)     # a sample off its slot (.instants)
         self._anchor = np.zeros(model.size)
         self._anchor[model.iw], self._anchor[model.ih] = s[model.iw], -s[model.ih]
         v2, m2 = model.rest_variances
@@ -146,23 +148,6 @@ class KalmanFilter:
             j = model.il + 2 * k
             self.line_difference[j] = weights @ np.cos(2 * np.pi * f * ahead) * s[j]
             self.line_difference[j + 1] = -weights @ np.sin(2 * np.pi * f * ahead) * s[j + 1]
-
-    def _off_slot(self, x: np.ndarray, y: float, d: float, p: float):
-        """
-        Return (current row, deflection row, innovation on the slot, at the stamp).
-
-        Of a sample ``d`` periods off its slot, taken at its stamp with probability ``p``
-        (module docstring; :attr:`~.statespace.StateSpaceModel.off_slot_rows`, linear).
-        """
-        u = (d + 0.5) * OFF_SLOT_STEPS
-        j = min(int(u), OFF_SLOT_STEPS - 1)
-        f = u - j
-        tc, tw = self.model.off_slot_rows
-        c_at = tc[j] + f * (tc[j + 1] - tc[j])
-        c = self.model.c
-        nu_slot, nu_stamp = y - float(c @ x), y - float(c_at @ x)
-        w_at = tw[j] + f * (tw[j + 1] - tw[j])
-        return c + p * (c_at - c), self._w_row + p * (w_at - self._w_row), nu_slot, nu_stamp
 
     @property
     def rotation(self) -> np.ndarray:
@@ -232,7 +217,7 @@ class KalmanFilter:
         Filter ``current_a`` (A) from ``state``; return (new state, w, std, still).
 
         ``steps[k]``: sample periods from the slot of the sample before (None: all 1); a
-        fraction is the stamp's offset from its slot (:meth:`_off_slot`).  ``record``: filled
+        fraction is the stamp's offset from its slot (:mod:`.instants`).  ``record``: filled
         at rows ``offset + k`` for the smoother.  The loop keeps the state's arrays in local
         variables and builds the returned :class:`FilterState` once; a block and single
         samples run the same statements.  ``copy=False``: the new state reuses ``state``'s
@@ -253,7 +238,12 @@ class KalmanFilter:
         meter, win, onset, hold = state.noise, state.window, state.onset, state.hold_off
         hold_still, jump = state.hold_still, state.jump
         chi, blocks, zs, zn, nll, stamps = state.innovations
+        zg, gg, zzgg, zggg, gggg, timed, llr, scale = stamps     # the stamps' evidence
         prior, w_row = m.config.sampled_at_stamp_prior, self._w_row
+        p = at_stamp(stamps, prior)
+        off = self.off_slot
+        dc, mixed_c, mixed_w = off.mixed(p)
+        evidence = lambda: StampEvidence(zg, gg, zzgg, zggg, gggg, timed, llr, scale)  # noqa
         settled, block = self._settled, self._block
         if copy:
             x, P, meter, win = x.copy(), P.copy(), replace(meter), win.copy()
@@ -283,7 +273,7 @@ class KalmanFilter:
                                     lambda: float(c_lines @ x))
                 jump = follow_jump(jump, win.jump_quiet, verdict, yk, tk, lambda: (
                     x0, P0, moved, samples, Innovations(chi, blocks, zs, zn, nll,
-                                                        stamps)), still)
+                                                        evidence())), still)
                 if jump is not None and verdict is False and win.jumped(self.rest,
                                                                         meter.var_a2):
                     accepted, jump = jump, None
@@ -296,10 +286,9 @@ class KalmanFilter:
                 P = self._released(P, still)
             row, wk, var = c, w_row, meter.var_a2
             if dk:                      # taken off its slot: at the stamp, or on the slot?
-                p = at_stamp(stamps, prior)
-                row, wk, nu_slot, nu_stamp = self._off_slot(x, yk, dk, p)
-                P0c = P @ c
-                var += p * (1.0 - p) * (nu_slot - nu_stamp) ** 2    # the mixture's spread
+                j = off.index(dk)
+                row, wk, g = mixed_c[j], mixed_w[j], float(dc[j] @ x)
+                var += p * (1.0 - p) * g * g    # the mixture's spread
             if record is not None:
                 j = offset + k
                 record.x_pred[j], record.P_pred[j] = x, P
@@ -309,9 +298,16 @@ class KalmanFilter:
                 zs, zn, nll = zs + z, zn + 1, nll + z * z + 2.0 * math.log(r)
                 if zn == block:
                     chi, blocks, zs, zn = chi + zs * zs / zn, blocks + 1, 0.0, 0
-            if dk:                      # over the slot's sqrt(S) (the used row's depends on dk)
-                sd = math.sqrt(float(c @ P0c) + meter.var_a2)
-                stamps = stamps.add(nu_slot / sd, (nu_slot - nu_stamp) / sd)
+            if dk:                      # over the last sample's sqrt(S): not this offset's
+                zk, gk = (z * r + p * g) / (scale or r), g / (scale or r)     # on the slot
+                zg, gg, zzgg = zg + zk * gk, gg + gk * gk, zzgg + (zk * gk) ** 2
+                zggg, gggg, timed = zggg + zk * gk ** 3, gggg + gk ** 4, timed + 1
+                if timed == STAMP_WINDOW:   # a window closed: its likelihood ratio
+                    llr += evidence().window_llr()
+                    zg = gg = zzgg = zggg = gggg = 0.0
+                    timed, p = 0, at_stamp(StampEvidence(llr=llr), prior)
+                    dc, mixed_c, mixed_w = off.mixed(p)
+            scale = r
             if not held:
                 meter.add(yk, sk, win, self._alpha, None if d3 is None else float(d3 @ x))
             if begins and not held:     # what the window says of the offset
@@ -334,7 +330,7 @@ class KalmanFilter:
             elif still:
                 onset = follow(onset, win.track, yk, tk,
                                lambda: (x, P, moved, samples,
-                                        Innovations(chi, blocks, zs, zn, nll, stamps)))
+                                        Innovations(chi, blocks, zs, zn, nll, evidence())))
             elif was and onset is not None:     # the rest ended: a sample told it?
                 ended = onset.start(yk, tk) if win.quiet == 0 else None
                 onset = None
@@ -342,7 +338,8 @@ class KalmanFilter:
                 n = k + 1
                 break
         return (FilterState(x, P, meter, win, still, moved, samples, onset, ended, hold,
-                            hold_still, jump, Innovations(chi, blocks, zs, zn, nll, stamps)),
+                            hold_still, jump, Innovations(chi, blocks, zs, zn, nll,
+                                                          evidence())),
                 out_w[:n], out_s[:n], out_still[:n])
 
     def with_jump(self, P: np.ndarray) -> np.ndarray:

@@ -27,65 +27,17 @@ block closed a second after the move began, against 24; 1,577 over the next.
 from __future__ import annotations
 
 import functools
-import math
 from typing import NamedTuple
 
 from scipy.stats import chi2 as chi2_dist
 
-__all__ = ['Innovations', 'StampEvidence', 'block_samples', 'explains', 'at_stamp',
-           'STAMP_WINDOW', 'MODEL_FALSE_ALARM']
+from .instants import StampEvidence
+
+__all__ = ['Innovations', 'block_samples', 'explains', 'MODEL_FALSE_ALARM']
 
 #: False-alarm level of the test that a periodic model explains the current of a stretch: a
 #: model that does is refused or dropped by chance once in 10^6 stretches (11 days of checks).
 MODEL_FALSE_ALARM = 1e-6
-
-
-#: Samples off their slots per window of the stamps' evidence: the regression's variance is
-#: an asymptotic one (White 1980), within ~10 % of the truth from a few tens of samples, and a
-#: window confines a burst of innovations (a release, a start) to its own weight.
-STAMP_WINDOW = 128
-
-
-class StampEvidence(NamedTuple):
-    """
-    The regression of the innovations on what a sample's offset from its slot would explain.
-
-    For a sample taken d periods off its slot, g = (c(d) - c) x- is the current the offset
-    would add (:meth:`~.filter.KalmanFilter._off_slot`); the innovation on the slot is
-    z = beta g + e, beta = 1 if the sample was taken at its stamp and 0 if on its slot.
-    Over each window of ``STAMP_WINDOW`` such samples, sums of z g, g^2, (z g)^2, z g^3 and
-    g^4 give the least-squares beta and its heteroscedasticity-consistent variance V (White
-    1980), which holds whatever the innovations' own spread, mean and correlation: the
-    offsets are the stamps' jitter, independent from sample to sample.  A window's
-    log-likelihood ratio of beta = 1 against beta = 0 is (2 beta - 1) / (2 V); the windows'
-    add (``llr``).  z and g are over sqrt(S) of the row on the slot, not of the row the
-    filter used: that S depends on the offset, and a systematic innovation over it would
-    bias beta towards the row used.
-    """
-
-    zg: float = 0.0
-    gg: float = 0.0
-    zzgg: float = 0.0
-    zggg: float = 0.0
-    gggg: float = 0.0
-    n: int = 0
-    llr: float = 0.0
-
-    def add(self, z: float, g: float) -> 'StampEvidence':
-        """Return the evidence with one more sample (a full window closed into ``llr``)."""
-        zg, gg = z * g, g * g
-        sums = StampEvidence(self.zg + zg, self.gg + gg, self.zzgg + zg * zg,
-                             self.zggg + zg * gg, self.gggg + gg * gg, self.n + 1, self.llr)
-        return sums if sums.n < STAMP_WINDOW else StampEvidence(llr=self.llr + sums._window())
-
-    def _window(self) -> float:
-        """Return the window's log-likelihood ratio (0 if it says nothing)."""
-        if self.gg <= 0.0:
-            return 0.0
-        beta = self.zg / self.gg
-        resid = self.zzgg - 2.0 * beta * self.zggg + beta * beta * self.gggg
-        var = resid / self.gg ** 2 * self.n / (self.n - 1)
-        return (2.0 * beta - 1.0) / (2.0 * var) if var > 0.0 else 0.0
 
 
 class Innovations(NamedTuple):
@@ -107,21 +59,6 @@ class Innovations(NamedTuple):
     def closed(self) -> 'Innovations':
         """Return the sums without the open block (a block belongs to one model)."""
         return self._replace(open_sum=0.0, open_n=0)
-
-
-def at_stamp(evidence: StampEvidence, prior: float) -> float:
-    """
-    Return the probability that the samples were taken at their stamps, not on their slots.
-
-    A DAQ on its own clock samples on the slots and the host stamps late by a varying
-    delay; a DAQ timed by the host samples when it stamps.  The windows' log-likelihood
-    ratio (:class:`StampEvidence`) is added to the prior's log-odds
-    (``sampled_at_stamp_prior``; 0 or 1 is not revised).
-    """
-    if not 0.0 < prior < 1.0:
-        return prior
-    odds = evidence.llr + math.log(prior / (1.0 - prior))
-    return 1.0 / (1.0 + math.exp(-min(max(odds, -700.0), 700.0)))
 
 
 def block_samples(motion_hz: float, sample_rate_hz: float) -> int:

@@ -43,8 +43,9 @@ from .filter import FilterState, ForwardRecord, KalmanFilter
 from .fixed_lag import lag_smoother
 from .lines import NOMINAL_LINES_HZ, measure_line
 from .motionline import MOTION_LONGEST_S, MOTION_PERIODS, measure_recent
+from .innovations import explains
+from .instants import at_stamp
 from .onset import due, restart
-from .innovations import at_stamp, explains
 from .kalman_state import KalmanState
 from .periodic import StretchLog, after_refutation, refilter, same_motion
 from .ring import SampleRing

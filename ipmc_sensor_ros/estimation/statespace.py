@@ -76,9 +76,9 @@ __all__ = ['StateSpaceModel', 'modal_realisation', 'line_frequencies_hz', 'harmo
 HOLD_RELEASE = 100.0
 
 #: Rows tabulated per period for a sample taken off its slot (:attr:`StateSpaceModel.
-#: off_slot_rows`), linear between them: a row off by 1/8 of the table step squared times
-#: its second derivative (2e-5 of a 470 Hz amplifier pole's term at 500 Hz).
-OFF_SLOT_STEPS = 128
+#: off_slot_rows`; the nearest is used): a sample's instant to 1/2048 of a period, 0.5 us at
+#: 1 kHz, about the resolution of a float stamp of today's epoch time (0.24 us).
+OFF_SLOT_STEPS = 1024
 
 
 def modal_realisation(reduced: ReducedModel):
