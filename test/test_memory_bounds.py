@@ -105,11 +105,11 @@ def test_estimate_memory_per_sample_is_bounded(monkeypatch):
 
     slope = _bytes_per_sample(run)
     # output times, estimates and their std (3 x 8 B), the 'kept' mask (1 B) and the sample
-    # periods the smoother reuses (int32, 4 B) are the result: 29 B; the accuracy works on
-    # views and chunks; the filter's own state does not grow.  36 B leaves room for the
-    # diff/mask temporaries of the time rules, not for another record-length float array
-    # (the whole-record detrend copies took ~70 B per sample before, the joined block lists
-    # 16 B more).
+    # periods the smoother reuses (8 B: the slots and the stamp's fraction) are the result:
+    # 33 B; the accuracy works on views and chunks; the filter's own state does not grow.
+    # 36 B leaves room for the diff/mask temporaries of the time rules, not for another
+    # record-length float array (the whole-record detrend copies took ~70 B per sample
+    # before, the joined block lists 16 B more, the fraction kept apart 8 B).
     assert slope <= 36, f'{slope:.0f} B per sample'
 
 

@@ -26,16 +26,15 @@ def run_record(stream: StreamEstimator, time_s, current_a, block_samples: int = 
     an estimate (refused or dropped ones have none; see the stream's counters).  The rules
     are the live ones: a jump back by more than ``max_gap_s`` starts a new run, as a bag loop
     does live.  Per kept sample it also keeps ``record_std_m`` (the published standard
-    deviation), ``record_steps`` (the slots since the sample before; 0 where a new run began)
-    and ``record_offsets`` (each stamp's offset from its slot, periods): the sample periods
-    handed to the filter, which :func:`smooth_record` reuses.
+    deviation) and ``record_steps`` (the sample periods handed to the filter: the slots since
+    the sample before plus the stamp's offset from its slot; 0 where a new run began), which
+    :func:`smooth_record` reuses.
     """
     t = np.asarray(time_s, float)
     i = np.asarray(current_a, float)
     kept = np.zeros(t.size, dtype=bool)
     out_t, out_w, out_s = np.empty(t.size), np.empty(t.size), np.empty(t.size)
-    steps = np.empty(t.size, dtype=np.int32)     # a gap is bridged only up to max_gap_s
-    offsets = np.empty(t.size)
+    steps = np.empty(t.size)
     n_out = 0
     for k in range(0, t.size, block_samples):
         end = min(k + block_samples, t.size)
@@ -45,12 +44,10 @@ def run_record(stream: StreamEstimator, time_s, current_a, block_samples: int = 
             out_t[n_out:n_out + m] = res[0]
             out_w[n_out:n_out + m] = res[1]
             out_s[n_out:n_out + m] = stream.last_std_m if stream.last_std_m.size == m else np.nan
-            steps[n_out:n_out + m] = stream.codes[stream.accepted]
-            offsets[n_out:n_out + m] = stream.offsets[stream.accepted]
+            steps[n_out:n_out + m] = (stream.codes + stream.offsets)[stream.accepted]
             n_out += m
             kept[k:end] = stream.accepted
     stream.record_std_m, stream.record_steps = out_s[:n_out], steps[:n_out]
-    stream.record_offsets = offsets[:n_out]
     return out_t[:n_out], out_w[:n_out], kept
 
 
@@ -81,7 +78,7 @@ def smooth_record(estimator: DeflectionEstimator, stream: StreamEstimator, time_
     i = np.asarray(current_a, float)[stream.kept]
     steps = stream.record_steps
     cuts = [int(k) for k in np.flatnonzero(steps == START) if k > 0]
-    periods = np.maximum(steps, 1) + stream.record_offsets
+    periods = np.where(steps == START, 1.0, steps)      # a run's first sample: on its slot
     out = [estimator.smooth(t[a:b], i[a:b], periods[a:b])
            for a, b in zip([0, *cuts], [*cuts, t.size]) if b > a]
     if not out:
