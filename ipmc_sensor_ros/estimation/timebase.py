@@ -16,7 +16,7 @@ anchor (the *grid*) and takes each stamp at the nearest grid slot (:func:`grid_s
 so ``steps = k - k_prev`` is the number of sample periods since the previous accepted sample
 (1: contiguous; m > 1: m - 1 samples missing, bridged by the filter), and
 ``(t - a) / P - (k - k_a)``, in [-1/2, 1/2), the stamp's offset from its slot in periods
-(``slot_offset``: where a DAQ that samples when it stamps took the sample, :mod:`.filter`).
+(``slot_offset``: where a DAQ that samples when it stamps took the sample, :mod:`.instants`).
 Jitter up to ``JITTER_FRACTION`` = 25 % of the period rounds to the right slot as long as the
 grid is within the remaining 25 % of the stamps' slots, which the grid's updates keep it:
 
