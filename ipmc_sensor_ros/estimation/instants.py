@@ -78,9 +78,12 @@ class StampEvidence(NamedTuple):
     Over each window of ``STAMP_WINDOW`` such samples, sums of z g, g^2, (z g)^2, z g^3 and
     g^4 give the least-squares beta and its heteroscedasticity-consistent variance V (White
     1980), which holds whatever the innovations' own spread, mean and correlation: the
-    offsets are the stamps' jitter, independent from sample to sample.  A window's
-    log-likelihood ratio of beta = 1 against beta = 0 is (2 beta - 1) / (2 V); the windows'
-    add (``llr``).  z and g are over sqrt(S) of the sample before, not of this sample's
+    offsets are the stamps' jitter, independent from sample to sample.  V is itself an
+    estimate, from as many samples as carry g: n_eff = (sum g^2)^2 / sum g^4 (a start from
+    rest puts a window's g into a few samples), so beta is Student-t with n_eff - 1 degrees
+    of freedom about 1 or 0, and a window's log-likelihood ratio of beta = 1 against
+    beta = 0 is that of the two t densities ((2 beta - 1) / (2 V) when n_eff is large); the
+    windows' add (``llr``).  z and g are over sqrt(S) of the sample before, not of this sample's
     row: that S depends on the offset, and a systematic innovation over it would bias beta
     towards the row the filter used.  The filter keeps the sums (:mod:`.filter`).
     """
@@ -103,7 +106,11 @@ class StampEvidence(NamedTuple):
         beta = self.zg / self.gg
         resid = self.zzgg - 2.0 * beta * self.zggg + beta * beta * self.gggg
         var = resid / self.gg ** 2 * self.n / (self.n - 1)
-        return (2.0 * beta - 1.0) / (2.0 * var) if var > 0.0 else 0.0
+        if not var > 0.0:
+            return 0.0
+        dof = max(self.gg * self.gg / self.gggg - 1.0, 1.0)
+        return 0.5 * (dof + 1.0) * (math.log1p(beta * beta / (dof * var))
+                                    - math.log1p((beta - 1.0) ** 2 / (dof * var)))
 
 
 def at_stamp(evidence: StampEvidence, prior: float) -> float:
