@@ -50,6 +50,7 @@ from .noise import NOISE_AVERAGE_S, NOISE_FLOOR_A, NoiseMeter
 from .onset import Onset, Start, follow, follow_jump
 from .rest import RestTest, RestWindow
 from .statespace import StateSpaceModel
+from .timebase import slots_of
 
 __all__ = ['FilterState', 'KalmanFilter', 'ForwardRecord', 'astuple_shallow', 'NoiseMeter',
            'NOISE_AVERAGE_S', 'NOISE_FLOOR_A']
@@ -243,7 +244,9 @@ class KalmanFilter:
         p = at_stamp(stamps, prior)
         off = self.off_slot
         dc, mixed_c, mixed_w = off.mixed(p)
-        evidence = lambda: StampEvidence(zg, gg, zzgg, zggg, gggg, timed, llr, scale)  # noqa
+
+        def evidence():             # the sums as they stand (a snapshot's, or the result's)
+            return StampEvidence(zg, gg, zzgg, zggg, gggg, timed, llr, scale)
         settled, block = self._settled, self._block
         if copy:
             x, P, meter, win = x.copy(), P.copy(), replace(meter), win.copy()
@@ -254,7 +257,7 @@ class KalmanFilter:
         last_steps, ended = 1, None
         for k in range(n):
             yk, tk = y[k], st[k]
-            sk = math.floor(tk + 0.5)   # the slots (timebase.slots_of) and the offset from it
+            sk = slots_of(tk)           # the slots, and the stamp's offset from its slot
             dk = tk - sk
             if sk != last_steps:
                 F, Q = m.discrete(sk)
