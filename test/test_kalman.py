@@ -93,6 +93,26 @@ def test_blocks_single_samples_and_restored_state_agree(reduced):
     assert np.array_equal(singles, block)
 
 
+def test_a_sample_on_its_slot_and_one_a_hair_off_it_publish_the_same(reduced):
+    """
+    One rule publishes the tip where a sample was taken, on its slot or off it.
+
+    A stream at epoch time is off its slots by its stamps' rounding (~1e-7 of a period),
+    which takes the off-slot table's middle row: the slot's own rows.  The numbers must
+    be the same as on the slot, to the bit: a second formula for the slot (x_w s_w and
+    sqrt(P_ww) s_w) would differ by rounding, and a seam at d = 0 by more.
+    """
+    ssm = StateSpaceModel(reduced, EstimatorConfig(), FS, (50.0,))
+    _, y = _simulate(ssm, 1500, 20e-9, seed=2)
+    filt = KalmanFilter(ssm)
+    on = filt.run(filt.initial_state(), y)
+    off = filt.run(filt.initial_state(), y, np.full(y.size, 1.0 + 1e-7))
+    assert np.array_equal(on[1], off[1]) and np.array_equal(on[2], off[2])
+    assert off[0].innovations.stamps.n > 0      # the hair off the slot took the off-slot rows
+    w, std = filt.deflection(on[0])
+    assert (w, std) == (on[1][-1], on[2][-1])    # a state's deflection: the same rule
+
+
 def test_filter_std_covers_its_own_model(reduced):
     """On records drawn from the model, 2 sigma covers ~95 % of the errors (not 50, not 100)."""
     cfg = EstimatorConfig(rest_false_alarm=1e-12)     # a drawn motion is never still

@@ -189,9 +189,8 @@ class KalmanFilter:
 
     def deflection(self, state: FilterState) -> tuple[float, float]:
         """(w, its standard deviation) of a state, m."""
-        m = self.model
-        s = m.scale[m.iw]
-        return float(state.x[m.iw] * s), math.sqrt(max(float(state.P[m.iw, m.iw]), 0.0)) * s
+        w = self._w_row
+        return float(w @ state.x), math.sqrt(max(float(w @ state.P @ w), 0.0))
 
     def to_block_end(self, state: FilterState) -> int:
         """
@@ -231,8 +230,8 @@ class KalmanFilter:
         st = ([1] * n if steps is None else steps if isinstance(steps, list)
               else np.asarray(steps, dtype=float).tolist())
         m = self.model
-        iw, ib = m.iw, m.ib
-        sw, sb = float(m.scale[iw]), float(m.scale[ib])
+        ib = m.ib
+        sb = float(m.scale[ib])
         c, rows, rot, c_lines = m.c, self._rest_rows, self._rot, self._c_lines
         d3 = self.line_difference
         x, P, still, moved, samples = state.x, state.P, state.still, state.moved, state.samples
@@ -321,12 +320,8 @@ class KalmanFilter:
             if record is not None:
                 record.x_post[offset + k], record.P_post[offset + k] = x, P
             samples += 1
-            if dk:
-                out_w[k] = float(wk @ x)
-                out_s[k] = math.sqrt(max(float(wk @ P @ wk), 0.0))
-            else:
-                out_w[k] = x[iw] * sw
-                out_s[k] = math.sqrt(max(P[iw, iw], 0.0)) * sw
+            out_w[k] = float(wk @ x)    # the tip where the sample was taken (on its slot:
+            out_s[k] = math.sqrt(max(float(wk @ P @ wk), 0.0))     # wk = e_w s_w, w itself)
             out_still[k] = still
             if accepted is not None:    # the offset jumped: the run again, still, from its start
                 ended, onset = accepted, None
