@@ -41,7 +41,7 @@ from .filter import FilterState, ForwardRecord, KalmanFilter
 from .innovations import block_samples, explains
 from .motionline import MOTION_WOBBLE
 from .onset import due, restart
-from .timebase import slots_of
+from .step_glr import offset_step_at
 
 __all__ = ['Stretch', 'StretchLog', 'Refiltered', 'refilter', 'same_motion',
            'offset_step_at', 'Change', 'after_refutation']
@@ -279,68 +279,6 @@ def after_refutation(whole: Stretch, filt: KalmanFilter, drop: KalmanFilter,
     if jumped.now.innovations.nll >= ended:
         return Change(drop, whole)
     return None if wait and at > n - 2 * period else Change(filt, whole, at)
-
-
-def offset_step_at(span: Stretch, filt: KalmanFilter, chunk: int = 512) -> int | None:
-    """
-    Return the sample of ``span`` before which the offset most likely jumped, or None.
-
-    The generalised likelihood ratio of one jump (Willsky and Jones 1976): ``span`` filtered
-    again under ``filt`` gives its normalised innovations z_k = nu_k / sqrt(S_k), N(0, 1)
-    under the model (:func:`_innovations`).  A jump of the offset by ``a`` before sample t
-    adds a * rho_k(t) to z_k, the jump's signature through this filter: rho_k = c e_k /
-    sqrt(S_k), e_t the offset's unit vector, e_{k+1} = F (I - K_k c) e_k.  For each candidate
-    t (every ``len(span) / 200``-th sample, leaving a period of the periodic motion after
-    it; None: none does) what the best jump there explains is (sum rho z)^2 / sum rho^2.  It
-    is taken first over blocks one period long, the sums of z and rho over each block over
-    its root size (the statistic of :mod:`.innovations`: a model's residual at the motion's
-    harmonics sums to nearly nothing over a period, while sample by sample it would pull the
-    jump's time to where it happens to match); that finds the jump's period, and the same
-    ratio over single samples within a period of it, where the jump's first innovation is
-    sharpest, its sample.
-    """
-    m = filt.model
-    n, period = len(span.y), block_samples(m.motion_hz, m.sample_rate_hz)
-    if n < period + 2:
-        return None
-    at = np.arange(1, n - period + 1, max(1, n // 200))
-    sig = np.zeros((m.size, at.size))           # the signatures' state errors, by candidate
-    sums = np.zeros((4, at.size))               # fit and power, by blocks and by samples
-    block_z, block_rho = 0.0, np.zeros(at.size)
-    c, unit = m.c, 1.0 / m.scale[m.ib]
-    for k, z, s, gain in _innovations(span, filt, chunk):
-        sig[m.ib, at == k] = unit
-        rho = (c @ sig) / s
-        block_z += z
-        block_rho += rho
-        sums[2:] += rho * z, rho * rho
-        if (k + 1) % period == 0 or k + 1 == n:
-            size = (k % period) + 1
-            sums[:2] += block_rho * block_z / size, block_rho * block_rho / size
-            block_z, block_rho = 0.0, np.zeros(at.size)
-        sig = m.discrete(slots_of(span.steps[k + 1]) if k + 1 < n else 1)[0] @ (
-            sig - np.outer(gain / (s * s), c @ sig))
-    explained = sums[[0, 2]] ** 2 / np.maximum(sums[[1, 3]], 1e-300)
-    coarse = at[int(np.argmax(explained[0]))]
-    return int(at[int(np.argmax(np.where(np.abs(at - coarse) <= period, explained[1], -1.0)))])
-
-
-def _innovations(span: Stretch, filt: KalmanFilter, chunk: int):
-    """
-    Yield (k, z_k, sqrt(S_k), P_k c') for each sample k of ``span`` filtered again under ``filt``.
-
-    In pieces of ``chunk`` samples, so the covariances held for them stay small.
-    """
-    m, state = filt.model, span.start_under(filt)
-    for a in range(0, len(span.y), chunk):
-        b = min(len(span.y), a + chunk)
-        rec = ForwardRecord.empty(b - a, m.size)
-        state = filt.run(state, span.y[a:b], span.steps[a:b], record=rec)[0]
-        gains = rec.P_pred @ m.c
-        s = np.sqrt(gains @ m.c + state.noise.var_a2)
-        z = (np.asarray(span.y[a:b]) - rec.x_pred @ m.c) / s
-        for j in range(b - a):
-            yield a + j, float(z[j]), float(s[j]), gains[j]
 
 
 def _put(record: ForwardRecord, at: int, rows: ForwardRecord) -> None:

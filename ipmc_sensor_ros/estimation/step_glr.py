@@ -1,0 +1,119 @@
+# SPDX-License-Identifier: Apache-2.0
+"""
+Where the offset stepped in a span: the generalised likelihood ratio of one jump, at every sample.
+
+Willsky and Jones (1976): a span filtered again under a model gives normalised innovations
+z_k = nu_k / sqrt(S_k), N(0, 1) under the model.  A jump of the offset by ``a`` before
+sample t adds a rho_k(t) to z_k for k >= t, the jump's signature through this filter::
+
+    rho_k(t) = c e_k / sqrt(S_k),   e_t = e_b (the offset's unit vector),
+    e_{k+1} = Phi_k e_k,            Phi_k = F_{k+1} (I - K_k c),  K_k = P_k c' / S_k
+
+(F_{k+1} the transition to the next sample).  What the best jump at t explains is
+(sum_k rho_k z_k)^2 / sum_k rho_k^2.  Both sums are linear and quadratic forms in e_b of
+quantities that run *backwards* (the adjoint of the signature's recursion)::
+
+    sum_{k>=t} w_k rho_k(t) = e_b' lambda_t,  lambda_t = Phi_t' lambda_{t+1} + c' w_t / sqrt(S_t)
+    sum_{k>=t} rho_k(t)^2   = e_b' M_t e_b,   M_t = Phi_t' M_{t+1} Phi_t + c' c / S_t
+
+so one backward pass gives the ratio at *every* sample, not at a grid of candidates: a
+step of several times the one-sample prediction's spread must be placed on its sample (one
+sample early or late, the filter reads the step's first sample as motion, and the model
+with the jump fails its test as surely as the model without).
+
+Over a periodic model's blocks (one period each: the statistic of :mod:`.innovations`, in
+which a model's residual at the motion's harmonics sums to nearly nothing over a period,
+while sample by sample it would pull the jump's time to where it happens to match), the
+signature's and innovations' block sums B_j(t), Z_j give sum_j B_j Z_j / n_j (the weights
+w_k = Z_j(k) / n_j(k)) and sum_j B_j^2 / n_j (the block being summed, v, and the blocks
+after it, M_>, run back the same way).  The block ratio finds the jump's period, the
+sample ratio within a period of it its sample.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .filter import ForwardRecord, KalmanFilter
+from .innovations import block_samples
+from .timebase import slots_of
+
+__all__ = ['offset_step_at']
+
+
+def offset_step_at(span, filt: KalmanFilter, chunk: int = 512) -> int | None:
+    """
+    Return the sample of ``span`` before which the offset most likely jumped, or None.
+
+    ``span``: a :class:`~.periodic.Stretch` (its start state, samples and sample periods),
+    filtered again under ``filt``'s periodic model.  Candidates leave a period of the motion
+    after them (None: the span is shorter than a period and two samples).
+    """
+    m = filt.model
+    n, period = len(span.y), block_samples(m.motion_hz, m.sample_rate_hz)
+    if n < period + 2:
+        return None
+    z, s, gains = _innovations(span, filt, chunk)
+    fit, power = _ratios(filt, span.steps, z, s, gains, period)
+    at = np.arange(1, n - period + 1)
+    explained = fit[:, at] ** 2 / np.maximum(power[:, at], 1e-300)
+    coarse = at[int(np.argmax(explained[0]))]
+    return int(at[int(np.argmax(np.where(np.abs(at - coarse) <= period, explained[1], -1.0)))])
+
+
+def _ratios(filt: KalmanFilter, steps, z, s, gains, period: int):
+    """
+    Return (fit, power), each (block, sample) x sample: the sums of the module docstring.
+
+    One backward pass: lambda (blocks, samples), v and M_> (blocks), M (samples).
+    """
+    m = filt.model
+    n, size = z.size, m.size
+    c = m.c
+    unit = np.zeros(size)
+    unit[m.ib] = 1.0 / m.scale[m.ib]
+    starts = np.arange(0, n, period)
+    sizes = np.minimum(period, n - starts)
+    block_mean = np.repeat(np.add.reduceat(z, starts) / sizes, sizes)     # Z_j / n_j
+    fit, power = np.zeros((2, n)), np.zeros((2, n))
+    lam_b, lam_s, v, later, M = (np.zeros(size), np.zeros(size), np.zeros(size),
+                                 np.zeros((size, size)), np.zeros((size, size)))
+    transitions = {}
+    for t in range(n - 1, -1, -1):
+        if t + 1 < n:
+            slots = slots_of(steps[t + 1])
+            if slots not in transitions:
+                transitions[slots] = m.discrete(slots)[0]
+            phi = transitions[slots] - np.outer(transitions[slots] @ gains[t], c) / s[t] ** 2
+            lam_b, lam_s, v = phi.T @ lam_b, phi.T @ lam_s, phi.T @ v
+            later, M = phi.T @ later @ phi, phi.T @ M @ phi
+        row = c / s[t]
+        lam_b += row * block_mean[t]
+        lam_s += row * z[t]
+        v += row
+        M += np.outer(row, row)
+        n_block = min(period, n - (t - t % period))
+        fit[:, t] = unit @ lam_b, unit @ lam_s
+        power[:, t] = (unit @ v) ** 2 / n_block + unit @ later @ unit, unit @ M @ unit
+        if t % period == 0:             # the block's first sample: it joins the later ones
+            later += np.outer(v, v) / n_block
+            v = np.zeros(size)
+    return fit, power
+
+
+def _innovations(span, filt: KalmanFilter, chunk: int):
+    """
+    Return (z, sqrt(S), P c') for each sample of ``span`` filtered again under ``filt``.
+
+    In pieces of ``chunk`` samples, so the covariances held for them stay small.
+    """
+    m, state = filt.model, span.start_under(filt)
+    n = len(span.y)
+    z, s, gains = np.empty(n), np.empty(n), np.empty((n, m.size))
+    for a in range(0, n, chunk):
+        b = min(n, a + chunk)
+        rec = ForwardRecord.empty(b - a, m.size)
+        state = filt.run(state, span.y[a:b], span.steps[a:b], record=rec)[0]
+        gains[a:b] = rec.P_pred @ m.c
+        s[a:b] = np.sqrt(gains[a:b] @ m.c + state.noise.var_a2)
+        z[a:b] = (np.asarray(span.y[a:b]) - rec.x_pred @ m.c) / s[a:b]
+    return z, s, gains
