@@ -45,9 +45,10 @@ SETTINGS = (
             'upper corner of the motion spectrum (third order above it): above the 1-20 Hz band '
             'and a 30 Hz free vibration'),
     Setting('periodic_remainder_rms_m', 20e-6, 'm', 1e-9, 1.0,
-            "RMS of the motion a periodic model leaves (a crank's play, the rig's "
-            'vibration): the motion prior once the periodic motion is modelled; small, so an '
-            'offset is learned within a few periods'),
+            "largest RMS of the motion a periodic model leaves (a crank's play, the rig's "
+            'vibration): the motion prior once the periodic motion is modelled, small, so an '
+            'offset is learned within a few periods; the data choose it, a quarter or a '
+            'sixteenth of it by likelihood'),
     Setting('motion_speed_walk', 2.4e-3, '1/sqrt(s)', 0.0, 1.0,
             "random walk of the periodic motion's relative speed: a DC motor's speed wobbles "
             'by ~1 % over seconds (phase excursions of 0.2-2 rad at 5-20 Hz); each periodic '

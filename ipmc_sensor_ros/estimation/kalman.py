@@ -37,7 +37,7 @@ import numpy as np
 
 from ..lti.reduction import ReducedModel
 from .carry import Changes
-from .config import EstimatorConfig, parse_mains
+from .config import SETTINGS, EstimatorConfig, parse_mains
 from .core import Estimate
 from .filter import FilterState, ForwardRecord, KalmanFilter
 from .fixed_lag import lag_smoother
@@ -47,7 +47,8 @@ from .innovations import explains
 from .instants import at_stamp
 from .onset import due, restart
 from .kalman_state import KalmanState
-from .periodic import StretchLog, after_refutation, refilter, same_motion
+from .periodic import (REMAINDER_CHOICES, StretchLog, after_refutation, likeliest, refilter,
+                       same_motion)
 from .ring import SampleRing
 from .smoother import smooth_segments
 from .statespace import StateSpaceModel
@@ -251,8 +252,8 @@ class KalmanEstimator(KalmanState):
             return
         if not f_line and (len(old) < 2 or self._state.samples > self._first_n):
             return        # no line: keep what is modelled (the nominal pair only at the start)
-        model = StateSpaceModel(self.reduced, self.config, self.sample_rate_hz, f_line or (),
-                                self.model.motion_hz)
+        model = StateSpaceModel(self.reduced, self.model.config, self.sample_rate_hz,
+                                f_line or (), self.model.motion_hz)     # its remainder too
         self._take_over(self._new_filter(model), self._log.current)    # measured there
 
     def _begin_segment(self, filt, state, old, old_state) -> tuple | None:
@@ -299,27 +300,41 @@ class KalmanEstimator(KalmanState):
         """Measure the periodic motion: a model from its span, while it explains the current."""
         if self._log.current.deferred:      # a failed model's judgement waits: it runs on
             return
-        f0 = measure_recent(recent, self.sample_rate_hz, self.model)
+        f0 = measure_recent(recent, self.sample_rate_hz, self.model,
+                            self.config.periodic_remainder_rms_m)
         floor = MOTION_PERIODS / min(recent.size / self.sample_rate_hz, MOTION_LONGEST_S)
         span = self._log.span_for(f0, self._first_rest_n is None, floor)
         if span is None or same_motion(f0, self.model.motion_hz):
             return
-        filt = self._new_filter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,
-                                                self.model.fundamentals_hz, f0))
+        filters = [self._new_filter(StateSpaceModel(self.reduced, config, self.sample_rate_hz,
+                                                    self.model.fundamentals_hz, f0))
+                   for config in (self._remainder_configs() if f0 else (self.config,))]
+        filt, run = likeliest(span, filters)
         if not self._take_over(filt, span, lambda run: not f0 or explains(
-                run.now.innovations, run.start.innovations)):
+                run.now.innovations, run.start.innovations), run=run):
             self._log.current.measured_hz = 0.0         # refused: it counts as none
 
-    def _take_over(self, filt: KalmanFilter, span, accept=None, jump_at=None) -> bool:
+    def _remainder_configs(self) -> list:
+        """Return the settings with each periodic remainder tried (``REMAINDER_CHOICES``)."""
+        low = next(s.low for s in SETTINGS if s.name == 'periodic_remainder_rms_m')
+        rms = self.config.periodic_remainder_rms_m
+        return [self.config.replace(periodic_remainder_rms_m=value) for value in
+                sorted({max(r * rms, low) for r in REMAINDER_CHOICES}, reverse=True)]
+
+    def _take_over(self, filt: KalmanFilter, span, accept=None, jump_at=None,
+                   run=None) -> bool:
         """
         Let ``filt`` take over from the start of ``span``, filtered again under it.
 
         Returns False, changing nothing, when ``accept(run)`` (:func:`~.periodic.refilter`'s
-        result) refuses the run.  ``jump_at``: the offset jumped before that sample.
+        result) refuses the run.  ``jump_at``: the offset jumped before that sample.  ``run``:
+        the span already filtered again under ``filt`` (without a jump; again when a
+        fixed-lag smoother holds samples of it: they are recorded).
         """
         held = 0 if self._lag is None else min(len(span.y), self._lag.held)
         rec = ForwardRecord.empty(held, filt.model.size) if held else None
-        run = refilter(span, filt, rec, jump_at)
+        if run is None or rec is not None:
+            run = refilter(span, filt, rec, jump_at)
         if accept is not None and not accept(run):
             return False
         link = self._begin_segment(filt, run.start, span.filter, span.state)

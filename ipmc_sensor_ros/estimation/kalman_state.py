@@ -18,7 +18,7 @@ from ..errors import ParameterError
 from ..lti.reduction import ReducedModel
 from .carry import carry_state
 from .filter import FilterState, KalmanFilter
-from .periodic import StretchLog
+from .periodic import StretchLog, design
 from .ring import SampleRing
 from .statespace import StateSpaceModel
 
@@ -30,17 +30,20 @@ class KalmanState:
 
     def get_state(self) -> dict:
         return {'filter': self._state.copy(), 'line_hz': self.model.fundamentals_hz,
-                'motion_hz': self.model.motion_hz, 'recent': self._recent.buffer.copy(),
-                'grid': self._recent.count, 'first_rest_n': self._first_rest_n,
-                'stretches': self._log.saved(), 'offset_jumps': self.offset_jumps}
+                'motion_hz': self.model.motion_hz,
+                'remainder_m': self.model.config.periodic_remainder_rms_m,
+                'recent': self._recent.buffer.copy(), 'grid': self._recent.count,
+                'first_rest_n': self._first_rest_n, 'stretches': self._log.saved(),
+                'offset_jumps': self.offset_jumps}
 
     def set_state(self, state: dict) -> None:
         try:
             fs: FilterState = state['filter']
             line = tuple(float(f) for f in state['line_hz'])
             motion = float(state['motion_hz'])
+            remainder = float(state['remainder_m'])
             recent = np.asarray(state['recent'], dtype=float)
-            filt = self._model_filter(line, motion)
+            filt = self._model_filter(line, motion, remainder)
             log = StretchLog.restored(state['stretches'], self._model_filter)
             window_slots = fs.window.offset_var.shape
         except (KeyError, TypeError, ValueError, AttributeError):
@@ -56,12 +59,12 @@ class KalmanState:
         self._first_rest_n = state.get('first_rest_n')
         self.offset_jumps = int(state.get('offset_jumps', 0))
 
-    def _model_filter(self, line_hz, motion_hz) -> KalmanFilter:
-        """Return this filter when its model has these lines and motion, else a new one."""
-        m = self.model
-        if m.fundamentals_hz == tuple(line_hz) and m.motion_hz == motion_hz:
+    def _model_filter(self, line_hz, motion_hz, remainder_m) -> KalmanFilter:
+        """Return this filter when its model is of this design (:func:`.periodic.design`)."""
+        if design(self.model) == (tuple(line_hz), motion_hz, remainder_m):
             return self._filter
-        return self._new_filter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,
+        config = self.config.replace(periodic_remainder_rms_m=remainder_m)
+        return self._new_filter(StateSpaceModel(self.reduced, config, self.sample_rate_hz,
                                                 tuple(line_hz), motion_hz))
 
     def rebuilt(self, reduced: ReducedModel | None = None, recent_input=None,

@@ -43,8 +43,43 @@ from .motionline import MOTION_WOBBLE
 from .onset import due, restart
 from .step_glr import offset_step_at
 
-__all__ = ['Stretch', 'StretchLog', 'Refiltered', 'refilter', 'same_motion',
-           'offset_step_at', 'Change', 'after_refutation']
+__all__ = ['Stretch', 'StretchLog', 'Refiltered', 'refilter', 'same_motion', 'design',
+           'likeliest', 'REMAINDER_CHOICES', 'offset_step_at', 'Change', 'after_refutation']
+
+
+#: The periodic remainders a model is tried with, relative to ``periodic_remainder_rms_m``
+#: (the largest): the likeliest on the span it takes over from is taken (:func:`likeliest`).
+#: A clean crank leaves micrometres; its model's test, and the jumps found under it, are as
+#: sensitive as its remainder is small (a 6 nA step under a 2.65 Hz crank was found 1.8 s
+#: late with 20 um, on its sample with 1.25); a rig that shakes keeps the largest.  Steps of
+#: four: the likelihood tells a remainder from one four times it in a few periods.
+REMAINDER_CHOICES = (1.0, 0.25, 0.0625)
+
+
+def design(model) -> tuple:
+    """Return what tells a model from another of the same estimator: lines, motion, remainder."""
+    return (model.fundamentals_hz, model.motion_hz, model.config.periodic_remainder_rms_m)
+
+
+def likeliest(span: Stretch, filters) -> tuple:
+    """
+    Return (filter, its run) under which ``span`` is likeliest, of those that explain it.
+
+    Each filters the span again from its start (:func:`refilter`); twice the negative
+    log-likelihood of the span's innovations (``Innovations.nll``) decides.  None explains
+    it: the first (its refusal is :func:`~.innovations.explains`'s to say).
+    """
+    best, lowest = None, math.inf
+    for filt in filters:
+        run = refilter(span, filt)
+        if best is None:
+            best = filt, run
+        if not explains(run.now.innovations, run.start.innovations):
+            continue
+        nll = run.now.innovations.nll - run.start.innovations.nll
+        if nll < lowest:
+            best, lowest = (filt, run), nll
+    return best
 
 
 def same_motion(a_hz: float, b_hz: float) -> bool:
@@ -111,23 +146,24 @@ class StretchLog:
         cur.rest = cur.rest or rest
 
     def saved(self) -> tuple:
-        """Return the log as plain values (models by lines and fundamental; states copied)."""
+        """Return the log as plain values (models by :func:`design`; states copied)."""
         return tuple(None if st is None else (
-            st.filter.model.fundamentals_hz, st.filter.model.motion_hz, st.state.copy(),
+            *design(st.filter.model), st.state.copy(),
             list(st.y), list(st.steps), st.rest, st.measured_hz, st.floor_hz, st.jumped,
             st.deferred)
             for st in (self.earlier, self.current))
 
     @classmethod
     def restored(cls, saved, make_filter) -> 'StretchLog':
-        """Return the log of :meth:`saved`; ``make_filter(lines_hz, motion_hz)`` builds filters."""
+        """Return the log of :meth:`saved`; ``make_filter(*design)`` builds filters."""
         parts = []
         for item in saved:
             if item is None:
                 parts.append(None)
                 continue
-            lines, motion, state, y, steps, rest, measured, floor, jumped, deferred = item
-            filt = make_filter(tuple(lines), float(motion))
+            lines, motion, remainder, state, y, steps, rest, measured, floor, jumped, \
+                deferred = item
+            filt = make_filter(tuple(lines), float(motion), float(remainder))
             if state.x.shape != (filt.model.size,):
                 raise ValueError('a stretch state of another design')
             parts.append(Stretch(filt, state.copy(), list(y), list(steps), bool(rest),

@@ -54,7 +54,7 @@ def offset_step_at(span, filt: KalmanFilter, chunk: int = 512) -> int | None:
         return None
     z, s, gains = _innovations(span, filt, chunk)
     fit, power = _ratios(filt, span.steps, z, s, gains, period)
-    at = np.arange(1, n - period + 1)
+    at = np.arange(0, n - period + 1)
     explained = fit[:, at] ** 2 / np.maximum(power[:, at], 1e-300)
     coarse = at[int(np.argmax(explained[0]))]
     return int(at[int(np.argmax(np.where(np.abs(at - coarse) <= period, explained[1], -1.0)))])
