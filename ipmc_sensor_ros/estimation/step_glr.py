@@ -45,8 +45,10 @@ def offset_step_at(span, filt: KalmanFilter, chunk: int = 512) -> int | None:
     Return the sample of ``span`` before which the offset most likely jumped, or None.
 
     ``span``: a :class:`~.periodic.Stretch` (its start state, samples and sample periods),
-    filtered again under ``filt``'s periodic model.  Candidates leave a period of the motion
-    after them (None: the span is shorter than a period and two samples).
+    filtered again under ``filt``'s periodic model.  Candidates are the span's samples that
+    leave a period of the motion after them, its first included (a jump just before the
+    span's start, which the last check's test could not see yet); None: the span is
+    shorter than a period and two samples.
     """
     m = filt.model
     n, period = len(span.y), block_samples(m.motion_hz, m.sample_rate_hz)
