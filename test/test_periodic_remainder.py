@@ -59,6 +59,7 @@ def test_the_likeliest_remainder_is_taken(vibration_m, chosen_m):
     model = est.core.model
     assert model.motion_hz == pytest.approx(5.0, rel=0.01)
     assert model.config.periodic_remainder_rms_m == pytest.approx(chosen_m)
+    assert est.core.status()['motion_remainder_m'] == model.config.periodic_remainder_rms_m
 
 
 def test_a_saved_state_keeps_the_remainder_it_chose():

@@ -37,7 +37,7 @@ import numpy as np
 
 from ..lti.reduction import ReducedModel
 from .carry import Changes
-from .config import SETTINGS, EstimatorConfig, parse_mains
+from .config import EstimatorConfig, parse_mains
 from .core import Estimate
 from .filter import FilterState, ForwardRecord, KalmanFilter
 from .fixed_lag import lag_smoother
@@ -47,7 +47,7 @@ from .innovations import explains
 from .instants import at_stamp
 from .onset import due, restart
 from .kalman_state import KalmanState
-from .periodic import (REMAINDER_CHOICES, StretchLog, after_refutation, likeliest, refilter,
+from .periodic import (StretchLog, after_refutation, likeliest, refilter, remainder_configs,
                        same_motion)
 from .ring import SampleRing
 from .smoother import smooth_segments
@@ -308,18 +308,11 @@ class KalmanEstimator(KalmanState):
             return
         filters = [self._new_filter(StateSpaceModel(self.reduced, config, self.sample_rate_hz,
                                                     self.model.fundamentals_hz, f0))
-                   for config in (self._remainder_configs() if f0 else (self.config,))]
+                   for config in (remainder_configs(self.config) if f0 else (self.config,))]
         filt, run = likeliest(span, filters)
         if not self._take_over(filt, span, lambda run: not f0 or explains(
                 run.now.innovations, run.start.innovations), run=run):
             self._log.current.measured_hz = 0.0         # refused: it counts as none
-
-    def _remainder_configs(self) -> list:
-        """Return the settings with each periodic remainder tried (``REMAINDER_CHOICES``)."""
-        low = next(s.low for s in SETTINGS if s.name == 'periodic_remainder_rms_m')
-        rms = self.config.periodic_remainder_rms_m
-        return [self.config.replace(periodic_remainder_rms_m=value) for value in
-                sorted({max(r * rms, low) for r in REMAINDER_CHOICES}, reverse=True)]
 
     def _take_over(self, filt: KalmanFilter, span, accept=None, jump_at=None,
                    run=None) -> bool:
@@ -388,7 +381,10 @@ class KalmanEstimator(KalmanState):
                 'at_rest': bool(self._state.still), 'deflection_std_m': w_std,
                 'noise_a': math.sqrt(self._state.noise.var_a2),
                 'mains_line_hz': self.line_hz, 'mains_line_a': level,
-                'motion_hz': self.model.motion_hz, 'offset_jumps': self.offset_jumps,
+                'motion_hz': self.model.motion_hz,
+                'motion_remainder_m': (self.model.config.periodic_remainder_rms_m
+                                       if self.model.motion_hz else None),
+                'offset_jumps': self.offset_jumps,
                 'sampled_at_stamp': at_stamp(self._state.innovations.stamps,
                                              self.config.sampled_at_stamp_prior)}
 

@@ -37,6 +37,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .carry import carry_state
+from .config import SETTINGS
 from .filter import FilterState, ForwardRecord, KalmanFilter
 from .innovations import block_samples, explains
 from .motionline import MOTION_WOBBLE
@@ -44,7 +45,8 @@ from .onset import due, restart
 from .step_glr import offset_step_at
 
 __all__ = ['Stretch', 'StretchLog', 'Refiltered', 'refilter', 'same_motion', 'design',
-           'likeliest', 'REMAINDER_CHOICES', 'offset_step_at', 'Change', 'after_refutation']
+           'likeliest', 'REMAINDER_CHOICES', 'remainder_configs', 'offset_step_at', 'Change',
+           'after_refutation']
 
 
 #: The periodic remainders a model is tried with, relative to ``periodic_remainder_rms_m``
@@ -54,6 +56,14 @@ __all__ = ['Stretch', 'StretchLog', 'Refiltered', 'refilter', 'same_motion', 'de
 #: late with 20 um, on its sample with 1.25); a rig that shakes keeps the largest.  Steps of
 #: four: the likelihood tells a remainder from one four times it in a few periods.
 REMAINDER_CHOICES = (1.0, 0.25, 0.0625)
+
+
+def remainder_configs(config) -> list:
+    """Return ``config`` with each remainder tried, the largest first (within its range)."""
+    low = next(s.low for s in SETTINGS if s.name == 'periodic_remainder_rms_m')
+    rms = config.periodic_remainder_rms_m
+    return [config.replace(periodic_remainder_rms_m=value) for value in
+            sorted({max(r * rms, low) for r in REMAINDER_CHOICES}, reverse=True)]
 
 
 def design(model) -> tuple:
