@@ -79,13 +79,10 @@ def _ratios(filt: KalmanFilter, steps, z, s, gains, period: int):
     fit, power = np.zeros((2, n)), np.zeros((2, n))
     lam_b, lam_s, v, later, M = (np.zeros(size), np.zeros(size), np.zeros(size),
                                  np.zeros((size, size)), np.zeros((size, size)))
-    transitions = {}
     for t in range(n - 1, -1, -1):
         if t + 1 < n:
-            slots = slots_of(steps[t + 1])
-            if slots not in transitions:
-                transitions[slots] = m.discrete(slots)[0]
-            phi = transitions[slots] - np.outer(transitions[slots] @ gains[t], c) / s[t] ** 2
+            F = m.discrete(slots_of(steps[t + 1]))[0]      # the model caches it
+            phi = F - np.outer(F @ gains[t], c) / s[t] ** 2
             lam_b, lam_s, v = phi.T @ lam_b, phi.T @ lam_s, phi.T @ v
             later, M = phi.T @ later @ phi, phi.T @ M @ phi
         row = c / s[t]
