@@ -9,9 +9,10 @@ It joins the model (:mod:`.statespace`), filter (:mod:`.filter`), smoother
 :class:`~.filter.FilterState` and advances it sample by sample; a block and single samples
 run the same recursion.  The mains line (``mains_hz``: ``'auto'``, 50, 60 or 0 = none) is
 measured every ``CHECK_S`` of data on the last ``LINE_WINDOW_S`` of current, at fixed
-sample counts (so the result does not depend on how the stream is cut into blocks); when it
-appears, or moves by more than ``LINE_RETUNE_HZ``, the model with line states at the
-measured frequency takes over from the start of the stretch since the last check, whose
+sample counts (so the result does not depend on how the stream is cut into blocks); the
+measurements are joined (:class:`~.lines.Line`), and when a line appears, or its joined
+frequency moves further than the line states' walk follows, the model with line states at
+that frequency takes over from the start of the stretch since the last check, whose
 samples are filtered again (:func:`~.periodic.refilter`).
 
 A periodic motion is measured at the same checks, on the last 1, 2, 4 and 8 s of current
@@ -41,7 +42,7 @@ from .config import EstimatorConfig, parse_mains
 from .core import Estimate
 from .filter import FilterState, ForwardRecord, KalmanFilter
 from .fixed_lag import lag_smoother
-from .lines import NOMINAL_LINES_HZ, measure_line
+from .lines import NOMINAL_LINES_HZ, Line, measure_line
 from .motionline import MOTION_LONGEST_S, MOTION_PERIODS, measure_recent
 from .innovations import explains
 from .instants import at_stamp
@@ -65,9 +66,6 @@ LINE_FIRST_S = 0.5
 #: The mains line is measured on the last this of current, s: 2 s resolves 0.5 Hz and,
 #: zero-padded, finds the line to ~0.01 Hz at 3 % hum.
 LINE_WINDOW_S = 2.0
-#: A measured line this far from the modelled one retunes the model, Hz: the line states'
-#: random walk follows a smaller error (the phasor turns by 2 pi 0.02 rad/s).
-LINE_RETUNE_HZ = 0.02
 
 
 class KalmanEstimator(KalmanState):
@@ -158,6 +156,7 @@ class KalmanEstimator(KalmanState):
         self._log = StretchLog(self._filter, self._state)
         self._recent = SampleRing(self._window_n)    # on the sample grid: bridged slots too
         self._first_rest_n = None
+        self._line = Line()             # the mains line measured so far (joined)
 
     # -- streaming ------------------------------------------------------------------------
     def estimate(self, current_a, steps=None) -> Estimate:
@@ -245,10 +244,12 @@ class KalmanEstimator(KalmanState):
     def _check_mains(self, recent: np.ndarray) -> None:
         if self.mains_hz == 0.0:
             return
-        f_line, _ = measure_line(recent, self.sample_rate_hz, self._nominal(),
-                                 self.config.line_harmonics)
-        old = self.model.fundamentals_hz
-        if f_line and len(old) == 1 and abs(f_line - old[0]) <= LINE_RETUNE_HZ:
+        seen = measure_line(recent, self.sample_rate_hz, self._nominal(),
+                            self.config.line_harmonics)
+        shared = max(0.0, 1.0 - self._check_n / recent.size) if self._line.hz else 0.0
+        self._line = self._line.joined(seen, shared)
+        f_line, old = seen.hz and self._line.hz, self.model.fundamentals_hz
+        if f_line and len(old) == 1 and self._line.follows(old[0], self.config.line_walk_a):
             return
         if not f_line and (len(old) < 2 or self._state.samples > self._first_n):
             return        # no line: keep what is modelled (the nominal pair only at the start)

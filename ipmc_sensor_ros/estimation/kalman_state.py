@@ -3,7 +3,7 @@
 The Kalman estimator's state in and out: save, restore, rebuild for a new design, continue.
 
 What :class:`~.kalman.KalmanEstimator` is at any sample is its :class:`~.filter.FilterState`,
-the model's lines and periodic motion, the last window of current on the sample grid, the
+the model's lines and periodic motion, the line measured so far, the last window of current on the sample grid, the
 stretches a model change would filter again (:class:`~.periodic.StretchLog`), the first
 rest's sample and the jumps counted; :meth:`KalmanState.get_state` returns them as values and
 :meth:`KalmanState.set_state` takes them back (scipy.signal's ``zi`` / ``zf``: state in,
@@ -18,6 +18,7 @@ from ..errors import ParameterError
 from ..lti.reduction import ReducedModel
 from .carry import carry_state
 from .filter import FilterState, KalmanFilter
+from .lines import Line
 from .periodic import StretchLog, design
 from .ring import SampleRing
 from .statespace import StateSpaceModel
@@ -34,7 +35,7 @@ class KalmanState:
                 'remainder_m': self.model.config.periodic_remainder_rms_m,
                 'recent': self._recent.buffer.copy(), 'grid': self._recent.count,
                 'first_rest_n': self._first_rest_n, 'stretches': self._log.saved(),
-                'offset_jumps': self.offset_jumps}
+                'offset_jumps': self.offset_jumps, 'line': tuple(self._line)}
 
     def set_state(self, state: dict) -> None:
         try:
@@ -46,6 +47,7 @@ class KalmanState:
             filt = self._model_filter(line, motion, remainder)
             log = StretchLog.restored(state['stretches'], self._model_filter)
             window_slots = fs.window.offset_var.shape
+            line = Line(*(float(v) for v in state.get('line', ())))
         except (KeyError, TypeError, ValueError, AttributeError):
             raise ParameterError('not a state of this Kalman estimator') from None
         if (fs.x.shape != (filt.model.size,) or recent.shape != self._recent.buffer.shape
@@ -58,6 +60,7 @@ class KalmanState:
         self._recent = SampleRing(recent.size, recent, int(state.get('grid', fs.samples)))
         self._first_rest_n = state.get('first_rest_n')
         self.offset_jumps = int(state.get('offset_jumps', 0))
+        self._line = line
 
     def _model_filter(self, line_hz, motion_hz, remainder_m) -> KalmanFilter:
         """Return this filter when its model is of this design (:func:`.periodic.design`)."""
@@ -94,5 +97,6 @@ class KalmanState:
         self._state = carry_state(old._filter, self._filter, old._state)
         self._log = StretchLog(self._filter, self._state)
         self._first_rest_n, self.offset_jumps = old._first_rest_n, old.offset_jumps
+        self._line = old._line
         if old._window_n == self._window_n:
             self._recent = old._recent.copy()

@@ -14,15 +14,33 @@ run up to +-0.5 Hz off nominal, so the fundamental is measured, not assumed:
 * a line is *present* when, at some harmonic, the power exceeds the local level (median of
   the periodogram within 2..8 Hz of that harmonic, excluding the line) by the chi-square
   factor of ``false_alarm`` over the candidates searched (a periodogram bin of noise is
-  exponential with mean the local level).
+  exponential with mean the local level);
+* the frequency's variance is the Cramér–Rao bound of a harmonic family in white noise
+  (Kay, *Fundamentals of Statistical Signal Processing I*, eq. 3.41, each harmonic k adding
+  k^2 times its signal-to-noise ratio): var f = 12 fs^2 / ((2 pi)^2 N (N^2 - 1)
+  sum_k k^2 eta_k), eta_k = A_k^2 / (2 sigma_k^2), the noise sigma_k^2 read from the local
+  level (a Hann-windowed bin of white noise holds 3N/8 sigma^2).
+
+The line is one frequency measured again at every check, so the measurements are joined
+(:meth:`Line.joined`: the inverse-variance mean, a Kalman filter on a constant) and the
+model follows the joined frequency once the modelled one is unlikely and its phasors would
+drift faster than their walk follows (:meth:`Line.follows`).  A line with 20-40 % hum (3 uA on 0.12 uA of noise) was
+measured to 50.1180 Hz on the first 0.5 s and kept within a 0.02 Hz tolerance though every
+2 s window after it read 50.1143 +- 0.0003 Hz (the truth 50.1143): its phasors turned
+0.023 rad/s, the walk lagged them by up to a microampere and the innovations' variance grew
+to 38 times the model's over 20 s.
 """
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
+from scipy.stats import norm
 
-__all__ = ['measure_line', 'NOMINAL_LINES_HZ', 'SEARCH_HZ', 'PAD', 'family_peak', 'vertex',
+from .innovations import MODEL_FALSE_ALARM
+
+__all__ = ['measure_line', 'Line', 'NOMINAL_LINES_HZ', 'SEARCH_HZ', 'PAD', 'family_peak', 'vertex',
            'local_level', 'local_levels']
 
 #: Nominal mains frequencies, Hz.
@@ -31,19 +49,67 @@ NOMINAL_LINES_HZ = (50.0, 60.0)
 SEARCH_HZ = 0.5
 #: Zero-padding factor of the periodogram (frequency grid 1/(PAD T)).
 PAD = 8
+#: A measurement this many standard deviations from the line known so far is a new line (a
+#: grid whose frequency stepped, another line), by chance once in 1/MODEL_FALSE_ALARM checks.
+_NEW_LINE_Z = float(norm.isf(0.5 * MODEL_FALSE_ALARM))
+
+
+class Line(NamedTuple):
+    """A mains line measured: its fundamental, its amplitude and how well its frequency is known."""
+
+    #: fundamental, Hz (0: no line)
+    hz: float = 0.0
+    #: amplitude of its strongest harmonic, A
+    amplitude_a: float = 0.0
+    #: variance of ``hz``, Hz^2 (the Cramér–Rao bound of the window it was measured on)
+    hz_var: float = math.inf
+    #: how fast a frequency error turns the line's phasors: 2 pi max_k k A_k, A/s per Hz
+    drift_a_per_hz: float = 0.0
+
+    def joined(self, new: 'Line', shared: float = 0.0) -> 'Line':
+        """
+        Return this line's frequency joined with a new measurement of it (inverse variance).
+
+        ``shared``: the fraction of the new window's samples the last window measured too
+        (windows of 2 s every second: 0.5); the new measurement counts for 1 - ``shared``
+        of its information.  A measurement farther than ``_NEW_LINE_Z`` standard deviations
+        from this one starts afresh (the line changed); no line measured keeps this one.
+        """
+        if not new.hz:
+            return self
+        var = new.hz_var / max(1.0 - shared, 1e-12)
+        if not self.hz or (new.hz - self.hz) ** 2 > _NEW_LINE_Z ** 2 * (self.hz_var + var):
+            return new._replace(hz_var=var)
+        joined_var = 1.0 / (1.0 / self.hz_var + 1.0 / var)
+        hz = joined_var * (self.hz / self.hz_var + new.hz / var)
+        return new._replace(hz=hz, hz_var=joined_var)
+
+    def follows(self, model_hz: float, walk_a: float) -> bool:
+        """
+        Tell whether line states at ``model_hz`` follow this line: keep them.
+
+        A frequency error df turns harmonic k's phasor by 2 pi k df rad/s: its states move by
+        ``drift_a_per_hz`` df in a second, against ``walk_a`` (A/sqrt(s): their walk's RMS
+        over a second); beyond it the states lag the line and its residual grows.  And a
+        ``model_hz`` within ``_NEW_LINE_Z`` standard deviations of this line is as likely as
+        the joined frequency (retuning to it would chase the measurements' noise).
+        """
+        error = abs(self.hz - model_hz)
+        return (self.drift_a_per_hz * error <= walk_a
+                or error * error <= _NEW_LINE_Z ** 2 * self.hz_var)
 
 
 def measure_line(current_a, sample_rate_hz: float, nominal=NOMINAL_LINES_HZ,
-                 harmonics: int = 3, false_alarm: float = 1e-4) -> tuple[float, float]:
+                 harmonics: int = 3, false_alarm: float = 1e-4) -> Line:
     """
-    Return (line frequency Hz, amplitude A) of the strongest mains line, or (0.0, 0.0).
+    Return the strongest mains line (:class:`Line`; ``Line()`` when there is none).
 
     ``nominal``: the nominal frequencies searched (one for a configured ``mains_hz``).
     """
     x = np.asarray(current_a, dtype=float)
     fs = float(sample_rate_hz)
     if x.size < 64 or not np.all(np.isfinite(x)):
-        return 0.0, 0.0
+        return Line()
     x = (x - x.mean()) * np.hanning(x.size)
     # grid at most 0.02 Hz (the parabola's vertex then errs far below the grid)
     n_fft = 1 << int(math.ceil(math.log2(max(PAD * x.size, fs / 0.02))))
@@ -60,20 +126,26 @@ def measure_line(current_a, sample_rate_hz: float, nominal=NOMINAL_LINES_HZ,
             best = (peak_bin * df, top)
     f_line = best[0]
     if not f_line:
-        return 0.0, 0.0
+        return Line()
     # every zero-padded bin searched, at each harmonic, is a chance: P(exp(1) > factor) = that
     searched = max(1, int(2 * SEARCH_HZ / df) * len(nominal) * harmonics)
     factor = math.log(searched / false_alarm)
-    window_sum = 0.5 * x.size                   # sum of the Hann window: amplitude = 2|X|/sum
-    amp = 0.0
+    n = x.size
+    amp, drift, info = 0.0, 0.0, 0.0
     for k in range(1, harmonics + 1):
         if k * f_line >= 0.45 * fs:
             break
         j = int(round(k * f_line / df))
         level = local_level(power, j, df)
+        a_k = 4.0 * math.sqrt(power[j]) / n     # the Hann window sums to n/2: A = 2|X|/sum
+        # eta_k = A_k^2 / (2 sigma^2), sigma^2 = level / (3n/8): the line's power above noise
+        info += k * k * 3.0 * max(power[j] - level, 0.0) / (n * level)
         if power[j] > factor * level:
-            amp = max(amp, 2.0 * math.sqrt(power[j]) / window_sum)
-    return (f_line, amp) if amp else (0.0, 0.0)
+            amp, drift = max(amp, a_k), max(drift, 2.0 * math.pi * k * a_k)
+    if not amp:
+        return Line()
+    hz_var = 12.0 * fs * fs / ((2.0 * math.pi) ** 2 * n * (n * n - 1.0) * info)
+    return Line(f_line, amp, hz_var, drift)
 
 
 def family_peak(power: np.ndarray, cand: np.ndarray, ks) -> tuple[float, float]:
