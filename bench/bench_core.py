@@ -89,7 +89,8 @@ def bench_field(smoke: bool = False) -> list[dict]:
     Sample slim, 5 Hz.
     """
     from ipmc_sensor_ros.physics.beam import ElasticaBeam
-    from ipmc_sensor_ros.physics.field import FieldSolver, NonlinearFieldSolver
+    from ipmc_sensor_ros.physics.field import FieldSolver
+    from ipmc_sensor_ros.physics.field_nonlinear import NonlinearFieldSolver
 
     duration = 1.0 if smoke else 10.0
     t = np.arange(int(duration * 1000)) / 1000.0

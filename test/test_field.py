@@ -89,7 +89,7 @@ def test_term_dropped_from_eq9_is_negligible_at_physical_amplitudes():
     tip deflection -- impossible for a 22 mm beam. The linear variant reproduces H1
     (0.14 % waveform error at 2 kHz).
     """
-    from ipmc_sensor_ros.physics.field import NonlinearFieldSolver
+    from ipmc_sensor_ros.physics.field_nonlinear import NonlinearFieldSolver
     from ipmc_sensor_ros.workbench.studies import nonlinearity_study
 
     model = SensorModel(PAPER_SAMPLES['slim'], effects=())

@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..physics.beam import ElasticaBeam
-from ..physics.field import FieldSolver, NonlinearFieldSolver
+from ..physics.field import FieldSolver
+from ..physics.field_nonlinear import NonlinearFieldSolver
 from ..physics.model import SensorModel
 from .freqresp import harmonic_fit
 
