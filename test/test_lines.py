@@ -33,8 +33,10 @@ def test_a_quantised_still_record_has_no_line():
 
 def test_measurements_of_one_line_are_joined_by_their_variances():
     """
-    The joined frequency is the inverse-variance mean; a window that shares half its samples
-    with the last counts half; a measurement far outside both is a new line.
+    The joined frequency is the inverse-variance mean.
+
+    A window that shares half its samples with the last counts half; a measurement far
+    outside both is a new line.
     """
     first = Line(50.10, 1e-6, 1e-4, 1.0)            # 10 mHz each: 1.4 sigma apart
     second = Line(50.12, 1e-6, 1e-4, 1.0)
@@ -48,9 +50,10 @@ def test_measurements_of_one_line_are_joined_by_their_variances():
 
 def test_line_states_are_retuned_when_the_walk_cannot_follow_and_the_model_is_unlikely():
     """
-    A 3 uA line 0.004 Hz off its model turns the phasors by 75 nA/s (walk 1 nA/sqrt(s)):
-    retuned once the joined measurement tells it (0.2 mHz); a weak line, or an error within
-    the measurements' spread, keeps the model.
+    A 3 uA line 0.004 Hz off its model is retuned once the joined measurement tells it.
+
+    Its phasors turn by 75 nA/s (walk 1 nA/sqrt(s)) and it is known to 0.2 mHz; a weak
+    line, or an error within the measurements' spread, keeps the model.
     """
     strong = Line(50.1143, 3.2e-6, (2e-4) ** 2, 2 * np.pi * 3.2e-6)
     assert not strong.follows(50.1180, 1e-9)
@@ -61,8 +64,9 @@ def test_line_states_are_retuned_when_the_walk_cannot_follow_and_the_model_is_un
 
 def test_a_strong_hum_is_modelled_at_the_frequency_its_later_windows_tell():
     """
-    slim-strong-hum seed 1 (a 3.2 uA hum at 50.1143 Hz, 0.12 uA noise, a 5 Hz crank): the
-    first 0.5 s measured 50.1180 Hz and the model kept it (it was within a fixed 0.02 Hz),
+    A strong hum is modelled at the frequency its later windows tell (slim-strong-hum, 1).
+
+    A 3.2 uA hum at 50.1143 Hz, 0.12 uA noise, a 5 Hz crank: the first 0.5 s measured 50.1180 Hz and the model kept it (it was within a fixed 0.02 Hz),
     the innovations' variance grew to 38 times the model's and the estimate read 0.84 %.
     Now the joined measurements retune it: within 1 mHz (the 2 s windows read it to
     0.2 mHz each), and the estimate 0.52 % (0.49 % at the true frequency; limit 0.65 %,
@@ -74,3 +78,22 @@ def test_a_strong_hum_is_modelled_at_the_frequency_its_later_windows_tell():
     est = DeflectionEstimator(model, rec.sample_rate_hz)
     assert estimate_scores(rec, _causal(rec, est, 1000))['nrmse'] < 0.0065
     assert est.core.status()['mains_line_hz'] == pytest.approx(rec.mains_hz, abs=1e-3)
+
+
+def test_the_joined_line_is_saved_and_restored_with_the_state():
+    """A restored estimator goes on joining the line it had, to the bit."""
+    rec = build('slim-strong-hum', 1)
+    model = SensorModel.named(rec.model, Geometry(*rec.geometry_m, rec.sample),
+                              extra_effects=rec.effects)
+    y, cut = rec.current_a[:8000], 3500
+    whole = DeflectionEstimator(model, rec.sample_rate_hz).core
+    expected = whole.estimate(y).deflection_m
+    first = DeflectionEstimator(model, rec.sample_rate_hz).core
+    head = first.estimate(y[:cut]).deflection_m
+    saved = first.get_state()
+    assert saved['line'][0] == pytest.approx(rec.mains_hz, abs=2e-3)     # one joined
+    restored = DeflectionEstimator(model, rec.sample_rate_hz).core
+    restored.set_state(saved)
+    assert restored.get_state()['line'] == saved['line']
+    tail = restored.estimate(y[cut:]).deflection_m
+    assert np.array_equal(np.concatenate([head, tail]), expected)

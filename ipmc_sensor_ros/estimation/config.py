@@ -90,8 +90,8 @@ SETTINGS = (
             'RMS of each mains-line component before it is learned: hum near mains wiring '
             'reaches a microampere'),
     Setting('line_walk_a', 1e-9, 'A/sqrt(s)', 0.0, 1e-3,
-            'random walk of each mains-line component: a hum changing over seconds and a line '
-            'frequency measured to ~0.01 Hz'),
+            'random walk of each mains-line component: a hum changing over seconds (a line '
+            'frequency error it cannot follow retunes the model)'),
     Setting('line_harmonics', 3, '', 1, 5,
             'mains harmonics modelled: the line, its second and its third'),
     Setting('current_noise_a', 20e-9, 'A', 1e-15, 1e-3,

@@ -2,13 +2,14 @@
 """
 The Kalman estimator's state in and out: save, restore, rebuild for a new design, continue.
 
-What :class:`~.kalman.KalmanEstimator` is at any sample is its :class:`~.filter.FilterState`,
-the model's lines and periodic motion, the line measured so far, the last window of current on the sample grid, the
-stretches a model change would filter again (:class:`~.periodic.StretchLog`), the first
-rest's sample and the jumps counted; :meth:`KalmanState.get_state` returns them as values and
+What :class:`~.kalman.KalmanEstimator` is at any sample is its
+:class:`~.filter.FilterState`, the model's lines and periodic motion, the mains line
+measured so far, the last window of current on the sample grid, the stretches a model change
+would filter again (:class:`~.periodic.StretchLog`), the first rest's sample and the jumps
+counted; :meth:`KalmanState.get_state` returns them as values and
 :meth:`KalmanState.set_state` takes them back (scipy.signal's ``zi`` / ``zf``: state in,
-state out), so a restored estimator continues to the bit.  A new design (reduced model,
-rate, settings) continues from the old one's state (:func:`~.carry.carry_state`).
+state out), so a restored estimator continues to the bit. A new design (reduced model, rate,
+settings) continues from the old one's state (:func:`~.carry.carry_state`).
 """
 from __future__ import annotations
 
@@ -35,7 +36,8 @@ class KalmanState:
                 'remainder_m': self.model.config.periodic_remainder_rms_m,
                 'recent': self._recent.buffer.copy(), 'grid': self._recent.count,
                 'first_rest_n': self._first_rest_n, 'stretches': self._log.saved(),
-                'offset_jumps': self.offset_jumps, 'line': tuple(self._line)}
+                'offset_jumps': self.offset_jumps,
+                'line': tuple(float(v) for v in self._line)}
 
     def set_state(self, state: dict) -> None:
         try:

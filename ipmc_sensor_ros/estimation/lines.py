@@ -24,11 +24,11 @@ run up to +-0.5 Hz off nominal, so the fundamental is measured, not assumed:
 The line is one frequency measured again at every check, so the measurements are joined
 (:meth:`Line.joined`: the inverse-variance mean, a Kalman filter on a constant) and the
 model follows the joined frequency once the modelled one is unlikely and its phasors would
-drift faster than their walk follows (:meth:`Line.follows`).  A line with 20-40 % hum (3 uA on 0.12 uA of noise) was
-measured to 50.1180 Hz on the first 0.5 s and kept within a 0.02 Hz tolerance though every
-2 s window after it read 50.1143 +- 0.0003 Hz (the truth 50.1143): its phasors turned
-0.023 rad/s, the walk lagged them by up to a microampere and the innovations' variance grew
-to 38 times the model's over 20 s.
+drift faster than their walk follows (:meth:`Line.follows`). A line with 20-40 % hum (3 uA
+on 0.12 uA of noise) was measured to 50.1180 Hz on the first 0.5 s and kept within a 0.02 Hz
+tolerance though every 2 s window after it read 50.1143 +- 0.0003 Hz (the truth 50.1143):
+its phasors turned 0.023 rad/s, the walk lagged them by up to a microampere and the
+innovations' variance grew to 38 times the model's over 20 s.
 """
 from __future__ import annotations
 
@@ -55,7 +55,7 @@ _NEW_LINE_Z = float(norm.isf(0.5 * MODEL_FALSE_ALARM))
 
 
 class Line(NamedTuple):
-    """A mains line measured: its fundamental, its amplitude and how well its frequency is known."""
+    """A mains line measured: its fundamental, its amplitude, how well its frequency is known."""
 
     #: fundamental, Hz (0: no line)
     hz: float = 0.0
