@@ -66,11 +66,11 @@ def test_a_strong_hum_is_modelled_at_the_frequency_its_later_windows_tell():
     """
     A strong hum is modelled at the frequency its later windows tell (slim-strong-hum, 1).
 
-    A 3.2 uA hum at 50.1143 Hz, 0.12 uA noise, a 5 Hz crank: the first 0.5 s measured 50.1180 Hz and the model kept it (it was within a fixed 0.02 Hz),
-    the innovations' variance grew to 38 times the model's and the estimate read 0.84 %.
-    Now the joined measurements retune it: within 1 mHz (the 2 s windows read it to
-    0.2 mHz each), and the estimate 0.52 % (0.49 % at the true frequency; limit 0.65 %,
-    between the two).
+    A 3.2 uA hum at 50.1143 Hz, 0.12 uA noise, a 5 Hz crank: the first 0.5 s measured
+    50.1180 Hz and the model kept it (it was within a fixed 0.02 Hz), the innovations'
+    variance grew to 38 times the model's and the estimate read 0.84 %. Now the joined
+    measurements retune it: within 1 mHz (the 2 s windows read it to 0.2 mHz each), and the
+    estimate 0.52 % (0.49 % at the true frequency; limit 0.65 %, between the two).
     """
     rec = build('slim-strong-hum', 1)
     model = SensorModel.named(rec.model, Geometry(*rec.geometry_m, rec.sample),
