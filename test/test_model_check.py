@@ -84,3 +84,32 @@ def test_a_wobbling_crank_keeps_its_periodic_model():
     # (a test of the plain squares dropped it at 4, 7, 10, 13 and 17 s: 2.65 % against 0.93 %)
     _, out = _run('crank-20hz-short-pct-poweron', 5)
     assert all(abs(m - 20.0) < 0.2 for m, _, _ in out[1:])
+
+
+def test_a_model_that_explains_the_current_closes_no_block_early():
+    """
+    Drawn from a periodic model itself, its innovations never grow past the CUSUM's limit.
+
+    The limit is ln 10^6: a false alarm once in ~10^6 samples (innovations.CUSUM_LIMIT); 3
+    records of 20,000 samples close exactly the blocks of whole periods (19 s, 5 Hz: 95
+    each).  The early close on a stop is `test_periodic_motion.py`'s crank that stops.
+    """
+    from ipmc_sensor_ros.estimation.config import EstimatorConfig
+    from ipmc_sensor_ros.estimation.filter import KalmanFilter
+    from ipmc_sensor_ros.estimation.innovations import block_samples
+    from ipmc_sensor_ros.estimation.statespace import StateSpaceModel
+    from ipmc_sensor_ros.lti.reduction import reduce_model_parts
+    from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
+    from test_kalman import _simulate
+
+    fs = 1000.0
+    reduced = reduce_model_parts(SensorModel.named('h2', PAPER_SAMPLES['slim']), 4,
+                                 (0.1, 50.0))[0]
+    config = EstimatorConfig(rest_false_alarm=1e-12, periodic_remainder_rms_m=1.25e-6)
+    ssm = StateSpaceModel(reduced, config, fs, (), 5.0)     # a drawn motion is never still
+    period = block_samples(5.0, fs)
+    for seed in range(3):
+        _, y = _simulate(ssm, 20000, 2e-9, seed=seed)
+        filt = KalmanFilter(ssm)
+        state = filt.run(filt.initial_state(), y)[0]
+        assert state.innovations.blocks == (y.size - int(fs)) // period     # after 1 s

@@ -44,7 +44,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .forward import ForwardRecord, astuple_shallow
-from .innovations import Innovations, block_samples
+from .innovations import CUSUM_LIMIT, CUSUM_STEP, Innovations, block_samples
 from .instants import STAMP_WINDOW, OffSlot, StampEvidence, at_stamp
 from .noise import NOISE_AVERAGE_S, NOISE_FLOOR_A, NoiseMeter
 from .onset import Onset, Start, follow, follow_jump
@@ -237,7 +237,8 @@ class KalmanFilter:
         x, P, still, moved, samples = state.x, state.P, state.still, state.moved, state.samples
         meter, win, onset, hold = state.noise, state.window, state.onset, state.hold_off
         hold_still, jump = state.hold_still, state.jump
-        chi, blocks, zs, zn, nll, stamps = state.innovations
+        chi, blocks, zs, zn, nll, stamps, cusum = state.innovations
+        alarm, (c_gain, c_drift) = False, CUSUM_STEP
         zg, gg, zzgg, zggg, gggg, timed, llr, scale = stamps     # the stamps' evidence
         prior, w_row = m.config.sampled_at_stamp_prior, self._w_row
         p = at_stamp(stamps, prior)
@@ -275,7 +276,7 @@ class KalmanFilter:
                                     lambda: float(c_lines @ x))
                 jump = follow_jump(jump, win.jump_quiet, verdict, yk, tk, lambda: (
                     x0, P0, moved, samples, Innovations(chi, blocks, zs, zn, nll,
-                                                        evidence())), still)
+                                                        evidence(), cusum)), still)
                 if jump is not None and verdict is False and win.jumped(self.rest,
                                                                         meter.var_a2):
                     accepted, jump = jump, None
@@ -298,8 +299,11 @@ class KalmanFilter:
             x, P, z, r = scalar_update(x, P, row, yk, var)
             if samples >= settled:      # R measured: the innovation's variance is the model's
                 zs, zn, nll = zs + z, zn + 1, nll + z * z + 2.0 * math.log(r)
-                if zn == block:
-                    chi, blocks, zs, zn = chi + zs * zs / zn, blocks + 1, 0.0, 0
+                if block > 1:           # a periodic model: its innovations grown? (.innovations)
+                    cusum = max(0.0, cusum + c_gain * z * z - c_drift)
+                alarm = cusum > CUSUM_LIMIT and zn < block
+                if zn == block or alarm:
+                    chi, blocks, zs, zn, cusum = chi + zs * zs / zn, blocks + 1, 0.0, 0, 0.0
             if dk:                      # over the last sample's sqrt(S): not this offset's
                 zk, gk = (z * r + p * g) / (scale or r), g / (scale or r)     # on the slot
                 zg, gg, zzgg = zg + zk * gk, gg + gk * gk, zzgg + (zk * gk) ** 2
@@ -328,16 +332,17 @@ class KalmanFilter:
             elif still:
                 onset = follow(onset, win.track, yk, tk,
                                lambda: (x, P, moved, samples,
-                                        Innovations(chi, blocks, zs, zn, nll, evidence())))
+                                        Innovations(chi, blocks, zs, zn, nll, evidence(),
+                                                    cusum)))
             elif was and onset is not None:     # the rest ended: a sample told it?
                 ended = onset.start(yk, tk) if win.quiet == 0 else None
                 onset = None
-            if until_motion and ended is not None:
+            if until_motion and (ended is not None or alarm):
                 n = k + 1
                 break
         return (FilterState(x, P, meter, win, still, moved, samples, onset, ended, hold,
                             hold_still, jump, Innovations(chi, blocks, zs, zn, nll,
-                                                          evidence())),
+                                                          evidence(), cusum)),
                 out_w[:n], out_s[:n], out_still[:n])
 
     def with_jump(self, P: np.ndarray) -> np.ndarray:

@@ -52,14 +52,18 @@ def offset_step_at(span, filt: KalmanFilter, chunk: int = 512) -> int | None:
     """
     m = filt.model
     n, period = len(span.y), block_samples(m.motion_hz, m.sample_rate_hz)
-    if n < period + 2:
+    if n < 2:
         return None
     z, s, gains = _innovations(span, filt, chunk)
     fit, power = _ratios(filt, span.steps, z, s, gains, period)
-    at = np.arange(0, n - period + 1)
-    explained = fit[:, at] ** 2 / np.maximum(power[:, at], 1e-300)
-    coarse = at[int(np.argmax(explained[0]))]
-    return int(at[int(np.argmax(np.where(np.abs(at - coarse) <= period, explained[1], -1.0)))])
+    near = np.arange(0, n)              # the sample stage: the last period's samples too
+    judged = near > n - period - 1
+    if n >= period + 2:                 # the block stage: the period of an older jump
+        at = np.arange(0, n - period + 1)
+        coarse = at[int(np.argmax(fit[0, at] ** 2 / np.maximum(power[0, at], 1e-300)))]
+        judged |= np.abs(near - coarse) <= period
+    sample = fit[1, near] ** 2 / np.maximum(power[1, near], 1e-300)
+    return int(near[int(np.argmax(np.where(judged, sample, -1.0)))])
 
 
 def _ratios(filt: KalmanFilter, steps, z, s, gains, period: int):
