@@ -27,7 +27,8 @@ while sample by sample it would pull the jump's time to where it happens to matc
 signature's and innovations' block sums B_j(t), Z_j give sum_j B_j Z_j / n_j (the weights
 w_k = Z_j(k) / n_j(k)) and sum_j B_j^2 / n_j (the block being summed, v, and the blocks
 after it, M_>, run back the same way).  The block ratio finds the jump's period, the
-sample ratio within a period of it its sample.
+sample ratio within a period of it its sample; over the span's last period, which no
+whole block follows, the sample ratio alone.
 """
 from __future__ import annotations
 
@@ -45,10 +46,11 @@ def offset_step_at(span, filt: KalmanFilter, chunk: int = 512) -> int | None:
     Return the sample of ``span`` before which the offset most likely jumped, or None.
 
     ``span``: a :class:`~.periodic.Stretch` (its start state, samples and sample periods),
-    filtered again under ``filt``'s periodic model.  Candidates are the span's samples that
-    leave a period of the motion after them, its first included (a jump just before the
-    span's start, which the last check's test could not see yet); None: the span is
-    shorter than a period and two samples.
+    filtered again under ``filt``'s periodic model.  Candidates: the samples within a period
+    of the block the block ratio picks (of the samples that leave a period after them, the
+    span's first included: a jump just before its start, which the last check's test could
+    not see yet), and every sample of the span's last period (a jump a block closed early
+    on, a few samples old: :mod:`.innovations`); None: fewer than two samples.
     """
     m = filt.model
     n, period = len(span.y), block_samples(m.motion_hz, m.sample_rate_hz)
