@@ -97,3 +97,17 @@ def test_the_joined_line_is_saved_and_restored_with_the_state():
     assert restored.get_state()['line'] == saved['line']
     tail = restored.estimate(y[cut:]).deflection_m
     assert np.array_equal(np.concatenate([head, tail]), expected)
+
+
+def test_a_noise_free_line_has_a_small_finite_variance():
+    """
+    A synthetic line with no noise: the local level is the window's leakage, maybe zero.
+
+    The frequency within 0.1 mHz of the truth (the vertex's error on 2 s), its variance
+    positive and finite, plain floats (a saved state holds them).
+    """
+    t = np.arange(2000) / 1000.0
+    line = measure_line(1e-6 * np.sin(2 * np.pi * 50.1 * t), 1000.0)
+    assert line.hz == pytest.approx(50.1, abs=1e-4)
+    assert 0.0 < line.hz_var < 1e-6
+    assert all(type(v) is float for v in line)

@@ -139,13 +139,13 @@ def measure_line(current_a, sample_rate_hz: float, nominal=NOMINAL_LINES_HZ,
         level = local_level(power, j, df)
         a_k = 4.0 * math.sqrt(power[j]) / n     # the Hann window sums to n/2: A = 2|X|/sum
         # eta_k = A_k^2 / (2 sigma^2), sigma^2 = level / (3n/8): the line's power above noise
-        info += k * k * 3.0 * max(power[j] - level, 0.0) / (n * level)
+        info += k * k * 3.0 * max(power[j] - level, 0.0) / (n * max(level, 1e-300))
         if power[j] > factor * level:
             amp, drift = max(amp, a_k), max(drift, 2.0 * math.pi * k * a_k)
     if not amp:
         return Line()
     hz_var = 12.0 * fs * fs / ((2.0 * math.pi) ** 2 * n * (n * n - 1.0) * info)
-    return Line(f_line, amp, hz_var, drift)
+    return Line(float(f_line), float(amp), float(hz_var), float(drift))
 
 
 def family_peak(power: np.ndarray, cand: np.ndarray, ks) -> tuple[float, float]:
