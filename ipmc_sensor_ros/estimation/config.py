@@ -42,8 +42,9 @@ SETTINGS = (
             'unknown offset is learned while moving, and the causal estimate loses least to it '
             '(10 Hz, inside the 1-20 Hz band of the paper, measured best on the scenarios)'),
     Setting('motion_bandwidth_hz', 50.0, 'Hz', 0.1, 1e4,
-            'upper corner of the motion spectrum (third order above it): above the 1-20 Hz band '
-            'and a 30 Hz free vibration'),
+            'largest upper corner of the motion spectrum (third order above it): above the '
+            '1-20 Hz band and a 30 Hz free vibration; without a periodic model the data choose '
+            'it, a half or a quarter'),
     Setting('periodic_remainder_rms_m', 20e-6, 'm', 1e-9, 1.0,
             "largest RMS of the motion a periodic model leaves (a crank's play, the rig's "
             'vibration): the motion prior once the periodic motion is modelled, small, so an '

@@ -1,10 +1,8 @@
 # SPDX-License-Identifier: Apache-2.0
 """
-The Kalman deflection estimator.
+The Kalman deflection estimator: model, filter, smoother and the lines measured.
 
-It joins the model (:mod:`.statespace`), filter (:mod:`.filter`), smoother
-(:mod:`.smoother`) and the mains line measured from the data (:mod:`.lines`).
-
+:mod:`.statespace`, :mod:`.filter`, :mod:`.smoother`, :mod:`.lines`.
 :class:`KalmanEstimator` implements :class:`~.core.EstimatorCore`.  It owns one
 :class:`~.filter.FilterState` and advances it sample by sample; a block and single samples
 run the same recursion.  The mains line (``mains_hz``: ``'auto'``, 50, 60 or 0 = none) is
@@ -23,8 +21,9 @@ filtered again (:mod:`.periodic`); it must explain the current of its span, and 
 of its blocks (one period) closes, of the stretch so far (its innovations' chi-square).  When
 it fails, the current since the last state that passed is filtered again without it, and
 with a jump of the offset under it; the more likely takes over (a crank that stops goes
-within a period).  A motion that ends a rest is filtered again from where the rest test's
-CUSUM says it began (:mod:`.onset`).
+within a period).  Without one, the broad prior's upper corner is chosen by the same
+likelihood at each check (:mod:`.motion_band`).  A motion that ends a rest is filtered
+again from where the rest test's CUSUM says it began (:mod:`.onset`).
 
 ``smoothed_lag_s`` > 0 also smooths the live output with that lag
 (:class:`~.fixed_lag.FixedLagSmoother` on the filter's own forward record):
@@ -43,6 +42,7 @@ from .core import Estimate
 from .filter import FilterState, ForwardRecord, KalmanFilter
 from .fixed_lag import lag_smoother
 from .lines import NOMINAL_LINES_HZ, Line, measure_line
+from .motion_band import likelier_band
 from .motionline import MOTION_LONGEST_S, MOTION_PERIODS, measure_recent
 from .innovations import explains
 from .instants import at_stamp
@@ -149,7 +149,8 @@ class KalmanEstimator(KalmanState):
         if self._state is not None and self._lag is not None:
             self._lag.flush()
         nominal = () if self.mains_hz == 0.0 else self._nominal()
-        if self.model.fundamentals_hz != tuple(nominal) or self.model.motion_hz:
+        if (self.model.fundamentals_hz, self.model.motion_hz, self.model.config) != (
+                tuple(nominal), 0.0, self.config):
             self._filter = self._new_filter(StateSpaceModel(self.reduced, self.config,
                                                             self.sample_rate_hz, nominal))
         self._state = self._filter.initial_state()
@@ -239,6 +240,10 @@ class KalmanEstimator(KalmanState):
         recent = self._recent.values()
         self._check_mains(recent[-self._line_n:])
         self._check_motion(recent)
+        band = likelier_band(self._log.current, self._filter, self._state, self.config,
+                             self.reduced, self._new_filter)
+        if band is not None:            # the broad prior's upper corner (.motion_band)
+            self._take_over(band[0], self._log.current, run=band[1])
         self._log.mark(self._filter, self._state)
 
     def _check_mains(self, recent: np.ndarray) -> None:
@@ -301,8 +306,7 @@ class KalmanEstimator(KalmanState):
         """Measure the periodic motion: a model from its span, while it explains the current."""
         if self._log.current.deferred:      # a failed model's judgement waits: it runs on
             return
-        f0 = measure_recent(recent, self.sample_rate_hz, self.model,
-                            self.config.periodic_remainder_rms_m)
+        f0 = measure_recent(recent, self.sample_rate_hz, self.model, self.config)
         floor = MOTION_PERIODS / min(recent.size / self.sample_rate_hz, MOTION_LONGEST_S)
         span = self._log.span_for(f0, self._first_rest_n is None, floor)
         if span is None or same_motion(f0, self.model.motion_hz):
@@ -370,14 +374,11 @@ class KalmanEstimator(KalmanState):
 
     # -- reporting -----------------------------------------------------------------------
     def status(self) -> dict:
-        m = self.model
+        m, x = self.model, self._state.x
         w, w_std = self._filter.deflection(self._state)
         b, b_std = self._filter.offset(self._state)
-        level = 0.0
-        if m.lines_hz:
-            s = m.scale
-            level = float(math.hypot(self._state.x[m.il] * s[m.il],
-                                     self._state.x[m.il + 1] * s[m.il + 1]))
+        level = float(math.hypot(x[m.il] * m.scale[m.il], x[m.il + 1] * m.scale[m.il + 1])
+                      if m.lines_hz else 0.0)
         return {'estimator': self.name, 'offset_a': b, 'offset_std_a': b_std,
                 'at_rest': bool(self._state.still), 'deflection_std_m': w_std,
                 'noise_a': math.sqrt(self._state.noise.var_a2),
@@ -385,6 +386,7 @@ class KalmanEstimator(KalmanState):
                 'motion_hz': self.model.motion_hz,
                 'motion_remainder_m': (self.model.config.periodic_remainder_rms_m
                                        if self.model.motion_hz else None),
+                'motion_bandwidth_hz': self.model.config.motion_bandwidth_hz,
                 'offset_jumps': self.offset_jumps,
                 'sampled_at_stamp': at_stamp(self._state.innovations.stamps,
                                              self.config.sampled_at_stamp_prior)}

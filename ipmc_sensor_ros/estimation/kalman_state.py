@@ -34,6 +34,7 @@ class KalmanState:
         return {'filter': self._state.copy(), 'line_hz': self.model.fundamentals_hz,
                 'motion_hz': self.model.motion_hz,
                 'remainder_m': self.model.config.periodic_remainder_rms_m,
+                'bandwidth_hz': self.model.config.motion_bandwidth_hz,
                 'recent': self._recent.buffer.copy(), 'grid': self._recent.count,
                 'first_rest_n': self._first_rest_n, 'stretches': self._log.saved(),
                 'offset_jumps': self.offset_jumps,
@@ -45,8 +46,9 @@ class KalmanState:
             line = tuple(float(f) for f in state['line_hz'])
             motion = float(state['motion_hz'])
             remainder = float(state['remainder_m'])
+            band = float(state['bandwidth_hz'])
             recent = np.asarray(state['recent'], dtype=float)
-            filt = self._model_filter(line, motion, remainder)
+            filt = self._model_filter(line, motion, remainder, band)
             log = StretchLog.restored(state['stretches'], self._model_filter)
             window_slots = fs.window.offset_var.shape
             line = Line(*(float(v) for v in state.get('line', ())))
@@ -64,11 +66,12 @@ class KalmanState:
         self.offset_jumps = int(state.get('offset_jumps', 0))
         self._line = line
 
-    def _model_filter(self, line_hz, motion_hz, remainder_m) -> KalmanFilter:
+    def _model_filter(self, line_hz, motion_hz, remainder_m, band_hz) -> KalmanFilter:
         """Return this filter when its model is of this design (:func:`.periodic.design`)."""
-        if design(self.model) == (tuple(line_hz), motion_hz, remainder_m):
+        if design(self.model) == (tuple(line_hz), motion_hz, remainder_m, band_hz):
             return self._filter
-        config = self.config.replace(periodic_remainder_rms_m=remainder_m)
+        config = self.config.replace(periodic_remainder_rms_m=remainder_m,
+                                     motion_bandwidth_hz=band_hz)
         return self._new_filter(StateSpaceModel(self.reduced, config, self.sample_rate_hz,
                                                 tuple(line_hz), motion_hz))
 

@@ -74,15 +74,16 @@ _SIDEBANDS = 24
 _RATES = 24
 
 
-def measure_recent(current_a, sample_rate_hz: float, model,
-                   remainder_rms_m: float | None = None) -> float | None:
+def measure_recent(current_a, sample_rate_hz: float, model, settings=None) -> float | None:
     """
     Return the fundamental of a periodic motion at the end of a live stream, Hz (module doc).
 
     ``current_a``: the last samples (up to :data:`MOTION_LONGEST_S`); 0.0: none; None: less
-    than :data:`MOTION_SHORTEST_S` of current.  ``remainder_rms_m``: the remainder the
-    residual may hold (None: ``model``'s own; the estimator gives its setting, the largest
-    a model it takes may leave, whatever remainder the model in use has).
+    than :data:`MOTION_SHORTEST_S` of current.  ``settings``: the
+    :class:`~.config.EstimatorConfig` whose remainder (what the residual may hold) and upper
+    corner (how high the search goes) the measurement takes (None: ``model``'s own; the
+    estimator gives its settings, the largest a model may leave and the widest band,
+    whatever the model in use chose).
     """
     x = np.asarray(current_a, dtype=float)
     fs = float(sample_rate_hz)
@@ -91,26 +92,24 @@ def measure_recent(current_a, sample_rate_hz: float, model,
         return None
     spans = sorted({min(available, MOTION_LONGEST_S / 2 ** j) for j in (3, 2, 1, 0)})
     for span in spans:
-        f0 = measure_motion(x[-int(round(span * fs)):], fs, model,
-                            remainder_rms_m=remainder_rms_m)
+        f0 = measure_motion(x[-int(round(span * fs)):], fs, model, settings=settings)
         if f0:
             return f0
     return 0.0
 
 
 def measure_motion(current_a, sample_rate_hz: float, model, false_alarm: float = 1e-4,
-                   remainder_rms_m: float | None = None) -> float | None:
+                   settings=None) -> float | None:
     """
     Return the fundamental of a periodic motion in a stretch of current, Hz.
 
     0.0: none; None: a stretch shorter than :data:`MOTION_SHORTEST_S` cannot be judged.
     ``model``: the estimator's :class:`~.statespace.StateSpaceModel` (sensor, settings and
-    mains lines); ``remainder_rms_m``: the remainder motion the residual may hold (None: the
-    model's ``periodic_remainder_rms_m``).  Module docstring.
+    mains lines); ``settings``: as :func:`measure_recent`'s.  Module docstring.
     """
     x = np.asarray(current_a, dtype=float)
     fs = float(sample_rate_hz)
-    cfg = model.config
+    cfg = settings or model.config
     span = x.size / fs
     if span < MOTION_SHORTEST_S - 1e-9:
         return None
@@ -144,7 +143,7 @@ def measure_motion(current_a, sample_rate_hz: float, model, false_alarm: float =
     residual = _piecewise(x, t, every, mains, span)[0]
     amplitude2 = _piecewise(x, t, every, mains, piece)[1]
     explained = _explained(residual, fs, hi, (every, amplitude2, span), mains,
-                           _remainder_psd(model, remainder_rms_m), noise_a2, false_alarm)
+                           _remainder_psd(model, cfg), noise_a2, false_alarm)
     return f0 if explained else 0.0
 
 
@@ -198,11 +197,10 @@ def _piecewise(x, t, lines_hz, mains_hz, piece_s) -> tuple[np.ndarray, np.ndarra
     return residual, power
 
 
-def _remainder_psd(model, remainder_rms_m: float | None = None):
-    """Return f (Hz) -> two-sided PSD of the remainder motion's current, A^2/Hz."""
-    cfg = model.config
+def _remainder_psd(model, cfg):
+    """Return f (Hz) -> two-sided PSD of the remainder motion's current, A^2/Hz (``cfg``'s)."""
     a, c = 2 * np.pi * cfg.motion_bandwidth_hz, 2 * np.pi * cfg.motion_corner_hz
-    q = motion_intensity(a, c, remainder_rms_m or cfg.periodic_remainder_rms_m)
+    q = motion_intensity(a, c, cfg.periodic_remainder_rms_m)
 
     def psd(f):
         w2 = (2 * np.pi * np.asarray(f)) ** 2

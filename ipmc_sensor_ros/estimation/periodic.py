@@ -67,8 +67,14 @@ def remainder_configs(config) -> list:
 
 
 def design(model) -> tuple:
-    """Return what tells a model from another of the same estimator: lines, motion, remainder."""
-    return (model.fundamentals_hz, model.motion_hz, model.config.periodic_remainder_rms_m)
+    """
+    Return what tells a model from another of the same estimator.
+
+    Its lines, periodic motion, remainder and upper corner (the last two chosen by the data:
+    :func:`likeliest`, :mod:`.motion_band`).
+    """
+    return (model.fundamentals_hz, model.motion_hz, model.config.periodic_remainder_rms_m,
+            model.config.motion_bandwidth_hz)
 
 
 def likeliest(span: Stretch, filters) -> tuple:
@@ -171,9 +177,9 @@ class StretchLog:
             if item is None:
                 parts.append(None)
                 continue
-            lines, motion, remainder, state, y, steps, rest, measured, floor, jumped, \
+            lines, motion, remainder, band, state, y, steps, rest, measured, floor, jumped, \
                 deferred = item
-            filt = make_filter(tuple(lines), float(motion), float(remainder))
+            filt = make_filter(tuple(lines), float(motion), float(remainder), float(band))
             if state.x.shape != (filt.model.size,):
                 raise ValueError('a stretch state of another design')
             parts.append(Stretch(filt, state.copy(), list(y), list(steps), bool(rest),
