@@ -165,6 +165,12 @@ def setting(name: str) -> Setting:
     return _BY_NAME[name]
 
 
+def fractions_of(config, name: str, fractions) -> list:
+    """Return ``fractions`` of setting ``name`` in ``config``, within its range, largest first."""
+    value, low = getattr(config, name), _BY_NAME[name].low
+    return sorted({max(f * value, low) for f in fractions}, reverse=True)
+
+
 #: Values of ``mains_hz``.
 MAINS_CHOICES = ('auto', 0, 50, 60)
 

@@ -19,7 +19,7 @@ record 13, 6.5 % instead of 1.1 %).
 """
 from __future__ import annotations
 
-from .config import SETTINGS
+from .config import fractions_of
 from .periodic import refilter
 from .statespace import StateSpaceModel
 
@@ -31,10 +31,8 @@ BAND_CHOICES = (1.0, 0.5, 0.25)
 
 def band_choices_hz(config) -> list:
     """Return the upper corners tried, Hz: above the lower corner and within range."""
-    low = next(s.low for s in SETTINGS if s.name == 'motion_bandwidth_hz')
-    top = config.motion_bandwidth_hz
-    return sorted({max(r * top, low) for r in BAND_CHOICES
-                   if r * top > config.motion_corner_hz} | {top}, reverse=True)
+    return [hz for hz in fractions_of(config, 'motion_bandwidth_hz', BAND_CHOICES)
+            if hz > config.motion_corner_hz]
 
 
 def likelier_band(span, filt, state, config, reduced, build) -> tuple | None:

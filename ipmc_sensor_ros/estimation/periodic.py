@@ -37,7 +37,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .carry import carry_state
-from .config import SETTINGS
+from .config import fractions_of
 from .filter import FilterState, ForwardRecord, KalmanFilter
 from .innovations import block_samples, explains
 from .motionline import MOTION_WOBBLE
@@ -60,10 +60,8 @@ REMAINDER_CHOICES = (1.0, 0.25, 0.0625)
 
 def remainder_configs(config) -> list:
     """Return ``config`` with each remainder tried, the largest first (within its range)."""
-    low = next(s.low for s in SETTINGS if s.name == 'periodic_remainder_rms_m')
-    rms = config.periodic_remainder_rms_m
     return [config.replace(periodic_remainder_rms_m=value) for value in
-            sorted({max(r * rms, low) for r in REMAINDER_CHOICES}, reverse=True)]
+            fractions_of(config, 'periodic_remainder_rms_m', REMAINDER_CHOICES)]
 
 
 def design(model) -> tuple:
