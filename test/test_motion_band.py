@@ -72,3 +72,27 @@ def test_a_chosen_corner_is_saved_and_restored_with_the_state():
     assert restored.model.config.motion_bandwidth_hz == pytest.approx(12.5)
     tail = restored.estimate(y[cut:]).deflection_m
     assert np.array_equal(np.concatenate([head, tail]), expected)
+
+
+def test_a_stretch_spent_still_is_not_filtered_again(monkeypatch):
+    """
+    Record 5's hold (from 10.5 s): the rest measurement holds the tip, so no corner is tried.
+
+    Every check in the sines tries the two other corners (two runs each); those in the
+    hold, from 12 s (a stretch wholly still), try none: on the hold's eight checks the
+    choice had cost sixteen runs of a second each.
+    """
+    import ipmc_sensor_ros.estimation.motion_band as motion_band
+    rec, _ = draw(5, 20.0)
+    n = int(12.0 * rec.sample_rate_hz)
+    runs = []
+    refilter = motion_band.refilter
+    monkeypatch.setattr(motion_band, 'refilter',
+                        lambda span, filt: runs.append(len(span.y)) or refilter(span, filt))
+    core = _estimator(rec).core
+    core.estimate(rec.current_a[:n])
+    assert len(runs) >= 2                           # the sines' checks tried the corners
+    del runs[:]
+    core.estimate(rec.current_a[n:])
+    assert runs == []
+    assert core.status()['at_rest']

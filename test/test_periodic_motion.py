@@ -192,7 +192,7 @@ def _log_after(stretches):
     """
     log = StretchLog('filter', _State())
     for i, (n, rest, measured, *floor) in enumerate(stretches):
-        log.add([0.0] * n, [1] * n, rest)
+        log.add([0.0] * n, [1] * n, np.full(n, rest))
         if i < len(stretches) - 1:
             log.span_for(measured, False, *floor)
             log.mark('filter', _State())

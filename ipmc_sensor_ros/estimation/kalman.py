@@ -2,7 +2,7 @@
 """
 The Kalman deflection estimator: model, filter, smoother and the lines measured.
 
-:mod:`.statespace`, :mod:`.filter`, :mod:`.smoother`, :mod:`.lines`.
+The parts: :mod:`.statespace` (model), :mod:`.filter`, :mod:`.smoother`, :mod:`.lines`.
 :class:`KalmanEstimator` implements :class:`~.core.EstimatorCore`.  It owns one
 :class:`~.filter.FilterState` and advances it sample by sample; a block and single samples
 run the same recursion.  The mains line (``mains_hz``: ``'auto'``, 50, 60 or 0 = none) is
@@ -179,7 +179,7 @@ class KalmanEstimator(KalmanState):
             if rec is not None:
                 self._lag.push(self._filter, rec.rows(0, w.size))
             self._remember(y[a:b], st[a:b], still)
-            self._log.add(y[a:b].tolist(), st[a:b].tolist(), bool(still.any()))
+            self._log.add(y[a:b].tolist(), st[a:b].tolist(), still)
             parts.append((w, s, still))
             a = b
             closed = self._state.innovations.blocks != blocks
@@ -342,7 +342,7 @@ class KalmanEstimator(KalmanState):
             self._lag.replace_newest(filt, rec, link if held == len(span.y) else None)
         rested = bool(run.still.any())
         if span is self._log.current:   # what the rest test says of the stretch now
-            span.rest = rested
+            span.rest, span.moved = rested, not run.still.all()
         if self._first_rest_n is None and rested:
             self._first_rest_n = run.start.samples + int(np.argmax(run.still))
         self._filter, self._state = filt, run.now

@@ -111,7 +111,10 @@ class Stretch:
     state: FilterState
     y: list = field(default_factory=list)
     steps: list = field(default_factory=list)
+    #: a sample in it was still (the rest test's verdict, as published live)
     rest: bool = False
+    #: a sample in it was not still
+    moved: bool = False
     measured_hz: float | None = None
     #: the lowest fundamental the measurement could see, Hz
     floor_hz: float = 0.0
@@ -145,26 +148,33 @@ class StretchLog:
         if self.current.measured_hz is not None:
             self.earlier, self.current = self.current, Stretch(filt, state.copy())
 
-    def add(self, y: list, steps: list, rest: bool) -> None:
-        """Append samples (values, sample periods since the one before) to the current one."""
+    def add(self, y: list, steps: list, still: np.ndarray) -> None:
+        """
+        Append samples to the current one.
+
+        ``y``, ``steps``: values and sample periods since the one before; ``still``: per
+        sample, the rest test found it still.
+        """
         cur = self.current
         cur.y += y
         cur.steps += steps
-        cur.rest = cur.rest or rest
+        cur.rest = cur.rest or bool(still.any())
+        cur.moved = cur.moved or not still.all()
 
-    def add_one(self, y: float, steps: int, rest: bool) -> None:
+    def add_one(self, y: float, steps: int, still: bool) -> None:
         """Append one sample (the node's path: no lists built)."""
         cur = self.current
         cur.y.append(y)
         cur.steps.append(steps)
-        cur.rest = cur.rest or rest
+        cur.rest = cur.rest or still
+        cur.moved = cur.moved or not still
 
     def saved(self) -> tuple:
         """Return the log as plain values (models by :func:`design`; states copied)."""
         return tuple(None if st is None else (
             *design(st.filter.model), st.state.copy(),
-            list(st.y), list(st.steps), st.rest, st.measured_hz, st.floor_hz, st.jumped,
-            st.deferred)
+            list(st.y), list(st.steps), st.rest, st.moved, st.measured_hz, st.floor_hz,
+            st.jumped, st.deferred)
             for st in (self.earlier, self.current))
 
     @classmethod
@@ -175,14 +185,14 @@ class StretchLog:
             if item is None:
                 parts.append(None)
                 continue
-            lines, motion, remainder, band, state, y, steps, rest, measured, floor, jumped, \
-                deferred = item
+            lines, motion, remainder, band, state, y, steps, rest, moved, measured, floor, \
+                jumped, deferred = item
             filt = make_filter(tuple(lines), float(motion), float(remainder), float(band))
             if state.x.shape != (filt.model.size,):
                 raise ValueError('a stretch state of another design')
             parts.append(Stretch(filt, state.copy(), list(y), list(steps), bool(rest),
-                                 None if measured is None else float(measured), float(floor),
-                                 bool(jumped), bool(deferred)))
+                                 bool(moved), None if measured is None else float(measured),
+                                 float(floor), bool(jumped), bool(deferred)))
         log = cls.__new__(cls)
         log.earlier, log.current = parts
         if log.current is None:
