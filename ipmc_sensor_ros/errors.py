@@ -14,7 +14,17 @@ it into one line and exit status 2, never a traceback.
 """
 from __future__ import annotations
 
-__all__ = ['IpmcError', 'ParameterError', 'DataError', 'DataFormatError']
+import difflib
+from typing import Iterable
+
+__all__ = ['IpmcError', 'ParameterError', 'DataError', 'DataFormatError', 'did_you_mean']
+
+
+def did_you_mean(names: Iterable[str], known: Iterable[str]) -> str:
+    """Return "; did you mean 'k' for 'n'?" for each name close to a known one ('' if none)."""
+    known = list(known)
+    return ''.join(f"; did you mean '{near[0]}' for '{name}'?" for name in names
+                   for near in [difflib.get_close_matches(name, known, 1)] if near)
 
 
 class IpmcError(ValueError):

@@ -250,6 +250,25 @@ def test_inline_commands_use_existing_verbs_and_flags():
     assert checked > 10
 
 
+def test_no_two_documents_write_the_same_output():
+    """
+    A user runs the README's tour and a doc's commands in one directory (the repository's).
+
+    ``estimate`` and ``diagnose`` refuse to replace a file they did not write in that run,
+    so two documents writing ``est/`` or ``model.yaml`` made the second fail (and ``info``
+    then read the first one's model): each document's outputs are its own.
+    """
+    writers = {}
+    for doc in DOCS:
+        for language, body, line in _blocks(doc):
+            for command in re.findall(r'^\$ (ipmc-model .*)$', body, re.M):
+                for out in re.findall(r'--(?:out|save|save-model|json|report)[ =](\S+)',
+                                      command):
+                    writers.setdefault(out.rstrip('/'), set()).add(doc.name)
+    shared = {out: sorted(docs) for out, docs in writers.items() if len(docs) > 1}
+    assert len(writers) > 10 and not shared
+
+
 def test_generated_parts_are_current():
     sys.path.insert(0, str(ROOT / 'scripts'))
     try:

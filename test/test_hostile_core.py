@@ -243,3 +243,13 @@ def test_estimate_to_bag_with_huge_time_origin_is_one_line_and_leaves_no_bag(tmp
         code == 2 and 'Traceback' not in err and len(errors) == 1 and 'must lie in' in errors[0]
     ), err
     assert not list((tmp_path / 'x').glob('*')) if (tmp_path / 'x').exists() else True
+
+
+def test_a_misspelt_parameter_in_a_params_file_is_named_with_the_likely_one(tmp_path):
+    """The offline reader suggests the known name, as the node does (one helper)."""
+    f = tmp_path / 'typo.yaml'
+    f.write_text('/**/ipmc_estimator:\n  ros__parameters:\n    motion_rms: 0.002\n')
+    with pytest.raises(ValueError, match=r"typo\.yaml: unknown parameter 'motion_rms' in "
+                       r"section '/\*\*/ipmc_estimator'; did you mean 'motion_rms_m' for "
+                       r"'motion_rms'\?"):
+        C.load_params_file(f)

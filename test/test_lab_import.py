@@ -298,3 +298,15 @@ def test_unused_column_and_voltage_current_with_a_gain(tmp_path):
     assert any('column(s) not imported: Temp (C)' in s for s in said)
     with pytest.raises(DataFormatError, match='no current column'):
         import_lab_file(src, geometry='22mm,7mm,360um')      # a voltage without a gain
+
+
+def test_a_current_column_in_microvolts_asks_for_the_amplifier_gain(tmp_path):
+    """A transimpedance output logged in uV is a voltage, not an unknown unit."""
+    src = tmp_path / 'tia_uv.csv'
+    src.write_text('Time (s),Current [uV]\n' + '\n'.join(
+        f'{k * 1e-3:.3f},{np.sin(k / 50):.5f}' for k in range(2000)) + '\n')
+    with pytest.raises(DataFormatError, match=r"column 'Current \[uV\]' is a voltage: give the "
+                                              r'transimpedance'):
+        import_lab_file(src, geometry='22mm,7mm,360um')
+    ts = import_lab_file(src, geometry='22mm,7mm,360um', current_gain_a_per_v=1e-6)
+    assert np.max(ts.current_a) == pytest.approx(1e-12, rel=1e-3)    # 1 uV at 1 uA/V

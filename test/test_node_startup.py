@@ -49,6 +49,25 @@ def test_help_prints_usage_and_starts_nothing(exe, flag, monkeypatch, capsys):
     assert ('autostart' in out) == exe.endswith('_managed')
 
 
+@pytest.mark.parametrize('value', ['233', '-1', 'abc'])
+def test_a_domain_id_no_dds_participant_can_use_is_refused_in_one_line(value):
+    """
+    Fast DDS only logs a port error for domain 233 and the process exits 1.
+
+    The executables (and the demo) refuse it before rclpy starts: exit 2, one line naming
+    the variable and the range.
+    """
+    env = dict(os.environ, ROS_DOMAIN_ID=value)
+    for cmd in (['-c', 'import sys; from ipmc_sensor_ros.nodes.entry import estimator; '
+                       'sys.exit(estimator())'],
+                ['-m', 'ipmc_sensor_ros.nodes.demo', '--duration', '25']):
+        done = subprocess.run([sys.executable, *cmd], env=env, capture_output=True, text=True,
+                              cwd=ROOT, timeout=60)
+        assert done.returncode == 2, done.stderr
+        assert f"ROS_DOMAIN_ID='{value}' is not a ROS 2 domain: an integer 0-232" in done.stderr
+        assert 'Traceback' not in done.stderr and done.stdout == ''
+
+
 def test_signal_while_the_node_is_built_ends_it_at_once():
     stop = threading.Event()
 

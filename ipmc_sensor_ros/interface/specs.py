@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
-from ..errors import ParameterError
+from ..errors import ParameterError, did_you_mean
 from ..estimation.deflection import ESTIMATORS
 from ..estimation.config import CONFIG_FIELDS, SETTINGS
 from ..estimation.inverse import DEFAULT_LEAK_CORNER_HZ
@@ -355,7 +355,8 @@ def load_params_file(path: str | Path, node_name: str = 'ipmc_estimator',
                 continue
             if name not in by_name:
                 raise ParameterError(f'{path}: unknown parameter {short_repr(name)} in section '
-                                     f"'{key}' (known: {sorted(by_name)})")
+                                     f"'{key}'{did_you_mean([str(name)], by_name)} "
+                                     f'(known: {sorted(by_name)})')
             if by_name[name].kind is float and type(value) is int:    # as the node's rcl
                 raise ParameterError(f"{path}: parameter '{name}' = {value} is an integer; a "
                                      f'ROS 2 node refuses it for a double: write {value}.0')

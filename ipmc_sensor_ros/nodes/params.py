@@ -26,6 +26,7 @@ from ..interface.specs import (GEOMETRY_NAMES, GEOMETRY_SPECS, MATERIAL_NAMES, M
                                markdown_table)
 from ..interface.builders import build_model as build_sensor_model
 from ..interface.builders import model_file_summary as build_model_file_summary
+from ..errors import did_you_mean
 from ..physics.parameters import read_yaml
 
 __all__ = ['ParameterError', 'Spec', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_SPECS',
@@ -222,10 +223,8 @@ def check_unknown_overrides(node, specs: Iterable[Spec], cli_args=None,
         files = params_files(cli_args)
         where = f" in {', '.join(files)}" if files else ''
         ours = sorted(known - {'use_sim_time', 'start_type_description_service'})
-        near = {n: difflib.get_close_matches(n, ours, 1) for n in fatal}
-        hint = ''.join(f"; did you mean '{m[0]}' for '{n}'?" for n, m in near.items() if m)
         raise ParameterError(f'unknown parameter(s) {fatal}{where} for node '
-                             f"'{node.get_name()}'{hint}; known: {ours}")
+                             f"'{node.get_name()}'{did_you_mean(fatal, ours)}; known: {ours}")
 
 
 def declare(node, specs: Iterable[Spec]) -> None:

@@ -23,8 +23,8 @@ A lab file is free text, then one column-header line, then numeric rows::
   ``columns={"time": ..., "deflection": ..., "current": ...}`` names them
   explicitly (an explicit name may add a unit, ``"t [ms]"``, for a column
   whose header has none).  Units come from ``[unit]``, ``(unit)`` or a
-  ``_unit`` suffix: s, ms, us; m, mm, um/µm, nm; A, mA, uA/µA, nA, pA; V or
-  mV for a current measured as a transimpedance-amplifier voltage, which needs
+  ``_unit`` suffix: s, ms, us; m, mm, um/µm, nm; A, mA, uA/µA, nA, pA; V, mV or
+  uV for a current measured as a transimpedance-amplifier voltage, which needs
   ``current_gain_a_per_v``.  A column without a unit is refused, never
   guessed.  The deflection column is optional (current-only records).
 * Geometry (free length L, width W, total thickness 2h) comes from the

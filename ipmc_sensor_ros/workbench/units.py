@@ -20,7 +20,7 @@ __all__ = ['TIME_UNITS', 'LENGTH_UNITS', 'CURRENT_UNITS', 'VOLTAGE_UNITS', 'QUAN
 TIME_UNITS = {'s': 1.0, 'ms': 1e-3, 'us': 1e-6}
 LENGTH_UNITS = {'m': 1.0, 'mm': 1e-3, 'um': 1e-6, 'nm': 1e-9}
 CURRENT_UNITS = {'A': 1.0, 'mA': 1e-3, 'uA': 1e-6, 'nA': 1e-9, 'pA': 1e-12}
-VOLTAGE_UNITS = {'V': 1.0, 'mV': 1e-3}
+VOLTAGE_UNITS = {'V': 1.0, 'mV': 1e-3, 'uV': 1e-6}
 
 #: Unit table of each time-series quantity.
 QUANTITY_UNITS = {'time': TIME_UNITS, 'deflection': LENGTH_UNITS, 'current': CURRENT_UNITS}
