@@ -92,6 +92,11 @@ def test_fit_frees_effect_parameter_and_saves_model(data, tmp_path, capsys):
     # an effect parameter of an effect not in the model: a one-line error naming the fix
     assert main(['fit', str(data), '--model', 'h2', '--free', 'd,delay_s']) == 2
     assert 'add it with --effects time_delay' in capsys.readouterr().err
+    # a near miss of a symbol: the list names the symbols, and the likely one is suggested
+    assert main(['fit', str(data), '--model', 'h2', '--free', 'd,alpha']) == 2
+    err = capsys.readouterr().err
+    assert 'charge_stress_coupling_j_per_c (alpha0)' in err
+    assert err.rstrip().endswith("did you mean 'alpha0' for 'alpha'?")
 
 
 def _doc_commands():

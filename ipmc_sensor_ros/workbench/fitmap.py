@@ -16,7 +16,9 @@ import numpy as np
 
 from ..physics.effects import EFFECTS, effect_parameter, get_effect
 from ..physics.model import EffectSpec, parse_effects
+from ..errors import did_you_mean
 from ..physics.parameters import MaterialParameters, ParameterError
+from .identifiability import SYMBOLS
 
 __all__ = ['FITTABLE', 'ParameterMap', 'effect_parameter_names', 'resolve_effect_parameter',
            'resolve_free', 'start_and_bounds']
@@ -66,9 +68,12 @@ def resolve_effect_parameter(name: str, effects) -> tuple[str, str]:
             f"cannot fit '{name}': it belongs to effect '{catalog[0]}', which is not in "
             f'the model; add it with --effects {catalog[0]}'
         )
+    ours = effect_parameter_names(specs)
+    near = did_you_mean([name], [*FITTABLE, *(SYMBOLS[n] for n in FITTABLE),
+                                 *(n.split('.', 1)[1] for n in ours)])
     raise ParameterError(
-        f"cannot fit '{name}'; fittable: {', '.join(FITTABLE)} or an effect parameter "
-        f"of the model ({', '.join(effect_parameter_names(specs)) or 'none'})"
+        f"cannot fit '{name}'; fittable: {', '.join(f'{n} ({SYMBOLS[n]})' for n in FITTABLE)} "
+        f"or an effect parameter of the model ({', '.join(ours) or 'none'}){near}"
     )
 
 

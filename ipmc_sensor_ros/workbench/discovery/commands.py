@@ -17,6 +17,8 @@ from typing import Sequence
 
 from ...physics.effects import get_effect
 from ...physics.model import parse_effects
+from ..fitmap import FITTABLE
+from ..identifiability import SYMBOLS
 
 __all__ = [
     'SYMBOL_TO_NAME',
@@ -28,9 +30,8 @@ __all__ = [
     'diagnosis_next_command',
 ]
 
-SYMBOL_TO_NAME = {'T': 'temperature_k', 'Y': 'youngs_modulus_pa', 'r0': 'surface_resistance_ohm',
-                  'd': 'diffusivity_m2_per_s', 'C-': 'anion_concentration_mol_per_m3',
-                  'kappa_e': 'permittivity_f_per_m', 'alpha0': 'charge_stress_coupling_j_per_c'}
+#: The paper's symbol of each fittable material parameter -> its name (one table: SYMBOLS).
+SYMBOL_TO_NAME = {symbol: name for name, symbol in SYMBOLS.items() if name in FITTABLE}
 
 
 def free_names(text: str) -> tuple[str, ...]:
