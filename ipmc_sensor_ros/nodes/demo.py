@@ -139,8 +139,9 @@ def main(argv=None) -> int:
     if args.duration <= SCORE_WINDOW_S:
         parser.error(f'--duration must exceed the {SCORE_WINDOW_S:g} s scoring window')
 
-    if domain_id_problem():
-        parser.error(domain_id_problem())
+    problem = domain_id_problem()
+    if problem:
+        parser.error(problem)
     domain = int(os.environ.get('ROS_DOMAIN_ID') or random.randint(50, 200))
     env = _child_env(domain)
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'

@@ -21,12 +21,12 @@ from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescr
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
 
+from ..errors import did_you_mean
 from ..interface.specs import (GEOMETRY_NAMES, GEOMETRY_SPECS, MATERIAL_NAMES, MATERIAL_SPECS,
                                MODEL_SPECS, QOS_SPECS, ParameterError, Spec, check_choice,
                                markdown_table)
 from ..interface.builders import build_model as build_sensor_model
 from ..interface.builders import model_file_summary as build_model_file_summary
-from ..errors import did_you_mean
 from ..physics.parameters import read_yaml
 
 __all__ = ['ParameterError', 'Spec', 'GEOMETRY_SPECS', 'MATERIAL_SPECS', 'MODEL_SPECS',

@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import did_you_mean
 from ..physics.effects import EFFECTS, effect_parameter, get_effect
 from ..physics.model import EffectSpec, parse_effects
-from ..errors import did_you_mean
 from ..physics.parameters import MaterialParameters, ParameterError
 from .identifiability import SYMBOLS
 
