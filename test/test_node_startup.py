@@ -209,3 +209,20 @@ def test_params_rules_read_the_nodes_arguments_not_sys_argv(tmp_path, monkeypatc
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=ctx)
+
+
+def test_an_out_of_range_parameter_reads_the_same_in_the_node_and_offline(tmp_path):
+    """The node checks its overrides by the params-file rules before rcl's descriptors."""
+    from ipmc_sensor_ros.interface.specs import load_params_file
+    f = tmp_path / 'neg.yaml'
+    f.write_text('/**/ipmc_estimator:\n  ros__parameters:\n    motion_rms_m: -0.001\n')
+    said = "parameter 'motion_rms_m' = -0.001 is outside [1e-07, 1]"
+    with pytest.raises(P.ParameterError) as offline:
+        load_params_file(f)
+    assert said in str(offline.value)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN))
+    done = subprocess.run([sys.executable, '-m', 'ipmc_sensor_ros.nodes.estimator_node',
+                           '--ros-args', '--params-file', str(f)], env=env, cwd=ROOT,
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and said in done.stderr and 'neg.yaml' in done.stderr
+    assert 'Traceback' not in done.stderr

@@ -24,7 +24,7 @@ from rclpy.parameter import Parameter
 from ..errors import did_you_mean
 from ..interface.specs import (GEOMETRY_NAMES, GEOMETRY_SPECS, MATERIAL_NAMES, MATERIAL_SPECS,
                                MODEL_SPECS, QOS_SPECS, ParameterError, Spec, check_choice,
-                               markdown_table)
+                               check_values, markdown_table)
 from ..interface.builders import build_model as build_sensor_model
 from ..interface.builders import model_file_summary as build_model_file_summary
 from ..physics.parameters import read_yaml
@@ -232,8 +232,11 @@ def declare(node, specs: Iterable[Spec]) -> None:
     Declare ``specs`` on ``node`` (parameter overrides from --ros-args apply).
 
     A renamed node starts from the values of its default-name sections
-    (:func:`check_unknown_overrides`), else from the specs' defaults.
+    (:func:`check_unknown_overrides`), else from the specs' defaults.  The overrides are
+    checked first by the rules a params file meets offline (:func:`check_values`: one
+    wording, "parameter 'x' = v is outside [lo, hi]", not rcl's descriptor message).
     """
+    check_values({n: p.value for n, p in parameter_overrides(node).items()}, specs)
     start = _FILE_DEFAULTS.get(node, {})
     for spec in specs:
         if spec.name in start:

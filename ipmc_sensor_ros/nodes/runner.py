@@ -135,7 +135,7 @@ def _report_configuration_error(name: str, exc: Exception, args) -> None:
     hint = ''
     if "type 'INTEGER'" in text and "expecting type 'DOUBLE'" in text:
         hint = ' (write floating-point parameters with a decimal point, e.g. 1000.0)'
-    elif 'out of range' in text and any(f'Parameter {n} out of range' in text
+    elif 'is outside [' in text and any(f"parameter '{n}' = " in text
                                         for n in ('length_m', 'width_m', 'thickness_m')):
         hint = ' (lengths are in metres: is it in millimetres?)'
     files = params_files(args)
