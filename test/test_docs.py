@@ -260,7 +260,7 @@ def test_no_two_documents_write_the_same_output():
     """
     writers = {}
     for doc in DOCS:
-        for language, body, line in _blocks(doc):
+        for _, body, _ in _blocks(doc):
             for command in re.findall(r'^\$ (ipmc-model .*)$', body, re.M):
                 for out in re.findall(r'--(?:out|save|save-model|json|report)[ =](\S+)',
                                       command):
