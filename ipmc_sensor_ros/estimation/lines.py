@@ -52,6 +52,9 @@ PAD = 8
 #: A measurement this many standard deviations from the line known so far is a new line (a
 #: grid whose frequency stepped, another line), by chance once in 1/MODEL_FALSE_ALARM checks.
 _NEW_LINE_Z = float(norm.isf(0.5 * MODEL_FALSE_ALARM))
+#: the level (A^2) taken for a noise-free line: its information huge but finite, even at
+#: the 1 A input limit
+_TINY = 1e-300
 
 
 class Line(NamedTuple):
@@ -139,7 +142,7 @@ def measure_line(current_a, sample_rate_hz: float, nominal=NOMINAL_LINES_HZ,
         level = local_level(power, j, df)
         a_k = 4.0 * math.sqrt(power[j]) / n     # the Hann window sums to n/2: A = 2|X|/sum
         # eta_k = A_k^2 / (2 sigma^2), sigma^2 = level / (3n/8): the line's power above noise
-        info += k * k * 3.0 * max(power[j] - level, 0.0) / (n * max(level, 1e-300))
+        info += k * k * 3.0 * max(power[j] - level, 0.0) / (n * max(level, _TINY))
         if power[j] > factor * level:
             amp, drift = max(amp, a_k), max(drift, 2.0 * math.pi * k * a_k)
     if not amp:

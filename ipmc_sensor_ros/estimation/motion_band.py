@@ -59,7 +59,6 @@ def likelier_band(span, filt, state, config, reduced, build) -> tuple | None:
         other = build(StateSpaceModel(reduced, model.config.replace(motion_bandwidth_hz=hz),
                                       model.sample_rate_hz, model.fundamentals_hz))
         run = refilter(span, other)
-        nll = run.now.innovations.nll - run.start.innovations.nll
-        if nll < lowest:
-            best, lowest = (other, run), nll
+        if run.nll < lowest:
+            best, lowest = (other, run), run.nll
     return best

@@ -90,9 +90,8 @@ def likeliest(span: Stretch, filters) -> tuple:
             best = filt, run
         if not explains(run.now.innovations, run.start.innovations):
             continue
-        nll = run.now.innovations.nll - run.start.innovations.nll
-        if nll < lowest:
-            best, lowest = (filt, run), nll
+        if run.nll < lowest:
+            best, lowest = (filt, run), run.nll
     return best
 
 
@@ -248,6 +247,11 @@ class Refiltered(NamedTuple):
     restarts: list
     #: per sample of the span: the rest test found it still (as published live)
     still: np.ndarray
+
+    @property
+    def nll(self) -> float:
+        """Twice the negative log-likelihood of the span's innovations (Σ z² + ln S)."""
+        return self.now.innovations.nll - self.start.innovations.nll
 
 
 def refilter(span: Stretch, filt: KalmanFilter, record: ForwardRecord | None = None,
