@@ -115,7 +115,7 @@ def test_a_sample_on_its_slot_and_one_a_hair_off_it_publish_the_same(reduced):
 
 def test_filter_std_covers_its_own_model(reduced):
     """On records drawn from the model, 2 sigma covers ~95 % of the errors (not 50, not 100)."""
-    cfg = EstimatorConfig(rest_false_alarm=1e-12)     # a drawn motion is never still
+    cfg = EstimatorConfig(false_alarm=1e-12)     # a drawn motion is never still
     ssm = StateSpaceModel(reduced, cfg, FS)
     inside, total = 0, 0
     for seed in range(4):
@@ -159,7 +159,7 @@ def test_smoother_is_the_batch_posterior(reduced):
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
 
-    cfg = EstimatorConfig(rest_false_alarm=1e-12)
+    cfg = EstimatorConfig(false_alarm=1e-12)
     ssm = StateSpaceModel(reduced, cfg, FS)
     _, y = _simulate(ssm, 300, 20e-9, seed=3)
     filt = KalmanFilter(ssm)
@@ -201,7 +201,7 @@ def test_rest_learns_offset_and_noise_and_holds_the_level(reduced):
     est = KalmanEstimator(reduced, FS, mains_hz=0)
     e = est.estimate(y)
     st = est.status()
-    # the tests run on every sample at rest_false_alarm (1e-6): a few samples may flicker
+    # the tests run on every sample at false_alarm (1e-6): a few samples may flicker
     assert e.still[int(0.5 * FS):].mean() > 0.99
     assert abs(st['offset_a'] - offset) < 4 * noise / math.sqrt(2.5 * FS)
     assert st['noise_a'] == pytest.approx(noise, rel=0.1)
@@ -246,7 +246,7 @@ def test_a_hum_far_above_the_noise_is_neither_noise_nor_motion(reduced):
     # the meter averages over 1 s (about 1,000 differences: +-5 % at 1 sigma on the variance)
     assert st['noise_a'] == pytest.approx(0.5e-9, rel=0.1)
     late = e.still[int(2 * FS):]
-    # four tests a sample at rest_false_alarm (1e-6 each): 0.03 false ends expected in 6 s
+    # four tests a sample at false_alarm (1e-6 each): 0.03 false ends expected in 6 s
     assert late.all()
     assert abs(st['offset_a'] - 6e-9) < 0.1e-9
 

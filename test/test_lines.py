@@ -5,10 +5,15 @@ import pytest
 
 from bench.bench_estimators import _causal, estimate_scores
 from bench.scenarios import build
+from ipmc_sensor_ros.estimation.config import EstimatorConfig
 from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
 from ipmc_sensor_ros.estimation.lines import Line, measure_line, vertex
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import Geometry
+
+#: the default settings: line walk 1 nA/sqrt(s), false alarm 1e-6 (new line beyond 4.9 sigma)
+CFG = EstimatorConfig()
+FA = CFG.false_alarm
 
 
 def test_the_vertex_stays_within_half_a_bin_on_a_flank():
@@ -40,12 +45,12 @@ def test_measurements_of_one_line_are_joined_by_their_variances():
     """
     first = Line(50.10, 1e-6, 1e-4, 1.0)            # 10 mHz each: 1.4 sigma apart
     second = Line(50.12, 1e-6, 1e-4, 1.0)
-    assert first.joined(second).hz == pytest.approx(50.11)
-    assert first.joined(second).hz_var == pytest.approx(5e-5)
-    half = first.joined(second, shared=0.5)         # the second counts as variance 2e-4
+    assert first.joined(second, 0.0, FA).hz == pytest.approx(50.11)
+    assert first.joined(second, 0.0, FA).hz_var == pytest.approx(5e-5)
+    half = first.joined(second, 0.5, FA)         # the second counts as variance 2e-4
     assert half.hz == pytest.approx((50.10 / 1 + 50.12 / 2) / (1 / 1 + 1 / 2))
-    assert first.joined(Line()) == first
-    assert first.joined(Line(50.2, 1e-6, 1e-4, 1.0)).hz == 50.2     # 7 sigma: a new line
+    assert first.joined(Line(), 0.0, FA) == first
+    assert first.joined(Line(50.2, 1e-6, 1e-4, 1.0), 0.0, FA).hz == 50.2     # 7 sigma: a new line
 
 
 def test_line_states_are_retuned_when_the_walk_cannot_follow_and_the_model_is_unlikely():
@@ -56,10 +61,10 @@ def test_line_states_are_retuned_when_the_walk_cannot_follow_and_the_model_is_un
     line, or an error within the measurements' spread, keeps the model.
     """
     strong = Line(50.1143, 3.2e-6, (2e-4) ** 2, 2 * np.pi * 3.2e-6)
-    assert not strong.follows(50.1180, 1e-9)
-    assert strong.follows(50.1145, 1e-9)            # within 4.9 sigma: noise
+    assert not strong.follows(50.1180, CFG)
+    assert strong.follows(50.1145, CFG)             # within 4.9 sigma: noise
     weak = strong._replace(amplitude_a=1e-12, drift_a_per_hz=2 * np.pi * 1e-12)
-    assert weak.follows(50.1180, 1e-9)
+    assert weak.follows(50.1180, CFG)
 
 
 def test_a_strong_hum_is_modelled_at_the_frequency_its_later_windows_tell():

@@ -41,21 +41,22 @@ def _sums(z: np.ndarray, block: int) -> Innovations:
 
 
 def test_the_chi_square_of_the_innovations_block_sums():
+    fa = 1e-6                       # the default false_alarm
     rng = np.random.default_rng(4)
     z = rng.standard_normal(1000)
     t = np.arange(z.size)
-    assert explains(_sums(z, 50), Innovations())
+    assert explains(_sums(z, 50), Innovations(), fa)
     # a residual at the motion's period and its harmonic (3x the noise's power) adds to
     # nothing over a block of one period: explained
     wobble = 2.0 * np.sin(2 * np.pi * t / 50) + 1.5 * np.cos(4 * np.pi * t / 50 + 1)
-    assert explains(_sums(z + wobble, 50), Innovations())
+    assert explains(_sums(z + wobble, 50), Innovations(), fa)
     # a slow drift of 0.3 sigma (a move under the model) adds up: each block's square is
     # 15^2 / 50 = 4.5 above chance, about 110 over 20 blocks against a limit of 65
-    assert not explains(_sums(z + 0.3, 50), Innovations())
-    assert explains(Innovations(), Innovations())
+    assert not explains(_sums(z + 0.3, 50), Innovations(), fa)
+    assert explains(Innovations(), Innovations(), fa)
     before = _sums(z, 50)
     assert not explains(before._replace(chi2=before.chi2 + 30.0, blocks=before.blocks + 1),
-                        before)       # one block of 30: beyond chi-square(1)'s 1e-6 (23.9)
+                        before, fa)   # one block of 30: beyond chi-square(1)'s 1e-6 (23.9)
 
 
 def test_a_periodic_model_a_slow_move_refutes_is_dropped():
@@ -90,7 +91,7 @@ def test_a_model_that_explains_the_current_closes_no_block_early():
     """
     Drawn from a periodic model itself, its innovations never grow past the CUSUM's limit.
 
-    The limit is ln 10^6: a false alarm once in ~10^6 samples (innovations.CUSUM_LIMIT); 3
+    The limit is ln 10^6: a false alarm once in ~10^6 samples (innovations.cusum_limit); 3
     records of 20,000 samples close exactly the blocks of whole periods (19 s, 5 Hz: 95
     each).  The early close on a stop is `test_periodic_motion.py`'s crank that stops.
     """
@@ -105,8 +106,10 @@ def test_a_model_that_explains_the_current_closes_no_block_early():
     fs = 1000.0
     reduced = reduce_model_parts(SensorModel.named('h2', PAPER_SAMPLES['slim']), 4,
                                  (0.1, 50.0))[0]
-    config = EstimatorConfig(rest_false_alarm=1e-12, periodic_remainder_rms_m=1.25e-6)
-    ssm = StateSpaceModel(reduced, config, fs, (), 5.0)     # a drawn motion is never still
+    # a drawn motion is never still: a rest window longer than the record (the tests keep
+    # the default false_alarm, whose CUSUM limit is the one judged here)
+    config = EstimatorConfig(rest_window_s=60.0, periodic_remainder_rms_m=1.25e-6)
+    ssm = StateSpaceModel(reduced, config, fs, (), 5.0)
     period = block_samples(5.0, fs)
     for seed in range(3):
         _, y = _simulate(ssm, 20000, 2e-9, seed=seed)

@@ -108,9 +108,11 @@ SETTINGS = (
             'less than 4 um in 4 s'),
     Setting('rest_window_s', 0.2, 's', 1e-3, 60.0,
             'window of the rest test: five periods of the slowest crank of the paper'),
-    Setting('rest_false_alarm', 1e-6, '', 1e-15, 0.5,
-            'false-alarm level of each rest test: chi-square on the window spread and mean '
-            'and on each sample, and the per-sample rate of the two-sided CUSUM'),
+    Setting('false_alarm', 1e-6, '', 1e-15, 0.5,
+            "false-alarm level of each of the filter's tests: the rest tests (chi-square on "
+            'the window spread and mean and on each sample, the per-sample rate of the '
+            "two-sided CUSUM), a periodic model's test per stretch and its CUSUM per sample, "
+            "and a mains line's frequency step per check"),
 )
 
 #: Names of the settings, in order (node parameters and CLI flags use the same names).

@@ -44,7 +44,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .forward import ForwardRecord, astuple_shallow
-from .innovations import CUSUM_LIMIT, CUSUM_STEP, Innovations, block_samples
+from .innovations import CUSUM_STEP, Innovations, block_samples, cusum_limit
 from .instants import STAMP_WINDOW, OffSlot, StampEvidence, at_stamp
 from .noise import NOISE_AVERAGE_S, NOISE_FLOOR_A, NoiseMeter
 from .onset import Onset, Start, follow, follow_jump
@@ -111,7 +111,7 @@ class KalmanFilter:
                       else rest_lines_hz)
         self.rest_lines_hz = lines
         self.rest = RestTest.design(cfg.rest_window_s, model.sample_rate_hz,
-                                    cfg.rest_false_alarm, lines, cfg.offset_jump_a,
+                                    cfg.false_alarm, lines, cfg.offset_jump_a,
                                     cfg.jump_hold_s)
         # one step of each line's phasor e^{-i W_k / fs} (sliding DFT of the rest window)
         self._rot = np.exp(-2j * np.pi * np.asarray(lines) / model.sample_rate_hz)
@@ -247,7 +247,7 @@ class KalmanFilter:
 
         def evidence():             # the sums as they stand (a snapshot's, or the result's)
             return StampEvidence(zg, gg, zzgg, zggg, gggg, timed, llr, scale)
-        settled, block = self._settled, self._block
+        settled, block, limit = self._settled, self._block, cusum_limit(m.config.false_alarm)
         if copy:
             x, P, meter, win = x.copy(), P.copy(), replace(meter), win.copy()
             onset = None if onset is None else onset.copy()
@@ -301,7 +301,7 @@ class KalmanFilter:
                 zs, zn, nll = zs + z, zn + 1, nll + z * z + 2.0 * math.log(r)
                 if block > 1:           # a periodic model: its innovations grown? (.innovations)
                     cusum = max(0.0, cusum + c_gain * z * z - c_drift)
-                alarm = cusum > CUSUM_LIMIT and zn < block
+                alarm = cusum > limit and zn < block
                 if zn == block or alarm:
                     chi, blocks, zs, zn, cusum = chi + zs * zs / zn, blocks + 1, 0.0, 0, 0.0
             if dk:                      # over the last sample's sqrt(S): not this offset's

@@ -16,7 +16,7 @@ level would follow it) adds up block after block.  The test is what matters for 
 estimate: a periodic model that misreads the low frequencies misreads the level (H(0) = 0).
 A block also closes early, as soon as its innovations have grown past the model's: Page's
 CUSUM of the log-likelihood ratio of N(0, CUSUM_RATIO) against N(0, 1) per sample,
-0.5 (z^2 (1 - 1/rho) - ln rho), reset at each block, passing ``CUSUM_LIMIT``.  A crank that
+0.5 (z^2 (1 - 1/rho) - ln rho), reset at each block, passing :func:`cusum_limit`.  A crank that
 stops, the end of a slow motion a periodic model took, or a jump of the offset under it is
 then judged within tens of milliseconds instead of at the period's end (the estimate
 published meanwhile stays: on `slim-crank-stop` seed 1 the stop read 3.2 % with a
@@ -42,20 +42,19 @@ from scipy.stats import chi2 as chi2_dist
 
 from .instants import StampEvidence
 
-__all__ = ['Innovations', 'block_samples', 'explains', 'MODEL_FALSE_ALARM', 'CUSUM_RATIO',
-           'CUSUM_LIMIT', 'CUSUM_STEP']
+__all__ = ['Innovations', 'block_samples', 'explains', 'cusum_limit', 'CUSUM_CHANGE_SIGMAS',
+           'CUSUM_RATIO', 'CUSUM_STEP']
 
-#: False-alarm level of the test that a periodic model explains the current of a stretch: a
-#: model that does is refused or dropped by chance once in 10^6 stretches (11 days of checks).
-MODEL_FALSE_ALARM = 1e-6
+#: The smallest change the CUSUMs must see quickly, in predicted standard deviations: one.
+#: The model's (below) looks for innovations whose standard deviation grew by it, a variance
+#: (1 + 1)^2 = 4 times the model's: what a crank that stops gives within ~0.1 s (z^2 3-7,
+#: then 100), while a model right but for a speed wobble reads 1.3-1.6 (the CUSUM drifts
+#: down).  The rest test's (:mod:`.rest`) looks for a mean shifted by it: a motion whose
+#: current is one noise sigma (smaller ones are left to the window's level test).
+CUSUM_CHANGE_SIGMAS = 1.0
 #: The variance, over the model's, of the innovations that close a block early (Page's
-#: CUSUM of log-likelihood ratios): twice the predicted standard deviation, what a crank
-#: that stops gives within ~0.1 s (z^2 3-7, then 100), while a model right but for a speed
-#: wobble reads 1.3-1.6 (the CUSUM drifts down).
-CUSUM_RATIO = 4.0
-#: The CUSUM's limit: ln(1 / MODEL_FALSE_ALARM), a false alarm once in ~10^6 samples of a
-#: model that explains the current (Wald's bound on the run length).
-CUSUM_LIMIT = math.log(1.0 / MODEL_FALSE_ALARM)
+#: CUSUM of log-likelihood ratios).
+CUSUM_RATIO = (1.0 + CUSUM_CHANGE_SIGMAS) ** 2
 #: Its step per sample is CUSUM_STEP[0] z^2 - CUSUM_STEP[1].
 CUSUM_STEP = (0.5 * (1.0 - 1.0 / CUSUM_RATIO), 0.5 * math.log(CUSUM_RATIO))
 
@@ -76,7 +75,7 @@ class Innovations(NamedTuple):
     #: the evidence of the samples taken off their slots on when they were taken
     stamps: StampEvidence = StampEvidence()
     #: Page's CUSUM of the open block's innovations against a variance CUSUM_RATIO times
-    #: the model's: past CUSUM_LIMIT the block closes early (the model is tested then)
+    #: the model's: past :func:`cusum_limit` the block closes early (the model is tested)
     cusum: float = 0.0
 
     def closed(self) -> 'Innovations':
@@ -89,18 +88,29 @@ def block_samples(motion_hz: float, sample_rate_hz: float) -> int:
     return max(1, round(sample_rate_hz / motion_hz)) if motion_hz else 1
 
 
-def explains(now: Innovations, then: Innovations) -> bool:
+def explains(now: Innovations, then: Innovations, false_alarm: float) -> bool:
     """
     Tell whether the model explains the current between two of its states' sums.
 
-    The closed blocks' chi-square against its 1 - :data:`MODEL_FALSE_ALARM` quantile; no
-    closed block says nothing against the model.
+    The closed blocks' chi-square against its 1 - ``false_alarm`` quantile (the setting
+    ``false_alarm``: a model that explains the current is refused or dropped by chance once
+    in 10^6 stretches at 1e-6, 11 days of checks); no closed block says nothing against it.
     """
     dof = now.blocks - then.blocks
-    return dof <= 0 or now.chi2 - then.chi2 <= _limit(dof)
+    return dof <= 0 or now.chi2 - then.chi2 <= _limit(dof, false_alarm)
 
 
 @functools.lru_cache(maxsize=256)
-def _limit(dof: int) -> float:
+def _limit(dof: int, false_alarm: float) -> float:
     """Return the test's limit for ``dof`` blocks (asked as each block closes: kept)."""
-    return float(chi2_dist.isf(MODEL_FALSE_ALARM, dof))
+    return float(chi2_dist.isf(false_alarm, dof))
+
+
+def cusum_limit(false_alarm: float) -> float:
+    """
+    Return the CUSUM's limit, ln(1 / ``false_alarm``).
+
+    A false alarm once in ~1 / ``false_alarm`` samples of a model that explains the current
+    (Wald's bound on the run length).
+    """
+    return math.log(1.0 / false_alarm)

@@ -41,9 +41,9 @@ from .config import EstimatorConfig, parse_mains
 from .core import Estimate
 from .filter import FilterState, ForwardRecord, KalmanFilter
 from .fixed_lag import lag_smoother
-from .lines import NOMINAL_LINES_HZ, Line, measure_line
+from .lines import NOMINAL_LINES_HZ, SEARCH_HZ, Line, measure_line
 from .motion_band import likelier_band
-from .motionline import MOTION_LONGEST_S, MOTION_PERIODS, measure_recent
+from .motionline import MOTION_LONGEST_S, MOTION_PERIODS, MOTION_SHORTEST_S, measure_recent
 from .innovations import explains
 from .instants import at_stamp
 from .onset import due, restart
@@ -58,14 +58,16 @@ from .timebase import slots_of
 __all__ = ['KalmanEstimator', 'CHECK_S', 'LINE_WINDOW_S']
 
 #: Data between two checks of the mains line and the periodic motion, s (a stretch,
-#: :mod:`.periodic`): the delay of a periodic model, modelled at the second check that
-#: measures it; a check costs 10-20 ms on 8 s of 1 kHz current, 10-20 us a sample.  The
-#: first checks come after ``LINE_FIRST_S`` (the line to ~0.05 Hz) and twice that.
-CHECK_S = 1.0
-LINE_FIRST_S = 0.5
-#: The mains line is measured on the last this of current, s: 2 s resolves 0.5 Hz and,
-#: zero-padded, finds the line to ~0.01 Hz at 3 % hum.
-LINE_WINDOW_S = 2.0
+#: :mod:`.periodic`): the shortest stretch a periodic motion is judged on, so a motion is
+#: judged as soon as a stretch of it can be; the delay of a periodic model, modelled at the
+#: second check that measures it; a check costs 10-20 ms on 8 s of 1 kHz current, 10-20 us
+#: a sample.  The first check comes half of this early (the line to ~0.05 Hz).
+CHECK_S = MOTION_SHORTEST_S
+LINE_FIRST_S = 0.5 * CHECK_S
+#: The mains line is measured on the last this of current, s: the window that resolves the
+#: search half-width (``1 / SEARCH_HZ``, 2 s) and, zero-padded, finds the line to ~0.01 Hz
+#: at 3 % hum.
+LINE_WINDOW_S = 1.0 / SEARCH_HZ
 
 
 class KalmanEstimator(KalmanState):
@@ -252,9 +254,9 @@ class KalmanEstimator(KalmanState):
         seen = measure_line(recent, self.sample_rate_hz, self._nominal(),
                             self.config.line_harmonics)
         shared = max(0.0, 1.0 - self._check_n / recent.size) if self._line.hz else 0.0
-        self._line = self._line.joined(seen, shared)
+        self._line = self._line.joined(seen, shared, self.config.false_alarm)
         f_line, old = seen.hz and self._line.hz, self.model.fundamentals_hz
-        if f_line and len(old) == 1 and self._line.follows(old[0], self.config.line_walk_a):
+        if f_line and len(old) == 1 and self._line.follows(old[0], self.config):
             return
         if not f_line and (len(old) < 2 or self._state.samples > self._first_n):
             return        # no line: keep what is modelled (the nominal pair only at the start)
@@ -316,7 +318,7 @@ class KalmanEstimator(KalmanState):
                    for config in (remainder_configs(self.config) if f0 else (self.config,))]
         filt, run = likeliest(span, filters)
         if not self._take_over(filt, span, lambda run: not f0 or explains(
-                run.now.innovations, run.start.innovations), run=run):
+                run.now.innovations, run.start.innovations, self.config.false_alarm), run=run):
             self._log.current.measured_hz = 0.0         # refused: it counts as none
 
     def _take_over(self, filt: KalmanFilter, span, accept=None, jump_at=None,

@@ -32,26 +32,30 @@ innovations' variance grew to 38 times the model's over 20 s.
 """
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
 import numpy as np
 from scipy.stats import norm
 
-from .innovations import MODEL_FALSE_ALARM
 
-__all__ = ['measure_line', 'Line', 'NOMINAL_LINES_HZ', 'SEARCH_HZ', 'PAD', 'family_peak', 'vertex',
-           'local_level', 'local_levels']
+__all__ = ['measure_line', 'Line', 'NOMINAL_LINES_HZ', 'SEARCH_HZ', 'FIND_FALSE_ALARM', 'PAD',
+           'family_peak', 'vertex', 'local_level', 'local_levels']
 
 #: Nominal mains frequencies, Hz.
 NOMINAL_LINES_HZ = (50.0, 60.0)
-#: Search half-width about a nominal frequency, Hz (grids stay within +-0.5 Hz).
+#: Search half-width about a nominal frequency, Hz: a grid's tolerance (European and North
+#: American grids stay within +-0.2 Hz in normal operation; 1 % of 50 Hz covers islanded
+#: supplies and DAQ clock errors).
 SEARCH_HZ = 0.5
+#: False-alarm level of finding a mains line or a periodic motion in one window: what is
+#: found is a candidate (a line's states learn ~0 where there is none; a motion's model must
+#: explain the current at ``false_alarm`` before it is taken), what is missed is not modelled
+#: at all, so the search is the more permissive of the two.
+FIND_FALSE_ALARM = 1e-4
 #: Zero-padding factor of the periodogram (frequency grid 1/(PAD T)).
 PAD = 8
-#: A measurement this many standard deviations from the line known so far is a new line (a
-#: grid whose frequency stepped, another line), by chance once in 1/MODEL_FALSE_ALARM checks.
-_NEW_LINE_Z = float(norm.isf(0.5 * MODEL_FALSE_ALARM))
 #: the level (A^2) taken for a noise-free line: its information huge but finite, even at
 #: the 1 A input limit
 _TINY = 1e-300
@@ -69,41 +73,50 @@ class Line(NamedTuple):
     #: how fast a frequency error turns the line's phasors: 2 pi max_k k A_k, A/s per Hz
     drift_a_per_hz: float = 0.0
 
-    def joined(self, new: 'Line', shared: float = 0.0) -> 'Line':
+    def joined(self, new: 'Line', shared: float, false_alarm: float) -> 'Line':
         """
         Return this line's frequency joined with a new measurement of it (inverse variance).
 
         ``shared``: the fraction of the new window's samples the last window measured too
         (windows of 2 s every second: 0.5); the new measurement counts for 1 - ``shared``
-        of its information.  A measurement farther than ``_NEW_LINE_Z`` standard deviations
-        from this one starts afresh (the line changed); no line measured keeps this one.
+        of its information.  A measurement farther from this one than chance puts it once in
+        1 / ``false_alarm`` checks (:func:`_new_line_z` standard deviations) starts afresh (a
+        grid whose frequency stepped, another line); no line measured keeps this one.
         """
         if not new.hz:
             return self
         var = new.hz_var / max(1.0 - shared, 1e-12)
-        if not self.hz or (new.hz - self.hz) ** 2 > _NEW_LINE_Z ** 2 * (self.hz_var + var):
+        z = _new_line_z(false_alarm)
+        if not self.hz or (new.hz - self.hz) ** 2 > z * z * (self.hz_var + var):
             return new._replace(hz_var=var)
         joined_var = 1.0 / (1.0 / self.hz_var + 1.0 / var)
         hz = joined_var * (self.hz / self.hz_var + new.hz / var)
         return new._replace(hz=hz, hz_var=joined_var)
 
-    def follows(self, model_hz: float, walk_a: float) -> bool:
+    def follows(self, model_hz: float, config) -> bool:
         """
         Tell whether line states at ``model_hz`` follow this line: keep them.
 
         A frequency error df turns harmonic k's phasor by 2 pi k df rad/s: its states move by
         ``drift_a_per_hz`` df in a second, against ``walk_a`` (A/sqrt(s): their walk's RMS
-        over a second); beyond it the states lag the line and its residual grows.  And a
-        ``model_hz`` within ``_NEW_LINE_Z`` standard deviations of this line is as likely as
-        the joined frequency (retuning to it would chase the measurements' noise).
+        over a second; ``config.line_walk_a``); beyond it the states lag the line and its
+        residual grows.  And a ``model_hz`` not a new line (:meth:`joined`, at
+        ``config.false_alarm``) is as likely as the joined frequency (retuning to it would
+        chase the measurements' noise).
         """
-        error = abs(self.hz - model_hz)
-        return (self.drift_a_per_hz * error <= walk_a
-                or error * error <= _NEW_LINE_Z ** 2 * self.hz_var)
+        error, z = abs(self.hz - model_hz), _new_line_z(config.false_alarm)
+        return (self.drift_a_per_hz * error <= config.line_walk_a
+                or error * error <= z * z * self.hz_var)
+
+
+@functools.lru_cache(maxsize=8)
+def _new_line_z(false_alarm: float) -> float:
+    """Return the standard deviations beyond which a measurement is a new line (two-sided)."""
+    return float(norm.isf(0.5 * false_alarm))
 
 
 def measure_line(current_a, sample_rate_hz: float, nominal=NOMINAL_LINES_HZ,
-                 harmonics: int = 3, false_alarm: float = 1e-4) -> Line:
+                 harmonics: int = 3, false_alarm: float = FIND_FALSE_ALARM) -> Line:
     """
     Return the strongest mains line (:class:`Line`; ``Line()`` when there is none).
 

@@ -38,7 +38,7 @@ from scipy.optimize import minimize_scalar
 from scipy.special import jv
 from scipy.stats import gamma
 
-from .lines import PAD, local_levels, vertex
+from .lines import FIND_FALSE_ALARM, PAD, local_levels, vertex
 from .statespace import harmonics_below, motion_intensity
 
 __all__ = ['measure_motion', 'measure_recent', 'MOTION_PERIODS', 'MOTION_LONGEST_S',
@@ -52,11 +52,9 @@ MOTION_PERIODS = 4.0
 #: The longest stretch judged live, s: periodic motions down to MOTION_PERIODS / this
 #: (0.5 Hz, below the paper's 1 Hz crank) are modelled, and no slower.
 MOTION_LONGEST_S = 8.0
-#: A stretch shorter than this, s, is not judged (None).
-MOTION_SHORTEST_S = 1.0
-#: The fit holds its phasors over pieces of at least this, s (and two periods): short against
-#: a motor's speed wobble, long against a period.
-MOTION_PIECE_S = 0.5
+#: A stretch shorter than this, s, is not judged (None): the longest over 2^3, so a live
+#: stream is judged on four stretches, each twice the last (:func:`measure_recent`).
+MOTION_SHORTEST_S = MOTION_LONGEST_S / 8.0
 #: The stretch is measured at this rate or the lowest above it (block means of the samples,
 #: whose nulls fall on the aliases of the band), Hz: above the motion band and 3 mains
 #: harmonics, and it bounds the cost of a measurement at high sample rates.
@@ -66,6 +64,10 @@ MOTION_RATE_HZ = 1000.0
 #: allowed in the residual (:func:`_wobble_power`).
 MOTION_WOBBLE = 0.02
 MOTION_WOBBLE_HZ = 0.5
+#: The fit holds its phasors over pieces of at least this, s (and two periods): short
+#: against a motor's speed wobble (a quarter of the fastest one's period), long against a
+#: period.
+MOTION_PIECE_S = 0.25 / MOTION_WOBBLE_HZ
 #: Bessel orders and rates counted in the wobble bound: the index reaches ~8 on a live
 #: stretch (8 s, 25 Hz), whose sidebands above the 12th are negligible; more than
 #: 4 MOTION_WOBBLE_HZ beyond the frequency excursion every order is near 1e-6 of the line or
@@ -90,7 +92,7 @@ def measure_recent(current_a, sample_rate_hz: float, model, settings=None) -> fl
     available = x.size / fs
     if available < MOTION_SHORTEST_S - 1e-9:
         return None
-    spans = sorted({min(available, MOTION_LONGEST_S / 2 ** j) for j in (3, 2, 1, 0)})
+    spans = sorted({min(available, MOTION_SHORTEST_S * 2 ** j) for j in range(4)})
     for span in spans:
         f0 = measure_motion(x[-int(round(span * fs)):], fs, model, settings=settings)
         if f0:
@@ -98,8 +100,8 @@ def measure_recent(current_a, sample_rate_hz: float, model, settings=None) -> fl
     return 0.0
 
 
-def measure_motion(current_a, sample_rate_hz: float, model, false_alarm: float = 1e-4,
-                   settings=None) -> float | None:
+def measure_motion(current_a, sample_rate_hz: float, model,
+                   false_alarm: float = FIND_FALSE_ALARM, settings=None) -> float | None:
     """
     Return the fundamental of a periodic motion in a stretch of current, Hz.
 

@@ -88,7 +88,8 @@ def likeliest(span: Stretch, filters) -> tuple:
         run = refilter(span, filt)
         if best is None:
             best = filt, run
-        if not explains(run.now.innovations, run.start.innovations):
+        if not explains(run.now.innovations, run.start.innovations,
+                        filt.model.config.false_alarm):
             continue
         if run.nll < lowest:
             best, lowest = (filt, run), run.nll
@@ -206,7 +207,8 @@ class StretchLog:
         """
         cur = self.current
         if (not cur.filter.model.motion_hz
-                or explains(state.innovations, cur.state.innovations)):
+                or explains(state.innovations, cur.state.innovations,
+                            cur.filter.model.config.false_alarm)):
             return None
         cur.measured_hz = 0.0
         return cur
@@ -330,7 +332,8 @@ def after_refutation(whole: Stretch, filt: KalmanFilter, drop: KalmanFilter,
     if at is None:
         return Change(drop, whole)
     jumped = refilter(whole, filt, jump_at=at)
-    if not explains(jumped.now.innovations, jumped.start.innovations):
+    if not explains(jumped.now.innovations, jumped.start.innovations,
+                    filt.model.config.false_alarm):
         return Change(drop, whole)
     n = len(whole.y)
     period = block_samples(filt.model.motion_hz, filt.model.sample_rate_hz)

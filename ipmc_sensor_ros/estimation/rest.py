@@ -5,7 +5,7 @@ The rest test: whether the sensor is still over the last ``rest_window_s``.
 A still sensor's current is its offset, the mains lines and white noise (H(0) = 0: a held
 deflection gives no current).  Over the window's N samples of the current i, fitted by
 least squares with a constant c and the K modelled mains lines, two chi-square tests at the
-level ``rest_false_alarm`` decide:
+level ``false_alarm`` decide:
 
 * **spread**: sum (i - c - lines)^2 / R < chi2_{N-1-2K}: no motion current beyond the
   noise R, which the filter measures (:mod:`.filter`), once the window's own least-squares
@@ -66,13 +66,14 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.stats import chi2
 
+from .innovations import CUSUM_CHANGE_SIGMAS
 from .rest_jump import JumpRun
 
 __all__ = ['RestTest', 'RestWindow', 'CUSUM_DRIFT']
 
-#: CUSUM drift, in noise sigmas: half the smallest shift it must see quickly (a motion whose
-#: current is one noise sigma; smaller ones are left to the window's level test).
-CUSUM_DRIFT = 0.5
+#: CUSUM drift, in noise sigmas: half the smallest shift it must see quickly
+#: (:data:`~.innovations.CUSUM_CHANGE_SIGMAS`).
+CUSUM_DRIFT = 0.5 * CUSUM_CHANGE_SIGMAS
 
 
 @dataclass(frozen=True)

@@ -96,9 +96,9 @@ MAX_WINDOW_SAMPLES = 8192
 FIRST_WINDOW_SAMPLES = 8
 
 #: Share of a period the grid may drift within one window for an uncertain period: of the
-#: half period between slots, ``JITTER_FRACTION`` is the stamps' and the rest is shared by
-#: the drift and the anchor's own error.
-DRIFT_MARGIN = 0.125
+#: half period between slots, ``JITTER_FRACTION`` is the stamps' and the rest is shared
+#: equally by the drift and the anchor's own error (0.125).
+DRIFT_MARGIN = 0.5 * (0.5 - JITTER_FRACTION)
 
 #: Fewest samples whose median spacing may re-lock the grid: the median of 31 spacings of a
 #: stream with 25 % jitter exceeds 1.25 periods with a probability below 1e-5.

@@ -50,15 +50,15 @@ from typing import Sequence
 import numpy as np
 
 from ...estimation.config import parse_mains as parse_mains_hz
+from ...estimation.lines import SEARCH_HZ
 from .drive import drive_of
 
 __all__ = ['MainsLine', 'MAINS_SEARCH_HZ', 'LEVEL_BAND_HZ', 'parse_mains', 'find_mains_lines',
            'line_threshold', 'summarize_lines']
 
-#: Search half-width around the nominal mains frequency, Hz (grid tolerance: European and
-#: North American grids stay within +-0.2 Hz in normal operation; 1 % of 50 Hz covers
-#: islanded supplies and DAQ clock errors).
-MAINS_SEARCH_HZ = 0.5
+#: Search half-width around the nominal mains frequency, Hz: the estimator's
+#: (:data:`~ipmc_sensor_ros.estimation.lines.SEARCH_HZ`), one rule for both.
+MAINS_SEARCH_HZ = SEARCH_HZ
 #: Half-width of the band whose residual spectrum gives a line's noise level, Hz (wide enough
 #: for ~50 bins on a 6 s record, narrow enough that the level is local).
 LEVEL_BAND_HZ = 5.0
