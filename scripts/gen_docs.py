@@ -5,12 +5,16 @@ Regenerate the generated parts of the documents (test/test_docs.py keeps them cu
 * ``docs/ros_interface.md``: the parameter tables, from ``interface/specs.py`` and
   ``interface/simulator.py``, between ``<!-- BEGIN GENERATED: NAME -->`` and
   ``<!-- END GENERATED -->``;
+* ``docs/estimator.md``: the settings table, from ``estimation/config.py``'s ``SETTINGS``, and
+  the numbers written in the estimator's code (:func:`code_constants`, classified by
+  ``CODE_CONSTANTS``), with the ``#:`` comment that gives each its reason;
 * ``docs/effects.md``: the effect catalog, from ``physics/catalog.py``.
 
 Run: ``python scripts/gen_docs.py`` (from the repository root or anywhere).
 """
 from __future__ import annotations
 
+import ast
 import re
 import sys
 from pathlib import Path
@@ -27,7 +31,62 @@ def _parts() -> dict:
     from ipmc_sensor_ros.interface.specs import ESTIMATOR_SPECS, markdown_table
 
     return {'estimator parameters': markdown_table(ESTIMATOR_SPECS),
-            'simulator parameters': markdown_table(SIMULATOR_OWN_SPECS)}
+            'simulator parameters': markdown_table(SIMULATOR_OWN_SPECS),
+            'estimator settings': _settings_table(), 'estimator constants': _constants_table()}
+
+
+def code_constants(package: Path = ROOT / 'ipmc_sensor_ros' / 'estimation') -> list[tuple]:
+    """
+    Return (``module.NAME``, value as written, ``#:`` comment) of each numeric literal.
+
+    Module-level assignments to an upper-case name whose value holds no name (a number, a
+    tuple of numbers, an expression of numbers); derived ones (``CHECK_S = ...``) are not.
+    """
+    found = []
+    for path in sorted(package.glob('*.py')):
+        source = path.read_text(encoding='utf-8')
+        lines = source.splitlines()
+        for node in ast.parse(source).body:
+            target = (node.targets[0] if isinstance(node, ast.Assign) else
+                      node.target if isinstance(node, ast.AnnAssign) else None)
+            if (not isinstance(target, ast.Name) or node.value is None
+                    or not re.fullmatch(r'_?[A-Z][A-Z0-9_]*', target.id)
+                    or any(isinstance(n, (ast.Name, ast.Attribute, ast.Call))
+                           for n in ast.walk(node.value))):
+                continue
+            value = eval(compile(ast.Expression(node.value), str(path), 'eval'), {})
+            if not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                       for v in (value if isinstance(value, tuple) else (value,))):
+                continue
+            comment, k = [], node.lineno - 2
+            while k >= 0 and lines[k].startswith('#:'):
+                comment.insert(0, lines[k][2:].strip())
+                k -= 1
+            found.append((f'{path.stem}.{target.id}', ast.get_source_segment(source, node.value),
+                          ' '.join(comment)))
+    return found
+
+
+def _settings_table() -> str:
+    from ipmc_sensor_ros.estimation.config import SETTINGS
+
+    rows = [f'| `{s.name}` | {s.default:g} | {s.unit} | {s.text} |' for s in SETTINGS]
+    return '\n'.join(['| setting | default | unit | what it says, and why |',
+                      '|---|---|---|---|', *rows])
+
+
+def _constants_table() -> str:
+    from ipmc_sensor_ros.estimation.config import CODE_CONSTANTS
+
+    found = code_constants()
+    rows = [f'| `{name}` | `{value}` | {CODE_CONSTANTS.get(name, "?")} | {why} |'
+            for kind in ('tuning', 'stream', 'physical')
+            for name, value, why in found if CODE_CONSTANTS.get(name) == kind]
+    rest = {kind: sorted(f'`{name}`' for name, _, _ in found if CODE_CONSTANTS.get(name) == kind)
+            for kind in ('numerical', 'limit', 'baseline')}
+    return '\n'.join(['| constant | value | kind | why |', '|---|---|---|---|', *rows, '',
+                      *(f'{kind.capitalize()}: {", ".join(names)}.' for kind, names in
+                        rest.items())])
 
 
 def _render(text: str, parts: dict) -> str:
@@ -44,8 +103,10 @@ def _render(text: str, parts: dict) -> str:
 def _targets() -> dict[Path, str]:
     from ipmc_sensor_ros.physics.effects import catalog_markdown
 
-    ros = ROOT / 'docs' / 'ros_interface.md'
-    return {ros: _render(ros.read_text(encoding='utf-8'), _parts()),
+    parts = _parts()
+    ros, est = ROOT / 'docs' / 'ros_interface.md', ROOT / 'docs' / 'estimator.md'
+    return {ros: _render(ros.read_text(encoding='utf-8'), parts),
+            est: _render(est.read_text(encoding='utf-8'), parts),
             ROOT / 'docs' / 'effects.md': EFFECTS_HEAD + catalog_markdown().rstrip() + '\n'}
 
 

@@ -96,4 +96,4 @@ def test_the_take_over_does_not_depend_on_how_the_stream_is_cut(cut):
     assert np.array_equal(np.concatenate(parts), whole)
     one = KalmanEstimator(reduced, fs)
     assert np.array_equal(np.array([one.estimate_one(v)[0] for v in y[:700]]), whole[:700])
-    assert est.line_hz == pytest.approx(50.2, abs=0.02)
+    assert est.model.line_hz == pytest.approx(50.2, abs=0.02)

@@ -103,6 +103,14 @@ SETTINGS = (
             "timed by the host), not a host's time for a sample taken on the DAQ's own clock "
             '(the stamp late by a varying delay): at 0.5 the data decide (the innovations '
             "against what the stamps' offsets from their slots would explain); 0 or 1 fixes it"),
+    Setting('noise_average_s', 1.0, 's', 1e-3, 3600.0,
+            'averaging time of the measured white-noise variance: long against a sample, '
+            'short against a record (the noise is known this long after the start; the '
+            "periodic model's test counts the innovations from then)"),
+    Setting('nonlinear_mean_corner_hz', 0.005, 'Hz', 1e-6, 10.0,
+            "corner of the running mean of a nonlinear sensor's T(w) - w restored while "
+            'moving (time constant 32 s): many periods of a 1 Hz crank, while a 0.2 s move '
+            'to a hold shifts it by 0.6 % of its gap'),
     Setting('rest_velocity_m_s', 1e-6, 'm/s', 1e-12, 1.0,
             "RMS velocity of a tip at rest (the rest pseudo-measurement's std): a hold creeps "
             'less than 4 um in 4 s'),
@@ -188,3 +196,35 @@ def parse_mains(value) -> str | float:
     if f not in (0.0, 50.0, 60.0):
         raise ParameterError(f"parameter 'mains_hz' must be 'auto', 0, 50 or 60, got {value!r}")
     return f
+
+
+#: Every number written as a module-level literal in ``ipmc_sensor_ros/estimation``, by kind:
+#: ``tuning``, a choice of the Kalman estimator's model and filter the data do not make (at
+#: most 10; the settings above are the rest); ``stream``, the time base's rules for stamps
+#: (:mod:`.timebase`, :mod:`.stream`, both cores); ``physical``; ``numerical``, precision,
+#: cost and sizes that do not change an estimate beyond rounding; ``limit``, what input is
+#: accepted; ``baseline``, the leaky core, its mains notch and the status's line detector.
+#: ``test_docs`` finds every such literal and checks it is here; ``docs/estimator.md`` lists
+#: them with their reasons.
+CODE_CONSTANTS = {
+    'innovations.CUSUM_CHANGE_SIGMAS': 'tuning', 'instants.STAMP_WINDOW': 'tuning',
+    'lines.FIND_FALSE_ALARM': 'tuning', 'motion_band.BAND_CHOICES': 'tuning',
+    'motionline.MOTION_PERIODS': 'tuning', 'motionline.MOTION_LONGEST_S': 'tuning',
+    'motionline.MOTION_WOBBLE': 'tuning', 'motionline.MOTION_WOBBLE_HZ': 'tuning',
+    'noise.NOISE_CLIP': 'tuning', 'periodic.REMAINDER_CHOICES': 'tuning',
+    'timebase.JITTER_FRACTION': 'stream', 'timebase.RATE_WINDOW_S': 'stream',
+    'timebase.FIRST_WINDOW_SAMPLES': 'stream', 'timebase.RELOCK_MIN_SAMPLES': 'stream',
+    'timebase.SIGNIFICANCE': 'stream', 'stream.RATE_FOLLOW_FRACTION': 'stream',
+    'lines.NOMINAL_LINES_HZ': 'physical', 'lines.SEARCH_HZ': 'physical',
+    'limits.DEFLECTION_LIMIT_PER_LENGTH': 'physical',
+    'lines.PAD': 'numerical', 'lines._TINY': 'numerical', 'motionline.MOTION_RATE_HZ':
+    'numerical', 'motionline._SIDEBANDS': 'numerical', 'motionline._RATES': 'numerical',
+    'noise.NOISE_FLOOR_A': 'numerical', 'statespace.HOLD_RELEASE': 'numerical',
+    'statespace.OFF_SLOT_STEPS': 'numerical', 'smoother.CHUNK_SAMPLES': 'numerical',
+    'inverse.SMALL_BLOCK_SAMPLES': 'numerical',
+    'accounting.MAX_BLOCK_SAMPLES': 'limit', 'accounting.MAX_ABS_CURRENT_A': 'limit',
+    'fixed_lag.MAX_LAG_SAMPLES': 'limit', 'timebase.MAX_STAMP_S': 'limit',
+    'timebase.MAX_WINDOW_SAMPLES': 'limit',
+    'leaky_design.DEFAULT_LEAK_CORNER_HZ': 'baseline', 'mains.LINE_WARN_RATIO': 'baseline',
+    'mains.DETECT_RATE_HZ': 'baseline',
+}

@@ -40,6 +40,10 @@ class EstimatorCore(Protocol):
     @property
     def sample_rate_hz(self) -> float: ...
 
+    @property
+    def mean_corner_hz(self) -> float:
+        """Corner of the running mean of a nonlinear sensor's T(w) - w while moving, Hz."""
+
     def estimate(self, current_a: np.ndarray, steps: np.ndarray | None = None) -> Estimate:
         """Filter a block; ``steps[k]`` sample periods since the sample before (None: 1)."""
 

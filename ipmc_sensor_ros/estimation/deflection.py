@@ -16,8 +16,9 @@ handles the model's other effects around the core, per block:
 * effects with an ``input_transform`` T (e.g. ``nonlinearity``) are undone on the core's
   output (``inverse_input_transform``).  The sensor cannot see the mean of T(w) (H(0) = 0)
   and the core centres its moving estimate on its working point, so the estimator adds back
-  m = <T(w) - w>, averaged while moving (``NONLINEAR_MEAN_CORNER_HZ``; the leaky core: at its
-  leak corner) and frozen at rest, where the core holds an absolute level;
+  m = <T(w) - w>, averaged while moving (the core's ``mean_corner_hz``: the setting
+  ``nonlinear_mean_corner_hz``; the leaky core: its leak corner) and frozen at rest, where
+  the core holds an absolute level;
 * a time-varying material (``hydration_drift``) is followed by rebuilding the core every
   ``update_s`` seconds of data time for the material at that time, each reduction
   warm-started from the previous one; the new core continues from the old one's state.
@@ -48,10 +49,6 @@ from .mains import MainsFilter, detect_lines
 from .ring import SampleRing
 
 __all__ = ['DeflectionEstimator', 'ESTIMATORS', 'leak_transient_s']
-
-#: Corner of the running mean of T(w) - w while the Kalman core moves, Hz (time constant 32 s):
-#: many periods of a 1 Hz crank, while a 0.2 s move to a hold shifts it by 0.6 % of its gap.
-NONLINEAR_MEAN_CORNER_HZ = 0.005
 
 
 def leak_transient_s(corner_hz: float) -> float:
@@ -254,8 +251,7 @@ class DeflectionEstimator:
         return Estimate(*(np.concatenate(p) for p in zip(*parts)))
 
     def _undo_input_transforms(self, est: Estimate) -> np.ndarray:
-        corner = getattr(self.core, 'leak_corner_hz', NONLINEAR_MEAN_CORNER_HZ)
-        return self._deflection_inv.undo(est, corner, self.sample_rate_hz)
+        return self._deflection_inv.undo(est, self.core.mean_corner_hz, self.sample_rate_hz)
 
     def pop_smoothed(self, flush: bool = False):
         """

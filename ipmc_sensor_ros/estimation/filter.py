@@ -46,14 +46,14 @@ import numpy as np
 from .forward import ForwardRecord, astuple_shallow
 from .innovations import CUSUM_STEP, Innovations, block_samples, cusum_limit
 from .instants import STAMP_WINDOW, OffSlot, StampEvidence, at_stamp
-from .noise import NOISE_AVERAGE_S, NOISE_FLOOR_A, NoiseMeter
+from .noise import NOISE_FLOOR_A, NoiseMeter
 from .onset import Onset, Start, follow, follow_jump
 from .rest import RestTest, RestWindow
 from .statespace import StateSpaceModel
 from .timebase import slots_of
 
 __all__ = ['FilterState', 'KalmanFilter', 'ForwardRecord', 'astuple_shallow', 'NoiseMeter',
-           'NOISE_AVERAGE_S', 'NOISE_FLOOR_A']
+           'NOISE_FLOOR_A']
 
 
 @dataclass(slots=True)
@@ -117,8 +117,8 @@ class KalmanFilter:
         self._rot = np.exp(-2j * np.pi * np.asarray(lines) / model.sample_rate_hz)
         self._c_lines = np.zeros(model.size)        # the mains lines' current
         self._c_lines[model.il:model.im] = model.c[model.il:model.im]
-        self._alpha = 1.0 / (NOISE_AVERAGE_S * model.sample_rate_hz)
-        #: the first sample whose innovation the test counts (R measured: NOISE_AVERAGE_S)
+        self._alpha = 1.0 / (cfg.noise_average_s * model.sample_rate_hz)
+        #: the first sample whose innovation the test counts (R measured: noise_average_s)
         self._settled = math.ceil(1.0 / self._alpha)
         self._block = block_samples(model.motion_hz, model.sample_rate_hz)
         s = model.scale
@@ -197,7 +197,7 @@ class KalmanFilter:
         Return the samples after which the filter closes its next innovation block.
 
         A block is one period of the periodic motion (:mod:`.innovations`), counted from
-        the first sample after ``NOISE_AVERAGE_S``; without a periodic model, 0 (none).
+        the first sample after ``noise_average_s``; without a periodic model, 0 (none).
         """
         if self._block == 1:
             return 0

@@ -60,7 +60,7 @@ CUSUM_STEP = (0.5 * (1.0 - 1.0 / CUSUM_RATIO), 0.5 * math.log(CUSUM_RATIO))
 
 
 class Innovations(NamedTuple):
-    """The test's sums, kept by the filter (not over its first ``NOISE_AVERAGE_S``)."""
+    """The test's sums, kept by the filter (not over its first ``noise_average_s``)."""
 
     #: sum over the closed blocks of (sum of z)^2 / samples in the block
     chi2: float = 0.0

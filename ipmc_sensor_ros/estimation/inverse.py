@@ -98,6 +98,11 @@ class InverseEstimator:
     def prewarp_hz(self) -> float:
         return self._design.prewarp_hz
 
+    @property
+    def mean_corner_hz(self) -> float:
+        """Corner of a nonlinear sensor's mean restored while moving: the leak's, Hz."""
+        return self.leak_corner_hz
+
     def poles(self) -> np.ndarray:
         """Discrete poles, all strictly inside the unit circle."""
         return sig.sos2zpk(self.sos)[1]

@@ -142,9 +142,9 @@ class KalmanEstimator(KalmanState):
         return self._filter.model
 
     @property
-    def line_hz(self) -> float:
-        """Mains fundamental in the model now, Hz (0: none)."""
-        return self._filter.model.line_hz
+    def mean_corner_hz(self) -> float:
+        """Corner of a nonlinear sensor's mean restored while moving, Hz (the setting)."""
+        return self.config.nonlinear_mean_corner_hz
 
     def reset(self) -> None:
         """Start afresh: the nominal lines (the measured ones are measured again) and the prior."""
@@ -384,7 +384,7 @@ class KalmanEstimator(KalmanState):
         return {'estimator': self.name, 'offset_a': b, 'offset_std_a': b_std,
                 'at_rest': bool(self._state.still), 'deflection_std_m': w_std,
                 'noise_a': math.sqrt(self._state.noise.var_a2),
-                'mains_line_hz': self.line_hz, 'mains_line_a': level,
+                'mains_line_hz': self.model.line_hz, 'mains_line_a': level,
                 'motion_hz': self.model.motion_hz,
                 'motion_remainder_m': (self.model.config.periodic_remainder_rms_m
                                        if self.model.motion_hz else None),

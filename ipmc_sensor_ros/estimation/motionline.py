@@ -63,6 +63,7 @@ MOTION_RATE_HZ = 1000.0
 #: motor under a crank's varying load): the sidebands it puts beside each harmonic are
 #: allowed in the residual (:func:`_wobble_power`).
 MOTION_WOBBLE = 0.02
+#: The fastest such wobble, Hz: a crank's load cycle seen through the motor's inertia.
 MOTION_WOBBLE_HZ = 0.5
 #: The fit holds its phasors over pieces of at least this, s (and two periods): short
 #: against a motor's speed wobble (a quarter of the fastest one's period), long against a
@@ -73,6 +74,7 @@ MOTION_PIECE_S = 0.25 / MOTION_WOBBLE_HZ
 #: 4 MOTION_WOBBLE_HZ beyond the frequency excursion every order is near 1e-6 of the line or
 #: below, and no bound is added.
 _SIDEBANDS = 24
+#: (the rates from the stretch's resolution to MOTION_WOBBLE_HZ, geometric)
 _RATES = 24
 
 

@@ -5,13 +5,13 @@ The white-noise variance per sample the Kalman filter measures (R of :mod:`.filt
 R, the white-noise variance per sample, is measured on the current less the lines the filter
 holds: the third difference i_k - 3 i_{k-1} + 3 i_{k-2} - i_{k-3} has variance 20 R for white
 noise and passes a current at f only as (2 sin(pi f / fs))^6 (4e-6 at 20 Hz, 0.06 at 150 Hz,
-at 1 kHz), so its square / 20, averaged over ``NOISE_AVERAGE_S`` (weights normalised, so the
-first differences already give R; ``current_noise_a`` until then), is R.  A hum is not small
-there (0.56 at 150 Hz: a 2 % hum with harmonics read a 0.5 nA noise as 3.9 nA), so the lines'
-own third difference is taken off first, as the filter predicts it from its state before the
-four samples (:attr:`.filter.KalmanFilter.line_difference`: the phasors turned on; the state after
-them has fitted their noise, and a second's lines taken from it read a 20 nA noise as
-16 nA).  Differences across a bridged gap are skipped.
+at 1 kHz), so its square / 20, averaged over the setting ``noise_average_s`` (weights
+normalised, so the first differences already give R; ``current_noise_a`` until then), is R.
+A hum is not small there (0.56 at 150 Hz: a 2 % hum with harmonics read a 0.5 nA noise as
+3.9 nA), so the lines' own third difference is taken off first, as the filter predicts it
+from its state before the four samples (:attr:`.filter.KalmanFilter.line_difference`: the
+phasors turned on; the state after them has fitted their noise, and a second's lines taken
+from it read a 20 nA noise as 16 nA).  Differences across a bridged gap are skipped.
 
 An ADC's rounding is noise of variance q^2 / 12 for a step q (uniform within a step), which
 the third difference misses while the reading sits on one code: R is at least that, q the
@@ -27,11 +27,8 @@ from dataclasses import dataclass
 
 from .rest import RestWindow
 
-__all__ = ['NoiseMeter', 'NOISE_AVERAGE_S', 'NOISE_CLIP', 'NOISE_FLOOR_A']
+__all__ = ['NoiseMeter', 'NOISE_CLIP', 'NOISE_FLOOR_A']
 
-#: Averaging time of the measured noise variance, s: long against one sample, short against a
-#: record (the noise is known within a second of the start).
-NOISE_AVERAGE_S = 1.0
 #: One sample counts at most this many times the measured variance in the noise average (a
 #: step in the current moves the measured noise by at most this, not by its square).
 NOISE_CLIP = 25.0
