@@ -13,14 +13,25 @@ which core it holds.  Two cores implement :class:`EstimatorCore`:
 """
 from __future__ import annotations
 
+import math
 from typing import Any, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ['Estimate', 'EstimatorCore', 'ESTIMATORS']
+__all__ = ['Estimate', 'EstimatorCore', 'ESTIMATORS', 'forgets_s']
 
 #: Names of the cores (node parameter ``estimator``, CLI ``--estimator``).
 ESTIMATORS = ('kalman', 'leaky')
+
+
+def forgets_s(corner_hz: float) -> float:
+    """
+    Return how long a first-order corner at ``corner_hz`` takes to forget a level, s.
+
+    Five time constants (e^-5, below 1 %): the settling a core reports
+    (:meth:`EstimatorCore.settling`).
+    """
+    return 5.0 / (2.0 * math.pi * corner_hz)
 
 
 class Estimate(NamedTuple):

@@ -48,12 +48,7 @@ from .kalman import KalmanEstimator
 from .mains import MainsFilter, detect_lines
 from .ring import SampleRing
 
-__all__ = ['DeflectionEstimator', 'ESTIMATORS', 'leak_transient_s']
-
-
-def leak_transient_s(corner_hz: float) -> float:
-    """Return the time a leak at ``corner_hz`` takes to forget a level, s: 5 time constants."""
-    return 5.0 / (2 * np.pi * corner_hz)
+__all__ = ['DeflectionEstimator', 'ESTIMATORS']
 
 
 class DeflectionEstimator:

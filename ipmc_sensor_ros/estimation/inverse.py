@@ -253,7 +253,9 @@ class InverseEstimator:
 
     def settling(self) -> tuple[float, str]:
         """Five time constants of the leak: it has forgotten the unknown starting level."""
-        return 5.0 / (2 * math.pi * self.leak_corner_hz), 'leak transient'
+        from .core import forgets_s
+
+        return forgets_s(self.leak_corner_hz), 'leak transient'
 
     def process_sample(self, current_a: float) -> float:
         """One sample of a single-channel estimator (alias of :meth:`process_one`)."""

@@ -38,7 +38,7 @@ import numpy as np
 from ..lti.reduction import ReducedModel
 from .carry import Changes
 from .config import EstimatorConfig, parse_mains
-from .core import Estimate
+from .core import Estimate, forgets_s
 from .filter import FilterState, ForwardRecord, KalmanFilter
 from .fixed_lag import lag_smoother
 from .lines import NOMINAL_LINES_HZ, SEARCH_HZ, Line, measure_line
@@ -396,5 +396,5 @@ class KalmanEstimator(KalmanState):
     def settling(self) -> tuple[float, str]:
         if self._first_rest_n is not None:
             return self._first_rest_n / self.sample_rate_hz, 'level learned at the first rest'
-        return (5.0 / (2 * math.pi * self.config.motion_corner_hz),
-                'no rest yet: five time constants of motion_corner_hz')
+        why = 'no rest yet: five time constants of motion_corner_hz'
+        return forgets_s(self.config.motion_corner_hz), why

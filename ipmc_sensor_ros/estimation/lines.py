@@ -39,6 +39,8 @@ from typing import NamedTuple
 import numpy as np
 from scipy.stats import norm
 
+from ..lti.discretize import USABLE_BAND_FRACTION
+
 
 __all__ = ['measure_line', 'Line', 'NOMINAL_LINES_HZ', 'SEARCH_HZ', 'FIND_FALSE_ALARM', 'PAD',
            'family_peak', 'vertex', 'local_level', 'local_levels']
@@ -131,9 +133,9 @@ def measure_line(current_a, sample_rate_hz: float, nominal=NOMINAL_LINES_HZ,
     n_fft = 1 << int(math.ceil(math.log2(max(PAD * x.size, fs / 0.02))))
     power = np.abs(np.fft.rfft(x, n_fft)) ** 2
     df = fs / n_fft
-    best = (0.0, -1.0)
+    best, top_hz = (0.0, -1.0), USABLE_BAND_FRACTION * fs
     for f0 in nominal:
-        ks = [k for k in range(1, harmonics + 1) if k * (f0 + SEARCH_HZ) < 0.45 * fs]
+        ks = [k for k in range(1, harmonics + 1) if k * (f0 + SEARCH_HZ) < top_hz]
         if not ks:
             continue
         cand = np.arange(int((f0 - SEARCH_HZ) / df), int((f0 + SEARCH_HZ) / df) + 1)
@@ -149,7 +151,7 @@ def measure_line(current_a, sample_rate_hz: float, nominal=NOMINAL_LINES_HZ,
     n = x.size
     amp, drift, info = 0.0, 0.0, 0.0
     for k in range(1, harmonics + 1):
-        if k * f_line >= 0.45 * fs:
+        if k * f_line >= USABLE_BAND_FRACTION * fs:
             break
         j = int(round(k * f_line / df))
         level = local_level(power, j, df)

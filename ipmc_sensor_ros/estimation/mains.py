@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.signal as sig
 
+from ..lti.discretize import USABLE_BAND_FRACTION
 from .inverse import ParameterError
 
 __all__ = ['MainsFilter', 'mains_sos', 'line_level', 'detect_lines', 'LINE_WARN_RATIO']
@@ -33,7 +34,7 @@ def mains_sos(mains_hz: float, sample_rate_hz: float, quality: float = 30.0,
         raise ParameterError(f"parameter 'mains_hz' must be 0, 50 or 60, got {mains_hz!r}")
     rows = []
     k = 1
-    while mains_hz and k * mains_hz < 0.45 * sample_rate_hz and k <= max_harmonics:
+    while mains_hz and k * mains_hz < USABLE_BAND_FRACTION * sample_rate_hz and k <= max_harmonics:
         b, a = sig.iirnotch(k * mains_hz, quality, fs=sample_rate_hz)
         rows.append(np.concatenate([b, a]))
         k += 1

@@ -38,6 +38,7 @@ from scipy.optimize import minimize_scalar
 from scipy.special import jv
 from scipy.stats import gamma
 
+from ..lti.discretize import USABLE_BAND_FRACTION
 from .lines import FIND_FALSE_ALARM, PAD, local_levels, vertex
 from .statespace import harmonics_below, motion_intensity
 
@@ -133,14 +134,14 @@ def measure_motion(current_a, sample_rate_hz: float, model,
     t = np.arange(x.size) / fs
     mains = tuple(model.lines_hz)
     df = fs / x.size
-    piece = min(span, max(MOTION_PIECE_S, 2.0 / f0))
+    piece, top_hz = min(span, max(MOTION_PIECE_S, 2.0 / f0)), USABLE_BAND_FRACTION * fs
     best = minimize_scalar(lambda f: float(np.var(_piecewise(
-        x, t, harmonics_below(f, 0.45 * fs, cfg.motion_harmonics), mains, piece)[0])),
+        x, t, harmonics_below(f, top_hz, cfg.motion_harmonics), mains, piece)[0])),
                            bounds=(f0 - df, f0 + df), method='bounded',
                            options={'xatol': 1e-4 * df})
     f0 = float(best.x)
     edge = hi * (1 + MOTION_WOBBLE) + 4 * MOTION_WOBBLE_HZ + 2.0 / span   # lines reaching it
-    every = np.array(harmonics_below(f0, min(edge, 0.45 * fs), x.size))
+    every = np.array(harmonics_below(f0, min(edge, USABLE_BAND_FRACTION * fs), x.size))
     # the test's residual: one fit over the stretch (a mean: a slope would take up a wobbling
     # line's leakage, and the ramp it took away would fill the lowest bins); the lines'
     # power, wobble included, from the pieces (one fit sees only the carrier)
@@ -166,7 +167,7 @@ def _strongest_family(x, fs, lo, hi, harmonics, false_alarm) -> float:
     power = np.abs(np.fft.rfft(w, n_fft)) ** 2
     df = fs / n_fft
     cand = np.arange(int(lo / df), int(hi / df) + 1)
-    ks = [k for k in range(1, harmonics + 1) if k * hi < 0.45 * fs] or [1]
+    ks = [k for k in range(1, harmonics + 1) if k * hi < USABLE_BAND_FRACTION * fs] or [1]
     summed = sum(power[np.minimum(k * cand, power.size - 1)] for k in ks)
     near = maximum_filter1d(power, 2 * PAD + 1, mode='nearest')[cand]
     level = math.log(cand.size / false_alarm)

@@ -64,7 +64,7 @@ import numpy as np
 from scipy.linalg import expm, solve_discrete_lyapunov, solve_sylvester
 
 from ..errors import ParameterError
-from ..lti.discretize import chain, van_loan
+from ..lti.discretize import USABLE_BAND_FRACTION, chain, van_loan
 from ..lti.reduction import ReducedModel
 from .config import EstimatorConfig
 
@@ -122,7 +122,7 @@ def harmonics_below(fundamental_hz: float, limit_hz: float, count: int) -> tuple
 
 def line_frequencies_hz(line_hz: float, sample_rate_hz: float, harmonics: int) -> tuple:
     """Return the mains line and its harmonics below 0.45 fs (none for ``line_hz`` 0), Hz."""
-    return harmonics_below(line_hz, 0.45 * sample_rate_hz, harmonics)
+    return harmonics_below(line_hz, USABLE_BAND_FRACTION * sample_rate_hz, harmonics)
 
 
 def _phasors(A: np.ndarray, Q: np.ndarray, first: int, frequencies_hz, walk: float) -> None:

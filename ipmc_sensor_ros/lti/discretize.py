@@ -20,7 +20,11 @@ import math
 import numpy as np
 import scipy.signal as sig
 
-__all__ = ['chain', 'default_prewarp_hz', 'tustin_sos', 'van_loan']
+__all__ = ['chain', 'default_prewarp_hz', 'tustin_sos', 'van_loan', 'USABLE_BAND_FRACTION']
+
+#: The highest frequency a sampled record is used to, as a fraction of its rate: below
+#: Nyquist by an anti-alias filter's transition band (a line there is 0.1 fs from its alias).
+USABLE_BAND_FRACTION = 0.45
 
 
 def default_prewarp_hz(sample_rate_hz: float, band_high_hz: float | None = None) -> float:

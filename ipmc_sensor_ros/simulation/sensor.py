@@ -31,7 +31,7 @@ import math
 import numpy as np
 import scipy.signal as sig
 
-from ..lti.discretize import default_prewarp_hz, tustin_sos
+from ..lti.discretize import USABLE_BAND_FRACTION, default_prewarp_hz, tustin_sos
 from ..physics.model import SensorModel
 from ..physics.parameters import ParameterError
 from ..physics.pipeline import DriftSchedule
@@ -76,7 +76,7 @@ def forward_reduction(model: SensorModel, sample_rate_hz: float, order: int = 8,
 
     Cached per model and rate; any pure delay is applied separately.
     """
-    high = 0.45 * sample_rate_hz
+    high = USABLE_BAND_FRACTION * sample_rate_hz
     if high <= low_hz * 10:
         raise ParameterError(f'sample_rate_hz={sample_rate_hz} is too low to simulate')
     return reduce_model(model, order, (low_hz, high), extension=3.0)
@@ -177,7 +177,7 @@ class SensorSimulator:
                        if compiled.material_at is not None else None)
         self._input = compiled.input_transforms
         self.reduced = forward_reduction(model, fs, self.order)
-        self._diffusive = reduce_model_parts(model, self.order, (0.01, 0.45 * fs),
+        self._diffusive = reduce_model_parts(model, self.order, (0.01, USABLE_BAND_FRACTION * fs),
                                              extension=3.0)[1] \
             if self._material_at is not None else None
         self.sos = self._sos_for(self.reduced)
@@ -276,7 +276,7 @@ class SensorSimulator:
         """
         drifted = self.model.with_material(material)
         self.reduced, self._diffusive = reduce_model_parts(
-            drifted, self.order, (0.01, 0.45 * self.sample_rate_hz), extension=3.0,
+            drifted, self.order, (0.01, USABLE_BAND_FRACTION * self.sample_rate_hz), extension=3.0,
             initial=self._diffusive)
         self.sos = self._sos_for(self.reduced)
         _, self._zi = sig.sosfilt(self.sos, self._replay, zi=np.zeros((self.sos.shape[0], 2)))

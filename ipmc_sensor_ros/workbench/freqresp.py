@@ -29,6 +29,8 @@ import numpy as np
 import scipy.signal as sig
 from scipy.optimize import minimize_scalar
 
+from ..lti.discretize import USABLE_BAND_FRACTION
+
 __all__ = ['FrequencyPoint', 'fundamental_response', 'cross_spectral_response', 'harmonic_fit']
 
 #: A record is periodic at f0 only if its harmonics explain the deflection: at most this fraction
@@ -208,7 +210,7 @@ def fundamental_response(time_s, deflection_m, current_a, *, frequency_hz: float
     n_keep = int(round(periods / f0 * fs))
     sl = slice(t.size - n_keep, t.size)
     tt, ww, ii = t[sl] - t[sl][0], w[sl], i[sl]
-    k_max = n_harmonics or int(max(1, min(12, np.floor(0.45 * fs / f0))))
+    k_max = n_harmonics or int(max(1, min(12, np.floor(USABLE_BAND_FRACTION * fs / f0))))
     pw, resid_w, cov_w = harmonic_fit(tt, ww, f0, k_max)
     variance_w = float(np.var(ww))
     if variance_w > 0 and float(np.mean(resid_w ** 2)) > MAX_APERIODIC_FRACTION * variance_w:
@@ -255,7 +257,7 @@ def cross_spectral_response(time_s, deflection_m, current_a, *, nperseg: int | N
     _, coh = sig.coherence(w, i, fs, nperseg=nperseg)
     n_avg = max(1, int(2 * t.size / nperseg - 1))   # 50 % overlap Hann segments
     h = pwi / np.where(pww > 0, pww, np.inf)
-    lo, hi = band_hz or (f[1], 0.45 * fs)
+    lo, hi = band_hz or (f[1], USABLE_BAND_FRACTION * fs)
     out = []
     for fk, hk, gk in zip(f, h, coh):
         if fk < lo or fk > hi or gk < min_coherence or hk == 0:

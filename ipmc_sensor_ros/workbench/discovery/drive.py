@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...lti.discretize import USABLE_BAND_FRACTION
 from ..freqresp import fundamental_response, harmonic_fit
 
 __all__ = ['Drive', 'drive_of', 'CONTENT_FRACTION']
@@ -48,7 +49,7 @@ def drive_of(rec, max_harmonics: int = 20) -> Drive:
     except ValueError:
         return Drive()
     fs = (t.size - 1) / t[-1]
-    k_max = min(int(0.45 * fs / f0), max_harmonics)
+    k_max = min(int(USABLE_BAND_FRACTION * fs / f0), max_harmonics)
     if k_max < 1 or f0 * t[-1] < 2:
         return Drive()
     phasors, resid, _ = harmonic_fit(t, w, f0, k_max)

@@ -51,6 +51,7 @@ import numpy as np
 
 from ...estimation.config import parse_mains as parse_mains_hz
 from ...estimation.lines import SEARCH_HZ
+from ...lti.discretize import USABLE_BAND_FRACTION
 from .drive import drive_of
 
 __all__ = ['MainsLine', 'MAINS_SEARCH_HZ', 'LEVEL_BAND_HZ', 'parse_mains', 'find_mains_lines',
@@ -136,7 +137,7 @@ def _measured_mains(r, f_mains, fs):
     cand = f_mains + np.arange(-MAINS_SEARCH_HZ, MAINS_SEARCH_HZ + df / 2, df)
     total = np.zeros(cand.size)
     for m in (1, 2, 3):
-        ok = m * cand < 0.45 * fs
+        ok = m * cand < USABLE_BAND_FRACTION * fs
         total[ok] += power[np.rint(m * cand[ok] / df).astype(int)]
     k = int(np.argmax(total))
     if 0 < k < cand.size - 1 and np.all(total[k - 1:k + 2] > 0):
@@ -165,7 +166,8 @@ def on_drive_harmonic(f, z, f0, span_s) -> bool:
 
 def _orders(fs, families, n_harmonics):
     """Harmonic numbers m of every line tested in a record, over the families."""
-    return [m for fm in families for m in range(1, min(n_harmonics, int(0.45 * fs / fm)) + 1)]
+    top_hz = USABLE_BAND_FRACTION * fs
+    return [m for fm in families for m in range(1, min(n_harmonics, int(top_hz / fm)) + 1)]
 
 
 def _family(t, r, drive, f_mains, n_harmonics, orders, false_alarm):
@@ -173,11 +175,11 @@ def _family(t, r, drive, f_mains, n_harmonics, orders, false_alarm):
     n = t.size
     fs = (n - 1) / (t[-1] - t[0])
     res = 1.0 / (t[-1] - t[0])
-    m_max = min(n_harmonics, int(0.45 * fs / f_mains))
+    m_max = min(n_harmonics, int(USABLE_BAND_FRACTION * fs / f_mains))
     if m_max < 1:
         return []
     f_line = _measured_mains(r, f_mains, fs)
-    freqs = [m * f_line for m in range(1, m_max + 1) if m * f_line < 0.45 * fs]
+    freqs = [m * f_line for m in range(1, m_max + 1) if m * f_line < USABLE_BAND_FRACTION * fs]
     stim = [f for f in drive if min(abs(f - g) for g in freqs) > res]
     a = _sinusoids(t, freqs + stim)
     coef = np.linalg.lstsq(a, r, rcond=None)[0]
