@@ -78,9 +78,9 @@ def test_the_smoothers_pass_back_through_the_changes_of_line_and_motion(reduced,
     A 1 Hz sine moving since power-on, 1 % noise, a 50 Hz hum from 1.2 s: at the 0.5 s check
     the nominal lines go (10 states, from the start), at the 2 s check the line is measured
     (16, from the start of its stretch at 1 s) and at the 3 s check measured again (from 2
-    s), and the 1 Hz model taken at 4 s starts from the stretch that began at 2 s (22): it
-    replaces the line's part there.  The fixed-lag smoother and the offline one pass back
-    through the same changes.
+    s), and the 1 Hz model taken at 4 s starts from the stretch that began at 2 s (28: three
+    periodic phasors and their rates): it replaces the line's part there.  The fixed-lag
+    smoother and the offline one pass back through the same changes.
     """
     begun = []
     begin = carry.Changes.begin
@@ -98,7 +98,7 @@ def test_the_smoothers_pass_back_through_the_changes_of_line_and_motion(reduced,
     held = np.concatenate([p.deflection_m for p in _drain(k) + _drain(k, flush=True)])
     whole = KalmanEstimator(reduced, FS).smooth(i)
     assert k.model.motion_hz == pytest.approx(1.0, rel=0.01)
-    changes = [(0, 10), (1000, 16), (2000, 16), (2000, 22)]
+    changes = [(0, 10), (1000, 16), (2000, 16), (2000, 28)]
     assert begun == changes + changes             # the live run (the lag's), the offline one
     assert np.max(np.abs(held - whole.deflection_m)) <= 1e-12     # the same passes
 

@@ -51,14 +51,20 @@ def test_moving_start_prior_is_invariant_under_the_model(reduced):
     """
     Moving since before the start: one step of the model leaves the prior unchanged.
 
-    With no walk of the periodic states their covariance is kept by the rotation, and the
-    motion states' part (forced response + stationary remainder) is then stationary too.
+    With no walk of the periodic states and their rates known zero (the fundamental exact)
+    their covariance is kept by the rotation, and the motion states' part (forced response
+    + stationary remainder) is then stationary too.
     """
     cfg = EstimatorConfig(motion_speed_walk=0.0, working_point_walk_m=0.0,
                           offset_walk_a=0.0, offset_drift_walk_a_per_s=0.0)
     ssm = StateSpaceModel(reduced, cfg, FS, motion_hz=5.0)
     F, Q = ssm.discrete(1)
     _, P0 = ssm.prior()
+    T = np.eye(ssm.size)        # the prior is T P T' (forced response); rates known zero in P
+    T[np.ix_(ssm.motion_states, np.arange(ssm.im, ssm.size))] = ssm.forced_response
+    P = np.linalg.solve(T, np.linalg.solve(T, P0).T)
+    P[ssm.ir:, :] = P[:, ssm.ir:] = 0.0
+    P0 = T @ P @ T.T
     m = np.r_[ssm.motion_states, np.arange(ssm.im, ssm.size)]
     # the offset drift turns into offset: leave those two out; 1e-8: discrete vs continuous
     # Lyapunov solutions and the Sylvester solve, each near 1e-10 of the largest entry

@@ -50,10 +50,11 @@ SETTINGS = (
             'vibration): the motion prior once the periodic motion is modelled, small, so an '
             'offset is learned within a few periods; the data choose it, a quarter or a '
             'sixteenth of it by likelihood'),
-    Setting('motion_speed_walk', 2.4e-3, '1/sqrt(s)', 0.0, 1.0,
+    Setting('motion_speed_walk', 7e-3, '1/sqrt(s)', 0.0, 1.0,
             "random walk of the periodic motion's relative speed: a DC motor's speed wobbles "
-            'by ~1 % over seconds (phase excursions of 0.2-2 rad at 5-20 Hz); each periodic '
-            'component walks by motion_rms_m x 2 pi f_motion x this'),
+            'by ~1 % over two seconds; a speed has inertia, so each periodic phasor turns '
+            "at a rate that walks by motion_rms_m x 2 pi f_motion x this (the phasor's "
+            'acceleration, not its velocity, is random)'),
     Setting('motion_harmonics', 3, '', 1, 10,
             "periodic-motion harmonics modelled: a crank-slider's second and third are a "
             'few percent of the first'),
@@ -210,7 +211,7 @@ CODE_CONSTANTS = {
     'innovations.CUSUM_CHANGE_SIGMAS': 'tuning', 'instants.STAMP_WINDOW': 'tuning',
     'lines.FIND_FALSE_ALARM': 'tuning', 'motion_band.BAND_CHOICES': 'tuning',
     'motionline.MOTION_PERIODS': 'tuning', 'motionline.MOTION_LONGEST_S': 'tuning',
-    'motionline.MOTION_WOBBLE': 'tuning', 'motionline.MOTION_WOBBLE_HZ': 'tuning',
+    'statespace.MOTION_WOBBLE': 'tuning', 'statespace.MOTION_WOBBLE_HZ': 'tuning',
     'noise.NOISE_CLIP': 'tuning', 'periodic.REMAINDER_CHOICES': 'tuning',
     'timebase.JITTER_FRACTION': 'stream', 'timebase.RATE_WINDOW_S': 'stream',
     'timebase.FIRST_WINDOW_SAMPLES': 'stream', 'timebase.RELOCK_MIN_SAMPLES': 'stream',

@@ -133,11 +133,11 @@ class KalmanFilter:
         accel[model.ia] = model.scale[model.ia]
         rows = [(model.c_velocity, v2), (accel, v2 * model.sample_rate_hz ** 2),
                 (model.c_motion, m2), (self._anchor, anchor_var)]
-        for k, f in enumerate(model.motion_lines_hz):     # a periodic amplitude at rest is
-            for j in (model.im + 2 * k, model.im + 2 * k + 1):   # the velocity's noise / W
-                row = np.zeros(model.size)
-                row[j] = s[j]
-                rows.append((row, v2 / (2 * np.pi * f) ** 2))
+        for j, f in zip(range(model.im, model.ir), np.repeat(model.motion_lines_hz, 2)):
+            for i, var in ((j, v2 / (2 * np.pi * f) ** 2), (j + model.ir - model.im, v2)):
+                row = np.zeros(model.size)      # at rest a periodic amplitude is the velocity's
+                row[i] = s[i]                   # noise / W, its rate the velocity's noise
+                rows.append((row, var))
         self._rest_rows = tuple(rows)
         # the lines' third difference i_{k+4} - 3 i_{k+3} + 3 i_{k+2} - i_{k+1} from the state
         # at sample k (module docstring): a phasor turned on by tau is (cos W tau) l_I -

@@ -40,7 +40,7 @@ from scipy.stats import gamma
 
 from ..lti.discretize import USABLE_BAND_FRACTION
 from .lines import FIND_FALSE_ALARM, PAD, local_levels, vertex
-from .statespace import harmonics_below, motion_intensity
+from .statespace import MOTION_WOBBLE, MOTION_WOBBLE_HZ, harmonics_below, motion_intensity
 
 __all__ = ['measure_motion', 'measure_recent', 'MOTION_PERIODS', 'MOTION_LONGEST_S',
            'MOTION_SHORTEST_S', 'MOTION_PIECE_S', 'MOTION_RATE_HZ', 'MOTION_WOBBLE',
@@ -60,12 +60,6 @@ MOTION_SHORTEST_S = MOTION_LONGEST_S / 8.0
 #: whose nulls fall on the aliases of the band), Hz: above the motion band and 3 mains
 #: harmonics, and it bounds the cost of a measurement at high sample rates.
 MOTION_RATE_HZ = 1000.0
-#: A motor's speed wobbles by up to this, relative, at rates up to MOTION_WOBBLE_HZ (a DC
-#: motor under a crank's varying load): the sidebands it puts beside each harmonic are
-#: allowed in the residual (:func:`_wobble_power`).
-MOTION_WOBBLE = 0.02
-#: The fastest such wobble, Hz: a crank's load cycle seen through the motor's inertia.
-MOTION_WOBBLE_HZ = 0.5
 #: The fit holds its phasors over pieces of at least this, s (and two periods): short
 #: against a motor's speed wobble (a quarter of the fastest one's period), long against a
 #: period.

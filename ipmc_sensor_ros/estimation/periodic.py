@@ -6,7 +6,7 @@ At each line check the estimator measures the fundamental of a periodic motion o
 last 1, 2, 4 and 8 s of current (:func:`~.motionline.measure_recent`; 0: none; None: a check
 before 1 s of current is too short to judge, and its stretch runs on into the next).  The
 model changes (periodic states at that fundamental appear, move by more than
-:data:`~.motionline.MOTION_WOBBLE` of it, a motor's speed wobble that the periodic states'
+:data:`~.statespace.MOTION_WOBBLE` of it, a motor's speed wobble that the periodic states'
 walk follows, or go: :mod:`.statespace`) when the measurement differs from the model and
 agrees with the one of the check before: two stretches in a row say so.  A check that
 found none speaks only of the fundamentals it could see (at least
@@ -40,8 +40,8 @@ from .carry import carry_state
 from .config import fractions_of
 from .filter import FilterState, ForwardRecord, KalmanFilter
 from .innovations import block_samples, explains
-from .motionline import MOTION_WOBBLE
 from .onset import due, restart
+from .statespace import MOTION_WOBBLE
 from .step_glr import offset_step_at
 
 __all__ = ['Stretch', 'StretchLog', 'Refiltered', 'refilter', 'same_motion', 'design',

@@ -20,15 +20,20 @@ H1)::
                                        from the last ones and a mains line, persistent,
                                        is told from motion within a few cycles
     h'   = xi_h                        working point (random walk, working_point_walk_m)
-    p_j' = V_j [[0, -1], [1, 0]] p_j + xi_p
+    p_j' = V_j [[0, -1], [1, 0]] p_j + r_j
+    r_j' = V_j [[0, -1], [1, 0]] r_j + xi_r
                                        periodic motion j (in phase, quadrature), m: the
                                        target the tip follows turns at V_j = 2 pi j f_motion,
                                        j = 1..motion_harmonics below motion_bandwidth_hz,
-                                       walking by motion_rms_m 2 pi f_motion
-                                       motion_speed_walk (a motor's speed wobble),
                                        f_motion measured from the data (:mod:`.motionline`);
                                        with these states xi_g drives only what the periodic
-                                       part leaves (periodic_remainder_rms_m)
+                                       part leaves (periodic_remainder_rms_m).  A motor's
+                                       speed wobbles: its relative error e walks
+                                       (e' = motion_speed_walk xi), and p_j turns at
+                                       V_j (1 + e), so p_j' - V_j J p_j = V_j e J p_j =: r_j
+                                       is continuous (a speed has inertia) and walks by
+                                       motion_rms_m 2 pi f_motion motion_speed_walk (r_j,
+                                       m/s: the phasor's rate in its turning frame)
     b'   = d + xi_b                    current offset, A (random walk, offset_walk_a)
     d'   = xi_d                        its drift, A/s (offset_drift_walk_a_per_s)
     l_k' = W_k [[0, -1], [1, 0]] l_k + xi_l
@@ -74,6 +79,14 @@ __all__ = ['StateSpaceModel', 'modal_realisation', 'line_frequencies_hz', 'harmo
 #: is measured equal to the held deflection: wide enough that the held level, not the old
 #: working point, decides (a 1e-4 relative pull), narrow enough for well-conditioned algebra.
 HOLD_RELEASE = 100.0
+
+#: A motor's speed wobbles by up to this, relative, at rates up to MOTION_WOBBLE_HZ (a DC
+#: motor under a crank's varying load): the sidebands it puts beside each harmonic are
+#: allowed in a periodic model's residual (:mod:`.motionline`), and a periodic phasor's rate
+#: is known to this of its turning before the data tell it (the rate states' prior).
+MOTION_WOBBLE = 0.02
+#: The fastest such wobble, Hz: a crank's load cycle seen through the motor's inertia.
+MOTION_WOBBLE_HZ = 0.5
 
 #: Rows tabulated per period for a sample taken off its slot (:attr:`StateSpaceModel.
 #: off_slot_rows`; the nearest is used): a sample's instant to 1/2048 of a period, 0.5 us at
@@ -176,7 +189,8 @@ class StateSpaceModel:
         self.iw, self.iu, self.ia, self.ih, self.ib = n, n + 1, n + 2, n + 3, n + 4
         self.il = n + 6
         self.im = self.il + 2 * len(self.lines_hz)
-        self.size = self.im + 2 * len(self.motion_lines_hz)
+        self.ir = self.im + 2 * len(self.motion_lines_hz)        # the phasors' rates
+        self.size = self.ir + 2 * len(self.motion_lines_hz)
         self.r0 = abs(float(np.real(reduced.charge_response(np.array([0.0]))[0])))
 
     # -- continuous model ---------------------------------------------------------------
@@ -206,8 +220,10 @@ class StateSpaceModel:
         Q[self.ib, self.ib] = cfg.offset_walk_a ** 2
         Q[self.ib + 1, self.ib + 1] = cfg.offset_drift_walk_a_per_s ** 2
         _phasors(A, Q, self.il, self.lines_hz, cfg.line_walk_a)
-        _phasors(A, Q, self.im, self.motion_lines_hz, self.motion_line_walk_m)
-        A[self.ia, self.im::2] = a_m * a_m * f_m      # the target the tip follows
+        _phasors(A, Q, self.im, self.motion_lines_hz, 0.0)
+        _phasors(A, Q, self.ir, self.motion_lines_hz, self.motion_line_walk_m)
+        A[np.arange(self.im, self.ir), np.arange(self.ir, self.size)] = 1.0
+        A[self.ia, self.im:self.ir:2] = a_m * a_m * f_m      # the target the tip follows
         return A, Q
 
     @functools.cached_property
@@ -223,7 +239,8 @@ class StateSpaceModel:
         s[self.ib] = cfg.offset_prior_a
         s[self.ib + 1] = cfg.offset_drift_a_per_s
         s[self.il:self.im] = cfg.line_prior_a
-        s[self.im:] = cfg.motion_rms_m
+        s[self.im:self.ir] = cfg.motion_rms_m
+        s[self.ir:] = cfg.motion_rms_m * 2 * math.pi * self.motion_hz * MOTION_WOBBLE
         return s
 
     # -- measurement rows (scaled states) ----------------------------------------------------
@@ -282,7 +299,7 @@ class StateSpaceModel:
 
     @property
     def motion_line_walk_m(self) -> float:
-        """Random walk of each periodic component, m/sqrt(s) (a relative speed walk)."""
+        """Random walk of each periodic phasor's rate, m/s/sqrt(s) (a relative speed walk)."""
         cfg = self.config
         return cfg.motion_rms_m * 2 * math.pi * self.motion_hz * cfg.motion_speed_walk
 
