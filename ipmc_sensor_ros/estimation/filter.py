@@ -118,8 +118,8 @@ class KalmanFilter:
         self._c_lines = np.zeros(model.size)        # the mains lines' current
         self._c_lines[model.il:model.im] = model.c[model.il:model.im]
         self._alpha = 1.0 / (cfg.noise_average_s * model.sample_rate_hz)
-        #: the first sample whose innovation the test counts (R measured: noise_average_s)
-        self._settled = math.ceil(1.0 / self._alpha)
+        #: the first sample the test counts (R measured: noise_average_s); the CUSUM's limit
+        self._settled, self._limit = math.ceil(1.0 / self._alpha), cusum_limit(cfg.false_alarm)
         self._block = block_samples(model.motion_hz, model.sample_rate_hz)
         s = model.scale
         self._w_row = np.zeros(model.size)          # the published deflection, m
@@ -247,7 +247,7 @@ class KalmanFilter:
 
         def evidence():             # the sums as they stand (a snapshot's, or the result's)
             return StampEvidence(zg, gg, zzgg, zggg, gggg, timed, llr, scale)
-        settled, block, limit = self._settled, self._block, cusum_limit(m.config.false_alarm)
+        settled, block, limit = self._settled, self._block, self._limit
         if copy:
             x, P, meter, win = x.copy(), P.copy(), replace(meter), win.copy()
             onset = None if onset is None else onset.copy()

@@ -34,6 +34,7 @@ from scipy.linalg import schur, solve_sylvester
 
 from ..errors import ParameterError
 from ..lti.reduction import ReducedModel
+from .core import Estimate, forgets_s
 from .leaky_design import DEFAULT_LEAK_CORNER_HZ, design, inverse_zpk, leak_tradeoff, positive
 
 __all__ = ['ParameterError', 'InverseEstimator', 'inverse_zpk', 'leak_tradeoff',
@@ -213,7 +214,6 @@ class InverseEstimator:
         zero-current samples (the leaky inverse has no prediction model: a missing sample is
         taken as no charge flowing); a stamp's offset from its slot is not used (on a slot).
         """
-        from .core import Estimate
         from .timebase import slots_of
 
         x = np.asarray(current_a, dtype=float)
@@ -253,8 +253,6 @@ class InverseEstimator:
 
     def settling(self) -> tuple[float, str]:
         """Five time constants of the leak: it has forgotten the unknown starting level."""
-        from .core import forgets_s
-
         return forgets_s(self.leak_corner_hz), 'leak transient'
 
     def process_sample(self, current_a: float) -> float:

@@ -41,7 +41,6 @@ from scipy.stats import norm
 
 from ..lti.discretize import USABLE_BAND_FRACTION
 
-
 __all__ = ['measure_line', 'Line', 'NOMINAL_LINES_HZ', 'SEARCH_HZ', 'FIND_FALSE_ALARM', 'PAD',
            'family_peak', 'vertex', 'local_level', 'local_levels']
 
@@ -151,7 +150,7 @@ def measure_line(current_a, sample_rate_hz: float, nominal=NOMINAL_LINES_HZ,
     n = x.size
     amp, drift, info = 0.0, 0.0, 0.0
     for k in range(1, harmonics + 1):
-        if k * f_line >= USABLE_BAND_FRACTION * fs:
+        if k * f_line >= top_hz:
             break
         j = int(round(k * f_line / df))
         level = local_level(power, j, df)

@@ -135,7 +135,7 @@ def measure_motion(current_a, sample_rate_hz: float, model,
                            options={'xatol': 1e-4 * df})
     f0 = float(best.x)
     edge = hi * (1 + MOTION_WOBBLE) + 4 * MOTION_WOBBLE_HZ + 2.0 / span   # lines reaching it
-    every = np.array(harmonics_below(f0, min(edge, USABLE_BAND_FRACTION * fs), x.size))
+    every = np.array(harmonics_below(f0, min(edge, top_hz), x.size))
     # the test's residual: one fit over the stretch (a mean: a slope would take up a wobbling
     # line's leakage, and the ramp it took away would fill the lowest bins); the lines'
     # power, wobble included, from the pieces (one fit sees only the carrier)

@@ -175,11 +175,12 @@ def _family(t, r, drive, f_mains, n_harmonics, orders, false_alarm):
     n = t.size
     fs = (n - 1) / (t[-1] - t[0])
     res = 1.0 / (t[-1] - t[0])
-    m_max = min(n_harmonics, int(USABLE_BAND_FRACTION * fs / f_mains))
+    top_hz = USABLE_BAND_FRACTION * fs
+    m_max = min(n_harmonics, int(top_hz / f_mains))
     if m_max < 1:
         return []
     f_line = _measured_mains(r, f_mains, fs)
-    freqs = [m * f_line for m in range(1, m_max + 1) if m * f_line < USABLE_BAND_FRACTION * fs]
+    freqs = [m * f_line for m in range(1, m_max + 1) if m * f_line < top_hz]
     stim = [f for f in drive if min(abs(f - g) for g in freqs) > res]
     a = _sinusoids(t, freqs + stim)
     coef = np.linalg.lstsq(a, r, rcond=None)[0]
