@@ -34,23 +34,27 @@ rest the filter itself is that still sensor's filter, and its b and P_b are used
 window's first samples are tested once the window is full, against its fit of the lines
 (before it a hum would fail every sample).
 
-**An offset that jumps** (``offset_jump_a``: an amplifier re-zeroed, a range switched):
-a sample beyond the per-sample limit from the filter's offset on its own may be a step.
-From it a second run of the per-sample tests starts, against a still sensor whose offset is
-the filter's with the jump's variance added (``jump_track``, ``jump_quiet``).  Out of a
-still stretch (at rest, or after a sample that agreed with rest on its own: a hold whose
-rest the window has not confirmed yet; a motion that starts gently, or a drift, fails the
-CUSUM first) its samples are taken less the lines of the jump's own fit, the window's basis
-with a step at the run's first sample (a line fit without it leaks the step into the
-lines), and it must hold the window.  Out of a motion (a step inside a move, or in a hold
-after it before the rest is confirmed) its samples are taken less the filter's own lines
-(the window's older samples are the motion's) and it must hold ``jump_hold_s``
-(:attr:`RestTest.moving_jump_n`: a smooth move's current can be flat within the noise for
-a window about its peak).  When the window fails against the filter's offset but its run
-has held that long and the window passes the spread test (:meth:`RestWindow.jumped`; each
-of its samples agreed with the run's offset), the offset jumped where the run began: the
-filter takes the run's samples again from there as still, the offset's variance grown by
-the jump's (:func:`.onset.restart`), and the rest test goes on with the run's offset.
+**An offset that jumps** (``offset_jump_a``: an amplifier re-zeroed, a range switched): a
+sample beyond the per-sample limit from the filter's offset on its own may be a step, and so
+may a sample at which the CUSUM of a sensor at rest tells its mean shifted (a step smaller
+than the noise of one sample: 12.5 nA under 14.7 nA of noise at 2 kHz, which no single
+sample shows while the window's mean knows it to 0.7 nA; the run then begins at the CUSUM's
+alarm, its delay after the step).  From it a second run of the per-sample tests starts,
+against a still sensor whose offset is the filter's with the jump's variance added
+(``jump_track``, ``jump_quiet``).  Out of a still stretch (at rest, or after a sample that
+agreed with rest on its own: a hold whose rest the window has not confirmed yet; a motion
+that starts gently, or a drift, starts a run there too, and its current, not flat, ends the
+run before it holds a window) its samples are taken less the lines of the jump's own fit,
+the window's basis with a step at the run's first sample (a line fit without it leaks the
+step into the lines), and it must hold the window.  Out of a motion (a step inside a move,
+or in a hold after it before the rest is confirmed) its samples are taken less the filter's
+own lines (the window's older samples are the motion's) and it must hold ``jump_hold_s``
+(:attr:`RestTest.moving_jump_n`: a smooth move's current can be flat within the noise for a
+window about its peak).  When the window fails against the filter's offset but its run has
+held that long and the window passes the spread test (:meth:`RestWindow.jumped`; each of its
+samples agreed with the run's offset), the offset jumped where the run began: the filter
+takes the run's samples again from there as still, the offset's variance grown by the jump's
+(:func:`.onset.restart`), and the rest test goes on with the run's offset.
 
 When all pass, the filter applies the zero-velocity pseudo-measurements (as zero-velocity
 updates in foot-mounted inertial navigation): the tip velocity and the motion's current are
@@ -316,7 +320,8 @@ class RestWindow(JumpRun):
             self.quiet = self.quiet + 1 if ok else 0
             if test.jump_var_a2:
                 self._follow_jump(test, r, (current_a, gram, theta, b), offset_a,
-                                  offset_var_a2, noise_var_a2, still_before, lines)
+                                  offset_var_a2, noise_var_a2, still_before, lines,
+                                  shifted=at_rest and not ok)
         if self.quiet < n:          # a sample of the window disagreed: no window test
             return False
         return test.still(*self._level(theta, b), offset_a, offset_var_a2, noise_var_a2)

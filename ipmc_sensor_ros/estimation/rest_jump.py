@@ -20,13 +20,15 @@ class JumpRun:
 
     def _follow_jump(self, test, r: float, fit: tuple, offset_a: float,
                      offset_var_a2: float, noise_var_a2: float, still_before: bool,
-                     lines) -> None:
+                     lines, shifted: bool = False) -> None:
         """
         Test sample ``r`` against a still sensor whose offset jumped (module docstring).
 
         A run starts at a sample beyond the per-sample limit from the filter's offset on its
-        own; out of a still stretch (``still_before``: at rest, or the sample before agreed
-        with rest; a motion that starts gently, or a drift, fails the CUSUM first) it must
+        own, or at one the rest test's CUSUM refused at rest (``shifted``: a step smaller
+        than one sample's noise; a motion that starts gently, or a drift, starts one there
+        too, and its current, not flat, ends it before it holds a window); out of a still
+        stretch (``still_before``: at rest, or the sample before agreed with rest) it must
         hold a window, out of a motion ``RestTest.moving_jump_n`` samples (a smooth move's
         current can be flat within the noise for a window about its peak).  It starts from
         the filter's offset with the jump's variance added (``jump_quiet`` 1: a run starts
@@ -49,7 +51,7 @@ class JumpRun:
         self.jump_quiet, self.jump_track, self.jump_sums = 0, None, None
         self.jump_moving = moving = not still_before
         d = (current - lines() if moving else r) - offset_a
-        if d * d > test.level_limit * (noise_var_a2 + offset_var_a2):
+        if shifted or d * d > test.level_limit * (noise_var_a2 + offset_var_a2):
             self.jump_sums = None if moving else (current, self.phase.copy())
             ok, self.jump_track = test.sample_ok(self._run_residual(r, fit, lines), None,
                                                  offset_a, offset_var_a2 + test.jump_var_a2,
