@@ -50,7 +50,7 @@ from .onset import due, restart
 from .kalman_state import KalmanState
 from .periodic import (StretchLog, after_refutation, likeliest, refilter, remainder_configs,
                        same_motion)
-from .ring import SampleRing
+from .ring import SampleRing, hold_next, on_grid
 from .smoother import smooth_segments
 from .statespace import StateSpaceModel
 from .timebase import slots_of
@@ -206,8 +206,8 @@ class KalmanEstimator(KalmanState):
                                                     [float(steps)], copy=False,
                                                     until_motion=True)
         self._log.add_one(float(current_a), float(steps), bool(still[0]))
-        for _ in range(slots_of(float(steps))):     # a bridged slot holds the next value
-            self._recent.push(current_a)
+        for k in range(slots_of(float(steps)), 0, -1):     # a bridged slot: no value
+            self._recent.push(current_a if k == 1 else math.nan)
         if self._first_rest_n is None and still[0]:
             self._first_rest_n = n
         closed = self._state.innovations.blocks != blocks
@@ -231,16 +231,16 @@ class KalmanEstimator(KalmanState):
         """
         Keep the last motion window of current on the sample grid; note the first rest.
 
-        A bridged slot holds the value of the sample after it, so the line check sees the
-        hum's phase where it was (a dropped burst does not shift the rest of the window).
+        A bridged slot is NaN: the line check holds the next sample's value there (the hum's
+        phase where it was), the motion's measurement leaves it out (:mod:`.motionline`).
         """
         if self._first_rest_n is None and still.any():
             self._first_rest_n = self._state.samples - y.size + int(np.argmax(still))
-        self._recent.extend(np.repeat(y, slots_of(steps)))
+        self._recent.extend(on_grid(y, slots_of(steps)))
 
     def _check_line(self) -> None:
         recent = self._recent.values()
-        self._check_mains(recent[-self._line_n:])
+        self._check_mains(hold_next(recent[-self._line_n:]))
         self._check_motion(recent)
         band = likelier_band(self._log.current, self._filter, self._state, self.config,
                              self.reduced, self._new_filter)

@@ -40,6 +40,7 @@ from scipy.stats import gamma
 
 from ..lti.discretize import USABLE_BAND_FRACTION
 from .lines import FIND_FALSE_ALARM, PAD, local_levels, vertex
+from .ring import hold_next
 from .statespace import MOTION_WOBBLE, MOTION_WOBBLE_HZ, harmonics_below, motion_intensity
 
 __all__ = ['measure_motion', 'measure_recent', 'MOTION_PERIODS', 'MOTION_LONGEST_S',
@@ -114,15 +115,17 @@ def measure_motion(current_a, sample_rate_hz: float, model,
         return None
     lo = MOTION_PERIODS / min(span, MOTION_LONGEST_S)
     hi = 0.5 * cfg.motion_bandwidth_hz
-    if x.size < 64 or lo >= hi or not np.all(np.isfinite(x)):
-        return 0.0
     d = np.diff(x, 3)
+    d = d[np.isfinite(d)]             # NaN: a slot the DAQ did not deliver (left out)
+    if x.size < 64 or lo >= hi or d.size < 64 or np.isinf(x).any():
+        return 0.0
     noise_a2 = float(np.mean(d * d)) / 20.0       # third difference of white noise: 20 var
     step = max(1, int(fs // MOTION_RATE_HZ))       # block means: the variance of a mean of
     if step > 1:                                   # `step` white samples is noise / step
-        x = x[:x.size // step * step].reshape(-1, step).mean(axis=1)
+        x = np.nanmean(x[:x.size // step * step].reshape(-1, step), axis=1)
         fs, noise_a2 = fs / step, noise_a2 / step
-    f0 = _strongest_family(x, fs, lo, hi, cfg.motion_harmonics, false_alarm)
+    kept = None if not np.isnan(x).any() else ~np.isnan(x)
+    f0 = _strongest_family(hold_next(x), fs, lo, hi, cfg.motion_harmonics, false_alarm)
     if not f0:
         return 0.0
     t = np.arange(x.size) / fs
@@ -130,7 +133,7 @@ def measure_motion(current_a, sample_rate_hz: float, model,
     df = fs / x.size
     piece, top_hz = min(span, max(MOTION_PIECE_S, 2.0 / f0)), USABLE_BAND_FRACTION * fs
     best = minimize_scalar(lambda f: float(np.var(_piecewise(
-        x, t, harmonics_below(f, top_hz, cfg.motion_harmonics), mains, piece)[0])),
+        x, t, harmonics_below(f, top_hz, cfg.motion_harmonics), mains, piece, kept)[0])),
                            bounds=(f0 - df, f0 + df), method='bounded',
                            options={'xatol': 1e-4 * df})
     f0 = float(best.x)
@@ -139,8 +142,8 @@ def measure_motion(current_a, sample_rate_hz: float, model,
     # the test's residual: one fit over the stretch (a mean: a slope would take up a wobbling
     # line's leakage, and the ramp it took away would fill the lowest bins); the lines'
     # power, wobble included, from the pieces (one fit sees only the carrier)
-    residual = _piecewise(x, t, every, mains, span)[0]
-    amplitude2 = _piecewise(x, t, every, mains, piece)[1]
+    residual = _piecewise(x, t, every, mains, span, kept)[0]
+    amplitude2 = _piecewise(x, t, every, mains, piece, kept)[1]
     explained = _explained(residual, fs, hi, (every, amplitude2, span), mains,
                            _remainder_psd(model, cfg), noise_a2, false_alarm)
     return f0 if explained else 0.0
@@ -173,12 +176,14 @@ def _strongest_family(x, fs, lo, hi, harmonics, false_alarm) -> float:
     return vertex(cand, summed, best) * df
 
 
-def _piecewise(x, t, lines_hz, mains_hz, piece_s) -> tuple[np.ndarray, np.ndarray]:
+def _piecewise(x, t, lines_hz, mains_hz, piece_s, kept=None) -> tuple[np.ndarray, np.ndarray]:
     """
     Fit a mean and the lines on pieces of about ``piece_s`` (one piece: ``piece_s`` >= span).
 
     Return (residual, each of ``lines_hz``'s squared amplitude averaged over the pieces:
     its power, wobble included, where one fit over the stretch sees only the carrier).
+    ``kept``: the samples delivered (None: all); the others are left out of the fit, their
+    residual 0.
     """
     pieces = max(1, int(x.size / (piece_s * (1.0 / (t[1] - t[0]) if t.size > 1 else 1.0))))
     edges = np.linspace(0, x.size, pieces + 1).astype(int)
@@ -188,10 +193,14 @@ def _piecewise(x, t, lines_hz, mains_hz, piece_s) -> tuple[np.ndarray, np.ndarra
     power = np.zeros(n)
     for a, b in zip(edges[:-1], edges[1:]):
         cols = np.array([np.ones(b - a)] + [w[a:b] for w in waves]).T
+        use = slice(None) if kept is None else kept[a:b]
         # least squares by the normal equations (a few dozen columns; lstsq of the small
         # system keeps a mains harmonic on a motion harmonic from making it singular)
-        coef = np.linalg.lstsq(cols.T @ cols, cols.T @ x[a:b], rcond=None)[0]
+        coef = np.linalg.lstsq(cols[use].T @ cols[use], cols[use].T @ x[a:b][use],
+                               rcond=None)[0]
         residual[a:b] = x[a:b] - cols @ coef
+        if kept is not None:
+            residual[a:b][~use] = 0.0
         power += (coef[1:1 + 2 * n:2] ** 2 + coef[2:2 + 2 * n:2] ** 2) * (b - a) / x.size
     return residual, power
 

@@ -11,7 +11,29 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ['SampleRing']
+__all__ = ['SampleRing', 'on_grid', 'hold_next']
+
+
+def on_grid(values, slots) -> np.ndarray:
+    """
+    Return ``values`` on the sample grid: each in the last of its ``slots``, NaN before it.
+
+    A sample ``slots`` periods after the one before leaves ``slots - 1`` grid slots the DAQ
+    did not deliver (a dropped row, a burst): those are NaN, not a value.
+    """
+    slots = np.asarray(slots, dtype=int)
+    out = np.full(int(slots.sum()), np.nan)
+    out[np.cumsum(slots) - 1] = values
+    return out
+
+
+def hold_next(values: np.ndarray) -> np.ndarray:
+    """Return ``values`` with each NaN slot holding the next value (the newest is a value)."""
+    missing = np.isnan(values)
+    if not missing.any():
+        return values
+    nxt = np.where(missing, values.size - 1, np.arange(values.size))
+    return values[np.minimum.accumulate(nxt[::-1])[::-1]]
 
 
 class SampleRing:
