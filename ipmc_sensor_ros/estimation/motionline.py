@@ -122,7 +122,7 @@ def measure_motion(current_a, sample_rate_hz: float, model,
     noise_a2 = float(np.mean(d * d)) / 20.0       # third difference of white noise: 20 var
     step = max(1, int(fs // MOTION_RATE_HZ))       # block means: the variance of a mean of
     if step > 1:                                   # `step` white samples is noise / step
-        x = np.nanmean(x[:x.size // step * step].reshape(-1, step), axis=1)
+        x = _block_means(x[:x.size // step * step].reshape(-1, step))
         fs, noise_a2 = fs / step, noise_a2 / step
     kept = None if not np.isnan(x).any() else ~np.isnan(x)
     f0 = _strongest_family(hold_next(x), fs, lo, hi, cfg.motion_harmonics, false_alarm)
@@ -147,6 +147,14 @@ def measure_motion(current_a, sample_rate_hz: float, model,
     explained = _explained(residual, fs, hi, (every, amplitude2, span), mains,
                            _remainder_psd(model, cfg), noise_a2, false_alarm)
     return f0 if explained else 0.0
+
+
+def _block_means(blocks: np.ndarray) -> np.ndarray:
+    """Return each row's mean over its delivered (finite) samples; NaN where none was."""
+    ok = np.isfinite(blocks)
+    count = ok.sum(axis=1)
+    sums = np.where(ok, blocks, 0.0).sum(axis=1)
+    return np.where(count > 0, sums / np.maximum(count, 1), np.nan)
 
 
 def _strongest_family(x, fs, lo, hi, harmonics, false_alarm) -> float:
