@@ -124,7 +124,8 @@ def measure_motion(current_a, sample_rate_hz: float, model,
     if step > 1:                                   # `step` white samples is noise / step
         x = _block_means(x[:x.size // step * step].reshape(-1, step))
         fs, noise_a2 = fs / step, noise_a2 / step
-    kept = None if not np.isnan(x).any() else ~np.isnan(x)
+    kept = ~np.isnan(x)
+    kept = None if kept.all() else kept
     f0 = _strongest_family(hold_next(x), fs, lo, hi, cfg.motion_harmonics, false_alarm)
     if not f0:
         return 0.0
