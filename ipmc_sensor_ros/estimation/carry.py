@@ -96,11 +96,13 @@ def _carried(mo, mn, x_scaled, P_scaled, joint: bool):
         if near:
             src += [mo.il + 2 * near[0], mo.il + 2 * near[0] + 1]
             dst += [mn.il + 2 * k, mn.il + 2 * k + 1]
-    # periodic states carry when the fundamental is the same; else they start afresh
+    # periodic states carry when the fundamental is the same (each harmonic both models
+    # have: another corner or count of harmonics keeps the rest); else they start afresh
     fresh = bool(mn.motion_lines_hz) and mo.motion_hz != mn.motion_hz
     if mn.motion_lines_hz and not fresh:
-        src += list(range(mo.im, mo.size))
-        dst += list(range(mn.im, mn.size))
+        for k in range(min(len(mo.motion_lines_hz), len(mn.motion_lines_hz))):
+            src += [mo.im + 2 * k, mo.im + 2 * k + 1, mo.ir + 2 * k, mo.ir + 2 * k + 1]
+            dst += [mn.im + 2 * k, mn.im + 2 * k + 1, mn.ir + 2 * k, mn.ir + 2 * k + 1]
     same_sensor = np.array_equal(np.diag(mo.sensor[0]), np.diag(mn.sensor[0]))
     if same_sensor:                   # only the lines changed: the charge states carry too
         src = list(range(mo.n_sensor)) + src
@@ -110,9 +112,7 @@ def _carried(mo, mn, x_scaled, P_scaled, joint: bool):
     x[dst] = x_old[src]
     P[np.ix_(dst, dst)] = P_old[np.ix_(src, src)]
     if not same_sensor:
-        x[:mn.n_sensor] = -x[mn.iu] / np.diag(mn.sensor[0])
-        P[:mn.n_sensor, dst] = 0.0
-        P[dst, :mn.n_sensor] = 0.0
+        x, P = _another_sensor(mo, mn, x, P, periodic=bool(mn.motion_lines_hz) and not fresh)
     x, P = x / mn.scale, P / np.outer(mn.scale, mn.scale)
     back = None
     if joint:                         # x_new[dst] = x_old[src]: Cov(x_old, x_new) = P_old T'
@@ -122,6 +122,52 @@ def _carried(mo, mn, x_scaled, P_scaled, joint: bool):
     if fresh:
         x, P, back = _restart_motion(mn, x, P, back)
     return x, P, back
+
+
+def _another_sensor(mo, mn, x: np.ndarray, P: np.ndarray, periodic: bool):
+    """
+    (x, P), SI units, carried onto another sensor: the current the old state explained kept.
+
+    The deflection states are the sensor's input and carry as they are, but what the old
+    state knew of a periodic motion came from its current through the old sensor: the new
+    sensor reads the same current as the phasors p_j (and their rates r_j) times
+    H_old(i V_j) / H_new(i V_j) (a complex gain: a turn and a scale of each phasor; eq. 45
+    through the reduced model), and the motion states follow them by their forced response
+    (:attr:`~.statespace.StateSpaceModel.forced_response`).  The charge states are the new
+    sensor's response to that motion: forced by the periodic states, steady for the rest of
+    the velocity (x_R = -u / p_i), with their prior covariance.
+    """
+    n = mn.n_sensor
+    poles = np.diag(mn.sensor[0])
+    x_r = np.zeros(n)
+    if periodic:
+        p = np.arange(mn.im, mn.size)
+        X = mn.forced_response * mn.scale[mn.motion_states][:, None] / mn.scale[p][None, :]
+        turn = np.eye(p.size)
+        for k, f in enumerate(mn.motion_lines_hz):
+            g = _charge_gain(mo, f) / _charge_gain(mn, f)
+            block = np.array([[g.real, -g.imag], [g.imag, g.real]])
+            for first in (2 * k, mn.ir - mn.im + 2 * k):
+                turn[first:first + 2, first:first + 2] = block
+        T = np.eye(mn.size)
+        T[np.ix_(p, p)] = turn
+        T[np.ix_(mn.motion_states[n:], p)] = X[n:] @ (turn - np.eye(p.size))
+        x, P = T @ x, T @ P @ T.T
+        x_r = X[:n] @ x[p]
+        u_forced = X[n + 1] @ x[p]
+        x[:n] = x_r - (x[mn.iu] - u_forced) / poles
+    else:
+        x[:n] = -x[mn.iu] / poles
+    P[:n, n:] = 0.0
+    P[n:, :n] = 0.0
+    return x, P
+
+
+def _charge_gain(model, f_hz: float) -> complex:
+    """R_n(i 2 pi f) of ``model``'s sensor (its modal realisation): H_n / s."""
+    a, b, c, d = model.sensor
+    s = 2j * np.pi * f_hz
+    return complex(d + np.sum(c * b / (s - np.diag(a))))
 
 
 def _restart_motion(mn, x: np.ndarray, P: np.ndarray, back=None):

@@ -22,7 +22,7 @@ from .filter import FilterState, KalmanFilter
 from .lines import Line
 from .periodic import StretchLog, design
 from .ring import SampleRing
-from .statespace import StateSpaceModel
+from .statespace import StateSpaceModel, harmonics_below
 
 __all__ = ['KalmanState']
 
@@ -66,6 +66,20 @@ class KalmanState:
         self.offset_jumps = int(state.get('offset_jumps', 0))
         self._line = line
 
+    def _design_after(self, old: 'KalmanState') -> tuple:
+        """(lines, motion, remainder, corner) of ``old``'s design under these settings."""
+        was, now, chosen = old.config, self.config, old.model.config
+        lines = (old.model.fundamentals_hz if old.mains_hz == self.mains_hz
+                 else self.model.fundamentals_hz)
+        remainder = (chosen.periodic_remainder_rms_m if was.periodic_remainder_rms_m
+                     == now.periodic_remainder_rms_m else now.periodic_remainder_rms_m)
+        band = (chosen.motion_bandwidth_hz if was.motion_bandwidth_hz == now.motion_bandwidth_hz
+                else now.motion_bandwidth_hz)
+        motion = old.model.motion_hz
+        if not harmonics_below(motion, band, now.motion_harmonics):
+            motion = 0.0
+        return lines, motion, remainder, band
+
     def _model_filter(self, line_hz, motion_hz, remainder_m, band_hz) -> KalmanFilter:
         """Return this filter when its model is of this design (:func:`.periodic.design`)."""
         if design(self.model) == (tuple(line_hz), motion_hz, remainder_m, band_hz):
@@ -90,15 +104,18 @@ class KalmanState:
         if changes:
             raise ParameterError(f'cannot rebuild the Kalman estimator with {sorted(changes)}')
         new = type(self)(reduced or self.reduced, fs, config, mains, lag_s)
-        if new.mains_hz == self.mains_hz:
-            new._filter = new._new_filter(StateSpaceModel(new.reduced, config, fs,
-                                                          self.model.fundamentals_hz,
-                                                          self.model.motion_hz))
         new.continue_from(self)
         return new
 
     def continue_from(self, old: 'KalmanState', recent_input=None) -> None:
-        """Take over ``old``'s stream state (deflection, offset, lines, ...)."""
+        """
+        Take over ``old``'s stream state (deflection, offset, lines, ...) and its design.
+
+        The mains lines measured (under the same ``mains_hz``) and the periodic motion carry
+        over, and so do the remainder and upper corner the data chose while the settings they
+        were chosen from are the same: a new sensor model or setting is not a new motion.
+        """
+        self._filter = self._model_filter(*self._design_after(old))
         self._state = carry_state(old._filter, self._filter, old._state)
         self._log = StretchLog(self._filter, self._state)
         self._first_rest_n, self.offset_jumps = old._first_rest_n, old.offset_jumps
