@@ -5,6 +5,7 @@ import pytest
 
 from bench.bench_estimators import _causal, estimate_scores
 from bench.scenarios import build
+from bench.scenarios.drawn import draw
 from ipmc_sensor_ros.estimation.config import EstimatorConfig
 from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
 from ipmc_sensor_ros.estimation.lines import Line, measure_line, vertex
@@ -34,6 +35,41 @@ def test_a_quantised_still_record_has_no_line():
     rng = np.random.default_rng(0)
     codes = np.round(0.4 * rng.standard_normal(4000))
     assert measure_line(codes * lsb, 1000.0) == Line()
+
+
+def test_the_flank_of_a_motion_line_beside_the_search_range_is_no_line():
+    """
+    A 24.3 Hz crank's second harmonic, 1.4 Hz below the 50 Hz search range, is no mains line.
+
+    In one second its main lobe (+-2 Hz) rises across the range; its largest bin inside was
+    taken for a 1.2 uA line at 49.515 Hz, known to 1 mHz, with or without a weak line at
+    50.28 Hz that a 1 s window cannot tell from it.  Only a peak within a resolution bin is a
+    line.
+    """
+    t = np.arange(500) / 500.0
+    rng = np.random.default_rng(1)
+    for weak_a in (0.0, 20e-9):
+        x = (2e-6 * np.sin(2 * np.pi * 48.64 * t) + weak_a * np.sin(2 * np.pi * 50.28 * t + 1)
+             + rng.normal(0, 2e-9, t.size))
+        assert measure_line(x, 500.0) == Line()
+
+
+def test_a_line_beside_a_crank_harmonic_is_modelled_only_where_it_is_likelier():
+    """
+    A measured line frequency is a candidate: its states take over if the stretch is likelier.
+
+    Drawn record 101: a 24.3 Hz crank from rest at 500 Hz, its second harmonic 1.6 Hz
+    below a 0.7 % hum at 50.28 Hz.  The first second's window (the spin-up) measured
+    49.85 Hz; taken over unasked, that line's model refiltered the rest at the start without
+    finding it, and the level stayed 17 um off (1.15 % NRMSE against a bound of 0.015 %;
+    now 0.56 %, limit the issue's 1 %).
+    """
+    rec, _ = draw(101)
+    model = SensorModel.named(rec.model, Geometry(*rec.geometry_m, rec.sample),
+                              extra_effects=rec.effects)
+    est = DeflectionEstimator(model, rec.sample_rate_hz)
+    assert estimate_scores(rec, _causal(rec, est, 1000))['nrmse'] < 0.01
+    assert est.core.status()['mains_line_hz'] == pytest.approx(rec.mains_hz, abs=0.1)
 
 
 def test_measurements_of_one_line_are_joined_by_their_variances():

@@ -297,8 +297,9 @@ class KalmanFilter:
                 record.x_pred[j], record.P_pred[j] = x, P
                 record.steps[j], record.still[j], record.w_row[j] = sk, still, wk
             x, P, z, r = scalar_update(x, P, row, yk, var)
+            nll += z * z + 2.0 * math.log(r)     # the likelihood: models compared alike
             if samples >= settled:      # R measured: the innovation's variance is the model's
-                zs, zn, nll = zs + z, zn + 1, nll + z * z + 2.0 * math.log(r)
+                zs, zn = zs + z, zn + 1
                 if block > 1:           # a periodic model: its innovations grown? (.innovations)
                     cusum = max(0.0, cusum + c_gain * z * z - c_drift)
                 alarm = cusum > limit and zn < block

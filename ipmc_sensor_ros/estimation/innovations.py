@@ -60,7 +60,7 @@ CUSUM_STEP = (0.5 * (1.0 - 1.0 / CUSUM_RATIO), 0.5 * math.log(CUSUM_RATIO))
 
 
 class Innovations(NamedTuple):
-    """The test's sums, kept by the filter (not over its first ``noise_average_s``)."""
+    """The test's sums, kept by the filter (not over its first ``noise_average_s``; nll is)."""
 
     #: sum over the closed blocks of (sum of z)^2 / samples in the block
     chi2: float = 0.0
@@ -70,7 +70,8 @@ class Innovations(NamedTuple):
     open_sum: float = 0.0
     open_n: int = 0
     #: sum over the samples of z^2 + ln S, S the innovation's variance (A^2): twice the
-    #: negative log-likelihood of the current under the model, less a constant per sample
+    #: negative log-likelihood of the current under the model, less a constant per sample;
+    #: from the first sample (R not measured yet is the same for every model compared)
     nll: float = 0.0
     #: the evidence of the samples taken off their slots on when they were taken
     stamps: StampEvidence = StampEvidence()

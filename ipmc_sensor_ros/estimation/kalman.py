@@ -8,10 +8,10 @@ The parts: :mod:`.statespace` (model), :mod:`.filter`, :mod:`.smoother`, :mod:`.
 run the same recursion.  The mains line (``mains_hz``: ``'auto'``, 50, 60 or 0 = none) is
 measured every ``CHECK_S`` of data on the last ``LINE_WINDOW_S`` of current, at fixed
 sample counts (so the result does not depend on how the stream is cut into blocks); the
-measurements are joined (:class:`~.lines.Line`), and when a line appears, or its joined
-frequency moves further than the line states' walk follows, the model with line states at
-that frequency takes over from the start of the stretch since the last check, whose
-samples are filtered again (:func:`~.periodic.refilter`).
+measurements are joined (:class:`~.lines.Line`); when a line appears, or its joined
+frequency moves further than the line states' walk follows, line states at that frequency
+take over from the start of the stretch since the last check if it is likelier under them
+(:func:`~.periodic.refilter`; a measurement is a candidate, and the likelihood judges).
 
 A periodic motion is measured at the same checks, on the last 1, 2, 4 and 8 s of current
 (:func:`~.motionline.measure_recent`); when two checks in a row say it appeared, went or
@@ -25,9 +25,8 @@ within a period).  Without one, the broad prior's upper corner is chosen by the 
 likelihood at each check (:mod:`.motion_band`).  A motion that ends a rest is filtered
 again from where the rest test's CUSUM says it began (:mod:`.onset`).
 
-``smoothed_lag_s`` > 0 also smooths the live output with that lag
-(:class:`~.fixed_lag.FixedLagSmoother` on the filter's own forward record):
-:meth:`KalmanEstimator.pop_smoothed` returns what is ready, oldest first.
+``smoothed_lag_s`` > 0 also smooths the live output with that lag (:class:`~.fixed_lag.
+FixedLagSmoother`): :meth:`KalmanEstimator.pop_smoothed` returns what is ready, oldest first.
 """
 from __future__ import annotations
 
@@ -48,11 +47,11 @@ from .innovations import explains
 from .instants import at_stamp
 from .onset import due, restart
 from .kalman_state import KalmanState
-from .periodic import (StretchLog, after_refutation, likeliest, refilter, remainder_configs,
-                       same_motion)
+from .periodic import (StretchLog, after_refutation, likeliest, nll_of, refilter,
+                       remainder_configs, same_motion)
 from .ring import SampleRing, hold_next, on_grid
 from .smoother import smooth_segments
-from .statespace import StateSpaceModel
+from .statespace import StateSpaceModel, line_frequencies_hz
 from .timebase import slots_of
 
 __all__ = ['KalmanEstimator', 'CHECK_S', 'LINE_WINDOW_S']
@@ -115,8 +114,6 @@ class KalmanEstimator(KalmanState):
 
     def _new_filter(self, model: StateSpaceModel) -> KalmanFilter:
         """Build the filter; its rest test fits the nominal lines until one is modelled."""
-        from .statespace import line_frequencies_hz
-
         nominal = () if self.mains_hz == 0.0 else self._nominal()
         rest_lines = tuple(f for f0 in nominal for f in line_frequencies_hz(
             f0, model.sample_rate_hz, self.config.line_harmonics))
@@ -184,10 +181,7 @@ class KalmanEstimator(KalmanState):
             self._log.add(y[a:b].tolist(), st[a:b].tolist(), still)
             parts.append((w, s, still))
             a = b
-            closed = self._state.innovations.blocks != blocks
-            self._restart_motion()
-            if closed:
-                self._block_closed()
+            self._after_run(blocks)
             if self._state.samples == due:
                 self._check_line()
         if not parts:
@@ -210,11 +204,15 @@ class KalmanEstimator(KalmanState):
             self._recent.push(current_a if k == 1 else math.nan)
         if self._first_rest_n is None and still[0]:
             self._first_rest_n = n
+        self._after_run(blocks)
+        return float(w[0]), float(s[0])
+
+    def _after_run(self, blocks: int) -> None:
+        """Filter a motion's start again; test a periodic model if a block closed."""
         closed = self._state.innovations.blocks != blocks
         self._restart_motion()
         if closed:
             self._block_closed()
-        return float(w[0]), float(s[0])
 
     def _restart_motion(self) -> None:
         """Filter a motion that ended a rest again from where it began (:mod:`.onset`)."""
@@ -260,9 +258,12 @@ class KalmanEstimator(KalmanState):
             return
         if not f_line and (len(old) < 2 or self._state.samples > self._first_n):
             return        # no line: keep what is modelled (the nominal pair only at the start)
-        model = StateSpaceModel(self.reduced, self.model.config, self.sample_rate_hz,
-                                f_line or (), self.model.motion_hz)     # its remainder too
-        self._take_over(self._new_filter(model), self._log.current)    # measured there
+        span, m = self._log.current, self.model                          # its remainder too
+        filt = self._new_filter(StateSpaceModel(self.reduced, m.config, m.sample_rate_hz,
+                                                f_line or (), m.motion_hz))
+        run, ours = refilter(span, filt), nll_of(span, self._filter, self._state)
+        if run.nll < ours:              # a measurement is a candidate (module docstring)
+            self._take_over(filt, span, run=run)
 
     def _begin_segment(self, filt, state, old, old_state) -> tuple | None:
         """Return the smoothers' link of a change (:meth:`~.carry.Changes.begin`), if one runs."""
@@ -386,8 +387,7 @@ class KalmanEstimator(KalmanState):
                 'noise_a': math.sqrt(self._state.noise.var_a2),
                 'mains_line_hz': self.model.line_hz, 'mains_line_a': level,
                 'motion_hz': self.model.motion_hz,
-                'motion_remainder_m': (self.model.config.periodic_remainder_rms_m
-                                       if self.model.motion_hz else None),
+                'motion_remainder_m': m.motion_hz and m.config.periodic_remainder_rms_m or None,
                 'motion_bandwidth_hz': self.model.config.motion_bandwidth_hz,
                 'offset_jumps': self.offset_jumps,
                 'sampled_at_stamp': at_stamp(self._state.innovations.stamps,

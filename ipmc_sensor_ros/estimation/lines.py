@@ -37,6 +37,7 @@ import math
 from typing import NamedTuple
 
 import numpy as np
+from scipy.ndimage import maximum_filter1d
 from scipy.stats import norm
 
 from ..lti.discretize import USABLE_BAND_FRACTION
@@ -138,7 +139,7 @@ def measure_line(current_a, sample_rate_hz: float, nominal=NOMINAL_LINES_HZ,
         if not ks:
             continue
         cand = np.arange(int((f0 - SEARCH_HZ) / df), int((f0 + SEARCH_HZ) / df) + 1)
-        peak_bin, top = family_peak(power, cand, ks)
+        peak_bin, top = family_peak(power, cand, ks, max(1, n_fft // x.size))
         if top > best[1]:
             best = (peak_bin * df, top)
     f_line = best[0]
@@ -165,15 +166,25 @@ def measure_line(current_a, sample_rate_hz: float, nominal=NOMINAL_LINES_HZ,
     return Line(float(f_line), float(amp), float(hz_var), float(drift))
 
 
-def family_peak(power: np.ndarray, cand: np.ndarray, ks) -> tuple[float, float]:
+def family_peak(power: np.ndarray, cand: np.ndarray, ks, reach: int = 1) -> tuple[float, float]:
     """
     Return (fractional bin, summed power) of the strongest family: power summed at k c.
 
-    ``cand``: candidate fundamental bins; ``ks``: the harmonics summed.  The edges of
-    ``cand`` only serve the parabolic vertex.
+    ``cand``: candidate fundamental bins; ``ks``: the harmonics summed; ``reach``: bins per
+    resolution bin (1 / T).  Only a family whose summed power peaks within a resolution bin
+    either side is one (the flank of a stronger line beside the range is not: a 24.3 Hz
+    crank's second harmonic, 1.6 Hz below a 50.3 Hz line, put the maximum at the range's
+    edge, 49.51 Hz); (0.0, -1.0) when none does.  The edges of ``cand`` only serve the
+    parabolic vertex.
     """
-    summed = sum(power[np.minimum(k * cand, power.size - 1)] for k in ks)
-    j = int(np.argmax(summed[1:-1])) + 1
+    wide = np.arange(cand[0] - reach, cand[-1] + reach + 1)
+    summed = sum(power[np.clip(k * wide, 0, power.size - 1)] for k in ks)
+    peaks = summed >= maximum_filter1d(summed, 2 * reach + 1, mode='nearest')
+    inner = np.flatnonzero(peaks[reach + 1:reach + cand.size - 1]) + 1     # bins of cand
+    if not inner.size:
+        return 0.0, -1.0
+    summed = summed[reach:reach + cand.size]
+    j = int(inner[np.argmax(summed[inner])])
     return vertex(cand, summed, j), float(summed[j])
 
 

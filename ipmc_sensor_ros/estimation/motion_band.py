@@ -23,7 +23,7 @@ steps and holds).
 from __future__ import annotations
 
 from .config import fractions_of
-from .periodic import refilter
+from .periodic import nll_of, refilter
 from .statespace import StateSpaceModel
 
 __all__ = ['BAND_CHOICES', 'band_choices_hz', 'likelier_band']
@@ -51,7 +51,7 @@ def likelier_band(span, filt, state, config, reduced, build) -> tuple | None:
     if model.motion_hz or span.filter is not filt or not span.moved or span.deferred:
         return None
     now = model.config.motion_bandwidth_hz
-    lowest = state.innovations.nll - span.state.innovations.nll
+    lowest = nll_of(span, filt, state)
     best = None
     for hz in band_choices_hz(config):
         if hz == now:

@@ -46,7 +46,7 @@ from .step_glr import offset_step_at
 
 __all__ = ['Stretch', 'StretchLog', 'Refiltered', 'refilter', 'same_motion', 'design',
            'likeliest', 'REMAINDER_CHOICES', 'remainder_configs', 'offset_step_at', 'Change',
-           'after_refutation']
+           'after_refutation', 'nll_of']
 
 
 #: The periodic remainders a model is tried with, relative to ``periodic_remainder_rms_m``
@@ -94,6 +94,18 @@ def likeliest(span: Stretch, filters) -> tuple:
         if run.nll < lowest:
             best, lowest = (filt, run), run.nll
     return best
+
+
+def nll_of(span: Stretch, filt: KalmanFilter, state: FilterState) -> float:
+    """
+    Return twice the negative log-likelihood of ``span``'s innovations under ``filt``.
+
+    From the filter's own sums when the span ran wholly under ``filt`` (to ``state``, its
+    state now), else from ``span`` filtered again under it.
+    """
+    if span.filter is filt:
+        return state.innovations.nll - span.state.innovations.nll
+    return refilter(span, filt).nll
 
 
 def same_motion(a_hz: float, b_hz: float) -> bool:
