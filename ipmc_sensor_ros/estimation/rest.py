@@ -39,7 +39,10 @@ sample beyond the per-sample limit from the filter's offset on its own may be a 
 may a sample at which the CUSUM of a sensor at rest tells its mean shifted (a step smaller
 than the noise of one sample: 12.5 nA under 14.7 nA of noise at 2 kHz, which no single
 sample shows while the window's mean knows it to 0.7 nA; the run then begins at the CUSUM's
-alarm, its delay after the step).  From it a second run of the per-sample tests starts,
+alarm, its delay after the step), or one at which the window's mean leaves the offset while
+its spread stays flat, whichever tells first (a 3.5 nA step under 2.1 nA of noise, drawn
+record 80, ended the rest by the level test 0.2 % beyond its limit, before the CUSUM spoke,
+and the hold read as a ramp).  From it a second run of the per-sample tests starts,
 against a still sensor whose offset is the filter's with the jump's variance added
 (``jump_track``, ``jump_quiet``).  Out of a still stretch (at rest, or after a sample that
 agreed with rest on its own: a hold whose rest the window has not confirmed yet; a motion
@@ -168,8 +171,12 @@ class RestTest:
         ``offset_var_a2``: the filter's offset and its variance; ``noise_var_a2``: the
         measured white-noise variance per sample, A^2.
         """
-        if not self.flat(spread, noise_var_a2):
-            return False
+        return (self.flat(spread, noise_var_a2)
+                and self.level(mean, offset_a, offset_var_a2, noise_var_a2))
+
+    def level(self, mean: float, offset_a: float, offset_var_a2: float,
+              noise_var_a2: float) -> bool:
+        """Tell whether a window's mean is the filter's offset (:meth:`still`'s level test)."""
         d = mean - offset_a
         return d * d <= self.level_limit * (noise_var_a2 / self.n + offset_var_a2)
 
@@ -318,13 +325,17 @@ class RestWindow(JumpRun):
                                             noise_var_a2, at_rest)
             still_before = at_rest or self.quiet > 0
             self.quiet = self.quiet + 1 if ok else 0
-            if test.jump_var_a2:
-                self._follow_jump(test, r, (current_a, gram, theta, b), offset_a,
-                                  offset_var_a2, noise_var_a2, still_before, lines,
-                                  shifted=at_rest and not ok)
         if self.quiet < n:          # a sample of the window disagreed: no window test
-            return False
-        return test.still(*self._level(theta, b), offset_a, offset_var_a2, noise_var_a2)
+            flat = level = False
+        else:
+            mean, spread = self._level(theta, b)
+            flat = test.flat(spread, noise_var_a2)
+            level = flat and test.level(mean, offset_a, offset_var_a2, noise_var_a2)
+        if not filled and test.jump_var_a2:     # at rest, a sample or a flat window off the
+            self._follow_jump(test, r, (current_a, gram, theta, b), offset_a,   # offset
+                              offset_var_a2, noise_var_a2, still_before, lines,
+                              shifted=at_rest and not (ok and (level or not flat)))
+        return level
 
     def _level(self, theta, b) -> tuple[float, float]:
         """Return the window's (mean, spread) less the lines' fit ``theta`` (None: none)."""

@@ -25,9 +25,10 @@ class JumpRun:
         Test sample ``r`` against a still sensor whose offset jumped (module docstring).
 
         A run starts at a sample beyond the per-sample limit from the filter's offset on its
-        own, or at one the rest test's CUSUM refused at rest (``shifted``: a step smaller
-        than one sample's noise; a motion that starts gently, or a drift, starts one there
-        too, and its current, not flat, ends it before it holds a window); out of a still
+        own, or at one the rest test refused at rest by its CUSUM or by its window's mean,
+        the spread flat (``shifted``: a step smaller than one sample's noise; a motion that
+        starts gently, or a drift, starts one there too, and its current, not flat, ends it
+        before it holds a window); out of a still
         stretch (``still_before``: at rest, or the sample before agreed with rest) it must
         hold a window, out of a motion ``RestTest.moving_jump_n`` samples (a smooth move's
         current can be flat within the noise for a window about its peak).  It starts from
