@@ -139,7 +139,6 @@ def _another_sensor(mo, mn, x: np.ndarray, P: np.ndarray, periodic: bool):
     """
     n = mn.n_sensor
     poles = np.diag(mn.sensor[0])
-    x_r = np.zeros(n)
     if periodic:
         p = np.arange(mn.im, mn.size)
         X = mn.forced_response * mn.scale[mn.motion_states][:, None] / mn.scale[p][None, :]
@@ -153,9 +152,7 @@ def _another_sensor(mo, mn, x: np.ndarray, P: np.ndarray, periodic: bool):
         T[np.ix_(p, p)] = turn
         T[np.ix_(mn.motion_states[n:], p)] = X[n:] @ (turn - np.eye(p.size))
         x, P = T @ x, T @ P @ T.T
-        x_r = X[:n] @ x[p]
-        u_forced = X[n + 1] @ x[p]
-        x[:n] = x_r - (x[mn.iu] - u_forced) / poles
+        x[:n] = X[:n] @ x[p] - (x[mn.iu] - X[n + 1] @ x[p]) / poles
     else:
         x[:n] = -x[mn.iu] / poles
     P[:n, n:] = 0.0
