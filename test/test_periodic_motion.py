@@ -112,12 +112,14 @@ def test_drawn_record_82_keeps_its_crank_through_a_burst_and_finds_the_offset_st
     Drawn record 82 (1.49 Hz crank, a 39-row burst at 5.5 s, -37 nA offset step at 9.9 s).
 
     26 % NRMSE while the burst's held slots refused the periodic model (previous test);
-    1.45 % now (bound 0.026 %: what is left is the burst's own 4-6 s, the motion unseen
-    for 39 ms, and the step's period).  Allowed 3 %, about a tenth of the failure.
+    then 1.45 %: judged on the last 1, 2, 4 and 8 s, the crank (from rest at ~1 s) was
+    modelled at 6 s, after the burst, which the broad prior bridged 100 um off.  On every
+    whole second's stretch it is modelled before the burst: 0.52 % (bound 0.026 %: the
+    step's period is left).  Allowed: the issue's 1 %.
     """
     from bench.scenarios.drawn import draw
     rec = draw(82)[0]
-    assert estimate_scores(rec, run_estimator(rec))['nrmse'] < 0.03
+    assert estimate_scores(rec, run_estimator(rec))['nrmse'] < 0.01
 
 
 def _gain(reduced, f):

@@ -13,7 +13,7 @@ frequency moves further than the line states' walk follows, line states at that 
 take over from the start of the stretch since the last check if it is likelier under them
 (:func:`~.periodic.refilter`; a measurement is a candidate, and the likelihood judges).
 
-A periodic motion is measured at the same checks, on the last 1, 2, 4 and 8 s of current
+A periodic motion is measured at the same checks, on the last 1, 2, ..., 8 s of current
 (:func:`~.motionline.measure_recent`); when two checks in a row say it appeared, went or
 moved, the model with periodic states at the measured fundamental (a small remainder:
 :mod:`.statespace`) takes over from the start of those stretches, whose samples are

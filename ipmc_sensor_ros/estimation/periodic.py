@@ -3,7 +3,7 @@
 When the Kalman estimator's model takes periodic-motion states, and from when.
 
 At each line check the estimator measures the fundamental of a periodic motion on the
-last 1, 2, 4 and 8 s of current (:func:`~.motionline.measure_recent`; 0: none; None: a check
+last 1, 2, ..., 8 s of current (:func:`~.motionline.measure_recent`; 0: none; None: a check
 before 1 s of current is too short to judge, and its stretch runs on into the next).  The
 model changes (periodic states at that fundamental appear, move by more than
 :data:`~.statespace.MOTION_WOBBLE` of it, a motor's speed wobble that the periodic states'
