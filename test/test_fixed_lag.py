@@ -76,11 +76,13 @@ def test_the_smoothers_pass_back_through_the_changes_of_line_and_motion(reduced,
     Each model change takes over from the start of its stretch; the smoothers follow it.
 
     A 1 Hz sine moving since power-on, 1 % noise, a 50 Hz hum from 1.2 s: at the 0.5 s check
-    the nominal lines go (10 states, from the start), at the 2 s check the line is measured
-    (16, from the start of its stretch at 1 s) and at the 3 s check measured again (from 2
-    s), and the 1 Hz model taken at 4 s starts from the stretch that began at 2 s (28: three
-    periodic phasors and their rates): it replaces the line's part there.  The fixed-lag
-    smoother and the offline one pass back through the same changes.
+    the nominal lines go (10 states, from the start), at the 2 s check the broad prior's
+    corner changes (10, from its stretch at 1 s), the 1 Hz model (22: three periodic phasors
+    and their rates) starts from the stretch that began at 2 s, and the line measured at the
+    5 s check takes over from 4 s (28).  (The line's first measurements, 49.73 Hz on 0.8 s of
+    hum and 50.001 Hz at 3 s, were not likelier than the motion's remainder at 50 Hz over
+    their stretches, so they were not taken.)  The fixed-lag smoother and the offline one
+    pass back through the same changes.
     """
     begun = []
     begin = carry.Changes.begin
@@ -98,7 +100,7 @@ def test_the_smoothers_pass_back_through_the_changes_of_line_and_motion(reduced,
     held = np.concatenate([p.deflection_m for p in _drain(k) + _drain(k, flush=True)])
     whole = KalmanEstimator(reduced, FS).smooth(i)
     assert k.model.motion_hz == pytest.approx(1.0, rel=0.01)
-    changes = [(0, 10), (1000, 16), (2000, 16), (2000, 28)]
+    changes = [(0, 10), (1000, 10), (2000, 22), (4000, 28)]
     assert begun == changes + changes             # the live run (the lag's), the offline one
     assert np.max(np.abs(held - whole.deflection_m)) <= 1e-12     # the same passes
 
@@ -152,8 +154,15 @@ def test_the_smoothers_follow_the_live_model_back_through_its_changes(
         z = (whole.deflection_m - w) / whole.std_m
         assert float(np.sqrt(np.mean(z[after] ** 2))) < 1.0
     else:       # 2.5 periods ahead smooth the waveform, not the level (its evidence is
-        # seconds away): measured 0.77 of the live error (seeded record: deterministic)
-        assert err(held) < 0.9 * err(live.deflection_m)
+        # seconds away): the error less its mean over each second measured 0.40 of the live
+        # one, 0.45 since the line is judged by likelihood (whose level error, ~9 um, the
+        # lag leaves; the whole error 0.90 of the live, 0.56 before); seeded, deterministic
+        def waveform(x):
+            e = np.concatenate([(x - w)[(t >= a) & (t < a + 1)] for a in np.arange(1.5, 8.0)])
+            e = e.reshape(-1, int(FS))
+            return float(np.sqrt(np.mean((e - e.mean(axis=1, keepdims=True)) ** 2)))
+        assert waveform(held) < 0.6 * waveform(live.deflection_m)
+        assert err(held) < err(live.deflection_m)
 
 
 def test_the_cut_of_the_stream_does_not_change_the_smoothed_output(record, reduced):
