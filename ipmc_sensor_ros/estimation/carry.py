@@ -144,7 +144,8 @@ def _another_sensor(mo, mn, x: np.ndarray, P: np.ndarray, periodic: bool):
         X = mn.forced_response * mn.scale[mn.motion_states][:, None] / mn.scale[p][None, :]
         turn = np.eye(p.size)
         for k, f in enumerate(mn.motion_lines_hz):
-            g = _charge_gain(mo, f) / _charge_gain(mn, f)
+            s = 2j * np.pi * f            # R_n = H_n / s of each sensor (eq. 45 reduced)
+            g = complex(mo.reduced.charge_response(s) / mn.reduced.charge_response(s))
             block = np.array([[g.real, -g.imag], [g.imag, g.real]])
             for first in (2 * k, mn.ir - mn.im + 2 * k):
                 turn[first:first + 2, first:first + 2] = block
@@ -158,13 +159,6 @@ def _another_sensor(mo, mn, x: np.ndarray, P: np.ndarray, periodic: bool):
     P[:n, n:] = 0.0
     P[n:, :n] = 0.0
     return x, P
-
-
-def _charge_gain(model, f_hz: float) -> complex:
-    """R_n(i 2 pi f) of ``model``'s sensor (its modal realisation): H_n / s."""
-    a, b, c, d = model.sensor
-    s = 2j * np.pi * f_hz
-    return complex(d + np.sum(c * b / (s - np.diag(a))))
 
 
 def _restart_motion(mn, x: np.ndarray, P: np.ndarray, back=None):

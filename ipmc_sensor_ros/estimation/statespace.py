@@ -184,6 +184,7 @@ class StateSpaceModel:
         self.motion_hz = float(motion_hz or 0.0)
         self.motion_lines_hz = harmonics_below(self.motion_hz, config.motion_bandwidth_hz,
                                                config.motion_harmonics)
+        self.reduced = reduced
         self.sensor = modal_realisation(reduced)
         n = self.n_sensor = reduced.order
         self.iw, self.iu, self.ia, self.ih, self.ib = n, n + 1, n + 2, n + 3, n + 4
