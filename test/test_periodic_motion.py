@@ -72,16 +72,25 @@ def test_moving_start_prior_is_invariant_under_the_model(reduced):
     assert np.max(np.abs(step - P0[np.ix_(m, m)])) < 1e-8 * np.max(np.abs(P0[np.ix_(m, m)]))
 
 
-def test_measure_motion_finds_a_crank_and_refuses_other_motions(reduced):
-    """A crank's fundamental to 1 %; two unrelated sines of 0.3 mm, or no motion: none."""
+def test_measure_motion_finds_a_crank_two_sines_and_no_motion(reduced):
+    """
+    A crank's fundamental to 1 %; two unrelated sines: none, or each; no motion: none.
+
+    With one motion modelled (the default ``motion_fundamentals``) two sines are refused: one
+    family of harmonics cannot explain them.  With three, the second is searched in what the
+    first leaves, and each refined beside the other: a 2 s stretch resolves 5 and 7.3 Hz to
+    1e-3 (its resolution is 0.5 Hz; the least-squares fit of two clean sines in 1 nA of noise
+    is far finer).
+    """
     ssm = StateSpaceModel(reduced, EstimatorConfig(), FS)
     crank = build('crank-5hz-short-0.2na-poweron', 0)
-    f0 = measure_motion(crank.current_a[:2000], crank.sample_rate_hz, ssm)
-    assert f0 == pytest.approx(5.0, rel=1e-2)      # a 2 s mean of a speed wobbling by <= 1 %
+    found = measure_motion(crank.current_a[:2000], crank.sample_rate_hz, ssm)
+    assert found == pytest.approx((5.0,), rel=1e-2)  # a 2 s mean of a speed wobbling by <= 1 %
     two = _two_sines(reduced, 2000, (5.0, 0.8e-3), (7.3, 0.3e-3), 1e-9, seed=0)
-    assert measure_motion(two, FS, ssm) == 0.0
+    assert measure_motion(two, FS, ssm) == ()
+    assert measure_motion(two, FS, _several(reduced)) == pytest.approx((5.0, 7.3), rel=1e-3)
     rng = np.random.default_rng(0)
-    assert measure_motion(1e-9 * rng.standard_normal(2000), FS, ssm) == 0.0
+    assert measure_motion(1e-9 * rng.standard_normal(2000), FS, _several(reduced)) == ()
 
 
 def test_slots_the_daq_did_not_deliver_are_left_out_of_the_motion_s_measurement(reduced):
@@ -101,10 +110,10 @@ def test_slots_the_daq_did_not_deliver_are_left_out_of_the_motion_s_measurement(
     gap = slice(900, 960)
     held = y.copy()
     held[gap] = y[960]
-    assert measure_motion(held, FS, ssm) == 0.0
+    assert measure_motion(held, FS, ssm) == ()
     y[gap] = np.nan
-    assert measure_motion(y, FS, ssm) == pytest.approx(5.0, rel=1e-2)
-    assert measure_motion(np.full(2000, np.nan), FS, ssm) == 0.0
+    assert measure_motion(y, FS, ssm) == pytest.approx((5.0,), rel=1e-2)
+    assert measure_motion(np.full(2000, np.nan), FS, ssm) == ()
 
 
 def test_drawn_record_82_keeps_its_crank_through_a_burst_and_finds_the_offset_step():
@@ -120,6 +129,11 @@ def test_drawn_record_82_keeps_its_crank_through_a_burst_and_finds_the_offset_st
     from bench.scenarios.drawn import draw
     rec = draw(82)[0]
     assert estimate_scores(rec, run_estimator(rec))['nrmse'] < 0.01
+
+
+def _several(reduced):
+    """Return the model of an estimator that models up to three periodic motions."""
+    return StateSpaceModel(reduced, EstimatorConfig(motion_fundamentals=3), FS)
 
 
 def _gain(reduced, f):
@@ -139,17 +153,21 @@ def _two_sines(reduced, n, first, second, noise_a, seed):
 
 def test_a_slow_crank_is_judged_on_a_long_stretch(reduced):
     """
-    A 1 Hz crank: not periodic on 2 s, 1 Hz on 8 s; two slow sines on 8 s: none.
+    A 1 Hz crank: not periodic on 2 s, 1 Hz on 8 s; two slow sines on 8 s: both, modelled.
 
     2 s hold too few of its periods to search it (MOTION_PERIODS), and a family of its
-    harmonics leaves the fundamental in the residual; measure_recent tries 2, 4, then 8 s.
+    harmonics leaves the fundamental in the residual; measure_recent tries 1, 2, ..., 8 s.
+    The sines' fundamentals to 1 % (each refined beside the other on pieces of two of its
+    periods, where the other's is not resolved).
     """
     ssm = StateSpaceModel(reduced, EstimatorConfig(), FS)
     y = build('crank-1hz-short-0.2na-poweron', 0).grid_current_a
-    assert measure_recent(y[:2000], FS, ssm) == 0.0
-    assert measure_recent(y[:8000], FS, ssm) == pytest.approx(1.0, rel=1e-2)
+    assert measure_recent(y[:2000], FS, ssm) == ()
+    assert measure_recent(y[:8000], FS, ssm) == pytest.approx((1.0,), rel=1e-2)
     two = _two_sines(reduced, 8000, (1.0, 0.5e-3), (1.7, 0.3e-3), 0.2e-9, seed=1)
-    assert measure_recent(two, FS, ssm) == 0.0
+    assert measure_recent(two, FS, ssm) == ()
+    assert sorted(measure_recent(two, FS, _several(reduced))) == pytest.approx([1.0, 1.7],
+                                                                               rel=1e-2)
 
 
 @pytest.mark.parametrize('noise_a', [0.0, 1e-10, 1e-9])
@@ -165,7 +183,8 @@ def test_a_sine_with_little_noise_keeps_its_fundamental(reduced, noise_a):
     ssm = StateSpaceModel(reduced, EstimatorConfig(), FS)
     y = _two_sines(reduced, 8000, (5.0, 0.5e-3), (7.3, 0.0), noise_a, seed=3)   # one sine
     for seconds in (2, 3, 5, 8):
-        assert measure_recent(y[:int(seconds * FS)], FS, ssm) == pytest.approx(5.0, rel=1e-4)
+        assert measure_recent(y[:int(seconds * FS)], FS, ssm) == pytest.approx((5.0,),
+                                                                               rel=1e-4)
 
 
 def test_a_speed_wobble_is_allowed_and_a_line_beyond_its_reach_is_not(reduced):
@@ -173,7 +192,7 @@ def test_a_speed_wobble_is_allowed_and_a_line_beyond_its_reach_is_not(reduced):
     A 20 Hz crank whose speed wobbles by MOTION_WOBBLE at MOTION_WOBBLE_HZ is periodic.
 
     The same with a line of 1 % of the crank's at 24 Hz (4 Hz off: beyond the wobble's
-    excursion and four sidebands) is not.
+    excursion and four sidebands) is not: it is a second motion, found when several are.
     """
     ssm = StateSpaceModel(reduced, EstimatorConfig(), FS)
     t = np.arange(2000) / FS
@@ -183,9 +202,13 @@ def test_a_speed_wobble_is_allowed_and_a_line_beyond_its_reach_is_not(reduced):
     crank = (1e-3 * _gain(reduced, f) * np.sin(phase)
              + 0.05e-3 * _gain(reduced, 2 * f) * np.sin(2 * phase)
              + 0.2e-9 * rng.standard_normal(t.size))
-    assert measure_motion(crank, FS, ssm) == pytest.approx(f, rel=MOTION_WOBBLE)
+    assert measure_motion(crank, FS, ssm) == pytest.approx((f,), rel=MOTION_WOBBLE)
     line = 0.01e-3 * _gain(reduced, 24.0) * np.sin(2 * np.pi * 24.0 * t)
-    assert measure_motion(crank + line, FS, ssm) == 0.0
+    # the line to 1 % (a quarter of the stretch's resolution): 1 % of the crank, beside
+    # the wobble's sidebands 0.5 Hz apart, refined on pieces of 0.5 s
+    assert measure_motion(crank + line, FS, _several(reduced)) == pytest.approx((f, 24.0),
+                                                                                rel=1e-2)
+    assert measure_motion(crank + line, FS, ssm) == ()
 
 
 def test_power_on_crank_level_is_learned_within_one_percent():
@@ -230,7 +253,7 @@ class _State:
 
 def _log_after(stretches):
     """
-    Return a StretchLog after stretches of (samples, rest, measured Hz or None) each.
+    Return a StretchLog after stretches of (samples, rest, fundamentals Hz or None) each.
 
     An optional fourth item is the lowest fundamental the measurement could see, Hz.
     """
@@ -248,39 +271,44 @@ def test_a_periodic_model_needs_two_stretches_in_a_row_or_a_start_in_motion():
     # moving since the start: the first stretch judged decides, from the very start (a
     # stretch not judged, None, runs on into the next)
     log = _log_after([(500, False, None), (500, False, None)])
-    span = log.span_for(5.0, never_rested=True)
+    span = log.span_for((5.0,), never_rested=True)
     assert span is not None and len(span.y) == 1000
     # after a rest the first judgement alone is not enough ...
     log = _log_after([(500, True, None), (500, False, None)])
-    assert log.span_for(5.0, never_rested=False) is None
+    assert log.span_for((5.0,), never_rested=False) is None
     # ... two agreeing stretches are, from the start of the last one
-    log = _log_after([(500, True, None), (500, False, 5.0), (2000, False, None)])
-    span = log.span_for(5.05, never_rested=False)
+    log = _log_after([(500, True, None), (500, False, (5.0,)), (2000, False, None)])
+    span = log.span_for((5.05,), never_rested=False)
     assert span is not None and len(span.y) == 2000
     # ... and of the one before when it had no rest either: both are that periodic motion
-    log = _log_after([(500, True, 0.0), (1000, False, 5.0), (1000, False, None)])
-    span = log.span_for(5.0, never_rested=False)
+    log = _log_after([(500, True, ()), (1000, False, (5.0,)), (1000, False, None)])
+    span = log.span_for((5.0,), never_rested=False)
     assert span is not None and len(span.y) == 2000
     # a rest in the last stretch, or a fundamental that moved by more than MOTION_WOBBLE: no
-    log = _log_after([(500, True, None), (500, False, 5.0), (2000, True, None)])
-    assert log.span_for(5.0, never_rested=False) is None
-    log = _log_after([(500, True, None), (500, False, 5.0), (2000, False, None)])
-    assert log.span_for(5.0 * (1 + 2 * MOTION_WOBBLE), never_rested=False) is None
+    log = _log_after([(500, True, None), (500, False, (5.0,)), (2000, True, None)])
+    assert log.span_for((5.0,), never_rested=False) is None
+    log = _log_after([(500, True, None), (500, False, (5.0,)), (2000, False, None)])
+    assert log.span_for((5.0 * (1 + 2 * MOTION_WOBBLE),), never_rested=False) is None
     # a check that found none on 1 s of current (4 periods: 4 Hz and up) does not speak of a
     # 2 Hz crank: moving since the start, the 2 Hz of the next check decides alone ...
-    log = _log_after([(1000, False, 0.0, 4.0), (2000, False, None)])
-    span = log.span_for(2.0, never_rested=True, floor_hz=4 / 3)
+    log = _log_after([(1000, False, (), 4.0), (2000, False, None)])
+    span = log.span_for((2.0,), never_rested=True, floor_hz=4 / 3)
     assert span is not None and len(span.y) == 3000
-    log = _log_after([(500, True, None), (500, False, 0.0, 4.0), (2000, False, None)])
-    assert log.span_for(2.0, never_rested=False, floor_hz=4 / 3) is None
+    log = _log_after([(500, True, None), (500, False, (), 4.0), (2000, False, None)])
+    assert log.span_for((2.0,), never_rested=False, floor_hz=4 / 3) is None
     # ... while one that could have seen it (down to 1 Hz) and found none contradicts it
-    log = _log_after([(4000, False, 0.0, 1.0), (2000, False, None)])
-    assert log.span_for(2.0, never_rested=True, floor_hz=4 / 6) is None
-    # the motion gone twice in a row (0 Hz) is a change too, rest or not
-    log = _log_after([(500, True, None), (500, False, 0.0), (2000, True, None)])
-    assert log.span_for(0.0, never_rested=False) is not None
-    log = _log_after([(500, True, None), (500, False, 0.0, 4.0), (2000, True, None)])
-    assert log.span_for(0.0, never_rested=False, floor_hz=2.0) is not None
+    log = _log_after([(4000, False, (), 1.0), (2000, False, None)])
+    assert log.span_for((2.0,), never_rested=True, floor_hz=4 / 6) is None
+    # the motion gone twice in a row (none) is a change too, rest or not
+    log = _log_after([(500, True, None), (500, False, ()), (2000, True, None)])
+    assert log.span_for((), never_rested=False) is not None
+    log = _log_after([(500, True, None), (500, False, (), 4.0), (2000, True, None)])
+    assert log.span_for((), never_rested=False, floor_hz=2.0) is not None
+    # several motions: the same set in any order is the same; one more or less is not
+    log = _log_after([(500, True, None), (500, False, (5.0, 7.3)), (2000, False, None)])
+    assert len(log.span_for((7.3, 5.0), never_rested=False).y) == 2000
+    log = _log_after([(500, True, None), (500, False, (5.0, 7.3)), (2000, False, None)])
+    assert log.span_for((5.0,), never_rested=False) is None
 
 
 def _core(record):
@@ -374,3 +402,57 @@ def test_blocks_and_single_samples_agree_where_a_stopped_crank_is_dropped():
     w_one = np.array([one.estimate_one(v)[0] for v in y])
     assert np.array_equal(w_block, w_one)
     assert whole.model.motion_hz == one.model.motion_hz == 0.0
+
+
+def test_two_sines_on_a_shaker_are_modelled_as_two_periodic_motions(monkeypatch):
+    """
+    Two sines (2.0 and 3.1 Hz, 0.6 and 0.4 mm) since 0.5 s on the short sample, 20 nA offset.
+
+    With one periodic motion modelled (the default) the stretch is never periodic and the
+    broad prior confuses the slow part with offset: 2.1 % NRMSE.  With three (the setting
+    ``motion_fundamentals``) both are modelled, with the fundamentals to 1 %, and the
+    offset is the current's mean within a few periods: 0.79 %.  Asserted: half the error
+    of one motion and the issue's 1 %.  The record is the bench's (exact H2 by FFT).
+    """
+    from bench.scenarios.daq import Daq
+    from bench.scenarios.library import MM, NA, Scenario
+    from bench.scenarios.motions import Sines, Windowed
+    from bench.scenarios.sensor import Sensor
+    from ipmc_sensor_ros.estimation import deflection
+
+    def make(rng):
+        sines = Sines((2.0, 3.1), (0.6 * MM, 0.4 * MM), (0.0, 1.0))
+        return (Sensor('short'), Windowed(sines, 0.5, 30.0, 0.5),
+                Daq(sample_rate_hz=500.0, offset_a=20 * NA, noise_fraction=0.01))
+
+    rec = Scenario('two-sines', 'sines', 12.0, make, 'two sines on a shaker').build(0)
+    one = estimate_scores(rec, run_estimator(rec))['nrmse']
+    monkeypatch.setattr(deflection, 'EstimatorConfig',
+                        lambda: EstimatorConfig(motion_fundamentals=3))
+    made, init = [], deflection.DeflectionEstimator.__init__
+    monkeypatch.setattr(deflection.DeflectionEstimator, '__init__',
+                        lambda self, *a, **k: made.append(self) or init(self, *a, **k))
+    several = estimate_scores(rec, run_estimator(rec))['nrmse']
+    assert several < min(0.5 * one, 0.01)
+    fundamentals = made[0].core.status()['motion_fundamentals_hz']
+    assert sorted(fundamentals) == pytest.approx([2.0, 3.1], rel=0.01)
+
+
+def test_blocks_singles_and_restore_agree_with_two_periodic_motions(reduced):
+    """Two sines modelled together: blocks, single samples and a restore give the same values."""
+    config = EstimatorConfig(motion_fundamentals=3)
+    y = _two_sines(reduced, int(6.0 * FS), (5.0, 0.5e-3), (7.3, 0.4e-3), 1e-9, seed=4) + 5e-9
+    whole = KalmanEstimator(reduced, FS, config=config)
+    w_block = whole.estimate(y).deflection_m
+    assert sorted(whole.status()['motion_fundamentals_hz']) == pytest.approx([5.0, 7.3],
+                                                                             rel=0.01)
+    one = KalmanEstimator(reduced, FS, config=config)
+    assert np.array_equal(w_block, [one.estimate_one(v)[0] for v in y])
+    cut = KalmanEstimator(reduced, FS, config=config)
+    cut.estimate(y[:4300])
+    assert len(cut.status()['motion_fundamentals_hz']) == 2      # the state holds both
+    saved = cut.get_state()
+    tail = cut.estimate(y[4300:]).deflection_m
+    cut.set_state(saved)
+    assert np.array_equal(tail, cut.estimate(y[4300:]).deflection_m)
+    assert np.array_equal(tail, w_block[4300:])

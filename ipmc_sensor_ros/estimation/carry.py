@@ -98,7 +98,7 @@ def _carried(mo, mn, x_scaled, P_scaled, joint: bool):
             dst += [mn.il + 2 * k, mn.il + 2 * k + 1]
     # periodic states carry when the fundamental is the same (each harmonic both models
     # have: another corner or count of harmonics keeps the rest); else they start afresh
-    fresh = bool(mn.motion_lines_hz) and mo.motion_hz != mn.motion_hz
+    fresh = bool(mn.motion_lines_hz) and mo.motion_fundamentals_hz != mn.motion_fundamentals_hz
     if mn.motion_lines_hz and not fresh:
         for k in range(min(len(mo.motion_lines_hz), len(mn.motion_lines_hz))):
             src += [mo.im + 2 * k, mo.im + 2 * k + 1, mo.ir + 2 * k, mo.ir + 2 * k + 1]

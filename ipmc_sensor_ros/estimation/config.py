@@ -58,6 +58,12 @@ SETTINGS = (
     Setting('motion_harmonics', 3, '', 1, 10,
             "periodic-motion harmonics modelled: a crank-slider's second and third are a "
             'few percent of the first'),
+    Setting('motion_fundamentals', 1, '', 1, 5,
+            'periodic motions of unrelated fundamentals modelled together, each with its '
+            'harmonics, found one after another in what the others leave: a sum of sines on '
+            'a shaker, a crank on a vibrating base (up to 3 is worth it there); 1 by default, '
+            'since on the drawn records (two sines, then a move to a hold) the stiff model of '
+            'two sines lost more where they ended than it gained while they ran'),
     Setting('working_point_walk_m', 1e-6, 'm/sqrt(s)', 0.0, 1.0,
             'random walk of the working point while moving: the stimulus, not drift, moves it; '
             'a rest sets it where the tip is held'),

@@ -120,7 +120,7 @@ class KalmanFilter:
         self._alpha = 1.0 / (cfg.noise_average_s * model.sample_rate_hz)
         #: the first sample the test counts (R measured: noise_average_s); the CUSUM's limit
         self._settled, self._limit = math.ceil(1.0 / self._alpha), cusum_limit(cfg.false_alarm)
-        self._block = block_samples(model.motion_hz, model.sample_rate_hz)
+        self._block = block_samples(model.motion_fundamentals_hz, model.sample_rate_hz)
         s = model.scale
         self._w_row = np.zeros(model.size)          # the published deflection, m
         self._w_row[model.iw] = s[model.iw]

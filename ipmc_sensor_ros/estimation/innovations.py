@@ -38,6 +38,7 @@ import functools
 import math
 from typing import NamedTuple
 
+import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
 from .instants import StampEvidence
@@ -84,9 +85,14 @@ class Innovations(NamedTuple):
         return self._replace(open_sum=0.0, open_n=0, cusum=0.0)
 
 
-def block_samples(motion_hz: float, sample_rate_hz: float) -> int:
-    """Return the samples in one block: a period of the periodic motion; 1 without one."""
-    return max(1, round(sample_rate_hz / motion_hz)) if motion_hz else 1
+def block_samples(motion_hz, sample_rate_hz: float) -> int:
+    """
+    Return the samples in one block: a period of the periodic motion; 1 without one.
+
+    ``motion_hz``: its fundamental(s), Hz (several: the slowest one's period).
+    """
+    slowest = min((f for f in np.atleast_1d(motion_hz) if f), default=0.0)
+    return max(1, round(sample_rate_hz / slowest)) if slowest else 1
 
 
 def explains(now: Innovations, then: Innovations, false_alarm: float) -> bool:

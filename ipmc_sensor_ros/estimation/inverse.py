@@ -249,7 +249,8 @@ class InverseEstimator:
 
     def status(self) -> dict:
         return {'estimator': self.name, 'offset_a': None, 'offset_std_a': None,
-                'at_rest': False, 'deflection_std_m': None, 'noise_a': None, 'motion_hz': None}
+                'at_rest': False, 'deflection_std_m': None, 'noise_a': None, 'motion_hz': None,
+                'motion_fundamentals_hz': None}
 
     def settling(self) -> tuple[float, str]:
         """Five time constants of the leak: it has forgotten the unknown starting level."""

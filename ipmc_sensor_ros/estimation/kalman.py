@@ -51,7 +51,8 @@ from .periodic import (StretchLog, after_refutation, likeliest, nll_of, refilter
                        remainder_configs, same_motion)
 from .ring import SampleRing, hold_next, on_grid
 from .smoother import smooth_segments
-from .statespace import StateSpaceModel, line_frequencies_hz
+from .phasors import line_frequencies_hz
+from .statespace import StateSpaceModel
 from .timebase import slots_of
 
 __all__ = ['KalmanEstimator', 'CHECK_S', 'LINE_WINDOW_S']
@@ -114,10 +115,8 @@ class KalmanEstimator(KalmanState):
 
     def _new_filter(self, model: StateSpaceModel) -> KalmanFilter:
         """Build the filter; its rest test fits the nominal lines until one is modelled."""
-        nominal = () if self.mains_hz == 0.0 else self._nominal()
-        rest_lines = tuple(f for f0 in nominal for f in line_frequencies_hz(
-            f0, model.sample_rate_hz, self.config.line_harmonics))
-        return KalmanFilter(model, rest_lines)
+        return KalmanFilter(model, tuple(f for f0 in self._nominal() if f0 for f in (
+            line_frequencies_hz(f0, model.sample_rate_hz, self.config.line_harmonics))))
 
     def _nominal(self) -> tuple:
         return NOMINAL_LINES_HZ if self.mains_hz == 'auto' else (self.mains_hz,)
@@ -260,7 +259,7 @@ class KalmanEstimator(KalmanState):
             return        # no line: keep what is modelled (the nominal pair only at the start)
         span, m = self._log.current, self.model                          # its remainder too
         filt = self._new_filter(StateSpaceModel(self.reduced, m.config, m.sample_rate_hz,
-                                                f_line or (), m.motion_hz))
+                                                f_line or (), m.motion_fundamentals_hz))
         run, ours = refilter(span, filt), nll_of(span, self._filter, self._state)
         if run.nll < ours:              # a measurement is a candidate (module docstring)
             self._take_over(filt, span, run=run)
@@ -288,9 +287,9 @@ class KalmanEstimator(KalmanState):
         span = self._log.refuted(self._state)
         if span is None:
             return
-        m, before = self.model, self._log.earlier
-        whole = span
-        if before is not None and same_motion(before.filter.model.motion_hz, m.motion_hz):
+        m, before, whole = self.model, self._log.earlier, span
+        if before is not None and same_motion(before.filter.model.motion_fundamentals_hz,
+                                              m.motion_fundamentals_hz):
             whole = before.then(span)       # a jump taken at its end is judged again
         drop = self._new_filter(StateSpaceModel(self.reduced, self.config, self.sample_rate_hz,
                                                 m.fundamentals_hz))
@@ -301,7 +300,7 @@ class KalmanEstimator(KalmanState):
             return
         self._take_over(change.filter, change.span, jump_at=change.jump_at)
         if change.jump_at is not None:
-            span.measured_hz, span.jumped = m.motion_hz, True
+            span.measured_hz, span.jumped = m.motion_fundamentals_hz, True
             self.offset_jumps += 1
         self._log.mark(self._filter, self._state)
 
@@ -312,7 +311,7 @@ class KalmanEstimator(KalmanState):
         f0 = measure_recent(recent, self.sample_rate_hz, self.model, self.config)
         floor = MOTION_PERIODS / min(recent.size / self.sample_rate_hz, MOTION_LONGEST_S)
         span = self._log.span_for(f0, self._first_rest_n is None, floor)
-        if span is None or same_motion(f0, self.model.motion_hz):
+        if span is None or same_motion(f0, self.model.motion_fundamentals_hz):
             return
         filters = [self._new_filter(StateSpaceModel(self.reduced, config, self.sample_rate_hz,
                                                     self.model.fundamentals_hz, f0))
@@ -320,7 +319,7 @@ class KalmanEstimator(KalmanState):
         filt, run = likeliest(span, filters)
         if not self._take_over(filt, span, lambda run: not f0 or explains(
                 run.now.innovations, run.start.innovations, self.config.false_alarm), run=run):
-            self._log.current.measured_hz = 0.0         # refused: it counts as none
+            self._log.current.measured_hz = ()          # refused: it counts as none
 
     def _take_over(self, filt: KalmanFilter, span, accept=None, jump_at=None,
                    run=None) -> bool:
@@ -387,6 +386,7 @@ class KalmanEstimator(KalmanState):
                 'noise_a': math.sqrt(self._state.noise.var_a2),
                 'mains_line_hz': self.model.line_hz, 'mains_line_a': level,
                 'motion_hz': self.model.motion_hz,
+                'motion_fundamentals_hz': list(m.motion_fundamentals_hz),
                 'motion_remainder_m': m.motion_hz and m.config.periodic_remainder_rms_m or None,
                 'motion_bandwidth_hz': self.model.config.motion_bandwidth_hz,
                 'offset_jumps': self.offset_jumps,

@@ -22,7 +22,8 @@ from .filter import FilterState, KalmanFilter
 from .lines import Line
 from .periodic import StretchLog, design
 from .ring import SampleRing
-from .statespace import StateSpaceModel, harmonics_below
+from .phasors import harmonics_below
+from .statespace import StateSpaceModel
 
 __all__ = ['KalmanState']
 
@@ -32,7 +33,7 @@ class KalmanState:
 
     def get_state(self) -> dict:
         return {'filter': self._state.copy(), 'line_hz': self.model.fundamentals_hz,
-                'motion_hz': self.model.motion_hz,
+                'motion_hz': self.model.motion_fundamentals_hz,
                 'remainder_m': self.model.config.periodic_remainder_rms_m,
                 'bandwidth_hz': self.model.config.motion_bandwidth_hz,
                 'recent': self._recent.buffer.copy(), 'grid': self._recent.count,
@@ -44,7 +45,7 @@ class KalmanState:
         try:
             fs: FilterState = state['filter']
             line = tuple(float(f) for f in state['line_hz'])
-            motion = float(state['motion_hz'])
+            motion = tuple(float(f) for f in np.atleast_1d(state['motion_hz']) if f)
             remainder = float(state['remainder_m'])
             band = float(state['bandwidth_hz'])
             recent = np.asarray(state['recent'], dtype=float)
@@ -75,9 +76,8 @@ class KalmanState:
                      == now.periodic_remainder_rms_m else now.periodic_remainder_rms_m)
         band = (chosen.motion_bandwidth_hz if was.motion_bandwidth_hz == now.motion_bandwidth_hz
                 else now.motion_bandwidth_hz)
-        motion = old.model.motion_hz
-        if not harmonics_below(motion, band, now.motion_harmonics):
-            motion = 0.0
+        motion = tuple(f for f in old.model.motion_fundamentals_hz
+                       if harmonics_below(f, band, now.motion_harmonics))
         return lines, motion, remainder, band
 
     def _model_filter(self, line_hz, motion_hz, remainder_m, band_hz) -> KalmanFilter:

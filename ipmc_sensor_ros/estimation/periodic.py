@@ -71,7 +71,8 @@ def design(model) -> tuple:
     Its lines, periodic motion, remainder and upper corner (the last two chosen by the data:
     :func:`likeliest`, :mod:`.motion_band`).
     """
-    return (model.fundamentals_hz, model.motion_hz, model.config.periodic_remainder_rms_m,
+    return (model.fundamentals_hz, model.motion_fundamentals_hz,
+            model.config.periodic_remainder_rms_m,
             model.config.motion_bandwidth_hz)
 
 
@@ -108,11 +109,12 @@ def nll_of(span: Stretch, filt: KalmanFilter, state: FilterState) -> float:
     return refilter(span, filt).nll
 
 
-def same_motion(a_hz: float, b_hz: float) -> bool:
-    """Tell whether two measured fundamentals (0: none) are the same motion."""
-    if not a_hz or not b_hz:
-        return a_hz == b_hz
-    return abs(a_hz - b_hz) <= MOTION_WOBBLE * max(a_hz, b_hz)   # the walk follows less
+def same_motion(a_hz: tuple, b_hz: tuple) -> bool:
+    """Tell whether two measured sets of fundamentals (() none) are the same motions."""
+    if len(a_hz) != len(b_hz):
+        return False
+    return all(abs(a - b) <= MOTION_WOBBLE * max(a, b)     # the walk follows less
+               for a, b in zip(sorted(a_hz), sorted(b_hz)))
 
 
 @dataclass
@@ -127,7 +129,8 @@ class Stretch:
     rest: bool = False
     #: a sample in it was not still
     moved: bool = False
-    measured_hz: float | None = None
+    #: the fundamentals measured at its end's check, Hz (() none; None: not judged)
+    measured_hz: tuple | None = None
     #: the lowest fundamental the measurement could see, Hz
     floor_hz: float = 0.0
     #: a jump of the offset was taken at its end's check, filtering again from before its
@@ -199,11 +202,11 @@ class StretchLog:
                 continue
             lines, motion, remainder, band, state, y, steps, rest, moved, measured, floor, \
                 jumped, deferred = item
-            filt = make_filter(tuple(lines), float(motion), float(remainder), float(band))
+            filt = make_filter(tuple(lines), tuple(motion), float(remainder), float(band))
             if state.x.shape != (filt.model.size,):
                 raise ValueError('a stretch state of another design')
             parts.append(Stretch(filt, state.copy(), list(y), list(steps), bool(rest),
-                                 bool(moved), None if measured is None else float(measured),
+                                 bool(moved), None if measured is None else tuple(measured),
                                  float(floor), bool(jumped), bool(deferred)))
         log = cls.__new__(cls)
         log.earlier, log.current = parts
@@ -222,15 +225,15 @@ class StretchLog:
                 or explains(state.innovations, cur.state.innovations,
                             cur.filter.model.config.false_alarm)):
             return None
-        cur.measured_hz = 0.0
+        cur.measured_hz = ()
         return cur
 
-    def span_for(self, measured_hz: float, never_rested: bool,
+    def span_for(self, measured_hz: tuple | None, never_rested: bool,
                  floor_hz: float = 0.0) -> Stretch | None:
         """
         Record the current stretch's measurement; return the span a new model starts at.
 
-        The model has that fundamental (0: none, down to ``floor_hz``); None: it may not
+        The model has those fundamentals ((): none, down to ``floor_hz``); None: it may not
         take over (module docstring).
         """
         cur, before = self.current, self.earlier
@@ -238,7 +241,8 @@ class StretchLog:
         if measured_hz is None or (measured_hz and cur.rest):
             return None
         if (before is None or before.measured_hz is None         # the first stretch judged
-                or before.measured_hz == 0.0 and 0.0 < measured_hz < before.floor_hz):
+                or before.measured_hz == () and measured_hz
+                and min(measured_hz) < before.floor_hz):
             if not never_rested:
                 return None
         elif not same_motion(measured_hz, before.measured_hz):
@@ -348,7 +352,7 @@ def after_refutation(whole: Stretch, filt: KalmanFilter, drop: KalmanFilter,
                     filt.model.config.false_alarm):
         return Change(drop, whole)
     n = len(whole.y)
-    period = block_samples(filt.model.motion_hz, filt.model.sample_rate_hz)
+    period = block_samples(filt.model.motion_fundamentals_hz, filt.model.sample_rate_hz)
     ended, state, done = math.inf, whole.start_under(filt), 0
     for p in sorted({q for q in (at, *(n - j * (period // 2) for j in range(1, 5))) if q > 0}):
         state = refilter(Stretch(filt, state, whole.y[done:p], whole.steps[done:p]), filt).now

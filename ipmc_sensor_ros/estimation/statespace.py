@@ -25,7 +25,8 @@ H1)::
                                        periodic motion j (in phase, quadrature), m: the
                                        target the tip follows turns at V_j = 2 pi j f_motion,
                                        j = 1..motion_harmonics below motion_bandwidth_hz,
-                                       f_motion measured from the data (:mod:`.motionline`);
+                                       f_motion measured from the data (:mod:`.motionline`;
+                                       several motions: each its own f_motion and lines);
                                        with these states xi_g drives only what the periodic
                                        part leaves (periodic_remainder_rms_m).  A motor's
                                        speed wobbles: its relative error e walks
@@ -69,11 +70,12 @@ import numpy as np
 from scipy.linalg import expm, solve_discrete_lyapunov, solve_sylvester
 
 from ..errors import ParameterError
-from ..lti.discretize import USABLE_BAND_FRACTION, chain, van_loan
+from ..lti.discretize import chain, van_loan
 from ..lti.reduction import ReducedModel
 from .config import EstimatorConfig
+from .phasors import line_frequencies_hz, motion_lines, write_phasors
 
-__all__ = ['StateSpaceModel', 'modal_realisation', 'line_frequencies_hz', 'harmonics_below']
+__all__ = ['StateSpaceModel', 'modal_realisation']
 
 #: At a rest sample the working point's prior is widened to this many ``motion_rms_m`` before it
 #: is measured equal to the held deflection: wide enough that the held level, not the old
@@ -125,27 +127,6 @@ def motion_intensity(a: float, f: float, rms_m: float) -> float:
     return rms_m ** 2 * 4 * a ** 3 * f * (a + f) ** 2 / (2 * a + f)
 
 
-def harmonics_below(fundamental_hz: float, limit_hz: float, count: int) -> tuple:
-    """Return k f, k = 1..count, below ``limit_hz`` (none for a fundamental of 0), Hz."""
-    if not fundamental_hz:
-        return ()
-    return tuple(k * fundamental_hz for k in range(1, count + 1)
-                 if k * fundamental_hz < limit_hz)
-
-
-def line_frequencies_hz(line_hz: float, sample_rate_hz: float, harmonics: int) -> tuple:
-    """Return the mains line and its harmonics below 0.45 fs (none for ``line_hz`` 0), Hz."""
-    return harmonics_below(line_hz, USABLE_BAND_FRACTION * sample_rate_hz, harmonics)
-
-
-def _phasors(A: np.ndarray, Q: np.ndarray, first: int, frequencies_hz, walk: float) -> None:
-    """Write phasor pairs from state ``first``: turning at 2 pi f, each walking by ``walk``."""
-    for k, f in enumerate(frequencies_hz):
-        j = first + 2 * k
-        A[j, j + 1], A[j + 1, j] = -2 * math.pi * f, 2 * math.pi * f
-        Q[j, j] = Q[j + 1, j + 1] = walk ** 2
-
-
 class StateSpaceModel:
     """
     The model of the module docstring for one sensor, sample rate and mains line.
@@ -161,8 +142,9 @@ class StateSpaceModel:
     line_hz : float or tuple of float
         Mains fundamental(s) in the model, Hz (0 or (): no line states; several while the line
         is not yet measured, e.g. (50, 60)).
-    motion_hz : float
-        Fundamental of the periodic motion in the model, Hz (0: none).
+    motion_hz : float or tuple of float
+        Fundamental(s) of the periodic motions in the model, Hz (0 or (): none), the
+        strongest first.
 
     """
 
@@ -181,9 +163,12 @@ class StateSpaceModel:
         self.line_hz = self.fundamentals_hz[0] if len(self.fundamentals_hz) == 1 else 0.0
         self.lines_hz = tuple(f for f0 in self.fundamentals_hz
                               for f in line_frequencies_hz(f0, fs, config.line_harmonics))
-        self.motion_hz = float(motion_hz or 0.0)
-        self.motion_lines_hz = harmonics_below(self.motion_hz, config.motion_bandwidth_hz,
-                                               config.motion_harmonics)
+        self.motion_fundamentals_hz = tuple(float(f) for f in np.atleast_1d(motion_hz or 0.0)
+                                            if f)
+        self.motion_hz = (self.motion_fundamentals_hz or (0.0,))[0]
+        self.motion_lines_hz, self.motion_line_fundamentals_hz = motion_lines(
+            self.motion_fundamentals_hz, config.motion_bandwidth_hz, config.motion_harmonics,
+            MOTION_WOBBLE)
         self.reduced = reduced
         self.sensor = modal_realisation(reduced)
         n = self.n_sensor = reduced.order
@@ -220,9 +205,9 @@ class StateSpaceModel:
         A[self.ib, self.ib + 1] = 1.0
         Q[self.ib, self.ib] = cfg.offset_walk_a ** 2
         Q[self.ib + 1, self.ib + 1] = cfg.offset_drift_walk_a_per_s ** 2
-        _phasors(A, Q, self.il, self.lines_hz, cfg.line_walk_a)
-        _phasors(A, Q, self.im, self.motion_lines_hz, 0.0)
-        _phasors(A, Q, self.ir, self.motion_lines_hz, self.motion_line_walk_m)
+        write_phasors(A, Q, self.il, self.lines_hz, cfg.line_walk_a)
+        write_phasors(A, Q, self.im, self.motion_lines_hz, 0.0)
+        write_phasors(A, Q, self.ir, self.motion_lines_hz, self.motion_line_walk_m)
         A[np.arange(self.im, self.ir), np.arange(self.ir, self.size)] = 1.0
         A[self.ia, self.im:self.ir:2] = a_m * a_m * f_m      # the target the tip follows
         return A, Q
@@ -241,7 +226,8 @@ class StateSpaceModel:
         s[self.ib + 1] = cfg.offset_drift_a_per_s
         s[self.il:self.im] = cfg.line_prior_a
         s[self.im:self.ir] = cfg.motion_rms_m
-        s[self.ir:] = cfg.motion_rms_m * 2 * math.pi * self.motion_hz * MOTION_WOBBLE
+        s[self.ir:] = np.repeat(cfg.motion_rms_m * 2 * math.pi * MOTION_WOBBLE
+                                * np.asarray(self.motion_line_fundamentals_hz), 2)
         return s
 
     # -- measurement rows (scaled states) ----------------------------------------------------
@@ -299,10 +285,11 @@ class StateSpaceModel:
         return v2, v2 * self.r0 ** 2
 
     @property
-    def motion_line_walk_m(self) -> float:
+    def motion_line_walk_m(self) -> np.ndarray:
         """Random walk of each periodic phasor's rate, m/s/sqrt(s) (a relative speed walk)."""
         cfg = self.config
-        return cfg.motion_rms_m * 2 * math.pi * self.motion_hz * cfg.motion_speed_walk
+        return (cfg.motion_rms_m * 2 * math.pi * cfg.motion_speed_walk
+                * np.asarray(self.motion_line_fundamentals_hz))
 
     @functools.cached_property
     def motion_states(self) -> np.ndarray:

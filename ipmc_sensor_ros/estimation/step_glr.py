@@ -53,7 +53,7 @@ def offset_step_at(span, filt: KalmanFilter, chunk: int = 512) -> int | None:
     on, a few samples old: :mod:`.innovations`); None: fewer than two samples.
     """
     m = filt.model
-    n, period = len(span.y), block_samples(m.motion_hz, m.sample_rate_hz)
+    n, period = len(span.y), block_samples(m.motion_fundamentals_hz, m.sample_rate_hz)
     if n < 2:
         return None
     z, s, gains = _innovations(span, filt, chunk)
