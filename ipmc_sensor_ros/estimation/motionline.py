@@ -51,7 +51,7 @@ from scipy.stats import gamma
 from ..lti.discretize import USABLE_BAND_FRACTION
 from .lines import FIND_FALSE_ALARM, PAD, local_levels, vertex
 from .ring import hold_next
-from .phasors import harmonics_below
+from .phasors import harmonics_below, motion_lines
 from .statespace import MOTION_WOBBLE, MOTION_WOBBLE_HZ, motion_intensity
 
 __all__ = ['measure_motion', 'measure_recent', 'MOTION_PERIODS', 'MOTION_LONGEST_S',
@@ -169,8 +169,7 @@ class _Stretch(NamedTuple):
 
 def _lines_of(fundamentals, limit_hz: float, fs: float, count: int) -> tuple:
     """Return the harmonics k f (k <= ``count``) of each fundamental below ``limit_hz``."""
-    top = min(limit_hz, USABLE_BAND_FRACTION * fs)
-    return tuple(h for f in fundamentals for h in harmonics_below(f, top, count))
+    return motion_lines(fundamentals, min(limit_hz, USABLE_BAND_FRACTION * fs), count, 0.0)[0]
 
 
 def _refined(s: _Stretch, found: tuple, f0: float, harmonics: int) -> float:
@@ -223,7 +222,8 @@ def _strongest_family(x, fs, lo, hi, harmonics, false_alarm, taken=()) -> float:
     periodogram within one resolution bin (not the flank of a stronger line) above the
     chi-square level.  (The strongest family of all can be a subharmonic's: on a record with
     little noise, 2.5 Hz, 5 Hz and 7.5 Hz hold a 5 Hz line and its leakage, more than 5, 10
-    and 15 Hz do; its first line is no line.)
+    and 15 Hz do; its first line is no line.)  Nor one whose first line is within 2 bins of
+    one of ``taken`` (Hz: the lines other motions found hold).
     """
     w = (x - x.mean()) * np.hanning(x.size)
     n_fft = 1 << int(math.ceil(math.log2(PAD * x.size)))

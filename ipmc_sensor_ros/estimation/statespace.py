@@ -169,7 +169,6 @@ class StateSpaceModel:
         self.motion_lines_hz, self.motion_line_fundamentals_hz = motion_lines(
             self.motion_fundamentals_hz, config.motion_bandwidth_hz, config.motion_harmonics,
             MOTION_WOBBLE)
-        self.reduced = reduced
         self.sensor = modal_realisation(reduced)
         n = self.n_sensor = reduced.order
         self.iw, self.iu, self.ia, self.ih, self.ib = n, n + 1, n + 2, n + 3, n + 4
