@@ -44,11 +44,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .forward import ForwardRecord, astuple_shallow
-from .innovations import CUSUM_STEP, Innovations, block_samples, cusum_limit
-from .instants import STAMP_WINDOW, OffSlot, StampEvidence, at_stamp
+from .innovations import Innovations, Tally, block_samples, cusum_limit
+from .instants import OffSlot, StampTally
 from .noise import NOISE_FLOOR_A, NoiseMeter
-from .onset import Onset, Start, follow, follow_jump
-from .rest import RestTest, RestWindow
+from .onset import Onset, Start, follow_jump, track_onset
+from .rest import RestTest, RestWindow, rest_change
 from .statespace import StateSpaceModel
 from .timebase import slots_of
 
@@ -122,6 +122,7 @@ class KalmanFilter:
         self._settled, self._limit = math.ceil(1.0 / self._alpha), cusum_limit(cfg.false_alarm)
         self._block = block_samples(model.motion_fundamentals_hz, model.sample_rate_hz)
         s = model.scale
+        self._sb = float(s[model.ib])              # the offset's scale, A
         self._w_row = np.zeros(model.size)          # the published deflection, m
         self._w_row[model.iw] = s[model.iw]
         self.off_slot = OffSlot(model, self._w_row)     # a sample off its slot (.instants)
@@ -225,36 +226,20 @@ class KalmanFilter:
         ``until_motion``: stop after a sample that ends a rest (the outputs are then shorter;
         the state's ``ended`` says where the motion began: :mod:`.onset`).
         """
-        y = current_a if isinstance(current_a, list) else np.asarray(current_a, float).tolist()
-        n = len(y)
-        st = ([1] * n if steps is None else steps if isinstance(steps, list)
-              else np.asarray(steps, dtype=float).tolist())
-        m = self.model
-        ib = m.ib
-        sb = float(m.scale[ib])
-        c, rows, rot, c_lines = m.c, self._rest_rows, self._rot, self._c_lines
-        d3 = self.line_difference
-        x, P, still, moved, samples = state.x, state.P, state.still, state.moved, state.samples
-        meter, win, onset, hold = state.noise, state.window, state.onset, state.hold_off
-        hold_still, jump = state.hold_still, state.jump
-        chi, blocks, zs, zn, nll, stamps, cusum = state.innovations
-        alarm, (c_gain, c_drift) = False, CUSUM_STEP
-        zg, gg, zzgg, zggg, gggg, timed, llr, scale = stamps     # the stamps' evidence
-        prior, w_row = m.config.sampled_at_stamp_prior, self._w_row
-        p = at_stamp(stamps, prior)
-        off = self.off_slot
-        dc, mixed_c, mixed_w = off.mixed(p)
+        y, st = _as_lists(current_a, steps)
+        n, m = len(y), self.model
+        x, P, meter, win, onset, jump = _unpacked(state, copy)
+        still, moved, samples = state.still, state.moved, state.samples
+        hold, hold_still = state.hold_off, state.hold_still
+        sums = Tally(state.innovations, self._block, self._limit)
+        stamps = StampTally(state.innovations.stamps, self.off_slot,
+                            m.config.sampled_at_stamp_prior)
 
-        def evidence():             # the sums as they stand (a snapshot's, or the result's)
-            return StampEvidence(zg, gg, zzgg, zggg, gggg, timed, llr, scale)
-        settled, block, limit = self._settled, self._block, self._limit
-        if copy:
-            x, P, meter, win = x.copy(), P.copy(), replace(meter), win.copy()
-            onset = None if onset is None else onset.copy()
-            jump = None if jump is None else jump.copy()
+        def snapshot():             # the sums as they stand (a snapshot's, or the result's)
+            return sums.value(stamps.value())
         out_w, out_s, out_still = np.empty(n), np.empty(n), np.empty(n, dtype=bool)
         F, Q = m.discrete(1)
-        last_steps, ended = 1, None
+        last_steps, ended, alarm = 1, None, False
         for k in range(n):
             yk, tk = y[k], st[k]
             sk = slots_of(tk)           # the slots, and the stamp's offset from its slot
@@ -269,82 +254,77 @@ class KalmanFilter:
             if held:                    # window and meter left as the test left them, past it
                 verdict, hold = hold_still, hold - 1
             else:
-                win.push(yk, None if not (samples and rot.size) else rot if sk == 1
-                         else rot ** sk, sk)
-                verdict = win.judge(self.rest, yk, float(x[ib]) * sb,
-                                    float(P[ib, ib]) * sb * sb, meter.var_a2, still,
-                                    lambda: float(c_lines @ x))
-                jump = follow_jump(jump, win.jump_quiet, verdict, yk, tk, lambda: (
-                    x0, P0, moved, samples, Innovations(chi, blocks, zs, zn, nll,
-                                                        evidence(), cusum)), still)
-                if jump is not None and verdict is False and win.jumped(self.rest,
-                                                                        meter.var_a2):
-                    accepted, jump = jump, None
+                verdict, jump, accepted = self._judge(
+                    win, meter.var_a2, yk, tk, sk, x, P, still, jump, samples,
+                    lambda: (x0, P0, moved, samples, snapshot()))
             was = still
-            still, release, begins, moved = _rest_change(verdict, still, moved)
+            still, release, begins, moved = rest_change(verdict, still, moved)
             if samples:
                 P = F @ P @ F.T
                 P = 0.5 * (P + P.T) + Q     # symmetric to the bit (the updates keep it so)
             if release:
                 P = self._released(P, still)
-            row, wk, var = c, w_row, meter.var_a2
-            if dk:                      # taken off its slot: at the stamp, or on the slot?
-                j = off.index(dk)
-                row, wk, g = mixed_c[j], mixed_w[j], float(dc[j] @ x)
-                var += p * (1.0 - p) * g * g    # the mixture's spread
+            row, wk, var, g = ((m.c, self._w_row, meter.var_a2, 0.0) if not dk
+                               else stamps.row(dk, x, meter.var_a2))   # at the stamp or slot?
             if record is not None:
                 j = offset + k
                 record.x_pred[j], record.P_pred[j] = x, P
                 record.steps[j], record.still[j], record.w_row[j] = sk, still, wk
             x, P, z, r = scalar_update(x, P, row, yk, var)
-            nll += z * z + 2.0 * math.log(r)     # the likelihood: models compared alike
-            if samples >= settled:      # R measured: the innovation's variance is the model's
-                zs, zn = zs + z, zn + 1
-                if block > 1:           # a periodic model: its innovations grown? (.innovations)
-                    cusum = max(0.0, cusum + c_gain * z * z - c_drift)
-                alarm = cusum > limit and zn < block
-                if zn == block or alarm:
-                    chi, blocks, zs, zn, cusum = chi + zs * zs / zn, blocks + 1, 0.0, 0, 0.0
-            if dk:                      # over the last sample's sqrt(S): not this offset's
-                zk, gk = (z * r + p * g) / (scale or r), g / (scale or r)     # on the slot
-                zg, gg, zzgg = zg + zk * gk, gg + gk * gk, zzgg + (zk * gk) ** 2
-                zggg, gggg, timed = zggg + zk * gk ** 3, gggg + gk ** 4, timed + 1
-                if timed == STAMP_WINDOW:   # a window closed: its likelihood ratio
-                    llr += evidence().window_llr()
-                    zg = gg = zzgg = zggg = gggg = 0.0
-                    timed, p = 0, at_stamp(StampEvidence(llr=llr), prior)
-                    dc, mixed_c, mixed_w = off.mixed(p)
-            scale = r
-            if not held:
-                meter.add(yk, sk, win, self._alpha, None if d3 is None else float(d3 @ x))
-            if begins and not held:     # what the window says of the offset
-                x, P = self._window_offset(x, P, win, meter.var_a2)
-            if still:                   # the rest pseudo-measurements (velocity, ... = 0)
-                for row_c, var in rows:
-                    x, P = scalar_update(x, P, row_c, 0.0, var)[:2]
+            alarm = sums.add(z, r, samples >= self._settled)    # R measured: the test counts
+            stamps.add(dk, z, r, g)
+            x, P = self._rest_updates(x, P, yk, sk, win, meter, held, begins, still)
             if record is not None:
                 record.x_post[offset + k], record.P_post[offset + k] = x, P
             samples += 1
             out_w[k] = float(wk @ x)    # the tip where the sample was taken (on its slot:
             out_s[k] = math.sqrt(max(float(wk @ P @ wk), 0.0))     # wk = e_w s_w, w itself)
             out_still[k] = still
-            if accepted is not None:    # the offset jumped: the run again, still, from its start
-                ended, onset = accepted, None
-            elif still:
-                onset = follow(onset, win.track, yk, tk,
-                               lambda: (x, P, moved, samples,
-                                        Innovations(chi, blocks, zs, zn, nll, evidence(),
-                                                    cusum)))
-            elif was and onset is not None:     # the rest ended: a sample told it?
-                ended = onset.start(yk, tk) if win.quiet == 0 else None
-                onset = None
+            onset, ended = track_onset(accepted, still, was, onset, ended, win, yk, tk,
+                                       lambda: (x, P, moved, samples, snapshot()))
             if until_motion and (ended is not None or alarm):
                 n = k + 1
                 break
         return (FilterState(x, P, meter, win, still, moved, samples, onset, ended, hold,
-                            hold_still, jump, Innovations(chi, blocks, zs, zn, nll,
-                                                          evidence(), cusum)),
-                out_w[:n], out_s[:n], out_still[:n])
+                            hold_still, jump, snapshot()), out_w[:n], out_s[:n], out_still[:n])
+
+    def _judge(self, win: RestWindow, noise_a2: float, y: float, t: float, steps: int, x, P,
+               still: bool, jump, samples: int, snapshot):
+        """
+        Push a sample into the rest window; return (verdict, jump's run, jump accepted).
+
+        ``x``: the state predicted to the sample, ``P`` the covariance before it; the jump
+        test follows a run still at one offset (:func:`.onset.follow_jump`) and accepts it
+        when the window says the offset jumped (:meth:`.rest.RestWindow.jumped`).
+        """
+        rot, ib, sb = self._rot, self.model.ib, self._sb
+        win.push(y, None if not (samples and rot.size) else rot if steps == 1 else rot ** steps,
+                 steps)
+        verdict = win.judge(self.rest, y, float(x[ib]) * sb, float(P[ib, ib]) * sb * sb,
+                            noise_a2, still, lambda: float(self._c_lines @ x))
+        jump = follow_jump(jump, win.jump_quiet, verdict, y, t, snapshot, still)
+        if jump is not None and verdict is False and win.jumped(self.rest, noise_a2):
+            return verdict, None, jump
+        return verdict, jump, None
+
+    def _rest_updates(self, x, P, y: float, steps: int, win: RestWindow, meter: NoiseMeter,
+                      held: bool, begins: bool, still: bool):
+        """
+        Return (x, P) after a sample's rest measurements.
+
+        The noise meter takes the sample (not while a motion's start is held); a rest that
+        begins measures the offset (:meth:`_window_offset`); at rest, the pseudo-measurements
+        (velocity, acceleration, motion current, periodic motion = 0; the working point).
+        """
+        if not held:
+            d3 = self.line_difference
+            meter.add(y, steps, win, self._alpha, None if d3 is None else float(d3 @ x))
+            if begins:
+                x, P = self._window_offset(x, P, win, meter.var_a2)
+        if still:
+            for row, var in self._rest_rows:
+                x, P = scalar_update(x, P, row, 0.0, var)[:2]
+        return x, P
 
     def with_jump(self, P: np.ndarray) -> np.ndarray:
         """Return a copy of ``P`` with the offset's variance grown by a jump's."""
@@ -367,20 +347,21 @@ class KalmanFilter:
         return P
 
 
-def _rest_change(verdict: bool | None, still: bool, moved: bool):
-    """
-    Return (still, release, begins, moved) after the rest window's ``verdict``.
+def _as_lists(current_a, steps) -> tuple[list, list]:
+    """Return the samples and their steps as lists of floats (the loop's fastest form)."""
+    y = current_a if isinstance(current_a, list) else np.asarray(current_a, float).tolist()
+    return y, ([1] * len(y) if steps is None else steps if isinstance(steps, list)
+               else np.asarray(steps, dtype=float).tolist())
 
-    The working point is released when the tip leaves a rest (the centre of the coming
-    motion is unknown) and when a new hold begins (it is where the tip is held); a record
-    that starts at rest keeps its rest position until it moves.  None: the window is not
-    full, no rest.
-    """
-    if verdict is None:
-        return False, False, False, moved
-    release = still != verdict and (not verdict or moved)
-    moved = (moved or not verdict) and not (release and verdict)
-    return verdict, release, verdict and not still, moved
+
+def _unpacked(state: FilterState, copy: bool) -> tuple:
+    """Return the state's (x, P, meter, window, onset, jump), copies if ``copy``."""
+    x, P, meter, win, onset, jump = (state.x, state.P, state.noise, state.window, state.onset,
+                                     state.jump)
+    if not copy:
+        return x, P, meter, win, onset, jump
+    return (x.copy(), P.copy(), replace(meter), win.copy(),
+            None if onset is None else onset.copy(), None if jump is None else jump.copy())
 
 
 def scalar_update(x: np.ndarray, P: np.ndarray, row: np.ndarray, value: float, var: float):

@@ -43,8 +43,8 @@ from scipy.stats import chi2 as chi2_dist
 
 from .instants import StampEvidence
 
-__all__ = ['Innovations', 'block_samples', 'explains', 'cusum_limit', 'CUSUM_CHANGE_SIGMAS',
-           'CUSUM_RATIO', 'CUSUM_STEP']
+__all__ = ['Innovations', 'Tally', 'block_samples', 'explains', 'cusum_limit',
+           'CUSUM_CHANGE_SIGMAS', 'CUSUM_RATIO', 'CUSUM_STEP']
 
 #: The smallest change the CUSUMs must see quickly, in predicted standard deviations: one.
 #: The model's (below) looks for innovations whose standard deviation grew by it, a variance
@@ -83,6 +83,44 @@ class Innovations(NamedTuple):
     def closed(self) -> 'Innovations':
         """Return the sums without the open block (a block belongs to one model)."""
         return self._replace(open_sum=0.0, open_n=0, cusum=0.0)
+
+
+class Tally:
+    """
+    The sums of :class:`Innovations` while the filter runs (mutable; :meth:`value` is theirs).
+
+    ``block``: samples per block (:func:`block_samples`; 1: no periodic model, no CUSUM);
+    ``limit``: the CUSUM's (:func:`cusum_limit`).
+    """
+
+    __slots__ = ('chi2', 'blocks', 'open_sum', 'open_n', 'nll', 'cusum', 'block', 'limit')
+
+    def __init__(self, sums: Innovations, block: int, limit: float):
+        self.chi2, self.blocks, self.open_sum, self.open_n, self.nll = sums[:5]
+        self.cusum, self.block, self.limit = sums.cusum, block, limit
+
+    def value(self, stamps: StampEvidence) -> Innovations:
+        """Return the sums as they stand, with the stamps' evidence ``stamps``."""
+        return Innovations(self.chi2, self.blocks, self.open_sum, self.open_n, self.nll,
+                           stamps, self.cusum)
+
+    def add(self, z: float, r: float, tested: bool) -> bool:
+        """
+        Add a normalised innovation ``z`` (``r`` = sqrt(S)); return whether the CUSUM alarmed.
+
+        The likelihood counts every sample; the test only those ``tested`` (R measured).
+        """
+        self.nll += z * z + 2.0 * math.log(r)
+        if not tested:
+            return False
+        self.open_sum, self.open_n = self.open_sum + z, self.open_n + 1
+        if self.block > 1:
+            self.cusum = max(0.0, self.cusum + CUSUM_STEP[0] * z * z - CUSUM_STEP[1])
+        alarm = self.cusum > self.limit and self.open_n < self.block
+        if self.open_n == self.block or alarm:
+            self.chi2 += self.open_sum * self.open_sum / self.open_n
+            self.blocks, self.open_sum, self.open_n, self.cusum = self.blocks + 1, 0.0, 0, 0.0
+        return alarm
 
 
 def block_samples(motion_hz, sample_rate_hz: float) -> int:

@@ -21,7 +21,7 @@ import numpy as np
 
 from .statespace import OFF_SLOT_STEPS
 
-__all__ = ['OffSlot', 'StampEvidence', 'at_stamp', 'STAMP_WINDOW']
+__all__ = ['OffSlot', 'StampEvidence', 'StampTally', 'at_stamp', 'STAMP_WINDOW']
 
 
 class OffSlot:
@@ -126,3 +126,60 @@ def at_stamp(evidence: StampEvidence, prior: float) -> float:
         return prior
     odds = evidence.llr + math.log(prior / (1.0 - prior))
     return 1.0 / (1.0 + math.exp(-min(max(odds, -700.0), 700.0)))
+
+
+class StampTally:
+    """
+    The stamps' evidence while the filter runs, and the rows of a sample off its slot.
+
+    Mutable (one run's; :meth:`value` is the :class:`StampEvidence` a state keeps).  p, the
+    probability that the samples were taken at their stamps, is revised as each window of
+    ``STAMP_WINDOW`` samples off their slots closes (:func:`at_stamp`), and the mixture's
+    rows with it (:meth:`OffSlot.mixed`).
+    """
+
+    __slots__ = ('zg', 'gg', 'zzgg', 'zggg', 'gggg', 'n', 'llr', 'scale', 'prior', 'p', 'off',
+                 'tables')
+
+    def __init__(self, evidence: StampEvidence, off: OffSlot, prior: float):
+        (self.zg, self.gg, self.zzgg, self.zggg, self.gggg, self.n, self.llr,
+         self.scale) = evidence
+        self.prior, self.off = prior, off
+        self.p = at_stamp(evidence, prior)
+        self.tables = off.mixed(self.p)
+
+    def value(self) -> StampEvidence:
+        """Return the sums as they stand."""
+        return StampEvidence(self.zg, self.gg, self.zzgg, self.zggg, self.gggg, self.n,
+                             self.llr, self.scale)
+
+    def row(self, d: float, x: np.ndarray, var: float):
+        """
+        Return (current row, deflection row, R, g) of a sample ``d`` periods off its slot.
+
+        The mixture's mean rows, R grown by its spread p (1 - p) g^2 (module docstring).
+        """
+        j = self.off.index(d)
+        dc, mixed_c, mixed_w = self.tables
+        g = float(dc[j] @ x)
+        return mixed_c[j], mixed_w[j], var + self.p * (1.0 - self.p) * g * g, g
+
+    def add(self, d: float, z: float, r: float, g: float) -> None:
+        """
+        Add a sample's innovation ``z`` (over ``r`` = sqrt(S)) and ``g`` if it was off its slot.
+
+        Both over sqrt(S) of the sample before (:class:`StampEvidence`); a window closed adds
+        its log-likelihood ratio and revises p.
+        """
+        if d:
+            unit = self.scale or r
+            zk, gk = (z * r + self.p * g) / unit, g / unit
+            self.zg, self.gg = self.zg + zk * gk, self.gg + gk * gk
+            self.zzgg, self.zggg = self.zzgg + (zk * gk) ** 2, self.zggg + zk * gk ** 3
+            self.gggg, self.n = self.gggg + gk ** 4, self.n + 1
+            if self.n == STAMP_WINDOW:
+                self.llr += self.value().window_llr()
+                self.zg = self.gg = self.zzgg = self.zggg = self.gggg = 0.0
+                self.n, self.p = 0, at_stamp(StampEvidence(llr=self.llr), self.prior)
+                self.tables = self.off.mixed(self.p)
+        self.scale = r

@@ -23,7 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
-__all__ = ['Onset', 'Start', 'follow', 'follow_jump', 'restart', 'due']
+__all__ = ['Onset', 'Start', 'follow', 'follow_jump', 'track_onset', 'restart', 'due']
 
 
 class Start(NamedTuple):
@@ -89,6 +89,24 @@ def follow(onset: Onset | None, track: tuple | None, y: float, step: int, snapsh
         else:
             sides.append(None)
     return Onset(*sides)
+
+
+def track_onset(accepted: Start | None, still: bool, was: bool, onset: Onset | None,
+                ended: Start | None, win, y: float, t: float, snapshot) -> tuple:
+    """
+    Return (onset, ended) after a filter's sample.
+
+    The offset jumped (``accepted``): the run again, still, from its start; at rest: where a
+    motion that ends it would have begun (:func:`follow`); a rest that ended: whether a
+    sample told it (:meth:`Onset.start`).  ``win``: the filter's rest window.
+    """
+    if accepted is not None:
+        return None, accepted
+    if still:
+        return follow(onset, win.track, y, t, snapshot), ended
+    if was and onset is not None:
+        return None, onset.start(y, t) if win.quiet == 0 else None
+    return onset, ended
 
 
 def follow_jump(run: Start | None, quiet: int, verdict, y: float, step: int,

@@ -76,7 +76,7 @@ from scipy.stats import chi2
 from .innovations import CUSUM_CHANGE_SIGMAS
 from .rest_jump import JumpRun
 
-__all__ = ['RestTest', 'RestWindow', 'CUSUM_DRIFT']
+__all__ = ['RestTest', 'RestWindow', 'CUSUM_DRIFT', 'rest_change']
 
 #: CUSUM drift, in noise sigmas: half the smallest shift it must see quickly
 #: (:data:`~.innovations.CUSUM_CHANGE_SIGMAS`).
@@ -345,3 +345,19 @@ class RestWindow(JumpRun):
         else:
             mean, explained = float(theta[0]), float(b @ theta)
         return mean, max(self.total_sq - explained, 0.0)
+
+
+def rest_change(verdict: bool | None, still: bool, moved: bool):
+    """
+    Return (still, release, begins, moved) after the rest window's ``verdict``.
+
+    The working point is released when the tip leaves a rest (the centre of the coming
+    motion is unknown) and when a new hold begins (it is where the tip is held); a record
+    that starts at rest keeps its rest position until it moves.  None: the window is not
+    full, no rest.
+    """
+    if verdict is None:
+        return False, False, False, moved
+    release = still != verdict and (not verdict or moved)
+    moved = (moved or not verdict) and not (release and verdict)
+    return verdict, release, verdict and not still, moved
