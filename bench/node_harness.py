@@ -89,15 +89,17 @@ k = 0
 t0 = time.monotonic()
 total = int(rate * duration)
 offsets = np.arange(n) / fs
-signal = 1e-6 * np.sin(2 * np.pi * 5.0 * offsets)
 start = time.time() - epoch
 back = offsets[::-1].copy()
+signal = 1e-6 * np.sin(2 * np.pi * 5.0 * -back)  # a 5 Hz crank's current, continuous from
+                                                # message to message (rewritten with the times)
 from rclpy.serialization import serialize_message
 # serialised once (CDR, little-endian): the rows (time, current) are the last 16 n bytes; each
 # send rewrites the times in place and publishes the bytes (publish of a message object costs
 # ~100 us of conversion and serialisation: the driver would need most of a core at 4000 msg/s)
 buf = bytearray(serialize_message(pack_block(start - back, signal)))
-times = np.frombuffer(buf, dtype="<f8", count=2 * n, offset=len(buf) - 16 * n).reshape(n, 2)[:, 0]
+rows = np.frombuffer(buf, dtype="<f8", count=2 * n, offset=len(buf) - 16 * n).reshape(n, 2)
+times, currents = rows[:, 0], rows[:, 1]
 while k < total:
     # a DAQ's steady sample clock: message k ends at start + k / rate (contiguous samples, no
     # jitter in the stamps); it is published when due, and after a stall the backlog goes out
@@ -109,6 +111,7 @@ while k < total:
     if due > now:
         time.sleep(max(due - now, 1e-3))
     times[:] = start + k / rate - back   # in place, in the serialised message
+    currents[:] = 1e-6 * np.sin(2 * np.pi * 5.0 * (k / rate - back))
     pub.publish(bytes(buf))
     k += 1
 print(f"SENT {k} {k * n} {time.monotonic() - t0:.6f}", flush=True)
