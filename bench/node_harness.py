@@ -91,13 +91,17 @@ total = int(rate * duration)
 offsets = np.arange(n) / fs
 start = time.time() - epoch
 back = offsets[::-1].copy()
-signal = 1e-6 * np.sin(2 * np.pi * 5.0 * -back)  # a 5 Hz crank's current, continuous from
-                                                # message to message (rewritten with the times)
+
+
+def crank_current(end_s):      # a 5 Hz crank's current for the samples up to end_s,
+    return 1e-6 * np.sin(2 * np.pi * 5.0 * (end_s - back))  # continuous across messages
+
+
 from rclpy.serialization import serialize_message
 # serialised once (CDR, little-endian): the rows (time, current) are the last 16 n bytes; each
-# send rewrites the times in place and publishes the bytes (publish of a message object costs
+# send rewrites the times and currents in place and publishes the bytes (publishing an object costs
 # ~100 us of conversion and serialisation: the driver would need most of a core at 4000 msg/s)
-buf = bytearray(serialize_message(pack_block(start - back, signal)))
+buf = bytearray(serialize_message(pack_block(start - back, crank_current(0.0))))
 rows = np.frombuffer(buf, dtype="<f8", count=2 * n, offset=len(buf) - 16 * n).reshape(n, 2)
 times, currents = rows[:, 0], rows[:, 1]
 while k < total:
@@ -111,7 +115,7 @@ while k < total:
     if due > now:
         time.sleep(max(due - now, 1e-3))
     times[:] = start + k / rate - back   # in place, in the serialised message
-    currents[:] = 1e-6 * np.sin(2 * np.pi * 5.0 * (k / rate - back))
+    currents[:] = crank_current(k / rate)
     pub.publish(bytes(buf))
     k += 1
 print(f"SENT {k} {k * n} {time.monotonic() - t0:.6f}", flush=True)

@@ -171,7 +171,7 @@ class KalmanFilter:
         counts twice.
         """
         m, n = self.model, window.samples.size
-        sb = float(m.scale[m.ib])
+        sb = self._sb
         first_var = window.offset_var[window.pos]
         info = n / noise - (1.0 / (float(P[m.ib, m.ib]) * sb * sb) - 1.0 / first_var)
         if info <= 0.0:
@@ -184,7 +184,7 @@ class KalmanFilter:
 
     def initial_state(self) -> FilterState:
         x, P = self.model.prior()
-        pb = P[self.model.ib, self.model.ib] * self.model.scale[self.model.ib] ** 2
+        pb = P[self.model.ib, self.model.ib] * self._sb ** 2
         return FilterState(x, P, NoiseMeter(self.model.config.current_noise_a ** 2),
                            RestWindow.empty(self.rest.n, len(self.rest_lines_hz), pb))
 
@@ -207,9 +207,8 @@ class KalmanFilter:
 
     def offset(self, state: FilterState) -> tuple[float, float]:
         """Return (current offset, its standard deviation) of a state, A."""
-        m = self.model
-        s = m.scale[m.ib]
-        return float(state.x[m.ib] * s), math.sqrt(max(float(state.P[m.ib, m.ib]), 0.0)) * s
+        ib, s = self.model.ib, self._sb
+        return float(state.x[ib]) * s, math.sqrt(max(float(state.P[ib, ib]), 0.0)) * s
 
     # -- the recursion ---------------------------------------------------------------------------
     def run(self, state: FilterState, current_a, steps=None, record: ForwardRecord | None = None,
@@ -330,7 +329,7 @@ class KalmanFilter:
         """Return a copy of ``P`` with the offset's variance grown by a jump's."""
         m = self.model
         P = P.copy()
-        P[m.ib, m.ib] += self.rest.jump_var_a2 / float(m.scale[m.ib]) ** 2
+        P[m.ib, m.ib] += self.rest.jump_var_a2 / self._sb ** 2
         return P
 
     def _released(self, P: np.ndarray, still: bool) -> np.ndarray:
