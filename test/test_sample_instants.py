@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ipmc_sensor_ros.estimation.instants import STAMP_WINDOW, StampEvidence, at_stamp
+from ipmc_sensor_ros.estimation.instants import ON_SLOT, STAMP_WINDOW, StampEvidence, at_stamp
 from ipmc_sensor_ros.estimation.records import estimate_record, smooth_record
 from ipmc_sensor_ros.estimation.stream import StreamEstimator
 from ipmc_sensor_ros.interface import builders as B
@@ -159,3 +159,22 @@ def test_a_saved_state_continues_off_the_slots():
     # the evidence of when the samples were taken is part of the state
     assert np.any(steps != np.round(steps))
     assert np.array_equal(tail.deflection_m, again.deflection_m)
+
+
+def test_stamps_off_their_slots_by_float_rounding_are_on_them():
+    # an exact grid's float stamps land ~1e-10 periods off their slots: the slot's estimate,
+    # to the bit, and no evidence on when the samples were taken (the half-row bound: ON_SLOT)
+    _, current, _ = _record(sampled=False, n=1500)
+    ones = np.ones(current.size)
+    wobble = 1e-10 * np.sign(np.sin(np.arange(current.size)) + 0.5)
+    runs = {}
+    for name, steps in (('exact', ones), ('rounded', ones + wobble),
+                        ('off', ones + 2 * ON_SLOT * np.sign(wobble))):
+        core = _estimator().core
+        runs[name] = core.estimate(current, steps), core._state.innovations.stamps
+    (a, ev_a), (b, ev_b), (_, ev_off) = runs['exact'], runs['rounded'], runs['off']
+    assert np.array_equal(a.deflection_m, b.deflection_m)
+    assert np.array_equal(a.std_m, b.std_m)
+    assert ev_a == ev_b and ev_b.n == 0 and ev_b.gg == 0.0
+    # past the bound each sample is off its slot: the evidence counts it
+    assert ev_off.n == current.size % STAMP_WINDOW and ev_off.gg > 0.0

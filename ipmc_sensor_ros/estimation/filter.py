@@ -45,7 +45,7 @@ import numpy as np
 
 from .forward import ForwardRecord, astuple_shallow
 from .innovations import Innovations, Tally, block_samples, cusum_limit
-from .instants import OffSlot, StampTally
+from .instants import ON_SLOT, OffSlot, StampTally
 from .noise import NOISE_FLOOR_A, NoiseMeter
 from .onset import Onset, Start, follow_jump, track_onset
 from .rest import RestTest, RestWindow, rest_change
@@ -242,7 +242,7 @@ class KalmanFilter:
         for k in range(n):
             yk, tk = y[k], st[k]
             sk = slots_of(tk)           # the slots, and the stamp's offset from its slot
-            dk = tk - sk
+            dk = tk - sk if not -ON_SLOT < tk - sk < ON_SLOT else 0.0
             if sk != last_steps:
                 F, Q = m.discrete(sk)
                 last_steps = sk

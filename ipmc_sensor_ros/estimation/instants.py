@@ -21,7 +21,13 @@ import numpy as np
 
 from .statespace import OFF_SLOT_STEPS
 
-__all__ = ['OffSlot', 'StampEvidence', 'StampTally', 'at_stamp', 'STAMP_WINDOW']
+__all__ = ['OffSlot', 'StampEvidence', 'StampTally', 'at_stamp', 'STAMP_WINDOW', 'ON_SLOT']
+
+#: A sample closer to its slot than this (periods) is on it: half a row of the table
+#: (:meth:`OffSlot.index` picks the slot's own row there, so it changes no estimate).  The stamps
+#: of an exact grid land ~1e-10 periods off their slots by float rounding alone; they take the
+#: slot's path and add no evidence on where the samples were taken.
+ON_SLOT = 0.5 / OFF_SLOT_STEPS
 
 
 class OffSlot:
