@@ -189,6 +189,13 @@ def _offset_step(rng):
     return Sensor('slim'), motion, daq
 
 
+def _coarse_adc(rng):
+    """A 2-5 Hz crank after a 1-2 s rest; a 12-bit ADC whose step is ~100 times the noise."""
+    crank = replace(_crank(rng, rng.uniform(2.0, 5.0), True), start_s=rng.uniform(1.0, 2.0))
+    daq = Daq(offset_a=rng.uniform(5, 20) * NA, noise_a=0.2 * NA, adc_bits=12)
+    return Sensor('slim'), crank, daq
+
+
 def _hour_drift(rng):
     bursts, steps, t = [], [], rng.uniform(20, 60)
     while t < 3540:
@@ -248,6 +255,10 @@ def _scenarios() -> list[Scenario]:
                  'slim, 30 s pick-and-place (0.4 s moves, 2-4 s holds, +-1 mm); the amplifier '
                  're-zeroed or its range switched once (offset steps by 2-60 nA, '
                  'log-uniform, at 10-20 s); noise 0.2 or 2 nA, 16 bit'),
+        Scenario('slim-coarse-adc', 'daq', 20.0, _coarse_adc,
+                 'slim, 2-5 Hz crank after a 1-2 s rest, 12-bit ADC (its step 10-25 nA, '
+                 '50-120 times the 0.2 nA noise: a still reading sits on one code), '
+                 'offset 5-20 nA'),
         Scenario('narrow-pick-place-2min', 'pick-place', 120.0, _pick_place('narrow', 2, False),
                  'narrow (30 x 5 x 0.2 mm), 2 min pick-and-place, offset drifting 5 -> 25 nA, '
                  '0.5 nA, 16 bit'),
