@@ -7,7 +7,8 @@ random, generated without package code) is judged by :func:`bench.bench_estimato
 the live estimate's raw NRMSE after the first second beside the causal Wiener bound, the
 smoothed one, +-2 sigma coverage, rows estimated; ``ok`` as there (raw NRMSE <= max(2 x
 bound, 1 %) and every row estimated).  One line per record says what was drawn, so a failure
-can be rebuilt (``bench.scenarios.drawn.draw(index)``).  Usage::
+can be rebuilt (``bench.scenarios.drawn.draw(index)``); the summary names the records whose
+coverage is below 90 %.  Usage::
 
     python -m bench.bench_drawn [--first 0] [--count 40] [--duration-s 20] [--json out.json]
 """
@@ -24,6 +25,10 @@ from .scenarios.drawn import DRAWN_DURATION_S, draw
 __all__ = ['describe', 'main']
 
 NA = 1e-9
+#: The +-2 sigma coverage issue 27 asks for is 90-98 %: below, the published std understates
+#: the error (a record's failure as much as its NRMSE); above is the priors' floor
+#: (docs/benchmarks.md).
+COVERAGE_LOW = 0.90
 
 
 def describe(info: dict) -> str:
@@ -79,8 +84,11 @@ def main(argv=None) -> int:
         results.append(row)
         print(_line(index, row, info), flush=True)
     passed = sum(bool(r['ok']) for r in results)
+    narrow = [r['index'] for r in results if not r['coverage'] >= COVERAGE_LOW]
     print(f'{passed} of {len(results)} drawn records within max(2 x causal bound, 1 %) with '
-          f'every row estimated ({time.perf_counter() - wall0:.0f} s)')
+          f'every row estimated; +-2 sigma coverage below {100 * COVERAGE_LOW:.0f} % on '
+          f'{len(narrow)}{" (" + ", ".join(map(str, narrow)) + ")" if narrow else ""} '
+          f'({time.perf_counter() - wall0:.0f} s)')
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as f:
             json.dump({'rows': [{k: _json_safe(v) for k, v in r.items()} for r in results]},

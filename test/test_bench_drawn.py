@@ -37,6 +37,8 @@ def test_the_sweep_prints_a_judged_line_per_record_and_the_count(tmp_path, capsy
     assert text.splitlines()[0].split()[0] == '2'
     assert 'of 1 drawn records within max(2 x causal bound, 1 %)' in text
     row = json.loads(out.read_text())['rows'][0]
+    narrow = 'on 1 (2)' if row['coverage'] < 0.9 else 'on 0 ('
+    assert f'+-2 sigma coverage below 90 % {narrow}' in text
     assert row['index'] == 2 and row['drawn'] in text
     assert math.isfinite(row['nrmse']) and row['rows_given'] > 0
     assert row['ok'] == (row['nrmse'] <= max(2 * row['causal_bound'], 0.01)
