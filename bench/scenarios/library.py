@@ -190,7 +190,7 @@ def _offset_step(rng):
 
 
 def _coarse_adc(rng):
-    """A 2-5 Hz crank after a 1-2 s rest; a 12-bit ADC whose step is ~100 times the noise."""
+    """Draw a 2-5 Hz crank after a 1-2 s rest, a 12-bit ADC whose step is ~100 x the noise."""
     crank = replace(_crank(rng, rng.uniform(2.0, 5.0), True), start_s=rng.uniform(1.0, 2.0))
     daq = Daq(offset_a=rng.uniform(5, 20) * NA, noise_a=0.2 * NA, adc_bits=12)
     return Sensor('slim'), crank, daq
