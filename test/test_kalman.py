@@ -10,6 +10,7 @@ from scipy.linalg import expm
 from ipmc_sensor_ros.errors import ParameterError
 from ipmc_sensor_ros.estimation.config import CONFIG_FIELDS, EstimatorConfig
 from ipmc_sensor_ros.estimation.filter import KalmanFilter
+from ipmc_sensor_ros.estimation.instants import ON_SLOT
 from ipmc_sensor_ros.estimation.kalman import KalmanEstimator
 from ipmc_sensor_ros.estimation.smoother import smooth
 from ipmc_sensor_ros.estimation.statespace import StateSpaceModel
@@ -97,18 +98,22 @@ def test_a_sample_on_its_slot_and_one_a_hair_off_it_publish_the_same(reduced):
     """
     One rule publishes the tip where a sample was taken, on its slot or off it.
 
-    A stream at epoch time is off its slots by its stamps' rounding (~1e-7 of a period),
-    which takes the off-slot table's middle row: the slot's own rows.  The numbers must
-    be the same as on the slot, to the bit: a second formula for the slot (x_w s_w and
-    sqrt(P_ww) s_w) would differ by rounding, and a seam at d = 0 by more.
+    A stream at epoch time is off its slots by its stamps' rounding (~1e-7 of a period):
+    within ``ON_SLOT`` (half a row of the off-slot table) a sample is on its slot.  At that
+    bound the off-slot path takes the table's middle row, the slot's own rows: the numbers
+    must be the same as on the slot, to the bit (a second formula for the slot, x_w s_w and
+    sqrt(P_ww) s_w, would differ by rounding, and a seam at the bound by more).
     """
     ssm = StateSpaceModel(reduced, EstimatorConfig(), FS, (50.0,))
     _, y = _simulate(ssm, 1500, 20e-9, seed=2)
     filt = KalmanFilter(ssm)
     on = filt.run(filt.initial_state(), y)
-    off = filt.run(filt.initial_state(), y, np.full(y.size, 1.0 + 1e-7))
-    assert np.array_equal(on[1], off[1]) and np.array_equal(on[2], off[2])
-    assert off[0].innovations.stamps.n > 0      # the hair off the slot took the off-slot rows
+    hair = filt.run(filt.initial_state(), y, np.full(y.size, 1.0 + 1e-7))
+    edge = filt.run(filt.initial_state(), y, np.full(y.size, 1.0 - ON_SLOT))
+    for off in (hair, edge):
+        assert np.array_equal(on[1], off[1]) and np.array_equal(on[2], off[2])
+    assert hair[0].innovations.stamps.n == 0    # on its slot: no evidence of when it was taken
+    assert edge[0].innovations.stamps.n > 0     # the bound took the off-slot rows
     w, std = filt.deflection(on[0])
     assert (w, std) == (on[1][-1], on[2][-1])    # a state's deflection: the same rule
 
