@@ -8,12 +8,15 @@ offset, noise and quantisation): generated independently of the estimator's code
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
+from scipy.stats import norm
 
 from bench.bench_estimators import _causal, estimate_scores
 from bench.scenarios.daq import Daq
-from bench.scenarios.library import MM, NA, Scenario
+from bench.scenarios.library import build, MM, NA, Scenario
 from bench.scenarios.motions import Crank
 from bench.scenarios.sensor import Sensor
 from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
@@ -75,3 +78,66 @@ def test_a_crank_from_rest_on_a_16_bit_daq_below_its_step_learns_its_offset_at_r
     est = DeflectionEstimator(model, rec.sample_rate_hz)
     out = _causal(rec, est, 1000)
     assert estimate_scores(rec, out)['nrmse'] < 0.01
+
+
+@pytest.mark.parametrize('sigma', [0.0, 0.1, 0.2, 0.3])
+def test_the_rounding_a_still_level_keeps_has_the_variance_the_meter_says(sigma):
+    """
+    Var(beta) against a direct sum: the mean reading of a level u within a step, over u.
+
+    For each of 2,000 levels u in [0, q) the mean rounding error is sum over the codes of
+    (code - u) P(code | u, sigma) with Gaussian noise; its variance over u is what the
+    meter's Fourier series says when its measured variance is sigma^2 + q^2 / 4 (its
+    convention: the measured variance less the most a still level's rounding adds).  The
+    series keeps three terms and the rest at k = 4: 1 % allowed.
+    """
+    q, meter = 1.0, NoiseMeter(1.0)
+    meter.step_a, meter.measured_a2 = q, sigma ** 2 + q * q / 4
+    u = (np.arange(2000) + 0.5) / 2000 * q
+    codes = np.arange(-8, 9)[:, None] * q
+    if sigma:
+        edges = (codes - u - q / 2) / sigma
+        p = norm.cdf(edges + q / sigma) - norm.cdf(edges)
+    else:
+        p = np.abs(codes - u) < q / 2
+    bias = ((codes - u) * p).sum(axis=0)
+    assert meter.rounding_bias_a2() == pytest.approx(np.mean(bias ** 2), rel=0.01)
+    # a noise that dithers the rounding leaves none; no step seen, nothing is known of it
+    meter.measured_a2 = q * q
+    assert meter.rounding_bias_a2() < 1e-12 * q * q
+    meter.step_a = math.inf
+    assert meter.rounding_bias_a2() == 0.0
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_a_coarse_adcs_rest_rounding_is_in_the_published_std(seed):
+    """
+    ``slim-coarse-adc``: a 12-bit ADC's 10-25 nA step over 0.2 nA of noise, a crank after a rest.
+
+    The rest reads one code, so the offset it measures is off by that level's rounding, and
+    the level walks once the crank starts: the published std covered 5 % (seed 0) and 40 %
+    (seed 1) of the errors within 2 sigma.  With the rounding's share (estimation/rounding.py)
+    the issue's 90 % at least; the estimate itself is unchanged (the same NRMSE as the bench's
+    table, 4.21 and 0.94 %, to 0.01 points).
+    """
+    rec = build('slim-coarse-adc', seed)
+    model = SensorModel.named(rec.model, Geometry(*rec.geometry_m, rec.sample),
+                              extra_effects=rec.effects)
+    scores = estimate_scores(rec, _causal(rec, DeflectionEstimator(model, rec.sample_rate_hz),
+                                          1000))
+    assert scores['coverage'] >= 0.90
+    assert 100 * scores['nrmse'] == pytest.approx((4.208, 0.941)[seed], abs=0.01)
+
+
+def test_without_a_quantiser_the_published_std_is_the_filters_own():
+    # an unquantised record (a crank from rest): its smallest change is far below the noise,
+    # so the rounding's share is 0 and the std is sqrt(P_ww) to the bit
+    rec = build('crank-5hz-slim-0.2na-rest', 0)
+    model = SensorModel.named(rec.model, Geometry(*rec.geometry_m, rec.sample),
+                              extra_effects=rec.effects)
+    est = DeflectionEstimator(model, rec.sample_rate_hz)
+    _causal(rec, est, 1000)
+    core = est.core
+    w_row, state = core._filter._w_row, core._state
+    assert state.rounding is not None and state.noise.rounding_bias_a2() == 0.0
+    assert core._filter.deflection(state)[1] == np.sqrt(w_row @ state.P @ w_row)

@@ -25,13 +25,18 @@ def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> Fil
     model, and the charge states when the sensor is the same) are carried with their
     covariance; a different sensor's charge states are set to their steady value for the
     current velocity (x_R = -u / p_i) with their prior covariance; new line states start from
-    their prior.
+    their prior.  The map is linear in the state (the priors' means are 0), so the state's
+    sensitivity to a rest's rounding (:mod:`.rounding`) is carried by it too.
     """
     x, P, _ = _carried(old.model, new.model, state.x, state.P, joint=False)
+    bias = state.rounding           # a linear map of the state: its sensitivity maps alike
+    if bias is not None:
+        bias = bias._replace(sensitivity=_carried(old.model, new.model, bias.sensitivity,
+                                                  state.P, joint=False)[0])
     init = new.initial_state()
     out = replace(init, x=x, P=P, noise=replace(state.noise), samples=state.samples,
                   still=state.still, moved=state.moved,
-                  innovations=state.innovations.closed())
+                  innovations=state.innovations.closed(), rounding=bias)
     win = state.window
     if win.samples.size != new.rest.n:          # the rest test's window restarts
         return replace(out, still=False, moved=True)

@@ -49,6 +49,7 @@ from .instants import ON_SLOT, OffSlot, StampTally
 from .noise import NOISE_FLOOR_A, NoiseMeter
 from .onset import Onset, Start, follow_jump, track_onset
 from .rest import RestTest, RestWindow, rest_change
+from .rounding import RoundingBias, RoundingTally
 from .statespace import StateSpaceModel
 from .timebase import slots_of
 
@@ -82,10 +83,13 @@ class FilterState:
     jump: Start | None = None
     #: the normalised innovations' sums a check tests the model by (:mod:`.innovations`)
     innovations: Innovations = Innovations()
+    #: the estimate's sensitivity to the rounding a rest keeps (:mod:`.rounding`)
+    rounding: RoundingBias | None = None
 
     def copy(self) -> 'FilterState':
         return replace(self, x=self.x.copy(), P=self.P.copy(), noise=replace(self.noise),
                        window=self.window.copy(),
+                       rounding=None if self.rounding is None else self.rounding.copy(),
                        onset=None if self.onset is None else self.onset.copy(),
                        jump=None if self.jump is None else self.jump.copy())
 
@@ -156,7 +160,8 @@ class KalmanFilter:
         """One sample's turn e^{-i W_k / fs} of each rest-test line."""
         return self._rot
 
-    def _window_offset(self, x, P, window: RestWindow, noise):
+    def _window_offset(self, x, P, window: RestWindow, noise,
+                       bias: RoundingTally | None = None):
         """
         Update (x, P) with the window's fitted constant as a measurement of the offset.
 
@@ -180,7 +185,10 @@ class KalmanFilter:
         row[m.ib] = sb
         row[m.ib + 1] = -float(m.scale[m.ib + 1]) * (n - 1) / (2.0 * m.sample_rate_hz)
         mean = float(window.residuals(0).mean())
-        return scalar_update(x, P, row, mean, 1.0 / info)[:2]
+        x, P, _, r, g = scalar_update(x, P, row, mean, 1.0 / info)
+        if bias is not None:                    # the mean of a still reading: its rounding
+            bias.update(g / r, row, 1.0)
+        return x, P
 
     def initial_state(self) -> FilterState:
         x, P = self.model.prior()
@@ -190,8 +198,9 @@ class KalmanFilter:
 
     def deflection(self, state: FilterState) -> tuple[float, float]:
         """(w, its standard deviation) of a state, m."""
-        w = self._w_row
-        return float(w @ state.x), math.sqrt(max(float(w @ state.P @ w), 0.0))
+        w, bias = self._w_row, RoundingTally(state.rounding, self.model.size)
+        return float(w @ state.x), math.sqrt(max(float(w @ state.P @ w), 0.0)
+                                             + bias.variance(w, state.noise))
 
     def to_block_end(self, state: FilterState) -> int:
         """
@@ -228,6 +237,7 @@ class KalmanFilter:
         y, st = _as_lists(current_a, steps)
         n, m = len(y), self.model
         x, P, meter, win, onset, jump = _unpacked(state, copy)
+        bias = RoundingTally(state.rounding, m.size)
         still, moved, samples = state.still, state.moved, state.samples
         hold, hold_still = state.hold_off, state.hold_still
         sums = Tally(state.innovations, self._block, self._limit)
@@ -249,6 +259,7 @@ class KalmanFilter:
             x0, P0, accepted = x, P, None
             if samples:
                 x = F @ x
+                bias.predict(F, meter)
             held = hold > 0             # a motion's start again (.onset.restart): motion, the
             if held:                    # window and meter left as the test left them, past it
                 verdict, hold = hold_still, hold - 1
@@ -269,15 +280,17 @@ class KalmanFilter:
                 j = offset + k
                 record.x_pred[j], record.P_pred[j] = x, P
                 record.steps[j], record.still[j], record.w_row[j] = sk, still, wk
-            x, P, z, r = scalar_update(x, P, row, yk, var)
+            x, P, z, r, gain = scalar_update(x, P, row, yk, var)
+            bias.update(gain / r, row, 1.0 if still else 0.0, meter)
             alarm = sums.add(z, r, samples >= self._settled)    # R measured: the test counts
             stamps.add(dk, z, r, g)
-            x, P = self._rest_updates(x, P, yk, sk, win, meter, held, begins, still)
+            x, P = self._rest_updates(x, P, yk, sk, win, meter, held, begins, still, bias)
             if record is not None:
                 record.x_post[offset + k], record.P_post[offset + k] = x, P
             samples += 1
             out_w[k] = float(wk @ x)    # the tip where the sample was taken (on its slot:
-            out_s[k] = math.sqrt(max(float(wk @ P @ wk), 0.0))     # wk = e_w s_w, w itself)
+            out_s[k] = math.sqrt(max(float(wk @ P @ wk), 0.0)      # wk = e_w s_w, w itself)
+                                 + bias.variance(wk, meter))
             out_still[k] = still
             onset, ended = track_onset(accepted, still, was, onset, ended, win, yk, tk,
                                        lambda: (x, P, moved, samples, snapshot()))
@@ -285,7 +298,8 @@ class KalmanFilter:
                 n = k + 1
                 break
         return (FilterState(x, P, meter, win, still, moved, samples, onset, ended, hold,
-                            hold_still, jump, snapshot()), out_w[:n], out_s[:n], out_still[:n])
+                            hold_still, jump, snapshot(), bias.value()),
+                out_w[:n], out_s[:n], out_still[:n])
 
     def _judge(self, win: RestWindow, noise_a2: float, y: float, t: float, steps: int, x, P,
                still: bool, jump, samples: int, snapshot):
@@ -307,7 +321,7 @@ class KalmanFilter:
         return verdict, jump, None
 
     def _rest_updates(self, x, P, y: float, steps: int, win: RestWindow, meter: NoiseMeter,
-                      held: bool, begins: bool, still: bool):
+                      held: bool, begins: bool, still: bool, bias: RoundingTally):
         """
         Return (x, P) after a sample's rest measurements.
 
@@ -318,11 +332,13 @@ class KalmanFilter:
         if not held:
             d3 = self.line_difference
             meter.add(y, steps, win, self._alpha, None if d3 is None else float(d3 @ x))
-            if begins:
-                x, P = self._window_offset(x, P, win, meter.var_a2)
+            if begins:              # a new level, its own rounding (.rounding)
+                bias.fold(self._w_row, meter)
+                x, P = self._window_offset(x, P, win, meter.var_a2, bias)
         if still:
             for row, var in self._rest_rows:
-                x, P = scalar_update(x, P, row, 0.0, var)[:2]
+                x, P, _, r, gain = scalar_update(x, P, row, 0.0, var)
+                bias.update(gain / r, row, 0.0)
         return x, P
 
     def with_jump(self, P: np.ndarray) -> np.ndarray:
@@ -367,10 +383,10 @@ def scalar_update(x: np.ndarray, P: np.ndarray, row: np.ndarray, value: float, v
     """
     Update (x, P) with the scalar measurement ``row @ x = value`` of variance ``var``.
 
-    Returns (x, P, z, sqrt(S)).
+    Returns (x, P, z, sqrt(S), g).
 
-    P - g g' with g = P row / sqrt(S): symmetric exactly; z = nu / sqrt(S), the normalised
-    innovation, S its variance.
+    P - g g' with g = P row / sqrt(S): symmetric exactly (the gain is g / sqrt(S)); z = nu /
+    sqrt(S), the normalised innovation, S its variance.
     """
     Pc = P @ row
     S = float(row @ Pc) + var
@@ -378,4 +394,4 @@ def scalar_update(x: np.ndarray, P: np.ndarray, row: np.ndarray, value: float, v
     x = x + Pc * (nu / S)
     r = math.sqrt(S)
     g = Pc / r
-    return x, P - g[:, None] * g, nu / r, r
+    return x, P - g[:, None] * g, nu / r, r, g

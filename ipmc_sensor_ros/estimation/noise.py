@@ -18,7 +18,9 @@ the third difference misses while the reading sits on one code: R is at least th
 smallest change between two successive samples seen (``step_a``; for unquantised data it
 shrinks below any noise).  A still reading that steps by one code now and then is then
 within the rest test's per-sample limit, not a 5.7 sigma outlier (16 bits over +-100 uA at
-0.37 nA of noise).
+0.37 nA of noise).  Averaging removes the rounding only where the noise dithers it: a still
+reading within a code or two of one level is rounded the same way sample after sample
+(:meth:`NoiseMeter.rounding_bias_a2`, :mod:`.rounding`).
 """
 from __future__ import annotations
 
@@ -35,6 +37,8 @@ NOISE_CLIP = 25.0
 #: The measured noise stays above this, A RMS (below any DAQ's noise; a noise-free record would
 #: otherwise drive the gain to infinity).
 NOISE_FLOOR_A = 1e-12
+#: sum over k >= 4 of 1 / k^2 (:meth:`NoiseMeter.rounding_bias_a2`)
+_TAIL = math.pi ** 2 / 6.0 - 1.0 - 0.25 - 1.0 / 9.0
 
 
 @dataclass(slots=True)
@@ -89,3 +93,28 @@ class NoiseMeter:
         quantiser = self.step_a ** 2 / 12.0 if math.isfinite(self.step_a) else 0.0
         self.var_a2 = max(self.measured_a2, quantiser, NOISE_FLOOR_A ** 2)
         self.weight = weight + 1.0
+
+    def rounding_bias_a2(self, noise_a2: float | None = None) -> float:
+        """
+        Return the variance of the mean rounding error at a still level, A^2 (0: no step seen).
+
+        ``noise_a2``: the measured variance there (None: the meter's now).
+
+        For a level at u within a step q and Gaussian noise sigma, the mean reading is off by
+        the rounding's sawtooth smoothed by the noise, sum_k (-1)^(k+1) q / (pi k)
+        sin(2 pi k u / q) exp(-2 pi^2 k^2 sigma^2 / q^2), of variance over u
+        sum_k q^2 / (2 pi^2 k^2) exp(-4 pi^2 k^2 sigma^2 / q^2): q^2 / 12 without noise,
+        below 1e-4 q^2 once sigma > q / 2 (terms past the third taken at k = 4).  sigma^2 is
+        the measured variance less q^2 / 4, the most a still level's rounding adds (a
+        reading toggling between two codes half the time): the least noise it can have had.
+        """
+        measured = self.measured_a2 if noise_a2 is None else noise_a2
+        if not math.isfinite(self.step_a) or not math.isfinite(measured):
+            return 0.0
+        q2 = self.step_a ** 2
+        c = 4.0 * math.pi ** 2 * max(measured - q2 / 4.0, 0.0) / q2
+        if c > 700.0:               # e^-c underflows
+            return 0.0
+        e = math.exp(-c)
+        terms = e + e ** 4 / 4.0 + e ** 9 / 9.0 + _TAIL * e ** 16
+        return q2 / (2.0 * math.pi ** 2) * terms
