@@ -22,6 +22,7 @@ from bench.scenarios.sensor import Sensor
 from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
 from ipmc_sensor_ros.estimation.noise import NoiseMeter
 from ipmc_sensor_ros.estimation.rest import RestWindow
+from ipmc_sensor_ros.estimation.rounding import RoundingTally
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import Geometry
 
@@ -141,3 +142,24 @@ def test_without_a_quantiser_the_published_std_is_the_filters_own():
     w_row, state = core._filter._w_row, core._state
     assert state.rounding is not None and state.noise.rounding_bias_a2() == 0.0
     assert core._filter.deflection(state)[1] == np.sqrt(w_row @ state.P @ w_row)
+
+
+def test_a_rest_that_begins_keeps_the_share_of_the_one_before():
+    # the published variance does not jump as a new rest begins: the old rest's share (its
+    # rounding through the gains since) is folded in whole, and the new rest starts from d = 0
+    meter = NoiseMeter(1.0)
+    meter.step_a, meter.measured_a2 = 10e-9, 0.04e-18     # 10 nA steps, 0.2 nA of noise
+    tally = RoundingTally(None, 3)
+    w_row = np.array([2.0, 0.0, 0.0])
+    tally.update(np.array([0.5, 0.1, 0.0]), np.array([1.0, 0.0, 0.0]), 1.0, meter)
+    tally.predict(np.eye(3) * 2.0, meter)
+    before = tally.variance(w_row, meter)
+    assert before == pytest.approx(meter.rounding_bias_a2(0.04e-18) * (2.0 * 0.5 * 2.0) ** 2)
+    tally.fold(w_row, meter)
+    tally.fold(w_row, meter)                    # nothing since: nothing more to fold
+    assert tally.variance(w_row, meter) == before and not tally.d.any()
+    tally.update(np.array([0.25, 0.0, 0.0]), np.array([1.0, 0.0, 0.0]), 1.0, meter)
+    second = tally.variance(w_row, meter)       # this rest's share beside the folded one
+    assert second == pytest.approx(before + meter.rounding_bias_a2(0.04e-18) * 0.5 ** 2)
+    tally.fold(w_row, meter)
+    assert tally.variance(w_row, meter) == second

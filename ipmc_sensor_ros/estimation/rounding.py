@@ -79,7 +79,8 @@ class RoundingTally:
 
         It cannot once the rest's noise dithers the meter's step past Var(beta) = 0
         (sigma > 4.2 q: exp(-4 pi^2 sigma^2 / q^2) underflows), as for any unquantised
-        stream (its "step" is the smallest difference seen): d is then 0 for good.
+        stream (its "step" is the smallest difference seen): d is then set to 0 (a rest
+        whose rounding matters starts it again).
         """
         if not self.zero:
             if _matters(meter, self.noise):
@@ -104,7 +105,7 @@ class RoundingTally:
     def fold(self, w_row: np.ndarray, meter) -> None:
         """Fold the share of the rest before into f as a rest begins; d restarts."""
         if not self.zero:
-            self.folded += self.variance(w_row, meter)
+            self.folded = self.variance(w_row, meter)
             self.d, self.zero = np.zeros_like(self.d), True
 
     def variance(self, w_row: np.ndarray, meter) -> float:
