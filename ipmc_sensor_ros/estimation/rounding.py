@@ -63,12 +63,13 @@ class RoundingTally:
 
     """
 
-    __slots__ = ('d', 'folded', 'noise', 'zero')
+    __slots__ = ('d', 'folded', 'noise', 'zero', '_known')
 
     def __init__(self, bias: RoundingBias | None, size: int):
         bias = bias or RoundingBias(np.zeros(size))
         self.d, self.folded, self.noise = bias.sensitivity.copy(), bias.folded, bias.rest_noise_a2
         self.zero = not self.d.any()            # d = 0 stays 0 until a rest
+        self._known = (None, 0.0)               # ((step, rest noise), Var(beta)) last asked
 
     def value(self) -> RoundingBias:
         return RoundingBias(self.d.copy(), self.folded, self.noise)
@@ -83,7 +84,7 @@ class RoundingTally:
         whose rounding matters starts it again).
         """
         if not self.zero:
-            if _matters(meter, self.noise):
+            if self._matters(meter):
                 self.d = F @ self.d
             else:
                 self.d, self.zero = np.zeros_like(self.d), True
@@ -96,7 +97,7 @@ class RoundingTally:
         """
         if h and meter is not None:
             self.noise = meter.measured_a2
-            if self.zero and not _matters(meter, self.noise):
+            if self.zero and not self._matters(meter):
                 return
         if h or not self.zero:
             self.d = self.d + gain * (h - float(row @ self.d))
@@ -112,9 +113,15 @@ class RoundingTally:
         """Return the share of the deflection's variance, m^2 (0 without a rest so far)."""
         if self.zero:
             return self.folded
-        return self.folded + meter.rounding_bias_a2(self.noise) * float(w_row @ self.d) ** 2
+        return self.folded + self._var_beta(meter) * float(w_row @ self.d) ** 2
 
+    def _var_beta(self, meter) -> float:
+        """Return Var(beta) for the meter's step and this rest's noise (kept while they stay)."""
+        key = (meter.step_a, self.noise)
+        if self._known[0] != key:
+            self._known = key, meter.rounding_bias_a2(self.noise)
+        return self._known[1]
 
-def _matters(meter, noise_a2: float) -> bool:
-    """Tell whether a rest's rounding can matter: its step unknown yet, or not dithered away."""
-    return not math.isfinite(meter.step_a) or meter.rounding_bias_a2(noise_a2) > 0.0
+    def _matters(self, meter) -> bool:
+        """Tell whether this rest's rounding can matter: its step unknown yet, or not dithered."""
+        return not math.isfinite(meter.step_a) or self._var_beta(meter) > 0.0
