@@ -84,11 +84,11 @@ def main(argv=None) -> int:
         results.append(row)
         print(_line(index, row, info), flush=True)
     passed = sum(bool(r['ok']) for r in results)
-    narrow = [r['index'] for r in results if not r['coverage'] >= COVERAGE_LOW]
+    narrow = [r['index'] for r in results if not r['coverage'] >= COVERAGE_LOW]   # NaN too
+    which = f" ({', '.join(map(str, narrow))})" if narrow else ''
     print(f'{passed} of {len(results)} drawn records within max(2 x causal bound, 1 %) with '
           f'every row estimated; +-2 sigma coverage below {100 * COVERAGE_LOW:.0f} % on '
-          f'{len(narrow)}{" (" + ", ".join(map(str, narrow)) + ")" if narrow else ""} '
-          f'({time.perf_counter() - wall0:.0f} s)')
+          f'{len(narrow)}{which} ({time.perf_counter() - wall0:.0f} s)')
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as f:
             json.dump({'rows': [{k: _json_safe(v) for k, v in r.items()} for r in results]},

@@ -30,7 +30,7 @@ def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> Fil
     """
     x, P, _ = _carried(old.model, new.model, state.x, state.P, joint=False)
     bias = state.rounding           # a linear map of the state: its sensitivity maps alike
-    if bias is not None:
+    if bias is not None and bias.sensitivity.any():
         bias = bias._replace(sensitivity=_carried(old.model, new.model, bias.sensitivity,
                                                   state.P, joint=False)[0])
     init = new.initial_state()

@@ -252,7 +252,9 @@ class KalmanFilter:
         for k in range(n):
             yk, tk = y[k], st[k]
             sk = slots_of(tk)           # the slots, and the stamp's offset from its slot
-            dk = tk - sk if not -ON_SLOT < tk - sk < ON_SLOT else 0.0
+            dk = tk - sk
+            if -ON_SLOT < dk < ON_SLOT:     # within the table's half row: on the slot
+                dk = 0.0
             if sk != last_steps:
                 F, Q = m.discrete(sk)
                 last_steps = sk
