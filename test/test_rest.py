@@ -138,3 +138,48 @@ def test_a_jumps_run_is_tested_on_its_own_fit_with_the_step():
     assert residual == pytest.approx(expected, abs=1e-15)
     leaked = y[-1] - theta[1::2].sum() - expected   # the fit without the step
     assert abs(leaked) > 1.5 * 0.2e-9
+
+
+def test_a_jumps_run_goes_on_when_the_lines_change():
+    """
+    A jump's run in progress when the rest test's lines change is carried, not lost or broken.
+
+    Drawn record 228 (2026-12-02) ended in a traceback: a mains line was measured while the
+    window followed a jump's run, and the run's phasor sums (3 lines) met the new window's
+    (6 lines).  Here a still current of 6 nA (0.2 nA of noise) steps by 20 nA at sample
+    1400; at sample 1500 (100 samples into the run) the state of a filter that tests the
+    50 Hz family is carried onto one that also tests the 60 Hz family.  The run's phasor
+    sums are those of its samples under the new lines (the sum of e^(-j 2 pi f k / fs) over
+    k = 0..99 samples back: the newest has phase 1 after a carry) to rounding; run on, the
+    carried filter follows the run as the new filter does when it ran from the start
+    (hum-free current: the lines change no verdict): the same run length, the same sums
+    relative to the newest phase, the same estimates to 1e-9 of their largest.
+    """
+    from ipmc_sensor_ros.estimation.carry import carry_state
+    from ipmc_sensor_ros.estimation.config import EstimatorConfig
+    from ipmc_sensor_ros.estimation.filter import KalmanFilter
+    from ipmc_sensor_ros.estimation.statespace import StateSpaceModel
+    from ipmc_sensor_ros.lti.reduction import reduce_model_parts
+    from ipmc_sensor_ros.physics.model import SensorModel
+    from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
+
+    reduced = reduce_model_parts(SensorModel.named('h2', PAPER_SAMPLES['slim']), 4,
+                                 (0.1, 50.0))[0]
+    ssm = StateSpaceModel(reduced, EstimatorConfig(), FS)
+    before, after = (50.0, 100.0, 150.0), (50.0, 100.0, 150.0, 60.0, 120.0, 180.0)
+    old, new = KalmanFilter(ssm, before), KalmanFilter(ssm, after)
+    rng = np.random.default_rng(5)
+    n, step_at, carry_at = 1580, 1400, 1500
+    y = 6e-9 + 20e-9 * (np.arange(n) >= step_at) + 0.2e-9 * rng.standard_normal(n)
+    state = old.run(old.initial_state(), y[:carry_at])[0]
+    assert state.window.jump_sums is not None and state.window.jump_quiet == carry_at - step_at
+    carried = carry_state(old, new, state)
+    back = np.arange(carry_at - step_at)[:, None]
+    expected = np.exp(2j * np.pi * np.array(after) * back / FS).sum(axis=0)
+    assert np.allclose(carried.window.jump_sums[1], expected, rtol=1e-9, atol=1e-9)
+    end, w, _, _ = new.run(carried, y[carry_at:])
+    ref, w_ref, _, _ = new.run(new.run(new.initial_state(), y[:carry_at])[0], y[carry_at:])
+    assert end.window.jump_quiet == ref.window.jump_quiet == n - step_at
+    relative = [s.window.jump_sums[1] * s.window.phase.conj() for s in (end, ref)]
+    assert np.allclose(*relative, rtol=1e-9, atol=1e-9)
+    assert np.max(np.abs(w - w_ref)) <= 1e-9 * np.max(np.abs(w_ref))

@@ -46,9 +46,11 @@ def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> Fil
     age = (win.pos - 1 - np.arange(n)) % n      # slot of the sample j periods ago
     phases = np.ones((n, len(new.rest_lines_hz)), complex)
     phases[age] = new.rotation[None, :] ** -np.arange(n)[:, None]
-    return replace(out, window=replace(win.copy(), line_sums=win.samples @ phases,
-                                       phase=np.ones(len(new.rest_lines_hz), complex),
-                                       phases=phases, contiguous=n))
+    window = replace(win.copy(), line_sums=win.samples @ phases,
+                     phase=np.ones(len(new.rest_lines_hz), complex), phases=phases, contiguous=n)
+    if window.jump_sums is not None:            # a jump's run goes on under the new lines
+        window.jump_sums = (window.jump_sums[0], window.run_phasors(phases))
+    return replace(out, window=window)
 
 
 def carry_back(old: KalmanFilter, new: KalmanFilter, state: FilterState):

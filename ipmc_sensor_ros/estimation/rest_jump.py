@@ -62,6 +62,19 @@ class JumpRun:
             else:
                 self.jump_sums = None
 
+    def run_phasors(self, phases: np.ndarray) -> np.ndarray:
+        """
+        Return the sum of the run's samples' phasors under the per-slot ``phases``.
+
+        What ``jump_sums`` holds for the run's newest samples (:meth:`_follow_jump` adds one
+        per sample while ``jump_quiet + 1`` is below the window's size), asked when the
+        window's lines change (:func:`~.carry.carry_state`): a run in progress goes on under
+        the new lines as if they had been tested from its start.
+        """
+        n = self.samples.size
+        length = min(self.jump_quiet, n - 1)
+        return phases[(self.pos - 1 - np.arange(length)) % n].sum(axis=0)
+
     def _steps(self) -> bool:
         """Tell whether the run's samples are fitted with its step (:meth:`_run_residual`)."""
         return (self.jump_sums is not None and not self.jump_moving
