@@ -269,3 +269,38 @@ def test_kalman_node_learns_the_offset_at_rest_and_publishes_its_uncertainty():
         assert np.ptp(w[-10_000:]) < 5e-5
     finally:
         node.close()
+
+
+@pytest.mark.parametrize('one_sample', [True, False])
+def test_a_fault_inside_the_estimator_drops_its_samples_and_the_stream_goes_on(one_sample):
+    """
+    An exception inside the estimator is a defect, not the input's: it must not end a node.
+
+    Drawn record 228 (2026-12-02) raised a ValueError deep in the filter; in a live node that
+    would have ended the callback's executor.  Now the samples of the call that raised are
+    dropped and the filter reset, counted (``samples_dropped``, ``resets``) and said with
+    the exception's text, and the next samples are estimated: 100 samples fed, the 50th
+    raising, 99 estimated.
+    """
+    stream = _fresh_stream()
+    est = stream.estimator
+    name = 'process_one' if one_sample else 'process'
+    real, calls = getattr(est, name), []
+
+    def faulty(*args):
+        calls.append(1)
+        if len(calls) == 50 if one_sample else len(calls) == 5:
+            raise ValueError('operands could not be broadcast together')
+        return real(*args)
+    setattr(est, name, faulty)
+    t = 3.0 + np.arange(100) / FS
+    size = 1 if one_sample else 10
+    for k in range(0, t.size, size):
+        if one_sample:
+            stream.feed_one(float(t[k]), 1e-8)
+        else:
+            stream.feed(t[k:k + size], np.full(size, 1e-8))
+    c = stream.counters
+    assert c['samples_dropped'] == size and c['resets'] == 1
+    assert c['samples_out'] == 100 - size and stream.check_invariant()
+    assert 'estimator fault (ValueError: operands could not' in stream.last_warning

@@ -20,6 +20,7 @@ its slot in this count), ``rate_rebuilds``, and the source events the node count
 """
 from __future__ import annotations
 
+import math
 from typing import Any, Callable
 
 import numpy as np
@@ -241,10 +242,28 @@ class StreamAccounts:
         c['gaps_bridged'] = max(c['gaps_bridged'] - gaps, 0)
         timebase.recounted = (0, 0)
 
-    def _drop(self, n: int) -> None:
-        """Drop ``n`` samples whose estimate is not finite; reset the filter."""
+    def _drop(self, n: int, why: str = 'non-finite estimate') -> None:
+        """Drop ``n`` samples the estimator gave no finite estimate of; reset the filter."""
         self.estimator.reset()
         self.counters['samples_dropped'] += n
         self.counters['resets'] += 1
-        self._say(f'non-finite estimate on {self.source}: {n} sample(s) dropped, filter reset',
-                  'dropped')
+        self._say(f'{why} on {self.source}: {n} sample(s) dropped, filter reset', 'dropped')
+
+    def _estimated(self, run: Callable[[], tuple], n: int) -> tuple | None:
+        """
+        Return ``run()``, the estimator's (time, deflection) of ``n`` samples, or None.
+
+        None: an estimate was not finite, or the estimator raised.  Either drops the samples
+        and resets the filter, counted and said (with the exception: a defect to report,
+        since input is refused before it reaches the estimator); a live node loses ``n``
+        samples, not its estimator.
+        """
+        try:
+            t_out, w = run()
+        except Exception as exc:  # noqa: BLE001 - a defect: counted and said, never fatal
+            self._drop(n, f'estimator fault ({type(exc).__name__}: {exc})')
+            return None
+        if not (math.isfinite(w) if isinstance(w, float) else np.all(np.isfinite(w))):
+            self._drop(n)
+            return None
+        return t_out, w

@@ -282,17 +282,17 @@ class StreamEstimator(StreamAccounts):
         if code < 0:
             c['messages_rejected'] += 1
             return None
-        est = self.estimator
         if code == START:
-            est.reset()
-        t_out, w = est.process_one(time_s, current_a, (code or 1) + self.timebase.slot_offset)
+            self.estimator.reset()
+        out = self._estimated(lambda: self.estimator.process_one(
+            time_s, current_a, (code or 1) + self.timebase.slot_offset), 1)
         if self.timebase.fresh:
             hz = self._rate_action()
             if hz is not None:
                 self._follow_rate(hz)
-        if not math.isfinite(w):
-            self._drop(1)
+        if out is None:
             return None
+        t_out, w = out
         c['samples_out'] += 1
         if self._stamp_floor_s is not None:
             kept = self._past_floor(np.array([t_out]), np.array([w]))
@@ -376,14 +376,14 @@ class StreamEstimator(StreamAccounts):
         for stop, kind, hz in events + [(t.size, 2, None)]:
             sel = np.flatnonzero(accepted[start:stop]) + start
             if sel.size:
-                t_out, w = self.estimator.process(t[sel], current[sel],
-                                                  np.maximum(codes[sel], 1) + self.offsets[sel])
-                if np.all(np.isfinite(w)):
-                    parts.append((t_out, w, self.estimator.last_std_m))
+                out = self._estimated(lambda: self.estimator.process(
+                    t[sel], current[sel], np.maximum(codes[sel], 1) + self.offsets[sel]),
+                    sel.size)
+                if out is not None:
+                    parts.append((*out, self.estimator.last_std_m))
                     self.counters['samples_out'] += sel.size
                 else:
                     accepted[sel] = False
-                    self._drop(sel.size)
             if kind == 1:
                 self.estimator.reset()
             elif kind == 0:
