@@ -63,7 +63,7 @@ def _line(index: int, row: dict, info: dict) -> str:
     return (f"{index:5d} {'ok  ' if row['ok'] else 'FAIL'} live {100 * row['nrmse']:8.3f} % "
             f"bound {100 * row['causal_bound']:7.3f} % smoothed "
             f"{100 * row['smoothed_nrmse']:8.3f} % coverage {100 * row['coverage']:5.1f} % "
-            f'rows {rows}  {describe(info)}')
+            f"rows {rows}  {describe(info)}{'  FAULT: ' + row['fault'] if row['fault'] else ''}")
 
 
 def main(argv=None) -> int:

@@ -57,7 +57,8 @@ class Estimate:
 
     ``row_index``: the record rows that have an estimate (into ``record.time_s``), with their
     output ``time_s``, ``deflection_m`` and published ``std_m`` (NaN: none); ``cpu_s``:
-    process time spent in the estimator.
+    process time spent in the estimator; ``fault``: the first exception inside the estimator
+    the stream said (its samples dropped, the filter reset: a defect to report), or ''.
     """
 
     row_index: np.ndarray
@@ -67,6 +68,7 @@ class Estimate:
     rows_given: int
     rows_estimated: int
     cpu_s: float
+    fault: str = ''
 
 
 def run_estimator(record: Record, causal: bool = True, estimator: str = 'kalman',
@@ -97,7 +99,9 @@ def _causal(record: Record, est, block_samples: int) -> Estimate:
     """Return the live estimate: the stream rules, block by block (1: the one-sample path)."""
     from ipmc_sensor_ros.estimation.stream import StreamEstimator
 
-    stream = StreamEstimator(est, max_gap_s=0.1, source=record.name)
+    faults = []
+    stream = StreamEstimator(est, max_gap_s=0.1, source=record.name, warn=lambda text: (
+        faults.append(text) if 'estimator fault' in text else None))
     t, i = record.time_s, record.current_a
     index, t_out, w_out, std_out = [], [], [], []
     cpu0 = time.process_time()
@@ -122,7 +126,8 @@ def _causal(record: Record, est, block_samples: int) -> Estimate:
     cat = (lambda parts, dtype=float: np.concatenate(parts) if parts
            else np.zeros(0, dtype=dtype))
     rows = cat(index, np.int64)
-    return Estimate(rows, cat(t_out), cat(w_out), cat(std_out), int(t.size), int(rows.size), cpu)
+    return Estimate(rows, cat(t_out), cat(w_out), cat(std_out), int(t.size), int(rows.size), cpu,
+                    faults[0] if faults else '')
 
 
 def _smoothed(record: Record, est, block_samples: int) -> Estimate:
@@ -173,7 +178,7 @@ def judge(record: Record, estimators=('kalman',), block_samples: int = 1000) -> 
             'smoothed_ratio': s_smooth['nrmse'] / bounds.noncausal_nrmse,
             'coverage': s_live['coverage'], 'rows_given': live.rows_given,
             'rows_estimated': live.rows_estimated,
-            'cpu_us_per_row': 1e6 * live.cpu_s / max(live.rows_given, 1),
+            'cpu_us_per_row': 1e6 * live.cpu_s / max(live.rows_given, 1), 'fault': live.fault,
             'ok': bool(s_live['nrmse'] <= max(2 * judged_by, 0.01)
                        and live.rows_estimated == live.rows_given),
         })

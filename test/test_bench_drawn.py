@@ -50,3 +50,27 @@ def test_a_sweep_too_short_to_judge_is_refused(capsys):
         main(['--duration-s', '1'])
     assert exc.value.code == 2
     assert '--duration-s >= 2' in capsys.readouterr().err
+
+
+def test_a_fault_inside_the_estimator_is_named_on_its_line(tmp_path, capsys, monkeypatch):
+    """
+    The stream drops a call's samples when the estimator raises (the node goes on); the sweep
+    must not hide it: the record fails (rows missing) and its line names the exception.
+    """
+    from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
+
+    real, calls = DeflectionEstimator.process, []
+
+    def faulty(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:             # the live run's second 1000-row block
+            raise ValueError('operands could not be broadcast together')
+        return real(self, *args, **kwargs)
+    monkeypatch.setattr(DeflectionEstimator, 'process', faulty)
+    out = tmp_path / 'drawn.json'
+    assert main(['--first', '2', '--count', '1', '--duration-s', '3', '--json', str(out)]) == 0
+    line = capsys.readouterr().out.splitlines()[0]
+    row = json.loads(out.read_text())['rows'][0]
+    assert 'FAULT: estimator fault (ValueError: operands could not' in line
+    assert row['fault'].startswith('estimator fault (ValueError') and not row['ok']
+    assert row['rows_estimated'] < row['rows_given']
