@@ -54,8 +54,10 @@ def test_a_sweep_too_short_to_judge_is_refused(capsys):
 
 def test_a_fault_inside_the_estimator_is_named_on_its_line(tmp_path, capsys, monkeypatch):
     """
-    The stream drops a call's samples when the estimator raises (the node goes on); the sweep
-    must not hide it: the record fails (rows missing) and its line names the exception.
+    A sweep does not hide a fault inside the estimator.
+
+    The stream drops a call's samples when the estimator raises (the node goes on); the
+    record then fails (rows missing) and its line names the exception.
     """
     from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
 
