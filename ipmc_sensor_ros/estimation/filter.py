@@ -312,11 +312,11 @@ class KalmanFilter:
         test follows a run still at one offset (:func:`.onset.follow_jump`) and accepts it
         when the window says the offset jumped (:meth:`.rest.RestWindow.jumped`).
         """
-        rot, ib, sb = self._rot, self.model.ib, self._sb
+        rot, ib, sb, cl = self._rot, self.model.ib, self._sb, self._c_lines
         win.push(y, None if not (samples and rot.size) else rot if steps == 1 else rot ** steps,
                  steps)
         verdict = win.judge(self.rest, y, float(x[ib]) * sb, float(P[ib, ib]) * sb * sb,
-                            noise_a2, still, lambda: float(self._c_lines @ x))
+                            noise_a2, still, lambda: (float(cl @ x), float(cl @ P @ cl)))
         jump = follow_jump(jump, win.jump_quiet, verdict, y, t, snapshot, still)
         if jump is not None and verdict is False and win.jumped(self.rest, noise_a2):
             return verdict, None, jump

@@ -296,7 +296,7 @@ class RestWindow(JumpRun):
         return self.samples[order] - (turns.real @ theta[1::2] + turns.imag @ theta[2::2])
 
     def judge(self, test: RestTest, current_a: float, offset_a: float, offset_var_a2: float,
-              noise_var_a2: float, at_rest: bool, lines=lambda: 0.0) -> bool | None:
+              noise_var_a2: float, at_rest: bool, lines=lambda: (0.0, 0.0)) -> bool | None:
         """
         Test the newest sample (after :meth:`push`); return the window's verdict.
 
@@ -304,7 +304,7 @@ class RestWindow(JumpRun):
         (the window's first ones once it is full, against its fit of the lines) and the
         whole window passes :meth:`RestTest.still`.  ``offset_a``, ``offset_var_a2``: the
         filter's offset and its variance before this sample; ``lines()``: the filter's mains
-        lines at it, A (the jump test's run out of a motion asks for them).
+        lines at it and their variance, (A, A^2) (the jump test's run out of a motion asks).
         """
         n = self.samples.size
         filled = self.count == n - 1

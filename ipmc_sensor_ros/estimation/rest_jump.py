@@ -35,28 +35,31 @@ class JumpRun:
         the filter's offset with the jump's variance added (``jump_quiet`` 1: a run starts
         here) and learns it from each sample that agrees (:meth:`_run_residual`).  ``fit``:
         (the sample's current, and the window's (A'A)^-1, fit and A'i; None without lines);
-        ``lines()``: the filter's mains lines at this sample, A (asked for only out of a
-        motion).
+        ``lines()``: the filter's mains lines at this sample and their variance, (A, A^2)
+        (asked for only out of a motion, whose samples are tested within the noise and that
+        variance: the filter's own account of how well it knows the hum).
         """
         current = fit[0]
         if self.jump_track is not None:
             if self._steps():
                 total, phasors = self.jump_sums
                 self.jump_sums = (total + current, phasors + self.phase)
-            ok, self.jump_track = test.sample_ok(self._run_residual(r, fit, lines),
-                                                 self.jump_track, offset_a, offset_var_a2,
-                                                 noise_var_a2)
+            residual, line_var = self._run_residual(r, fit, lines)
+            ok, self.jump_track = test.sample_ok(residual, self.jump_track, offset_a,
+                                                 offset_var_a2, noise_var_a2 + line_var)
             if ok:
                 self.jump_quiet += 1
                 return
         self.jump_quiet, self.jump_track, self.jump_sums = 0, None, None
         self.jump_moving = moving = not still_before
-        d = (current - lines() if moving else r) - offset_a
-        if shifted or d * d > test.level_limit * (noise_var_a2 + offset_var_a2):
+        value, line_var = lines() if moving else (current - r, 0.0)
+        d = current - value - offset_a
+        if shifted or d * d > test.level_limit * (noise_var_a2 + line_var + offset_var_a2):
             self.jump_sums = None if moving else (current, self.phase.copy())
-            ok, self.jump_track = test.sample_ok(self._run_residual(r, fit, lines), None,
-                                                 offset_a, offset_var_a2 + test.jump_var_a2,
-                                                 noise_var_a2)
+            residual, line_var = self._run_residual(r, fit, lines)
+            ok, self.jump_track = test.sample_ok(residual, None, offset_a,
+                                                 offset_var_a2 + test.jump_var_a2,
+                                                 noise_var_a2 + line_var)
             if ok:
                 self.jump_quiet = 1
             else:
@@ -80,9 +83,9 @@ class JumpRun:
         return (self.jump_sums is not None and not self.jump_moving
                 and self.jump_quiet + 1 < self.samples.size)
 
-    def _run_residual(self, r: float, fit: tuple, lines) -> float:
+    def _run_residual(self, r: float, fit: tuple, lines) -> tuple[float, float]:
         """
-        Return the newest sample less the lines the jump's run assumes.
+        Return the newest sample less the lines the jump's run assumes, and their variance.
 
         Out of a still stretch, the lines of the window's fit with the jump's step
         (:meth:`_step_residual`; ``r``, the fit without it, once the run holds the window).
@@ -92,10 +95,11 @@ class JumpRun:
         """
         current, gram, theta, b = fit
         if self.jump_moving:
-            return current - lines()
+            value, variance = lines()
+            return current - value, variance
         if gram is None or not self._steps():
-            return r
-        return self._step_residual(current, gram, theta, b)
+            return r, 0.0
+        return self._step_residual(current, gram, theta, b), 0.0
 
     def _step_residual(self, current_a: float, gram: np.ndarray, theta: np.ndarray,
                        b: np.ndarray) -> float:
