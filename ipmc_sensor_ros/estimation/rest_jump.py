@@ -52,8 +52,8 @@ class JumpRun:
                 return
         self.jump_quiet, self.jump_track, self.jump_sums = 0, None, None
         self.jump_moving = moving = not still_before
-        value, line_var = lines() if moving else (current - r, 0.0)
-        d = current - value - offset_a
+        value, line_var = lines() if moving else (0.0, 0.0)
+        d = (current - value if moving else r) - offset_a
         if shifted or d * d > test.level_limit * (noise_var_a2 + line_var + offset_var_a2):
             self.jump_sums = None if moving else (current, self.phase.copy())
             residual, line_var = self._run_residual(r, fit, lines)
