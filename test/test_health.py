@@ -46,6 +46,22 @@ def test_warn_on_malformed_messages_resets_gaps_only_while_they_happen():
     assert mon.evaluate(_counters(3000, rejected_malformed=2, resets=1, gaps=1), 3.0).level == OK
 
 
+def test_the_first_evaluation_reports_what_was_counted_before_it():
+    """
+    Counts before the first evaluation are its period's, not lost.
+
+    The first evaluation compared with nothing and skipped the counter warnings: messages of
+    a second publisher ignored (or resets, gaps) before the node's first 1 Hz tick were
+    never reported (a DDS test failed whenever its messages all arrived within the first
+    second).  Its period now runs from the start.
+    """
+    mon = HealthMonitor(FS)
+    h = mon.evaluate(_counters(1000, resets=1, messages_ignored=5), 1.0)
+    assert h.level == WARN
+    assert '1 filter reset(s)' in h.message and '5 message(s) of other publishers' in h.message
+    assert mon.evaluate(_counters(2000, resets=1, messages_ignored=5), 2.0).level == OK
+
+
 def test_warn_when_the_estimator_takes_a_jump_of_the_offset():
     mon = HealthMonitor(FS)
     assert mon.evaluate(_counters(1000, offset_jumps=0), 1.0).level == OK

@@ -10,7 +10,8 @@ every problem, and key/value pairs for the ROS tools (rqt_robot_monitor,
 diagnostic_aggregator).  The ROS publisher is
 :class:`ipmc_sensor_ros.nodes.diagnostics.DiagnosticsPublisher`.
 
-Rules (evaluated on the change of the counters since the previous evaluation):
+Rules (evaluated on the change of the counters since the previous evaluation; the first
+evaluation's period runs from the start, so nothing counted before it goes unreported):
 
 * ERROR: no new sample for ``stale_after_s`` (or none at all since start); an estimate
   beyond what the geometry allows (``samples_beyond_limit`` rose:
@@ -273,17 +274,15 @@ class HealthMonitor:
             errors.append('no data for ' + (f'{since:.1f} s' if self._last_data_s is not None
                                             else f'{since:.1f} s since start')
                           + f' (stale_after_s {lim.stale_after_s:g})')
-        beyond = delta.get('samples_beyond_limit', 0) if self._prev is not None else \
-            int(status.get('samples_beyond_limit', 0))
+        beyond = delta.get('samples_beyond_limit', 0)
         if beyond > 0:
             errors.append(f'{beyond} estimate(s) beyond the geometric limit |w| > '
                           f"{_text(status.get('deflection_limit_m'))} m: not physically "
                           'possible (offset drift, wrong model or geometry?)')
-        if self._prev is not None:
-            for key, text in self.WARN_COUNTERS:
-                if delta.get(key, 0) > 0:
-                    warnings.append(f'{delta[key]} {text}')
-            warnings += _fraction_warnings(delta, status, lim.loss_warn_fraction)
+        for key, text in self.WARN_COUNTERS:
+            if delta.get(key, 0) > 0:
+                warnings.append(f'{delta[key]} {text}')
+        warnings += _fraction_warnings(delta, status, lim.loss_warn_fraction)
         warnings += self._rate_warnings(status, values, dt, new, done, prev)
         offset = status.get('estimated_offset_a')
         if statistics is not None:
