@@ -56,7 +56,8 @@ class JumpRun:
         d = (current - value if moving else r) - offset_a
         if shifted or d * d > test.level_limit * (noise_var_a2 + line_var + offset_var_a2):
             self.jump_sums = None if moving else (current, self.phase.copy())
-            residual, line_var = self._run_residual(r, fit, lines)
+            residual, line_var = ((current - value, line_var) if moving   # lines asked once
+                                  else self._run_residual(r, fit, lines))
             ok, self.jump_track = test.sample_ok(residual, None, offset_a,
                                                  offset_var_a2 + test.jump_var_a2,
                                                  noise_var_a2 + line_var)
