@@ -159,6 +159,34 @@ def test_the_smoother_passes_back_through_a_carry_exactly(reduced):
     assert np.max(np.abs(w2 - w1)) <= 1e-9 * scale and np.allclose(s2, s1, rtol=1e-6)
 
 
+def test_a_rounding_not_yet_felt_is_carried_onto_a_larger_model(reduced):
+    """
+    A zero rounding sensitivity (no rest felt yet) takes the new model's size when carried.
+
+    Fresh drawn record 161 (16-bit ADC, a mains line measured after a rest began): the
+    carried d kept the old model's 10 states, so the new model's first rest update raised
+    (size 10 is different from 16) and the stream dropped 1,000 samples and reset.
+    """
+    from ipmc_sensor_ros.estimation.carry import carry_state
+    from ipmc_sensor_ros.estimation.rounding import RoundingBias
+
+    bare = KalmanFilter(StateSpaceModel(reduced, EstimatorConfig(), FS))
+    lined = KalmanFilter(StateSpaceModel(reduced, EstimatorConfig(), FS, (50.0,)))
+    assert lined.model.size > bare.model.size
+    start = bare.initial_state()
+    for d in (np.zeros(bare.model.size), np.linspace(0.0, 1.0, bare.model.size)):
+        state = replace(start, rounding=RoundingBias(d))
+        carried = carry_state(bare, lined, state).rounding.sensitivity
+        assert carried.shape == (lined.model.size,) and carried.any() == d.any()
+    # a still, quantised current (3 nA codes, 0.3 nA of noise): the rest updates carry beta
+    q = 3e-9
+    y = np.round((10e-9 + 0.3e-9 * np.random.default_rng(2).standard_normal(600)) / q) * q
+    state = carry_state(bare, lined, replace(start, rounding=RoundingBias(
+        np.zeros(bare.model.size))))
+    state, w, std, _ = lined.run(state, y)
+    assert state.still and np.all(np.isfinite(w)) and np.all(np.isfinite(std))
+
+
 def test_smoother_is_the_batch_posterior(reduced):
     """RTS equals the least-squares posterior of the whole record (information form)."""
     import scipy.sparse as sp

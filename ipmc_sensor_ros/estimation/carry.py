@@ -30,9 +30,10 @@ def carry_state(old: KalmanFilter, new: KalmanFilter, state: FilterState) -> Fil
     """
     x, P, _ = _carried(old.model, new.model, state.x, state.P, joint=False)
     bias = state.rounding           # a linear map of the state: its sensitivity maps alike
-    if bias is not None and bias.sensitivity.any():
+    if bias is not None:            # (d = 0 too: it takes the new model's size)
         bias = bias._replace(sensitivity=_carried(old.model, new.model, bias.sensitivity,
-                                                  state.P, joint=False)[0])
+                                                  state.P, joint=False)[0]
+                             if bias.sensitivity.any() else np.zeros(new.model.size))
     init = new.initial_state()
     out = replace(init, x=x, P=P, noise=replace(state.noise), samples=state.samples,
                   still=state.still, moved=state.moved,
