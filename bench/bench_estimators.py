@@ -57,8 +57,9 @@ class Estimate:
 
     ``row_index``: the record rows that have an estimate (into ``record.time_s``), with their
     output ``time_s``, ``deflection_m`` and published ``std_m`` (NaN: none); ``cpu_s``:
-    process time spent in the estimator; ``fault``: the first exception inside the estimator
-    the stream said (its samples dropped, the filter reset: a defect to report), or ''.
+    process time spent in the estimator; ``fault``: the last exception inside the estimator
+    the stream said (its samples dropped, the filter reset), or the first of the smoother
+    (its run's live estimate kept): a defect to report, or ''.
     """
 
     row_index: np.ndarray
@@ -99,9 +100,7 @@ def _causal(record: Record, est, block_samples: int) -> Estimate:
     """Return the live estimate: the stream rules, block by block (1: the one-sample path)."""
     from ipmc_sensor_ros.estimation.stream import StreamEstimator
 
-    faults = []
-    stream = StreamEstimator(est, max_gap_s=0.1, source=record.name, warn=lambda text: (
-        faults.append(text) if 'estimator fault' in text else None))
+    stream = StreamEstimator(est, max_gap_s=0.1, source=record.name)
     t, i = record.time_s, record.current_a
     index, t_out, w_out, std_out = [], [], [], []
     cpu0 = time.process_time()
@@ -127,7 +126,7 @@ def _causal(record: Record, est, block_samples: int) -> Estimate:
            else np.zeros(0, dtype=dtype))
     rows = cat(index, np.int64)
     return Estimate(rows, cat(t_out), cat(w_out), cat(std_out), int(t.size), int(rows.size), cpu,
-                    faults[0] if faults else '')
+                    stream.last_fault)
 
 
 def _smoothed(record: Record, est, block_samples: int) -> Estimate:
@@ -139,9 +138,12 @@ def _smoothed(record: Record, est, block_samples: int) -> Estimate:
     _, _, stream = estimate_record(est, record.time_s, record.current_a, max_gap_s=0.1,
                                    block_samples=block_samples, source=record.name)
     rows = np.flatnonzero(stream.kept)
-    t_out, w, std = smooth_record(fresh, stream, record.time_s, record.current_a)
+    faults = []
+    t_out, w, std = smooth_record(fresh, stream, record.time_s, record.current_a,
+                                  warn=faults.append)
     cpu = time.process_time() - cpu0
-    return Estimate(rows, t_out, w, std, int(record.time_s.size), int(rows.size), cpu)
+    return Estimate(rows, t_out, w, std, int(record.time_s.size), int(rows.size), cpu,
+                    stream.last_fault or (faults[0] if faults else ''))
 
 
 def estimate_scores(record: Record, estimate: Estimate | None) -> dict:
@@ -178,7 +180,8 @@ def judge(record: Record, estimators=('kalman',), block_samples: int = 1000) -> 
             'smoothed_ratio': s_smooth['nrmse'] / bounds.noncausal_nrmse,
             'coverage': s_live['coverage'], 'rows_given': live.rows_given,
             'rows_estimated': live.rows_estimated,
-            'cpu_us_per_row': 1e6 * live.cpu_s / max(live.rows_given, 1), 'fault': live.fault,
+            'cpu_us_per_row': 1e6 * live.cpu_s / max(live.rows_given, 1),
+            'fault': live.fault or smooth.fault,
             'ok': bool(s_live['nrmse'] <= max(2 * judged_by, 0.01)
                        and live.rows_estimated == live.rows_given),
         })

@@ -17,7 +17,8 @@ from __future__ import annotations
 import difflib
 from typing import Iterable
 
-__all__ = ['IpmcError', 'ParameterError', 'DataError', 'DataFormatError', 'did_you_mean']
+__all__ = ['IpmcError', 'ParameterError', 'DataError', 'DataFormatError', 'did_you_mean',
+           'defect_text']
 
 
 def did_you_mean(names: Iterable[str], known: Iterable[str]) -> str:
@@ -25,6 +26,24 @@ def did_you_mean(names: Iterable[str], known: Iterable[str]) -> str:
     known = list(known)
     return ''.join(f"; did you mean '{near[0]}' for '{name}'?" for name in names
                    for near in [difflib.get_close_matches(name, known, 1)] if near)
+
+
+def defect_text(exc: BaseException) -> str:
+    """
+    Return one line for an exception not raised on purpose: a defect, not the user's input.
+
+    Its type and text, and the package's innermost line it passed (where to look), so a
+    command line or node says it without a traceback.
+    """
+    import traceback
+    frames = traceback.extract_tb(exc.__traceback__) if exc.__traceback__ else []
+    ours = [f for f in frames if 'ipmc_sensor_ros' in f.filename] or frames
+    where = ''
+    if ours:
+        parts = ours[-1].filename.replace('\\', '/').split('/')
+        where = f" at {'/'.join(parts[-2:])}:{ours[-1].lineno}"
+    return (f'internal error ({type(exc).__name__}: {exc}){where}: a defect of '
+            'ipmc_sensor_ros, please report it')
 
 
 class IpmcError(ValueError):

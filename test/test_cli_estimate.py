@@ -202,3 +202,86 @@ def test_estimate_reports_the_level_error_beside_the_nrmse(short_run, tmp_path, 
     assert f"NRMSE {100 * row['nrmse']:.3g} % (means and linear trends removed)" in out
     assert f"as measured: {100 * row['nrmse_raw']:.3g} %, level error " \
         f"{row['start_error_m']:+.3g} m -> {row['end_error_m']:+.3g} m" in out
+
+
+def test_a_fault_inside_the_estimator_or_smoother_is_said_and_loses_no_row(
+        short_run, tmp_path, capsys, monkeypatch):
+    """
+    A defect inside the estimator is not a traceback, nor a row lost without a word.
+
+    The smoother raising on a run: that run's live estimate is written (to the bit the
+    ``--causal`` output) and the exception is said.  The live filter raising on a block: its
+    rows are dropped with a reset (the stream's rule) and the summary says how many.
+    """
+    from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
+
+    src = str(short_run / 'short_5Hz.csv')
+    assert main(['estimate', src, '--out', str(tmp_path / 'causal'), '--causal']) == 0
+
+    def broken(self, *args, **kwargs):
+        raise ValueError('operands could not be broadcast together')
+    with monkeypatch.context() as m:
+        m.setattr(DeflectionEstimator, 'smooth', broken)
+        assert main(['estimate', src, '--out', str(tmp_path / 'smooth')]) == 0
+    out = ''.join(capsys.readouterr())                  # faults on stderr, rows on stdout
+    assert 'smoother fault (ValueError: operands could not be broadcast together)' in out
+    assert 'their live (causal) estimate is given instead' in out
+    causal = read_estimate(tmp_path / 'causal' / 'short_5Hz.estimate.csv')
+    smoothed = read_estimate(tmp_path / 'smooth' / 'short_5Hz.estimate.csv')
+    assert np.array_equal(smoothed['deflection_estimate_m'], causal['deflection_estimate_m'])
+
+    real, calls = DeflectionEstimator.process, []
+
+    def faulty(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:             # the second 1000-row block
+            raise ValueError('matmul: a mismatch in its core dimension')
+        return real(self, *args, **kwargs)
+    monkeypatch.setattr(DeflectionEstimator, 'process', faulty)
+    assert main(['estimate', src, '--out', str(tmp_path / 'dropped'), '--causal',
+                 '--json', str(tmp_path / 'o.json')]) == 0
+    out = ''.join(capsys.readouterr())                  # faults on stderr, rows on stdout
+    assert 'estimator fault (ValueError: matmul: a mismatch in its core dimension)' in out
+    row = json.loads((tmp_path / 'o.json').read_text())[0]
+    assert row['rows_dropped'] == 1000 and row['rows_estimated'] == row['rows_given'] - 1000
+    assert '1000 dropped with a filter reset (no finite estimate)' in out
+
+
+def test_a_defect_is_one_line_naming_where_and_a_batch_goes_on(
+        short_run, tmp_path, capsys, monkeypatch):
+    """
+    An exception the package did not raise on purpose is said in one line, not a traceback.
+
+    Not the user's input (those are ValueErrors naming the place: exit status 2) but a
+    defect: its type, text and the package line it passed, exit status 3.  In a batch of
+    inputs the one that meets it fails and the others are written (exit status 1).
+    """
+    import sys
+
+    import ipmc_sensor_ros.cli.estimate_verb as verb
+    cli = sys.modules['ipmc_sensor_ros.cli.main']
+
+    def broken(args):
+        raise TypeError("unsupported operand type(s) for +: 'NoneType' and 'float'")
+    with monkeypatch.context() as m:
+        m.setattr(cli, 'check_outputs', broken)
+        assert main(['estimate', str(short_run), '--out', str(tmp_path / 'a')]) == 3
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and 'Traceback' not in err
+    assert err.startswith('ipmc-model estimate: internal error (TypeError: unsupported operand')
+    assert ' at cli/main.py:' in err                # the innermost package line it passed
+    assert 'a defect of ipmc_sensor_ros, please report it' in err
+
+    real = verb._checked_current
+
+    def once_broken(data):
+        if str(data.path).endswith('short_5Hz.csv'):
+            raise IndexError('index 6000 is out of bounds for axis 0 with size 6000')
+        return real(data)
+    monkeypatch.setattr(verb, '_checked_current', once_broken)
+    assert main(['estimate', str(short_run), str(short_run / 'brief'),
+                 '--out', str(tmp_path / 'b')]) == 1
+    err = capsys.readouterr().err
+    assert 'short_5Hz.csv: internal error (IndexError: index 6000 is out of bounds' in err
+    assert 'Traceback' not in err
+    assert [p.name for p in (tmp_path / 'b').glob('*.estimate.csv')] == ['short_3Hz.estimate.csv']

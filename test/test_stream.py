@@ -304,3 +304,5 @@ def test_a_fault_inside_the_estimator_drops_its_samples_and_the_stream_goes_on(o
     assert c['samples_dropped'] == size and c['resets'] == 1
     assert c['samples_out'] == 100 - size and stream.check_invariant()
     assert 'estimator fault (ValueError: operands could not' in stream.last_warning
+    assert stream.last_fault == 'estimator fault (ValueError: operands could not be broadcast ' \
+        'together)'

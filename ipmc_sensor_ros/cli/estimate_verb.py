@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import defect_text
 from ..estimation.limits import beyond_limit, deflection_limit_m
 from ..physics.parameters import ParameterError
 from .args import Progress, fmt_time_s, load_data, say, write_json
@@ -252,8 +253,12 @@ def _run(args, estimator, data, current, values, src):
     t_out, w, stream = estimate_record(estimator, data.time_s, current,
                                        max_gap_s=float(values['max_gap_s']), source=src)
     std = stream.record_std_m
+    if stream.last_fault:               # a defect: its samples dropped, the filter reset
+        say(f'{src}: {stream.last_fault}: {stream.counters["samples_dropped"]} sample(s) '
+            'dropped with a filter reset (please report it)')
     if fresh is not None and stream.kept.any():
-        t_out, w, std = smooth_record(fresh, stream, data.time_s, current)
+        t_out, w, std = smooth_record(fresh, stream, data.time_s, current,
+                                      warn=lambda text: say(f'{src}: {text}'))
     return t_out, w, std, stream
 
 
@@ -379,6 +384,9 @@ def cmd_estimate(args) -> int:
             if printable(path) not in text:
                 text = f'{printable(path)}: {text}'
             print(f'ipmc-model estimate: error: {text}', file=sys.stderr)
+            failed.append(printable(path))
+        except Exception as exc:  # noqa: BLE001 - a defect: this input fails, the rest go on
+            print(f'ipmc-model estimate: {printable(path)}: {defect_text(exc)}', file=sys.stderr)
             failed.append(printable(path))
     if len(paths) > 1 or failed:
         print(f'estimate: {len(summary)} of {len(paths)} input(s) written to '

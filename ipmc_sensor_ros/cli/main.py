@@ -13,6 +13,7 @@ import argparse
 import difflib
 import sys
 
+from ..errors import defect_text
 from . import data_verbs, info_verbs, model_verbs
 from .args import HelpFormatter
 from .outputs import check_outputs
@@ -68,6 +69,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, OSError) as exc:   # ParameterError, DataFormatError, ... are ValueErrors
         print(f'ipmc-model {args.verb}: error: {exc}', file=sys.stderr)
         return 2
+    except Exception as exc:  # noqa: BLE001 - a defect: one line, exit status 3, no traceback
+        print(f'ipmc-model {args.verb}: {defect_text(exc)}', file=sys.stderr)
+        return 3
 
 
 if __name__ == '__main__':

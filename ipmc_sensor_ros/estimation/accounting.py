@@ -99,8 +99,9 @@ def record_summary(counters: dict) -> tuple[dict, str]:
     """
     Return what became of a record's rows: a JSON-able dict and one line of text.
 
-    Rows given, estimated and refused (with the count per reason), slots lost in the stamps
-    and filter resets, from a stream's :data:`COUNTER_NAMES` counters.
+    Rows given, estimated, refused (with the count per reason) and dropped (the estimator
+    gave none: ``last_fault``), slots lost in the stamps and filter resets, from a stream's
+    :data:`COUNTER_NAMES` counters.
     """
     by_reason = {r: counters[f'rejected_{r}'] for r in REJECT_REASONS if counters[f'rejected_{r}']}
     out = {'rows_given': counters['samples_in'], 'rows_estimated': counters['samples_out'],
@@ -111,7 +112,9 @@ def record_summary(counters: dict) -> tuple[dict, str]:
     text = (f"{out['rows_given']} rows, {out['rows_estimated']} estimated, "
             f"{out['rows_refused']} refused" + (f' ({why})' if why else '')
             + (f", {out['samples_lost']} missing in the stamps (bridged)"
-               if out['samples_lost'] else ''))
+               if out['samples_lost'] else '')
+            + (f", {out['rows_dropped']} dropped with a filter reset (no finite estimate)"
+               if out['rows_dropped'] else ''))
     return out, text
 
 
@@ -141,6 +144,7 @@ class StreamAccounts:
         self.counters: dict[str, int] = dict.fromkeys(COUNTER_NAMES, 0)
         self.last_rejection = ''
         self.last_warning = ''
+        self.last_fault = ''                        # the last estimator fault said ('' none)
         self._refused_since = 0                     # refusals since the last accepted sample
         self._said: dict[str, int] = {}             # events of each kind said or not
         self._say_next: dict[str, int] = {}         # count at which a kind is said next
@@ -261,7 +265,8 @@ class StreamAccounts:
         try:
             t_out, w = run()
         except Exception as exc:  # noqa: BLE001 - a defect: counted and said, never fatal
-            self._drop(n, f'estimator fault ({type(exc).__name__}: {exc})')
+            self.last_fault = f'estimator fault ({type(exc).__name__}: {exc})'
+            self._drop(n, self.last_fault)
             return None
         if not (math.isfinite(w) if isinstance(w, float) else np.all(np.isfinite(w))):
             self._drop(n)

@@ -5,9 +5,12 @@ Whole records offline with the live stream's rules: ``ipmc-model estimate``, bag
 :func:`estimate_record` feeds a record to a :class:`~.stream.StreamEstimator` in blocks
 (:func:`run_record`), so refusals, bridged gaps and new runs are decided exactly as live;
 :func:`smooth_record` then smooths each run the stream began from a fresh start, with the
-sample periods the stream handed the filter.
+sample periods the stream handed the filter; a run whose smoothing raises (a defect) keeps
+its live estimate, said through ``warn``.
 """
 from __future__ import annotations
+
+from typing import Callable
 
 import numpy as np
 
@@ -25,10 +28,11 @@ def run_record(stream: StreamEstimator, time_s, current_a, block_samples: int = 
     Returns (output times, deflection, kept): ``kept`` marks the input samples that have
     an estimate (refused or dropped ones have none; see the stream's counters).  The rules
     are the live ones: a jump back by more than ``max_gap_s`` starts a new run, as a bag loop
-    does live.  Per kept sample it also keeps ``record_std_m`` (the published standard
-    deviation) and ``record_steps`` (the sample periods handed to the filter: the slots since
-    the sample before plus the stamp's offset from its slot; 0 where a new run began), which
-    :func:`smooth_record` reuses.
+    does live.  Per kept sample it also keeps ``record_time_s``, ``record_deflection_m`` and
+    ``record_std_m`` (the published estimate and standard deviation) and ``record_steps``
+    (the sample periods handed to the filter: the slots since the sample before plus the
+    stamp's offset from its slot; 0 where a new run began), which :func:`smooth_record`
+    reuses.
     """
     t = np.asarray(time_s, float)
     i = np.asarray(current_a, float)
@@ -48,6 +52,7 @@ def run_record(stream: StreamEstimator, time_s, current_a, block_samples: int = 
             n_out += m
             kept[k:end] = stream.accepted
     stream.record_std_m, stream.record_steps = out_s[:n_out], steps[:n_out]
+    stream.record_time_s, stream.record_deflection_m = out_t[:n_out], out_w[:n_out]
     return out_t[:n_out], out_w[:n_out], kept
 
 
@@ -66,21 +71,36 @@ def estimate_record(estimator: DeflectionEstimator, time_s, current_a, *, max_ga
     return t, w, stream
 
 
-def smooth_record(estimator: DeflectionEstimator, stream: StreamEstimator, time_s, current_a):
+def smooth_record(estimator: DeflectionEstimator, stream: StreamEstimator, time_s, current_a,
+                  warn: Callable[[str], None] | None = None):
     """
     Offline smoothed estimate of the samples ``stream`` kept: (times, deflection, std).
 
     ``stream`` ran the record (:func:`estimate_record`); its decisions are reused, not made
     again: each run it began is smoothed from a fresh start (:meth:`DeflectionEstimator.smooth`)
-    with the sample periods it handed the filter (missing samples bridged).
+    with the sample periods it handed the filter (missing samples bridged).  A run whose
+    smoothing raises keeps the stream's live estimate, and ``warn`` is told (the exception's
+    text: a defect to report, as the stream's estimator fault): nothing is lost.
     """
     t = np.asarray(time_s, float)[stream.kept]
     i = np.asarray(current_a, float)[stream.kept]
     steps = stream.record_steps
     cuts = [int(k) for k in np.flatnonzero(steps == START) if k > 0]
     periods = np.where(steps == START, 1.0, steps)      # a run's first sample: on its slot
-    out = [estimator.smooth(t[a:b], i[a:b], periods[a:b])
+    out = [_smoothed_run(estimator, stream, t, i, periods, a, b, warn)
            for a, b in zip([0, *cuts], [*cuts, t.size]) if b > a]
     if not out:
         return np.zeros(0), np.zeros(0), np.zeros(0)
     return tuple(np.concatenate(p) for p in zip(*out))
+
+
+def _smoothed_run(estimator, stream, t, i, periods, a: int, b: int, warn) -> tuple:
+    """Return the smoothed run of kept samples a..b-1, or its live estimate if smoothing fails."""
+    try:
+        return estimator.smooth(t[a:b], i[a:b], periods[a:b])
+    except Exception as exc:  # noqa: BLE001 - a defect: said, the run's live estimate kept
+        if warn is not None:
+            warn(f'smoother fault ({type(exc).__name__}: {exc}) on {stream.source}, kept '
+                 f'samples {a}..{b - 1}: their live (causal) estimate is given instead')
+        return (stream.record_time_s[a:b], stream.record_deflection_m[a:b],
+                stream.record_std_m[a:b])
