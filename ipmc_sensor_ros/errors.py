@@ -35,13 +35,17 @@ def defect_text(exc: BaseException) -> str:
     Its type and text, and the package's innermost line it passed (where to look), so a
     command line or node says it without a traceback.
     """
+    import os
     import traceback
+    package = os.path.dirname(os.path.abspath(__file__))
     frames = traceback.extract_tb(exc.__traceback__) if exc.__traceback__ else []
-    ours = [f for f in frames if 'ipmc_sensor_ros' in f.filename] or frames
+    ours = [f for f in frames
+            if os.path.abspath(f.filename).startswith(package + os.sep)] or frames
     where = ''
     if ours:
-        parts = ours[-1].filename.replace('\\', '/').split('/')
-        where = f" at {'/'.join(parts[-2:])}:{ours[-1].lineno}"
+        name = os.path.abspath(ours[-1].filename)
+        shown = os.path.relpath(name, package) if name.startswith(package + os.sep) else name
+        where = f" at {shown.replace(os.sep, '/')}:{ours[-1].lineno}"
     return (f'internal error ({type(exc).__name__}: {exc}){where}: a defect of '
             'ipmc_sensor_ros, please report it')
 
