@@ -126,7 +126,8 @@ SETTINGS = (
     Setting('false_alarm', 1e-6, '', 1e-15, 0.5,
             "false-alarm level of each of the filter's tests: the rest tests (chi-square on "
             'the window spread and mean and on each sample, the per-sample rate of the '
-            "two-sided CUSUM), a periodic model's test per stretch and its CUSUM per sample, "
+            'two-sided CUSUM and of the shifted-mean ratio at all ages), a periodic '
+            "model's test per stretch and its CUSUM per sample, "
             "and a mains line's frequency step per check"),
 )
 

@@ -27,8 +27,10 @@ rest at its first telling sample, before the pseudo-measurements below could pus
 into the offset; ``RestTest.sample_ok``): its innovation z_k = (r_k - b_k) / sqrt(R + P_k),
 r_k the sample less the window's fit of the lines, against the offset b_k (variance P_k) a
 still sensor would have, from the filter's own b and P_b and then learned from each sample
-that agreed (a scalar Kalman filter of the offset), is within chi2_1 and its two-sided CUSUM
-within the level for the same false-alarm rate.  Under rest these innovations are independent
+that agreed (a scalar Kalman filter of the offset), is within chi2_1, its two-sided CUSUM
+within the level for the same false-alarm rate, and so is their likelihood ratio of a mean
+shifted at any age (:mod:`.mean_shift`: a shift too small for the CUSUM, designed for one
+sigma, is told once old enough).  Under rest these innovations are independent
 N(0, 1), so an offset not learned yet is one offset, not evidence summed sample by sample; at
 rest the filter itself is that still sensor's filter, and its b and P_b are used.  The
 window's first samples are tested once the window is full, against its fit of the lines
@@ -39,7 +41,8 @@ sample beyond the per-sample limit from the filter's offset on its own may be a 
 may a sample at which the CUSUM of a sensor at rest tells its mean shifted (a step smaller
 than the noise of one sample: 12.5 nA under 14.7 nA of noise at 2 kHz, which no single
 sample shows while the window's mean knows it to 0.7 nA; the run then begins at the CUSUM's
-alarm, its delay after the step), or one at which the window's mean leaves the offset while
+alarm, its delay after the step; or at the shift statistic's, for a quarter sigma ~500
+samples after it), or one at which the window's mean leaves the offset while
 its spread stays flat, whichever tells first (a 3.5 nA step under 2.1 nA of noise, drawn
 record 80, ended the rest by the level test 0.2 % beyond its limit, before the CUSUM spoke,
 and the hold read as a ramp).  From it a second run of the per-sample tests starts,
@@ -74,6 +77,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from .innovations import CUSUM_CHANGE_SIGMAS
+from .mean_shift import ShiftTest
 from .rest_jump import JumpRun
 
 __all__ = ['RestTest', 'RestWindow', 'CUSUM_DRIFT', 'rest_change']
@@ -99,6 +103,8 @@ class RestTest:
     #: (A'A)^-1 of the window's fit when it holds no gap (module docstring; None: formed
     #: from the window's phases each time)
     gram_inv: np.ndarray | None = field(default=None, compare=False)
+    #: a shift of any size, told once old enough (:mod:`.mean_shift`; None: the CUSUM's only)
+    shift: ShiftTest | None = field(default=None, compare=False)
 
     def sample_ok(self, r: float, track: tuple | None, offset_a: float, offset_var_a2: float,
                   noise_var_a2: float, at_rest: bool = False) -> tuple[bool, tuple | None]:
@@ -110,17 +116,20 @@ class RestTest:
         ``offset_var_a2`` (used as they are ``at_rest``).  A sample that fails returns None.
         """
         if track is None:
-            track = (0.0, 0.0, offset_a, offset_var_a2)
+            track = (0.0, 0.0, offset_a, offset_var_a2, None)
         elif at_rest:
-            track = (track[0], track[1], offset_a, offset_var_a2)
-        up, down, b, pb = track
+            track = (track[0], track[1], offset_a, offset_var_a2, track[4])
+        up, down, b, pb, sums = track
         s = noise_var_a2 + pb
         z = (r - b) / math.sqrt(s)
         up = max(0.0, up + z - CUSUM_DRIFT)
         down = max(0.0, down - z - CUSUM_DRIFT)
-        if z * z > self.level_limit or up > self.cusum_limit or down > self.cusum_limit:
+        sums, shifted = (self.shift.step(sums, z, s / pb if pb > 0.0 else math.inf)
+                         if self.shift is not None else (None, False))
+        if (z * z > self.level_limit or up > self.cusum_limit or down > self.cusum_limit
+                or shifted):
             return False, None
-        return True, (up, down, b + pb / s * (r - b), pb * noise_var_a2 / s)
+        return True, (up, down, b + pb / s * (r - b), pb * noise_var_a2 / s, sums)
 
     def first_window(self, residuals, offset_a: float, offset_var_a2: float,
                      noise_var_a2: float) -> tuple[int, tuple | None]:
@@ -155,7 +164,8 @@ class RestTest:
         cusum = math.log(4 * k * k / false_alarm) / (2 * k) - 1.166
         return cls(n, float(chi2.isf(false_alarm, n - 1 - 2 * lines)),
                    float(chi2.isf(false_alarm, 1)), max(cusum, 1.0), jump_a * jump_a,
-                   max(n, int(round(jump_hold_s * sample_rate_hz))), _gram_inv(turns))
+                   max(n, int(round(jump_hold_s * sample_rate_hz))), _gram_inv(turns),
+                   ShiftTest.design(false_alarm))
 
     def flat(self, spread: float, noise_var_a2: float) -> bool:
         """Tell whether the window's residual ``spread`` (A^2) is white noise (the spread test)."""
@@ -311,13 +321,13 @@ class RestWindow(JumpRun):
         self.count = min(self.count + 1, n)
         self.offset_var[self.pos - 1] = offset_var_a2
         if self.count < n:
-            self.track = self.track or (0.0, 0.0, offset_a, offset_var_a2)
+            self.track = self.track or (0.0, 0.0, offset_a, offset_var_a2, None)
             return None
         gram = self.gram(test.gram_inv) if self.phase.size else None
         theta, b = self.solve(gram) if gram is not None else (None, None)
         if filled:                  # from the offset before the window's first sample
-            first = self.track or (0.0, 0.0, offset_a, offset_var_a2)
-            self.quiet, self.track = test.first_window(self.residuals(self.pos), *first[2:],
+            first = self.track or (0.0, 0.0, offset_a, offset_var_a2, None)
+            self.quiet, self.track = test.first_window(self.residuals(self.pos), *first[2:4],
                                                        noise_var_a2)
         else:                       # this sample less the window's lines (t = 0: the cosines)
             r = current_a - float(theta[1::2].sum()) if theta is not None else current_a
