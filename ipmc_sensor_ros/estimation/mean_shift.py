@@ -27,9 +27,9 @@ that is in the offset already, and a longer sum would only weigh what the model 
 (a drift its walk lags).  The test alarms when one of the K used passes chi2_1 at
 ``false_alarm`` / K (Bonferroni: on white noise, restarted after each alarm, the statistic
 alarms at 4-6 % of ``false_alarm`` per sample, measured; the memories' sums are strongly
-correlated).  The
-memories are 2^1 .. 2^52 samples (52: the bits of a float's mantissa, the longest forgetting
-factor it holds); a shift shorter than two samples is the per-sample test's and the CUSUM's.
+correlated).  The memories are 2^1 .. 2^52 samples (52: the bits of a float's mantissa, the
+longest forgetting factor it holds); a shift shorter than two samples is the per-sample
+test's and the CUSUM's.
 """
 from __future__ import annotations
 
