@@ -58,6 +58,7 @@ from .array_path import ArrayPath
 from .publishing import EstimatePublishing
 from .live_params import LiveParameters
 from .sources import FollowedSource, subscribe_followed
+from .barrier import DefectBarrier
 from .runner import run
 
 __all__ = ['EstimatorNode', 'ESTIMATOR_SPECS', 'COUNTER_NAMES', 'PUBLISH_POINTS', 'main']
@@ -69,7 +70,7 @@ ESTIMATOR_SPECS = C.ESTIMATOR_SPECS
 _ERRORS = (IpmcError,)  # every deliberate error of the package names the parameter
 
 
-class EstimatorNode(LiveParameters, ArrayPath, EstimatePublishing, Node):
+class EstimatorNode(DefectBarrier, LiveParameters, ArrayPath, EstimatePublishing, Node):
     """
     The estimator node (module docstring).
 

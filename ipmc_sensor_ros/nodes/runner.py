@@ -116,18 +116,31 @@ def _on_signal(signum, frame) -> None:
 SPIN_PERIOD_S = 0.1
 
 
+#: Exceptions a callback raises that end the spin as before: a shutdown, a configuration
+#: error (exit 2), an rcl error (re-raised unless the context is stopping).
+_ENDS_SPIN = _SHUTDOWN + (ParameterError, ParameterException, RCLError)
+
+
 def spin_until_signalled(executor, context=None, node=None) -> None:
     """
     Spin ``executor`` until SIGINT/SIGTERM was received or the context shut down.
 
     Also until ``node`` says it is ``finalized`` (a managed node after the ``shutdown``
     transition: the executable then ends, exit status 0).  A loop of ``spin_once`` (see the
-    module docstring for why not ``spin``); an exception raised by a callback propagates out
-    of it.
+    module docstring for why not ``spin``).  Any other exception a callback raises past
+    the node's own barrier (:mod:`.barrier`) is a defect: said on one line, counted on
+    ``node``, and the node goes on.
     """
     while (not _SIGNALLED and not _stopping(context)
            and not getattr(node, 'finalized', False)):
-        executor.spin_once(timeout_sec=SPIN_PERIOD_S)
+        try:
+            executor.spin_once(timeout_sec=SPIN_PERIOD_S)
+        except _ENDS_SPIN:
+            raise
+        except Exception as exc:  # noqa: BLE001 - a callback's defect never ends the node
+            if node is None or not hasattr(node, 'count_defect'):
+                raise
+            node.count_defect(exc)
 
 
 def _report_configuration_error(name: str, exc: Exception, args) -> None:

@@ -46,6 +46,7 @@ from . import topics as T
 from .diagnostics import DiagnosticsPublisher
 from ..interface.blocks import current_columns, deflection_columns
 from .messages import BlockPacker
+from .barrier import DefectBarrier
 from .runner import run
 
 __all__ = ['SimulatorNode', 'SIMULATOR_SPECS', 'STIMULI', 'load_stimulus_csv',
@@ -55,7 +56,7 @@ MAX_BLOCKS_PER_TICK = 10
 MIN_TICK_S = 1e-3
 
 
-class SimulatorNode(Node):
+class SimulatorNode(DefectBarrier, Node):
     """
     Simulated sensor + DAQ node; see the module docstring and README "ROS 2 interface".
 
