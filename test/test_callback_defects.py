@@ -2,15 +2,12 @@
 """A defect raised in a node's timer callback is logged on one line; the node goes on."""
 import os
 import signal
-import subprocess
-import sys
 import time
-from pathlib import Path
 
 import pytest
+from node_process import signal_and_wait, start_until_ready
 
 pytest.importorskip('rclpy')
-ROOT = Path(__file__).resolve().parents[1]
 
 # The plain estimator node whose 1 s status timer raises (a stand-in for any defect in a
 # callback outside the stream's own barrier: the smoother's drain, the counters' JSON).
@@ -29,27 +26,13 @@ sys.exit(m.main())
 @pytest.mark.ros
 @pytest.mark.parametrize('executor', ['events', 'single'])
 def test_a_timer_callback_defect_is_said_and_the_node_goes_on(executor):
-    env = dict(os.environ, PYTHONPATH=str(ROOT), IPMC_EXECUTOR=executor,
-               ROS_DOMAIN_ID=str(100 + os.getpid() % 50))
-    proc = subprocess.Popen([sys.executable, '-c', _FAULTY], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, env=env, text=True)
-    lines = []
-    deadline = time.monotonic() + 60.0
-    for line in proc.stdout:
-        lines.append(line)
-        if 'ready' in line or time.monotonic() > deadline:
-            break
+    proc, lines = start_until_ready(['-c', _FAULTY], 100 + os.getpid() % 50,
+                                    IPMC_EXECUTOR=executor)
     time.sleep(3.5)                 # three ticks of the 1 s timer, each one raising
     alive = proc.poll() is None
-    proc.send_signal(signal.SIGTERM)
-    try:
-        out, _ = proc.communicate(timeout=20.0)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, _ = proc.communicate()
-    text = ''.join(lines) + out
+    code, text = signal_and_wait(proc, signal.SIGTERM, lines)
     assert alive, text              # before the barrier the first tick ended the process
-    assert proc.returncode == 0, text
+    assert code == 0, text
     assert 'Traceback' not in text, text
     said = [ln for ln in text.splitlines() if 'internal error (ZeroDivisionError' in ln]
     # one line per DEFECT_LOG_PERIOD_S (10 s): the first tick's, naming the package line

@@ -2,37 +2,21 @@
 """SIGINT/SIGTERM right after "ready" end the node process with 0 and no traceback."""
 import os
 import signal
-import subprocess
-import sys
-import time
-from pathlib import Path
 
 import pytest
+from node_process import signal_and_wait, start_until_ready
 
 pytest.importorskip('rclpy')
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def _start_and_signal(sig, domain, executor=None):
-    env = dict(os.environ, PYTHONPATH=str(ROOT), ROS_DOMAIN_ID=str(domain))
-    if executor is not None:
-        env['IPMC_EXECUTOR'] = executor
-    proc = subprocess.Popen([sys.executable, '-m', 'ipmc_sensor_ros.nodes.simulator_node'],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, text=True)
-    lines = []
-    deadline = time.monotonic() + 60.0
-    for line in proc.stdout:
-        lines.append(line)
-        if 'ready' in line or time.monotonic() > deadline:
-            break
-    proc.send_signal(sig)                     # on the "ready" line: the racy moment
-    try:
-        out, _ = proc.communicate(timeout=20.0)   # the spin loop sees it within 0.1 s
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, _ = proc.communicate()
-        pytest.fail('node did not exit within 20 s of the signal:\n' + ''.join(lines) + out)
-    return proc.returncode, ''.join(lines) + out
+    extra = {} if executor is None else {'IPMC_EXECUTOR': executor}
+    proc, lines = start_until_ready(['-m', 'ipmc_sensor_ros.nodes.simulator_node'], domain,
+                                    **extra)
+    code, text = signal_and_wait(proc, sig, lines)   # on the "ready" line: the racy moment
+    if code is None:                                  # the spin loop sees it within 0.1 s
+        pytest.fail('node did not exit within 20 s of the signal:\n' + text)
+    return code, text
 
 
 @pytest.mark.ros
