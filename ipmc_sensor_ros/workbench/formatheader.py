@@ -141,7 +141,8 @@ def header_format(path: PathLike, header: TextHeader) -> str:
     if 'format' not in header.values:
         line = header.column_line or header.n_lines
         raise DataFormatError(path, line, "missing '# format: ...' header line (known formats: "
-                              f"{', '.join(FORMATS)})")
+                              f"{', '.join(FORMATS)}; a DAQ's or lab program's own file is "
+                              'converted by `ipmc-model import`)')
     fmt = header.values['format']
     if fmt not in FORMATS:
         raise DataFormatError(path, header.lines['format'], f'unknown format {fmt!r} '
