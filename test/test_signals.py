@@ -45,3 +45,14 @@ def test_events_executor_is_the_default_where_rclpy_has_it(monkeypatch):
     monkeypatch.setenv('IPMC_EXECUTOR', 'multi')
     with pytest.raises(runner.ParameterError, match='IPMC_EXECUTOR'):
         runner.executor_name()
+
+
+@pytest.mark.ros
+def test_the_estimator_says_its_totals_as_it_stops():
+    # one line in the counters' terms (samples_in == out + refused + dropped + unpublished)
+    proc, lines = start_until_ready(['-m', 'ipmc_sensor_ros.nodes.estimator_node'],
+                                    150 + os.getpid() % 50)
+    code, text = signal_and_wait(proc, signal.SIGINT, lines)
+    assert code == 0, text
+    assert ('stopping: 0 sample(s) in, 0 published, 0 refused, 0 dropped, 0 unpublished '
+            '(estimator/counters has the reasons)') in text, text

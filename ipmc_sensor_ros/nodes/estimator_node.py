@@ -323,7 +323,19 @@ class EstimatorNode(DefectBarrier, LiveParameters, ArrayPath, EstimatePublishing
         pub = getattr(self, '_pub_smoothed', None)
         if pub is not None:
             pub.wait_for_all_acked(Duration(nanoseconds=int(T.FLUSH_TIMEOUT_S * 1e9)))
+        self._say_totals()
         super().destroy_node()
+
+    def _say_totals(self) -> None:
+        """Log what became of the samples taken, in the counters' terms (one line)."""
+        stream, array = getattr(self, '_stream', None), getattr(self, '_array', None)
+        if stream is None and array is None:
+            return                  # a managed node never configured, or cleaned up
+        c = array.totals() if array is not None else stream.counters
+        self.get_logger().info(
+            f"stopping: {c['samples_in']} sample(s) in, {c['samples_out']} published, "
+            f"{c['samples_rejected']} refused, {c['samples_dropped']} dropped, "
+            f"{c['samples_unpublished']} unpublished (estimator/counters has the reasons)")
 
     # -- periodic -------------------------------------------------------------
     def _on_timer(self) -> None:
