@@ -103,7 +103,7 @@ def estimate_accuracy(time_s, estimate_m, measured_m, delay_s: float = 0.0,
     t = np.asarray(time_s, float)
     sel = t >= t[0] + settle[0] + delay_s
     if np.count_nonzero(sel) >= 10:
-        what = f'after the first {fmt_time_s(settle[0])} s: {settle[1]}'
+        what = f'after the first {fmt_time_s(settle[0])} s, {settle[1]}'
     else:
         sel = t >= t[0] + delay_s
         what = 'whole record'
@@ -352,9 +352,10 @@ def _estimate_line(row: dict, values: dict, estimator, t_out, w, measured) -> st
     row['nrmse'] = err
     row.update(level)
     return msg + (f'; NRMSE {100 * err:.3g} % (means and linear trends removed) over '
-                  f'{fmt_time_s(used)} s ({what}); as measured: '
+                  f'{fmt_time_s(used)} s ({what}); as measured (nothing removed): '
                   f"{100 * level['nrmse_raw']:.3g} %, level error "
-                  f"{level['start_error_m']:+.3g} m -> {level['end_error_m']:+.3g} m")
+                  f"{level['start_error_m']:+.3g} m at the start, "
+                  f"{level['end_error_m']:+.3g} m at the end")
 
 
 def cmd_estimate(args) -> int:

@@ -254,7 +254,7 @@ class InverseEstimator:
 
     def settling(self) -> tuple[float, str]:
         """Five time constants of the leak: it has forgotten the unknown starting level."""
-        return forgets_s(self.leak_corner_hz), 'leak transient'
+        return forgets_s(self.leak_corner_hz), 'five time constants of the leak'
 
     def process_sample(self, current_a: float) -> float:
         """One sample of a single-channel estimator (alias of :meth:`process_one`)."""

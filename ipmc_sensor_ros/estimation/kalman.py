@@ -395,6 +395,6 @@ class KalmanEstimator(KalmanState):
 
     def settling(self) -> tuple[float, str]:
         if self._first_rest_n is not None:
-            return self._first_rest_n / self.sample_rate_hz, 'level learned at the first rest'
-        why = 'no rest yet: five time constants of motion_corner_hz'
+            return self._first_rest_n / self.sample_rate_hz, 'its level learned at its first rest'
+        why = 'five time constants of motion_corner_hz: no rest in it'
         return forgets_s(self.config.motion_corner_hz), why
