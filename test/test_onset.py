@@ -101,8 +101,8 @@ def test_under_hum_a_rest_ends_only_where_the_tip_moves(monkeypatch):
     rec = build('big-pick-place-10min', 0)
     n = int(20 * rec.sample_rate_hz)
     starts = []
-    real = K.restart
-    monkeypatch.setattr(K, 'restart', lambda *a: starts.append(1) or real(*a))
+    real = K.restart_after_motion
+    monkeypatch.setattr(K, 'restart_after_motion', lambda *a: starts.append(1) or real(*a))
     est = KalmanEstimator(_reduced(rec), rec.sample_rate_hz)
     still = est.estimate(rec.current_a[:n]).still
     ends = int(np.count_nonzero(np.diff(still.astype(int)) == -1))

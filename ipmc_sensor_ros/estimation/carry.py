@@ -116,7 +116,7 @@ def _carried(mo, mn, x_scaled, P_scaled, joint: bool):
         src = list(range(mo.n_sensor)) + src
         dst = list(range(mn.n_sensor)) + dst
     elif joint:
-        raise ValueError('the smoother passes back only across a model of the same sensor')
+        raise RuntimeError('the smoother passes back only across a model of the same sensor')
     x[dst] = x_old[src]
     P[np.ix_(dst, dst)] = P_old[np.ix_(src, src)]
     if not same_sensor:

@@ -49,6 +49,7 @@ from .instants import ON_SLOT, OffSlot, StampTally
 from .noise import NOISE_FLOOR_A, NoiseMeter
 from .onset import Onset, Start, follow_jump, track_onset
 from .rest import RestTest, RestWindow, rest_change
+from .rest_jump import JumpLag, jump_covariance
 from .rounding import RoundingBias, RoundingTally
 from .statespace import StateSpaceModel
 from .timebase import slots_of
@@ -114,9 +115,8 @@ class KalmanFilter:
         lines = tuple(model.lines_hz if rest_lines_hz is None or model.lines_hz
                       else rest_lines_hz)
         self.rest_lines_hz = lines
-        self.rest = RestTest.design(cfg.rest_window_s, model.sample_rate_hz,
-                                    cfg.false_alarm, lines, cfg.offset_jump_a,
-                                    cfg.jump_hold_s)
+        self.rest = RestTest.design(cfg.rest_window_s, model.sample_rate_hz, cfg.false_alarm,
+                                    lines, cfg.offset_jump_a, cfg.jump_hold_s)
         # one step of each line's phasor e^{-i W_k / fs} (sliding DFT of the rest window)
         self._rot = np.exp(-2j * np.pi * np.asarray(lines) / model.sample_rate_hz)
         self._c_lines = np.zeros(model.size)        # the mains lines' current
@@ -343,11 +343,12 @@ class KalmanFilter:
                 bias.update(gain / r, row, 0.0)
         return x, P
 
-    def with_jump(self, P: np.ndarray) -> np.ndarray:
-        """Return a copy of ``P`` with the offset's variance grown by a jump's."""
-        m = self.model
+    def with_jump(self, P: np.ndarray, lag: JumpLag | None = None) -> np.ndarray:
+        """Return a copy of ``P`` with a jump's covariance (:func:`.rest_jump.jump_covariance`)."""
+        m, at = self.model, np.array([self.model.ib, self.model.iw])
         P = P.copy()
-        P[m.ib, m.ib] += self.rest.jump_var_a2 / self._sb ** 2
+        P[np.ix_(at, at)] += (jump_covariance(self.rest.jump_var_a2, lag, m.charge_gain)
+                              / np.outer(m.scale[at], m.scale[at]))
         return P
 
     def _released(self, P: np.ndarray, still: bool) -> np.ndarray:

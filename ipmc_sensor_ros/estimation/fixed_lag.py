@@ -122,7 +122,7 @@ class FixedLagSmoother:
         """
         n = record.x_post.shape[0]
         if not 0 < n <= self._held:
-            raise ValueError(f'{n} samples to replace, {self._held} held')
+            raise RuntimeError(f'{n} samples to replace, {self._held} held')
         self._cut(0, self._held - n)
         self.begin(link)
         self.push(filt, record)             # fewer than 2 L held: nothing is due

@@ -23,7 +23,8 @@ it fails, the current since the last state that passed is filtered again without
 with a jump of the offset under it; the more likely takes over (a crank that stops goes
 within a period).  Without one, the broad prior's upper corner is chosen by the same
 likelihood at each check (:mod:`.motion_band`).  A motion that ends a rest is filtered
-again from where the rest test's CUSUM says it began (:mod:`.onset`).
+again from where the rest test's CUSUM says it began (:mod:`.onset`); a jump of the offset
+found at the hold after it is taken with its likely time in the motion (:mod:`.jump_time`).
 
 ``smoothed_lag_s`` > 0 also smooths the live output with that lag (:class:`~.fixed_lag.
 FixedLagSmoother`): :meth:`KalmanEstimator.pop_smoothed` returns what is ready, oldest first.
@@ -44,8 +45,8 @@ from .lines import NOMINAL_LINES_HZ, SEARCH_HZ, Line, measure_line
 from .motion_band import likelier_band
 from .motionline import MOTION_LONGEST_S, MOTION_PERIODS, MOTION_SHORTEST_S, measure_recent
 from .innovations import explains
-from .instants import at_stamp
-from .onset import due, restart
+from .onset import due
+from .jump_time import MotionLog, restart_after_motion
 from .kalman_state import KalmanState
 from .periodic import (StretchLog, after_refutation, likeliest, nll_of, refilter,
                        remainder_configs, same_motion)
@@ -153,6 +154,7 @@ class KalmanEstimator(KalmanState):
                                                             self.sample_rate_hz, nominal))
         self._state = self._filter.initial_state()
         self._log = StretchLog(self._filter, self._state)
+        self._moving = MotionLog(int(self.config.jump_search_s * self.sample_rate_hz))
         self._recent = SampleRing(self._window_n)    # on the sample grid: bridged slots too
         self._first_rest_n = None
         self._line = Line()             # the mains line measured so far (joined)
@@ -178,6 +180,7 @@ class KalmanEstimator(KalmanState):
                 self._lag.push(self._filter, rec.rows(0, w.size))
             self._remember(y[a:b], st[a:b], still)
             self._log.add(y[a:b].tolist(), st[a:b].tolist(), still)
+            self._moving.add(y[a:b].tolist(), st[a:b].tolist(), bool(still[-1]))
             parts.append((w, s, still))
             a = b
             self._after_run(blocks)
@@ -199,6 +202,7 @@ class KalmanEstimator(KalmanState):
                                                     [float(steps)], copy=False,
                                                     until_motion=True)
         self._log.add_one(float(current_a), float(steps), bool(still[0]))
+        self._moving.add([float(current_a)], [float(steps)], bool(still[0]))
         for k in range(slots_of(float(steps)), 0, -1):     # a bridged slot: no value
             self._recent.push(current_a if k == 1 else math.nan)
         if self._first_rest_n is None and still[0]:
@@ -218,7 +222,8 @@ class KalmanEstimator(KalmanState):
         if not due(self._state):
             return
         held = 0 if self._lag is None else min(len(self._state.ended.y), self._lag.held)
-        start, before, self._state, rec = restart(self._filter, self._state, held)
+        start, before, self._state, rec = restart_after_motion(self._filter, self._state, held,
+                                                               self._moving)
         self.offset_jumps += bool(start.hold_still)
         link = self._begin_segment(self._filter, start, self._filter, before)
         if rec is not None:
@@ -374,25 +379,7 @@ class KalmanEstimator(KalmanState):
         still = live.estimate(y, st).still
         return Estimate(*smooth_segments(live._changes.segments, y, st), still)
 
-    # -- reporting -----------------------------------------------------------------------
-    def status(self) -> dict:
-        m, x = self.model, self._state.x
-        w, w_std = self._filter.deflection(self._state)
-        b, b_std = self._filter.offset(self._state)
-        level = float(math.hypot(x[m.il] * m.scale[m.il], x[m.il + 1] * m.scale[m.il + 1])
-                      if m.lines_hz else 0.0)
-        return {'estimator': self.name, 'offset_a': b, 'offset_std_a': b_std,
-                'at_rest': bool(self._state.still), 'deflection_std_m': w_std,
-                'noise_a': math.sqrt(self._state.noise.var_a2),
-                'mains_line_hz': self.model.line_hz, 'mains_line_a': level,
-                'motion_hz': self.model.motion_hz,
-                'motion_fundamentals_hz': list(m.motion_fundamentals_hz),
-                'motion_remainder_m': m.motion_hz and m.config.periodic_remainder_rms_m or None,
-                'motion_bandwidth_hz': self.model.config.motion_bandwidth_hz,
-                'offset_jumps': self.offset_jumps,
-                'sampled_at_stamp': at_stamp(self._state.innovations.stamps,
-                                             self.config.sampled_at_stamp_prior)}
-
+    # -- reporting (status: :class:`~.kalman_state.KalmanState`) ----------------------------
     def settling(self) -> tuple[float, str]:
         if self._first_rest_n is not None:
             return self._first_rest_n / self.sample_rate_hz, 'its level learned at its first rest'

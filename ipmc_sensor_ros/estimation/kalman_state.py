@@ -1,17 +1,20 @@
 # SPDX-License-Identifier: Apache-2.0
 """
-The Kalman estimator's state in and out: save, restore, rebuild for a new design, continue.
+The Kalman estimator's state in and out: save, restore, rebuild, continue, report.
 
 What :class:`~.kalman.KalmanEstimator` is at any sample is its
 :class:`~.filter.FilterState`, the model's lines and periodic motion, the mains line
 measured so far, the last window of current on the sample grid, the stretches a model change
 would filter again (:class:`~.periodic.StretchLog`), the first rest's sample and the jumps
-counted; :meth:`KalmanState.get_state` returns them as values and
+counted, the motion since the last rest (:class:`~.jump_time.MotionLog`);
+:meth:`KalmanState.get_state` returns them as values and
 :meth:`KalmanState.set_state` takes them back (scipy.signal's ``zi`` / ``zf``: state in,
 state out), so a restored estimator continues to the bit. A new design (reduced model, rate,
 settings) continues from the old one's state (:func:`~.carry.carry_state`).
 """
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -19,6 +22,8 @@ from ..errors import ParameterError
 from ..lti.reduction import ReducedModel
 from .carry import carry_state
 from .filter import FilterState, KalmanFilter
+from .instants import at_stamp
+from .jump_time import MotionLog
 from .lines import Line
 from .periodic import StretchLog, design
 from .ring import SampleRing
@@ -38,7 +43,7 @@ class KalmanState:
                 'bandwidth_hz': self.model.config.motion_bandwidth_hz,
                 'recent': self._recent.buffer.copy(), 'grid': self._recent.count,
                 'first_rest_n': self._first_rest_n, 'stretches': self._log.saved(),
-                'offset_jumps': self.offset_jumps,
+                'offset_jumps': self.offset_jumps, 'moving': self._moving.saved(),
                 'line': tuple(float(v) for v in self._line)}
 
     def set_state(self, state: dict) -> None:
@@ -51,6 +56,8 @@ class KalmanState:
             recent = np.asarray(state['recent'], dtype=float)
             filt = self._model_filter(line, motion, remainder, band)
             log = StretchLog.restored(state['stretches'], self._model_filter)
+            moving = MotionLog.restored(self._moving.limit, state.get('moving'),
+                                        self._model_filter)
             window_slots = fs.window.offset_var.shape
             line = Line(*(float(v) for v in state.get('line', ())))
         except (KeyError, TypeError, ValueError, AttributeError):
@@ -60,7 +67,7 @@ class KalmanState:
             raise ParameterError('state was saved from a different estimator design')
         if self._lag is not None:
             self._lag.flush()
-        self._filter, self._log = filt, log
+        self._filter, self._log, self._moving = filt, log, moving
         self._state = fs.copy()
         self._recent = SampleRing(recent.size, recent, int(state.get('grid', fs.samples)))
         self._first_rest_n = state.get('first_rest_n')
@@ -122,3 +129,22 @@ class KalmanState:
         self._line = old._line
         if old._window_n == self._window_n:
             self._recent = old._recent.copy()
+
+    def status(self) -> dict:
+        """Return the state in numbers (:meth:`~.core.EstimatorCore.status`)."""
+        m, x = self.model, self._state.x
+        w, w_std = self._filter.deflection(self._state)
+        b, b_std = self._filter.offset(self._state)
+        level = float(math.hypot(x[m.il] * m.scale[m.il], x[m.il + 1] * m.scale[m.il + 1])
+                      if m.lines_hz else 0.0)
+        return {'estimator': self.name, 'offset_a': b, 'offset_std_a': b_std,
+                'at_rest': bool(self._state.still), 'deflection_std_m': w_std,
+                'noise_a': math.sqrt(self._state.noise.var_a2),
+                'mains_line_hz': self.model.line_hz, 'mains_line_a': level,
+                'motion_hz': self.model.motion_hz,
+                'motion_fundamentals_hz': list(m.motion_fundamentals_hz),
+                'motion_remainder_m': m.motion_hz and m.config.periodic_remainder_rms_m or None,
+                'motion_bandwidth_hz': self.model.config.motion_bandwidth_hz,
+                'offset_jumps': self.offset_jumps,
+                'sampled_at_stamp': at_stamp(self._state.innovations.stamps,
+                                             self.config.sampled_at_stamp_prior)}

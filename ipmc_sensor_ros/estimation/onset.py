@@ -136,14 +136,15 @@ def due(state) -> bool:
     return state.ended is not None and len(state.ended.y) >= 2
 
 
-def restart(filt, state, held: int):
+def restart(filt, state, held: int, lag=None):
     """
     Filter the motion's first samples again from where it began.
 
     ``state.ended`` (:class:`Start`): the state there, the samples since, their steps.  The
     run starts from the filter's state there with the rest test's window and noise meter as
     they are now (past those samples), and takes the samples as motion (``hold_off``), or as
-    still after an offset that jumped (``held_still``).
+    still after an offset that jumped (``held_still``; ``lag``: when it jumped in a motion
+    before its run, :mod:`.jump_time`).
     Returns (the state the run started from, the filter's state there before it (without
     the jump's variance: what the smoothers pass back to), the state now, the forward record
     of the last ``held`` samples or None).
@@ -152,7 +153,7 @@ def restart(filt, state, held: int):
     from .periodic import Stretch, refilter
 
     (x, P, moved, samples, innovations), ys, steps, still, held_still = state.ended
-    start = replace(state, x=x, P=filt.with_jump(P) if held_still else P, still=still,
+    start = replace(state, x=x, P=filt.with_jump(P, lag) if held_still else P, still=still,
                     moved=moved, samples=samples, onset=None, ended=None, hold_off=len(ys),
                     hold_still=held_still, innovations=innovations)
     before = replace(start, P=P) if held_still else start

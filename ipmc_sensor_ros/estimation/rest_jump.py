@@ -8,9 +8,11 @@ it starts, what each of its samples is tested as, and when it is taken.  Its fie
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-__all__ = ['JumpRun']
+__all__ = ['JumpRun', 'JumpLag', 'jump_covariance']
 
 
 class JumpRun:
@@ -143,3 +145,37 @@ class JumpRun:
             return False
         self.quiet, self.track = self.jump_quiet, self.jump_track
         return True
+
+
+class JumpLag(NamedTuple):
+    """How long before its run a jump found out of a motion happened (:mod:`.jump_time`)."""
+
+    #: the lag's mean and variance, s and s^2
+    mean_s: float
+    var_s2: float
+    #: the jump as its run measured it, A
+    jump_a: float
+
+
+def jump_covariance(jump_var_a2: float, lag: JumpLag | None, charge_gain: float) -> np.ndarray:
+    """
+    Return the covariance a jump of the offset adds to (offset A, deflection m).
+
+    A jump J that happened L seconds before its run, while the sensor moved, was read as
+    motion: the current's steady part is R_n(0) times the tip's velocity (H(0) = 0,
+    ``charge_gain``), so from then the filter's tip ramped by J / R_n(0) a second (drawn
+    record 187: 9.25 nA, 29 um/s, until a hold).  The deflection's error is then
+    -J L / R_n(0): with the jump's variance ``jump_var_a2`` and the lag's mean and
+    variance, the cross term is -var_J E[L] / R_n(0), and the deflection's own
+    (var_J E[L]^2 + J^2 var_L) / R_n(0)^2: the offset measured again moves the deflection
+    by -E[L] / R_n(0) a unit of its change and leaves the spread of the jump's time, with
+    the jump's measured size.  ``lag`` None: the offset's variance alone (a jump at rest,
+    or one placed on its sample by :mod:`.step_glr`).
+    """
+    cov = np.zeros((2, 2))
+    cov[0, 0] = jump_var_a2
+    if lag is not None:
+        k = -lag.mean_s / charge_gain
+        cov[0, 1] = cov[1, 0] = jump_var_a2 * k
+        cov[1, 1] = jump_var_a2 * k * k + (lag.jump_a / charge_gain) ** 2 * lag.var_s2
+    return cov

@@ -176,7 +176,9 @@ class StateSpaceModel:
         self.im = self.il + 2 * len(self.lines_hz)
         self.ir = self.im + 2 * len(self.motion_lines_hz)        # the phasors' rates
         self.size = self.ir + 2 * len(self.motion_lines_hz)
-        self.r0 = abs(float(np.real(reduced.charge_response(np.array([0.0]))[0])))
+        #: R_n(0), A s/m: a steady current is this times the tip's velocity (H(0) = 0)
+        self.charge_gain = float(np.real(reduced.charge_response(np.array([0.0]))[0]))
+        self.r0 = abs(self.charge_gain)
 
     # -- continuous model ---------------------------------------------------------------
     @functools.cached_property

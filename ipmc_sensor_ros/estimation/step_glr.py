@@ -38,7 +38,7 @@ from .filter import ForwardRecord, KalmanFilter
 from .innovations import block_samples
 from .timebase import slots_of
 
-__all__ = ['offset_step_at']
+__all__ = ['jump_signatures', 'offset_step_at']
 
 
 def offset_step_at(span, filt: KalmanFilter, chunk: int = 512) -> int | None:
@@ -66,6 +66,20 @@ def offset_step_at(span, filt: KalmanFilter, chunk: int = 512) -> int | None:
         judged |= np.abs(near - coarse) <= period
     sample = fit[1, near] ** 2 / np.maximum(power[1, near], 1e-300)
     return int(near[int(np.argmax(np.where(judged, sample, -1.0)))])
+
+
+def jump_signatures(span, filt: KalmanFilter, chunk: int = 512) -> tuple:
+    """
+    Return (fit, power) per sample of ``span``: sum_k rho_k z_k and sum_k rho_k^2, 1 A jump.
+
+    The sample stage of the module docstring: twice the log-likelihood ratio of a jump of
+    ``a`` amperes before sample t is 2 a fit[t] - a^2 power[t].
+    """
+    m = filt.model
+    period = block_samples(m.motion_fundamentals_hz, m.sample_rate_hz)
+    z, s, gains = _innovations(span, filt, chunk)
+    fit, power = _ratios(filt, span.steps, z, s, gains, period)
+    return fit[1], power[1]
 
 
 def _ratios(filt: KalmanFilter, steps, z, s, gains, period: int):
