@@ -72,3 +72,19 @@ def test_a_jump_in_a_motion_moves_the_level_the_hold_starts_from(step_a):
     assert abs(ramp) > 3 * ramp_std                 # the ramp alone: off, and not covered
     assert abs(level) < abs(ramp) / 3
     assert abs(level) < 2 * std
+
+
+def test_the_motion_kept_is_saved_and_restored_with_the_state():
+    """Saved mid-motion and restored, an estimator continues to the bit through the jump."""
+    rec = _record(15 * NA)
+    model = SensorModel.named(rec.model, Geometry(*rec.geometry_m, rec.sample),
+                              extra_effects=rec.effects)
+    first, second = (DeflectionEstimator(model, rec.sample_rate_hz).core for _ in range(2))
+    cut = int(6.0 * rec.sample_rate_hz)             # moving, the jump in the motion kept
+    first.estimate(rec.current_a[:cut])
+    assert first.get_state()['moving'] is not None
+    second.set_state(first.get_state())
+    a, b = (est.estimate(rec.current_a[cut:]) for est in (first, second))
+    assert first.status()['offset_jumps'] >= 1
+    np.testing.assert_array_equal(a.deflection_m, b.deflection_m)
+    np.testing.assert_array_equal(a.std_m, b.std_m)
