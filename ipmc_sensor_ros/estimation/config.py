@@ -89,12 +89,13 @@ SETTINGS = (
             'within the noise about its peak for up to ~0.6 s (0.3 mm over 10 s at 0.2 nA), a '
             'hold after a move lasts seconds; out of a still stretch (and at 0) a rest window '
             'is enough'),
-    Setting('jump_search_s', 10.0, 's', 0.0, 600.0,
+    Setting('jump_search_s', 10.0, 's', 0.0, 60.0,
             'the longest motion in which a jump of the offset found at the hold after it is '
             "placed by the motion's current (its likely time moves the level the hold starts "
             "from); the motion's samples are kept and filtered again when such a jump is "
             'found, ~0.1 ms a sample on a 2-core machine, a pause the node takes once per '
-            'jump; after a longer motion the jump is taken at the hold; 0: always'),
+            'jump (hence at most 60 s); after a longer motion the jump is taken at the hold; '
+            '0: always'),
     Setting('offset_drift_a_per_s', 0.05e-9, 'A/s', 0.0, 1e-3,
             "RMS of the offset's drift rate before it is learned: 3 nA a minute, a DAQ "
             'warming up; a short rest cannot tell a larger drift from noise'),

@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from .onset import restart
-from .periodic import Stretch, design
+from .periodic import Stretch
 from .rest_jump import JumpLag
 from .step_glr import jump_signatures
 
@@ -60,19 +60,13 @@ class MotionLog:
         span.steps += steps
 
     def saved(self) -> tuple | None:
-        span = self.span
-        return None if span is None else (*design(span.filter.model), span.state.copy(),
-                                          list(span.y), list(span.steps))
+        """Return the motion as plain values (:meth:`~.periodic.Stretch.values`), or None."""
+        return None if self.span is None else self.span.values()
 
     @classmethod
     def restored(cls, limit: int, saved, make_filter) -> 'MotionLog':
-        if saved is None:
-            return cls(limit)
-        lines, motion, remainder, band, state, y, steps = saved
-        filt = make_filter(tuple(lines), tuple(motion), float(remainder), float(band))
-        if state.x.shape != (filt.model.size,):
-            raise ValueError('a motion state of another design')
-        return cls(limit, Stretch(filt, state.copy(), list(y), list(steps)))
+        """Return the log of :meth:`saved`; ``make_filter(*design)`` builds its filter."""
+        return cls(limit, None if saved is None else Stretch.from_values(saved, make_filter))
 
 
 def restart_after_motion(filt, state, held: int, log: MotionLog):
@@ -91,7 +85,7 @@ def restart_after_motion(filt, state, held: int, log: MotionLog):
     log.span = None
     if span is None or ended.still or len(span.y) - n_run < 2:
         return out
-    m = filt.model
+    m = filt.model                  # the run without a lag measured the jump's size
     jump = float(out[2].x[m.ib] - out[1].x[m.ib]) * float(m.scale[m.ib])
     motion = Stretch(span.filter, span.state, span.y[:-n_run], span.steps[:-n_run])
     lag = _lag(motion, jump, filt)

@@ -179,8 +179,9 @@ class KalmanEstimator(KalmanState):
             if rec is not None:
                 self._lag.push(self._filter, rec.rows(0, w.size))
             self._remember(y[a:b], st[a:b], still)
-            self._log.add(y[a:b].tolist(), st[a:b].tolist(), still)
-            self._moving.add(y[a:b].tolist(), st[a:b].tolist(), bool(still[-1]))
+            ys, ss = y[a:b].tolist(), st[a:b].tolist()
+            self._log.add(ys, ss, still)
+            self._moving.add(ys, ss, bool(still[-1]))       # both extend: ys not kept
             parts.append((w, s, still))
             a = b
             self._after_run(blocks)

@@ -144,6 +144,19 @@ class Stretch:
         """Return the span from this stretch's start through the end of ``later``."""
         return Stretch(self.filter, self.state, self.y + later.y, self.steps + later.steps)
 
+    def values(self) -> tuple:
+        """Return (its model by :func:`design`, start state copied, samples, steps)."""
+        return (*design(self.filter.model), self.state.copy(), list(self.y), list(self.steps))
+
+    @classmethod
+    def from_values(cls, values, make_filter, **more) -> 'Stretch':
+        """Return the stretch of :meth:`values`; ``make_filter(*design)`` builds its filter."""
+        lines, motion, remainder, band, state, y, steps = values
+        filt = make_filter(tuple(lines), tuple(motion), float(remainder), float(band))
+        if state.x.shape != (filt.model.size,):
+            raise ValueError('a stretch state of another design')
+        return cls(filt, state.copy(), list(y), list(steps), **more)
+
     def start_under(self, filt: KalmanFilter) -> FilterState:
         """Return the state at its start under ``filt`` (carried when it ran another)."""
         if self.filter is filt:
@@ -187,10 +200,8 @@ class StretchLog:
     def saved(self) -> tuple:
         """Return the log as plain values (models by :func:`design`; states copied)."""
         return tuple(None if st is None else (
-            *design(st.filter.model), st.state.copy(),
-            list(st.y), list(st.steps), st.rest, st.moved, st.measured_hz, st.floor_hz,
-            st.jumped, st.deferred)
-            for st in (self.earlier, self.current))
+            *st.values(), st.rest, st.moved, st.measured_hz, st.floor_hz, st.jumped,
+            st.deferred) for st in (self.earlier, self.current))
 
     @classmethod
     def restored(cls, saved, make_filter) -> 'StretchLog':
@@ -200,14 +211,11 @@ class StretchLog:
             if item is None:
                 parts.append(None)
                 continue
-            lines, motion, remainder, band, state, y, steps, rest, moved, measured, floor, \
-                jumped, deferred = item
-            filt = make_filter(tuple(lines), tuple(motion), float(remainder), float(band))
-            if state.x.shape != (filt.model.size,):
-                raise ValueError('a stretch state of another design')
-            parts.append(Stretch(filt, state.copy(), list(y), list(steps), bool(rest),
-                                 bool(moved), None if measured is None else tuple(measured),
-                                 float(floor), bool(jumped), bool(deferred)))
+            rest, moved, measured, floor, jumped, deferred = item[7:]
+            parts.append(Stretch.from_values(
+                item[:7], make_filter, rest=bool(rest), moved=bool(moved),
+                measured_hz=None if measured is None else tuple(measured),
+                floor_hz=float(floor), jumped=bool(jumped), deferred=bool(deferred)))
         log = cls.__new__(cls)
         log.earlier, log.current = parts
         if log.current is None:

@@ -162,8 +162,9 @@ def jump_covariance(jump_var_a2: float, lag: JumpLag | None, charge_gain: float)
     Return the covariance a jump of the offset adds to (offset A, deflection m).
 
     A jump J that happened L seconds before its run, while the sensor moved, was read as
-    motion: the current's steady part is R_n(0) times the tip's velocity (H(0) = 0,
-    ``charge_gain``), so from then the filter's tip ramped by J / R_n(0) a second (drawn
+    motion: the current's steady part is R_n(0) times the tip's velocity (H_n(s) = s R_n(s),
+    eq. 45 reduced as in :mod:`~ipmc_sensor_ros.lti.reduction`, so H(0) = 0; R_n(0) is
+    ``charge_gain``, A s/m), so from then the filter's tip ramped by J / R_n(0) a second (drawn
     record 187: 9.25 nA, 29 um/s, until a hold).  The deflection's error is then
     -J L / R_n(0): with the jump's variance ``jump_var_a2`` and the lag's mean and
     variance, the cross term is -var_J E[L] / R_n(0), and the deflection's own

@@ -75,18 +75,17 @@ def jump_signatures(span, filt: KalmanFilter, chunk: int = 512) -> tuple:
     The sample stage of the module docstring: twice the log-likelihood ratio of a jump of
     ``a`` amperes before sample t is 2 a fit[t] - a^2 power[t].
     """
-    m = filt.model
-    period = block_samples(m.motion_fundamentals_hz, m.sample_rate_hz)
     z, s, gains = _innovations(span, filt, chunk)
-    fit, power = _ratios(filt, span.steps, z, s, gains, period)
+    fit, power = _ratios(filt, span.steps, z, s, gains, 1, blocks=False)
     return fit[1], power[1]
 
 
-def _ratios(filt: KalmanFilter, steps, z, s, gains, period: int):
+def _ratios(filt: KalmanFilter, steps, z, s, gains, period: int, blocks: bool = True):
     """
     Return (fit, power), each (block, sample) x sample: the sums of the module docstring.
 
-    One backward pass: lambda (blocks, samples), v and M_> (blocks), M (samples).
+    One backward pass: lambda (blocks, samples), v and M_> (blocks), M (samples); without
+    ``blocks`` the block stage is not run (its rows stay 0).
     """
     m = filt.model
     n, size = z.size, m.size
@@ -103,16 +102,20 @@ def _ratios(filt: KalmanFilter, steps, z, s, gains, period: int):
         if t + 1 < n:
             F = m.discrete(slots_of(steps[t + 1]))[0]      # the model caches it
             phi = F - np.outer(F @ gains[t], c) / s[t] ** 2
-            lam_b, lam_s, v = phi.T @ lam_b, phi.T @ lam_s, phi.T @ v
-            later, M = phi.T @ later @ phi, phi.T @ M @ phi
+            lam_s, M = phi.T @ lam_s, phi.T @ M @ phi
+            if blocks:
+                lam_b, v, later = phi.T @ lam_b, phi.T @ v, phi.T @ later @ phi
         row = c / s[t]
-        lam_b += row * block_mean[t]
         lam_s += row * z[t]
-        v += row
         M += np.outer(row, row)
+        fit[1, t], power[1, t] = unit @ lam_s, unit @ M @ unit
+        if not blocks:
+            continue
+        lam_b += row * block_mean[t]
+        v += row
         n_block = min(period, n - (t - t % period))
-        fit[:, t] = unit @ lam_b, unit @ lam_s
-        power[:, t] = (unit @ v) ** 2 / n_block + unit @ later @ unit, unit @ M @ unit
+        fit[0, t] = unit @ lam_b
+        power[0, t] = (unit @ v) ** 2 / n_block + unit @ later @ unit
         if t % period == 0:             # the block's first sample: it joins the later ones
             later += np.outer(v, v) / n_block
             v = np.zeros(size)
