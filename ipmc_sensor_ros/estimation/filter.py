@@ -168,12 +168,11 @@ class KalmanFilter:
         Applied when a rest begins: the rest test has just found the window's N samples to be
         offset + lines + white noise, so the constant of its least-squares fit (:mod:`.rest`)
         is the offset at the window's centre, b - d (N - 1) / (2 fs), within R / N (the
-        fit's lines add 1e-4 of it for three lines of 50.22 Hz in 0.2 s).  The
-        filter has used these samples already, under its motion model, which takes little of
-        b from them (a steady current is also a slow motion: a still start leaves P_b at its
-        prior); the information on b it took, 1/P_b now less 1/P_b before the window's first
-        sample (kept in the window's slot), is taken off the measurement's, so no sample
-        counts twice.
+        fit's lines add 1e-4 of it for three lines of 50.22 Hz in 0.2 s).  The filter has
+        used these samples already, under its motion model, which takes little of b from
+        them (a steady current is also a slow motion: a still start leaves P_b at its prior);
+        the information on b it took, 1/P_b now less 1/P_b before the window's first sample
+        (kept in the window's slot), is taken off the measurement's: no sample counts twice.
         """
         m, n = self.model, window.samples.size
         sb = self._sb
@@ -287,8 +286,9 @@ class KalmanFilter:
             alarm = sums.add(z, r, samples >= self._settled)    # R measured: the test counts
             stamps.add(dk, z, r, g)
             x, P = self._rest_updates(x, P, yk, sk, win, meter, held, begins, still, bias)
-            if record is not None:
-                record.x_post[offset + k], record.P_post[offset + k] = x, P
+            if record is not None:      # j: this sample's row, set before the update
+                record.x_post[j], record.P_post[j] = x, P
+                record.c_row[j], record.z[j], record.s[j] = row, z, r
             samples += 1
             out_w[k] = float(wk @ x)    # the tip where the sample was taken (on its slot:
             out_s[k] = math.sqrt(max(float(wk @ P @ wk), 0.0)      # wk = e_w s_w, w itself)

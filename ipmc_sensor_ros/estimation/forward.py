@@ -3,7 +3,8 @@
 What a forward pass of the filter keeps per sample for the smoothers.
 
 :mod:`.smoother` and :mod:`.fixed_lag` need the predictions, the updates, the transition's
-steps, the rest flag and the row of the published deflection of each sample.
+steps, the rest flag and the row of the published deflection of each sample;
+:mod:`.step_glr` the current's update: its row and normalised innovation.
 """
 from __future__ import annotations
 
@@ -27,12 +28,17 @@ class ForwardRecord:
     #: the row of the published deflection (m per scaled state): the tip where the sample
     #: was taken (:attr:`~.statespace.StateSpaceModel.off_slot_rows`)
     w_row: np.ndarray
+    #: the row the current was measured with (the slot's, or the stamp's: :mod:`.instants`)
+    c_row: np.ndarray
+    #: the current's innovation over sqrt(S), and sqrt(S) (A)
+    z: np.ndarray
+    s: np.ndarray
 
     @classmethod
     def empty(cls, n: int, nx: int) -> 'ForwardRecord':
         return cls(np.empty((n, nx)), np.empty((n, nx, nx)), np.empty((n, nx)),
                    np.empty((n, nx, nx)), np.empty(n, dtype=np.int64), np.empty(n, dtype=bool),
-                   np.empty((n, nx)))
+                   np.empty((n, nx)), np.empty((n, nx)), np.empty(n), np.empty(n))
 
     def rows(self, start: int, stop: int) -> 'ForwardRecord':
         """Return the record of samples ``start`` to ``stop`` (views, not copies)."""

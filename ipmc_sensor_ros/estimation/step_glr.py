@@ -6,15 +6,20 @@ Willsky and Jones (1976): a span filtered again under a model gives normalised i
 z_k = nu_k / sqrt(S_k), N(0, 1) under the model.  A jump of the offset by ``a`` before
 sample t adds a rho_k(t) to z_k for k >= t, the jump's signature through this filter::
 
-    rho_k(t) = c e_k / sqrt(S_k),   e_t = e_b (the offset's unit vector),
-    e_{k+1} = Phi_k e_k,            Phi_k = F_{k+1} (I - K_k c),  K_k = P_k c' / S_k
+    rho_k(t) = c_k e_k / sqrt(S_k),   e_t = e_b (the offset's unit vector),
+    e_{k+1} = Phi_k e_k,              Phi_k = F_{k+1} (I - K_k c_k),  K_k = P_k c_k' / S_k
 
-(F_{k+1} the transition to the next sample).  What the best jump at t explains is
+(F_{k+1} the transition to the next sample, c_k the row the current was measured with: the
+slot's or the stamp's, :mod:`.instants`).  A sample the rest test found still has the rest's
+pseudo-measurements too (zero velocity, ...); its map is then the product of every update's
+I - K h, which for the filter's own gains is P+_k (P-_k)^-1 (posterior times inverse prior:
+each factor is P_i P_(i-1)^-1); without them a jump's error at rest would run through the
+motion's dynamics unchecked.  What the best jump at t explains is
 (sum_k rho_k z_k)^2 / sum_k rho_k^2.  Both sums are linear and quadratic forms in e_b of
 quantities that run *backwards* (the adjoint of the signature's recursion)::
 
-    sum_{k>=t} w_k rho_k(t) = e_b' lambda_t,  lambda_t = Phi_t' lambda_{t+1} + c' w_t / sqrt(S_t)
-    sum_{k>=t} rho_k(t)^2   = e_b' M_t e_b,   M_t = Phi_t' M_{t+1} Phi_t + c' c / S_t
+    sum_{k>=t} w_k rho_k(t) = e_b' lambda_t,  lambda_t = Phi_t' lambda_{t+1} + c_t' w_t / sqrt(S_t)
+    sum_{k>=t} rho_k(t)^2   = e_b' M_t e_b,   M_t = Phi_t' M_{t+1} Phi_t + c_t' c_t / S_t
 
 so one backward pass gives the ratio at *every* sample, not at a grid of candidates: a
 step of several times the one-sample prediction's spread must be placed on its sample (one
@@ -56,8 +61,7 @@ def offset_step_at(span, filt: KalmanFilter, chunk: int = 512) -> int | None:
     n, period = len(span.y), block_samples(m.motion_fundamentals_hz, m.sample_rate_hz)
     if n < 2:
         return None
-    z, s, gains = _innovations(span, filt, chunk)
-    fit, power = _ratios(filt, span.steps, z, s, gains, period)
+    fit, power = _ratios(filt, span.steps, _innovations(span, filt, chunk), period)
     near = np.arange(0, n)              # the sample stage: the last period's samples too
     judged = near > n - period - 1
     if n >= period + 2:                 # the block stage: the period of an older jump
@@ -75,21 +79,21 @@ def jump_signatures(span, filt: KalmanFilter, chunk: int = 512) -> tuple:
     The sample stage of the module docstring: twice the log-likelihood ratio of a jump of
     ``a`` amperes before sample t is 2 a fit[t] - a^2 power[t].
     """
-    z, s, gains = _innovations(span, filt, chunk)
-    fit, power = _ratios(filt, span.steps, z, s, gains, 1, blocks=False)
+    fit, power = _ratios(filt, span.steps, _innovations(span, filt, chunk), 1, blocks=False)
     return fit[1], power[1]
 
 
-def _ratios(filt: KalmanFilter, steps, z, s, gains, period: int, blocks: bool = True):
+def _ratios(filt: KalmanFilter, steps, forward, period: int, blocks: bool = True):
     """
     Return (fit, power), each (block, sample) x sample: the sums of the module docstring.
 
-    One backward pass: lambda (blocks, samples), v and M_> (blocks), M (samples); without
-    ``blocks`` the block stage is not run (its rows stay 0).
+    ``forward``: what :func:`_innovations` returns.  One backward pass: lambda (blocks,
+    samples), v and M_> (blocks), M (samples); without ``blocks`` the block stage is not run
+    (its rows stay 0).
     """
     m = filt.model
+    z, s, rows, gains, maps = forward
     n, size = z.size, m.size
-    c = m.c
     unit = np.zeros(size)
     unit[m.ib] = 1.0 / m.scale[m.ib]
     starts = np.arange(0, n, period)
@@ -101,11 +105,12 @@ def _ratios(filt: KalmanFilter, steps, z, s, gains, period: int, blocks: bool = 
     for t in range(n - 1, -1, -1):
         if t + 1 < n:
             F = m.discrete(slots_of(steps[t + 1]))[0]      # the model caches it
-            phi = F - np.outer(F @ gains[t], c) / s[t] ** 2
+            phi = (F @ maps[t] if t in maps
+                   else F - np.outer(F @ gains[t], rows[t]) / s[t] ** 2)
             lam_s, M = phi.T @ lam_s, phi.T @ M @ phi
             if blocks:
                 lam_b, v, later = phi.T @ lam_b, phi.T @ v, phi.T @ later @ phi
-        row = c / s[t]
+        row = rows[t] / s[t]
         lam_s += row * z[t]
         M += np.outer(row, row)
         fit[1, t], power[1, t] = unit @ lam_s, unit @ M @ unit
@@ -124,18 +129,22 @@ def _ratios(filt: KalmanFilter, steps, z, s, gains, period: int, blocks: bool = 
 
 def _innovations(span, filt: KalmanFilter, chunk: int):
     """
-    Return (z, sqrt(S), P c') for each sample of ``span`` filtered again under ``filt``.
+    Return (z, sqrt(S), c_k, P c_k', maps) for each sample of ``span`` filtered again.
 
-    In pieces of ``chunk`` samples, so the covariances held for them stay small.
+    The filter's own normalised innovations, their sqrt(S) and measurement rows; ``maps``:
+    P+ (P-)^-1 of each sample found still (the module docstring), by sample.  In pieces of
+    ``chunk`` samples, so the covariances held for them stay small.
     """
     m, state = filt.model, span.start_under(filt)
     n = len(span.y)
-    z, s, gains = np.empty(n), np.empty(n), np.empty((n, m.size))
+    z, s, maps = np.empty(n), np.empty(n), {}
+    rows, gains = np.empty((n, m.size)), np.empty((n, m.size))
     for a in range(0, n, chunk):
         b = min(n, a + chunk)
         rec = ForwardRecord.empty(b - a, m.size)
         state = filt.run(state, span.y[a:b], span.steps[a:b], record=rec)[0]
-        gains[a:b] = rec.P_pred @ m.c
-        s[a:b] = np.sqrt(gains[a:b] @ m.c + state.noise.var_a2)
-        z[a:b] = (np.asarray(span.y[a:b]) - rec.x_pred @ m.c) / s[a:b]
-    return z, s, gains
+        z[a:b], s[a:b], rows[a:b] = rec.z, rec.s, rec.c_row
+        gains[a:b] = np.einsum('kij,kj->ki', rec.P_pred, rec.c_row)
+        for k in np.flatnonzero(rec.still):
+            maps[a + k] = np.linalg.solve(rec.P_pred[k], rec.P_post[k]).T
+    return z, s, rows, gains, maps
