@@ -78,8 +78,10 @@ def test_prefer_chooses_and_nrmse_shows_the_consequence(short_run, tmp_path, cap
     assert 'NRMSE' in capsys.readouterr().out
 
 
-def test_output_keeps_measured_and_names_the_estimate(short_run, tmp_path):
+def test_output_keeps_measured_and_names_the_estimate(short_run, tmp_path, capsys):
     assert main(['estimate', str(short_run), '--out', str(tmp_path)]) == 0   # a directory works
+    # no --params or --model-file: the paper's material is used, and that is said
+    assert "material: the paper's Tables 1-2" in capsys.readouterr().err
     est = read_estimate(tmp_path / 'short_5Hz.estimate.csv')
     measured = read_timeseries(short_run / 'short_5Hz.csv')
     assert set(est) == {'time_s', 'current_A', 'deflection_estimate_m',
@@ -90,6 +92,7 @@ def test_output_keeps_measured_and_names_the_estimate(short_run, tmp_path):
     assert not np.allclose(est['deflection_estimate_m'], est['deflection_m'])
     header = (tmp_path / 'short_5Hz.estimate.csv').read_text().splitlines()[:12]
     assert '# length_m: 0.011' in header                                 # the geometry used
+    assert "# params: defaults of the estimator node (material: the paper's Tables 1-2)" in header
 
 
 def test_kalman_is_compared_from_when_it_learned_the_level(short_run, tmp_path, capsys):

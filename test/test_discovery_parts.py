@@ -400,7 +400,7 @@ def test_the_final_model_is_the_lower_of_its_refit_and_the_fit_beside_c_s(
     adopted = []
     state = SimpleNamespace(
         current=SimpleNamespace(error=0.02), noise_floor=0.01, steps=[], late_ties=[],
-        offset={}, record=lambda *a, **kw: None, refit_set=lambda chosen: refit,
+        chosen=[], offset={}, record=lambda *a, **kw: None, refit_set=lambda chosen: refit,
         without=lambda name, base: warm if base == 'inner fit' else None,
         score=lambda c: c, adopt=adopted.append, baseline='baseline')
     inner = SimpleNamespace(steps=[], first_ties=[], late_ties=[], offset={},

@@ -188,7 +188,8 @@ REFUSED = {  # file text -> the message it must give (file:line where a line app
                  r"cell\.csv:3: non-numeric cell 'x' in column Current \[A\]"),
     'notable.csv': ('just words\nand more words\n', r'notable\.csv:2: no table found in the file'),
     'nan.csv': ('Time [s],Current [A]\n0,1\n1,NaN\n', r"nan\.csv:3: NaN/Inf cell 'NaN'"),
-    'dup.csv': ('Time [s],Current [A]\n0,1\n0,1\n', r'dup\.csv:3: duplicate time 0\.0 s'),
+    'dup.csv': ('Time [s],Current [A]\n0,1\n0,1\n0,2\n',
+                r'dup\.csv:3: only 1 data row with a time of its own'),
 }
 
 
@@ -310,3 +311,41 @@ def test_a_current_column_in_microvolts_asks_for_the_amplifier_gain(tmp_path):
         import_lab_file(src, geometry='22mm,7mm,360um')
     ts = import_lab_file(src, geometry='22mm,7mm,360um', current_gain_a_per_v=1e-6)
     assert np.max(ts.current_a) == pytest.approx(1e-12, rel=1e-3)    # 1 uV at 1 uA/V
+
+
+def test_a_repeated_stamp_is_not_imported_and_is_said(tmp_path):
+    """
+    A host that stamped twice in one tick: the row after is left out, counted and placed.
+
+    As the estimator node refuses a duplicated stamp (one sample, no reset); the output's
+    header keeps the count under the node's counter name, and a decrease is still an error.
+    """
+    text = 'run 9\nTime [ms],Current [nA]\n0,1\n1,2\n1,3\n2,4\n3,5\n3,6\n3,7\n4,8\n'
+    src = _lab(tmp_path, 'host.csv', text)
+    ts = import_lab_file(src, geometry='22mm,7mm,360um')
+    assert ts.time_s.tolist() == [0.0, 0.001, 0.002, 0.003, 0.004]
+    assert ts.current_a.tolist() == pytest.approx([1e-9, 2e-9, 4e-9, 5e-9, 8e-9], rel=1e-12)
+    assert ts.extra['rejected_duplicate_stamp'] == '3 (lines 5, 8, 9)'
+    said = []
+    out = import_lab_files([src], tmp_path / 'out', notice=said.append,
+                           geometry='22mm,7mm,360um')
+    assert any('not imported: 3 (lines 5, 8, 9)' in s for s in said)
+    assert '# rejected_duplicate_stamp: 3 (lines 5, 8, 9)' in out[0].read_text().splitlines()
+    assert io.read_timeseries(out[0]).time_s.size == 5
+
+
+def test_a_run_metadata_key_near_a_known_one_is_refused(tmp_path):
+    """'temperatur_k' would be a note and the temperature silently unused: refused, named."""
+    geometry = '"width_mm": 7, "thickness_um": 360'
+    for text, key, near in (('{"length_mm": 22, ' + geometry + ', "temperatur_k": 295}',
+                             'temperatur_k', 'temperature_k'),
+                            ('{"lenght_mm": 22, ' + geometry + '}', 'lenght_mm', 'length_mm'),
+                            ('{"geometry": {"lenght_mm": 22, ' + geometry + '}}', 'lenght_mm',
+                             'length_mm')):
+        meta = tmp_path / 'meta.json'
+        meta.write_text(text)
+        with pytest.raises(DataFormatError, match=rf"meta\.json: run metadata key '{key}' is "
+                                                  rf"not one it reads; did you mean '{near}'"):
+            import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=meta)
+    meta.write_text('{"length_mm": 22, ' + geometry + ', "operator": "jd"}')
+    assert import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=meta).extra['meta.operator'] == 'jd'

@@ -87,6 +87,10 @@ def test_fitted_model_estimates_the_field_record_as_well_as_the_true_one(calibra
     assert ci[0] <= corner <= ci[1] and abs(corner / CORNER_HZ - 1) < 0.1
     true_err = _raw_nrmse(calibrated, field, '--model-file', str(calibrated / 'true.yaml'))
     fit_err = _raw_nrmse(calibrated, field, '--model-file', str(calibrated / 'm.yaml'))
+    last = max(calibrated.glob('est*/field.estimate.csv'), key=lambda p: p.stat().st_mtime_ns)
+    written = last.read_text().splitlines()[:12]
+    assert ('# params: defaults of the estimator node, material and effects of '
+            f"--model-file {calibrated / 'm.yaml'}") in written      # which model made it, said
     print(f'raw NRMSE: fitted model {fit_err:.5f}, true model {true_err:.5f}, '
           f'ratio {fit_err / true_err:.3f}')
     assert fit_err <= 1.2 * true_err          # the issue's criterion

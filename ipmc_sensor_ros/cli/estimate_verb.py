@@ -146,7 +146,7 @@ def _write_estimate(path: Path, data, values: dict, model_text: str, params, res
             for k in ('length_m', 'width_m', 'thickness_m', 'sample_rate_hz')
         ),
         f'# model: {model_text}',
-        f"# params: {params or 'defaults of the estimator node'}",
+        f'# params: {params}',
         f'# resets: {resets}',
         '# estimate: ' + ('smoothed (fixed-interval: every sample sees the whole record)'
                           if smoothed else 'causal (the live filter, as the node publishes it)'),
@@ -325,10 +325,18 @@ def _write_output(args, data, values, model_text, resets, t_out, current, w, mea
             deflection_topic=args.estimate_topic), args.overwrite)
     else:
         note = write_complete(out, lambda p: _write_estimate(
-            p, data, values, model_text, args.params, resets, t_out, current, w, measured,
+            p, data, values, model_text, _params_text(args), resets, t_out, current, w, measured,
             flagged, std, not args.causal),
             args.overwrite)
     return out, (f'; {note}' if note else '')
+
+
+def _params_text(args) -> str:
+    """Where the node parameters came from (an estimate file's ``# params:`` line)."""
+    if getattr(args, 'model_file', None):
+        return f'{args.params or "defaults of the estimator node"}, material and effects of ' \
+               f'--model-file {args.model_file}'
+    return args.params or "defaults of the estimator node (material: the paper's Tables 1-2)"
 
 
 def _output_path(args, data_path) -> Path:
@@ -375,6 +383,9 @@ def cmd_estimate(args) -> int:
     # a node output like publish_points: offline, the whole record is smoothed (or --causal)
     base = dict(base, smoothed_lag_s=0.0)
     paths = _estimate_inputs(args)
+    if not (args.params or getattr(args, 'model_file', None)):
+        say("material: the paper's Tables 1-2 where a data header gives none (no --params or "
+            '--model-file): a sensor of your own needs its own (ipmc-model fit --save-model)')
     cache = EstimatorCache()
     summary, failed = [], []
     for path in paths:

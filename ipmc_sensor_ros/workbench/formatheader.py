@@ -123,12 +123,13 @@ def parse_header(path: PathLike, source: TextSource) -> TextHeader:
         lineno = source.lineno
         if ':' not in body:
             raise DataFormatError(path, lineno, f"header line without ':' separator: {s!r} "
-                                  "(expected '# key: value')")
+                                  "(expected '# key: value')" + _import_hint(values))
         key, _, value = body.partition(':')
         key, value = key.strip(), value.strip()
         if not HEADER_KEY_PATTERN.fullmatch(key):
             raise DataFormatError(path, lineno, f'invalid header key {key!r} in {s!r} '
-                                  "(expected '# key: value', key [A-Za-z][A-Za-z0-9_.-]*)")
+                                  "(expected '# key: value', key [A-Za-z][A-Za-z0-9_.-]*)"
+                                  + _import_hint(values))
         if key in values:
             raise DataFormatError(path, lineno, f"duplicate header key '{key}' (first "
                                   f'given on line {where[key]})')
@@ -136,13 +137,21 @@ def parse_header(path: PathLike, source: TextSource) -> TextHeader:
         where[key] = lineno
 
 
+def _import_hint(values: dict) -> str:
+    """Where no format line came yet, the file may be a lab program's own: say what reads it."""
+    return '' if 'format' in values else f'; {OWN_FILE_HINT}'
+
+
+#: a DAQ's or lab program's file is not one of ours: what converts it
+OWN_FILE_HINT = "a DAQ's or lab program's own file is converted by `ipmc-model import`"
+
+
 def header_format(path: PathLike, header: TextHeader) -> str:
     """Return the header's format, checked to be a known one."""
     if 'format' not in header.values:
         line = header.column_line or header.n_lines
         raise DataFormatError(path, line, "missing '# format: ...' header line (known formats: "
-                              f"{', '.join(FORMATS)}; a DAQ's or lab program's own file is "
-                              'converted by `ipmc-model import`)')
+                              f"{', '.join(FORMATS)}; {OWN_FILE_HINT})")
     fmt = header.values['format']
     if fmt not in FORMATS:
         raise DataFormatError(path, header.lines['format'], f'unknown format {fmt!r} '

@@ -27,6 +27,9 @@ A lab file is free text, then one column-header line, then numeric rows::
   uV for a current measured as a transimpedance-amplifier voltage, which needs
   ``current_gain_a_per_v``.  A column without a unit is refused, never
   guessed.  The deflection column is optional (current-only records).
+* A row whose time equals the row before's (a host that stamped twice in one clock tick)
+  is not imported, as the estimator node refuses such a sample; the output's header and
+  ``ipmc-model import`` say how many and where.  A time that decreases is an error.
 * Geometry (free length L, width W, total thickness 2h) comes from the
   ``geometry`` argument, a run-metadata file ``meta`` and/or header lines
   such as ``Length: 22 mm``; two sources that differ are refused (see
@@ -66,6 +69,9 @@ _ROLE_UNITS = {'time': TIME_UNITS, 'deflection': LENGTH_UNITS, 'current': CURREN
 #: spreadsheet exports on European lab PCs write 'µA' or 'Länge'.  Said in the output file
 #: (``text_encoding``) and by ``ipmc-model import``.
 LEGACY_ENCODING = 'cp1252'
+#: The output header's key for rows dropped because their time repeats the row before's (a
+#: host that stamps twice in one tick): the estimator node's counter of the same samples.
+REPEATED_KEY = 'rejected_duplicate_stamp'
 #: Most lines of free text searched for the column header.
 MAX_HEADER_LINES = 500
 _DIALECTS = (('\t', '.'), ('\t', ','), (';', '.'), (';', ','), (',', '.'))
@@ -286,11 +292,18 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
         factors = {role: _factor(path, line, role, cells[k], unit, current_gain_a_per_v)
                    for role, (k, unit) in roles.items()}
         t_index, t_unit = roles['time']
-        data, _ = read_table(source, cells, increasing_check(path, cells[t_index], t_unit or '',
-                                                             t_index),
-                             delimiter=delimiter, decimal=decimal, max_rows=max_rows,
-                             header_line=line, empty_last=cells[-1] == '')
-    picked = {role: to_si(data[k], factors[role]) for role, (k, _) in roles.items()}
+        data, first_row = read_table(
+            source, cells, increasing_check(path, cells[t_index], t_unit or '', t_index, True),
+            delimiter=delimiter, decimal=decimal, max_rows=max_rows, header_line=line,
+            empty_last=cells[-1] == '')
+    repeated = np.flatnonzero(np.diff(data[t_index]) == 0) + 1
+    if data[t_index].size - repeated.size < 2:
+        raise DataFormatError(path, first_row + int(repeated[0]), 'only 1 data row with a time '
+                              'of its own (the others repeat it); at least 2 are needed')
+    kept = np.ones(data[t_index].size, bool)
+    kept[repeated] = False              # a repeated stamp: the row after is refused, as the
+    picked = {role: to_si(data[k][kept], factors[role])        # node refuses the sample
+              for role, (k, _) in roles.items()}
     del data
     t = picked['time']
     steps = np.diff(t)
@@ -307,6 +320,10 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
         extra['geometry_header'] = _one_line('; '.join(header_geometry))
     if source.encoding != 'utf-8':
         extra['text_encoding'] = source.encoding
+    if repeated.size:
+        lines = ', '.join(str(first_row + k) for k in repeated[:5])
+        extra[REPEATED_KEY] = f"{repeated.size} (line{'s' if repeated.size > 1 else ''} " \
+                              f"{lines}{', ...' if repeated.size > 5 else ''})"
     used = {k for k, _ in roles.values()}
     unused = [c for k, c in enumerate(cells) if k not in used and c]   # '': a trailing delimiter
     if unused:
@@ -371,6 +388,9 @@ def import_lab_files(paths: Iterable[PathLike], out_dir: PathLike, *,
             notice(f"{src}: column(s) not imported: {ts.extra['unused_columns']} (name one with "
                    '--columns deflection=NAME or current=NAME)'
                    + ('' if ts.deflection_m is not None else '; no deflection column found'))
+        if notice is not None and REPEATED_KEY in ts.extra:
+            notice(f'{src}: row(s) with the time of the row before not imported: '
+                   f'{ts.extra[REPEATED_KEY]} (the estimator node refuses such a sample too)')
         if notice is not None and 'geometry_header' in ts.extra:
             notice(f"{src}: geometry from its header: {ts.extra['geometry_header']}")
     out.mkdir(parents=True, exist_ok=True)

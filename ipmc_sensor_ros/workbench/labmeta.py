@@ -14,6 +14,7 @@ and they differ, the import is refused naming both.
 """
 from __future__ import annotations
 
+import difflib
 import json
 import math
 import os
@@ -23,6 +24,7 @@ from pathlib import Path
 from typing import Mapping
 
 from ..physics.parameters import Geometry, ParameterError
+from .formatheader import KNOWN_KEYS, NEAR_MISS
 from .measurements import DataFormatError, PathLike
 from .units import LENGTH_UNITS, decimal_to_si, parse_length, unit_factor
 
@@ -31,6 +33,9 @@ __all__ = ['HEADER_GEOMETRY_NAMES', 'MAX_META_BYTES', 'GEOMETRY_PARTS', 'read_ru
 
 #: The parts of a geometry, in the order of ``--geometry length,width,thickness``.
 GEOMETRY_PARTS = ('length', 'width', 'thickness')
+#: The keys a run-metadata file is read for; any other is kept as a note (``meta.<key>``).
+META_KEYS = (('sample', 'geometry') + KNOWN_KEYS + GEOMETRY_PARTS
+             + tuple(f'{part}_{unit}' for part in GEOMETRY_PARTS for unit in LENGTH_UNITS))
 #: Largest run-metadata file read, bytes.
 MAX_META_BYTES = 1 << 20
 
@@ -63,7 +68,25 @@ def read_run_metadata(meta: PathLike) -> dict:
                               f"{getattr(exc, 'problem', None) or exc}") from None
     if not isinstance(data, dict):
         raise DataFormatError(meta, None, 'run metadata must be a mapping (JSON object)')
+    inner = data.get('geometry')
+    for key in list(data) + (list(inner) if isinstance(inner, dict) else []):
+        if str(key).partition('_')[0] not in GEOMETRY_PARTS:
+            _refuse_near_miss(meta, key)
     return data
+
+
+def _refuse_near_miss(meta: PathLike, key) -> None:
+    """
+    Refuse a run-metadata key that is not read but near one that is (a misspelling).
+
+    As a data header's keys (:data:`.formatheader.NEAR_MISS`): ``temperatur_k`` would
+    otherwise be kept as a note and the temperature it meant silently not used.
+    """
+    near = difflib.get_close_matches(str(key), META_KEYS, n=1, cutoff=NEAR_MISS)
+    if near and near[0] != key:
+        raise DataFormatError(meta, None, f'run metadata key {key!r} is not one it reads; did '
+                              f'you mean {near[0]!r}? (keys that are not near one are kept as '
+                              'notes)')
 
 
 def _meta_geometry(meta: PathLike, data: dict) -> dict[str, tuple[float, str]]:

@@ -362,18 +362,19 @@ def read_table(source: TextSource, columns: Sequence[str], check: BlockCheck | N
     return out, first_row_line
 
 
-def increasing_check(path, column: str, unit: str, index: int = 0) -> BlockCheck:
+def increasing_check(path, column: str, unit: str, index: int = 0,
+                     repeats: bool = False) -> BlockCheck:
     """
     Return a :func:`read_table` check that column ``index`` strictly increases.
 
-    ``column`` names it, in ``unit``.
-
-    The error names the line, both values and the previous line.
+    ``column`` names it, in ``unit``; ``repeats``: a value equal to the one before passes
+    (a lab import drops such rows itself, counted).  The error names the line, both values
+    and the previous line.
     """
     def check(block: np.ndarray, prev: np.ndarray | None, line0: int) -> None:
         t = block[:, index] if prev is None else np.concatenate(([prev[index]], block[:, index]))
         offset = 0 if prev is None else 1
-        k = first_bad(np.diff(t) <= 0)
+        k = first_bad(np.diff(t) < 0 if repeats else np.diff(t) <= 0)
         if k is None:
             return
         lineno = line0 + k + 1 - offset

@@ -146,6 +146,29 @@ def _drop_failing(inner, structure, band) -> bool:
     return dropped
 
 
+def _extend_steps(state, inner, outer) -> None:
+    """
+    Append the steps of the search beside C(s) as moves of the model the step list shows.
+
+    That model holds the effects of the first search (``outer``) when C(s) is added, but the
+    search beside C(s) starts again from the baseline times C(s): its first addition of one of
+    them adds nothing to the list (``current_offset`` was listed as added twice).  It is
+    listed as ``kept``, refitted beside C(s); one it never names is listed as ``dropped``.
+    """
+    touched = set()
+    for st in inner.steps:
+        if st.action == 'added' and st.effect in outer and st.effect not in touched:
+            st = replace(st, action='kept', reason=(
+                'in the model C(s) was fitted to; the search beside C(s), started from the '
+                f'baseline times C(s), names it again: {st.reason}'))
+        touched.add(st.effect)
+        state.steps.append(st)
+    for name in [n for n in outer if n not in touched]:
+        state.record(name, 'dropped', inner.current,
+                     'the search beside C(s), started from the baseline times C(s), does not '
+                     f'name it (held-out error {inner.current.error:.4f} without it)')
+
+
 def _adopt_inner(state, inner, best, structure) -> None:
     """
     Make the verdict's effects, steps and ties those of the search beside C(s).
@@ -160,7 +183,7 @@ def _adopt_inner(state, inner, best, structure) -> None:
                  f'the catalog left the held-out error at {state.current.error:.4f} '
                  f'({state.current.error / state.noise_floor:.2f}x the floor): C(s) = '
                  f"{' * '.join(structure)} fitted, searching again beside it")
-    state.steps.extend(inner.steps)
+    _extend_steps(state, inner, [n for n, _ in state.chosen])
     state.late_ties.extend([f'{t} (beside C(s))' for t in inner.first_ties] + inner.late_ties)
     state.chosen = list(inner.chosen)
     state.offset = inner.offset or state.offset

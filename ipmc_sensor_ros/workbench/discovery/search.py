@@ -88,13 +88,46 @@ def _start(records, raw, drives, settings, priors, say, given=None) -> SearchSta
     return state
 
 
+def _change(before: float, after: float) -> str:
+    """
+    Say what a held-out error did, in words that agree with its numbers.
+
+    ``lowers the held-out error 0.0663 -> 0.0463 (1.43x)``, ``raises the held-out error
+    0.0663 -> 0.0665 (+0.35 %)``: a change under 5 % is given in percent (a ratio rounds it
+    to 1.00x).
+    """
+    if after == before:
+        return f'leaves the held-out error at {before:.4f}'
+    verb = 'lowers' if after < before else 'raises'
+    tail = (f'{before / after:.2f}x' if abs(after / before - 1) >= 0.05
+            else f'{100 * (after / before - 1):+.2g} %')
+    return f'{verb} the held-out error {before:.4f} -> {after:.4f} ({tail})'
+
+
+def _named_by(state, missing) -> str:
+    """``name by its test (numbers)`` of each named effect (:func:`~.significance.membership`)."""
+    kept = state.kept_by or {}
+    return ', '.join(f"{n} by its {kept[n]['test']} ({kept[n]['summary']})" if n in kept
+                     else n for n in missing)
+
+
 def _reason(state, missing, explained) -> str:
+    """
+    Return the verdict's reason: what the named effects did to the held-out error, what kept them.
+
+    An effect is named either because it lowers the held-out error (a step of the search) or
+    because its own test keeps it (the offset's chi-square: ``||y - y_hat|| / ||y - mean y||``
+    cannot see a mean current beside the dynamics).  When the error did not fall, the second
+    is the reason, and the verdict says so with the test's numbers.
+    """
     base, cur, floor = state.baseline, state.current, state.noise_floor
     if missing:
-        return (f"adding {', '.join(missing)} lowers the held-out error {base.error:.4f} -> "
-                f'{cur.error:.4f} ({base.error / cur.error:.2f}x)'
-                + ('' if explained else f'; the residual stays above the noise floor '
-                   f'{floor:.4f}: something else is missing too'))
+        text = f"adding {', '.join(missing)} {_change(base.error, cur.error)}"
+        if cur.error >= base.error:
+            text += ('; kept by ' + ('its own test' if len(missing) == 1 else 'their own tests')
+                     + ', not by the held-out error: ' + _named_by(state, missing))
+        return text + ('' if explained else f'; the residual stays above the noise floor '
+                       f'{floor:.4f}: something else is missing too')
     if explained:
         return (f'baseline error {base.error:.4f} is at the noise floor ({floor:.4f}) and no '
                 'effect improves it significantly: nothing is missing')

@@ -3,7 +3,7 @@
 What :func:`~ipmc_sensor_ros.workbench.diagnose.diagnose` returns: candidates, steps, verdict.
 
 :class:`Candidate` (one fitted model and its held-out error), :class:`Step` (one move of the
-stepwise search: added, dropped or swapped, with the fitted values and the ties) and
+stepwise search: added, dropped, swapped or kept, with the fitted values and the ties) and
 :class:`Diagnosis` (the verdict with its JSON form; its text form is :mod:`.summary`).
 """
 from __future__ import annotations
@@ -51,7 +51,12 @@ class Candidate:
 
 @dataclass
 class Step:
-    """One accepted change of the model (``action``: added / dropped)."""
+    """
+    One accepted change of the model.
+
+    ``action``: added, dropped, swapped, or kept (an effect of the first search that the
+    search beside C(s) names again: refitted beside C(s), not added a second time).
+    """
 
     effect: str
     action: str
