@@ -349,3 +349,11 @@ def test_a_run_metadata_key_near_a_known_one_is_refused(tmp_path):
             import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=meta)
     meta.write_text('{"length_mm": 22, ' + geometry + ', "operator": "jd"}')
     assert import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=meta).extra['meta.operator'] == 'jd'
+
+
+def test_a_run_metadata_key_that_is_not_text_is_left_out(tmp_path):
+    """YAML reads '1: x' as an integer key: not a header key, not a defect."""
+    meta = tmp_path / 'meta.yaml'
+    meta.write_text('length_mm: 22\nwidth_mm: 7\nthickness_um: 360\n1: x\n')
+    ts = import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=meta)
+    assert ts.geometry.length_m == 0.022 and not any(k.startswith('meta.') for k in ts.extra)

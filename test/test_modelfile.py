@@ -98,3 +98,15 @@ def test_params_view_names_the_fitted_values_without_anchors(tmp_path):
     assert p['effects'] == ['amplifier_bandwidth(corner_hz=299.0)'] and p['model'] == 'h2'
     assert p['sample_rate_hz'] == 1000.0                # a measured rate, 9 digits
     assert 'current_offset' not in text                 # the recording's, not the sensor's
+
+
+def test_a_misspelt_key_is_named_with_the_one_it_is_near(tmp_path):
+    """A model file's 'materal:' would leave its material unread: refused, the fix named."""
+    path = save_model(tmp_path / 'm.yaml', FITTED)
+    doc = yaml.safe_load(path.read_text())
+    doc['materal'] = doc.pop('material')
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ParameterError, match=r"m\.yaml: unknown key\(s\) \['materal'\] "
+                                             r"\(known: .*\); did you mean 'material' for "
+                                             r"'materal'\?"):
+        load_model(path)

@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from ..errors import did_you_mean
 from .effects import get_effect, split_by_scope
 from .model import EffectSpec, SensorModel, format_effect, parse_effects
 from .parameters import Geometry, MaterialParameters, ParameterError, read_yaml
@@ -282,7 +283,8 @@ def load_model(path) -> ModelFile:
         raise ParameterError(f"{path}: not a model file (expected 'format: {MODEL_FORMAT}')")
     unknown = sorted(str(k) for k in set(doc) - set(_KEYS))
     if unknown:
-        raise ParameterError(f'{path}: unknown key(s) {unknown}')
+        raise ParameterError(f'{path}: unknown key(s) {unknown} (known: {", ".join(_KEYS)})'
+                             + did_you_mean(unknown, _KEYS))
     prov = doc.get('provenance') or {}
     if not isinstance(prov, dict):
         raise ParameterError(f'{path}: provenance: must be a mapping')

@@ -337,7 +337,8 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
                 raise DataFormatError(meta, None, f'run metadata {key}: {value!r} must be a '
                                       'number in SI units')
             known[key] = float(value)
-        elif key not in ('sample', 'geometry') and key.partition('_')[0] not in GEOMETRY_PARTS:
+        elif key not in ('sample', 'geometry') and \
+                str(key).partition('_')[0] not in GEOMETRY_PARTS:
             if not HEADER_KEY_PATTERN.fullmatch(str(key)):
                 continue
             scalar = isinstance(value, (str, int, float, bool))
