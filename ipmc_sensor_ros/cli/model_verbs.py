@@ -298,7 +298,8 @@ def add_parsers(sub, formatter) -> None:
         formatter_class=formatter,
         help='identify material parameters from the frequency response (paper 5.2)',
         description='Fit the --free parameters to the measured frequency response '
-        '(time series through the response at the excitation fundamental).',
+        '(time series through the response at the excitation fundamental, or at each '
+        'tone of a multi-sine drive).',
     )
     add_model_args(p)
     add_data_args(p)

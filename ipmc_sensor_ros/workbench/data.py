@@ -12,8 +12,9 @@ from ..interface.specs import defaults, ESTIMATOR_SPECS
 from ..physics.model import SensorModel
 from ..physics.parameters import MaterialParameters
 from .freqfit import FitGroup
-from .freqresp import FrequencyPoint, fundamental_response
+from .freqresp import FrequencyPoint
 from .measurements import FrequencyResponseData, TimeSeries, sample_label
+from .tones import tone_responses
 from .timepredict import Record
 
 __all__ = ['material_for', 'records_from', 'on_sample_grid', 'groups_from', 'frf_points']
@@ -139,8 +140,8 @@ def groups_from(data: Sequence, min_periods: int = 2) -> list[FitGroup]:
     """
     One FitGroup per sample: FRF files as they are.
 
-    Time series through the fundamental-response extraction (paper
-    section 5.2).
+    Time series through the fundamental-response extraction (paper section 5.2), or at
+    each tone of a multi-sine drive (:mod:`.tones`).
     """
     groups: dict[tuple, FitGroup] = {}
     for d in data:
@@ -153,10 +154,11 @@ def groups_from(data: Sequence, min_periods: int = 2) -> list[FitGroup]:
             if d.deflection_m is None:
                 raise ValueError(f'{d.path}: no deflection column: cannot measure the response')
             try:
-                g.points.append(fundamental_response(d.time_s, d.deflection_m, d.current_a,
-                                                     source=d.path, min_periods=min_periods))
+                g.points.extend(tone_responses(d.time_s, d.deflection_m, d.current_a,
+                                               source=d.path, min_periods=min_periods))
             except ValueError as exc:
-                raise ValueError(f'{exc}; fit reads periodic (crank-slider) records: '
-                                 f'`ipmc-model diagnose DATA --save-model FILE` fits the '
-                                 f'material in the time domain on any record') from None
+                raise ValueError(f'{exc}; fit reads periodic records (a crank-slider, tones '
+                                 f'of a common fundamental): `ipmc-model diagnose DATA '
+                                 f'--save-model FILE` fits the material in the time domain '
+                                 f'on any record') from None
     return list(groups.values())

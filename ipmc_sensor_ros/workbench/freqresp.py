@@ -31,7 +31,8 @@ from scipy.optimize import minimize_scalar
 
 from ..lti.discretize import USABLE_BAND_FRACTION
 
-__all__ = ['FrequencyPoint', 'fundamental_response', 'cross_spectral_response', 'harmonic_fit']
+__all__ = ['FrequencyPoint', 'fundamental_response', 'cross_spectral_response', 'harmonic_fit',
+           'phasor_sd', 'NotPeriodic']
 
 #: A record is periodic at f0 only if its harmonics explain the deflection: at most this fraction
 #: of the deflection's variance may be left by the K-harmonic fit.  A crank-slider record leaves
@@ -39,6 +40,14 @@ __all__ = ['FrequencyPoint', 'fundamental_response', 'cross_spectral_response', 
 #: the amplitude about 1e-2; robot-like motion, steps and free vibration leave most of it, and
 #: their "fundamental" would be a peak of a broadband spectrum, not a response.
 MAX_APERIODIC_FRACTION = 0.1
+
+
+class NotPeriodic(ValueError):
+    """The deflection is not explained by harmonics of ``frequency_hz`` (its spectrum's peak)."""
+
+    def __init__(self, text: str, frequency_hz: float):
+        super().__init__(text)
+        self.frequency_hz = frequency_hz
 
 
 @dataclass(frozen=True)
@@ -169,7 +178,7 @@ def harmonic_fit(t: np.ndarray, x: np.ndarray, f0: float, n_harmonics: int):
     return phasors, resid, cov
 
 
-def _phasor_sd(cov: np.ndarray, phasor: complex, k: int = 1) -> tuple[float, float]:
+def phasor_sd(cov: np.ndarray, phasor: complex, k: int = 1) -> tuple[float, float]:
     """Return the sd of ln|X| and arg X for harmonic k from the coefficient covariance."""
     ia, ib = 2 * k - 1, 2 * k
     a, b = phasor.real, -phasor.imag
@@ -214,14 +223,14 @@ def fundamental_response(time_s, deflection_m, current_a, *, frequency_hz: float
     pw, resid_w, cov_w = harmonic_fit(tt, ww, f0, k_max)
     variance_w = float(np.var(ww))
     if variance_w > 0 and float(np.mean(resid_w ** 2)) > MAX_APERIODIC_FRACTION * variance_w:
-        raise ValueError(
+        raise NotPeriodic(
             f'{source}: the deflection is not periodic: mean + {k_max} harmonics of {f0:.4g} Hz '
             f'explain {100 * (1 - float(np.mean(resid_w ** 2)) / variance_w):.0f} % of it (need '
-            f'{100 * (1 - MAX_APERIODIC_FRACTION):.0f} %)')
+            f'{100 * (1 - MAX_APERIODIC_FRACTION):.0f} %)', f0)
     pi_, _, cov_i = harmonic_fit(tt, ii, f0, k_max)
     h = pi_[0] / pw[0]
-    sdm_w, sdp_w = _phasor_sd(cov_w, pw[0])
-    sdm_i, sdp_i = _phasor_sd(cov_i, pi_[0])
+    sdm_w, sdp_w = phasor_sd(cov_w, pw[0])
+    sdm_i, sdp_i = phasor_sd(cov_i, pi_[0])
     return FrequencyPoint(
         frequency_hz=f0,
         response=complex(h),
