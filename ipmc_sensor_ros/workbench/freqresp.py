@@ -144,37 +144,46 @@ def _harmonic_columns(t: np.ndarray, w0: float, n_harmonics: int) -> np.ndarray:
     return a
 
 
-def harmonic_fit(t: np.ndarray, x: np.ndarray, f0: float, n_harmonics: int):
+def harmonic_fit(t: np.ndarray, x: np.ndarray, f0: float, n_harmonics: int,
+                 trend: bool = False):
     """
     Least-squares fit of x(t) by a mean and ``n_harmonics`` harmonics of f0.
 
     Returns (phasors (complex, amplitude and phase of cos), residual, covariance
     of the real coefficients [mean, a1, b1, a2, b2, ...]).  Phasor convention:
     x = Re(X_k exp(j k w0 t)), i.e. X_k = a_k - j b_k for a_k cos + b_k sin.
-    The normal equations are accumulated over ``FIT_CHUNK_ROWS`` rows at a time
-    (memory independent of the record length; a record of one chunk gives the
-    same numbers as the whole matrix at once).
+    ``trend``: a straight line is fitted with them (a laser's or a mount's drift; not
+    orthogonal to the harmonics, so fitted jointly), its row and column left out of the
+    covariance (the others' marginal).  The normal equations are accumulated over
+    ``FIT_CHUNK_ROWS`` rows at a time (memory independent of the record length; a record
+    of one chunk gives the same numbers as the whole matrix at once).
     """
     w0 = 2 * np.pi * f0
     t = np.asarray(t, float)
     x = np.asarray(x, float)
-    m = 2 * n_harmonics + 1
+    mid, half = 0.5 * (t[0] + t[-1]), max(0.5 * (t[-1] - t[0]), 1e-300)
+
+    def columns(tk):
+        a = _harmonic_columns(tk, w0, n_harmonics)
+        return np.column_stack([a, (tk - mid) / half]) if trend else a
+    m = 2 * n_harmonics + 1 + int(trend)
     gram = np.zeros((m, m))
     atx = np.zeros(m)
     chunks = [slice(k, k + FIT_CHUNK_ROWS) for k in range(0, t.size, FIT_CHUNK_ROWS)]
     for sl in chunks:
-        a = _harmonic_columns(t[sl], w0, n_harmonics)
+        a = columns(t[sl])
         gram += a.T @ a
         atx += a.T @ x[sl]
     gram_inv = np.linalg.pinv(gram)
     coef = gram_inv @ atx
     resid = np.empty(t.size)
     for sl in chunks:
-        resid[sl] = x[sl] - _harmonic_columns(t[sl], w0, n_harmonics) @ coef
+        resid[sl] = x[sl] - columns(t[sl]) @ coef
     dof = max(t.size - m, 1)
     sigma2 = float(resid @ resid) / dof
-    cov = sigma2 * gram_inv
-    phasors = coef[1::2] - 1j * coef[2::2]
+    keep = slice(0, 2 * n_harmonics + 1)
+    cov = sigma2 * gram_inv[keep, keep]
+    phasors = coef[1:2 * n_harmonics + 1:2] - 1j * coef[2:2 * n_harmonics + 1:2]
     return phasors, resid, cov
 
 
