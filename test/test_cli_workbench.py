@@ -41,10 +41,12 @@ def test_compare_json_and_report(sweep, tmp_path):
     assert wrong['error'] > 3 * right['error']
 
 
-def test_fit_saves_params_usable_by_nodes(sweep, tmp_path):
+def test_fit_saves_params_usable_by_nodes(sweep, tmp_path, capsys):
     saved = tmp_path / 'fitted.yaml'
     assert main(['fit', str(sweep), '--model', 'h2', '--free', 'alpha0,d', '--set', 'd=5e-11',
                  '--save', str(saved), '--report', str(tmp_path / 'r')]) == 0
+    # the frequencies it read are said, per sample (a point missing would show here)
+    assert '12 frequency point(s) of 2 sample(s): ' in capsys.readouterr().err
     # two samples (slim, short) -> one file per sample geometry, under the namespace-proof key
     saved_short = tmp_path / 'fitted_short.yaml'
     doc = yaml.safe_load(saved_short.read_text())

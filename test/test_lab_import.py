@@ -340,6 +340,8 @@ def test_a_run_metadata_key_near_a_known_one_is_refused(tmp_path):
     for text, key, near in (('{"length_mm": 22, ' + geometry + ', "temperatur_k": 295}',
                              'temperatur_k', 'temperature_k'),
                             ('{"lenght_mm": 22, ' + geometry + '}', 'lenght_mm', 'length_mm'),
+                            ('{"length_mm": 22, ' + geometry + ', "Temperature_K": 296}',
+                             'Temperature_K', 'temperature_k'),
                             ('{"geometry": {"lenght_mm": 22, ' + geometry + '}}', 'lenght_mm',
                              'length_mm')):
         meta = tmp_path / 'meta.json'
@@ -351,9 +353,14 @@ def test_a_run_metadata_key_near_a_known_one_is_refused(tmp_path):
     assert import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=meta).extra['meta.operator'] == 'jd'
 
 
-def test_a_run_metadata_key_that_is_not_text_is_left_out(tmp_path):
-    """YAML reads '1: x' as an integer key: not a header key, not a defect."""
+def test_a_run_metadata_key_no_header_can_hold_is_named_not_dropped(tmp_path):
+    """YAML reads '1: x' as an integer key; 'Operator Name' has a space: named, not kept."""
     meta = tmp_path / 'meta.yaml'
-    meta.write_text('length_mm: 22\nwidth_mm: 7\nthickness_um: 360\n1: x\n')
+    meta.write_text('length_mm: 22\nwidth_mm: 7\nthickness_um: 360\n1: x\nOperator Name: jd\n')
     ts = import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=meta)
     assert ts.geometry.length_m == 0.022 and not any(k.startswith('meta.') for k in ts.extra)
+    assert ts.extra['meta_keys_left_out'] == '1, Operator Name'
+    said = []
+    import_lab_files([LAB / 'daq_slim_5Hz.tsv'], tmp_path / 'out', meta=meta,
+                     notice=said.append)
+    assert any('not kept as notes' in s and '1, Operator Name' in s for s in said)

@@ -86,7 +86,9 @@ def _cmd_fit(args) -> int:
             say(f'{e}: kept at its catalog values (a frequency-response fit cannot see it; '
                 'diagnose fits it in the time domain)')
     say(f"fitting {', '.join(free)} to {sum(len(g.points) for g in groups)} frequency point(s) "
-        f'of {len(groups)} sample(s)')
+        f'of {len(groups)} sample(s): '
+        + '; '.join(f"{g.name}: {', '.join(f'{p.frequency_hz:.4g}' for p in g.points)} Hz"
+                    for g in groups))
     with Progress('fit'):
         res = fit_parameters(groups, free, material, effects)
     print(res.summary())

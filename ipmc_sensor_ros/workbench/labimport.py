@@ -44,12 +44,9 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from ..physics.parameters import MaterialParameters, ParameterError
-from .formatheader import HEADER_KEY_PATTERN
 from .formatread import incomplete_notes
-from .formats import KNOWN_KEYS, write_timeseries
-from .labmeta import (GEOMETRY_PARTS, geometry_from_header, read_run_metadata,
-                      resolve_geometry)
+from .formats import write_timeseries
+from .labmeta import geometry_from_header, meta_values, read_run_metadata, resolve_geometry
 from .measurements import DataFormatError, PathLike, TimeSeries
 from .textread import (MAX_BYTES, MAX_ROWS, TextSource, increasing_check, parse_number,
                        read_table)
@@ -330,29 +327,26 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
         extra['unused_columns'] = _one_line(', '.join(unused))
     if current_gain_a_per_v is not None:
         extra['current_gain_a_per_v'] = repr(float(current_gain_a_per_v))
-    known: dict[str, float] = {}
-    for key, value in meta_data.items():
-        if key in KNOWN_KEYS:
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise DataFormatError(meta, None, f'run metadata {key}: {value!r} must be a '
-                                      'number in SI units')
-            known[key] = float(value)
-        elif key not in ('sample', 'geometry') and \
-                str(key).partition('_')[0] not in GEOMETRY_PARTS:
-            if not HEADER_KEY_PATTERN.fullmatch(str(key)):
-                continue
-            scalar = isinstance(value, (str, int, float, bool))
-            text = _one_line(value)[:200] if scalar else '(nested value, not kept)'
-            if text:
-                extra[f'meta.{key}'] = text
-    try:
-        MaterialParameters(**known)
-    except (ParameterError, TypeError) as exc:
-        raise DataFormatError(meta, None, f'implausible known value: {exc}') from None
+    known, notes = meta_values(meta, meta_data)
+    extra.update(notes)
     return TimeSeries(path=str(path), sample=name, geometry=geo, known=known,
                       sample_rate_hz=1.0 / float(np.median(steps)), time_s=t,
                       current_a=picked['current'], deflection_m=picked.get('deflection'),
                       extra=extra, notes=incomplete_notes(path, source))
+
+
+#: What the import says of a file (``notice``), by the output header key that records it.
+_NOTICES = (
+    ('text_encoding', 'not UTF-8 text: read as {} (Windows Western); check the units and '
+                      'names it printed'),
+    ('unused_columns', 'column(s) not imported: {} (name one with --columns deflection=NAME '
+                       'or current=NAME)'),
+    (REPEATED_KEY, 'row(s) with the time of the row before not imported: {} (the estimator '
+                   'node refuses such a sample too)'),
+    ('meta_keys_left_out', 'run metadata key(s) not kept as notes (a header key is a letter, '
+                           "then letters, digits, '_', '.' or '-'): {}"),
+    ('geometry_header', 'geometry from its header: {}'),
+)
 
 
 def import_lab_files(paths: Iterable[PathLike], out_dir: PathLike, *,
@@ -379,21 +373,14 @@ def import_lab_files(paths: Iterable[PathLike], out_dir: PathLike, *,
             raise DataFormatError(dst, None, 'output exists; not replaced (pass --overwrite to '
                                   'replace it, or choose another --out)')
     series = [import_lab_file(p, **options) for p in paths]
-    for src, ts in zip(paths, series):
-        for note in ts.notes if notice is not None else ():
+    for src, ts in zip(paths, series if notice is not None else ()):
+        for note in ts.notes:
             notice(note)
-        if notice is not None and 'text_encoding' in ts.extra:
-            notice(f"{src}: not UTF-8 text: read as {ts.extra['text_encoding']} (Windows "
-                   'Western); check the units and names it printed')
-        if notice is not None and 'unused_columns' in ts.extra:
-            notice(f"{src}: column(s) not imported: {ts.extra['unused_columns']} (name one with "
-                   '--columns deflection=NAME or current=NAME)'
-                   + ('' if ts.deflection_m is not None else '; no deflection column found'))
-        if notice is not None and REPEATED_KEY in ts.extra:
-            notice(f'{src}: row(s) with the time of the row before not imported: '
-                   f'{ts.extra[REPEATED_KEY]} (the estimator node refuses such a sample too)')
-        if notice is not None and 'geometry_header' in ts.extra:
-            notice(f"{src}: geometry from its header: {ts.extra['geometry_header']}")
+        for key, text in _NOTICES:
+            if key in ts.extra:
+                notice(f'{src}: ' + text.format(ts.extra[key])
+                       + ('; no deflection column found' if key == 'unused_columns'
+                          and ts.deflection_m is None else ''))
     out.mkdir(parents=True, exist_ok=True)
     for ts, dst in zip(series, targets):
         write_timeseries(dst, ts)

@@ -23,13 +23,13 @@ import stat
 from pathlib import Path
 from typing import Mapping
 
-from ..physics.parameters import Geometry, ParameterError
-from .formatheader import KNOWN_KEYS, NEAR_MISS
+from ..physics.parameters import Geometry, MaterialParameters, ParameterError
+from .formatheader import HEADER_KEY_PATTERN, KNOWN_KEYS, NEAR_MISS
 from .measurements import DataFormatError, PathLike
 from .units import LENGTH_UNITS, decimal_to_si, parse_length, unit_factor
 
 __all__ = ['HEADER_GEOMETRY_NAMES', 'MAX_META_BYTES', 'GEOMETRY_PARTS', 'read_run_metadata',
-           'geometry_from_header', 'resolve_geometry']
+           'geometry_from_header', 'resolve_geometry', 'meta_values']
 
 #: The parts of a geometry, in the order of ``--geometry length,width,thickness``.
 GEOMETRY_PARTS = ('length', 'width', 'thickness')
@@ -75,6 +75,43 @@ def read_run_metadata(meta: PathLike) -> dict:
     return data
 
 
+def meta_values(meta: PathLike, data: dict) -> tuple[dict, dict]:
+    """
+    Return (known values in SI units, notes) of run metadata (its geometry read elsewhere).
+
+    ``temperature_k`` and the other known keys must be numbers, plausible together; any
+    other key is a note ``meta.<key>`` (one line, 200 characters); a key no header line can
+    hold (``HEADER_KEY_PATTERN``: ``Operator Name``, ``7``) is named under
+    ``meta_keys_left_out``, not dropped unsaid.
+    """
+    known: dict[str, float] = {}
+    notes: dict[str, str] = {}
+    left_out: list[str] = []
+    for key, value in data.items():
+        if key in KNOWN_KEYS:
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise DataFormatError(meta, None, f'run metadata {key}: {value!r} must be a '
+                                      'number in SI units')
+            known[key] = float(value)
+        elif key in ('sample', 'geometry') or str(key).partition('_')[0] in GEOMETRY_PARTS:
+            continue
+        elif not HEADER_KEY_PATTERN.fullmatch(str(key)):
+            left_out.append(str(key))
+        elif isinstance(value, (str, int, float, bool)):
+            text = ' '.join(str(value).split())[:200]
+            if text:
+                notes[f'meta.{key}'] = text
+        else:
+            notes[f'meta.{key}'] = '(nested value, not kept)'
+    if left_out:
+        notes['meta_keys_left_out'] = ' '.join(', '.join(left_out).split())[:200]
+    try:
+        MaterialParameters(**known)
+    except (ParameterError, TypeError) as exc:
+        raise DataFormatError(meta, None, f'implausible known value: {exc}') from None
+    return known, notes
+
+
 def _refuse_near_miss(meta: PathLike, key) -> None:
     """
     Refuse a run-metadata key that is not read but near one that is (a misspelling).
@@ -82,8 +119,8 @@ def _refuse_near_miss(meta: PathLike, key) -> None:
     As a data header's keys (:data:`.formatheader.NEAR_MISS`): ``temperatur_k`` would
     otherwise be kept as a note and the temperature it meant silently not used.
     """
-    near = difflib.get_close_matches(str(key), META_KEYS, n=1, cutoff=NEAR_MISS)
-    if near and near[0] != key:
+    near = difflib.get_close_matches(str(key).lower(), META_KEYS, n=1, cutoff=NEAR_MISS)
+    if near and near[0] != key:         # 'Temperature_K' too: the keys are read as written
         raise DataFormatError(meta, None, f'run metadata key {key!r} is not one it reads; did '
                               f'you mean {near[0]!r}? (keys that are not near one are kept as '
                               'notes)')
