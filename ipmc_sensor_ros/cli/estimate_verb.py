@@ -333,10 +333,10 @@ def _write_output(args, data, values, model_text, resets, t_out, current, w, mea
 
 def _params_text(args) -> str:
     """Where the node parameters came from (an estimate file's ``# params:`` line)."""
+    given = args.params or 'defaults of the estimator node'
     if getattr(args, 'model_file', None):
-        return f'{args.params or "defaults of the estimator node"}, material and effects of ' \
-               f'--model-file {args.model_file}'
-    return args.params or "defaults of the estimator node (material: the paper's Tables 1-2)"
+        return f'{given}, material and effects of --model-file {args.model_file}'
+    return given if args.params else f"{given} (material: the paper's Tables 1-2)"
 
 
 def _output_path(args, data_path) -> Path:

@@ -105,6 +105,8 @@ def _ratios(filt: KalmanFilter, steps, forward, period: int, blocks: bool = True
     for t in range(n - 1, -1, -1):
         if t + 1 < n:
             F = m.discrete(slots_of(steps[t + 1]))[0]      # the model caches it
+            # the sample's map P+ (P-)^-1: stored whole where the rest's updates followed
+            # the current's, else the current's alone, I - K c_k (rank one: kept as K)
             phi = (F @ maps[t] if t in maps
                    else F - np.outer(F @ gains[t], rows[t]) / s[t] ** 2)
             lam_s, M = phi.T @ lam_s, phi.T @ M @ phi

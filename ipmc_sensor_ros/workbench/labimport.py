@@ -40,13 +40,14 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Iterable, Mapping
 
 import numpy as np
 
 from .formatread import incomplete_notes
 from .formats import write_timeseries
-from .labmeta import geometry_from_header, meta_values, read_run_metadata, resolve_geometry
+from .labmeta import (geometry_from_header, meta_values, one_line, read_run_metadata,
+                      resolve_geometry)
 from .measurements import DataFormatError, PathLike, TimeSeries
 from .textread import (MAX_BYTES, MAX_ROWS, TextSource, increasing_check, parse_number,
                        read_table)
@@ -240,10 +241,6 @@ def _factor(path, line: int, role: str, cell: str, unit: str | None,
     return factor
 
 
-def _one_line(text: Any) -> str:
-    return ' '.join(str(text).split())
-
-
 def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = None,
                     columns: Mapping[str, str] | None = None,
                     current_gain_a_per_v: float | None = None, sample: str | None = None,
@@ -281,7 +278,7 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
     if sample and meta_sample and str(meta_sample) != sample:
         raise DataFormatError(path, None, f'sample conflict: argument says {sample!r} but run '
                               f'metadata {meta} says {meta_sample!r}')
-    name = _one_line(sample or meta_sample or '')
+    name = one_line(sample or meta_sample or '')
     with TextSource(path, max_bytes=max_bytes, fallback_encoding=LEGACY_ENCODING) as source:
         notes, cells, line, delimiter, decimal = _find_table(path, source)
         geo = resolve_geometry(path, geometry, meta, meta_data, name, notes)
@@ -308,13 +305,13 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
         k = int(np.argmax(steps <= 0)) + 1
         raise DataFormatError(path, line + 1 + k, f'time step below float resolution after '
                               f'conversion to seconds at {t[k]!r} s')
-    extra: dict[str, str] = {f'note_{k + 1:02d}': _one_line(n)
+    extra: dict[str, str] = {f'note_{k + 1:02d}': one_line(n)
                              for k, (_, n) in enumerate(notes)}
-    extra['lab_columns'] = _one_line(', '.join(f'{role}={cells[k]}'
-                                               for role, (k, _) in roles.items()))
+    extra['lab_columns'] = one_line(', '.join(f'{role}={cells[k]}'
+                                              for role, (k, _) in roles.items()))
     header_geometry = [text for _, text in geometry_from_header(path, notes).values()]
     if header_geometry:
-        extra['geometry_header'] = _one_line('; '.join(header_geometry))
+        extra['geometry_header'] = one_line('; '.join(header_geometry))
     if source.encoding != 'utf-8':
         extra['text_encoding'] = source.encoding
     if repeated.size:
@@ -324,7 +321,7 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
     used = {k for k, _ in roles.values()}
     unused = [c for k, c in enumerate(cells) if k not in used and c]   # '': a trailing delimiter
     if unused:
-        extra['unused_columns'] = _one_line(', '.join(unused))
+        extra['unused_columns'] = one_line(', '.join(unused))
     if current_gain_a_per_v is not None:
         extra['current_gain_a_per_v'] = repr(float(current_gain_a_per_v))
     known, notes = meta_values(meta, meta_data)

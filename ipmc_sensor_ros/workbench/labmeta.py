@@ -29,7 +29,7 @@ from .measurements import DataFormatError, PathLike
 from .units import LENGTH_UNITS, decimal_to_si, parse_length, unit_factor
 
 __all__ = ['HEADER_GEOMETRY_NAMES', 'MAX_META_BYTES', 'GEOMETRY_PARTS', 'read_run_metadata',
-           'geometry_from_header', 'resolve_geometry', 'meta_values']
+           'geometry_from_header', 'resolve_geometry', 'meta_values', 'one_line']
 
 #: The parts of a geometry, in the order of ``--geometry length,width,thickness``.
 GEOMETRY_PARTS = ('length', 'width', 'thickness')
@@ -75,6 +75,11 @@ def read_run_metadata(meta: PathLike) -> dict:
     return data
 
 
+def one_line(text) -> str:
+    """Return ``text`` as one line: its words joined by single spaces (a header value)."""
+    return ' '.join(str(text).split())
+
+
 def meta_values(meta: PathLike, data: dict) -> tuple[dict, dict]:
     """
     Return (known values in SI units, notes) of run metadata (its geometry read elsewhere).
@@ -98,13 +103,13 @@ def meta_values(meta: PathLike, data: dict) -> tuple[dict, dict]:
         elif not HEADER_KEY_PATTERN.fullmatch(str(key)):
             left_out.append(str(key))
         elif isinstance(value, (str, int, float, bool)):
-            text = ' '.join(str(value).split())[:200]
+            text = one_line(value)[:200]
             if text:
                 notes[f'meta.{key}'] = text
         else:
             notes[f'meta.{key}'] = '(nested value, not kept)'
     if left_out:
-        notes['meta_keys_left_out'] = ' '.join(', '.join(left_out).split())[:200]
+        notes['meta_keys_left_out'] = one_line(', '.join(left_out))[:200]
     try:
         MaterialParameters(**known)
     except (ParameterError, TypeError) as exc:

@@ -33,6 +33,8 @@ regression's covariance (:func:`~.freqresp.phasor_sd`).
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from scipy.optimize import minimize_scalar
 from scipy.stats import f as f_dist
@@ -109,19 +111,39 @@ def tone_responses(time_s, deflection_m, current_a, *, source: str = '',
         def windows(f: float) -> list:          # most periods first
             return [_common_fit(t, w, f, whole - d, fs, top) for d in drops
                     if whole - d >= fewest]
-        sl = min(windows(f0), key=lambda f: f[0])[3][0]     # refined past a start-up
+        sl = min(windows(f0), key=lambda f: f.left).window     # refined past a start-up
         f0 = _refined(t[sl] - t[sl][0], w[sl], f0,
                       REFINE_BINS / (duration * refused.frequency_hz), top)
         chosen = _longest(windows(f0))
-        if chosen[0] > MAX_APERIODIC_FRACTION:
+        if chosen.left > MAX_APERIODIC_FRACTION:
             raise
-        stray = _stray_line(chosen[4], fs, f0, float(np.max(np.abs(chosen[3][2]))))
+        stray = _stray_line(chosen.resid, fs, f0, float(np.max(np.abs(chosen.pw))))
         if stray is not None:
             raise NotPeriodic(f'{source}: the deflection holds a tone near {stray:.3g} Hz that '
                               f'is no harmonic of the common {f0:.4g} Hz of the others: its '
                               'tones have no common period in the record',
                               refused.frequency_hz) from None
-        return _tones(t, i, chosen[1:4], source)
+        return _tones(t, i, chosen, source)
+
+
+class CommonFit(NamedTuple):
+    """The deflection regressed on ``top`` harmonics of ``f0`` and a line, over a window."""
+
+    #: the deflection's share it leaves, per degree of freedom left (``dof``)
+    left: float
+    f0: float
+    periods: int
+    window: slice
+    top: int
+    pw: np.ndarray
+    cov_w: np.ndarray
+    resid: np.ndarray
+    dof: int
+
+
+def _hann_power(x: np.ndarray) -> np.ndarray:
+    """Return the periodogram of ``x`` less its mean, Hann-windowed (bin k at k fs / N)."""
+    return np.abs(np.fft.rfft((x - x.mean()) * np.hanning(x.size))) ** 2
 
 
 def _stray_line(resid, fs: float, f0: float, strongest_m: float) -> float | None:
@@ -138,7 +160,7 @@ def _stray_line(resid, fs: float, f0: float, strongest_m: float) -> float | None
     0.3 mm read as 3.006 and 4.208 Hz).  Below ``f0`` a commensurate tone cannot be (the
     common fundamental would be lower): the power there is a drift's.
     """
-    power = np.abs(np.fft.rfft((resid - resid.mean()) * np.hanning(resid.size))) ** 2
+    power = _hann_power(resid)
     above = power[max(int(f0 * resid.size / fs) - 1, 1):]
     mean = float(np.median(above)) / np.log(2.0)
     k = int(np.argmax(above))
@@ -155,8 +177,7 @@ def _common_fundamental(w, fs: float, peak_hz: float, duration: float, fewest: i
     Scored on one Hann-windowed spectrum of the record: the share of the deflection's power
     in the bins nearest each harmonic below the usable band and one either side.
     """
-    x = (w - w.mean()) * np.hanning(w.size)
-    power = np.abs(np.fft.rfft(x)) ** 2
+    power = _hann_power(w)
     power[0] = 0.0
     total = float(power.sum())
     df = fs / w.size
@@ -176,20 +197,20 @@ def _common_fundamental(w, fs: float, peak_hz: float, duration: float, fewest: i
     return next(s[1:] for s in scored if s[0] <= LEFT_FACTOR * least)
 
 
-def _common_fit(t, w, f0: float, periods: int, fs: float, top: int) -> tuple:
+def _common_fit(t, w, f0: float, periods: int, fs: float, top: int) -> CommonFit:
     """
-    Return (the share ``top`` harmonics of ``f0`` leave, f0, periods, the fit, its residual).
+    Return the :class:`CommonFit` over the last ``periods`` whole periods.
 
-    Over the last ``periods`` whole periods; the share per degree of freedom left (so a
-    window of fewer samples is not favoured for fitting its noise with as many columns).
+    Its share left is per degree of freedom (so a window of fewer samples is not favoured
+    for fitting its noise with as many columns).
     """
     n_keep = int(round(periods / f0 * fs))
     sl = slice(t.size - n_keep, t.size)
     pw, resid_w, cov_w = harmonic_fit(t[sl] - t[sl][0], w[sl], f0, top, trend=True)
     variance_w = float(np.var(w[sl]))
-    dof = max(n_keep - 2 * top - 1, 1)
+    dof = max(n_keep - 2 * top - 2, 1)      # the harmonics, the mean and the line
     left = float(resid_w @ resid_w) / dof / variance_w if variance_w > 0 else np.inf
-    return left, f0, periods, (sl, top, pw, cov_w), resid_w
+    return CommonFit(left, f0, periods, sl, top, pw, cov_w, resid_w, dof)
 
 
 def _refined(t, w, f0: float, relative: float, top: int) -> float:
@@ -206,7 +227,7 @@ def _refined(t, w, f0: float, relative: float, top: int) -> float:
     return float(res.x)
 
 
-def _longest(fits: list) -> tuple:
+def _longest(fits: list) -> CommonFit:
     """
     Return the fit of the most periods that leaves no more than the least does, at 1 %.
 
@@ -214,29 +235,22 @@ def _longest(fits: list) -> tuple:
     leaves more per degree of freedom than one past it; the F test of the two residual
     variances at a 1 % false alarm tells more from the noise's spread.
     """
-    best = min(fits, key=lambda f: f[0])
-    return next(f for f in fits if f[0] <= best[0] * f_dist.isf(0.01, _dof(f), _dof(best)))
+    best = min(fits, key=lambda f: f.left)
+    return next(f for f in fits if f.left <= best.left * f_dist.isf(0.01, f.dof, best.dof))
 
 
-def _dof(fit: tuple) -> int:
-    """Return the degrees of freedom a common fit leaves: samples less its columns."""
-    sl, top = fit[3][:2]
-    return max(sl.stop - sl.start - 2 * top - 1, 1)
-
-
-def _tones(t, i, common: tuple, source: str) -> list[FrequencyPoint]:
+def _tones(t, i, fit: CommonFit, source: str) -> list[FrequencyPoint]:
     """Return the points of the tones of the common fundamental's fit (the module docstring)."""
-    f0, periods, (sl, top, pw, cov_w) = common
+    sl, f0, top, pw = fit.window, fit.f0, fit.top, fit.pw
     pi_, _, cov_i = harmonic_fit(t[sl] - t[sl][0], i[sl], f0, top, trend=True)
-    strongest = float(np.max(np.abs(pw)))
     out = []
-    for k in np.flatnonzero(np.abs(pw) >= TONE_FRACTION * strongest):
-        sdm_w, sdp_w = phasor_sd(cov_w, pw[k], int(k) + 1)
+    for k in np.flatnonzero(np.abs(pw) >= TONE_FRACTION * float(np.max(np.abs(pw)))):
+        sdm_w, sdp_w = phasor_sd(fit.cov_w, pw[k], int(k) + 1)
         sdm_i, sdp_i = phasor_sd(cov_i, pi_[k], int(k) + 1)
         out.append(FrequencyPoint(
             frequency_hz=float((k + 1) * f0), response=complex(pi_[k] / pw[k]),
             sd_log_mag=float(np.hypot(sdm_w, sdm_i)), sd_phase_rad=float(np.hypot(sdp_w, sdp_i)),
             deflection_amplitude_m=float(abs(pw[k])), source=source,
             window=(float(t[sl][0]), float(t[sl][-1])),
-            extra={'periods': periods, 'harmonics': top, 'tone_of_hz': f0}))
+            extra={'periods': fit.periods, 'harmonics': top, 'tone_of_hz': f0}))
     return out
