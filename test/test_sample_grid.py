@@ -5,6 +5,7 @@ import pytest
 
 from bench.discovery_records import make_records, Truth
 from ipmc_sensor_ros.workbench.data import on_sample_grid
+from ipmc_sensor_ros.workbench.stamps import measured_rate_hz
 from ipmc_sensor_ros.workbench.timepredict import predict, prepare, Record
 
 DROPPED = [500, 501, 1700, 2900, 2901, 2902]
@@ -60,3 +61,23 @@ def test_dropped_rows_leave_the_residual_mean_as_it_is():
     # the mean's own standard error is 1.6e-4 (1 % noise over 4000 samples)
     assert abs(joined - whole) > 3e-4 * scale
     assert abs(gridded - whole) < 3e-5 * scale
+
+
+def test_the_rate_is_the_clock_the_stamps_follow_not_their_median_spacing():
+    """
+    A 1500 Hz DAQ stamped with +-15 % host jitter and 2 % of its rows dropped.
+
+    1/median(dt) reads the jitter and the gaps (1494.8 Hz here); the line through the stamps'
+    slots reads the clock: its standard error on 15,000 rows is ~3e-4 Hz (jitter RMS
+    0.087 periods), so 1500 +- 0.002 Hz holds with margin.  A clock 3 ppm slow is followed,
+    and float stamps k/1000 read 1000.0 exactly (rounded to the digits they support).
+    """
+    rng = np.random.default_rng(4)
+    k = np.arange(15000)
+    t = k / 1500.0 + rng.uniform(-0.15, 0.15, k.size) / 1500.0
+    kept = t[rng.random(k.size) > 0.02]
+    assert abs(1.0 / np.median(np.diff(kept)) - 1500.0) > 1.0       # what the median read
+    assert measured_rate_hz(kept) == pytest.approx(1500.0, abs=2e-3)
+    assert measured_rate_hz(k / 1000.0 * (1 + 3e-6)) == pytest.approx(1000.0 / (1 + 3e-6),
+                                                                       rel=1e-9)
+    assert measured_rate_hz(k / 1000.0) == 1000.0

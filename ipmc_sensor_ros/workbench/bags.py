@@ -61,6 +61,7 @@ from .bagtopics import (
     topic_key,
 )
 from .measurements import DataFormatError, PathLike, TimeSeries
+from .stamps import measured_rate_hz
 
 __all__ = ['read_bag', 'write_bag', 'same_geometry']
 
@@ -259,7 +260,7 @@ def read_bag(path: PathLike, current_topic: str = 'current',
             geometry = Geometry.from_dict(dict(geometry))
         except (ParameterError, TypeError) as exc:
             raise DataFormatError(where, None, f'geometry argument: {exc}') from None
-    rate = 1.0 / float(np.median(np.diff(tc)))
+    rate = measured_rate_hz(tc)
     return TimeSeries(path=where, sample=geometry.name, geometry=geometry, known=known,
                       sample_rate_hz=rate, time_s=tc, current_a=current, deflection_m=deflection,
                       extra=extra, deflection_alignment=alignment)

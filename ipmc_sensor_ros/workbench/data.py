@@ -7,13 +7,14 @@ from typing import Sequence
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from ..estimation.timebase import JITTER_FRACTION, START, Timebase
+from ..estimation.timebase import JITTER_FRACTION
 from ..interface.specs import defaults, ESTIMATOR_SPECS
 from ..physics.model import SensorModel
 from ..physics.parameters import MaterialParameters
 from .freqfit import FitGroup
 from .freqresp import FrequencyPoint
 from .measurements import FrequencyResponseData, TimeSeries, sample_label
+from .stamps import stamp_steps
 from .tones import tone_responses
 from .timepredict import Record
 
@@ -70,7 +71,7 @@ def on_sample_grid(path: str, time_s, *columns, max_gap_s: float = MAX_GAP_S):
         return None
     if np.max(dt) < (1 + 2 * JITTER_FRACTION) * np.median(dt):
         return None                         # no spacing holds a missing slot: nothing to fill
-    steps = _steps(path, t, max_gap_s)
+    steps = stamp_steps(path, t, max_gap_s)
     if steps is None or np.all(steps == 1):
         return None
     slots = np.concatenate([[0], np.cumsum(steps)])
@@ -88,29 +89,6 @@ def _filled(t, values, t_grid, slots) -> np.ndarray:
     out = CubicSpline(t, values)(t_grid)
     out[slots] = values
     return out
-
-
-def _steps(path: str, t: np.ndarray, max_gap_s: float) -> np.ndarray | None:
-    """Return the slot steps of stamps ``t[1:]`` (:class:`Timebase`), or None: one refused."""
-    base = Timebase(float(np.median(np.diff(t))), max_gap_s)
-    base.admit(float(t[0]))
-    out, i = [], 1
-    while i < t.size:
-        run = base.admit_plain(t, i, t.size)
-        out.append(run)
-        i += run.size
-        if i < t.size:
-            step = base.admit(float(t[i]))
-            if step == START:
-                raise ValueError(f'{path}: no sample for {t[i] - t[i - 1]:.6g} s after t = '
-                                 f'{t[i - 1]:.6g} s, a gap longer than max_gap_s '
-                                 f'({max_gap_s:g} s): the motion in it is unknown; split the '
-                                 'record there')
-            if step < 1:
-                return None
-            out.append(np.array([step]))
-            i += 1
-    return np.concatenate(out)
 
 
 def frf_points(frf: FrequencyResponseData) -> list[FrequencyPoint]:

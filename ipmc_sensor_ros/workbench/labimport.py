@@ -49,6 +49,7 @@ from .formats import write_timeseries
 from .labmeta import (geometry_from_header, meta_values, one_line, read_run_metadata,
                       resolve_geometry)
 from .measurements import DataFormatError, PathLike, TimeSeries
+from .stamps import measured_rate_hz
 from .textread import (MAX_BYTES, MAX_ROWS, TextSource, increasing_check, parse_number,
                        read_table)
 from .units import (CURRENT_UNITS, LENGTH_UNITS, TIME_UNITS, VOLTAGE_UNITS, split_unit, to_si,
@@ -327,7 +328,7 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
     known, notes = meta_values(meta, meta_data)
     extra.update(notes)
     return TimeSeries(path=str(path), sample=name, geometry=geo, known=known,
-                      sample_rate_hz=1.0 / float(np.median(steps)), time_s=t,
+                      sample_rate_hz=measured_rate_hz(t), time_s=t,
                       current_a=picked['current'], deflection_m=picked.get('deflection'),
                       extra=extra, notes=incomplete_notes(path, source))
 
