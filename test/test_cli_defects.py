@@ -19,6 +19,7 @@ import pytest
 
 from ipmc_sensor_ros.cli.args import parse_geometry
 from ipmc_sensor_ros.cli.main import main
+from ipmc_sensor_ros.physics.modelfile import load_model
 from ipmc_sensor_ros.workbench.compare import amplitude_bins
 from ipmc_sensor_ros.workbench.io import read_any
 from ipmc_sensor_ros.workbench.measurements import TimeSeries, round_rate_hz
@@ -47,6 +48,23 @@ def test_saved_params_list_the_data_in_natural_order(sweep, tmp_path):
     assert main(['fit', str(sweep), '--free', 'alpha0', '--save', str(saved)]) == 0
     data_line = next(ln for ln in saved.read_text().splitlines() if ln.startswith('# data:'))
     assert data_line == '# data: slim_1Hz.csv, slim_2Hz.csv, slim_13Hz.csv'
+
+
+def test_a_model_the_fit_found_inadequate_is_saved_with_that_said(sweep, tmp_path, capsys):
+    """
+    The sweep has a 2 ms delay the fitted model lacks (10 degrees at 13 Hz, far above the
+    noise): the save line says the model is inadequate, and so does the file wherever it is
+    loaded (the node's and estimate's model_file line).
+    """
+    saved = tmp_path / 'm.yaml'
+    assert main(['fit', str(sweep), '--free', 'alpha0', '--save-model', str(saved)]) == 0
+    out = capsys.readouterr().out
+    assert 'model inadequate' in out and 'saved although the fit found it inadequate' in out
+    assert 'which found it INADEQUATE' in load_model(saved).summary()
+    assert main(['fit', str(sweep), '--effects', 'time_delay', '--free', 'alpha0,delay_s',
+                 '--save-model', str(saved), '--overwrite']) == 0
+    assert 'saved although' not in capsys.readouterr().out
+    assert 'INADEQUATE' not in load_model(saved).summary()
 
 
 def test_import_prints_files_in_natural_order(tmp_path, capsys):

@@ -110,8 +110,14 @@ def _cmd_fit(args) -> int:
 
         save_model(args.save_model, effects=res.effects, material=res.material,
                    tool='ipmc-model fit', data_files=data_files(data), ci95=res.ci95,
-                   error={'chi2': res.chi2, 'dof': res.dof, 'p_value': res.p_value})
+                   error={'chi2': res.chi2, 'dof': res.dof, 'p_value': res.p_value},
+                   extra={'adequate': bool(res.adequate)})
         print_saved(args.save_model)
+        if not res.adequate:
+            print(f'  saved although the fit found it inadequate (chi2/dof = '
+                  f'{res.reduced_chi2:.3g}, p = {res.p_value:.2g}): the best this model does on '
+                  'these records, not a calibrated sensor; the file says so wherever it is '
+                  'loaded, and diagnose finds what it misses')
     if args.save:
         for path in write_params_files(Path(args.save), groups, data, res):
             print(f'saved node parameters (the fitted model; key /**/ipmc_estimator, geometry '

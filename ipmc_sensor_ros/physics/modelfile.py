@@ -20,6 +20,8 @@ was calibrated on (:attr:`~ipmc_sensor_ros.physics.effects.Effect.scope`)::
       created_utc: '2026-11-22T23:59:00Z'
       data_files: [a.csv, b.csv]
       error: {held_out: 0.0102, noise_floor: 0.0100}
+      adequate: true                  # fit: the misfit within the noise (chi2 test); false is
+                                      # said wherever the file is loaded
       ci95: {diffusivity_m2_per_s: [3.1e-11, 3.4e-11]}
       recording_effects:              # properties of those recordings, not of the sensor
         - name: current_offset
@@ -136,7 +138,8 @@ class ModelFile:
         files = prov.get('data_files') or []
         origin = ', '.join(filter(None, (
             str(prov.get('tool') or ''), str(prov.get('created_utc') or ''),
-            f'{len(files)} data file(s)' if files else '')))
+            f'{len(files)} data file(s)' if files else '',
+            'which found it INADEQUATE' if prov.get('adequate') is False else '')))
         line = (f"model_file {self.path or '(unsaved)'}: {self.name}"
                 + (f' (calibration: {origin})' if origin else ''))
         note = self.recording_note(recording)
@@ -151,8 +154,8 @@ class ModelFile:
                                             for k, v in self.material.to_dict().items())]
         lines.append('  recording effects of the calibration (not applied unless '
                      f"{RECORDING_FLAG}): {_text(self.recording_effects) or 'none'}")
-        for key in ('tool', 'created_utc', 'data_files', 'error', 'mains_lines'):
-            if prov.get(key):
+        for key in ('tool', 'created_utc', 'data_files', 'error', 'adequate', 'mains_lines'):
+            if prov.get(key) or prov.get(key) is False:
                 lines.append(f'  {key}: {prov[key]}')
         lines.extend(f'  notice: {n}' for n in self.notices)
         return '\n'.join(lines)
