@@ -85,6 +85,10 @@ def test_unnamed_sample_is_labelled_by_its_geometry(tmp_path):
     js = tmp_path / 'c.json'
     assert main(['compare', str(tmp_path / 'labview_slim_5Hz.csv'), '--json', str(js)]) == 0
     assert json.loads(js.read_text())['records'][0]['sample'] == '22x7x0.36mm'
+    assert main(['estimate', str(tmp_path / 'labview_slim_5Hz.csv'), '--out',
+                 str(tmp_path / 'est')]) == 0                # the same label, not '# sample: '
+    est = (tmp_path / 'est' / 'labview_slim_5Hz.estimate.csv').read_text().splitlines()
+    assert '# sample: 22x7x0.36mm' in est
 
 
 def test_bag_sample_named_by_its_sidecar_also_with_geometry_flag(tmp_path):

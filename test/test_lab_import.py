@@ -183,7 +183,9 @@ REFUSED = {  # file text -> the message it must give (file:line where a line app
                   r'unit of deflection'),
     'nocur.csv': ('Time [s],Laser [mm]\n0,1\n1,1\n', r'nocur\.csv:1: no current column among'),
     'back.txt': ('run 3\nTime [ms];Current [µA]\n0;1,5\n2;1,5\n1;1,5\n',
-                 r'back\.txt:5: time decreases: 1\.0 ms after 2\.0 ms'),
+                 r'back\.txt:5: time decreases: 1\.0 ms after 2\.0 ms on line 4; Time \[ms\] must '
+                 r'not go back \(a repeated time is left out, counted; one going back is a '
+                 r'second run'),
     'cell.csv': ('Time [s],Current [A]\n0,1\n1,x\n',
                  r"cell\.csv:3: non-numeric cell 'x' in column Current \[A\]"),
     'notable.csv': ('just words\nand more words\n', r'notable\.csv:2: no table found in the file'),
@@ -364,3 +366,21 @@ def test_a_run_metadata_key_no_header_can_hold_is_named_not_dropped(tmp_path):
     import_lab_files([LAB / 'daq_slim_5Hz.tsv'], tmp_path / 'out', meta=meta,
                      notice=said.append)
     assert any('not kept as notes' in s and '1, Operator Name' in s for s in said)
+
+
+def test_values_in_a_unit_are_written_as_the_decimals_the_file_gave(tmp_path):
+    """
+    0.1257 nA is written 1.257e-10, not 1.2570000000000002e-10 (0.1257 / 1e9 in binary).
+
+    One value in four of a 3-decimal column lands an ulp off when divided; each is the double
+    nearest its decimal in SI, so the written CSV reads as the file did.
+    """
+    rows = ''.join(f'{k * 0.5},{v}\n' for k, v in enumerate(
+        ('0.1257', '-2.678', '3.202', '0.003', '125.7', '-0.0001')))
+    src = _lab(tmp_path, 'nA.csv', 'Time [ms],Current [nA]\n' + rows)
+    out = import_lab_files([src], tmp_path / 'out', geometry='22mm,7mm,360um')
+    text = out[0].read_text()
+    for want in ('1.257e-10', '-2.678e-09', '3.202e-09', '3e-12', '1.257e-07', '-1e-13',
+                 '0.0005'):
+        assert f',{want}\n' in text or f'\n{want},' in text, want
+    assert '00000000' not in text and '99999999' not in text     # no binary noise anywhere

@@ -21,6 +21,7 @@ from ..estimation.limits import beyond_limit, deflection_limit_m
 from ..physics.parameters import ParameterError
 from .args import Progress, fmt_time_s, load_data, say, write_json
 from .outputs import check_free, printable, write_complete
+from ..workbench.measurements import sample_label
 from .saved_models import estimate_values
 
 __all__ = ['cmd_estimate', 'read_estimate', 'estimate_accuracy', 'EstimatorCache',
@@ -140,7 +141,7 @@ def _write_estimate(path: Path, data, values: dict, model_text: str, params, res
     head = [
         f'# format: {ESTIMATE_FORMAT}',
         f'# source: {printable(data.path)}',
-        f'# sample: {data.sample}',
+        f'# sample: {sample_label(data)}',
         *(
             f'# {k}: {values[k]!r}'
             for k in ('length_m', 'width_m', 'thickness_m', 'sample_rate_hz')

@@ -382,8 +382,11 @@ def increasing_check(path, column: str, unit: str, index: int = 0,
         if t[k + 1] == t[k]:
             raise DataFormatError(path, lineno, f'duplicate time {now} {unit} (same as line '
                                   f'{lineno - 1}); {column} must be strictly increasing')
+        rule = (f'{column} must not go back (a repeated time is left out, counted; one going '
+                'back is a second run or a clock that wrapped: split the file there)'
+                if repeats else f'{column} must be strictly increasing')
         raise DataFormatError(path, lineno, f'time decreases: {now} {unit} after {before} {unit} '
-                              f'on line {lineno - 1}; {column} must be strictly increasing')
+                              f'on line {lineno - 1}; {rule}')
     return check
 
 
