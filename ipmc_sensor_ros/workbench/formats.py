@@ -54,8 +54,8 @@ Header
   ``known`` and are checked by
   :class:`~ipmc_sensor_ros.physics.parameters.MaterialParameters`.
 * ``sample_rate_hz`` (optional, time series only): nominal sampling rate, Hz;
-  it must agree within 1 % with the rate the time stamps say (their least-squares slope
-  against their sample-clock slots: :mod:`.stamps`).
+  it must agree with ``1 / median(diff(time_s))`` within 1 % (without it, the rate the
+  stamps say is taken: :func:`~.stamps.measured_rate_hz`).
 * Every other key is kept, as a string, in ``extra``.
 * Known numeric keys must be finite decimal numbers (``1e-3``, ``0.022``);
   NaN, Inf, units (``22 mm``) and empty values are errors.

@@ -57,8 +57,8 @@ def measured_rate_hz(time_s) -> float:
     """
     Return the sample rate of stamps ``time_s`` (increasing, at least 2), Hz.
 
-    The inverse slope of the stamps against their slots (module docstring), rounded to the
-    decimal of its standard error (the digits the stamps support; at most
+    The inverse slope of the stamps against their slots (module docstring), rounded to two
+    significant digits of its standard error (the digits the stamps support; at most
     :data:`~.measurements.RATE_DIGITS` significant).  When a stamp has no slot of its own, or
     fewer than 3 stamps are given, the inverse of the median spacing.
     """
@@ -73,4 +73,4 @@ def measured_rate_hz(time_s) -> float:
     rate_std = rate * slope_std / slope
     if not math.isfinite(rate_std) or rate_std <= 0.0:
         return round_rate_hz(rate)
-    return round_rate_hz(round(rate, max(0, -math.floor(math.log10(rate_std)))))
+    return round_rate_hz(round(rate, max(0, 1 - math.floor(math.log10(rate_std)))))

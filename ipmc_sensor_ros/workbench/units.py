@@ -48,8 +48,14 @@ def to_si(value, factor: float):
     arr = np.asarray(value, dtype=float)
     out = np.array(arr * factor, dtype=float)           # NaN and Inf as they were
     finite = np.isfinite(arr)
-    out[finite] = [float(f'{v!r}e{exponent}') for v in arr[finite].tolist()]
+    out[finite] = [_shifted(repr(v), exponent) for v in arr[finite].tolist()]
     return out if arr.ndim else float(out)
+
+
+def _shifted(text: str, exponent: int) -> float:
+    """Return the decimal ``text`` (a float's repr) times 10**exponent, rounded once."""
+    mantissa, _, power = text.partition('e')
+    return float(f'{mantissa}e{int(power or 0) + exponent}')
 
 
 def decimal_to_si(value: str | float, factor: float) -> float:
