@@ -52,9 +52,10 @@ def test_saved_params_list_the_data_in_natural_order(sweep, tmp_path):
 
 def test_a_model_the_fit_found_inadequate_is_saved_with_that_said(sweep, tmp_path, capsys):
     """
+    A model the chi-square test refuses is saved with that said, on the line and in the file.
+
     The sweep has a 2 ms delay the fitted model lacks (10 degrees at 13 Hz, far above the
-    noise): the save line says the model is inadequate, and so does the file wherever it is
-    loaded (the node's and estimate's model_file line).
+    noise); the file says so wherever it is loaded (the node's and estimate's model_file line).
     """
     saved = tmp_path / 'm.yaml'
     assert main(['fit', str(sweep), '--free', 'alpha0', '--save-model', str(saved)]) == 0
