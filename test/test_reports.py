@@ -37,7 +37,7 @@ def h1_records():
 
 def test_compare_report(h1_records, tmp_path):
     cmp = compare_records(h1_records, lambda r: r.model)
-    pts = {'slim': [r.point for r in cmp.records if r.point]}
+    pts = {'slim': [tone.point for r in cmp.records for tone in r.tones]}
     index = compare_report(
         tmp_path, cmp, 'h1', pts, {'slim': {'model': h1_records[0].model.frequency_response}}
     )

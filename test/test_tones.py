@@ -7,9 +7,14 @@ sensor times s, evaluated at each tone; not the package's models), 1.5 kHz, 10 s
 """
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
+from ipmc_sensor_ros.physics.model import SensorModel
+from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
+from ipmc_sensor_ros.workbench.compare import compare_records
 from ipmc_sensor_ros.workbench.freqresp import NotPeriodic
 from ipmc_sensor_ros.workbench.tones import tone_responses
 
@@ -17,10 +22,13 @@ FS = 1500.0
 T = np.arange(0.0, 10.0, 1.0 / FS)
 
 
-def _response(f_hz):
-    """H(j 2 pi f) = k s / (1 + s / (2 pi 20 Hz)), A/m: a sensor's shape, chosen here."""
-    s = 2j * np.pi * np.asarray(f_hz, float)
+def _transfer(s):
+    """H(s) = k s / (1 + s / (2 pi 20 Hz)), A/m: a sensor's shape, chosen here."""
     return 3e-4 * s / (1.0 + s / (2 * np.pi * 20.0))
+
+
+def _response(f_hz):
+    return _transfer(2j * np.pi * np.asarray(f_hz, float))
 
 
 def _record(tones, noise_a=1e-9, seed=0):
@@ -111,3 +119,29 @@ def test_a_rest_and_a_start_up_before_the_tones_are_dropped_and_fit_reads_both()
                       known={}, sample_rate_hz=FS, time_s=T, current_a=i, deflection_m=w)
     (group,) = groups_from([data])
     assert [round(p.frequency_hz, 2) for p in group.points] == [3.0, 7.0]
+
+
+def test_compare_reads_each_tone_as_fit_does():
+    """
+    A multi-sine record is compared at each tone (compare read none before).
+
+    The model here is the record's own H (errors within their sd: 4 sd allowed on each of
+    four numbers); one 10 % too strong is 0.83 dB off at both tones, flagged in their bands.
+    """
+    w, i = _record([(3.0, 0.5e-3, 0.0), (7.0, 0.3e-3, 0.4)])
+    rec = SimpleNamespace(time_s=T, deflection_m=w, current_a=i, sample='slim',
+                          path='shaker.csv')
+    model = SensorModel(PAPER_SAMPLES['slim'])
+    for gain, off_db in ((1.0, 0.0), (1.1, -20 * np.log10(1.1))):
+        cmp = compare_records([rec], lambda r: model,
+                              transfer_for=lambda r: lambda s: gain * _transfer(s))
+        tones = cmp.records[0].tones
+        assert [round(t.frequency_hz, 2) for t in tones] == [3.0, 7.0]
+        for t in tones:
+            assert abs(t.mag_error_db - off_db) < 4 * t.mag_sd_db
+            assert abs(t.phase_error_deg) < 4 * t.phase_sd_deg
+        assert [len(r['tones']) for r in cmp.to_json()['records']] == [2]
+        table = cmp.summary().splitlines()
+        assert '3' in table[1].split()[2] and table[2].split()[0] == '7'
+        bands = {c['label']: c['flagged'] for c in cmp.where['frequency_band']}
+        assert bands == {'2-5 Hz': gain != 1.0, '5-10 Hz': gain != 1.0}

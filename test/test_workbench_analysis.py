@@ -148,7 +148,8 @@ def test_h1_model_on_h2_data_fails_where_expected():
     # ... and on short the complex response error grows with frequency (high-frequency failure).
     short = [r for r in wrong.records if r.sample == 'short']
     log_err = [
-        np.hypot(r.mag_error_db * np.log(10) / 20, np.radians(r.phase_error_deg)) for r in short
+        np.hypot(r.tones[0].mag_error_db * np.log(10) / 20, np.radians(r.tones[0].phase_error_deg))
+        for r in short
     ]
     assert log_err[-1] > 2 * log_err[0]
     assert any(c['flagged'] for c in wrong.where['frequency_band'] if c['label'].startswith('10'))

@@ -163,7 +163,8 @@ def _cmd_compare(args) -> int:
         cmp = compare_records(recs, model_for, settle_s=args.settle)
     print(cmp.summary())
     print('  fit % = 100 (1 - error); error = ||y - ŷ|| / ||y - mean y|| of the current; '
-          'noise = error of a perfect model; dMag/dPhase = measured/model at f0 +- 1 sd')
+          'noise = error of a perfect model; dMag/dPhase = measured/model at f0 (at each tone of '
+          'a multi-sine record) +- 1 sd')
     write_json(args.json, {**cmp.to_json(), 'model': model_text})
     rd = report_dir(args.report)
     if rd:
@@ -171,8 +172,7 @@ def _cmd_compare(args) -> int:
 
         pts, curves = {}, {}
         for r, rec in zip(cmp.records, recs):
-            if r.point is not None:
-                pts.setdefault(r.sample, []).append(r.point)
+            pts.setdefault(r.sample, []).extend(tone.point for tone in r.tones)
             curves.setdefault(r.sample, {'model': rec.model.frequency_response})
         print(f'report: {compare_report(rd, cmp, model_text, pts, curves)}')
     return 0

@@ -17,7 +17,9 @@ Metrics (per record and over all records)
       measurement noise (residual of a harmonic fit for periodic records,
       else the scaled MAD of second differences);
     * per-frequency magnitude (dB) and phase (deg) error at each record's
-      excitation fundamental, with the measurement's standard uncertainty;
+      excitation fundamental, or at each tone of a multi-sine record
+      (:func:`~.tones.tone_responses`, as ``fit`` reads it), with the measurement's
+      standard uncertainty;
     * residual tests (MATLAB ``resid``): autocorrelation of the residual at lags
       1..``max_lag`` and its cross-correlation with the input velocity at lags
       -max_lag..max_lag, against the 99 % bound 2.58/sqrt(N).
@@ -39,11 +41,12 @@ from ..physics.model import SensorModel
 from ..simulation.convolution import lti_response_fft
 from .adequacy import magnitude_flags
 from .blas import single_threaded_blas
-from .freqresp import FrequencyPoint, fundamental_response
+from .freqresp import FrequencyPoint
 from .metrics import fit_percent, noise_rms
+from .tones import tone_responses
 
-__all__ = ['RecordComparison', 'Comparison', 'compare_records', 'FREQUENCY_BANDS_HZ', 'BOUND99',
-           'normalised_cross_correlation']
+__all__ = ['ToneError', 'RecordComparison', 'Comparison', 'compare_records', 'FREQUENCY_BANDS_HZ',
+           'BOUND99', 'normalised_cross_correlation']
 
 FREQUENCY_BANDS_HZ = ((0.0, 2.0), (2.0, 5.0), (5.0, 10.0), (10.0, 20.0), (20.0, np.inf))
 #: Two-sided 99 % quantile of N(0, 1): a white residual's correlation stays in +-BOUND99/sqrt(N).
@@ -99,6 +102,42 @@ def normalised_cross_correlation(a: np.ndarray, b: np.ndarray, lags: np.ndarray)
     return np.asarray(out) / den if den > 0 else np.zeros(len(lags))
 
 
+@dataclass(frozen=True)
+class ToneError:
+    """The measured response at one tone of a record against the model's (measured / model)."""
+
+    point: FrequencyPoint
+    model_response: complex
+    mag_error_db: float
+    phase_error_deg: float
+    mag_sd_db: float
+    phase_sd_deg: float
+
+    @property
+    def frequency_hz(self) -> float:
+        return self.point.frequency_hz
+
+    @classmethod
+    def of(cls, point: FrequencyPoint, transfer) -> 'ToneError':
+        """Return the error of ``transfer`` (the model's H(s)) at a measured ``point``."""
+        hm = complex(transfer(np.array([2j * np.pi * point.frequency_hz]))[0])
+        ratio = point.response / hm
+        return cls(point, hm, float(20 * np.log10(abs(ratio))),
+                   float(np.degrees(np.angle(ratio))), float(20 / np.log(10) * point.sd_log_mag),
+                   float(np.degrees(point.sd_phase_rad)))
+
+    def to_json(self) -> dict:
+        return {'frequency_hz': self.frequency_hz, 'mag_error_db': self.mag_error_db,
+                'mag_sd_db': self.mag_sd_db, 'phase_error_deg': self.phase_error_deg,
+                'phase_sd_deg': self.phase_sd_deg}
+
+    def text(self) -> str:
+        """Return the table's frequency, dMag and dPhase columns ({} for the others)."""
+        dm = f'{self.mag_error_db:+6.2f}+-{self.mag_sd_db:.2f}'
+        dp = f'{self.phase_error_deg:+6.2f}+-{self.phase_sd_deg:.2f}'
+        return f'{self.frequency_hz:7.3g} {{}} {dm:>14} {dp:>14}'
+
+
 @dataclass
 class RecordComparison:
     source: str
@@ -110,12 +149,8 @@ class RecordComparison:
     fit_percent: float
     error: float
     noise_floor: float
-    point: FrequencyPoint | None
-    model_response: complex | None
-    mag_error_db: float | None
-    phase_error_deg: float | None
-    mag_sd_db: float | None
-    phase_sd_deg: float | None
+    #: the record's fundamental, or each tone of a multi-sine record (none: not periodic)
+    tones: list[ToneError]
     whiteness: dict
     input_correlation: dict
     windows: list[dict] = field(default_factory=list)
@@ -137,9 +172,7 @@ class Comparison:
             'records': [{
                 'source': r.source, 'sample': r.sample, 'error': r.error,
                 'fit_percent': r.fit_percent, 'noise_floor': r.noise_floor,
-                'frequency_hz': r.point.frequency_hz if r.point else None,
-                'mag_error_db': r.mag_error_db, 'mag_sd_db': r.mag_sd_db,
-                'phase_error_deg': r.phase_error_deg, 'phase_sd_deg': r.phase_sd_deg,
+                'tones': [tone.to_json() for tone in r.tones],
                 'whiteness': r.whiteness, 'input_correlation': r.input_correlation,
             } for r in self.records],
             'where': self.where,
@@ -151,17 +184,11 @@ class Comparison:
             f"{'dMag dB':>14} {'dPhase deg':>14}"
         ]
         for r in self.records:
-            f0 = f'{r.point.frequency_hz:7.3g}' if r.point else '      -'
-            dm = (
-                f'{r.mag_error_db:+6.2f}+-{r.mag_sd_db:.2f}' if r.mag_error_db is not None else '-'
-            )
-            dp = (
-                f'{r.phase_error_deg:+6.2f}+-{r.phase_sd_deg:.2f}'
-                if r.phase_error_deg is not None
-                else '-'
-            )
-            lines.append(f'{_short(r.source):<28} {r.sample:<8} {f0} {r.fit_percent:7.2f} '
-                         f'{r.error:7.4f} {r.noise_floor:7.4f} {dm:>14} {dp:>14}')
+            cells = f'{r.fit_percent:7.2f} {r.error:7.4f} {r.noise_floor:7.4f}'
+            first = r.tones[0].text() if r.tones else f"      - {{}} {'-':>14} {'-':>14}"
+            lines.append(f'{_short(r.source):<28} {r.sample:<8} ' + first.format(cells))
+            lines += [f"{'':<28} {'':<8} " + tone.text().format(' ' * 23)
+                      for tone in r.tones[1:]]
         lines.append(f'overall: fit {self.fit_percent:.2f} %, error {self.error:.4f} '
                      f'(noise floor {self.noise_floor:.4f})')
         flagged = [
@@ -215,9 +242,10 @@ def _compare_records(records, model_for, settle_s, max_lag, n_windows, transfer_
         tt, yy, yh, ww = t[keep], y[keep], y_hat_full[keep], w[keep]
         del y_hat_full, keep
         try:
-            point = fundamental_response(tt, ww, yy, source=rec.path)
+            tones = [ToneError.of(p, transfer)
+                     for p in tone_responses(tt, ww, yy, source=rec.path)]
         except ValueError:
-            point = None
+            tones = []
         fp = fit_percent(yy, yh)
         den = np.linalg.norm(yy - yy.mean())
         noise = noise_rms(tt, ww, yy) * np.sqrt(yy.size) / den if den > 0 else float('nan')
@@ -231,15 +259,6 @@ def _compare_records(records, model_for, settle_s, max_lag, n_windows, transfer_
         ccf = normalised_cross_correlation(centred, vel, xl)
         del centred, vel
         bound = BOUND99 / np.sqrt(resid.size)
-        mag_err = ph_err = mag_sd = ph_sd = None
-        hm = None
-        if point is not None:
-            hm = complex(transfer(np.array([2j * np.pi * point.frequency_hz]))[0])
-            ratio = point.response / hm
-            mag_err = float(20 * np.log10(abs(ratio)))
-            ph_err = float(np.degrees(np.angle(ratio)))
-            mag_sd = float(20 / np.log(10) * point.sd_log_mag)
-            ph_sd = float(np.degrees(point.sd_phase_rad))
         windows = []
         edges = np.linspace(tt[0], tt[-1], n_windows + 1)
         for a, b in zip(edges[:-1], edges[1:]):
@@ -258,8 +277,7 @@ def _compare_records(records, model_for, settle_s, max_lag, n_windows, transfer_
         out.append(RecordComparison(
             source=str(rec.path), sample=str(getattr(rec, 'sample', '') or model.geometry.name),
             time_s=tt, measured_a=yy, predicted_a=yh, deflection_m=ww, fit_percent=fp,
-            error=float(1 - fp / 100), noise_floor=float(noise), point=point, model_response=hm,
-            mag_error_db=mag_err, phase_error_deg=ph_err, mag_sd_db=mag_sd, phase_sd_deg=ph_sd,
+            error=float(1 - fp / 100), noise_floor=float(noise), tones=tones,
             whiteness={'max_abs': float(np.max(np.abs(acf))), 'bound99': float(bound),
                        'fraction_outside': float(np.mean(np.abs(acf) > bound)),
                        'passed': bool(np.mean(np.abs(acf) > bound) <= 0.05)},
@@ -293,13 +311,14 @@ def _compare_records(records, model_for, settle_s, max_lag, n_windows, transfer_
                       magnitude_flags=magnitude_flags(records, model_for))
 
 
-def _freq_cell(label: str, recs: list[RecordComparison]) -> dict:
-    mags = np.array([r.mag_error_db for r in recs])
-    phs = np.array([r.phase_error_deg for r in recs])
-    msd = np.array([r.mag_sd_db for r in recs])
-    psd = np.array([r.phase_sd_deg for r in recs])
+def _freq_cell(label: str, tones: list[ToneError]) -> dict:
+    mags = np.array([r.mag_error_db for r in tones])
+    phs = np.array([r.phase_error_deg for r in tones])
+    msd = np.array([r.mag_sd_db for r in tones])
+    psd = np.array([r.phase_sd_deg for r in tones])
     flagged = bool(np.any(np.abs(mags) > 3 * msd) or np.any(np.abs(phs) > 3 * psd))
-    return {'label': label, 'n': len(recs), 'rms_mag_error_db': float(np.sqrt(np.mean(mags ** 2))),
+    return {'label': label, 'n': len(tones),
+            'rms_mag_error_db': float(np.sqrt(np.mean(mags ** 2))),
             'rms_phase_error_deg': float(np.sqrt(np.mean(phs ** 2))),
             'max_mag_z': float(np.max(np.abs(mags) / np.maximum(msd, 1e-12))),
             'max_phase_z': float(np.max(np.abs(phs) / np.maximum(psd, 1e-12))), 'flagged': flagged}
@@ -313,17 +332,17 @@ def _error_cell(label: str, errors: list[float], floors: list[float]) -> dict:
 
 
 def _where_it_fails(recs: list[RecordComparison]) -> dict:
-    with_point = [r for r in recs if r.point is not None]
+    tones = [tone for r in recs for tone in r.tones]
     by_band = []
     for lo, hi in FREQUENCY_BANDS_HZ:
-        sel = [r for r in with_point if lo <= r.point.frequency_hz < hi]
+        sel = [tone for tone in tones if lo <= tone.frequency_hz < hi]
         if sel:
             by_band.append(_freq_cell(f'{lo:g}-{hi:g} Hz', sel))
     by_sample = []
     for name in sorted({r.sample for r in recs}):
         sel = [r for r in recs if r.sample == name]
         cell = _error_cell(name, [r.error for r in sel], [r.noise_floor for r in sel])
-        sp = [r for r in sel if r.point is not None]
+        sp = [tone for r in sel for tone in r.tones]
         if sp:
             fc = _freq_cell(name, sp)
             cell.update({k: fc[k] for k in ('rms_mag_error_db', 'rms_phase_error_deg')})

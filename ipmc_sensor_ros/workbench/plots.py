@@ -254,15 +254,15 @@ def plot_residual_spectrum(out_dir: Path, name: str, records: Sequence,
 def plot_failure_map(out_dir: Path, name: str, records: Sequence) -> str:
     """Heat map of |error| / sd per sample and excitation frequency (magnitude and phase)."""
     plt = _plt()
-    recs = [r for r in records if r.point is not None]
-    samples = sorted({r.sample for r in recs})
-    freqs = sorted({round(r.point.frequency_hz, 3) for r in recs})
+    tones = [(r.sample, tone) for r in records for tone in r.tones]
+    samples = sorted({sample for sample, _ in tones})
+    freqs = sorted({round(tone.frequency_hz, 3) for _, tone in tones})
     zm = np.full((len(samples), len(freqs)), np.nan)
     zp = np.full_like(zm, np.nan)
-    for r in recs:
-        i, j = samples.index(r.sample), freqs.index(round(r.point.frequency_hz, 3))
-        zm[i, j] = abs(r.mag_error_db) / max(r.mag_sd_db, 1e-12)
-        zp[i, j] = abs(r.phase_error_deg) / max(r.phase_sd_deg, 1e-12)
+    for sample, tone in tones:
+        i, j = samples.index(sample), freqs.index(round(tone.frequency_hz, 3))
+        zm[i, j] = abs(tone.mag_error_db) / max(tone.mag_sd_db, 1e-12)
+        zp[i, j] = abs(tone.phase_error_deg) / max(tone.phase_sd_deg, 1e-12)
     fig, axes = plt.subplots(2, 1, figsize=(8, 2.4 + 1.0 * max(len(samples), 1)))
     for ax, z, what in ((axes[0], zm, 'magnitude'), (axes[1], zp, 'phase')):
         im = ax.imshow(

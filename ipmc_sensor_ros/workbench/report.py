@@ -132,7 +132,7 @@ def compare_report(
         [
             source_label(r.source),
             r.sample,
-            f'{r.point.frequency_hz:.3g}' if r.point else '-',
+            ', '.join(f'{tone.frequency_hz:.3g}' for tone in r.tones) or '-',
             f'{r.fit_percent:.2f}',
             f'{r.error:.4f}',
             f'{r.noise_floor:.4f}',
