@@ -131,7 +131,8 @@ def prepare(records: Sequence[Record], *, settle_s: float = 0.5, max_rows_per_re
             )
         idx = np.flatnonzero(keep)
         step = max(1, int(np.ceil(idx.size / max_rows_per_record)))
-        rows = idx[::step]
+        rows = np.arange(idx[0], t.size, step)          # one progression (fast row path),
+        rows = rows[keep[rows]]                         # without the filled slots
         x, n, fs, n_pad = padded_record(t, w, pad_s)
         f_all = np.fft.rfftfreq(n, 1.0 / fs)
         bins = np.arange(1, f_all.size)
@@ -293,6 +294,20 @@ def _lagrange4(p: PreparedRecord) -> tuple[np.ndarray, np.ndarray]:
     return j, w
 
 
+def _decimation(p: PreparedRecord) -> tuple[int, int]:
+    """
+    Return (k0, g): the rows lie on ``k0 + j g``, g the largest power of two dividing n_fft.
+
+    Every row's distance from the first counts (rows skip a record's filled slots: a
+    decimation read from the first two rows' step put the others a sample off).
+    """
+    k0 = int(p.rows[0])
+    step, g = int(np.gcd.reduce(p.rows - k0)) or 1, 1
+    while step % (2 * g) == 0 and p.n_fft % (2 * g) == 0:
+        g *= 2
+    return k0, g
+
+
 def _row_matrix(p: PreparedRecord, chunk: int = 32) -> np.ndarray:
     """
     Return M (rows x grid, complex) with ``irfft(X H)[p.rows] = Re(M @ H_grid)``.
@@ -305,11 +320,7 @@ def _row_matrix(p: PreparedRecord, chunk: int = 32) -> np.ndarray:
     record and 512 points) and the nearest singularity of H(exp(v)) a distance r from the
     real axis (pi/2 for real poles), the error is about (h/r)^4 relative, 2e-8 for real poles.
     """
-    n, k0 = p.n_fft, int(p.rows[0])
-    step = int(p.rows[1] - p.rows[0]) if p.rows.size > 1 else 1
-    g = 1
-    while step % (2 * g) == 0 and n % (2 * g) == 0:
-        g *= 2
+    n, (k0, g) = p.n_fft, _decimation(p)
     m_len = n // g
     k = p.bins
     xf = p.x_bins * np.where(k == n // 2, 1.0, 2.0) * np.exp(2j * np.pi * k * k0 / n)
@@ -345,16 +356,12 @@ def _rows_from_spectrum(p: PreparedRecord, y_bins: np.ndarray, rows: np.ndarray)
     """
     Return ``irfft(y)[rows]`` without the full inverse FFT.
 
-    Rows lie on the progression ``p.rows[0] + j g`` (g = the largest power of two dividing
-    both the row step and ``n_fft``): the spectrum, shifted to start at ``p.rows[0]``, is
-    folded (aliased) onto ``n_fft / g`` bins, whose inverse FFT is exactly the g-decimated
-    sequence (DFT decimation identity); g-fold fewer FFT points.
+    Rows lie on the progression ``p.rows[0] + j g`` (:func:`_decimation`): the spectrum,
+    shifted to start at ``p.rows[0]``, is folded (aliased) onto ``n_fft / g`` bins, whose
+    inverse FFT is exactly the g-decimated sequence (DFT decimation identity); g-fold fewer
+    FFT points.
     """
-    n, k0 = p.n_fft, int(p.rows[0])
-    step = int(p.rows[1] - p.rows[0]) if p.rows.size > 1 else 1
-    g = 1
-    while step % (2 * g) == 0 and n % (2 * g) == 0:
-        g *= 2
+    n, (k0, g) = p.n_fft, _decimation(p)
     if p.fold is None:
         k = p.bins
         weight = np.where(k == n // 2, 1.0, 2.0)          # rfft half: conjugate pairs count twice
