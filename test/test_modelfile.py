@@ -106,7 +106,25 @@ def test_a_misspelt_key_is_named_with_the_one_it_is_near(tmp_path):
     doc = yaml.safe_load(path.read_text())
     doc['materal'] = doc.pop('material')
     path.write_text(yaml.safe_dump(doc))
-    with pytest.raises(ParameterError, match=r"m\.yaml: unknown key\(s\) \['materal'\] "
+    line = 1 + path.read_text().splitlines().index('materal:')
+    with pytest.raises(ParameterError, match=rf"m\.yaml:{line}: unknown key\(s\) \['materal'\] "
                                              r"\(known: .*\); did you mean 'material' for "
                                              r"'materal'\?"):
+        load_model(path)
+
+
+def test_a_wrong_effect_or_material_name_is_placed_on_its_line(tmp_path):
+    """The line of the item refused, and the name it is near (h2's implied first item aside)."""
+    path = tmp_path / 'm.yaml'
+    path.write_text('format: ipmc-model/1\nbase: h2\neffects:\n  - name: time_delay\n'
+                    '  - name: amplifier_bandwith\n    values: {corner_hz: 200}\n'
+                    'material: {diffusivity_m2_per_s: 3.3e-11}\n')
+    with pytest.raises(ParameterError, match=r'm\.yaml:5: effects: unknown effect '
+                                             r"'amplifier_bandwith'.*did you mean "
+                                             r"'amplifier_bandwidth'"):
+        load_model(path)
+    path.write_text(path.read_text().replace('bandwith', 'bandwidth').replace(
+        '{diffusivity', '{difusivity'))
+    with pytest.raises(ParameterError, match=r'm\.yaml:7: material: unknown material '
+                                             r"parameter.*did you mean 'diffusivity_m2_per_s'"):
         load_model(path)

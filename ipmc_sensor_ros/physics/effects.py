@@ -39,6 +39,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from ..errors import did_you_mean
 from .parameters import ParameterError, parse_number, short_repr
 
 __all__ = [
@@ -127,7 +128,7 @@ class Effect:
         if unknown:
             raise ParameterError(
                 f"effect '{self.name}': unknown parameter(s) {short_repr(unknown)}; "
-                f'known: {sorted(known)}'
+                f'known: {sorted(known)}' + did_you_mean(unknown, known)
             )
         out = self.defaults()
         for k, v in values.items():
@@ -228,7 +229,7 @@ def get_effect(name: str) -> Effect:
     except (KeyError, TypeError):
         raise ParameterError(f'unknown effect {short_repr(name)}; known: {sorted(EFFECTS)} '
                              "(a plugin defines more: --plugin FILE, node parameter 'plugins')"
-                             ) from None
+                             + did_you_mean([str(name)], EFFECTS)) from None
 
 
 def effect_parameter(effect_name: str, parameter_name: str) -> EffectParameter:

@@ -224,40 +224,74 @@ def save_model(path, model: SensorModel | None = None, *, effects: Sequence = ()
     return saved.save(path)
 
 
+def _at(path: Path, key: str, *more) -> str:
+    """
+    Return ``file:line`` of a key of the document (``a.b``: b under a; then list indices).
+
+    Read again only for an error message: ``file`` alone when the key is not found.
+    """
+    import yaml
+
+    try:
+        node = yaml.compose(path.read_text(encoding='utf-8-sig'), Loader=yaml.SafeLoader)
+        mark = None
+        for step in (*key.split('.'), *more):
+            if isinstance(node, yaml.MappingNode):
+                mark, node = next((k.start_mark, v) for k, v in node.value if k.value == step)
+            else:
+                node = node.value[step]
+                mark = node.start_mark
+        return f'{path}:{mark.line + 1}'
+    except Exception:                   # noqa: BLE001 (a message's place: never a new error)
+        return str(path)
+
+
 def _effect_items(path: Path, items: Any, key: str) -> list[tuple[str, dict]]:
     """``(name, values)`` of a list of ``{name, values}`` items; errors name file and key."""
     if items is None:
         return []
     if not isinstance(items, list):
-        raise ParameterError(f'{path}: {key}: must be a list of {{name, values}}')
+        raise ParameterError(f'{_at(path, key)}: {key}: must be a list of {{name, values}}')
     out = []
     for k, item in enumerate(items):
         if not isinstance(item, dict) or 'name' not in item or set(item) - {'name', 'values'}:
-            raise ParameterError(
-                f'{path}: {key}[{k}]: expected {{name: ..., values: {{...}}}}, got {item!r}')
+            raise ParameterError(f'{_at(path, key, k)}: {key}[{k}]: expected '
+                                 f'{{name: ..., values: {{...}}}}, got {item!r}')
         values = item.get('values') or {}
         if not isinstance(values, dict):
-            raise ParameterError(f'{path}: {key}[{k}].values: must be a mapping')
+            raise ParameterError(f'{_at(path, key, k)}: {key}[{k}].values: must be a mapping')
         out.append((str(item['name']), values))
     return out
 
 
-def _parse(path: Path, items, key: str) -> tuple[EffectSpec, ...]:
+def _parse(path: Path, items, key: str, listed_from: int = 0) -> tuple[EffectSpec, ...]:
+    """Parse effect items; an error names the line of the first item refused alone."""
     try:
         return parse_effects(items)
     except ParameterError as exc:
-        raise ParameterError(f'{path}: {key}: {exc}') from None
+        alone = [k for k, item in enumerate(items[listed_from:]) if not _parses(item)]
+        where = _at(path, key, *alone[:1])
+        raise ParameterError(f'{where}: {key}: {exc}') from None
+
+
+def _parses(item) -> bool:
+    try:
+        parse_effects([item])
+    except ParameterError:
+        return False
+    return True
 
 
 def _split_effects(path: Path, doc: dict, prov: dict):
     """(sensor effects, recording effects, notices) of a model document."""
     base = str(doc.get('base', 'h1')).lower()
     if base not in ('h1', 'h2'):
-        raise ParameterError(f"{path}: base: must be h1 or h2, got {doc.get('base')!r}")
+        raise ParameterError(f"{_at(path, 'base')}: base: must be h1 or h2, got "
+                             f"{doc.get('base')!r}")
     items = _effect_items(path, doc.get('effects'), 'effects')
     if base == 'h2':
         items.insert(0, ('surface_resistance', {}))
-    sensor, moved = split_by_scope(_parse(path, items, 'effects'))
+    sensor, moved = split_by_scope(_parse(path, items, 'effects', int(base == 'h2')))
     recording = _parse(path, _effect_items(path, prov.get('recording_effects'),
                                            'provenance.recording_effects'),
                        'provenance.recording_effects')
@@ -286,15 +320,16 @@ def load_model(path) -> ModelFile:
         raise ParameterError(f"{path}: not a model file (expected 'format: {MODEL_FORMAT}')")
     unknown = sorted(str(k) for k in set(doc) - set(_KEYS))
     if unknown:
-        raise ParameterError(f'{path}: unknown key(s) {unknown} (known: {", ".join(_KEYS)})'
+        raise ParameterError(f'{_at(path, unknown[0])}: unknown key(s) {unknown} '
+                             f'(known: {", ".join(_KEYS)})'
                              + did_you_mean(unknown, _KEYS))
     prov = doc.get('provenance') or {}
     if not isinstance(prov, dict):
-        raise ParameterError(f'{path}: provenance: must be a mapping')
+        raise ParameterError(f"{_at(path, 'provenance')}: provenance: must be a mapping")
     sensor, recording, notices = _split_effects(path, doc, prov)
     mat = doc.get('material')
     if not isinstance(mat, dict):
-        raise ParameterError(f'{path}: material: missing or not a mapping')
-    material = MaterialParameters.from_dict(mat, where=f'{path}: material')
+        raise ParameterError(f"{_at(path, 'material')}: material: missing or not a mapping")
+    material = MaterialParameters.from_dict(mat, where=f"{_at(path, 'material')}: material")
     prov = {k: v for k, v in prov.items() if k != 'recording_effects'}
     return ModelFile(sensor, material, recording, prov, str(path), notices)

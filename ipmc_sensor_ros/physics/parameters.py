@@ -26,7 +26,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, Mapping
 
-from ..errors import ParameterError
+from ..errors import ParameterError, did_you_mean
 
 __all__ = [
     'ParameterError',
@@ -83,7 +83,7 @@ def _check_keys(cls, data: Any, where: str, what: str, noun: str) -> str:
     unknown = sorted(str(k) for k in set(data) - names)
     if unknown:
         raise ParameterError(f'{prefix}unknown {what} {noun} {short_repr(unknown)}; '
-                             f'known: {sorted(names)}')
+                             f'known: {sorted(names)}' + did_you_mean(unknown, names))
     return prefix
 
 
