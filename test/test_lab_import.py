@@ -78,10 +78,14 @@ def test_free_text_header_kept_as_notes():
 def test_geometry_sources_and_conflict(tmp_path):
     by_flag = import_lab_file(LAB / 'daq_slim_5Hz.tsv', geometry='22 mm, 7mm, 0.36mm')
     assert by_flag.geometry == Geometry(0.022, 0.007, 0.00036)
+    assert 'geometry_from' not in by_flag.extra             # the user's own, not said back
     by_yaml = import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=LAB / 'run.yaml')
     assert by_yaml.geometry == SLIM
+    assert by_yaml.extra['geometry_from'].startswith('run metadata ')
+    assert by_yaml.extra['geometry_from'].endswith('run.yaml (length: 22 mm, width: 7 mm, '
+                                                   'thickness: 0.36 mm)')
     agree = import_lab_file(LAB / 'daq_slim_5Hz.tsv', meta=META, geometry='22mm,7mm,360um')
-    assert agree.geometry == SLIM
+    assert agree.geometry == SLIM and 'geometry_from' not in agree.extra
     with pytest.raises(DataFormatError, match=r'length conflict: the geometry argument says 11mm '
                                               r'\(0\.011 m\) but run metadata .*run\.json says '
                                               r'length_mm: 22 \(0\.022 m\)'):
@@ -274,7 +278,9 @@ def test_header_geometry_legacy_encoding_and_unused_columns_are_read_and_said(tm
     said = []
     import_lab_files([src], tmp_path / 'out', notice=said.append)
     assert any('read as cp1252' in s for s in said)
-    assert any('geometry from its header' in s and 'messung.txt:2' in s for s in said)
+    assert any(s.endswith('messung.txt: geometry from the file header (line 2)') for s in said)
+    head = (tmp_path / 'out' / 'messung.csv').read_text(encoding='utf-8').splitlines()
+    assert sum('Breite' in line for line in head) == 1      # the note; not again beside it
     # English names, one per line, unit in brackets or after a decimal-comma value
     other = tmp_path / 'run.txt'
     _windows_export(other, 'Length [mm]: 22\nwidth = 7 mm\nThickness: 0,36 mm\n',
@@ -282,7 +288,7 @@ def test_header_geometry_legacy_encoding_and_unused_columns_are_read_and_said(tm
     assert import_lab_file(other).geometry.thickness_m == pytest.approx(360e-6, rel=1e-12)
     # a header that disagrees with --geometry is refused naming both, never chosen between
     with pytest.raises(DataFormatError, match=r'length conflict: the geometry argument says '
-                                              r'.*but the file header says .*messung\.txt:2'):
+                                              r'.*but the file header says line 2: Länge'):
         import_lab_file(src, geometry='20mm,7mm,360um')
 
 

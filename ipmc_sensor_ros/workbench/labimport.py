@@ -46,7 +46,7 @@ import numpy as np
 
 from .formatread import incomplete_notes
 from .formats import write_timeseries
-from .labmeta import (geometry_from_header, meta_values, one_line, read_run_metadata,
+from .labmeta import (meta_values, one_line, read_run_metadata,
                       resolve_geometry)
 from .measurements import DataFormatError, PathLike, TimeSeries
 from .stamps import measured_rate_hz
@@ -282,7 +282,7 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
     name = one_line(sample or meta_sample or '')
     with TextSource(path, max_bytes=max_bytes, fallback_encoding=LEGACY_ENCODING) as source:
         notes, cells, line, delimiter, decimal = _find_table(path, source)
-        geo = resolve_geometry(path, geometry, meta, meta_data, name, notes)
+        geo, geometry_from = resolve_geometry(path, geometry, meta, meta_data, name, notes)
         roles = _assign(path, cells, line, columns, current_gain_a_per_v is not None)
         factors = {role: _factor(path, line, role, cells[k], unit, current_gain_a_per_v)
                    for role, (k, unit) in roles.items()}
@@ -310,9 +310,9 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
                              for k, (_, n) in enumerate(notes)}
     extra['lab_columns'] = one_line(', '.join(f'{role}={cells[k]}'
                                               for role, (k, _) in roles.items()))
-    header_geometry = [text for _, text in geometry_from_header(path, notes).values()]
-    if header_geometry:
-        extra['geometry_header'] = one_line('; '.join(header_geometry))
+    if geometry_from:
+        extra['geometry_from'] = one_line('; '.join(f"{source} ({', '.join(texts)})"
+                                                    for source, texts in geometry_from.items()))
     if source.encoding != 'utf-8':
         extra['text_encoding'] = source.encoding
     if repeated.size:
@@ -343,7 +343,7 @@ _NOTICES = (
                    'node refuses such a sample too)'),
     ('meta_keys_left_out', 'run metadata key(s) not kept as notes (a header key is a letter, '
                            "then letters, digits, '_', '.' or '-'): {}"),
-    ('geometry_header', 'geometry from its header: {}'),
+    ('geometry_from', 'geometry from {}'),
 )
 
 

@@ -184,7 +184,7 @@ def geometry_from_header(path, notes) -> dict[str, tuple[float, str]]:
             if not m:
                 continue
             part, unit = HEADER_GEOMETRY_NAMES[m.group(1).lower()], m.group(2) or m.group(4)
-            where = f'{path}:{line}: {piece.strip()}'
+            where = f'line {line}: {piece.strip()}'
             try:
                 metres = parse_length(f'{m.group(3).replace(",", ".")} {unit}')
             except ValueError as exc:
@@ -210,12 +210,14 @@ def _flag_geometry(geometry) -> dict[str, tuple[float, str]]:
     return {p: (parse_length(v), v) for p, v in zip(GEOMETRY_PARTS, parts)}
 
 
-def resolve_geometry(path, geometry, meta, meta_data: dict, sample: str, notes) -> Geometry:
+def resolve_geometry(path, geometry, meta, meta_data: dict, sample: str, notes) -> tuple:
     """
     Return the geometry given by the argument, the run metadata and the header lines.
 
-    Two sources that give a part differently are refused naming both; a part none of them
-    gives is an error.
+    And where it came from other than the argument: ``{source: [texts as written]}`` (the
+    header's lines by number: their text is kept as notes; a part given twice alike is from
+    the first).  Two sources that give a part differently are
+    refused naming both; a part none of them gives is an error.
     """
     try:
         flag = _flag_geometry(geometry) if geometry is not None else {}
@@ -225,7 +227,7 @@ def resolve_geometry(path, geometry, meta, meta_data: dict, sample: str, notes) 
                (f'run metadata {meta}', _meta_geometry(meta, meta_data) if meta is not None
                 else {}),
                ('the file header', geometry_from_header(path, notes)))
-    values = {}
+    values, origin = {}, {}
     for part in GEOMETRY_PARTS:
         given = [(name, got[part]) for name, got in sources if part in got]
         for name, (metres, text) in given[1:]:
@@ -236,6 +238,11 @@ def resolve_geometry(path, geometry, meta, meta_data: dict, sample: str, notes) 
                                       'fix one of them')
         if given:
             values[part] = given[0][1][0]
+            name, (_, text) = given[0]
+            if name == sources[2][0]:
+                text = text.split(':')[0]      # 'line 2': its text is kept as a note
+            if name != sources[0][0] and text not in origin.setdefault(name, []):
+                origin[name].append(text)
     missing = [p for p in GEOMETRY_PARTS if p not in values]
     if missing:
         raise DataFormatError(path, None, f"no {', '.join(missing)}: give the geometry "
@@ -243,6 +250,7 @@ def resolve_geometry(path, geometry, meta, meta_data: dict, sample: str, notes) 
                               'metadata file (--meta) with length_mm, width_mm, thickness_um, '
                               "or header lines such as 'Length: 22 mm'")
     try:
-        return Geometry(values['length'], values['width'], values['thickness'], name=sample)
+        return Geometry(values['length'], values['width'], values['thickness'],
+                        name=sample), origin
     except ParameterError as exc:
         raise DataFormatError(path, None, f'geometry out of physical range: {exc}') from None
