@@ -1,7 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
 """The verdict's reason and the step list say what the search did, in numbers that agree."""
+import json
 from types import SimpleNamespace
 
+from ipmc_sensor_ros.cli.main import main
 from ipmc_sensor_ros.workbench.discovery import outside, search
 from ipmc_sensor_ros.workbench.discovery.verdict import Step
 
@@ -79,3 +81,25 @@ def test_an_effect_the_search_beside_c_s_names_again_is_not_listed_as_added_twic
     assert [(s.action, s.effect) for s in steps][-2:] == [
         ('kept', 'current_offset'), ('dropped', 'time_delay')]
     assert 'does not name it (held-out error 0.0463 without it)' in steps[-1].reason
+
+
+def test_a_search_that_ranked_nothing_says_why_instead_of_an_empty_table(tmp_path, capsys):
+    """The offset test used up --max-effects 1: the ranking's header stood over no rows."""
+    assert main(['simulate', '--out', str(tmp_path), '--samples', 'slim', '--frequencies', '5',
+                 '--duration', '4', '--effects', 'current_offset(offset_a=1e-7)']) == 0
+    capsys.readouterr()
+    js = tmp_path / 'd.json'
+    assert main(['diagnose', str(tmp_path / 'slim_5Hz.csv'), '--max-effects', '1',
+                 '--json', str(js)]) == 0
+    out = capsys.readouterr().out
+    assert ('first step: no effect ranked: --max-effects 1 used up by current_offset (the '
+            'offset test)') in out.splitlines()
+    assert 'rank effect' not in out
+    assert json.loads(js.read_text())['unranked'].startswith('--max-effects 1 used up')
+    # at the noise floor from the start (8.7 nA, p = 8e-5: not kept), the floor is the reason
+    assert main(['simulate', '--out', str(tmp_path / 'small'), '--samples', 'slim',
+                 '--frequencies', '5', '--duration', '4', '--effects',
+                 'current_offset(offset_a=1e-8)']) == 0
+    assert main(['diagnose', str(tmp_path / 'small' / 'slim_5Hz.csv')]) == 0
+    assert ('first step: no effect ranked: the held-out error 0.0100 is within 1.01 x the noise '
+            'floor 0.0100') in capsys.readouterr().out

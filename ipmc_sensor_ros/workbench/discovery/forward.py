@@ -93,12 +93,26 @@ def forward_search(state, completion: bool) -> None:
     offered again only in the ``completion`` pass (:mod:`.search`).
     """
     s = state.settings
+    if not state.first_ranking:
+        state.unranked = _unranked(state)
     while len(state.chosen) < s.max_effects and not state.at_floor():
         excluded = {st.effect for st in state.steps if st.action == 'dropped'}
         if not completion:
             excluded |= state.replaced
         if not forward_step(state, excluded):
             break
+
+
+def _unranked(state) -> str:
+    """Return why the forward search would rank no effect now ('' when it will rank)."""
+    s, names = state.settings, ', '.join(name for name, _ in state.chosen)
+    if len(state.chosen) >= s.max_effects:
+        return f'--max-effects {s.max_effects} used up by {names} (the offset test)'
+    if state.at_floor():
+        return (f'the held-out error {state.current.error:.4f} is within {s.stop_factor:g} x '
+                f'the noise floor {state.noise_floor:.4f}'
+                + (f' once {names} (the offset test) is in' if names else ''))
+    return ''
 
 
 def catalog_search(state) -> None:

@@ -162,4 +162,5 @@ def run_search(records, settings, priors, say) -> Diagnosis:
                      cv=state.cv, steps=state.steps, missing_effects=missing,
                      final=state.current, interference=state.lines,
                      offset_test=state.offset, line_test=state.line_test,
-                     kept_by=state.kept_by, correction=state.correction)
+                     kept_by=state.kept_by, correction=state.correction,
+                     unranked='' if state.first_ranking else state.unranked)

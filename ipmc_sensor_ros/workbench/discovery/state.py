@@ -40,6 +40,7 @@ class SearchState:
     chosen: list = field(default_factory=list)
     steps: list = field(default_factory=list)
     first_ranking: list = field(default_factory=list)
+    unranked: str = ''                  # why the search stopped before it ranked any effect
     first_ties: list = field(default_factory=list)
     late_ties: list = field(default_factory=list)
     replaced: set = field(default_factory=set)

@@ -31,6 +31,8 @@ def _lines_text(diag) -> list[str]:
 
 
 def _ranking_text(diag) -> list[str]:
+    if not diag.candidates:
+        return [f"first step: no effect ranked: {diag.unranked or 'none was tried'}"]
     out = [f"first step: {'rank':>4} {'effect':<24} {'error':>8} {'x better':>8} {'dBIC':>10}  "
            'params / flags']
     for k, c in enumerate(diag.candidates, 1):

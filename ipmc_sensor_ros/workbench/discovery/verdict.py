@@ -93,6 +93,7 @@ class Diagnosis:
     line_test: dict = field(default_factory=dict)
     kept_by: dict = field(default_factory=dict)
     correction: object | None = None      # :class:`~.correction.Correction` or None
+    unranked: str = ''                    # why ``candidates`` is empty (the search stopped)
 
     @property
     def final_model(self):
@@ -107,6 +108,7 @@ class Diagnosis:
                 'model': self.baseline.fit.models[0].describe(),
             },
             'candidates': [c.to_json(self.baseline) for c in self.candidates],
+            'unranked': self.unranked,
             'steps': [s.to_json() for s in self.steps],
             'final': {**final.to_json(), 'model': final.fit.models[0].describe()},
             'noise_floor': self.noise_floor,
