@@ -256,8 +256,8 @@ def test_a_defect_is_one_line_naming_where_and_a_batch_goes_on(
     """
     An exception the package did not raise on purpose is said in one line, not a traceback.
 
-    Not the user's input (those are ValueErrors naming the place: exit status 2) but a
-    defect: its type, text and the package line it passed, exit status 3.  In a batch of
+    Not the user's input (those are the package's errors, naming the place: exit status 2)
+    but a defect (a plain ValueError too, as numpy raises): its type, text and the package line it passed, exit status 3.  In a batch of
     inputs the one that meets it fails and the others are written (exit status 1).
     """
     import sys
@@ -275,6 +275,13 @@ def test_a_defect_is_one_line_naming_where_and_a_batch_goes_on(
     assert err.startswith('ipmc-model estimate: internal error (TypeError: unsupported operand')
     assert ' at cli/main.py:' in err                # the innermost package line it passed
     assert 'a defect of ipmc_sensor_ros, please report it' in err
+
+    def numpy_like(args):             # a ValueError no rule of ours raised: a defect too
+        raise ValueError('operands could not be broadcast together with shapes (3,) (4,)')
+    with monkeypatch.context() as m:
+        m.setattr(cli, 'check_outputs', numpy_like)
+        assert main(['estimate', str(short_run), '--out', str(tmp_path / 'a')]) == 3
+    assert 'internal error (ValueError: operands could not' in capsys.readouterr().err
 
     real = verb._checked_current
 

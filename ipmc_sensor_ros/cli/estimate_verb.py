@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import defect_text
+from ..errors import IpmcError, defect_text
 from ..estimation.limits import beyond_limit, deflection_limit_m
 from ..physics.parameters import ParameterError
 from .args import Progress, fmt_time_s, load_data, say, write_json
@@ -392,7 +392,7 @@ def cmd_estimate(args) -> int:
     for path in paths:
         try:
             summary.append(_estimate_one(args, path, base, explicit, cache))
-        except (ValueError, OSError) as exc:
+        except (IpmcError, OSError) as exc:
             text = printable(exc)
             if printable(path) not in text:
                 text = f'{printable(path)}: {text}'

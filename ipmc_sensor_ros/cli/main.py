@@ -13,7 +13,7 @@ import argparse
 import difflib
 import sys
 
-from ..errors import defect_text
+from ..errors import IpmcError, defect_text
 from . import data_verbs, info_verbs, model_verbs
 from .args import HelpFormatter
 from .outputs import check_outputs
@@ -66,10 +66,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         check_outputs(args)
         return int(args.func(args) or 0)
-    except (ValueError, OSError) as exc:   # ParameterError, DataFormatError, ... are ValueErrors
+    except (IpmcError, OSError) as exc:    # raised on purpose: the input, named, and its place
         print(f'ipmc-model {args.verb}: error: {exc}', file=sys.stderr)
         return 2
-    except Exception as exc:  # noqa: BLE001 - a defect: one line, exit status 3, no traceback
+    except Exception as exc:  # noqa: BLE001 - a defect (numpy's ValueError too): one line, 3
         print(f'ipmc-model {args.verb}: {defect_text(exc)}', file=sys.stderr)
         return 3
 

@@ -97,7 +97,7 @@ def parse_number(value: Any) -> float:
     if isinstance(value, bool):
         raise TypeError('a boolean is not a number')
     if isinstance(value, str) and not value.isascii():
-        raise ValueError(f'not an ASCII number: {short_repr(value)}')
+        raise ParameterError(f'not an ASCII number: {short_repr(value)}')
     return float(value)
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import DataError
 from ..physics.model import SensorModel
 
 __all__ = ['padded_record', 'lti_response_fft', 'predict_current', 'TRANSFER_CHUNK',
@@ -55,7 +56,7 @@ def lti_response_fft(transfer, time_s, deflection_m, pad_s: float = 2.0) -> np.n
     t = np.asarray(time_s, float)
     w = np.asarray(deflection_m, float)
     if t.size < 2:
-        raise ValueError('need at least two samples')
+        raise DataError('need at least two samples')
     x, n, fs, n_pad = padded_record(t, w, pad_s)
     if n > OVERLAP_SAVE_ABOVE and n_pad < OVERLAP_SAVE_FFT // 4:
         return _overlap_save(transfer, x, t.size, fs)

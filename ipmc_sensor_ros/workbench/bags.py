@@ -288,12 +288,12 @@ def write_bag(path: PathLike, timeseries: TimeSeries, storage: str = 'sqlite3',
 
     plugins = {'sqlite3': StoragePlugin.SQLITE3, 'mcap': StoragePlugin.MCAP}
     if storage not in plugins:
-        raise ValueError(f"storage must be 'sqlite3' or 'mcap', got {storage!r}")
+        raise ParameterError(f"storage must be 'sqlite3' or 'mcap', got {storage!r}")
     if int(block_size) != block_size or block_size < 1:
-        raise ValueError(f'block_size must be a positive integer, got {block_size!r}')
+        raise ParameterError(f'block_size must be a positive integer, got {block_size!r}')
     if deflection_msgtype not in (MULTIARRAY_TYPE, POINT_STAMPED_TYPE):
-        raise ValueError(f'deflection_msgtype must be {MULTIARRAY_TYPE!r} or '
-                         f'{POINT_STAMPED_TYPE!r}, got {deflection_msgtype!r}')
+        raise ParameterError(f'deflection_msgtype must be {MULTIARRAY_TYPE!r} or '
+                             f'{POINT_STAMPED_TYPE!r}, got {deflection_msgtype!r}')
     ts = timeseries
     if ts.n_samples and not (ts.time_s.min() >= 0.0 and ts.time_s.max() < 2.0 ** 31):
         raise DataFormatError(path, None, f'sample times must be >= 0 and < 2^31 s to be bag '

@@ -37,6 +37,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ..errors import DataError
 from ..physics.model import SensorModel
 from ..simulation.convolution import lti_response_fft
 from .adequacy import magnitude_flags
@@ -225,7 +226,7 @@ def _compare_records(records, model_for, settle_s, max_lag, n_windows, transfer_
     out: list[RecordComparison] = []
     for rec in records:
         if rec.deflection_m is None:
-            raise ValueError(f'{rec.path}: no deflection column: cannot compare')
+            raise DataError(f'{rec.path}: no deflection column: cannot compare')
         model = model_for(rec)
         transfer = transfer_for(rec) if transfer_for else model.transfer
         t, w, y = np.asarray(rec.time_s), np.asarray(rec.deflection_m), np.asarray(rec.current_a)
@@ -233,7 +234,7 @@ def _compare_records(records, model_for, settle_s, max_lag, n_windows, transfer_
         keep = t >= t[0] + settle_s
         n_keep = int(np.count_nonzero(keep))
         if n_keep < 16:
-            raise ValueError(
+            raise DataError(
                 f'{rec.path}: record shorter than settle time {settle_s} s + 16 samples'
             )
         first = t.size - n_keep

@@ -7,6 +7,7 @@ from typing import Sequence
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from ..errors import DataError
 from ..estimation.timebase import JITTER_FRACTION
 from ..interface.specs import defaults, ESTIMATOR_SPECS
 from ..physics.model import SensorModel
@@ -40,10 +41,10 @@ def records_from(series: Sequence[TimeSeries], material: MaterialParameters,
     out = []
     for ts in series:
         if not isinstance(ts, TimeSeries):
-            raise ValueError(f"{getattr(ts, 'path', ts)}: a time series is needed here "
-                             '(this is a frequency-response file)')
+            raise DataError(f"{getattr(ts, 'path', ts)}: a time series is needed here "
+                            '(this is a frequency-response file)')
         if ts.deflection_m is None:
-            raise ValueError(f'{ts.path}: no deflection column: cannot compare or fit')
+            raise DataError(f'{ts.path}: no deflection column: cannot compare or fit')
         model = SensorModel(ts.geometry, material_for(ts, material), effects)
         grid = on_sample_grid(ts.path, ts.time_s, ts.deflection_m, ts.current_a)
         t, (w, y), filled = grid or (ts.time_s, (ts.deflection_m, ts.current_a), None)
@@ -130,13 +131,13 @@ def groups_from(data: Sequence, min_periods: int = 2) -> list[FitGroup]:
             g.points.extend(frf_points(d))
         else:
             if d.deflection_m is None:
-                raise ValueError(f'{d.path}: no deflection column: cannot measure the response')
+                raise DataError(f'{d.path}: no deflection column: cannot measure the response')
             try:
                 g.points.extend(tone_responses(d.time_s, d.deflection_m, d.current_a,
                                                source=d.path, min_periods=min_periods))
             except ValueError as exc:
-                raise ValueError(f'{exc}; fit reads periodic records (a crank-slider, tones '
-                                 f'of a common fundamental): `ipmc-model diagnose DATA '
-                                 f'--save-model FILE` fits the material in the time domain '
-                                 f'on any record') from None
+                raise DataError(f'{exc}; fit reads periodic records (a crank-slider, tones '
+                                f'of a common fundamental): `ipmc-model diagnose DATA '
+                                f'--save-model FILE` fits the material in the time domain '
+                                f'on any record') from None
     return list(groups.values())

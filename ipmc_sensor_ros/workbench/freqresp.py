@@ -29,6 +29,7 @@ import numpy as np
 import scipy.signal as sig
 from scipy.optimize import minimize_scalar
 
+from ..errors import DataError
 from ..lti.discretize import USABLE_BAND_FRACTION
 
 __all__ = ['FrequencyPoint', 'fundamental_response', 'cross_spectral_response', 'harmonic_fit',
@@ -42,7 +43,7 @@ __all__ = ['FrequencyPoint', 'fundamental_response', 'cross_spectral_response', 
 MAX_APERIODIC_FRACTION = 0.1
 
 
-class NotPeriodic(ValueError):
+class NotPeriodic(DataError):
     """The deflection is not explained by harmonics of ``frequency_hz`` (its spectrum's peak)."""
 
     def __init__(self, text: str, frequency_hz: float):
@@ -207,11 +208,11 @@ def fundamental_response(time_s, deflection_m, current_a, *, frequency_hz: float
     w = np.asarray(deflection_m, float)
     i = np.asarray(current_a, float)
     if not (t.size == w.size == i.size) or t.size < 16:
-        raise ValueError(f'{source}: need at least 16 samples of time, deflection and current')
+        raise DataError(f'{source}: need at least 16 samples of time, deflection and current')
     fs = float((t.size - 1) / (t[-1] - t[0]))
     f0 = float(frequency_hz) if frequency_hz else _coarse_frequency(t, w, fs)
     if not f0 > 0:
-        raise ValueError(f'{source}: no excitation found in the deflection')
+        raise DataError(f'{source}: no excitation found in the deflection')
     duration = t[-1] - t[0] + 1.0 / fs
     if frequency_hz is None:
         # refine f0: minimise the residual of a 3-harmonic fit of the deflection
@@ -223,8 +224,8 @@ def fundamental_response(time_s, deflection_m, current_a, *, frequency_hz: float
         f0 = float(res.x)
     periods = int(np.floor(duration * f0 + 1e-9))
     if periods < min_periods:
-        raise ValueError(f'{source}: record holds {duration * f0:.2f} periods of {f0:.4g} Hz; '
-                         f'need at least {min_periods}')
+        raise DataError(f'{source}: record holds {duration * f0:.2f} periods of {f0:.4g} Hz; '
+                        f'need at least {min_periods}')
     n_keep = int(round(periods / f0 * fs))
     sl = slice(t.size - n_keep, t.size)
     tt, ww, ii = t[sl] - t[sl][0], w[sl], i[sl]

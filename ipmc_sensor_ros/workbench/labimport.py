@@ -44,6 +44,7 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
+from ..errors import ParameterError
 from .formatread import incomplete_notes
 from .formats import write_timeseries
 from .labmeta import (meta_values, one_line, read_run_metadata,
@@ -153,12 +154,12 @@ def parse_columns_spec(text: str) -> dict[str, str]:
         role, sep, name = item.partition('=')
         role, name = role.strip(), name.strip()
         if not sep or not name:
-            raise ValueError(f'columns: {item.strip()!r} is not role=column '
-                             '(e.g. time=Time [s],current=I (nA))')
+            raise ParameterError(f'columns: {item.strip()!r} is not role=column '
+                                 '(e.g. time=Time [s],current=I (nA))')
         if role not in ROLE_NAMES:
-            raise ValueError(f'columns: unknown role {role!r}; roles are {list(ROLE_NAMES)}')
+            raise ParameterError(f'columns: unknown role {role!r}; roles are {list(ROLE_NAMES)}')
         if role in out:
-            raise ValueError(f'columns: role {role!r} given twice')
+            raise ParameterError(f'columns: role {role!r} given twice')
         out[role] = name
     return out
 

@@ -16,7 +16,7 @@ from typing import Any, Union
 import numpy as np
 
 from ..physics.parameters import Geometry
-from ..errors import DataFormatError
+from ..errors import DataError, DataFormatError
 
 __all__ = ['DataFormatError', 'TimeSeries', 'FrequencyResponseData', 'PathLike',
            'RATE_DIGITS', 'round_rate_hz', 'geometry_label', 'sample_label']
@@ -54,9 +54,9 @@ def sample_label(data) -> str:
 def _vector(name: str, values: Any, n: int | None = None) -> np.ndarray:
     arr = np.array(values, dtype=float, copy=True)
     if arr.ndim != 1:
-        raise ValueError(f'{name} must be 1-D, got shape {arr.shape}')
+        raise DataError(f'{name} must be 1-D, got shape {arr.shape}')
     if n is not None and arr.size != n:
-        raise ValueError(f'{name} has {arr.size} values, expected {n}')
+        raise DataError(f'{name} has {arr.size} values, expected {n}')
     return arr
 
 
@@ -108,10 +108,10 @@ class TimeSeries:
             if self.deflection_alignment is None:
                 object.__setattr__(self, 'deflection_alignment', 'exact')
         elif self.deflection_alignment is not None:
-            raise ValueError('deflection_alignment given but deflection_m is None')
+            raise DataError('deflection_alignment given but deflection_m is None')
         if self.deflection_alignment not in (None, 'exact', 'linear'):
-            raise ValueError(f"deflection_alignment must be 'exact', 'linear' or None, "
-                             f'got {self.deflection_alignment!r}')
+            raise DataError(f"deflection_alignment must be 'exact', 'linear' or None, "
+                            f'got {self.deflection_alignment!r}')
         object.__setattr__(self, 'sample_rate_hz', round_rate_hz(self.sample_rate_hz))
         object.__setattr__(self, 'known', {str(k): float(v) for k, v in self.known.items()})
         object.__setattr__(self, 'extra', dict(self.extra))
@@ -179,7 +179,7 @@ class FrequencyResponseData:
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, _vector(name, getattr(self, name), f.size))
         if (self.gain_std_a_per_m is None) != (self.phase_std_deg is None):
-            raise ValueError('gain_std_a_per_m and phase_std_deg must be given together')
+            raise DataError('gain_std_a_per_m and phase_std_deg must be given together')
         object.__setattr__(self, 'known', {str(k): float(v) for k, v in self.known.items()})
         object.__setattr__(self, 'extra', dict(self.extra))
         object.__setattr__(self, 'path', str(self.path))

@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 
+from ..errors import DataError
 from ..estimation.timebase import START, Timebase, fit_line
 from .measurements import round_rate_hz
 
@@ -42,10 +43,10 @@ def stamp_steps(path: str, time_s, max_gap_s: float) -> np.ndarray | None:
         if i < t.size:
             step = base.admit(float(rel[i]))
             if step == START:
-                raise ValueError(f'{path}: no sample for {t[i] - t[i - 1]:.6g} s after t = '
-                                 f'{t[i - 1]:.6g} s, a gap longer than max_gap_s '
-                                 f'({max_gap_s:g} s): the motion in it is unknown; split the '
-                                 'record there')
+                raise DataError(f'{path}: no sample for {t[i] - t[i - 1]:.6g} s after t = '
+                                f'{t[i - 1]:.6g} s, a gap longer than max_gap_s '
+                                f'({max_gap_s:g} s): the motion in it is unknown; split the '
+                                'record there')
             if step < 1:
                 return None
             out.append(np.array([step]))

@@ -25,6 +25,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ..errors import DataError
 from ..physics.model import SensorModel
 from ..simulation.convolution import padded_record
 from .metrics import noise_rms
@@ -126,7 +127,7 @@ def prepare(records: Sequence[Record], *, settle_s: float = 0.5, max_rows_per_re
         if rec.filled is not None:
             keep &= ~rec.filled
         if keep.sum() < 32:
-            raise ValueError(
+            raise DataError(
                 f'{rec.path}: fewer than 32 samples after the {settle_s} s settle time'
             )
         idx = np.flatnonzero(keep)

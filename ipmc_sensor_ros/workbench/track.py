@@ -22,6 +22,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ..errors import DataError, ParameterError
 from ..physics.effects import get_effect
 from ..physics.model import SensorModel
 from ..physics.parameters import Geometry, MaterialParameters
@@ -74,10 +75,10 @@ def track_parameter(time_s, deflection_m, current_a, geometry: Geometry,
     i = np.asarray(current_a, float)
     step_s = step_s or window_s
     if not (window_s > 0 and step_s > 0):
-        raise ValueError('window_s and step_s must be > 0')
+        raise ParameterError('window_s and step_s must be > 0')
     if t[-1] - t[0] < window_s:
-        raise ValueError(f'{source}: record of {t[-1] - t[0]:.3g} s is shorter than one window '
-                         f'({window_s} s)')
+        raise DataError(f'{source}: record of {t[-1] - t[0]:.3g} s is shorter than one window '
+                        f'({window_s} s)')
     out: list[TrackPoint] = []
     current = material
     start = t[0]

@@ -15,6 +15,8 @@ from decimal import Decimal
 
 import numpy as np
 
+from ..errors import ParameterError
+
 __all__ = ['TIME_UNITS', 'LENGTH_UNITS', 'CURRENT_UNITS', 'VOLTAGE_UNITS', 'QUANTITY_UNITS',
            'SI_SYMBOL', 'unit_factor', 'to_si', 'decimal_to_si',
            'column_to_si', 'column_units', 'split_unit', 'parse_length']
@@ -118,11 +120,11 @@ def parse_length(text: str) -> float:
     """
     m = _LENGTH_VALUE.match(text)
     if not m or not m.group(1).isascii():
-        raise ValueError(f'{text.strip()!r} is not a length with a unit (e.g. 22mm, 360um)')
+        raise ParameterError(f'{text.strip()!r} is not a length with a unit (e.g. 22mm, 360um)')
     factor = unit_factor(m.group(2), LENGTH_UNITS)
     if factor is None:
-        raise ValueError(f'{text.strip()!r}: unknown length unit {m.group(2)!r} '
-                         f"(known: {', '.join(LENGTH_UNITS)})")
+        raise ParameterError(f'{text.strip()!r}: unknown length unit {m.group(2)!r} '
+                             f"(known: {', '.join(LENGTH_UNITS)})")
     return decimal_to_si(m.group(1), factor)
 
 

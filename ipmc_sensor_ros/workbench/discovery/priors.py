@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from typing import Sequence
 
+from ...errors import DataFormatError
 from ...physics.effects import EFFECTS
 
 __all__ = ['PRIOR_KEYS', 'PRIOR_FACTOR', 'priors_from_headers']
@@ -39,7 +40,7 @@ def priors_from_headers(series: Sequence) -> dict[tuple[str, str], float]:
             try:
                 out.setdefault(target, float(raw))
             except (TypeError, ValueError):
-                raise ValueError(
+                raise DataFormatError(
                     f"{ts.path}: header key '{key}' must be a number, got {raw!r}"
                 ) from None
     return out
