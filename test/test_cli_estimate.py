@@ -257,8 +257,9 @@ def test_a_defect_is_one_line_naming_where_and_a_batch_goes_on(
     An exception the package did not raise on purpose is said in one line, not a traceback.
 
     Not the user's input (those are the package's errors, naming the place: exit status 2)
-    but a defect (a plain ValueError too, as numpy raises): its type, text and the package line it passed, exit status 3.  In a batch of
-    inputs the one that meets it fails and the others are written (exit status 1).
+    but a defect (a plain ValueError too, as numpy raises): its type, text and the package
+    line it passed, exit status 3.  In a batch of inputs the one that meets it fails and the
+    others are written (exit status 1).
     """
     import sys
 
