@@ -7,8 +7,10 @@ from hypothesis import strategies as st
 
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_PARAMETERS, PAPER_SAMPLES, Geometry
-from ipmc_sensor_ros.lti.reduction import (ParameterError, eq55_poles_zeros, paper_eq55,
-                                           reduce_model, reduction_error, reduction_error_table)
+from ipmc_sensor_ros.lti.modal import modal_realisation
+from ipmc_sensor_ros.lti.reduction import (ParameterError, ReducedModel, eq55_poles_zeros,
+                                           paper_eq55, reduce_model, reduction_error,
+                                           reduction_error_table)
 
 MODELS = {name: SensorModel(g) for name, g in PAPER_SAMPLES.items()}
 
@@ -112,3 +114,38 @@ def test_eq55_of_h2_has_the_independently_computed_roots(sample):
 def test_h1_eq55_has_no_surface_resistance_factor():
     report = eq55_poles_zeros(SensorModel(PAPER_SAMPLES['slim'], effects=()))
     assert report['zeros'].size == 3 and report['poles'].size == 1
+
+
+@pytest.mark.parametrize('repeated', [2, 3, 4])
+def test_a_repeated_pole_is_realised_within_the_spread_and_estimated_on(repeated):
+    """
+    A fitted material's reduction had -3244.5375 rad/s twice: the estimator refused it.
+
+    Its m copies are spread 1e-3 apart about it, symmetric: the modal form's R_n(s) is the
+    zpk's within 1e-5 relative over 0.01 Hz-10 kHz (the O(e^2) bound of lti/modal.py).
+    """
+    poles = np.array([-328.7] + [-3244.5375] * repeated + [-2e5])
+    zeros = np.array([-276.6] + [-2693.0] * repeated + [-3.1e5])
+    red = ReducedModel(zeros_rad_s=zeros, poles_rad_s=poles, gain=2.5e-3, band_hz=(0.1, 50.0))
+    a, b, c, d = modal_realisation(red)
+    assert np.unique(np.diag(a)).size == poles.size
+    s = 2j * np.pi * np.logspace(-2, 4, 200)
+    modal = d + (c[None, :] * b[None, :] / (s[:, None] - np.diag(a)[None, :])).sum(axis=1)
+    zpk = 2.5e-3 * np.prod(s[:, None] - zeros, axis=1) / np.prod(s[:, None] - poles, axis=1)
+    assert np.max(np.abs(modal / zpk - 1.0)) < 1e-5
+
+
+def test_a_model_fitted_to_another_sensor_gives_an_estimator():
+    """The trial's fitted material (its order-4 reduction coalesces two poles) is estimated on."""
+    from ipmc_sensor_ros.estimation.deflection import DeflectionEstimator
+
+    fitted = PAPER_PARAMETERS.replace(diffusivity_m2_per_s=2.8302879469140467e-11,
+                                      permittivity_f_per_m=0.0002802611783121985,
+                                      charge_stress_coupling_j_per_c=42.80358862430402)
+    model = SensorModel(PAPER_SAMPLES['slim'], fitted, ('surface_resistance',))
+    poles = reduce_model(model, 4).poles_rad_s.real
+    assert np.min(np.abs(np.diff(np.sort(poles)))) < 1e-6 * np.max(np.abs(poles))
+    est = DeflectionEstimator(model, 1000.0)
+    t = np.arange(2000) / 1000.0
+    _, w = est.process(t, 1e-7 * np.sin(2 * np.pi * 5 * t))
+    assert w.size == t.size and np.all(np.isfinite(w))

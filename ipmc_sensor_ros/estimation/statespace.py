@@ -71,11 +71,13 @@ from scipy.linalg import expm, solve_discrete_lyapunov, solve_sylvester
 
 from ..errors import ParameterError
 from ..lti.discretize import chain, van_loan
+from ..lti.modal import modal_realisation
 from ..lti.reduction import ReducedModel
 from .config import EstimatorConfig
 from .phasors import line_frequencies_hz, motion_lines, write_phasors
 
 __all__ = ['StateSpaceModel', 'modal_realisation']
+
 
 #: At a rest sample the working point's prior is widened to this many ``motion_rms_m`` before it
 #: is measured equal to the held deflection: wide enough that the held level, not the old
@@ -94,27 +96,6 @@ MOTION_WOBBLE_HZ = 0.5
 #: off_slot_rows`; the nearest is used): a sample's instant to 1/2048 of a period, 0.5 us at
 #: 1 kHz, about the resolution of a float stamp of today's epoch time (0.24 us).
 OFF_SLOT_STEPS = 1024
-
-
-def modal_realisation(reduced: ReducedModel):
-    """
-    Return R_n(s) = D + sum_i r_i / (s - p_i) (distinct real poles) as (A, B, C, D).
-
-    A diagonal realisation: each state is a first-order lag of the velocity.
-    """
-    z = np.real(np.asarray(reduced.zeros_rad_s))
-    p = np.real(np.asarray(reduced.poles_rad_s))
-    k = float(reduced.gain)
-    gaps = np.abs(np.subtract.outer(p, p)) + np.eye(p.size) * 1e300
-    if p.size > 1 and np.min(gaps) < 1e-9 * np.max(np.abs(p)):
-        raise ParameterError('reduced model has repeated poles; the estimator needs distinct '
-                             'poles (choose another reduction_order)')
-    if z.size > p.size:
-        raise ParameterError(f'reduced model has more zeros ({z.size}) than poles ({p.size}); '
-                             'the estimator needs a proper R_n(s)')
-    r = np.array([k * np.prod(pi - z) / np.prod([pi - pj for pj in p if pj != pi]) for pi in p])
-    d = k if z.size == p.size else 0.0      # strictly proper with an amplifier pole
-    return np.diag(p), np.ones(p.size), r, d
 
 
 def motion_intensity(a: float, f: float, rms_m: float) -> float:
