@@ -28,24 +28,27 @@ def run_record(stream: StreamEstimator, time_s, current_a, block_samples: int = 
     Returns (output times, deflection, kept): ``kept`` marks the input samples that have
     an estimate (refused or dropped ones have none; see the stream's counters).  The rules
     are the live ones: a jump back by more than ``max_gap_s`` starts a new run, as a bag loop
-    does live.  Per kept sample it also keeps ``record_time_s``, ``record_deflection_m`` and
-    ``record_std_m`` (the published estimate and standard deviation) and ``record_steps``
-    (the sample periods handed to the filter: the slots since the sample before plus the
-    stamp's offset from its slot; 0 where a new run began), which :func:`smooth_record`
-    reuses.
+    does live; a record that starts before 0 s is fed from 0 s (live stamps are >= 0).  Per
+    kept sample it also keeps ``record_time_s``, ``record_deflection_m`` and ``record_std_m``
+    (the published estimate and standard deviation) and ``record_steps`` (the sample periods
+    handed to the filter: the slots since the sample before plus the stamp's offset from its
+    slot; 0 where a new run began), which :func:`smooth_record` reuses.
     """
     t = np.asarray(time_s, float)
     i = np.asarray(current_a, float)
+    # a record's time is its own: a pre-trigger's rows before 0 s (or host jitter on the first
+    # stamp) are fed from 0 s, as live stamps are, and published at their own times
+    shift = min(float(t[0]), 0.0) if t.size else 0.0
     kept = np.zeros(t.size, dtype=bool)
     out_t, out_w, out_s = np.empty(t.size), np.empty(t.size), np.empty(t.size)
     steps = np.empty(t.size)
     n_out = 0
     for k in range(0, t.size, block_samples):
         end = min(k + block_samples, t.size)
-        res = stream.feed(t[k:end], i[k:end])
+        res = stream.feed(t[k:end] - shift, i[k:end])
         if res is not None:
             m = res[0].size
-            out_t[n_out:n_out + m] = res[0]
+            out_t[n_out:n_out + m] = t[k:end][stream.accepted] if shift else res[0]
             out_w[n_out:n_out + m] = res[1]
             out_s[n_out:n_out + m] = stream.last_std_m if stream.last_std_m.size == m else np.nan
             steps[n_out:n_out + m] = (stream.codes + stream.offsets)[stream.accepted]
