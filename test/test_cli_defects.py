@@ -208,6 +208,16 @@ def test_an_existing_output_file_is_refused_before_the_data_is_read(
     assert calibrated.read_text() == 'kept\n'     # nothing lost
 
 
+@pytest.mark.parametrize('flag', ['--save-model', '--json'])
+def test_an_output_in_no_directory_is_refused_before_the_work(sweep, tmp_path, capsys, flag):
+    """--save-model nodir/x.yaml failed only when the diagnosis was over."""
+    target = tmp_path / 'nodir' / 'x.yaml'
+    assert main(['diagnose', str(sweep), flag, str(target)]) == 2
+    err = capsys.readouterr().err
+    assert f'{flag} {target}: no directory {target.parent} to write it in' in err
+    assert 'diagnosing' not in err
+
+
 def test_two_flags_naming_one_file_are_refused(tmp_path, capsys):
     out = tmp_path / 'm.yaml'
     assert main(['diagnose', 'no-such-data', '--save-model', str(out), '--json', str(out)]) == 2

@@ -119,7 +119,8 @@ def check_outputs(args) -> None:
     Refuse, before any work, the files a verb keeps that exist (without ``--overwrite``).
 
     The files of :data:`OUTPUT_FILE_FLAGS`; two flags naming the same file (``--json``
-    included) are refused too: the second write would lose the first.
+    included) are refused too: the second write would lose the first, and so is a file
+    whose directory does not exist (found after a diagnosis of minutes, it was lost).
     """
     named: dict[Path, str] = {}
     for dest, flag in {'json': '--json', **OUTPUT_FILE_FLAGS}.items():
@@ -131,6 +132,9 @@ def check_outputs(args) -> None:
             raise ParameterError(f'{flag} {printable(value)}: the same file as {named[path]}; '
                                  'give each output its own name')
         named[path] = flag
+        if not path.parent.is_dir():          # said now, not after the work it would keep
+            raise ParameterError(f'{flag} {printable(value)}: no directory '
+                                 f'{printable(path.parent)} to write it in')
         if dest in OUTPUT_FILE_FLAGS:
             check_free(Path(value), bool(getattr(args, 'overwrite', False)), flag)
 
