@@ -234,7 +234,8 @@ def test_model_file_round_trip_and_errors(tmp_path):
     ]
     bad = tmp_path / 'bad.yaml'
     bad.write_text(path.read_text().replace('corner_hz', 'corner_khz'))
-    with pytest.raises(ParameterError, match='bad.yaml: effects: .*corner_khz'):
+    with pytest.raises(ParameterError, match=r"bad\.yaml:9: effects: .*'corner_khz'.*did you mean "
+                                             r"'corner_hz'"):
         load_model(bad)
 
 

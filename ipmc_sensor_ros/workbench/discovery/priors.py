@@ -40,7 +40,6 @@ def priors_from_headers(series: Sequence) -> dict[tuple[str, str], float]:
             try:
                 out.setdefault(target, float(raw))
             except (TypeError, ValueError):
-                raise DataFormatError(
-                    f"{ts.path}: header key '{key}' must be a number, got {raw!r}"
-                ) from None
+                raise DataFormatError(ts.path, None, f"header key '{key}' must be a number, "
+                                      f'got {raw!r}') from None
     return out
