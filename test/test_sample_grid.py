@@ -10,7 +10,7 @@ from ipmc_sensor_ros.cli.main import main
 from ipmc_sensor_ros.physics.model import SensorModel
 from ipmc_sensor_ros.physics.parameters import PAPER_SAMPLES
 from ipmc_sensor_ros.simulation.daq import daq_current
-from ipmc_sensor_ros.workbench.data import on_sample_grid
+from ipmc_sensor_ros.workbench.data import on_sample_grid, taken_at_stamps
 from ipmc_sensor_ros.workbench.formats import write_timeseries
 from ipmc_sensor_ros.workbench.measurements import TimeSeries
 from ipmc_sensor_ros.workbench.stamps import measured_rate_hz
@@ -26,22 +26,48 @@ def _jittered(n=4000, seed=0):
 
 def test_dropped_rows_are_filled_on_the_sample_clock():
     t = _jittered()
-    w = np.sin(2 * np.pi * 3.0 * t)
+    w = np.sin(2 * np.pi * 3.0 * (5.0 + np.arange(t.size) * 1e-3))     # taken on the slots
     keep = np.setdiff1d(np.arange(t.size), DROPPED)
-    t_grid, (w_grid, none), filled = on_sample_grid('rec.csv', t[keep], w[keep], None)
+    t_grid, (w_grid, none), filled, at_stamps = on_sample_grid('rec.csv', t[keep], w[keep],
+                                                               None)
+    assert not at_stamps                                        # w is on the slots
     assert np.flatnonzero(filled).tolist() == DROPPED
     assert none is None
     assert np.array_equal(t_grid[~filled], t[keep])             # the stamps are kept
     assert np.allclose(t_grid[filled], 5.0 + np.array(DROPPED) * 1e-3, atol=0.25e-3)
-    # the spline through jittered stamps: 3 Hz sine, 1-3 samples missing (measured 2e-6)
-    assert np.max(np.abs(w_grid - np.sin(2 * np.pi * 3.0 * t_grid))) < 1e-4
+    assert np.array_equal(w_grid[~filled], w[keep])             # and their values
+    # the spline through the slots: 3 Hz sine, 1-3 samples missing (the clock's line through
+    # 4,000 stamps at +-0.2 ms is ~2 us off: 4e-5 of the sine)
+    assert np.max(np.abs(w_grid[filled] - w[DROPPED])) < 1e-4
 
 
 def test_records_on_their_clock_or_off_any_clock_are_left_alone():
     t = _jittered()
-    assert on_sample_grid('rec.csv', t, t) is None                     # nothing missing
+    w = np.sin(2 * np.pi * 3.0 * np.arange(t.size) * 1e-3)             # on the slots
+    assert on_sample_grid('rec.csv', t, w) is None                     # nothing missing
     rng = np.random.default_rng(1)
     assert on_sample_grid('rec.csv', np.sort(rng.uniform(0, 4, 4000)), t) is None
+
+
+def test_rows_taken_at_their_stamps_are_put_on_the_clock():
+    """
+    A DAQ the host times samples when it stamps: the values belong to the jittered instants.
+
+    The deflection is smoother against them than against the slots, so every column is
+    interpolated onto the clock: a 13 Hz sine read at +-20 % jitter comes back within 1e-4
+    of itself on the slots (cubic spline, 77 samples a period); host-jittered rows (values
+    on the slots) are left as they are.
+    """
+    t = _jittered()
+    on_stamps = np.sin(2 * np.pi * 13.0 * t)
+    grid = on_sample_grid('rec.csv', t, on_stamps, 2 * on_stamps)
+    assert grid.at_stamps and not grid.filled.any()
+    assert np.allclose(np.diff(grid.time_s), 1e-3, rtol=1e-6)
+    assert np.max(np.abs(grid.columns[0] - np.sin(2 * np.pi * 13.0 * grid.time_s))) < 1e-4
+    assert np.array_equal(grid.columns[1], 2 * grid.columns[0])
+    on_slots = np.sin(2 * np.pi * 13.0 * (5.0 + np.arange(t.size) * 1e-3))
+    assert on_sample_grid('rec.csv', t, on_slots) is None
+    assert not taken_at_stamps(np.arange(100) * 1e-3, np.arange(100), np.sin(np.arange(100)))
 
 
 def test_a_gap_longer_than_max_gap_s_is_refused_with_the_place():
@@ -62,7 +88,7 @@ def test_dropped_rows_leave_the_residual_mean_as_it_is():
     t, w, y = rec.time_s[keep], rec.deflection_m[keep], rec.current_a[keep]
     whole = mean_residual(rec)
     joined = mean_residual(Record(rec.path, rec.sample, rec.model, t, w, y))
-    t_g, (w_g, y_g), filled = on_sample_grid(rec.path, t, w, y)
+    t_g, (w_g, y_g), filled, _ = on_sample_grid(rec.path, t, w, y)
     gridded = mean_residual(Record(rec.path, rec.sample, rec.model, t_g, w_g, y_g, filled))
     scale = float(np.std(rec.current_a))
     # measured (of the current's RMS): joined 7.3e-4 off, gridded 4e-7 (6 of 4000 rows fewer);
@@ -83,8 +109,8 @@ def test_the_fit_rows_of_a_record_with_filled_slots_are_its_prediction(row_matri
     """
     rec = make_records(Truth(noise_rel=0.01), 0, samples=('slim',), frequencies_hz=(5.0,))[0]
     keep = np.setdiff1d(np.arange(rec.time_s.size), np.arange(3, rec.time_s.size, 97))
-    t_g, (w_g, y_g), filled = on_sample_grid(rec.path, rec.time_s[keep],
-                                             rec.deflection_m[keep], rec.current_a[keep])
+    t_g, (w_g, y_g), filled, _ = on_sample_grid(rec.path, rec.time_s[keep],
+                                                rec.deflection_m[keep], rec.current_a[keep])
     gridded = Record(rec.path, rec.sample, rec.model, t_g, w_g, y_g, filled)
     steps = set()
     for most in range(250, 400, 10):                # row steps 14-23: even ones decimate

@@ -37,6 +37,9 @@ def _records(args, with_data: bool = False):
     data = load_data(args)
     recs = records_from(data, material, effects)
     for r in recs:
+        if r.at_stamps:
+            say(f'{r.path}: rows taken at their stamps (the deflection is smoother against '
+                'them than against the sample clock): interpolated onto the clock')
         if r.filled is not None:
             say(f'{r.path}: {int(r.filled.sum())} row(s) missing on the sample clock: the '
                 "deflection interpolated there as the model's input, not fitted or scored")

@@ -56,6 +56,8 @@ class Record:
     #: samples the DAQ dropped, filled on the sample grid for the model's input
     #: (:func:`~.data.on_sample_grid`); never fitted or scored.  None: none.
     filled: np.ndarray | None = None
+    #: the rows were taken at their stamps and interpolated onto the sample clock
+    at_stamps: bool = False
 
 
 @dataclass
