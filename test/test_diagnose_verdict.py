@@ -95,6 +95,11 @@ def test_a_search_that_ranked_nothing_says_why_instead_of_an_empty_table(tmp_pat
     assert ('first step: no effect ranked: --max-effects 1 used up by current_offset (the '
             'offset test)') in out.splitlines()
     assert 'rank effect' not in out
+    # fit cannot see an offset (no frequency response shows it): it is not the next step
+    nxt = out.splitlines()[-1]
+    assert nxt.startswith('next (a frequency-response fit cannot see current_offset; the '
+                          'diagnosis fitted it in time: keep it in a model file): ipmc-model '
+                          'diagnose ') and nxt.endswith('--model h2 --save-model model.yaml')
     assert json.loads(js.read_text())['unranked'].startswith('--max-effects 1 used up')
     # at the noise floor from the start (8.7 nA, p = 8e-5: not kept), the floor is the reason
     assert main(['simulate', '--out', str(tmp_path / 'small'), '--samples', 'slim',

@@ -98,7 +98,8 @@ def diagnosis_next_command(diag, data: Sequence[str], model_file: str | None,
     Return what to run after a diagnosis.
 
     With a saved correction plugin: diagnose again with it; with a saved model: check it on
-    the data (compare); otherwise fit the named effects.
+    the data (compare); otherwise fit the named effects, or, when ``fit`` cannot see any of
+    them (an offset: no frequency response shows it), diagnose again keeping the model.
     """
     if plugin_file:
         return ('next (the correction C(s) as a candidate effect): '
@@ -109,6 +110,11 @@ def diagnosis_next_command(diag, data: Sequence[str], model_file: str | None,
     if diag.missing_effects:
         names = [e for e in diag.missing_effects if e != 'surface_resistance']
         b = 'h2' if 'surface_resistance' in diag.missing_effects or base == 'h2' else 'h1'
+        if names and not any(acts_on_transfer(e) for e in names):
+            them = 'it' if len(names) == 1 else 'them'
+            return ('next (a frequency-response fit cannot see ' + ', '.join(names) + '; the '
+                    f'diagnosis fitted {them} in time: keep {them} in a model file): '
+                    + next_command('diagnose', data, None, f'--model {b} --save-model model.yaml'))
         effects = ','.join(names)
         cmd = ['ipmc-model', 'fit', *map(str, data), '--model', b] + (
             ['--effects', effects] if effects else []
