@@ -390,3 +390,24 @@ def test_values_in_a_unit_are_written_as_the_decimals_the_file_gave(tmp_path):
                  '0.0005'):
         assert f',{want}\n' in text or f'\n{want},' in text, want
     assert '00000000' not in text and '99999999' not in text     # no binary noise anywhere
+
+
+def test_a_current_held_at_its_rail_is_said(tmp_path):
+    """
+    A transimpedance amplifier at its +-10 V rail: the rows there are said, not silently fitted.
+
+    A trial's 1e6 V/A amplifier clipped 49-72 % of its rows, and diagnose then 'found' a beam
+    resonance.  A clean sine near full scale holds its extreme codes far less than 1 %.
+    """
+    t = np.arange(0, 2, 0.0005)
+    for amplitude in (25.0, 9.9):
+        volts = np.round(np.clip(amplitude * np.sin(2 * np.pi * 13 * t), -10, 10), 4)
+        src = _lab(tmp_path, f'rail_{amplitude:g}.csv', 'Time [s],Current [V]\n' + ''.join(
+            f'{a:.4f},{v}\n' for a, v in zip(t, volts)))
+        ts = import_lab_file(src, geometry='22mm,7mm,360um', current_gain_a_per_v=1e-6)
+        if amplitude > 10:
+            held = int(np.count_nonzero(np.abs(volts) == 10))
+            assert ts.extra['current_at_limit'] == \
+                f'Current [V]: {held} of {t.size} rows at 10 or -10'
+        else:
+            assert 'current_at_limit' not in ts.extra

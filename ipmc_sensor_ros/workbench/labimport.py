@@ -50,6 +50,7 @@ from .formats import write_timeseries
 from .labmeta import (meta_values, one_line, read_run_metadata,
                       resolve_geometry)
 from .measurements import DataFormatError, PathLike, TimeSeries
+from .metrics import held_at_limit
 from .stamps import measured_rate_hz
 from .textread import (MAX_BYTES, MAX_ROWS, TextSource, increasing_check, parse_number,
                        read_table)
@@ -300,6 +301,9 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
     kept[repeated] = False              # a repeated stamp: the row after is refused, as the
     picked = {role: to_si(data[k][kept], factors[role])        # node refuses the sample
               for role, (k, _) in roles.items()}
+    k_current = roles['current'][0]     # (a deflection holds its top for a hold: not said)
+    held = held_at_limit(data[k_current][kept])
+    limits = {'current_at_limit': f'{cells[k_current]}: {held}'} if held else {}
     del data
     t = picked['time']
     steps = np.diff(t)
@@ -314,6 +318,7 @@ def import_lab_file(path: PathLike, *, geometry=None, meta: PathLike | None = No
     if geometry_from:
         extra['geometry_from'] = one_line('; '.join(f"{source} ({', '.join(texts)})"
                                                     for source, texts in geometry_from.items()))
+    extra.update(limits)
     if source.encoding != 'utf-8':
         extra['text_encoding'] = source.encoding
     if repeated.size:
@@ -345,6 +350,8 @@ _NOTICES = (
     ('meta_keys_left_out', 'run metadata key(s) not kept as notes (a header key is a letter, '
                            "then letters, digits, '_', '.' or '-'): {}"),
     ('geometry_from', 'geometry from {}'),
+    ('current_at_limit', '{} (an amplifier rail or the ADC range clips it there: no sensor '
+                         'model predicts those rows)'),
 )
 
 

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ['fit_percent', 'nrmse', 'noise_rms', 'detrended_nrmse', 'level_error', 'CHUNK_ROWS']
+__all__ = ['fit_percent', 'nrmse', 'noise_rms', 'detrended_nrmse', 'level_error', 'CHUNK_ROWS',
+           'held_at_limit', 'AT_LIMIT_FRACTION']
 
 #: Samples per piece of the running sums of :func:`detrended_nrmse`.
 CHUNK_ROWS = 65_536
@@ -148,3 +149,29 @@ def noise_rms(t: np.ndarray, w: np.ndarray, y: np.ndarray, window_s: float = 4.0
         _, resid, _ = harmonic_fit(t[sel] - t[sel][0], y[sel], f0, k)
         return float(np.sqrt(np.mean(resid ** 2)))
     return float(np.sqrt(ss / dof))
+
+
+#: A column holding its largest or smallest value in this fraction of its rows or more is
+#: said to sit at a limit: a clean sine at full scale of a 16-bit ADC dwells on its extreme
+#: codes ~0.1 % of the time at 0.05 Hz (less when faster), a clipped one far longer (a
+#: +-10 V amplifier rail held 49-72 % of a trial's rows).
+AT_LIMIT_FRACTION = 0.01
+
+
+def held_at_limit(values) -> str:
+    """
+    Return how many rows hold ``values``' largest or smallest value, if a limit's share.
+
+    '' when neither extreme holds :data:`AT_LIMIT_FRACTION` of the rows; else e.g.
+    ``'4912 of 10000 rows at 10 or -10'``: an amplifier's rail or an ADC's range clips the
+    signal there, which no model of the sensor predicts.
+    """
+    v = np.asarray(values, float)
+    if v.size == 0 or v.max() == v.min():
+        return ''
+    ends = [(float(x), int(np.count_nonzero(v == x))) for x in (v.max(), v.min())]
+    held = [(x, n) for x, n in ends if n >= AT_LIMIT_FRACTION * v.size]
+    if not held:
+        return ''
+    return (f'{sum(n for _, n in held)} of {v.size} rows at '
+            + ' or '.join(f'{x:.6g}' for x, _ in held))
