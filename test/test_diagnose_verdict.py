@@ -108,3 +108,17 @@ def test_a_search_that_ranked_nothing_says_why_instead_of_an_empty_table(tmp_pat
     assert main(['diagnose', str(tmp_path / 'small' / 'slim_5Hz.csv')]) == 0
     assert ('first step: no effect ranked: the held-out error 0.0100 is within 1.01 x the noise '
             'floor 0.0100') in capsys.readouterr().out
+
+
+def test_a_candidate_worse_on_held_out_data_says_so_beside_its_bic():
+    """dBIC -3155 read as 'very strong evidence' beside a held-out error 1.8 x the baseline's."""
+    from ipmc_sensor_ros.workbench.discovery.summary import _ranking_text
+
+    def cand(effect, error, bic, held_out=True):
+        return SimpleNamespace(effect=effect, error=error, held_out=held_out, flags=[],
+                               params={}, fit=SimpleNamespace(bic=bic))
+    diag = SimpleNamespace(baseline=cand(None, 0.011, 0.0), unranked='', candidates=[
+        cand('beam_inertia', 0.0196, -3155.3), cand('time_delay', 0.0104, -40.0)])
+    rows = _ranking_text(diag)
+    assert 'held-out error above the baseline' in rows[1]
+    assert 'held-out error above the baseline' not in rows[2]

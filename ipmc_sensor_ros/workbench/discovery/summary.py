@@ -38,7 +38,9 @@ def _ranking_text(diag) -> list[str]:
     for k, c in enumerate(diag.candidates, 1):
         ratio = diag.baseline.error / c.error if c.error > 0 else float('inf')
         params = ', '.join(f'{n}={v:.4g}' for n, v in c.params.items())
-        flags = ('  [' + '; '.join(c.flags) + ']') if c.flags else ''
+        worse = ['held-out error above the baseline: the BIC of the fit does not carry to '
+                 'data it did not see'] if c.held_out and c.error > diag.baseline.error else []
+        flags = ('  [' + '; '.join([*c.flags, *worse]) + ']') if c.flags or worse else ''
         mark = ' ' if c.held_out else '*'
         out.append(f'            {k:>4} {c.effect:<24} {c.error:8.4f}{mark}{ratio:7.2f} '
                    f'{c.fit.bic - diag.baseline.fit.bic:10.1f}  {params}{flags}')
