@@ -111,7 +111,7 @@ def test_a_search_that_ranked_nothing_says_why_instead_of_an_empty_table(tmp_pat
 
 
 def test_a_candidate_worse_on_held_out_data_says_so_beside_its_bic():
-    """A BIC of -3155 read as 'very strong evidence' beside a held-out error 1.8 x the baseline's."""
+    """A BIC of -3155 ('very strong evidence') beside 1.8 x the baseline's held-out error."""
     from ipmc_sensor_ros.workbench.discovery.summary import _ranking_text
 
     def cand(effect, error, bic, held_out=True):
