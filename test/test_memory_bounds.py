@@ -124,7 +124,8 @@ def _harmonic_fit_whole(t, x, f0, k):
     gram_inv = np.linalg.pinv(a.T @ a)
     coef = gram_inv @ (a.T @ x)
     resid = x - a @ coef
-    cov = float(resid @ resid) / max(t.size - a.shape[1], 1) * gram_inv
+    band = freqresp._band_variance(resid, (t.size - 1) / (t[-1] - t[0]), f0, k)  # the noise
+    cov = (float(resid @ resid) / max(t.size - a.shape[1], 1) if band is None else band) * gram_inv
     return coef[1::2] - 1j * coef[2::2], resid, cov
 
 

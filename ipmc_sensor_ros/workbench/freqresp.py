@@ -26,6 +26,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.fft
 import scipy.signal as sig
 from scipy.optimize import minimize_scalar
 
@@ -204,15 +205,26 @@ def _band_variance(resid: np.ndarray, fs: float, f0: float, n_harmonics: int) ->
     fitted lines' own bins left out, its median over ln 2 (the mean of exponential bins,
     robust to a line in the band): sigma^2 for white noise.
     """
-    win = np.hanning(resid.size)
-    power = np.abs(np.fft.rfft(resid * win)) ** 2 / float(np.sum(win * win))
-    f = np.fft.rfftfreq(resid.size, 1.0 / fs)
-    nearest = f0 * np.clip(np.rint(f / f0), 1, n_harmonics)
-    use = ((f >= 0.5 * f0) & (f <= (n_harmonics + 0.5) * f0)
-           & (np.abs(f - nearest) > 2.5 * fs / resid.size))
-    if np.count_nonzero(use) < MIN_NOISE_BINS:
+    n, df = resid.size, fs / resid.size
+    band = np.arange(int(np.ceil(0.5 * f0 / df)), int((n_harmonics + 0.5) * f0 / df) + 1)
+    band = band[band <= n // 2]
+    nearest = f0 * np.clip(np.rint(band * df / f0), 1, n_harmonics)
+    band = band[np.abs(band * df - nearest) > 2.5 * df]
+    if band.size < MIN_NOISE_BINS:
         return None
-    return float(np.median(power[use]) / np.log(2.0))
+    # a noise level needs no double precision: the Hann-windowed residual and its spectrum
+    # in single (4 B per sample each; compare's memory per sample is bounded)
+    x = np.arange(n, dtype=np.float32)
+    x *= np.float32(2 * np.pi / max(n - 1, 1))
+    np.cos(x, out=x)
+    x *= np.float32(-0.5)
+    x += np.float32(0.5)
+    norm = float(np.sum(np.square(x), dtype=np.float64))
+    x *= resid
+    spectrum = scipy.fft.rfft(x)
+    del x
+    power = np.abs(spectrum[band].astype(complex)) ** 2 / norm
+    return float(np.median(power) / np.log(2.0))
 
 
 def phasor_sd(cov: np.ndarray, phasor: complex, k: int = 1) -> tuple[float, float]:
