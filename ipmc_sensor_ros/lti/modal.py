@@ -2,7 +2,8 @@
 """
 The modal (diagonal) realisation of a reduced sensor model, R_n(s) = D + sum_i r_i / (s - p_i).
 
-The reduced model (:mod:`.reduction`) is kept as zeros, poles and a gain; the estimator's state
+The reduced model (:mod:`.reduction`: H_n(s) = s R_n(s), eq. 45 (H2) or eq. 31 (H1) fitted by
+real poles and zeros, R_n in A s/m) is kept as zeros, poles and a gain; the estimator's state
 space (:mod:`~ipmc_sensor_ros.estimation.statespace`) takes it as first-order lags of the tip
 velocity, one per pole, whose residues weigh them into the current.
 """

@@ -28,7 +28,7 @@ def stamp_steps(path: str, time_s, max_gap_s: float) -> np.ndarray | None:
     Return the slot steps of stamps ``time_s[1:]`` (sample periods since the row before).
 
     None: a stamp has no slot of its own (two rows closer than the jitter allows, or one
-    behind the other).  A gap longer than ``max_gap_s`` raises ValueError naming ``path`` and
+    behind the other).  A gap longer than ``max_gap_s`` raises DataError naming ``path`` and
     the gap: the motion in it is unknown.
     """
     t = np.asarray(time_s, float)

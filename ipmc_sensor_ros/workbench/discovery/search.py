@@ -163,4 +163,4 @@ def run_search(records, settings, priors, say) -> Diagnosis:
                      final=state.current, interference=state.lines,
                      offset_test=state.offset, line_test=state.line_test,
                      kept_by=state.kept_by, correction=state.correction,
-                     unranked='' if state.first_ranking else state.unranked)
+                     unranked=state.unranked)
